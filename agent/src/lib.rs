@@ -1,0 +1,1 @@
+//! fdi-agent process (multi-process runtime).

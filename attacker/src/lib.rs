@@ -1,0 +1,1 @@
+//! fdi-attacker process (multi-process runtime).

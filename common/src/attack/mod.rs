@@ -1,0 +1,311 @@
+//! False-data-injection attack profiles as data (SPEC §3).
+//!
+//! A profile is a list of channels; a channel targets one agent, one signal (position or
+//! velocity) and one or more links, and holds a time schedule of segments, each a
+//! [`Waveform`]. A segment is in force from its `from_s` until the next segment begins.
+//! Channels that target the same signal and link add up.
+
+pub mod presets;
+pub mod waveform;
+
+use std::collections::BTreeMap;
+
+use rand_chacha::ChaCha12Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::model::Vector;
+use crate::rng::{stream, Purpose};
+use crate::units::AngleUnit;
+
+pub use waveform::Waveform;
+
+/// Which measured signal a channel tampers with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Signal {
+    /// `y = q + S1`.
+    Position,
+    /// `ẏ = q̇ + S2`.
+    Velocity,
+}
+
+/// One segment of a schedule.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Segment {
+    /// Start time of the segment, s.
+    pub from_s: f64,
+    pub waveform: Waveform,
+}
+
+/// One attacked channel.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Channel {
+    /// Agent id (as in the scenario's `[[agents]] id`).
+    pub agent: u32,
+    pub signal: Signal,
+    /// 1-based link numbers this schedule is added to.
+    pub links: Vec<u32>,
+    /// Units of the waveform values: `deg` (deg, deg/s) or `rad` (rad, rad/s).
+    pub units: AngleUnit,
+    /// Segments in increasing `from_s`; before the first one nothing is injected.
+    pub segments: Vec<Segment>,
+}
+
+/// A whole attack profile: what a `--attack FILE` holds, or a scenario's `[attack]` inline.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AttackProfile {
+    #[serde(default)]
+    pub name: String,
+    #[serde(default)]
+    pub description: String,
+    #[serde(default)]
+    pub channels: Vec<Channel>,
+}
+
+impl AttackProfile {
+    /// Every problem of the profile, as `(field path relative to the profile, message)`.
+    /// `agent_dofs` maps each agent id of the scenario to its number of links.
+    pub fn problems(&self, agent_dofs: &BTreeMap<u32, usize>) -> Vec<(String, String)> {
+        let mut out = Vec::new();
+        for (c, ch) in self.channels.iter().enumerate() {
+            let at = |f: &str| format!("channels[{c}].{f}");
+            let dof = agent_dofs.get(&ch.agent).copied();
+            if dof.is_none() {
+                out.push((
+                    at("agent"),
+                    format!("agent {} is not in the scenario", ch.agent),
+                ));
+            }
+            if ch.links.is_empty() {
+                out.push((at("links"), "must name at least one link".into()));
+            }
+            for (l, &link) in ch.links.iter().enumerate() {
+                if link == 0 || dof.is_some_and(|d| link as usize > d) {
+                    out.push((
+                        at(&format!("links[{l}]")),
+                        format!(
+                            "link {link} does not exist (links are 1-based, agent has {} links)",
+                            dof.unwrap_or(0)
+                        ),
+                    ));
+                }
+            }
+            if ch.segments.is_empty() {
+                out.push((at("segments"), "must hold at least one segment".into()));
+            }
+            let mut prev = f64::NEG_INFINITY;
+            for (s, seg) in ch.segments.iter().enumerate() {
+                if !seg.from_s.is_finite() || seg.from_s < 0.0 {
+                    out.push((
+                        at(&format!("segments[{s}].from_s")),
+                        format!("must be finite and ≥ 0, got {}", seg.from_s),
+                    ));
+                } else if seg.from_s <= prev {
+                    out.push((
+                        at(&format!("segments[{s}].from_s")),
+                        format!("must increase: {} after {prev}", seg.from_s),
+                    ));
+                }
+                prev = seg.from_s;
+                for (field, msg) in seg.waveform.problems() {
+                    out.push((at(&format!("segments[{s}].waveform.{field}")), msg));
+                }
+            }
+        }
+        out
+    }
+}
+
+/// A channel ready to evaluate: one link, one signal, values scaled to rad.
+#[derive(Debug, Clone)]
+struct LinkChannel {
+    signal: Signal,
+    link: usize,
+    scale: f64,
+    segments: Vec<Segment>,
+    rng: ChaCha12Rng,
+}
+
+impl LinkChannel {
+    fn segment_at(&self, t: f64) -> Option<&Segment> {
+        let n = self.segments.partition_point(|s| s.from_s <= t);
+        n.checked_sub(1).map(|i| &self.segments[i])
+    }
+}
+
+/// Injected values `α` at one tick, in rad and rad/s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Injection<const N: usize> {
+    pub position: Vector<N>,
+    pub velocity: Vector<N>,
+}
+
+/// The attack on one agent, compiled from a profile: what the attacker process evaluates.
+#[derive(Debug, Clone)]
+pub struct AgentAttack {
+    channels: Vec<LinkChannel>,
+}
+
+impl AgentAttack {
+    /// Compiles every channel of `profile` that targets `agent_id`; Gaussian waveforms draw from
+    /// the stream `(run_seed, agent, AttackNoise { channel index })`.
+    pub fn compile(profile: &AttackProfile, agent_id: u32, run_seed: u64) -> Self {
+        let mut channels = Vec::new();
+        for (c, ch) in profile
+            .channels
+            .iter()
+            .enumerate()
+            .filter(|(_, ch)| ch.agent == agent_id)
+        {
+            for &link in &ch.links {
+                let channel = u32::try_from(c * 64 + link as usize).unwrap_or(u32::MAX);
+                let mut segments = ch.segments.clone();
+                segments.sort_by(|a, b| a.from_s.total_cmp(&b.from_s));
+                channels.push(LinkChannel {
+                    signal: ch.signal,
+                    link: (link as usize).saturating_sub(1),
+                    scale: ch.units.to_rad(),
+                    segments,
+                    rng: stream(run_seed, agent_id, Purpose::AttackNoise { channel }),
+                });
+            }
+        }
+        Self { channels }
+    }
+
+    /// `α(t)` for position and velocity, rad and rad/s. Channels are summed in profile order.
+    pub fn injection<const N: usize>(&mut self, t: f64) -> Injection<N> {
+        let mut inj = Injection {
+            position: Vector::<N>::zeros(),
+            velocity: Vector::<N>::zeros(),
+        };
+        for ch in &mut self.channels {
+            let Some(seg) = ch.segment_at(t).copied() else {
+                continue;
+            };
+            if ch.link >= N {
+                continue;
+            }
+            let v = ch.scale * seg.waveform.value(t, seg.from_s, &mut ch.rng);
+            match ch.signal {
+                Signal::Position => inj.position[ch.link] += v,
+                Signal::Velocity => inj.velocity[ch.link] += v,
+            }
+        }
+        inj
+    }
+
+    /// True when some channel has a non-`none` segment in force at `t`.
+    pub fn is_active(&self, t: f64) -> bool {
+        self.channels
+            .iter()
+            .any(|ch| ch.segment_at(t).is_some_and(|s| !s.waveform.is_none()))
+    }
+
+    /// Attack onsets in `[0, duration)`: the instants at which the agent goes from no attack
+    /// to some attack (segment boundaries only; a pulse train is one onset).
+    pub fn onsets(&self, duration: f64) -> Vec<f64> {
+        let mut bounds: Vec<f64> = self
+            .channels
+            .iter()
+            .flat_map(|c| c.segments.iter().map(|s| s.from_s))
+            .collect();
+        bounds.push(0.0);
+        bounds.sort_by(f64::total_cmp);
+        bounds.dedup();
+        let mut out = Vec::new();
+        let mut was_active = false;
+        for b in bounds.into_iter().filter(|b| *b < duration) {
+            let active = self.is_active(b);
+            if active && !was_active {
+                out.push(b);
+            }
+            was_active = active;
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dofs() -> BTreeMap<u32, usize> {
+        (1..=4).map(|i| (i, 2)).collect()
+    }
+
+    #[test]
+    fn paper_preset_robot1_values_in_radians() {
+        let p = presets::preset("paper").expect("paper preset");
+        assert!(p.problems(&dofs()).is_empty(), "{:?}", p.problems(&dofs()));
+        let mut a = AgentAttack::compile(&p, 1, 1);
+        let d = std::f64::consts::PI / 180.0;
+        let i5 = a.injection::<2>(5.0);
+        assert_eq!(i5.position[0], d * (-0.5 * 5.0f64.sin()));
+        assert_eq!(i5.position[1], i5.position[0], "signal-wise: both links");
+        assert_eq!(i5.velocity[0], d * (-4.0 * 5.0f64.sin()));
+        let i12 = a.injection::<2>(12.0);
+        assert_eq!((i12.position[0], i12.velocity[1]), (d, 7.0 * d));
+        assert_eq!(a.onsets(40.0), vec![0.0]);
+    }
+
+    #[test]
+    fn linkwise_preset_puts_s2_on_link_two_position() {
+        let p = presets::preset("paper-linkwise").expect("linkwise preset");
+        let mut a = AgentAttack::compile(&p, 1, 1);
+        let i = a.injection::<2>(12.0);
+        let d = std::f64::consts::PI / 180.0;
+        assert_eq!((i.position[0], i.position[1]), (d, 7.0 * d));
+        assert_eq!(i.velocity, Vector::<2>::zeros());
+    }
+
+    #[test]
+    fn onsets_and_activity_of_robots_2_and_3() {
+        let p = presets::preset("paper").expect("paper preset");
+        let a2 = AgentAttack::compile(&p, 2, 1);
+        assert_eq!(a2.onsets(40.0), vec![5.0]);
+        assert!(!a2.is_active(4.999) && a2.is_active(5.0));
+        let a3 = AgentAttack::compile(&p, 3, 1);
+        assert!(a3.is_active(29.9) && !a3.is_active(30.0));
+    }
+
+    #[test]
+    fn problems_name_the_field_path() {
+        let p = AttackProfile {
+            channels: vec![Channel {
+                agent: 9,
+                signal: Signal::Position,
+                links: vec![0, 3],
+                units: AngleUnit::Rad,
+                segments: vec![
+                    Segment {
+                        from_s: 1.0,
+                        waveform: Waveform::Constant { value: 1.0 },
+                    },
+                    Segment {
+                        from_s: 0.5,
+                        waveform: Waveform::Constant {
+                            value: f64::INFINITY,
+                        },
+                    },
+                ],
+            }],
+            ..AttackProfile::default()
+        };
+        let paths: Vec<String> = p.problems(&dofs()).into_iter().map(|p| p.0).collect();
+        for want in [
+            "channels[0].agent",
+            "channels[0].links[0]",
+            "channels[0].segments[1].from_s",
+            "channels[0].segments[1].waveform.value",
+        ] {
+            assert!(
+                paths.iter().any(|p| p == want),
+                "missing {want} in {paths:?}"
+            );
+        }
+    }
+}

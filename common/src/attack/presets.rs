@@ -1,0 +1,40 @@
+//! Attack profiles shipped with the tool, selectable by name (`--attack paper`). They are the
+//! files in `scenarios/attacks/`, embedded at build time so the binary works from anywhere.
+
+use super::AttackProfile;
+
+/// `(name, TOML text)` of every preset.
+pub const PRESETS: &[(&str, &str)] = &[
+    (
+        "paper",
+        include_str!("../../../scenarios/attacks/paper.toml"),
+    ),
+    (
+        "paper-linkwise",
+        include_str!("../../../scenarios/attacks/paper-linkwise.toml"),
+    ),
+    ("none", include_str!("../../../scenarios/attacks/none.toml")),
+];
+
+/// Names of the presets, for error messages.
+pub fn names() -> Vec<&'static str> {
+    PRESETS.iter().map(|p| p.0).collect()
+}
+
+/// The preset called `name`, parsed. The shipped files are checked by tests, so a parse error
+/// here can only come from a broken build.
+pub fn preset(name: &str) -> Option<AttackProfile> {
+    let text = PRESETS.iter().find(|p| p.0 == name)?.1;
+    toml::from_str(text).ok()
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn every_preset_parses() {
+        for (name, text) in super::PRESETS {
+            let parsed: Result<super::AttackProfile, _> = toml::from_str(text);
+            assert!(parsed.is_ok(), "preset {name}: {parsed:?}");
+        }
+    }
+}

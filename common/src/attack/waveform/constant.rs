@@ -1,0 +1,5 @@
+//! Constant bias: the simplest false data.
+
+pub(super) fn value(value: f64) -> f64 {
+    value
+}

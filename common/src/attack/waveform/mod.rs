@@ -1,0 +1,219 @@
+//! Attack waveforms: pure functions of time (and, for noise, of a seeded stream). A new waveform
+//! is one file here and one variant of [`Waveform`].
+//!
+//! Periodic waveforms (sine, pulse) use absolute time `t`, as the paper's profiles do
+//! (`−sin 2t` for `t ≥ 25`); the ramp uses the time since its segment began.
+
+mod constant;
+mod noise;
+mod pulse;
+mod ramp;
+mod sine;
+
+use rand_chacha::ChaCha12Rng;
+use serde::{Deserialize, Serialize};
+
+/// One segment's waveform. Values are in the channel's units (rad or deg for positions, rad/s
+/// or deg/s for velocities).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Waveform {
+    /// Pure relay: nothing injected.
+    None,
+    /// `value`.
+    Constant { value: f64 },
+    /// `amplitude · sin(omega t + phase) + offset`.
+    Sine {
+        amplitude: f64,
+        omega_rad_s: f64,
+        #[serde(default)]
+        phase_rad: f64,
+        #[serde(default)]
+        offset: f64,
+    },
+    /// `amplitude` during the first `width_percent` % of every `period_s`, zero otherwise,
+    /// starting at `delay_s` (the paper's `pulse(a, b, c)`).
+    Pulse {
+        amplitude: f64,
+        period_s: f64,
+        width_percent: f64,
+        #[serde(default)]
+        delay_s: f64,
+    },
+    /// `start + slope · (t − segment start)`.
+    Ramp {
+        slope_per_s: f64,
+        #[serde(default)]
+        start: f64,
+    },
+    /// Gaussian noise `N(mean, std²)`, one draw per tick from the attacker's seeded stream.
+    Gaussian {
+        std: f64,
+        #[serde(default)]
+        mean: f64,
+    },
+}
+
+impl Waveform {
+    /// Value at absolute time `t` in a segment that began at `segment_start`.
+    pub fn value(&self, t: f64, segment_start: f64, rng: &mut ChaCha12Rng) -> f64 {
+        match *self {
+            Self::None => 0.0,
+            Self::Constant { value } => constant::value(value),
+            Self::Sine {
+                amplitude,
+                omega_rad_s,
+                phase_rad,
+                offset,
+            } => sine::value(t, amplitude, omega_rad_s, phase_rad, offset),
+            Self::Pulse {
+                amplitude,
+                period_s,
+                width_percent,
+                delay_s,
+            } => pulse::value(t, amplitude, period_s, width_percent, delay_s),
+            Self::Ramp { slope_per_s, start } => ramp::value(t - segment_start, slope_per_s, start),
+            Self::Gaussian { std, mean } => noise::value(rng, mean, std),
+        }
+    }
+
+    /// True for `none`: the segment injects nothing.
+    pub fn is_none(&self) -> bool {
+        matches!(self, Self::None)
+    }
+
+    /// Every numeric parameter with its name, and the problems of this waveform's values.
+    pub fn problems(&self) -> Vec<(&'static str, String)> {
+        let mut out = Vec::new();
+        let params: Vec<(&'static str, f64)> = match *self {
+            Self::None => vec![],
+            Self::Constant { value } => vec![("value", value)],
+            Self::Sine {
+                amplitude,
+                omega_rad_s,
+                phase_rad,
+                offset,
+            } => vec![
+                ("amplitude", amplitude),
+                ("omega_rad_s", omega_rad_s),
+                ("phase_rad", phase_rad),
+                ("offset", offset),
+            ],
+            Self::Pulse {
+                amplitude,
+                period_s,
+                width_percent,
+                delay_s,
+            } => {
+                if period_s <= 0.0 {
+                    out.push(("period_s", format!("must be > 0, got {period_s}")));
+                }
+                if !(width_percent > 0.0 && width_percent <= 100.0) {
+                    out.push((
+                        "width_percent",
+                        format!("must be in (0, 100], got {width_percent}"),
+                    ));
+                }
+                vec![
+                    ("amplitude", amplitude),
+                    ("period_s", period_s),
+                    ("width_percent", width_percent),
+                    ("delay_s", delay_s),
+                ]
+            }
+            Self::Ramp { slope_per_s, start } => {
+                vec![("slope_per_s", slope_per_s), ("start", start)]
+            }
+            Self::Gaussian { std, mean } => {
+                if std < 0.0 {
+                    out.push(("std", format!("must be ≥ 0, got {std}")));
+                }
+                vec![("std", std), ("mean", mean)]
+            }
+        };
+        for (name, v) in params {
+            if !v.is_finite() {
+                out.push((name, format!("must be finite, got {v}")));
+            }
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::rng::{stream, Purpose};
+
+    fn rng() -> ChaCha12Rng {
+        stream(1, 1, Purpose::AttackNoise { channel: 0 })
+    }
+
+    #[test]
+    fn paper_pulse_is_high_for_five_percent_of_two_seconds() {
+        let w = Waveform::Pulse {
+            amplitude: 1.0,
+            period_s: 2.0,
+            width_percent: 5.0,
+            delay_s: 0.0,
+        };
+        let mut r = rng();
+        let high = (0..20_000)
+            .filter(|k| w.value(f64::from(*k) * 1e-3, 0.0, &mut r) == 1.0)
+            .count();
+        // 10 periods × 100 ms high at 1 kHz; a tick that lands on an edge may fall either side
+        // by round-off of k·1e-3 mod 2, hence ±1 tick per edge (20 edges).
+        assert!((980..=1020).contains(&high), "high for {high} ticks");
+        assert_eq!(w.value(0.05, 0.0, &mut r), 1.0);
+        assert_eq!(w.value(0.15, 0.0, &mut r), 0.0);
+        assert_eq!(w.value(2.05, 0.0, &mut r), 1.0);
+    }
+
+    #[test]
+    fn ramp_counts_from_its_segment_start_and_sine_from_absolute_time() {
+        let mut r = rng();
+        let ramp = Waveform::Ramp {
+            slope_per_s: 2.0,
+            start: 1.0,
+        };
+        assert_eq!(ramp.value(10.5, 10.0, &mut r), 2.0);
+        let sine = Waveform::Sine {
+            amplitude: -1.0,
+            omega_rad_s: 2.0,
+            phase_rad: 0.0,
+            offset: 0.0,
+        };
+        assert_eq!(sine.value(25.0, 25.0, &mut r), -(50.0f64).sin());
+    }
+
+    #[test]
+    fn gaussian_noise_has_the_requested_moments() {
+        let w = Waveform::Gaussian {
+            std: 0.5,
+            mean: 2.0,
+        };
+        let mut r = rng();
+        let xs: Vec<f64> = (0..40_000).map(|_| w.value(0.0, 0.0, &mut r)).collect();
+        let mean = xs.iter().sum::<f64>() / xs.len() as f64;
+        let var = xs.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / xs.len() as f64;
+        // Standard error of the mean 0.5/200 = 0.0025: 5 σ bound.
+        assert!((mean - 2.0).abs() < 0.0125, "mean {mean}");
+        assert!((var.sqrt() - 0.5).abs() < 0.01, "std {}", var.sqrt());
+    }
+
+    #[test]
+    fn invalid_parameters_are_named() {
+        let w = Waveform::Pulse {
+            amplitude: f64::NAN,
+            period_s: 0.0,
+            width_percent: 150.0,
+            delay_s: 0.0,
+        };
+        let names: Vec<_> = w.problems().into_iter().map(|p| p.0).collect();
+        assert!(
+            names.contains(&"amplitude")
+                && names.contains(&"period_s")
+                && names.contains(&"width_percent")
+        );
+    }
+}

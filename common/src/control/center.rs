@@ -1,0 +1,215 @@
+//! The control center's per-agent pipeline for one tick (SPEC §4, steps 1–10).
+
+use crate::delay::{DelayLine, DelayProfile};
+use crate::model::{EulerLagrange, Matrix, Vector};
+use crate::rng::{stream, Purpose};
+use crate::scenario::{AgentConfig, BuildModel, ControllerConfig, ControllerMode, ModelConfig};
+use crate::trajectory::{Reference, TrajectoryConfig};
+
+use super::estimator::{NnEstimator, NnParams};
+use super::observer::{Observer, ObserverInput};
+use super::Detector;
+
+/// Largest measurement magnitude accepted (rad, rad/s); larger values are treated like
+/// non-finite ones: rejected, counted, last good value held.
+pub const MAX_ABS_MEASUREMENT: f64 = 1e6;
+
+/// Everything that configures one agent's pipeline.
+#[derive(Debug, Clone)]
+pub struct CenterParams {
+    pub agent_id: u32,
+    pub run_seed: u64,
+    pub control_period_s: f64,
+    pub controller: ControllerConfig,
+    pub model: ModelConfig,
+    pub trajectory: TrajectoryConfig,
+    pub delay: DelayProfile,
+}
+
+impl CenterParams {
+    pub fn new(
+        agent: &AgentConfig,
+        controller: &ControllerConfig,
+        run_seed: u64,
+        control_period_s: f64,
+    ) -> Self {
+        Self {
+            agent_id: agent.id,
+            run_seed,
+            control_period_s,
+            controller: *controller,
+            model: agent.model,
+            trajectory: agent.trajectory.clone(),
+            delay: agent.delay,
+        }
+    }
+}
+
+/// What one tick produced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CenterOutput<const N: usize> {
+    /// Torque `u_k` to send, stamped `t_k`; always finite.
+    pub u: Vector<N>,
+    /// Attack estimate `Ŝ` used in this tick (zero in traditional mode).
+    pub s_hat: Vector<N>,
+    /// Observer estimate after this tick's step.
+    pub q_hat: Vector<N>,
+    pub qd_hat: Vector<N>,
+    pub qdd_hat: Vector<N>,
+    /// `e_u` and `u_τ` used in this tick.
+    pub e_u: Vector<N>,
+    pub u_tau: Vector<N>,
+    pub alarm: bool,
+    /// The measurement was rejected (non-finite or absurd) and the last good one used.
+    pub rejected_input: bool,
+    /// The computed torque was non-finite and the last good one was sent instead.
+    pub rejected_torque: bool,
+}
+
+/// Per-agent state of the control center.
+#[derive(Debug)]
+pub struct CenterAgent<const N: usize> {
+    params: CenterParams,
+    model: Box<dyn EulerLagrange<N>>,
+    sent: DelayLine<N>,
+    observer: Observer<N>,
+    estimator: NnEstimator<N>,
+    detector: Detector,
+    psi2_prev: Vector<N>,
+    last_good: (Vector<N>, Vector<N>),
+    last_u: Vector<N>,
+    /// Number of measurements rejected so far.
+    pub rejected_inputs: u64,
+    /// Number of torques replaced because they were non-finite.
+    pub rejected_torques: u64,
+}
+
+impl<const N: usize> CenterAgent<N>
+where
+    ModelConfig: BuildModel<N>,
+{
+    /// `None` when the model has another number of links than `N`.
+    pub fn new(params: CenterParams) -> Option<Self> {
+        let model = params.model.build_model()?;
+        let c = &params.controller;
+        let mut rng = stream(params.run_seed, params.agent_id, Purpose::NnInit);
+        let nn = NnParams {
+            hidden: c.hidden_neurons,
+            gamma_w: c.learning_rate_w,
+            gamma_v: c.learning_rate_v,
+            l1: c.observer_gain_l1,
+            bound_w: c.weight_bound_w,
+            bound_v: c.weight_bound_v,
+        };
+        let estimator = NnEstimator::new(nn, c.initial_v_range, &mut rng);
+        let detector = Detector::new(c.detection.threshold, c.detection.hold_s);
+        Some(Self {
+            params,
+            model,
+            sent: DelayLine::new(),
+            observer: Observer::default(),
+            estimator,
+            detector,
+            psi2_prev: Vector::<N>::zeros(),
+            last_good: (Vector::<N>::zeros(), Vector::<N>::zeros()),
+            last_u: Vector::<N>::zeros(),
+            rejected_inputs: 0,
+            rejected_torques: 0,
+        })
+    }
+}
+
+impl<const N: usize> CenterAgent<N> {
+    pub fn agent_id(&self) -> u32 {
+        self.params.agent_id
+    }
+
+    /// Desired trajectory at `t`.
+    pub fn reference(&self, t: f64) -> Reference<N> {
+        self.params.trajectory.reference(t)
+    }
+
+    /// One control tick at `t` from the (possibly tampered) measurement `(y, ẏ)`.
+    pub fn tick(&mut self, t: f64, y: &Vector<N>, yd: &Vector<N>) -> CenterOutput<N> {
+        let c = self.params.controller;
+        let dt = self.params.control_period_s;
+        let sane = |v: &Vector<N>| {
+            v.iter()
+                .all(|x| x.is_finite() && x.abs() <= MAX_ABS_MEASUREMENT)
+        };
+        let rejected_input = !(sane(y) && sane(yd));
+        if rejected_input {
+            self.rejected_inputs += 1;
+        } else {
+            self.last_good = (*y, *yd);
+        }
+        let (y, yd) = self.last_good;
+
+        // 1–3: reference, A = M(q_d)⁻¹, e_u over the zero-order-held history of sent u.
+        let reference = self.params.trajectory.reference::<N>(t);
+        let a: Matrix<N> = self.model.inverse_inertia(&reference.q);
+        let tau = self.params.delay.tau(t);
+        let e_u = self.sent.integral(t - tau, t);
+        let u_tau = self.sent.value_at(t - tau);
+
+        // 4: NN estimate from the previous tick's Ψ2 (no algebraic loop).
+        let s_hat = match c.mode {
+            ControllerMode::Proposed => self.estimator.estimate(&self.psi2_prev),
+            ControllerMode::Traditional => Vector::<N>::zeros(),
+        };
+
+        // 5: r̂ = Ψ̇1 + β Ψ1 − A e_u + Ŝ, u = k r̂.
+        let psi1 = reference.q - y;
+        let psi1_dot = reference.qd - yd;
+        let r_hat = psi1_dot + psi1 * c.beta - a * e_u + s_hat;
+        let mut u = r_hat * c.gain_k;
+        let rejected_torque = u.iter().any(|x| !x.is_finite());
+        if rejected_torque {
+            self.rejected_torques += 1;
+            u = self.last_u;
+        }
+
+        // 6: observer step.
+        let input = ObserverInput {
+            y: &y,
+            yd: &yd,
+            s_hat: &s_hat,
+            reference: &reference,
+            a: &a,
+            e_u: &e_u,
+            u_tau: &u_tau,
+            beta: c.beta,
+            l1: c.observer_gain_l1,
+            l2: c.observer_gain_l2,
+        };
+        let psi2 = self.observer.step(self.model.as_ref(), &input, dt);
+
+        // 7: weights.
+        if c.mode == ControllerMode::Proposed {
+            self.estimator.update(&psi2, dt);
+        }
+        self.psi2_prev = psi2;
+
+        // History of sent torques: push u_k, drop what no future query reaches.
+        if self.sent.push(t, u).is_ok() {
+            self.last_u = u;
+        }
+        self.sent.prune_before(t - tau);
+
+        // 9: detection.
+        let alarm = self.detector.update(t, s_hat.norm());
+
+        CenterOutput {
+            u,
+            s_hat,
+            q_hat: self.observer.q,
+            qd_hat: self.observer.qd,
+            qdd_hat: self.observer.qdd,
+            e_u,
+            u_tau,
+            alarm,
+            rejected_input,
+            rejected_torque,
+        }
+    }
+}

@@ -1,0 +1,12 @@
+//! The control center's math, per agent: observer (22)–(24), NN attack estimator (32), (37),
+//! (38), controller (12), (14) and the detection alarm. Pure: no I/O, no clocks.
+
+pub mod center;
+pub mod detection;
+pub mod estimator;
+pub mod observer;
+
+pub use center::{CenterAgent, CenterOutput, CenterParams};
+pub use detection::Detector;
+pub use estimator::{NnEstimator, NnParams};
+pub use observer::Observer;

@@ -1,0 +1,379 @@
+//! The delayed torque channel: delay profiles `τ(t)` and the [`DelayLine`] of zero-order-held
+//! commands, shared by the agent (`u(t − τ(t))` applied to the plant) and by the control center
+//! (`u_τ` for the observer, `e_u = ∫_{t−τ}^{t} u ds` for the controller).
+
+use std::collections::VecDeque;
+
+use serde::{Deserialize, Serialize};
+
+use crate::model::Vector;
+
+/// Known time-varying delay of the torque channel (SPEC §5), in seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum DelayProfile {
+    /// `τ(t) = amplitude · sin(rate · t) + offset`. Paper: 2 ms · sin(t/2) + 3 ms.
+    Sine {
+        amplitude_s: f64,
+        offset_s: f64,
+        rate_rad_s: f64,
+    },
+    /// `τ(t) = value`.
+    Constant { value_s: f64 },
+}
+
+impl DelayProfile {
+    /// `τ(t)` in seconds.
+    pub fn tau(&self, t: f64) -> f64 {
+        match *self {
+            Self::Sine {
+                amplitude_s,
+                offset_s,
+                rate_rad_s,
+            } => amplitude_s * (rate_rad_s * t).sin() + offset_s,
+            Self::Constant { value_s } => value_s,
+        }
+    }
+
+    /// Lower bound of `τ` over all `t`.
+    pub fn min(&self) -> f64 {
+        match *self {
+            Self::Sine {
+                amplitude_s,
+                offset_s,
+                ..
+            } => offset_s - amplitude_s.abs(),
+            Self::Constant { value_s } => value_s,
+        }
+    }
+
+    /// Upper bound of `τ` over all `t`.
+    pub fn max(&self) -> f64 {
+        match *self {
+            Self::Sine {
+                amplitude_s,
+                offset_s,
+                ..
+            } => offset_s + amplitude_s.abs(),
+            Self::Constant { value_s } => value_s,
+        }
+    }
+
+    /// Upper bound of `|τ̇|`; Assumption 4 of the paper needs it below 1.
+    pub fn max_rate(&self) -> f64 {
+        match *self {
+            Self::Sine {
+                amplitude_s,
+                rate_rad_s,
+                ..
+            } => (amplitude_s * rate_rad_s).abs(),
+            Self::Constant { .. } => 0.0,
+        }
+    }
+
+    /// Every parameter, for validation.
+    pub fn parameters(&self) -> Vec<(&'static str, f64)> {
+        match *self {
+            Self::Sine {
+                amplitude_s,
+                offset_s,
+                rate_rad_s,
+            } => {
+                vec![
+                    ("amplitude_s", amplitude_s),
+                    ("offset_s", offset_s),
+                    ("rate_rad_s", rate_rad_s),
+                ]
+            }
+            Self::Constant { value_s } => vec![("value_s", value_s)],
+        }
+    }
+
+    /// Short human-readable form, in ms, as in the paper's Table II.
+    pub fn describe_ms(&self) -> String {
+        match *self {
+            Self::Sine {
+                amplitude_s,
+                offset_s,
+                rate_rad_s,
+            } => format!(
+                "{} sin({}t) + {}",
+                fmt_num(amplitude_s * 1e3),
+                fmt_num(rate_rad_s),
+                fmt_num(offset_s * 1e3)
+            ),
+            Self::Constant { value_s } => fmt_num(value_s * 1e3),
+        }
+    }
+}
+
+fn fmt_num(x: f64) -> String {
+    let s = format!("{x:.4}");
+    s.trim_end_matches('0').trim_end_matches('.').to_string()
+}
+
+/// Result of looking a command up for time `t`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Lookup<const N: usize> {
+    /// The command in force (zero before the first one).
+    pub value: Vector<N>,
+    /// Stamp of that command, `None` before the first.
+    pub stamp: Option<f64>,
+    /// True when a newer command should have been in force but has not arrived: the last
+    /// received command is held (SPEC §5 deadline miss).
+    pub missed: bool,
+}
+
+/// History of `(t_send, u)` pairs, each command held from its stamp until the next one
+/// (zero-order hold). Stamps must increase strictly; older entries are pruned once no query
+/// can reach them (queries `t − τ(t)` never go back in time, because `|τ̇| < 1`).
+#[derive(Debug, Clone)]
+pub struct DelayLine<const N: usize> {
+    entries: VecDeque<(f64, Vector<N>)>,
+}
+
+impl<const N: usize> Default for DelayLine<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Why a command was refused by [`DelayLine::push`].
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+pub enum PushError {
+    #[error(
+        "stamp {stamp} s is not after the newest stamp {newest} s (out of order or duplicate)"
+    )]
+    NotIncreasing { stamp: f64, newest: f64 },
+    #[error("stamp or value is not finite")]
+    NotFinite,
+}
+
+impl<const N: usize> DelayLine<N> {
+    pub fn new() -> Self {
+        Self {
+            entries: VecDeque::with_capacity(256),
+        }
+    }
+
+    /// Number of commands kept.
+    pub fn len(&self) -> usize {
+        self.entries.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.entries.is_empty()
+    }
+
+    /// Stamp of the newest command.
+    pub fn newest_stamp(&self) -> Option<f64> {
+        self.entries.back().map(|e| e.0)
+    }
+
+    /// Appends a command sent at `stamp`.
+    pub fn push(&mut self, stamp: f64, value: Vector<N>) -> Result<(), PushError> {
+        if !stamp.is_finite() || value.iter().any(|v| !v.is_finite()) {
+            return Err(PushError::NotFinite);
+        }
+        if let Some(newest) = self.newest_stamp() {
+            if stamp <= newest {
+                return Err(PushError::NotIncreasing { stamp, newest });
+            }
+        }
+        self.entries.push_back((stamp, value));
+        Ok(())
+    }
+
+    /// Index of the newest entry with `stamp ≤ t`.
+    fn index_at(&self, t: f64) -> Option<usize> {
+        let n = self.entries.partition_point(|e| e.0 <= t);
+        n.checked_sub(1)
+    }
+
+    /// The command in force at `t`: the one with the largest stamp `≤ t`, zero before the first.
+    pub fn value_at(&self, t: f64) -> Vector<N> {
+        self.index_at(t)
+            .map_or_else(Vector::<N>::zeros, |i| self.entries[i].1)
+    }
+
+    /// Like [`Self::value_at`], and flags a deadline miss when commands are expected every
+    /// `period` seconds and the one due at `t` has not arrived. A tolerance of 1e-6 periods
+    /// absorbs the round-off between `k·Δ` and accumulated stamps.
+    pub fn lookup(&self, t: f64, period: f64) -> Lookup<N> {
+        match self.index_at(t) {
+            Some(i) => {
+                let (stamp, value) = self.entries[i];
+                let is_newest = i + 1 == self.entries.len();
+                let missed = is_newest && stamp + period * (1.0 - 1e-6) <= t;
+                Lookup {
+                    value,
+                    stamp: Some(stamp),
+                    missed,
+                }
+            }
+            None => Lookup {
+                value: Vector::<N>::zeros(),
+                stamp: None,
+                missed: false,
+            },
+        }
+    }
+
+    /// `∫_a^b u(s) ds` over the zero-order-held history; zero before the first command, the
+    /// newest command extends to `b`. Sums segment by segment in time order.
+    pub fn integral(&self, a: f64, b: f64) -> Vector<N> {
+        let mut acc = Vector::<N>::zeros();
+        if b <= a {
+            return acc;
+        }
+        let start = self.index_at(a).unwrap_or(0);
+        for i in start..self.entries.len() {
+            let (s0, value) = self.entries[i];
+            let s1 = self.entries.get(i + 1).map_or(f64::INFINITY, |e| e.0);
+            let lo = s0.max(a);
+            let hi = s1.min(b);
+            if hi > lo {
+                acc += value * (hi - lo);
+            }
+            if s1 >= b {
+                break;
+            }
+        }
+        acc
+    }
+
+    /// Drops every entry that no query at or after `t` can reach (keeps the one in force at `t`).
+    pub fn prune_before(&mut self, t: f64) {
+        while self.entries.len() >= 2 && self.entries[1].0 <= t {
+            self.entries.pop_front();
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn v(x: f64) -> Vector<2> {
+        Vector::<2>::new(x, -2.0 * x)
+    }
+
+    fn line(n: usize, dt: f64) -> DelayLine<2> {
+        let mut d = DelayLine::new();
+        for k in 0..n {
+            d.push(k as f64 * dt, v(k as f64 + 1.0))
+                .expect("increasing stamps");
+        }
+        d
+    }
+
+    #[test]
+    fn lookup_is_exact_at_and_between_stamps_and_zero_before_the_first() {
+        let d = line(10, 0.001);
+        assert_eq!(d.value_at(-1e-9), Vector::<2>::zeros());
+        for k in 0..10 {
+            let t = k as f64 * 0.001;
+            assert_eq!(d.value_at(t), v(k as f64 + 1.0), "at stamp {k}");
+            assert_eq!(
+                d.value_at(t + 0.0004),
+                v(k as f64 + 1.0),
+                "between {k} and {}",
+                k + 1
+            );
+        }
+    }
+
+    #[test]
+    fn lookup_with_time_varying_delay_picks_the_newest_due_command() {
+        let dt = 0.001;
+        let d = line(100, dt);
+        let tau = DelayProfile::Sine {
+            amplitude_s: 0.002,
+            offset_s: 0.003,
+            rate_rad_s: 0.5 * 1000.0,
+        };
+        for i in 10..100 {
+            let t = i as f64 * dt + 0.0003;
+            let q = t - tau.tau(t);
+            let k = (q / dt).floor() as usize;
+            assert_eq!(d.value_at(q), v(k as f64 + 1.0), "t = {t}, t − τ = {q}");
+        }
+    }
+
+    #[test]
+    fn deadline_miss_only_when_a_newer_command_is_overdue() {
+        let d = line(5, 0.001); // stamps 0 .. 4 ms
+        assert!(!d.lookup(0.0045, 0.001).missed);
+        assert!(d.lookup(0.0051, 0.001).missed);
+        assert!(!d.lookup(0.0021, 0.001).missed);
+        assert!(!DelayLine::<2>::new().lookup(1.0, 0.001).missed);
+    }
+
+    #[test]
+    fn integral_matches_the_analytic_value_for_a_known_input() {
+        // u(t) = t held on a 1 ms grid: ∫_a^b u = Σ k·Δ over whole cells + partial cells.
+        let dt = 0.001;
+        let mut d = DelayLine::<2>::new();
+        for k in 0..1000 {
+            let t = k as f64 * dt;
+            d.push(t, Vector::<2>::new(t, 1.0)).expect("increasing");
+        }
+        let (a, b) = (0.1234, 0.5678);
+        // Analytic integral of the staircase floor(s/Δ)·Δ.
+        let stair = |x: f64| {
+            let n = (x / dt).floor();
+            dt * dt * n * (n - 1.0) / 2.0 + n * dt * (x - n * dt)
+        };
+        let got = d.integral(a, b);
+        // Summation of ~440 terms of size 1e-4: round-off well below 1e-12.
+        assert_relative_eq!(got[0], stair(b) - stair(a), epsilon = 1e-12);
+        assert_relative_eq!(got[1], b - a, epsilon = 1e-12);
+        // Before the first command the integrand is zero.
+        let mut late = DelayLine::<2>::new();
+        late.push(1.0, Vector::<2>::new(2.0, 2.0)).expect("first");
+        assert_relative_eq!(late.integral(0.5, 1.5)[0], 1.0, epsilon = 1e-15);
+        assert_eq!(late.integral(0.2, 0.9), Vector::<2>::zeros());
+    }
+
+    #[test]
+    fn refuses_out_of_order_duplicate_and_non_finite_commands() {
+        let mut d = line(3, 0.001);
+        assert!(matches!(
+            d.push(0.001, v(1.0)),
+            Err(PushError::NotIncreasing { .. })
+        ));
+        assert!(matches!(
+            d.push(0.002, v(1.0)),
+            Err(PushError::NotIncreasing { .. })
+        ));
+        assert_eq!(d.push(0.005, v(f64::NAN)), Err(PushError::NotFinite));
+        assert_eq!(d.len(), 3);
+    }
+
+    #[test]
+    fn pruning_keeps_the_command_in_force() {
+        let mut d = line(100, 0.001);
+        d.prune_before(0.0505);
+        assert_eq!(d.value_at(0.0505), v(51.0));
+        assert_eq!(d.len(), 50);
+        assert_relative_eq!(
+            d.integral(0.0505, 0.0515)[0],
+            0.5e-3 * 51.0 + 0.5e-3 * 52.0,
+            epsilon = 1e-15
+        );
+    }
+
+    #[test]
+    fn delay_bounds_and_description() {
+        let p = DelayProfile::Sine {
+            amplitude_s: 0.02,
+            offset_s: 0.03,
+            rate_rad_s: 0.05,
+        };
+        assert_relative_eq!(p.min(), 0.01);
+        assert_relative_eq!(p.max(), 0.05);
+        assert_relative_eq!(p.max_rate(), 0.001);
+        assert_eq!(p.describe_ms(), "20 sin(0.05t) + 30");
+    }
+}

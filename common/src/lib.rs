@@ -1,0 +1,21 @@
+//! fdi-common: the math and the contracts every fdi-mas process shares.
+//!
+//! The system of Sargolzaei, Allen, Crane and Dixon, "Lyapunov-Based Control of a Nonlinear
+//! Multiagent System With a Time-Varying Input Delay Under False-Data-Injection Attacks":
+//! Euler–Lagrange agents ([`model`], [`plant`]), an attacker that injects false data into their
+//! measurements ([`attack`]), and a control center with a nonlinear observer, an NN attack
+//! estimator and a delay-compensating controller ([`control`]), over a delayed torque channel
+//! ([`delay`]). Nothing here does I/O except [`scenario`] loading files.
+
+pub mod attack;
+pub mod control;
+pub mod delay;
+pub mod engine;
+pub mod metrics;
+pub mod model;
+pub mod plant;
+pub mod records;
+pub mod rng;
+pub mod scenario;
+pub mod trajectory;
+pub mod units;

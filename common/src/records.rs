@@ -1,0 +1,199 @@
+//! Per-tick records of each process, and their join. The in-process engine produces the joined
+//! [`TickRecord`] directly; the multi-process runtime writes one stream per process and joins
+//! them after the run. Both feed the same [`crate::metrics`] and [`TraceDigest`].
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::model::Vector;
+use crate::scenario::MAX_DOF;
+
+/// A joint-space vector of up to [`MAX_DOF`] entries, stored without heap allocation and
+/// serialized as a sequence of its `len` entries.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Joints {
+    len: u8,
+    v: [f64; MAX_DOF],
+}
+
+impl Joints {
+    pub fn as_slice(&self) -> &[f64] {
+        &self.v[..usize::from(self.len)]
+    }
+
+    /// The first `N` entries as a vector (missing entries are zero).
+    pub fn to_vector<const N: usize>(&self) -> Vector<N> {
+        let mut out = Vector::<N>::zeros();
+        for (o, v) in out.iter_mut().zip(self.as_slice()) {
+            *o = *v;
+        }
+        out
+    }
+
+    pub fn from_slice(s: &[f64]) -> Self {
+        let mut j = Self::default();
+        let n = s.len().min(MAX_DOF);
+        j.v[..n].copy_from_slice(&s[..n]);
+        j.len = n as u8;
+        j
+    }
+}
+
+impl<const N: usize> From<&Vector<N>> for Joints {
+    fn from(v: &Vector<N>) -> Self {
+        Self::from_slice(v.as_slice())
+    }
+}
+
+impl<const N: usize> From<Vector<N>> for Joints {
+    fn from(v: Vector<N>) -> Self {
+        Self::from(&v)
+    }
+}
+
+impl Serialize for Joints {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_seq(self.as_slice())
+    }
+}
+
+impl<'de> Deserialize<'de> for Joints {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        struct Visit;
+        impl<'de> serde::de::Visitor<'de> for Visit {
+            type Value = Joints;
+            fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                write!(f, "a sequence of at most {MAX_DOF} numbers")
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<Joints, A::Error> {
+                let mut j = Joints::default();
+                while let Some(x) = seq.next_element::<f64>()? {
+                    if usize::from(j.len) == MAX_DOF {
+                        return Err(serde::de::Error::invalid_length(MAX_DOF + 1, &self));
+                    }
+                    j.v[usize::from(j.len)] = x;
+                    j.len += 1;
+                }
+                Ok(j)
+            }
+        }
+        d.deserialize_seq(Visit)
+    }
+}
+
+/// What an agent process knows about tick `k`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AgentRecord {
+    pub k: u64,
+    pub agent: u32,
+    /// `t_k`, s (sim time; in realtime mode, time since the shared epoch).
+    pub t: f64,
+    /// True state at `t_k`.
+    pub q: Joints,
+    pub qd: Joints,
+    pub qdd: Joints,
+    /// Measurement published (with sensor noise, before any attack).
+    pub y: Joints,
+    pub yd: Joints,
+    /// Torque applied at `t_k`: `u(t_k − τ(t_k))`.
+    pub u_applied: Joints,
+    /// `τ(t_k)`, s.
+    pub tau: f64,
+    /// The integration step from `t_k` held a command because the due one was missing.
+    pub missed: bool,
+}
+
+/// What the attacker process knows about tick `k` of one agent.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AttackRecord {
+    pub k: u64,
+    pub agent: u32,
+    /// Injected `α`, rad and rad/s.
+    pub alpha_position: Joints,
+    pub alpha_velocity: Joints,
+    /// Tampered measurement relayed to the control center.
+    pub y: Joints,
+    pub yd: Joints,
+    /// Some non-`none` segment was in force.
+    pub active: bool,
+}
+
+/// What the control-center process knows about tick `k` of one agent.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CenterRecord {
+    pub k: u64,
+    pub agent: u32,
+    /// `Ŝ` used in the tick.
+    pub s_hat: Joints,
+    /// Observer state after the tick.
+    pub q_hat: Joints,
+    pub qd_hat: Joints,
+    pub qdd_hat: Joints,
+    /// Torque sent, stamped `t_k`.
+    pub u: Joints,
+    pub alarm: bool,
+    /// The measurement was rejected (non-finite or absurd).
+    pub rejected_input: bool,
+}
+
+/// One tick of one agent, joined across processes.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TickRecord {
+    pub agent: AgentRecord,
+    pub attack: AttackRecord,
+    pub center: CenterRecord,
+}
+
+/// SHA-256 over every tick's true state, tampered measurement and torque as f64 bit patterns,
+/// in tick order and, within a tick, in the scenario's agent order.
+#[derive(Debug, Clone, Default)]
+pub struct TraceDigest {
+    hasher: Sha256,
+}
+
+impl TraceDigest {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    pub fn push(&mut self, r: &TickRecord) {
+        for j in [
+            &r.agent.q,
+            &r.agent.qd,
+            &r.attack.y,
+            &r.attack.yd,
+            &r.center.u,
+        ] {
+            for x in j.as_slice() {
+                self.hasher.update(x.to_bits().to_le_bytes());
+            }
+        }
+    }
+
+    /// Lower-case hex.
+    pub fn finish(self) -> String {
+        self.hasher
+            .finalize()
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn joints_round_trip_through_json_with_only_their_entries() {
+        let j = Joints::from(&Vector::<2>::new(1.5, -2.25));
+        let s = serde_json::to_string(&j).expect("serialize");
+        assert_eq!(s, "[1.5,-2.25]");
+        let back: Joints = serde_json::from_str(&s).expect("deserialize");
+        assert_eq!(back, j);
+        assert!(serde_json::from_str::<Joints>("[1,2,3,4,5,6,7]").is_err());
+    }
+}

@@ -1,0 +1,858 @@
+//! The scenario: everything a run needs, as TOML (serde, `deny_unknown_fields`), then
+//! [`Scenario::validate`] that returns every problem with its field path.
+//!
+//! Parameters carry their units in their names; typical values are the paper's (SPEC §4).
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::attack::{presets, AttackProfile};
+use crate::delay::DelayProfile;
+use crate::model::{EulerLagrange, TwoLink, TwoLinkParams};
+use crate::trajectory::TrajectoryConfig;
+use crate::units::AngleUnit;
+
+/// Largest number of agents a scenario may hold.
+pub const MAX_AGENTS: usize = 256;
+/// Largest scenario or attack file accepted, bytes.
+pub const MAX_FILE_BYTES: u64 = 1 << 20;
+/// Largest number of links a model may have (fixed-size message payloads).
+pub const MAX_DOF: usize = 6;
+
+/// The embedded default scenario: the paper's experiment (identical to `scenarios/paper.toml`).
+pub const PAPER_SCENARIO: &str = include_str!("../../scenarios/paper.toml");
+
+/// Controller variant (SPEC §4.8).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ControllerMode {
+    /// Observer + NN attack estimate `Ŝ` in (12) and (23).
+    Proposed,
+    /// The paper's baseline: `Ŝ ≡ 0`, weights not updated.
+    Traditional,
+}
+
+impl ControllerMode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Proposed => "proposed",
+            Self::Traditional => "traditional",
+        }
+    }
+}
+
+/// How processes are clocked (SPEC §6).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum ClockMode {
+    /// Deterministic, as fast as the machine allows.
+    #[default]
+    Lockstep,
+    /// Physics paced by the wall clock.
+    Realtime,
+}
+
+impl ClockMode {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Lockstep => "lockstep",
+            Self::Realtime => "realtime",
+        }
+    }
+}
+
+/// Alarm when `‖Ŝ‖` stays above a threshold for a hold time (beyond the paper, SPEC §4.9).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DetectionConfig {
+    /// Threshold on `‖Ŝ‖` (rad/s, the units of `S = S2 + β S1`).
+    pub threshold: f64,
+    /// How long `‖Ŝ‖` must stay above the threshold before the alarm is raised, s.
+    pub hold_s: f64,
+}
+
+/// Gains of the control center (SPEC §4, calibration there).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ControllerConfig {
+    pub mode: ControllerMode,
+    /// `k` of `u = k r̂` (14), typical 21.
+    pub gain_k: f64,
+    /// `β` of (7), (12), (23), 1/s; typical 30.
+    pub beta: f64,
+    /// Observer gain `L1` of (22), typical 0.01.
+    pub observer_gain_l1: f64,
+    /// Observer gain `L2` of (22), typical 0.012.
+    pub observer_gain_l2: f64,
+    /// Hidden neurons `n_n` of the NN (32), typical 3.
+    pub hidden_neurons: usize,
+    /// `Γ1 = value · I` of (37), typical 5000.
+    pub learning_rate_w: f64,
+    /// `Γ2 = value · I` of (38), typical 10.
+    pub learning_rate_v: f64,
+    /// Frobenius-ball radius `W̄` of the projection of `Ŵ`, typical 50.
+    pub weight_bound_w: f64,
+    /// Frobenius-ball radius `V̄` of the projection of `V̂`, typical 50.
+    pub weight_bound_v: f64,
+    /// `V̂(0) ~ U(−a, a)` elementwise, typical 1.
+    pub initial_v_range: f64,
+    pub detection: DetectionConfig,
+}
+
+/// Gaussian sensor noise θ (SPEC §2).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseConfig {
+    /// Standard deviation of θ1, rad; typical 1e-4.
+    pub position_std_rad: f64,
+    /// Standard deviation of θ2, rad/s; typical 1e-4.
+    pub velocity_std_rad_s: f64,
+}
+
+/// One link's additive disturbance `amplitude · sin(omega t)`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisturbanceLink {
+    pub amplitude: f64,
+    pub omega_rad_s: f64,
+}
+
+/// Exogenous disturbance `d(t)` of (1), N·m.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisturbanceConfig {
+    /// `deg` multiplies the amplitudes by π/180, the paper's reading ("0.2 sin(0.1t) deg");
+    /// `rad` takes them as N·m.
+    pub units: AngleUnit,
+    pub links: Vec<DisturbanceLink>,
+}
+
+impl DisturbanceConfig {
+    /// `d(t)` into `out`, N·m.
+    pub fn value_into(&self, t: f64, out: &mut [f64]) {
+        let scale = self.units.to_rad();
+        for (o, l) in out.iter_mut().zip(&self.links) {
+            *o = scale * l.amplitude * (l.omega_rad_s * t).sin();
+        }
+    }
+}
+
+/// The robot of one agent. One variant per model file in `model/`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum ModelConfig {
+    /// Two-link planar manipulator (eq. 67); parameters default to the paper's.
+    TwoLink {
+        #[serde(default = "paper_p1")]
+        p1: f64,
+        #[serde(default = "paper_p2")]
+        p2: f64,
+        #[serde(default = "paper_p3")]
+        p3: f64,
+        #[serde(default = "paper_fd1")]
+        fd1: f64,
+        #[serde(default = "paper_fd2")]
+        fd2: f64,
+    },
+}
+
+fn paper_p1() -> f64 {
+    TwoLinkParams::PAPER.p1
+}
+fn paper_p2() -> f64 {
+    TwoLinkParams::PAPER.p2
+}
+fn paper_p3() -> f64 {
+    TwoLinkParams::PAPER.p3
+}
+fn paper_fd1() -> f64 {
+    TwoLinkParams::PAPER.fd1
+}
+fn paper_fd2() -> f64 {
+    TwoLinkParams::PAPER.fd2
+}
+
+impl ModelConfig {
+    /// Number of links.
+    pub fn dof(&self) -> usize {
+        match self {
+            Self::TwoLink { .. } => 2,
+        }
+    }
+
+    /// The two-link model, if this is one.
+    pub fn two_link(&self) -> TwoLink {
+        match *self {
+            Self::TwoLink {
+                p1,
+                p2,
+                p3,
+                fd1,
+                fd2,
+            } => TwoLink::new(TwoLinkParams {
+                p1,
+                p2,
+                p3,
+                fd1,
+                fd2,
+            }),
+        }
+    }
+
+    fn problems(&self) -> Vec<(String, String)> {
+        let mut out = Vec::new();
+        match *self {
+            Self::TwoLink {
+                p1,
+                p2,
+                p3,
+                fd1,
+                fd2,
+            } => {
+                for (name, v) in [
+                    ("p1", p1),
+                    ("p2", p2),
+                    ("p3", p3),
+                    ("fd1", fd1),
+                    ("fd2", fd2),
+                ] {
+                    if !v.is_finite() {
+                        out.push((name.to_string(), format!("must be finite, got {v}")));
+                    }
+                }
+                for (name, v) in [("fd1", fd1), ("fd2", fd2)] {
+                    if v < 0.0 {
+                        out.push((name.to_string(), format!("friction must be ≥ 0, got {v}")));
+                    }
+                }
+                if !(TwoLinkParams {
+                    p1,
+                    p2,
+                    p3,
+                    fd1,
+                    fd2,
+                })
+                .is_positive_definite()
+                {
+                    out.push(("p1".into(), format!("inertia not positive definite: need p2 > 0 and p2(p1 − p2) > p3² (p1={p1}, p2={p2}, p3={p3})")));
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Builds the model of a [`ModelConfig`] for robots with `N` links. A model with another number
+/// of links yields `None` (validation makes every agent of a run share one link count).
+pub trait BuildModel<const N: usize> {
+    fn build_model(&self) -> Option<Box<dyn EulerLagrange<N>>>;
+}
+
+impl BuildModel<2> for ModelConfig {
+    fn build_model(&self) -> Option<Box<dyn EulerLagrange<2>>> {
+        match self {
+            Self::TwoLink { .. } => Some(Box::new(self.two_link())),
+        }
+    }
+}
+
+/// One agent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentConfig {
+    /// Unique id ≥ 1; attack channels refer to it.
+    pub id: u32,
+    pub model: ModelConfig,
+    pub trajectory: TrajectoryConfig,
+    pub delay: DelayProfile,
+}
+
+/// Where the attack comes from: exactly one of a preset name, a file, or inline channels.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AttackSource {
+    /// A shipped preset: `paper`, `paper-linkwise`, `none`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub preset: Option<String>,
+    /// An attack-profile TOML file, relative to the scenario file's folder.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<PathBuf>,
+    /// Inline profile.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub profile: Option<AttackProfile>,
+}
+
+/// A whole run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    pub name: String,
+    /// Run seed: sensor noise, V̂(0), attack noise all derive from it.
+    pub seed: u64,
+    /// Simulated time, s.
+    pub duration_s: f64,
+    /// Control period Δ, s; typical 0.001.
+    pub control_period_s: f64,
+    /// RK4 sub-steps of the plant per control period; typical 1.
+    pub physics_substeps: u32,
+    #[serde(default)]
+    pub clock: ClockMode,
+    pub controller: ControllerConfig,
+    pub noise: NoiseConfig,
+    pub disturbance: DisturbanceConfig,
+    pub agents: Vec<AgentConfig>,
+    pub attack: AttackSource,
+}
+
+/// One problem of a scenario, with the path of the field it concerns.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Problem {
+    pub path: String,
+    pub message: String,
+}
+
+impl std::fmt::Display for Problem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}: {}", self.path, self.message)
+    }
+}
+
+/// Every problem found in a scenario file.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{source_name}: {} problem(s):\n{}", problems.len(), problems.iter().map(|p| format!("  - {p}")).collect::<Vec<_>>().join("\n"))]
+pub struct ScenarioError {
+    /// File name or `<embedded>`.
+    pub source_name: String,
+    pub problems: Vec<Problem>,
+}
+
+impl ScenarioError {
+    fn one(source_name: &str, path: &str, message: impl Into<String>) -> Self {
+        Self {
+            source_name: source_name.into(),
+            problems: vec![Problem {
+                path: path.into(),
+                message: message.into(),
+            }],
+        }
+    }
+}
+
+/// A validated scenario with its attack profile resolved.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Resolved {
+    pub scenario: Scenario,
+    pub attack: AttackProfile,
+}
+
+impl Resolved {
+    /// Number of agents.
+    pub fn agent_count(&self) -> usize {
+        self.scenario.agents.len()
+    }
+
+    /// Number of control ticks of the run: `round(duration / Δ)`.
+    pub fn ticks(&self) -> u64 {
+        (self.scenario.duration_s / self.scenario.control_period_s).round() as u64
+    }
+
+    /// The scenario as TOML with the attack inlined (what a run directory stores).
+    pub fn to_toml(&self) -> String {
+        let mut s = self.scenario.clone();
+        s.attack = AttackSource {
+            preset: None,
+            file: None,
+            profile: Some(self.attack.clone()),
+        };
+        toml::to_string(&s).unwrap_or_else(|e| format!("# could not serialize scenario: {e}\n"))
+    }
+
+    /// Replaces the attack (e.g. `--attack FILE|PRESET`) and re-checks it against the agents.
+    pub fn with_attack(mut self, attack: AttackProfile) -> Result<Self, ScenarioError> {
+        let problems: Vec<Problem> = attack
+            .problems(&self.scenario.agent_dofs())
+            .into_iter()
+            .map(|(p, m)| Problem {
+                path: format!("attack.{p}"),
+                message: m,
+            })
+            .collect();
+        if !problems.is_empty() {
+            return Err(ScenarioError {
+                source_name: "attack".into(),
+                problems,
+            });
+        }
+        self.attack = attack;
+        Ok(self)
+    }
+}
+
+impl Scenario {
+    /// Ids and link counts of the agents.
+    pub fn agent_dofs(&self) -> BTreeMap<u32, usize> {
+        self.agents.iter().map(|a| (a.id, a.model.dof())).collect()
+    }
+
+    /// Every problem of the scenario's values (parsing has already checked keys and types).
+    pub fn validate(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
+        if self.name.trim().is_empty() {
+            push("name".into(), "must not be empty".into());
+        }
+        if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
+            push(
+                "duration_s".into(),
+                format!("must be finite and > 0, got {}", self.duration_s),
+            );
+        }
+        if !(self.control_period_s.is_finite() && self.control_period_s > 0.0) {
+            push(
+                "control_period_s".into(),
+                format!("must be finite and > 0, got {}", self.control_period_s),
+            );
+        } else if self.duration_s.is_finite() && self.control_period_s > self.duration_s {
+            push(
+                "control_period_s".into(),
+                format!(
+                    "must not exceed duration_s ({} > {})",
+                    self.control_period_s, self.duration_s
+                ),
+            );
+        } else if self.duration_s.is_finite() && self.duration_s / self.control_period_s > 1e9 {
+            push("duration_s".into(), "more than 1e9 control ticks".into());
+        }
+        if !(1..=1000).contains(&self.physics_substeps) {
+            push(
+                "physics_substeps".into(),
+                format!("must be in 1..=1000, got {}", self.physics_substeps),
+            );
+        }
+        let c = &self.controller;
+        for (name, v) in [
+            ("gain_k", c.gain_k),
+            ("beta", c.beta),
+            ("observer_gain_l1", c.observer_gain_l1),
+            ("observer_gain_l2", c.observer_gain_l2),
+            ("learning_rate_w", c.learning_rate_w),
+            ("learning_rate_v", c.learning_rate_v),
+            ("weight_bound_w", c.weight_bound_w),
+            ("weight_bound_v", c.weight_bound_v),
+            ("detection.threshold", c.detection.threshold),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                push(
+                    format!("controller.{name}"),
+                    format!("must be finite and > 0, got {v}"),
+                );
+            }
+        }
+        for (name, v) in [
+            ("initial_v_range", c.initial_v_range),
+            ("detection.hold_s", c.detection.hold_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                push(
+                    format!("controller.{name}"),
+                    format!("must be finite and ≥ 0, got {v}"),
+                );
+            }
+        }
+        if !(1..=64).contains(&c.hidden_neurons) {
+            push(
+                "controller.hidden_neurons".into(),
+                format!("must be in 1..=64, got {}", c.hidden_neurons),
+            );
+        }
+        for (name, v) in [
+            ("position_std_rad", self.noise.position_std_rad),
+            ("velocity_std_rad_s", self.noise.velocity_std_rad_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                push(
+                    format!("noise.{name}"),
+                    format!("must be finite and ≥ 0, got {v}"),
+                );
+            }
+        }
+        for (i, l) in self.disturbance.links.iter().enumerate() {
+            for (name, v) in [("amplitude", l.amplitude), ("omega_rad_s", l.omega_rad_s)] {
+                if !v.is_finite() {
+                    push(
+                        format!("disturbance.links[{i}].{name}"),
+                        format!("must be finite, got {v}"),
+                    );
+                }
+            }
+        }
+        if self.agents.is_empty() {
+            push(
+                "agents".into(),
+                "at least one agent is required (found zero)".into(),
+            );
+        }
+        if self.agents.len() > MAX_AGENTS {
+            push(
+                "agents".into(),
+                format!("at most {MAX_AGENTS} agents, found {}", self.agents.len()),
+            );
+        }
+        let mut seen = BTreeMap::new();
+        let dof0 = self.agents.first().map(|a| a.model.dof());
+        for (i, a) in self.agents.iter().enumerate() {
+            let at = |f: &str| format!("agents[{i}].{f}");
+            if a.id == 0 {
+                push(at("id"), "must be ≥ 1".into());
+            }
+            if let Some(j) = seen.insert(a.id, i) {
+                push(
+                    at("id"),
+                    format!("duplicate agent id {} (also agents[{j}])", a.id),
+                );
+            }
+            let dof = a.model.dof();
+            if dof > MAX_DOF {
+                push(
+                    at("model"),
+                    format!("{dof} links exceed the maximum {MAX_DOF}"),
+                );
+            }
+            if Some(dof) != dof0 {
+                push(
+                    at("model"),
+                    "every agent of a run must have the same number of links".into(),
+                );
+            }
+            for (f, m) in a.model.problems() {
+                push(at(&format!("model.{f}")), m);
+            }
+            if a.trajectory.links.len() != dof {
+                push(
+                    at("trajectory.links"),
+                    format!(
+                        "needs {dof} entries (one per link), found {}",
+                        a.trajectory.links.len()
+                    ),
+                );
+            }
+            if !(a.trajectory.ramp_rate.is_finite() && a.trajectory.ramp_rate >= 0.0) {
+                push(
+                    at("trajectory.ramp_rate"),
+                    format!("must be finite and ≥ 0, got {}", a.trajectory.ramp_rate),
+                );
+            }
+            for (l, link) in a.trajectory.links.iter().enumerate() {
+                for (name, v) in link.parameters() {
+                    if !v.is_finite() {
+                        push(
+                            at(&format!("trajectory.links[{l}].{name}")),
+                            format!("must be finite, got {v}"),
+                        );
+                    }
+                }
+            }
+            let mut delay_ok = true;
+            for (name, v) in a.delay.parameters() {
+                if !v.is_finite() {
+                    delay_ok = false;
+                    push(
+                        at(&format!("delay.{name}")),
+                        format!("must be finite, got {v}"),
+                    );
+                }
+            }
+            if delay_ok {
+                if a.delay.min() <= 0.0 {
+                    push(at("delay"), format!("delay must stay > 0 (Assumption 4), but its minimum is {} s (negative or zero delay)", a.delay.min()));
+                }
+                if a.delay.max_rate() >= 1.0 {
+                    push(
+                        at("delay"),
+                        format!(
+                            "|dτ/dt| must stay < 1 (Assumption 4), but it reaches {}",
+                            a.delay.max_rate()
+                        ),
+                    );
+                }
+                if a.delay.max() > 10.0 {
+                    push(
+                        at("delay"),
+                        format!("delay above 10 s ({} s) is not supported", a.delay.max()),
+                    );
+                }
+            }
+        }
+        if let Some(d) = dof0 {
+            if self.disturbance.links.len() != d {
+                push(
+                    "disturbance.links".into(),
+                    format!(
+                        "needs {d} entries (one per link), found {}",
+                        self.disturbance.links.len()
+                    ),
+                );
+            }
+        }
+        let sources = [
+            self.attack.preset.is_some(),
+            self.attack.file.is_some(),
+            self.attack.profile.is_some(),
+        ];
+        if sources.iter().filter(|s| **s).count() != 1 {
+            push(
+                "attack".into(),
+                "set exactly one of `preset`, `file` or `profile`".into(),
+            );
+        }
+        if let Some(p) = &self.attack.preset {
+            if presets::preset(p).is_none() {
+                push(
+                    "attack.preset".into(),
+                    format!(
+                        "unknown preset `{p}` (known: {})",
+                        presets::names().join(", ")
+                    ),
+                );
+            }
+        }
+        if let Some(profile) = &self.attack.profile {
+            for (p, m) in profile.problems(&self.agent_dofs()) {
+                push(format!("attack.profile.{p}"), m);
+            }
+        }
+        out
+    }
+}
+
+/// Reads a TOML file of at most [`MAX_FILE_BYTES`].
+pub fn read_limited(path: &Path) -> Result<String, String> {
+    let meta =
+        std::fs::metadata(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(format!(
+            "{} is {} bytes, larger than the {} byte limit",
+            path.display(),
+            meta.len(),
+            MAX_FILE_BYTES
+        ));
+    }
+    std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))
+}
+
+/// Deserializes `text`, collecting every unknown key (each one is removed and parsing retried)
+/// before reporting the first other error. Returns the value and the unknown-key problems.
+fn parse_collecting<T: serde::de::DeserializeOwned>(
+    text: &str,
+    source_name: &str,
+) -> Result<(Option<T>, Vec<Problem>), ScenarioError> {
+    // Syntax errors first, with their line and column.
+    let mut value: toml::Table = toml::from_str(text).map_err(|e| {
+        ScenarioError::one(
+            source_name,
+            "<file>",
+            format!("TOML syntax: {}", e.message()),
+        )
+    })?;
+    let mut problems = Vec::new();
+    for _ in 0..256 {
+        let de = toml::Value::Table(value.clone());
+        match serde_path_to_error::deserialize::<_, T>(de) {
+            Ok(v) => return Ok((Some(v), problems)),
+            Err(err) => {
+                let path = err.path().to_string();
+                let msg = err.inner().to_string();
+                let unknown = msg.starts_with("unknown field");
+                let key = msg.split('`').nth(1).map(str::to_owned);
+                problems.push(Problem {
+                    path: if path == "." {
+                        "<root>".into()
+                    } else {
+                        path.clone()
+                    },
+                    message: msg,
+                });
+                let removed = match (unknown, key) {
+                    (true, Some(key)) => remove_key(&mut value, &path, &key),
+                    _ => false,
+                };
+                if !removed {
+                    return Ok((None, problems));
+                }
+            }
+        }
+    }
+    Ok((None, problems))
+}
+
+/// Removes `key` from the table at `path` (as printed by serde_path_to_error, whose last
+/// segment may be the key itself).
+fn remove_key(root: &mut toml::Table, path: &str, key: &str) -> bool {
+    let mut segments: Vec<String> = Vec::new();
+    for part in path.split('.').filter(|s| !s.is_empty()) {
+        let mut rest = part;
+        if let Some(b) = rest.find('[') {
+            segments.push(rest[..b].to_string());
+            rest = &rest[b..];
+            while let Some(end) = rest.find(']') {
+                segments.push(rest[..=end].to_string());
+                rest = &rest[end + 1..];
+            }
+        } else {
+            segments.push(rest.to_string());
+        }
+    }
+    if segments.last().is_some_and(|s| s == key) {
+        segments.pop();
+    }
+    let mut root_value = toml::Value::Table(std::mem::take(root));
+    let removed = remove_at(&mut root_value, &segments, key);
+    if let toml::Value::Table(t) = root_value {
+        *root = t;
+    }
+    removed
+}
+
+fn remove_at(cur: &mut toml::Value, segments: &[String], key: &str) -> bool {
+    let Some((seg, rest)) = segments.split_first() else {
+        return cur.as_table_mut().is_some_and(|t| t.remove(key).is_some());
+    };
+    let next = if let Some(idx) = seg.strip_prefix('[').and_then(|s| s.strip_suffix(']')) {
+        idx.parse::<usize>()
+            .ok()
+            .and_then(|i| cur.as_array_mut().and_then(|a| a.get_mut(i)))
+    } else {
+        cur.as_table_mut().and_then(|t| t.get_mut(seg.as_str()))
+    };
+    next.is_some_and(|n| remove_at(n, rest, key))
+}
+
+/// Parses and validates scenario text. `base_dir` resolves `attack.file`.
+pub fn load_str(
+    text: &str,
+    source_name: &str,
+    base_dir: Option<&Path>,
+) -> Result<Resolved, ScenarioError> {
+    let (scenario, mut problems) = parse_collecting::<Scenario>(text, source_name)?;
+    let Some(scenario) = scenario else {
+        return Err(ScenarioError {
+            source_name: source_name.into(),
+            problems,
+        });
+    };
+    problems.extend(scenario.validate());
+    let mut attack = AttackProfile::default();
+    if let Some(name) = &scenario.attack.preset {
+        attack = presets::preset(name).unwrap_or_default();
+    } else if let Some(p) = &scenario.attack.profile {
+        attack = p.clone();
+    } else if let Some(file) = &scenario.attack.file {
+        let path = base_dir.map_or_else(|| file.clone(), |b| b.join(file));
+        match load_attack_file(&path) {
+            Ok(p) => {
+                for (path, m) in p.problems(&scenario.agent_dofs()) {
+                    problems.push(Problem {
+                        path: format!("attack.file({}).{path}", file.display()),
+                        message: m,
+                    });
+                }
+                attack = p;
+            }
+            Err(e) => problems.extend(e.problems.into_iter().map(|p| Problem {
+                path: format!("attack.file({}).{}", file.display(), p.path),
+                message: p.message,
+            })),
+        }
+    }
+    if problems.is_empty() {
+        Ok(Resolved { scenario, attack })
+    } else {
+        Err(ScenarioError {
+            source_name: source_name.into(),
+            problems,
+        })
+    }
+}
+
+/// Loads and validates a scenario file.
+pub fn load_file(path: &Path) -> Result<Resolved, ScenarioError> {
+    let name = path.display().to_string();
+    let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
+    load_str(&text, &name, path.parent())
+}
+
+/// The embedded paper scenario.
+pub fn paper() -> Result<Resolved, ScenarioError> {
+    load_str(PAPER_SCENARIO, "<embedded paper scenario>", None)
+}
+
+/// Loads an attack-profile file (checked for keys and types; agent references are checked
+/// against a scenario by [`Resolved::with_attack`]).
+pub fn load_attack_file(path: &Path) -> Result<AttackProfile, ScenarioError> {
+    let name = path.display().to_string();
+    let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
+    let (profile, problems) = parse_collecting::<AttackProfile>(&text, &name)?;
+    match profile {
+        Some(p) if problems.is_empty() => Ok(p),
+        _ => Err(ScenarioError {
+            source_name: name,
+            problems,
+        }),
+    }
+}
+
+/// `--attack` argument: a preset name or a file path.
+pub fn attack_from_arg(arg: &str) -> Result<AttackProfile, ScenarioError> {
+    if let Some(p) = presets::preset(arg) {
+        return Ok(p);
+    }
+    let path = Path::new(arg);
+    if !path.exists() {
+        return Err(ScenarioError::one(
+            arg,
+            "--attack",
+            format!(
+                "neither a preset ({}) nor an existing file",
+                presets::names().join(", ")
+            ),
+        ));
+    }
+    load_attack_file(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embedded_paper_scenario_validates() {
+        let r = paper().expect("paper scenario is valid");
+        assert_eq!(r.agent_count(), 4);
+        assert_eq!(r.ticks(), 40_000);
+        assert_eq!(r.attack.name, "paper");
+    }
+
+    #[test]
+    fn unknown_key_negative_delay_and_zero_agents_are_all_reported() {
+        let text = PAPER_SCENARIO.replace("seed = 1\n", "seed = 1\nfrobnicate = true\n");
+        let r = load_str(&text, "t", None);
+        assert!(r.is_err());
+        let bad = text.replace("offset_s = 0.003", "offset_s = -0.003");
+        let err = load_str(&bad, "t", None).expect_err("invalid");
+        let all = err.to_string();
+        assert!(all.contains("frobnicate"), "{all}");
+        assert!(all.contains("agents[0].delay"), "{all}");
+    }
+
+    #[test]
+    fn resolved_scenario_round_trips_through_toml() {
+        let r = paper().expect("valid");
+        let again = load_str(&r.to_toml(), "again", None).expect("round trip");
+        assert_eq!(again.attack, r.attack);
+        let mut s = again.scenario.clone();
+        s.attack = r.scenario.attack.clone();
+        assert_eq!(s, r.scenario);
+    }
+}

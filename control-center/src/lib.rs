@@ -1,0 +1,1 @@
+//! fdi-control-center process (multi-process runtime).

@@ -1,0 +1,145 @@
+//! The paper's Tables I and II.
+
+use std::process::ExitCode;
+
+use anyhow::Result;
+use fdi_common::delay::DelayProfile;
+use fdi_common::scenario::{self, ControllerMode, Resolved};
+use serde::Serialize;
+
+use crate::cli::{execute, TableArgs};
+
+/// Table I of the paper: (robot, traditional, proposed) RMSE in rad.
+const PAPER_TABLE1: [(u32, f64, f64); 4] = [
+    (1, 0.028, 0.008),
+    (2, 0.041, 0.013),
+    (3, 0.026, 0.009),
+    (4, 0.015, 0.010),
+];
+
+/// Table II of the paper: (case, delay, RMSE of robot 1 in rad).
+fn paper_table2() -> [(&'static str, DelayProfile, f64); 4] {
+    let sine = |a_ms: f64, rate: f64, off_ms: f64| DelayProfile::Sine {
+        amplitude_s: a_ms * 1e-3,
+        offset_s: off_ms * 1e-3,
+        rate_rad_s: rate,
+    };
+    [
+        ("small-fast", sine(2.0, 0.5, 3.0), 0.0084),
+        ("large-fast", sine(20.0, 0.5, 30.0), 0.0101),
+        ("small-slow", sine(2.0, 0.05, 3.0), 0.0085),
+        ("large-slow", sine(20.0, 0.05, 30.0), 0.0113),
+    ]
+}
+
+#[derive(Debug, Serialize)]
+struct Table1Row {
+    robot: u32,
+    traditional_rmse_rad: f64,
+    proposed_rmse_rad: f64,
+    paper_traditional: f64,
+    paper_proposed: f64,
+}
+
+#[derive(Debug, Serialize)]
+struct Table2Row {
+    case: &'static str,
+    tau_ms: String,
+    rmse_rad: f64,
+    paper_rmse_rad: f64,
+}
+
+fn base(args: &TableArgs) -> Result<Resolved> {
+    let mut r = scenario::paper()?;
+    if let Some(d) = args.duration_s {
+        r.scenario.duration_s = d;
+    }
+    Ok(r)
+}
+
+pub fn table1(args: &TableArgs) -> Result<ExitCode> {
+    let paper = base(args)?;
+    let mut results = Vec::new();
+    for mode in [ControllerMode::Traditional, ControllerMode::Proposed] {
+        let mut r = paper.clone();
+        r.scenario.controller.mode = mode;
+        results.push(execute(&r, args.engine)?);
+    }
+    let rows: Vec<Table1Row> = PAPER_TABLE1
+        .iter()
+        .map(|&(robot, pt, pp)| Table1Row {
+            robot,
+            traditional_rmse_rad: results[0]
+                .rmse_rad
+                .get(&robot.to_string())
+                .copied()
+                .unwrap_or(f64::NAN),
+            proposed_rmse_rad: results[1]
+                .rmse_rad
+                .get(&robot.to_string())
+                .copied()
+                .unwrap_or(f64::NAN),
+            paper_traditional: pt,
+            paper_proposed: pp,
+        })
+        .collect();
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({ "engine": args.engine.as_str(), "rows": rows })
+        );
+    } else {
+        println!("Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}", args.engine.as_str());
+        println!();
+        println!("| robot | traditional | proposed | ratio | paper traditional | paper proposed | paper ratio |");
+        println!("|---|---|---|---|---|---|---|");
+        for r in &rows {
+            println!(
+                "| {} | {:.4} | {:.4} | {:.2} | {:.3} | {:.3} | {:.2} |",
+                r.robot,
+                r.traditional_rmse_rad,
+                r.proposed_rmse_rad,
+                r.traditional_rmse_rad / r.proposed_rmse_rad,
+                r.paper_traditional,
+                r.paper_proposed,
+                r.paper_traditional / r.paper_proposed
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+pub fn table2(args: &TableArgs) -> Result<ExitCode> {
+    let paper = base(args)?;
+    let mut rows = Vec::new();
+    for (case, delay, paper_rmse) in paper_table2() {
+        let mut r = paper.clone();
+        r.scenario.agents.retain(|a| a.id == 1);
+        r.scenario.agents[0].delay = delay;
+        let summary = execute(&r, args.engine)?;
+        rows.push(Table2Row {
+            case,
+            tau_ms: delay.describe_ms(),
+            rmse_rad: summary.rmse_rad.get("1").copied().unwrap_or(f64::NAN),
+            paper_rmse_rad: paper_rmse,
+        });
+    }
+    if args.json {
+        println!(
+            "{}",
+            serde_json::json!({ "engine": args.engine.as_str(), "rows": rows })
+        );
+    } else {
+        println!("Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}", args.engine.as_str());
+        println!();
+        println!("| case | tau(t) (ms) | RMSE | paper RMSE |");
+        println!("|---|---|---|---|");
+        for r in &rows {
+            println!(
+                "| {} | {} | {:.4} | {:.4} |",
+                r.case, r.tau_ms, r.rmse_rad, r.paper_rmse_rad
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
