@@ -17,5 +17,6 @@ pub mod plant;
 pub mod records;
 pub mod rng;
 pub mod scenario;
+pub mod trace;
 pub mod trajectory;
 pub mod units;

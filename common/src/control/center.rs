@@ -131,6 +131,12 @@ impl<const N: usize> CenterAgent<N> {
 
     /// One control tick at `t` from the (possibly tampered) measurement `(y, ẏ)`.
     pub fn tick(&mut self, t: f64, y: &Vector<N>, yd: &Vector<N>) -> CenterOutput<N> {
+        self.tick_with_estimate(t, y, yd, None)
+    }
+
+    /// [`Self::tick`] with `Ŝ` replaced by `s_override` when given (an oracle for tests and
+    /// ablations: the weights are then not updated).
+    pub fn tick_with_estimate(&mut self, t: f64, y: &Vector<N>, yd: &Vector<N>, s_override: Option<&Vector<N>>) -> CenterOutput<N> {
         let c = self.params.controller;
         let dt = self.params.control_period_s;
         let sane = |v: &Vector<N>| {
@@ -153,9 +159,10 @@ impl<const N: usize> CenterAgent<N> {
         let u_tau = self.sent.value_at(t - tau);
 
         // 4: NN estimate from the previous tick's Ψ2 (no algebraic loop).
-        let s_hat = match c.mode {
-            ControllerMode::Proposed => self.estimator.estimate(&self.psi2_prev),
-            ControllerMode::Traditional => Vector::<N>::zeros(),
+        let s_hat = match (s_override, c.mode) {
+            (Some(s), _) => *s,
+            (None, ControllerMode::Proposed) => self.estimator.estimate(&self.psi2_prev),
+            (None, ControllerMode::Traditional) => Vector::<N>::zeros(),
         };
 
         // 5: r̂ = Ψ̇1 + β Ψ1 − A e_u + Ŝ, u = k r̂.
@@ -185,7 +192,7 @@ impl<const N: usize> CenterAgent<N> {
         let psi2 = self.observer.step(self.model.as_ref(), &input, dt);
 
         // 7: weights.
-        if c.mode == ControllerMode::Proposed {
+        if c.mode == ControllerMode::Proposed && s_override.is_none() {
             self.estimator.update(&psi2, dt);
         }
         self.psi2_prev = psi2;
