@@ -11,6 +11,7 @@ pub mod attack;
 pub mod control;
 pub mod delay;
 pub mod engine;
+pub mod ipc;
 pub mod metrics;
 pub mod model;
 pub mod plant;

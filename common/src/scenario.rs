@@ -236,7 +236,7 @@ impl ModelConfig {
                 })
                 .is_positive_definite()
                 {
-                    out.push(("p1".into(), format!("inertia not positive definite: need p2 > 0 and p2(p1 − p2) > p3² (p1={p1}, p2={p2}, p3={p3})")));
+                    out.push(("p2".into(), format!("inertia not positive definite: need p2 > 0 and p2(p1 − p2) > p3² (p1={p1}, p2={p2}, p3={p3})")));
                 }
             }
         }
@@ -745,7 +745,9 @@ pub fn load_str(
     problems.extend(scenario.validate());
     let mut attack = AttackProfile::default();
     if let Some(name) = &scenario.attack.preset {
-        attack = presets::preset(name).unwrap_or_default();
+        attack = presets::preset(name)
+            .unwrap_or_default()
+            .for_agents(&scenario.agent_dofs());
     } else if let Some(p) = &scenario.attack.profile {
         attack = p.clone();
     } else if let Some(file) = &scenario.attack.file {
@@ -803,10 +805,12 @@ pub fn load_attack_file(path: &Path) -> Result<AttackProfile, ScenarioError> {
     }
 }
 
-/// `--attack` argument: a preset name or a file path.
-pub fn attack_from_arg(arg: &str) -> Result<AttackProfile, ScenarioError> {
+/// `--attack` argument: a preset name or a file path. A preset keeps only the channels of
+/// agents in the scenario (the shipped presets are written for the paper's four robots); a file
+/// must name only agents of the scenario.
+pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, ScenarioError> {
     if let Some(p) = presets::preset(arg) {
-        return Ok(p);
+        return Ok(p.for_agents(&scenario.agent_dofs()));
     }
     let path = Path::new(arg);
     if !path.exists() {

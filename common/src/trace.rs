@@ -52,22 +52,36 @@ pub enum TraceRecord {
     Attack(AttackRecord),
     Center(CenterRecord),
     /// Latency stamps of the torque that agent `agent` received for tick `k`.
-    Latency { k: u64, agent: u32, stamps: HopStamps },
+    Latency {
+        k: u64,
+        agent: u32,
+        stamps: HopStamps,
+    },
     /// Something the process wants on record (lost peer, rejected message, shutdown reason).
-    Event { t: f64, message: String },
+    Event {
+        t: f64,
+        message: String,
+    },
 }
 
 /// Trace errors name the file and, for damage, the byte offset.
 #[derive(Debug, thiserror::Error)]
 pub enum TraceError {
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("{path}: not an fdi-mas trace (bad magic)")]
     BadMagic { path: PathBuf },
     #[error("{path}: trace format version {found} is not supported (this build reads version {FORMAT_VERSION})")]
     UnknownVersion { path: PathBuf, found: u32 },
     #[error("{path}: damaged frame at byte offset {offset}: {reason}")]
-    Damaged { path: PathBuf, offset: u64, reason: String },
+    Damaged {
+        path: PathBuf,
+        offset: u64,
+        reason: String,
+    },
     #[error("{path}: cannot encode record: {reason}")]
     Encode { path: PathBuf, reason: String },
 }
@@ -87,9 +101,16 @@ pub struct TraceWriter {
 impl TraceWriter {
     /// Creates (truncates) `path` and writes the magic, version and header.
     pub fn create(path: &Path, header: &TraceHeader) -> Result<Self, TraceError> {
-        let io = |source| TraceError::Io { path: path.to_path_buf(), source };
+        let io = |source| TraceError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         let file = File::create(path).map_err(io)?;
-        let mut w = Self { path: path.to_path_buf(), out: BufWriter::with_capacity(1 << 16, file), buf: Vec::with_capacity(512) };
+        let mut w = Self {
+            path: path.to_path_buf(),
+            out: BufWriter::with_capacity(1 << 16, file),
+            buf: Vec::with_capacity(512),
+        };
         w.out.write_all(MAGIC).map_err(io)?;
         w.out.write_all(&FORMAT_VERSION.to_le_bytes()).map_err(io)?;
         w.frame(header)?;
@@ -98,12 +119,27 @@ impl TraceWriter {
 
     fn frame<T: Serialize>(&mut self, value: &T) -> Result<(), TraceError> {
         self.buf.clear();
-        bincode::serde::encode_into_std_write(value, &mut self.buf, config())
-            .map_err(|e| TraceError::Encode { path: self.path.clone(), reason: e.to_string() })?;
-        let len = u32::try_from(self.buf.len()).map_err(|_| TraceError::Encode { path: self.path.clone(), reason: "frame over 4 GiB".into() })?;
-        let io = |source| TraceError::Io { path: self.path.clone(), source };
+        bincode::serde::encode_into_std_write(value, &mut self.buf, config()).map_err(|e| {
+            TraceError::Encode {
+                path: self.path.clone(),
+                reason: e.to_string(),
+            }
+        })?;
+        let len = u32::try_from(self.buf.len()).map_err(|_| TraceError::Encode {
+            path: self.path.clone(),
+            reason: "frame over 4 GiB".into(),
+        })?;
+        let io = |source| TraceError::Io {
+            path: self.path.clone(),
+            source,
+        };
         self.out.write_all(&len.to_le_bytes()).map_err(io)?;
-        self.out.write_all(&self.buf).map_err(|source| TraceError::Io { path: self.path.clone(), source })
+        self.out
+            .write_all(&self.buf)
+            .map_err(|source| TraceError::Io {
+                path: self.path.clone(),
+                source,
+            })
     }
 
     pub fn write(&mut self, record: &TraceRecord) -> Result<(), TraceError> {
@@ -111,7 +147,10 @@ impl TraceWriter {
     }
 
     pub fn flush(&mut self) -> Result<(), TraceError> {
-        self.out.flush().map_err(|source| TraceError::Io { path: self.path.clone(), source })
+        self.out.flush().map_err(|source| TraceError::Io {
+            path: self.path.clone(),
+            source,
+        })
     }
 
     pub fn path(&self) -> &Path {
@@ -139,29 +178,53 @@ pub struct TraceReader {
 
 impl TraceReader {
     pub fn open(path: &Path) -> Result<Self, TraceError> {
-        let io = |source| TraceError::Io { path: path.to_path_buf(), source };
+        let io = |source| TraceError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
         let mut input = BufReader::with_capacity(1 << 16, File::open(path).map_err(io)?);
         let mut magic = [0u8; 8];
         if input.read_exact(&mut magic).is_err() || &magic != MAGIC {
-            return Err(TraceError::BadMagic { path: path.to_path_buf() });
+            return Err(TraceError::BadMagic {
+                path: path.to_path_buf(),
+            });
         }
         let mut v = [0u8; 4];
-        input.read_exact(&mut v).map_err(|_| TraceError::Damaged { path: path.to_path_buf(), offset: 8, reason: "file ends inside the version".into() })?;
+        input.read_exact(&mut v).map_err(|_| TraceError::Damaged {
+            path: path.to_path_buf(),
+            offset: 8,
+            reason: "file ends inside the version".into(),
+        })?;
         let found = u32::from_le_bytes(v);
         if found != FORMAT_VERSION {
-            return Err(TraceError::UnknownVersion { path: path.to_path_buf(), found });
+            return Err(TraceError::UnknownVersion {
+                path: path.to_path_buf(),
+                found,
+            });
         }
         let mut r = Self {
             path: path.to_path_buf(),
             input,
             offset: 12,
-            header: TraceHeader { format_version: found, process: String::new(), scenario_toml: String::new(), seed: 0, clock: String::new() },
+            header: TraceHeader {
+                format_version: found,
+                process: String::new(),
+                scenario_toml: String::new(),
+                seed: 0,
+                clock: String::new(),
+            },
             buf: Vec::new(),
             done: false,
         };
         r.header = match r.next_frame::<TraceHeader>()? {
             Some(h) => h,
-            None => return Err(TraceError::Damaged { path: path.to_path_buf(), offset: 12, reason: "no header frame".into() }),
+            None => {
+                return Err(TraceError::Damaged {
+                    path: path.to_path_buf(),
+                    offset: 12,
+                    reason: "no header frame".into(),
+                })
+            }
         };
         Ok(r)
     }
@@ -176,7 +239,11 @@ impl TraceReader {
 
     fn damaged(&mut self, offset: u64, reason: impl Into<String>) -> TraceError {
         self.done = true;
-        TraceError::Damaged { path: self.path.clone(), offset, reason: reason.into() }
+        TraceError::Damaged {
+            path: self.path.clone(),
+            offset,
+            reason: reason.into(),
+        }
     }
 
     fn next_frame<T: serde::de::DeserializeOwned>(&mut self) -> Result<Option<T>, TraceError> {
@@ -186,17 +253,35 @@ impl TraceReader {
             Ok(0) => return Ok(None),
             Ok(4) => {}
             Ok(_) => return Err(self.damaged(start, "file ends inside a frame length")),
-            Err(e) => return Err(TraceError::Io { path: self.path.clone(), source: e }),
+            Err(e) => {
+                return Err(TraceError::Io {
+                    path: self.path.clone(),
+                    source: e,
+                })
+            }
         }
         let len = u32::from_le_bytes(len);
         if len > MAX_FRAME_BYTES {
-            return Err(self.damaged(start, format!("frame length {len} exceeds the {MAX_FRAME_BYTES} byte limit")));
+            return Err(self.damaged(
+                start,
+                format!("frame length {len} exceeds the {MAX_FRAME_BYTES} byte limit"),
+            ));
         }
         self.buf.resize(len as usize, 0);
         match read_full(&mut self.input, &mut self.buf) {
             Ok(n) if n == len as usize => {}
-            Ok(n) => return Err(self.damaged(start, format!("file ends inside a frame ({n} of {len} bytes)"))),
-            Err(e) => return Err(TraceError::Io { path: self.path.clone(), source: e }),
+            Ok(n) => {
+                return Err(self.damaged(
+                    start,
+                    format!("file ends inside a frame ({n} of {len} bytes)"),
+                ))
+            }
+            Err(e) => {
+                return Err(TraceError::Io {
+                    path: self.path.clone(),
+                    source: e,
+                })
+            }
         }
         let decoded = bincode::serde::decode_from_slice::<T, _>(&self.buf, config());
         match decoded {
@@ -204,7 +289,10 @@ impl TraceReader {
                 self.offset = start + 4 + u64::from(len);
                 Ok(Some(v))
             }
-            Ok((_, used)) => Err(self.damaged(start, format!("frame has {} trailing bytes", self.buf.len() - used))),
+            Ok((_, used)) => Err(self.damaged(
+                start,
+                format!("frame has {} trailing bytes", self.buf.len() - used),
+            )),
             Err(e) => Err(self.damaged(start, format!("cannot decode frame: {e}"))),
         }
     }
@@ -251,7 +339,13 @@ mod tests {
     }
 
     fn header() -> TraceHeader {
-        TraceHeader { format_version: FORMAT_VERSION, process: "attacker".into(), scenario_toml: "name = \"x\"".into(), seed: 9, clock: "lockstep".into() }
+        TraceHeader {
+            format_version: FORMAT_VERSION,
+            process: "attacker".into(),
+            scenario_toml: "name = \"x\"".into(),
+            seed: 9,
+            clock: "lockstep".into(),
+        }
     }
 
     fn record(k: u64) -> TraceRecord {
@@ -303,7 +397,10 @@ mod tests {
         }
         assert_eq!(ok, 9);
         let err = err.expect("an error for the cut frame");
-        assert!(err.contains("byte offset") && err.contains(&p.display().to_string()), "{err}");
+        assert!(
+            err.contains("byte offset") && err.contains(&p.display().to_string()),
+            "{err}"
+        );
         let _ = std::fs::remove_file(&p);
     }
 
@@ -317,7 +414,10 @@ mod tests {
         let e = TraceReader::open(&p).expect_err("version 99");
         assert!(e.to_string().contains("version 99"), "{e}");
         std::fs::write(&p, b"not a trace at all").expect("write");
-        assert!(matches!(TraceReader::open(&p), Err(TraceError::BadMagic { .. })));
+        assert!(matches!(
+            TraceReader::open(&p),
+            Err(TraceError::BadMagic { .. })
+        ));
         let _ = std::fs::remove_file(&p);
     }
 }

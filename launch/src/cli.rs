@@ -118,7 +118,7 @@ pub fn load(path: Option<&Path>) -> Result<Resolved> {
 /// Applies command-line overrides and re-validates.
 pub fn apply_overrides(mut r: Resolved, args: &RunArgs) -> Result<Resolved> {
     if let Some(a) = &args.attack {
-        let profile = scenario::attack_from_arg(a)?;
+        let profile = scenario::attack_from_arg(a, &r.scenario)?;
         r = r.with_attack(profile)?;
     }
     if let Some(c) = args.controller {

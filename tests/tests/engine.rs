@@ -31,12 +31,26 @@ fn same_seed_gives_a_bit_identical_trace_and_digest() {
     for (x, y) in a.iter().zip(&b) {
         // PartialEq on f64 would accept -0.0 == 0.0; compare the bit patterns.
         let bits = |r: &TickRecord| -> Vec<u64> {
-            [r.agent.q, r.agent.qd, r.agent.y, r.attack.y, r.center.u, r.center.s_hat, r.center.q_hat]
-                .iter()
-                .flat_map(|j| j.as_slice().iter().map(|v| v.to_bits()).collect::<Vec<_>>())
-                .collect()
+            [
+                r.agent.q,
+                r.agent.qd,
+                r.agent.y,
+                r.attack.y,
+                r.center.u,
+                r.center.s_hat,
+                r.center.q_hat,
+            ]
+            .iter()
+            .flat_map(|j| j.as_slice().iter().map(|v| v.to_bits()).collect::<Vec<_>>())
+            .collect()
         };
-        assert_eq!(bits(x), bits(y), "tick {} agent {}", x.agent.k, x.agent.agent);
+        assert_eq!(
+            bits(x),
+            bits(y),
+            "tick {} agent {}",
+            x.agent.k,
+            x.agent.agent
+        );
     }
 }
 
@@ -52,7 +66,10 @@ fn different_seed_gives_different_noise_and_digest() {
     assert_eq!(a[0].agent.q, b[0].agent.q);
     assert_ne!(a[0].agent.y, b[0].agent.y);
     let noise = a[0].agent.y.as_slice()[0];
-    assert!(noise.abs() < 1e-3, "sensor noise of std 1e-4 rad, got {noise}");
+    assert!(
+        noise.abs() < 1e-3,
+        "sensor noise of std 1e-4 rad, got {noise}"
+    );
 }
 
 /// Runs agent 1 of the paper scenario with the control center's Ŝ replaced by `oracle(t)`.
@@ -62,7 +79,13 @@ fn run_with_oracle(r: &Resolved, oracle: impl Fn(&mut AgentAttack, f64) -> Vecto
     let mut plant = Plant::<2>::new(PlantParams::new(a, s)).expect("2 links");
     let mut attack = AgentAttack::compile(&r.attack, a.id, s.seed);
     let mut oracle_attack = AgentAttack::compile(&r.attack, a.id, s.seed);
-    let mut center = CenterAgent::<2>::new(CenterParams::new(a, &s.controller, s.seed, s.control_period_s)).expect("2 links");
+    let mut center = CenterAgent::<2>::new(CenterParams::new(
+        a,
+        &s.controller,
+        s.seed,
+        s.control_period_s,
+    ))
+    .expect("2 links");
     let mut sum_sq = 0.0;
     for k in 0..r.ticks() {
         let t = tick_time(k, s.control_period_s);
@@ -85,19 +108,31 @@ fn with_s_hat_forced_to_the_true_attack_the_controller_matches_the_attack_free_r
     // per tick, integrated by a stable loop, stays far below 1e-9 rad.
     let attacked = paper(10.0);
     let beta = attacked.scenario.controller.beta;
-    let clean = attacked.clone().with_attack(presets::preset("none").expect("preset")).expect("valid");
+    let clean = attacked
+        .clone()
+        .with_attack(presets::preset("none").expect("preset"))
+        .expect("valid");
     let rmse_attacked = run_with_oracle(&attacked, |a, t| {
         let inj = a.injection::<2>(t);
         inj.velocity + inj.position * beta
     });
     let rmse_clean = run_with_oracle(&clean, |_, _| Vector::<2>::zeros());
-    assert!(rmse_clean > 1e-4, "the clean run still has a tracking error: {rmse_clean}");
-    assert!((rmse_attacked - rmse_clean).abs() < 1e-9, "attacked {rmse_attacked} vs clean {rmse_clean}");
+    assert!(
+        rmse_clean > 1e-4,
+        "the clean run still has a tracking error: {rmse_clean}"
+    );
+    assert!(
+        (rmse_attacked - rmse_clean).abs() < 1e-9,
+        "attacked {rmse_attacked} vs clean {rmse_clean}"
+    );
     // And without the oracle, the same attack does hurt the traditional controller.
     let mut trad = attacked.clone();
     trad.scenario.controller.mode = ControllerMode::Traditional;
     let rmse_trad = run_with_oracle(&trad, |_, _| Vector::<2>::zeros());
-    assert!(rmse_trad > 1.2 * rmse_clean, "traditional {rmse_trad} vs clean {rmse_clean}");
+    assert!(
+        rmse_trad > 1.2 * rmse_clean,
+        "traditional {rmse_trad} vs clean {rmse_clean}"
+    );
 }
 
 #[test]

@@ -90,7 +90,10 @@ fn shipped_scenarios_have_the_names_and_attacks_they_claim() {
         let mut s = load(file).scenario;
         s.name = paper.name.clone();
         s.attack = paper.attack.clone();
-        assert_eq!(s, paper, "{file} differs from paper.toml beyond name and attack");
+        assert_eq!(
+            s, paper,
+            "{file} differs from paper.toml beyond name and attack"
+        );
     }
 
     // Table II: robot 1 of the paper with the delays of the table (ms → s).
@@ -222,10 +225,8 @@ impl TempDir {
         let nanos = SystemTime::now()
             .duration_since(UNIX_EPOCH)
             .map_or(0, |d| d.as_nanos());
-        let dir = std::env::temp_dir().join(format!(
-            "fdi-tests-{tag}-{}-{nanos}",
-            std::process::id()
-        ));
+        let dir =
+            std::env::temp_dir().join(format!("fdi-tests-{tag}-{}-{nanos}", std::process::id()));
         fs::create_dir_all(&dir).unwrap_or_else(|e| panic!("cannot create {}: {e}", dir.display()));
         Self(dir)
     }
@@ -257,10 +258,7 @@ fn oversized_scenario_and_attack_files_are_refused_with_the_limit() {
     assert!(msg.contains("huge.toml"), "{msg}");
 
     let attack = tmp.0.join("huge-attack.toml");
-    let attack_text = format!(
-        "name = \"huge\"\nchannels = []\n#{}\n",
-        "x".repeat(limit)
-    );
+    let attack_text = format!("name = \"huge\"\nchannels = []\n#{}\n", "x".repeat(limit));
     fs::write(&attack, attack_text)
         .unwrap_or_else(|e| panic!("cannot write {}: {e}", attack.display()));
     let err = scenario::load_attack_file(&attack).expect_err("an oversized attack file");

@@ -66,6 +66,13 @@ pub struct AttackProfile {
 }
 
 impl AttackProfile {
+    /// The profile without the channels of agents not in `agent_dofs` (used for presets, which
+    /// are written for the paper's four robots, in scenarios with fewer agents).
+    pub fn for_agents(mut self, agent_dofs: &BTreeMap<u32, usize>) -> Self {
+        self.channels.retain(|c| agent_dofs.contains_key(&c.agent));
+        self
+    }
+
     /// Every problem of the profile, as `(field path relative to the profile, message)`.
     /// `agent_dofs` maps each agent id of the scenario to its number of links.
     pub fn problems(&self, agent_dofs: &BTreeMap<u32, usize>) -> Vec<(String, String)> {

@@ -136,7 +136,13 @@ impl<const N: usize> CenterAgent<N> {
 
     /// [`Self::tick`] with `Ŝ` replaced by `s_override` when given (an oracle for tests and
     /// ablations: the weights are then not updated).
-    pub fn tick_with_estimate(&mut self, t: f64, y: &Vector<N>, yd: &Vector<N>, s_override: Option<&Vector<N>>) -> CenterOutput<N> {
+    pub fn tick_with_estimate(
+        &mut self,
+        t: f64,
+        y: &Vector<N>,
+        yd: &Vector<N>,
+        s_override: Option<&Vector<N>>,
+    ) -> CenterOutput<N> {
         let c = self.params.controller;
         let dt = self.params.control_period_s;
         let sane = |v: &Vector<N>| {

@@ -1,0 +1,492 @@
+//! The transport layer: the only code that calls iceoryx2.
+//!
+//! Services (names built in [`Stream::service_name`] / [`Wake::service_name`], isolated per run by
+//! the iceoryx2 `global.prefix` of [`Transport::open`]):
+//!
+//! | stream | payload | publishers → subscribers |
+//! |---|---|---|
+//! | `fdi/measurement` | [`MeasurementMsg`] | N agents → attacker |
+//! | `fdi/tampered` | [`MeasurementMsg`] | attacker → control center |
+//! | `fdi/torque/<id>` | [`TorqueMsg`] | control center → agent `id` |
+//! | `fdi/control` | [`ControlMsg`] | launcher → every process |
+//! | `fdi/status` | [`StatusMsg`] | every process → launcher |
+//!
+//! Each process has one wake-up event service (`fdi/wake/...`) that its peers notify after
+//! publishing; it blocks on it with a timeout, never spinning.
+//!
+//! QoS: safe overflow is on for every service, so a dead or stalled subscriber never blocks a
+//! publisher (the oldest unread sample is overwritten instead). Buffers are sized so that
+//! lockstep never overflows; every receiver checks sequence numbers, so an overwritten sample is
+//! detected and counted, never silently lost. No history: a process that joins late sees nothing
+//! old, which is why the launcher starts the run only after every process reported ready.
+
+pub mod msg;
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+
+pub use msg::{ControlMsg, MeasurementMsg, Role, StatusMsg, TorqueMsg};
+
+/// Longest run prefix: iceoryx2 puts it into Unix socket paths (108 bytes in all).
+pub const MAX_PREFIX_LEN: usize = 40;
+
+/// Transport errors name the service or port concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum IpcError {
+    #[error("run prefix `{prefix}`: {reason}")]
+    Prefix { prefix: String, reason: String },
+    #[error("creating the iceoryx2 node `{name}`: {reason}")]
+    Node { name: String, reason: String },
+    #[error("service `{service}`: {reason}")]
+    Service { service: String, reason: String },
+    #[error("port on `{service}`: {reason}")]
+    Port { service: String, reason: String },
+    #[error("sending on `{service}`: {reason}")]
+    Send { service: String, reason: String },
+    #[error("receiving on `{service}`: {reason}")]
+    Receive { service: String, reason: String },
+    #[error("waiting on `{service}`: {reason}")]
+    Wait { service: String, reason: String },
+}
+
+/// Publish–subscribe streams of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Stream {
+    Measurement,
+    Tampered,
+    Torque(u32),
+    Control,
+    Status,
+}
+
+impl Stream {
+    /// The one place service names are built.
+    pub fn service_name(self) -> String {
+        match self {
+            Self::Measurement => "fdi/measurement".into(),
+            Self::Tampered => "fdi/tampered".into(),
+            Self::Torque(id) => format!("fdi/torque/{id}"),
+            Self::Control => "fdi/control".into(),
+            Self::Status => "fdi/status".into(),
+        }
+    }
+}
+
+/// Wake-up event services, one per process.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Wake {
+    Agent(u32),
+    Attacker,
+    Center,
+    Launcher,
+}
+
+impl Wake {
+    pub fn service_name(self) -> String {
+        match self {
+            Self::Agent(id) => format!("fdi/wake/agent/{id}"),
+            Self::Attacker => "fdi/wake/attacker".into(),
+            Self::Center => "fdi/wake/center".into(),
+            Self::Launcher => "fdi/wake/launcher".into(),
+        }
+    }
+}
+
+/// Sizes every process must agree on (iceoryx2 checks them when a service is opened).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Sizing {
+    /// Agents of the run.
+    pub agents: usize,
+    /// Messages one agent may have in flight on a stream (lockstep batch).
+    pub in_flight: usize,
+}
+
+impl Sizing {
+    fn qos(self, stream: Stream) -> (usize, usize, usize) {
+        // (max publishers, max subscribers, subscriber buffer)
+        let n = self.agents.max(1);
+        let burst = self.in_flight.max(1) * 4;
+        match stream {
+            Stream::Measurement => (n, 2, burst),
+            Stream::Tampered => (1, 2, n * burst),
+            Stream::Torque(_) => (1, 2, burst),
+            Stream::Control => (1, n + 4, 8),
+            Stream::Status => (n + 4, 2, 256),
+        }
+    }
+}
+
+/// Monotonic clock shared by every process of the machine, ns.
+pub fn monotonic_ns() -> u64 {
+    let ts = rustix::time::clock_gettime(rustix::time::ClockId::Monotonic);
+    u64::try_from(ts.tv_sec).unwrap_or(0) * 1_000_000_000 + u64::try_from(ts.tv_nsec).unwrap_or(0)
+}
+
+/// A process's handle on the run's shared memory.
+#[derive(Debug)]
+pub struct Transport {
+    node: Node<ipc::Service>,
+    config: Config,
+    sizing: Sizing,
+    prefix: String,
+}
+
+fn config_for(prefix: &str) -> Result<Config, IpcError> {
+    let bad = |reason: String| IpcError::Prefix {
+        prefix: prefix.into(),
+        reason,
+    };
+    if prefix.is_empty() || prefix.len() > MAX_PREFIX_LEN {
+        return Err(bad(format!("must be 1..={MAX_PREFIX_LEN} bytes")));
+    }
+    if !prefix
+        .bytes()
+        .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+    {
+        return Err(bad(
+            "only ASCII letters, digits, `_` and `-` are allowed".into()
+        ));
+    }
+    let mut config = Config::default();
+    config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| bad(format!("{e:?}")))?;
+    Ok(config)
+}
+
+impl Transport {
+    /// Opens this process's node `name` in the run `prefix`.
+    pub fn open(prefix: &str, name: &str, sizing: Sizing) -> Result<Self, IpcError> {
+        let config = config_for(prefix)?;
+        let err = |reason: String| IpcError::Node {
+            name: name.into(),
+            reason,
+        };
+        let node_name = NodeName::new(name).map_err(|e| err(format!("{e:?}")))?;
+        let node = NodeBuilder::new()
+            .name(&node_name)
+            .config(&config)
+            // Signals are ours: the processes set a flag on SIGINT/SIGTERM and flush traces.
+            .signal_handling_mode(SignalHandlingMode::Disabled)
+            .create::<ipc::Service>()
+            .map_err(|e| err(format!("{e:?}")))?;
+        Ok(Self {
+            node,
+            config,
+            sizing,
+            prefix: prefix.into(),
+        })
+    }
+
+    pub fn prefix(&self) -> &str {
+        &self.prefix
+    }
+
+    fn pubsub<T: ZeroCopySend + std::fmt::Debug + 'static>(
+        &self,
+        stream: Stream,
+    ) -> Result<
+        iceoryx2::service::port_factory::publish_subscribe::PortFactory<ipc::Service, T, ()>,
+        IpcError,
+    > {
+        let service = stream.service_name();
+        let (pubs, subs, buffer) = self.sizing.qos(stream);
+        let name = ServiceName::new(&service).map_err(|e| IpcError::Service {
+            service: service.clone(),
+            reason: format!("{e:?}"),
+        })?;
+        self.node
+            .service_builder(&name)
+            .publish_subscribe::<T>()
+            .max_publishers(pubs)
+            .max_subscribers(subs)
+            .max_nodes(self.sizing.agents + 8)
+            .subscriber_max_buffer_size(buffer)
+            .history_size(0)
+            .enable_safe_overflow(true)
+            .open_or_create()
+            .map_err(|e| IpcError::Service {
+                service,
+                reason: format!("{e:?}"),
+            })
+    }
+
+    /// A publisher on `stream`.
+    pub fn publisher<T: ZeroCopySend + Copy + std::fmt::Debug + 'static>(
+        &self,
+        stream: Stream,
+    ) -> Result<Outbox<T>, IpcError> {
+        let factory = self.pubsub::<T>(stream)?;
+        let service = stream.service_name();
+        let port = factory
+            .publisher_builder()
+            .create()
+            .map_err(|e| IpcError::Port {
+                service: service.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Outbox { port, service })
+    }
+
+    /// A subscriber on `stream`.
+    pub fn subscriber<T: ZeroCopySend + Copy + std::fmt::Debug + 'static>(
+        &self,
+        stream: Stream,
+    ) -> Result<Inbox<T>, IpcError> {
+        let factory = self.pubsub::<T>(stream)?;
+        let service = stream.service_name();
+        let port = factory
+            .subscriber_builder()
+            .create()
+            .map_err(|e| IpcError::Port {
+                service: service.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Inbox { port, service })
+    }
+
+    fn event(
+        &self,
+        wake: Wake,
+    ) -> Result<iceoryx2::service::port_factory::event::PortFactory<ipc::Service>, IpcError> {
+        let service = wake.service_name();
+        let name = ServiceName::new(&service).map_err(|e| IpcError::Service {
+            service: service.clone(),
+            reason: format!("{e:?}"),
+        })?;
+        self.node
+            .service_builder(&name)
+            .event()
+            .max_notifiers(self.sizing.agents + 4)
+            .max_listeners(2)
+            .max_nodes(self.sizing.agents + 8)
+            .open_or_create()
+            .map_err(|e| IpcError::Service {
+                service,
+                reason: format!("{e:?}"),
+            })
+    }
+
+    /// The listener this process blocks on.
+    pub fn waker(&self, wake: Wake) -> Result<Waker, IpcError> {
+        let service = wake.service_name();
+        let port = self
+            .event(wake)?
+            .listener_builder()
+            .create()
+            .map_err(|e| IpcError::Port {
+                service: service.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Waker { port, service })
+    }
+
+    /// A notifier that wakes the process behind `wake`.
+    pub fn notifier(&self, wake: Wake) -> Result<Bell, IpcError> {
+        let service = wake.service_name();
+        let port = self
+            .event(wake)?
+            .notifier_builder()
+            .create()
+            .map_err(|e| IpcError::Port {
+                service: service.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(Bell { port, service })
+    }
+
+    /// Number of subscribers currently connected to `stream`.
+    pub fn subscribers_of<T: ZeroCopySend + std::fmt::Debug + 'static>(
+        &self,
+        stream: Stream,
+    ) -> Result<usize, IpcError> {
+        Ok(self
+            .pubsub::<T>(stream)?
+            .dynamic_config()
+            .number_of_subscribers())
+    }
+
+    /// Reclaims the resources of every dead node of this run (crashed processes).
+    pub fn reap_dead_nodes(&self) -> usize {
+        reap_dead_nodes(&self.config)
+    }
+}
+
+fn reap_dead_nodes(config: &Config) -> usize {
+    let mut reaped = 0;
+    let _ = Node::<ipc::Service>::list(config, |state| {
+        if let NodeState::Dead(view) = state {
+            if view.try_remove_stale_resources().is_ok() {
+                reaped += 1;
+            }
+        }
+        CallbackProgression::Continue
+    });
+    reaped
+}
+
+/// Removes every resource a run prefix left behind: first iceoryx2's own cleanup of dead nodes,
+/// then every file of the prefix in the shared-memory and iceoryx2 root folders (including the
+/// files iceoryx2 keeps on purpose after a clean shutdown). Only call it when no process of the
+/// run is alive. Returns the number of files removed.
+pub fn remove_run_resources(prefix: &str) -> Result<usize, IpcError> {
+    let config = config_for(prefix)?;
+    reap_dead_nodes(&config);
+    let root = PathBuf::from(config.global.root_path().to_string());
+    let mut removed = 0;
+    let dirs = [
+        PathBuf::from("/dev/shm"),
+        root.clone(),
+        root.join("services"),
+        root.join("nodes"),
+    ];
+    for dir in &dirs {
+        removed += remove_prefixed(dir, prefix);
+    }
+    // Per-node folders are named by node id, not by prefix; their files carry the prefix.
+    if let Ok(entries) = std::fs::read_dir(root.join("nodes")) {
+        for e in entries.flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                removed += remove_prefixed(&p, prefix);
+                let _ = std::fs::remove_dir(&p); // only succeeds when empty
+            }
+        }
+    }
+    Ok(removed)
+}
+
+/// Files of `prefix` still present (for tests and the launcher's final check).
+pub fn leftover_files(prefix: &str) -> Vec<PathBuf> {
+    let Ok(config) = config_for(prefix) else {
+        return Vec::new();
+    };
+    let root = PathBuf::from(config.global.root_path().to_string());
+    let mut out = Vec::new();
+    let mut dirs = vec![
+        PathBuf::from("/dev/shm"),
+        root.clone(),
+        root.join("services"),
+        root.join("nodes"),
+    ];
+    if let Ok(entries) = std::fs::read_dir(root.join("nodes")) {
+        dirs.extend(entries.flatten().map(|e| e.path()).filter(|p| p.is_dir()));
+    }
+    for d in dirs {
+        if let Ok(entries) = std::fs::read_dir(&d) {
+            out.extend(
+                entries
+                    .flatten()
+                    .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+                    .map(|e| e.path()),
+            );
+        }
+    }
+    out
+}
+
+fn remove_prefixed(dir: &Path, prefix: &str) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    entries
+        .flatten()
+        .filter(|e| e.file_name().to_string_lossy().starts_with(prefix))
+        .filter(|e| {
+            e.path().is_file() || std::fs::symlink_metadata(e.path()).is_ok_and(|m| !m.is_dir())
+        })
+        .filter(|e| std::fs::remove_file(e.path()).is_ok())
+        .count()
+}
+
+/// Sending side of a stream.
+#[derive(Debug)]
+pub struct Outbox<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> {
+    port: Publisher<ipc::Service, T, ()>,
+    service: String,
+}
+
+impl<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> Outbox<T> {
+    /// Publishes `value`; returns the number of subscribers reached.
+    pub fn send(&self, value: T) -> Result<usize, IpcError> {
+        let err = |reason: String| IpcError::Send {
+            service: self.service.clone(),
+            reason,
+        };
+        let sample = self.port.loan_uninit().map_err(|e| err(format!("{e:?}")))?;
+        sample
+            .write_payload(value)
+            .send()
+            .map_err(|e| err(format!("{e:?}")))
+    }
+}
+
+/// Receiving side of a stream.
+#[derive(Debug)]
+pub struct Inbox<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> {
+    port: Subscriber<ipc::Service, T, ()>,
+    service: String,
+}
+
+impl<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> Inbox<T> {
+    /// Hands every waiting message to `f`, oldest first; returns how many.
+    pub fn drain(&self, mut f: impl FnMut(T)) -> Result<usize, IpcError> {
+        let mut n = 0;
+        while let Some(sample) = self.port.receive().map_err(|e| IpcError::Receive {
+            service: self.service.clone(),
+            reason: format!("{e:?}"),
+        })? {
+            f(*sample.payload());
+            n += 1;
+        }
+        Ok(n)
+    }
+}
+
+/// Rings a peer's wake-up event.
+#[derive(Debug)]
+pub struct Bell {
+    port: Notifier<ipc::Service>,
+    service: String,
+}
+
+impl Bell {
+    pub fn ring(&self) -> Result<(), IpcError> {
+        self.port.notify().map(|_| ()).map_err(|e| IpcError::Send {
+            service: self.service.clone(),
+            reason: format!("{e:?}"),
+        })
+    }
+}
+
+/// This process's wake-up event.
+#[derive(Debug)]
+pub struct Waker {
+    port: Listener<ipc::Service>,
+    service: String,
+}
+
+impl Waker {
+    /// Blocks until a peer rings or `timeout` passes (a signal also ends the wait early).
+    /// Returns whether it was rung. Every pending notification is consumed.
+    pub fn wait(&self, timeout: Duration) -> Result<bool, IpcError> {
+        let mut rung = false;
+        match self.port.timed_wait(|_| rung = true, timeout) {
+            Ok(_) => {}
+            Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => return Ok(false),
+            Err(e) => {
+                return Err(IpcError::Wait {
+                    service: self.service.clone(),
+                    reason: format!("{e:?}"),
+                })
+            }
+        }
+        // Coalesce whatever else arrived meanwhile.
+        let _ = self.port.try_wait(|_| rung = true);
+        Ok(rung)
+    }
+}
