@@ -1,1 +1,274 @@
-//! fdi-agent process (multi-process runtime).
+//! The agent process: a thin shell around [`fdi_common::plant::Plant`].
+//!
+//! Lockstep: publish measurement `k`, wait for torque `k`, integrate `[t_k, t_{k+1}]`.
+//! Realtime: at wall time `epoch + t_k` integrate `[t_{k−1}, t_k]` with whatever commands have
+//! arrived (a command due but missing is a deadline miss: the last one is held), then publish
+//! measurement `k`.
+
+use std::process::ExitCode;
+use std::time::Duration;
+
+use fdi_common::engine::{agent_record, tick_time};
+use fdi_common::ipc::msg::{check_header, from_vector, to_vector};
+use fdi_common::ipc::{
+    monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
+};
+use fdi_common::plant::{Plant, PlantParams};
+use fdi_common::process::{
+    self, LauncherLink, ProcessArgs, ProcessError, Shutdown, Start, WAIT_SLICE,
+};
+use fdi_common::scenario::{self, ClockMode, Resolved};
+use fdi_common::trace::{HopStamps, TraceError, TraceRecord, TraceWriter};
+
+/// Errors of the agent process.
+#[derive(Debug, thiserror::Error)]
+pub enum AgentError {
+    #[error(transparent)]
+    Process(#[from] ProcessError),
+    #[error(transparent)]
+    Ipc(#[from] fdi_common::ipc::IpcError),
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    #[error(transparent)]
+    Scenario(#[from] scenario::ScenarioError),
+    #[error("agent {0} is not in the scenario")]
+    NotInScenario(u32),
+    #[error("--agent is required")]
+    MissingId,
+    #[error("agent {0}: its model does not have 2 links")]
+    Dof(u32),
+    #[error("installing signal handlers: {0}")]
+    Signals(std::io::Error),
+}
+
+/// The agent's ports.
+#[derive(Debug)]
+pub struct Ports {
+    pub measurement: Outbox<MeasurementMsg>,
+    pub torque: Inbox<TorqueMsg>,
+    pub attacker: Bell,
+    pub waker: fdi_common::ipc::Waker,
+    pub launcher: LauncherLink,
+    /// The node; declared last so that it is dropped after the ports.
+    pub transport: fdi_common::ipc::Transport,
+}
+
+/// How the run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    Completed { ticks: u64, deadline_misses: u64 },
+    Stopped { ticks: u64 },
+}
+
+/// Counts of a run's torque stream.
+#[derive(Debug, Default)]
+struct Inflow {
+    refused: u64,
+}
+
+/// Takes every waiting torque into the plant's delay line; `want` (lockstep) is the tick whose
+/// torque must arrive. Returns whether it did.
+fn take_torques(
+    plant: &mut Plant<2>,
+    ports: &Ports,
+    trace: &mut TraceWriter,
+    inflow: &mut Inflow,
+    want: Option<u64>,
+) -> Result<bool, AgentError> {
+    let id = plant.agent_id();
+    let mut got = false;
+    let mut err = None;
+    ports.torque.drain(|m| {
+        let received = monotonic_ns();
+        if check_header(m.agent, m.dof, m.seq, 2, |a| a == id, want.unwrap_or(m.seq)).is_err()
+            || plant.receive(m.t_send, to_vector::<2>(&m.u)).is_err()
+        {
+            inflow.refused += 1;
+            return;
+        }
+        got |= want == Some(m.seq);
+        let stamps = HopStamps {
+            agent_sent_ns: m.agent_sent_ns,
+            attacker_sent_ns: m.attacker_sent_ns,
+            center_received_ns: m.center_received_ns,
+            center_sent_ns: m.center_sent_ns,
+            agent_received_ns: received,
+        };
+        if let Err(e) = trace.write(&TraceRecord::Latency {
+            k: m.seq,
+            agent: id,
+            stamps,
+        }) {
+            err = Some(e);
+        }
+    })?;
+    match err {
+        Some(e) => Err(e.into()),
+        None => Ok(got),
+    }
+}
+
+fn publish(
+    plant: &mut Plant<2>,
+    ports: &Ports,
+    k: u64,
+    t: f64,
+) -> Result<fdi_common::plant::Measurement<2>, AgentError> {
+    let m = plant.measure();
+    ports.measurement.send(MeasurementMsg {
+        seq: k,
+        agent: plant.agent_id(),
+        dof: 2,
+        t,
+        y: from_vector(&m.y),
+        yd: from_vector(&m.yd),
+        agent_sent_ns: monotonic_ns(),
+        attacker_sent_ns: 0,
+    })?;
+    ports.attacker.ring()?;
+    Ok(m)
+}
+
+/// Runs agent `agent_id` of `resolved` to the end (or until `shutdown`).
+pub fn run(
+    agent_id: u32,
+    resolved: &Resolved,
+    ports: &Ports,
+    shutdown: &Shutdown,
+    trace: &mut TraceWriter,
+) -> Result<Outcome, AgentError> {
+    let s = &resolved.scenario;
+    let agent = s
+        .agents
+        .iter()
+        .find(|a| a.id == agent_id)
+        .ok_or(AgentError::NotInScenario(agent_id))?;
+    let mut plant = Plant::<2>::new(PlantParams::new(agent, s)).ok_or(AgentError::Dof(agent_id))?;
+    let epoch_ns = match ports
+        .launcher
+        .ready_and_wait_start(&ports.waker, shutdown)?
+    {
+        Start::Go { epoch_ns } => epoch_ns,
+        Start::Shutdown => return Ok(Outcome::Stopped { ticks: 0 }),
+    };
+    let ticks = resolved.ticks();
+    let dt = s.control_period_s;
+    let mut inflow = Inflow::default();
+    let stopped = |k| Ok(Outcome::Stopped { ticks: k });
+    match s.clock {
+        ClockMode::Lockstep => {
+            for k in 0..ticks {
+                let t = tick_time(k, dt);
+                let state = (plant.q, plant.qd);
+                let m = publish(&mut plant, ports, k, t)?;
+                while !take_torques(&mut plant, ports, trace, &mut inflow, Some(k))? {
+                    if shutdown.requested() || ports.launcher.stop_requested()? {
+                        return stopped(k);
+                    }
+                    ports.waker.wait(WAIT_SLICE)?;
+                }
+                let step = plant.advance(t);
+                trace.write(&TraceRecord::Agent(agent_record(
+                    k,
+                    agent_id,
+                    t,
+                    (&state.0, &state.1),
+                    &m,
+                    &step,
+                )))?;
+            }
+        }
+        ClockMode::Realtime => {
+            let mut state = (plant.q, plant.qd);
+            let mut m = publish(&mut plant, ports, 0, 0.0)?;
+            for k in 1..=ticks {
+                let t = tick_time(k, dt);
+                let deadline = epoch_ns + (t * 1e9) as u64;
+                loop {
+                    take_torques(&mut plant, ports, trace, &mut inflow, None)?;
+                    let now = monotonic_ns();
+                    if now >= deadline {
+                        break;
+                    }
+                    if shutdown.requested() || ports.launcher.stop_requested()? {
+                        return stopped(k - 1);
+                    }
+                    ports
+                        .waker
+                        .wait(Duration::from_nanos(deadline - now).min(WAIT_SLICE))?;
+                }
+                let t_prev = tick_time(k - 1, dt);
+                let step = plant.advance(t_prev);
+                trace.write(&TraceRecord::Agent(agent_record(
+                    k - 1,
+                    agent_id,
+                    t_prev,
+                    (&state.0, &state.1),
+                    &m,
+                    &step,
+                )))?;
+                if k < ticks {
+                    state = (plant.q, plant.qd);
+                    m = publish(&mut plant, ports, k, t)?;
+                }
+            }
+        }
+    }
+    if inflow.refused > 0 {
+        trace.write(&TraceRecord::Event {
+            t: s.duration_s,
+            message: format!(
+                "{} torque messages refused (wrong agent, dof, sequence or stamp)",
+                inflow.refused
+            ),
+        })?;
+    }
+    trace.flush()?;
+    ports.launcher.report(StatusMsg::DONE, ticks)?;
+    Ok(Outcome::Completed {
+        ticks,
+        deadline_misses: plant.deadline_misses,
+    })
+}
+
+fn open(args: &ProcessArgs) -> Result<(u32, Resolved, Ports, TraceWriter, Shutdown), AgentError> {
+    let shutdown = Shutdown::install(args.launcher_pid).map_err(AgentError::Signals)?;
+    let id = args.agent.ok_or(AgentError::MissingId)?;
+    let resolved = scenario::load_file(&args.scenario)?;
+    let conn = process::connect(
+        args,
+        Role::Agent,
+        Wake::Agent(id),
+        process::sizing_for(&resolved),
+    )?;
+    let ports = Ports {
+        measurement: conn.transport.publisher(Stream::Measurement)?,
+        torque: conn.transport.subscriber(Stream::Torque(id))?,
+        attacker: conn.transport.notifier(Wake::Attacker)?,
+        waker: conn.waker,
+        launcher: conn.launcher,
+        transport: conn.transport,
+    };
+    let trace = TraceWriter::create(
+        &args.trace,
+        &process::trace_header(&format!("agent-{id}"), &resolved),
+    )?;
+    Ok((id, resolved, ports, trace, shutdown))
+}
+
+/// Entry point of the `fdi-agent` binary (and of `fdi-launch`'s multi-call fallback).
+pub fn main_with(args: ProcessArgs) -> ExitCode {
+    let result = open(&args).and_then(|(id, resolved, ports, mut trace, shutdown)| {
+        run(id, &resolved, &ports, &shutdown, &mut trace)
+    });
+    match result {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!(
+                "fdi-agent {}: {e}",
+                args.agent.map_or("?".into(), |a| a.to_string())
+            );
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,1 +1,179 @@
-//! fdi-attacker process (multi-process runtime).
+//! The attacker process: a man in the middle between the agents and the control center.
+//! It relays every measurement in order, adding the profile's `α(t)` ([`fdi_common::engine::tamper`]),
+//! and records what it injected. Purely event-driven in both clocks.
+
+use std::process::ExitCode;
+
+use fdi_common::attack::AgentAttack;
+use fdi_common::engine::{attack_record, tamper, tick_time};
+use fdi_common::ipc::msg::{check_header, from_vector, to_vector};
+use fdi_common::ipc::{
+    monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, Wake,
+};
+use fdi_common::plant::Measurement;
+use fdi_common::process::{
+    self, LauncherLink, ProcessArgs, ProcessError, Shutdown, Start, WAIT_SLICE,
+};
+use fdi_common::scenario::{self, Resolved};
+use fdi_common::trace::{TraceError, TraceRecord, TraceWriter};
+
+#[derive(Debug, thiserror::Error)]
+pub enum AttackerError {
+    #[error(transparent)]
+    Process(#[from] ProcessError),
+    #[error(transparent)]
+    Ipc(#[from] fdi_common::ipc::IpcError),
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    #[error(transparent)]
+    Scenario(#[from] scenario::ScenarioError),
+    #[error("installing signal handlers: {0}")]
+    Signals(std::io::Error),
+}
+
+/// The attacker's ports.
+#[derive(Debug)]
+pub struct Ports {
+    pub measurement: Inbox<MeasurementMsg>,
+    pub tampered: Outbox<MeasurementMsg>,
+    pub center: Bell,
+    pub waker: fdi_common::ipc::Waker,
+    pub launcher: LauncherLink,
+    /// The node; declared last so that it is dropped after the ports.
+    pub transport: fdi_common::ipc::Transport,
+}
+
+/// One attacked agent.
+#[derive(Debug)]
+struct Target {
+    id: u32,
+    attack: AgentAttack,
+    next: u64,
+}
+
+/// Relays until every agent's last tick went through (or `shutdown`). Returns messages refused.
+pub fn run(
+    resolved: &Resolved,
+    ports: &Ports,
+    shutdown: &Shutdown,
+    trace: &mut TraceWriter,
+) -> Result<u64, AttackerError> {
+    let s = &resolved.scenario;
+    let mut targets: Vec<Target> = s
+        .agents
+        .iter()
+        .map(|a| Target {
+            id: a.id,
+            attack: AgentAttack::compile(&resolved.attack, a.id, s.seed),
+            next: 0,
+        })
+        .collect();
+    if let Start::Shutdown = ports
+        .launcher
+        .ready_and_wait_start(&ports.waker, shutdown)?
+    {
+        return Ok(0);
+    }
+    let ticks = resolved.ticks();
+    let dt = s.control_period_s;
+    let mut refused = 0u64;
+    let mut failure = None;
+    loop {
+        let mut relayed = 0;
+        ports.measurement.drain(|m| {
+            let Some(target) = targets.iter_mut().find(|t| t.id == m.agent) else {
+                refused += 1;
+                return;
+            };
+            if let Err(e) = check_header(m.agent, m.dof, m.seq, 2, |_| true, target.next) {
+                refused += 1;
+                let _ = trace.write(&TraceRecord::Event {
+                    t: tick_time(m.seq, dt),
+                    message: e.to_string(),
+                });
+                if m.seq < target.next {
+                    return; // duplicate or replayed: dropped
+                }
+            }
+            target.next = m.seq + 1;
+            let t = tick_time(m.seq, dt);
+            let clean = Measurement {
+                y: to_vector::<2>(&m.y),
+                yd: to_vector::<2>(&m.yd),
+            };
+            let (out, inj) = tamper(&mut target.attack, t, &clean);
+            let active = target.attack.is_active(t);
+            let sent = ports.tampered.send(MeasurementMsg {
+                y: from_vector(&out.y),
+                yd: from_vector(&out.yd),
+                attacker_sent_ns: monotonic_ns(),
+                ..m
+            });
+            if let Err(e) = sent {
+                failure.get_or_insert(AttackerError::from(e));
+            }
+            if let Err(e) = trace.write(&TraceRecord::Attack(attack_record(
+                m.seq, m.agent, &out, &inj, active,
+            ))) {
+                failure.get_or_insert(AttackerError::from(e));
+            }
+            relayed += 1;
+        })?;
+        if let Some(e) = failure.take() {
+            return Err(e);
+        }
+        if relayed > 0 {
+            ports.center.ring()?;
+        }
+        if targets.iter().all(|t| t.next >= ticks) {
+            break;
+        }
+        if shutdown.requested() || ports.launcher.stop_requested()? {
+            return Ok(refused);
+        }
+        ports.waker.wait(WAIT_SLICE)?;
+    }
+    if refused > 0 {
+        trace.write(&TraceRecord::Event {
+            t: s.duration_s,
+            message: format!("{refused} measurement messages refused"),
+        })?;
+    }
+    trace.flush()?;
+    ports.launcher.report(StatusMsg::DONE, ticks)?;
+    Ok(refused)
+}
+
+fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), AttackerError> {
+    let shutdown = Shutdown::install(args.launcher_pid).map_err(AttackerError::Signals)?;
+    let resolved = scenario::load_file(&args.scenario)?;
+    let conn = process::connect(
+        args,
+        Role::Attacker,
+        Wake::Attacker,
+        process::sizing_for(&resolved),
+    )?;
+    let ports = Ports {
+        measurement: conn.transport.subscriber(Stream::Measurement)?,
+        tampered: conn.transport.publisher(Stream::Tampered)?,
+        center: conn.transport.notifier(Wake::Center)?,
+        waker: conn.waker,
+        launcher: conn.launcher,
+        transport: conn.transport,
+    };
+    let trace = TraceWriter::create(&args.trace, &process::trace_header("attacker", &resolved))?;
+    Ok((resolved, ports, trace, shutdown))
+}
+
+/// Entry point of the `fdi-attacker` binary.
+pub fn main_with(args: ProcessArgs) -> ExitCode {
+    match open(&args).and_then(|(resolved, ports, mut trace, shutdown)| {
+        run(&resolved, &ports, &shutdown, &mut trace)
+    }) {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("fdi-attacker: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -15,6 +15,7 @@ pub mod ipc;
 pub mod metrics;
 pub mod model;
 pub mod plant;
+pub mod process;
 pub mod records;
 pub mod rng;
 pub mod scenario;

@@ -269,6 +269,69 @@ pub struct AgentConfig {
     pub delay: DelayProfile,
 }
 
+/// Values every agent inherits unless it sets its own (handy for many identical agents).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AgentDefaults {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub model: Option<ModelConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trajectory: Option<TrajectoryConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay: Option<DelayProfile>,
+}
+
+/// Copies the keys of `[defaults]` into every `[[agents]]` table that lacks them, so that the
+/// agents deserialize complete. The `defaults` table itself stays (it is validated too).
+fn apply_agent_defaults(root: &mut toml::Table) {
+    let Some(toml::Value::Table(defaults)) = root.get("defaults").cloned() else {
+        return;
+    };
+    let Some(toml::Value::Array(agents)) = root.get_mut("agents") else {
+        return;
+    };
+    for agent in agents.iter_mut() {
+        if let toml::Value::Table(a) = agent {
+            for (k, v) in &defaults {
+                a.entry(k.clone()).or_insert_with(|| v.clone());
+            }
+        }
+    }
+}
+
+fn delay_problems(at: &str, delay: &DelayProfile) -> Vec<Problem> {
+    let mut out = Vec::new();
+    let mut push = |path: String, message: String| out.push(Problem { path, message });
+    let mut ok = true;
+    for (name, v) in delay.parameters() {
+        if !v.is_finite() {
+            ok = false;
+            push(format!("{at}.{name}"), format!("must be finite, got {v}"));
+        }
+    }
+    if ok {
+        if delay.min() <= 0.0 {
+            push(at.into(), format!("delay must stay > 0 (Assumption 4), but its minimum is {} s (negative or zero delay)", delay.min()));
+        }
+        if delay.max_rate() >= 1.0 {
+            push(
+                at.into(),
+                format!(
+                    "|dτ/dt| must stay < 1 (Assumption 4), but it reaches {}",
+                    delay.max_rate()
+                ),
+            );
+        }
+        if delay.max() > 10.0 {
+            push(
+                at.into(),
+                format!("delay above 10 s ({} s) is not supported", delay.max()),
+            );
+        }
+    }
+    out
+}
+
 /// Where the attack comes from: exactly one of a preset name, a file, or inline channels.
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -302,6 +365,9 @@ pub struct Scenario {
     pub controller: ControllerConfig,
     pub noise: NoiseConfig,
     pub disturbance: DisturbanceConfig,
+    /// Inherited by every agent that does not set the key itself.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub defaults: Option<AgentDefaults>,
     pub agents: Vec<AgentConfig>,
     pub attack: AttackSource,
 }
@@ -554,35 +620,13 @@ impl Scenario {
                     }
                 }
             }
-            let mut delay_ok = true;
-            for (name, v) in a.delay.parameters() {
-                if !v.is_finite() {
-                    delay_ok = false;
-                    push(
-                        at(&format!("delay.{name}")),
-                        format!("must be finite, got {v}"),
-                    );
-                }
+            for p in delay_problems(&at("delay"), &a.delay) {
+                push(p.path, p.message);
             }
-            if delay_ok {
-                if a.delay.min() <= 0.0 {
-                    push(at("delay"), format!("delay must stay > 0 (Assumption 4), but its minimum is {} s (negative or zero delay)", a.delay.min()));
-                }
-                if a.delay.max_rate() >= 1.0 {
-                    push(
-                        at("delay"),
-                        format!(
-                            "|dτ/dt| must stay < 1 (Assumption 4), but it reaches {}",
-                            a.delay.max_rate()
-                        ),
-                    );
-                }
-                if a.delay.max() > 10.0 {
-                    push(
-                        at("delay"),
-                        format!("delay above 10 s ({} s) is not supported", a.delay.max()),
-                    );
-                }
+        }
+        if let Some(delay) = self.defaults.as_ref().and_then(|d| d.delay.as_ref()) {
+            for p in delay_problems("defaults.delay", delay) {
+                push(p.path, p.message);
             }
         }
         if let Some(d) = dof0 {
@@ -656,6 +700,7 @@ fn parse_collecting<T: serde::de::DeserializeOwned>(
             format!("TOML syntax: {}", e.message()),
         )
     })?;
+    apply_agent_defaults(&mut value);
     let mut problems = Vec::new();
     for _ in 0..256 {
         let de = toml::Value::Table(value.clone());
@@ -663,7 +708,15 @@ fn parse_collecting<T: serde::de::DeserializeOwned>(
             Ok(v) => return Ok((Some(v), problems)),
             Err(err) => {
                 let path = err.path().to_string();
-                let msg = err.inner().to_string();
+                // The toml error appends a location line; the path above already says where.
+                let msg = err
+                    .inner()
+                    .to_string()
+                    .lines()
+                    .next()
+                    .unwrap_or_default()
+                    .trim_end()
+                    .to_string();
                 let unknown = msg.starts_with("unknown field");
                 let key = msg.split('`').nth(1).map(str::to_owned);
                 problems.push(Problem {

@@ -6,9 +6,12 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use fdi_common::engine::{run_inproc, RunSummary};
-use fdi_common::scenario::{self, ControllerMode, Resolved};
+use fdi_common::process::ProcessArgs;
+use fdi_common::records::TickRecord;
+use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
+use fdi_common::trace::{TraceRecord, TraceWriter};
 
-use crate::tables;
+use crate::{join, output, runtime, tables};
 
 /// Testbed for false-data-injection attacks on a multi-agent robot system (Sargolzaei et al.).
 #[derive(Debug, Parser)]
@@ -20,7 +23,7 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
-    /// Run a scenario (default: the embedded paper experiment).
+    /// Run a scenario (default: the embedded paper experiment) and write a run directory.
     Run(RunArgs),
     /// Parse and validate a scenario file; lists every problem with its field path.
     Validate {
@@ -31,11 +34,29 @@ pub enum Command {
     Table1(TableArgs),
     /// Reproduce the paper's Table II (robot 1 under four time-varying delays).
     Table2(TableArgs),
+    /// Internal: run as one of the runtime's processes (used when the sibling binaries are
+    /// missing or older than fdi-launch).
+    #[command(hide = true)]
+    Process {
+        #[arg(value_enum)]
+        role: ProcessRole,
+        #[command(flatten)]
+        args: ProcessArgs,
+    },
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ProcessRole {
+    Agent,
+    Attacker,
+    ControlCenter,
 }
 
 /// Which engine runs the scenario.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum Engine {
+    /// One process per agent, an attacker and a control center over iceoryx2 shared memory.
+    Ipc,
     /// Everything on one thread, no IPC (the oracle).
     Inproc,
 }
@@ -43,9 +64,16 @@ pub enum Engine {
 impl Engine {
     pub fn as_str(self) -> &'static str {
         match self {
+            Self::Ipc => "ipc",
             Self::Inproc => "inproc",
         }
     }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Clock {
+    Lockstep,
+    Realtime,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -67,8 +95,11 @@ impl From<Controller> for ControllerMode {
 pub struct RunArgs {
     /// Scenario TOML file; without it the embedded paper scenario runs.
     pub scenario: Option<PathBuf>,
-    #[arg(long, value_enum, default_value_t = Engine::Inproc)]
+    #[arg(long, value_enum, default_value_t = Engine::Ipc)]
     pub engine: Engine,
+    /// Replace the scenario's clock (realtime needs the ipc engine).
+    #[arg(long, value_enum)]
+    pub clock: Option<Clock>,
     /// Replace the scenario's attack: a preset (paper, paper-linkwise, none) or a profile file.
     #[arg(long)]
     pub attack: Option<String>,
@@ -81,6 +112,9 @@ pub struct RunArgs {
     /// Replace the scenario's seed.
     #[arg(long)]
     pub seed: Option<u64>,
+    /// Folder that receives the run directory.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
@@ -88,7 +122,7 @@ pub struct RunArgs {
 
 #[derive(Debug, Args)]
 pub struct TableArgs {
-    #[arg(long, value_enum, default_value_t = Engine::Inproc)]
+    #[arg(long, value_enum, default_value_t = Engine::Ipc)]
     pub engine: Engine,
     /// Print JSON instead of markdown.
     #[arg(long)]
@@ -96,6 +130,9 @@ pub struct TableArgs {
     /// Shorten every run to this many seconds (the paper's tables use 40 s).
     #[arg(long)]
     pub duration_s: Option<f64>,
+    /// Folder that receives the table's run directories.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
 }
 
 pub fn dispatch(cli: Cli) -> Result<ExitCode> {
@@ -104,6 +141,11 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Validate { scenario } => validate(&scenario),
         Command::Table1(args) => tables::table1(&args),
         Command::Table2(args) => tables::table2(&args),
+        Command::Process { role, args } => Ok(match role {
+            ProcessRole::Agent => fdi_agent::main_with(args),
+            ProcessRole::Attacker => fdi_attacker::main_with(args),
+            ProcessRole::ControlCenter => fdi_control_center::main_with(args),
+        }),
     }
 }
 
@@ -130,6 +172,15 @@ pub fn apply_overrides(mut r: Resolved, args: &RunArgs) -> Result<Resolved> {
     if let Some(s) = args.seed {
         r.scenario.seed = s;
     }
+    if let Some(c) = args.clock {
+        r.scenario.clock = match c {
+            Clock::Lockstep => ClockMode::Lockstep,
+            Clock::Realtime => ClockMode::Realtime,
+        };
+    }
+    if r.scenario.clock == ClockMode::Realtime && args.engine == Engine::Inproc {
+        bail!("the realtime clock needs the ipc engine (the in-process engine is lockstep only)");
+    }
     let problems = r.scenario.validate();
     if !problems.is_empty() {
         bail!(scenario::ScenarioError {
@@ -140,20 +191,132 @@ pub fn apply_overrides(mut r: Resolved, args: &RunArgs) -> Result<Resolved> {
     Ok(r)
 }
 
-/// Runs a resolved scenario on an engine.
-pub fn execute(r: &Resolved, engine: Engine) -> Result<RunSummary> {
-    match engine {
-        Engine::Inproc => run_inproc::<2>(r, |_| {}).context("in-process engine"),
+/// Writes the records of an in-process run as the per-process traces a multi-process run
+/// leaves, so that reports and exports read both alike.
+struct InprocTraces {
+    agents: Vec<(u32, TraceWriter)>,
+    attacker: TraceWriter,
+    center: TraceWriter,
+}
+
+impl InprocTraces {
+    fn create(dir: &Path, r: &Resolved) -> Result<Self> {
+        let header = |p: &str| fdi_common::process::trace_header(p, r);
+        let mut agents = Vec::new();
+        for a in &r.scenario.agents {
+            let name = format!("agent-{}", a.id);
+            agents.push((
+                a.id,
+                TraceWriter::create(&runtime::trace_path(dir, &name), &header(&name))?,
+            ));
+        }
+        Ok(Self {
+            agents,
+            attacker: TraceWriter::create(
+                &runtime::trace_path(dir, "attacker"),
+                &header("attacker"),
+            )?,
+            center: TraceWriter::create(
+                &runtime::trace_path(dir, "control-center"),
+                &header("control-center"),
+            )?,
+        })
+    }
+
+    fn write(&mut self, rec: &TickRecord) -> Result<()> {
+        if let Some((_, w)) = self
+            .agents
+            .iter_mut()
+            .find(|(id, _)| *id == rec.agent.agent)
+        {
+            w.write(&TraceRecord::Agent(rec.agent))?;
+        }
+        self.attacker.write(&TraceRecord::Attack(rec.attack))?;
+        self.center.write(&TraceRecord::Center(rec.center))?;
+        Ok(())
+    }
+
+    fn flush(mut self) -> Result<()> {
+        for (_, w) in &mut self.agents {
+            w.flush()?;
+        }
+        self.attacker.flush()?;
+        self.center.flush()?;
+        Ok(())
+    }
+}
+
+/// Runs a resolved scenario on an engine. With `run_dir`, traces and the summary go there; an
+/// ipc run without one uses a scratch folder under the system's temporary directory.
+pub fn execute(
+    r: &Resolved,
+    engine: Engine,
+    run_dir: Option<&Path>,
+    progress: bool,
+) -> Result<RunSummary> {
+    match (engine, run_dir) {
+        (Engine::Inproc, None) => run_inproc::<2>(r, |_| {}).context("in-process engine"),
+        (Engine::Inproc, Some(dir)) => {
+            let mut traces = InprocTraces::create(dir, r)?;
+            let mut failure = None;
+            let summary = run_inproc::<2>(r, |rec| {
+                if let Err(e) = traces.write(rec) {
+                    failure.get_or_insert(e);
+                }
+            })
+            .context("in-process engine")?;
+            if let Some(e) = failure {
+                return Err(e);
+            }
+            traces.flush()?;
+            output::write_summary(dir, &summary)?;
+            Ok(summary)
+        }
+        (Engine::Ipc, dir) => {
+            let scratch;
+            let dir = match dir {
+                Some(d) => d,
+                None => {
+                    scratch =
+                        output::create_run_dir(&std::env::temp_dir().join("fdi-mas-runs"), r)?;
+                    &scratch
+                }
+            };
+            let outcome = runtime::run_ipc(
+                r,
+                &runtime::IpcOptions {
+                    run_dir: dir.to_path_buf(),
+                    progress,
+                },
+            )?;
+            let joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
+            for w in &joined.warnings {
+                eprintln!("fdi-launch: warning: {w}");
+            }
+            if !outcome.leftovers.is_empty() {
+                eprintln!(
+                    "fdi-launch: warning: {} shared-memory files of run {} could not be removed",
+                    outcome.leftovers.len(),
+                    outcome.prefix
+                );
+            }
+            output::write_summary(dir, &joined.summary)?;
+            Ok(joined.summary)
+        }
     }
 }
 
 fn run(args: &RunArgs) -> Result<ExitCode> {
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
-    let summary = execute(&r, args.engine)?;
+    let dir = output::create_run_dir(&args.out, &r)?;
+    let summary = execute(&r, args.engine, Some(&dir), !args.json)?;
     if args.json {
-        println!("{}", serde_json::to_string(&summary)?);
+        let mut v = serde_json::to_value(&summary)?;
+        v["run_dir"] = serde_json::Value::String(dir.display().to_string());
+        println!("{v}");
     } else {
         print_summary(&summary);
+        println!("run directory {}", dir.display());
     }
     Ok(ExitCode::SUCCESS)
 }
@@ -163,10 +326,8 @@ fn print_summary(s: &RunSummary) {
         "scenario {} | engine {} | clock {} | controller {} | attack {} | {} agents | {:.1} s simulated in {:.2} s wall",
         s.scenario, s.engine, s.clock, s.controller, s.attack, s.agents, s.sim_s, s.wall_s
     );
-    println!(
-        "| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms |"
-    );
-    println!("|---|---|---|---|---|");
+    println!("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses |");
+    println!("|---|---|---|---|---|---|");
     for (id, m) in &s.metrics {
         let onsets: Vec<String> = m
             .onsets
@@ -181,11 +342,12 @@ fn print_summary(s: &RunSummary) {
             })
             .collect();
         println!(
-            "| {id} | {:.4} | {:.4} | {} | {} |",
+            "| {id} | {:.4} | {:.4} | {} | {} | {} |",
             m.rmse_rad,
             m.max_abs_error_rad,
             onsets.join(", "),
-            m.false_alarms
+            m.false_alarms,
+            m.deadline_misses
         );
     }
     println!("trace digest {}", s.trace_digest);

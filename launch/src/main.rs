@@ -1,6 +1,9 @@
 //! `fdi-launch`: the one user-facing command of fdi-mas.
 
 mod cli;
+mod join;
+mod output;
+mod runtime;
 mod tables;
 
 use clap::Parser;

@@ -7,7 +7,7 @@ use fdi_common::delay::DelayProfile;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 use serde::Serialize;
 
-use crate::cli::{execute, TableArgs};
+use crate::cli::{execute, Engine, TableArgs};
 
 /// Table I of the paper: (robot, traditional, proposed) RMSE in rad.
 const PAPER_TABLE1: [(u32, f64, f64); 4] = [
@@ -49,6 +49,24 @@ struct Table2Row {
     paper_rmse_rad: f64,
 }
 
+/// Runs one table entry; ipc runs keep their run directory under the table's folder.
+fn run_case(
+    r: &Resolved,
+    args: &TableArgs,
+    dir: &std::path::Path,
+    case: &str,
+) -> Result<fdi_common::engine::RunSummary> {
+    match args.engine {
+        Engine::Inproc => execute(r, args.engine, None, false),
+        Engine::Ipc => {
+            let mut named = r.clone();
+            named.scenario.name = case.into();
+            let d = crate::output::create_run_dir(dir, &named)?;
+            execute(r, args.engine, Some(&d), !args.json)
+        }
+    }
+}
+
 fn base(args: &TableArgs) -> Result<Resolved> {
     let mut r = scenario::paper()?;
     if let Some(d) = args.duration_s {
@@ -59,11 +77,14 @@ fn base(args: &TableArgs) -> Result<Resolved> {
 
 pub fn table1(args: &TableArgs) -> Result<ExitCode> {
     let paper = base(args)?;
+    let dir = args
+        .out
+        .join(format!("{}-table1", crate::output::timestamp()));
     let mut results = Vec::new();
     for mode in [ControllerMode::Traditional, ControllerMode::Proposed] {
         let mut r = paper.clone();
         r.scenario.controller.mode = mode;
-        results.push(execute(&r, args.engine)?);
+        results.push(run_case(&r, args, &dir, mode.as_str())?);
     }
     let rows: Vec<Table1Row> = PAPER_TABLE1
         .iter()
@@ -111,12 +132,15 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
 
 pub fn table2(args: &TableArgs) -> Result<ExitCode> {
     let paper = base(args)?;
+    let dir = args
+        .out
+        .join(format!("{}-table2", crate::output::timestamp()));
     let mut rows = Vec::new();
     for (case, delay, paper_rmse) in paper_table2() {
         let mut r = paper.clone();
         r.scenario.agents.retain(|a| a.id == 1);
         r.scenario.agents[0].delay = delay;
-        let summary = execute(&r, args.engine)?;
+        let summary = run_case(&r, args, &dir, case)?;
         rows.push(Table2Row {
             case,
             tau_ms: delay.describe_ms(),

@@ -1,0 +1,104 @@
+//! Run directories: `runs/<timestamp>-<name>/` with the scenario as used, the traces,
+//! `summary.json` and the RMSE table as markdown and CSV.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use fdi_common::engine::RunSummary;
+use fdi_common::scenario::Resolved;
+
+/// `YYYYMMDD-HHMMSS` in UTC.
+pub fn timestamp() -> String {
+    let secs = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_secs());
+    let (days, rem) = ((secs / 86_400) as i64, secs % 86_400);
+    // Civil date from days since 1970-01-01 (H. Hinnant's algorithm).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z - era * 146_097;
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}{m:02}{d:02}-{:02}{:02}{:02}",
+        rem / 3600,
+        rem % 3600 / 60,
+        rem % 60
+    )
+}
+
+/// Creates a fresh run directory under `root` and writes the scenario as used into it.
+pub fn create_run_dir(root: &Path, resolved: &Resolved) -> Result<PathBuf> {
+    let name: String = resolved
+        .scenario
+        .name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    let base = root.join(format!("{}-{name}", timestamp()));
+    let mut dir = base.clone();
+    let mut n = 1;
+    while dir.exists() {
+        n += 1;
+        dir = PathBuf::from(format!("{}-{n}", base.display()));
+    }
+    std::fs::create_dir_all(dir.join("traces"))
+        .with_context(|| format!("creating {}", dir.display()))?;
+    std::fs::write(dir.join("scenario.toml"), resolved.to_toml())
+        .with_context(|| format!("writing {}/scenario.toml", dir.display()))?;
+    Ok(dir)
+}
+
+/// Writes `summary.json`, `rmse.md` and `rmse.csv`.
+pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
+    std::fs::write(
+        dir.join("summary.json"),
+        serde_json::to_string_pretty(s)? + "\n",
+    )
+    .context("writing summary.json")?;
+    let mut md = format!(
+        "# RMSE of run `{}` ({} engine, {} clock, {} controller, attack `{}`)\n\n",
+        s.scenario, s.engine, s.clock, s.controller, s.attack
+    );
+    md.push_str("| robot | RMSE (rad) | max abs error (rad) | false alarms | deadline misses | rejected inputs |\n|---|---|---|---|---|---|\n");
+    let mut csv = String::from(
+        "robot,rmse_rad,max_abs_error_rad,false_alarms,deadline_misses,rejected_inputs\n",
+    );
+    for (id, m) in &s.metrics {
+        let _ = writeln!(
+            md,
+            "| {id} | {:.5} | {:.5} | {} | {} | {} |",
+            m.rmse_rad, m.max_abs_error_rad, m.false_alarms, m.deadline_misses, m.rejected_inputs
+        );
+        let _ = writeln!(
+            csv,
+            "{id},{},{},{},{},{}",
+            m.rmse_rad, m.max_abs_error_rad, m.false_alarms, m.deadline_misses, m.rejected_inputs
+        );
+    }
+    std::fs::write(dir.join("rmse.md"), md).context("writing rmse.md")?;
+    std::fs::write(dir.join("rmse.csv"), csv).context("writing rmse.csv")?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn timestamp_has_the_documented_shape() {
+        let t = super::timestamp();
+        assert_eq!(t.len(), 15, "{t}");
+        assert_eq!(&t[8..9], "-");
+        assert!(t[..4].parse::<u32>().is_ok_and(|y| y >= 2024));
+    }
+}

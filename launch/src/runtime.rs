@@ -1,0 +1,382 @@
+//! The multi-process engine: spawns the agents, the attacker and the control center, supervises
+//! them, and tears everything down (processes and shared memory) however the run ends.
+
+use std::os::unix::process::ExitStatusExt;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{anyhow, bail, Context, Result};
+use fdi_common::ipc::{
+    self, monotonic_ns, Bell, ControlMsg, Role, StatusMsg, Stream, Transport, Wake,
+};
+use fdi_common::scenario::{ClockMode, Resolved};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+/// Grace period between SIGTERM and SIGKILL when a run is torn down.
+const GRACE: Duration = Duration::from_secs(2);
+/// How long the processes may take to report ready.
+const READY_TIMEOUT: Duration = Duration::from_secs(30);
+/// Realtime runs start this long after the start message, so every process sees it in time.
+const REALTIME_LEAD: Duration = Duration::from_millis(50);
+
+/// One supervised child.
+#[derive(Debug)]
+struct Proc {
+    label: String,
+    wake: Wake,
+    child: Child,
+    status: Option<ExitStatus>,
+    ready: bool,
+}
+
+/// The role binaries: the sibling `fdi-agent` etc. when they are at least as new as this
+/// executable, else this executable in the hidden multi-call mode (`fdi-launch process ROLE`),
+/// which is always consistent with the launcher.
+fn role_command(role: &str) -> Result<Command> {
+    let me = std::env::current_exe().context("locating fdi-launch")?;
+    let sibling = me.with_file_name(format!("fdi-{role}"));
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    if let (Some(s), Some(m)) = (modified(&sibling), modified(&me)) {
+        if s >= m {
+            return Ok(Command::new(sibling));
+        }
+    }
+    let mut c = Command::new(me);
+    c.args(["process", role]);
+    Ok(c)
+}
+
+/// Describes how a child ended, naming the signal.
+pub fn describe_status(status: ExitStatus) -> String {
+    if let Some(sig) = status.signal() {
+        let name = match sig {
+            1 => "SIGHUP",
+            2 => "SIGINT",
+            6 => "SIGABRT",
+            9 => "SIGKILL",
+            11 => "SIGSEGV",
+            15 => "SIGTERM",
+            _ => "",
+        };
+        format!("was killed by signal {sig} {name}")
+            .trim_end()
+            .to_string()
+    } else {
+        format!("exited with status {}", status.code().unwrap_or(-1))
+    }
+}
+
+/// A unique run prefix (short: iceoryx2 puts it into socket paths).
+pub fn new_prefix() -> String {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.subsec_nanos());
+    format!("fdi{}_{:x}_", std::process::id(), nanos & 0xff_ffff)
+}
+
+/// Removes the resources of runs whose launcher is dead (a killed launcher cannot clean up).
+pub fn reap_stale_runs() -> usize {
+    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
+        return 0;
+    };
+    let mut prefixes: Vec<String> = entries
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            let rest = name.strip_prefix("fdi")?;
+            let (pid, tail) = rest.split_once('_')?;
+            let (tag, _) = tail.split_once('_')?;
+            pid.parse::<u32>().ok()?;
+            Some(format!("fdi{pid}_{tag}_"))
+        })
+        .collect();
+    prefixes.sort();
+    prefixes.dedup();
+    let mut n = 0;
+    for p in prefixes {
+        let pid = p.trim_start_matches("fdi").split('_').next().unwrap_or("");
+        if !Path::new("/proc").join(pid).exists() {
+            n += ipc::remove_run_resources(&p).unwrap_or(0);
+        }
+    }
+    n
+}
+
+/// What the caller needs after the processes ended.
+#[derive(Debug)]
+pub struct IpcOutcome {
+    pub wall_s: f64,
+    pub prefix: String,
+    pub leftovers: Vec<PathBuf>,
+}
+
+/// Options of one multi-process run.
+#[derive(Debug, Clone)]
+pub struct IpcOptions {
+    /// The run directory: `scenario.toml` is read from it, traces go to `traces/`.
+    pub run_dir: PathBuf,
+    pub progress: bool,
+}
+
+/// Trace path of a process.
+pub fn trace_path(run_dir: &Path, process: &str) -> PathBuf {
+    run_dir.join("traces").join(format!("{process}.trace"))
+}
+
+struct Launcher {
+    procs: Vec<Proc>,
+    bells: Vec<Bell>,
+    control: ipc::Outbox<ControlMsg>,
+    status: ipc::Inbox<StatusMsg>,
+    waker: ipc::Waker,
+    interrupted: Arc<AtomicBool>,
+}
+
+impl Launcher {
+    fn poll_children(&mut self) -> Option<String> {
+        for p in &mut self.procs {
+            if p.status.is_none() {
+                if let Ok(Some(st)) = p.child.try_wait() {
+                    p.status = Some(st);
+                    if !st.success() {
+                        return Some(format!(
+                            "{} (pid {}) {}",
+                            p.label,
+                            p.child.id(),
+                            describe_status(st)
+                        ));
+                    }
+                }
+            }
+        }
+        None
+    }
+
+    fn broadcast(&self, msg: ControlMsg) {
+        let _ = self.control.send(msg);
+        for b in &self.bells {
+            let _ = b.ring();
+        }
+    }
+
+    /// Stops every child still running: STOP message, SIGTERM, then SIGKILL after the grace.
+    fn teardown(&mut self) {
+        self.broadcast(ControlMsg {
+            command: ControlMsg::STOP,
+            reserved: 0,
+            epoch_ns: 0,
+        });
+        for p in &self.procs {
+            if p.status.is_none() {
+                if let Some(pid) = rustix::process::Pid::from_raw(p.child.id() as i32) {
+                    let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
+                }
+            }
+        }
+        let began = Instant::now();
+        while self.procs.iter().any(|p| p.status.is_none()) && began.elapsed() < GRACE {
+            self.poll_children();
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        for p in &mut self.procs {
+            if p.status.is_none() {
+                let _ = p.child.kill();
+                p.status = p.child.wait().ok();
+            }
+        }
+    }
+}
+
+/// Runs the resolved scenario in `opts.run_dir` (which must already hold `scenario.toml`).
+pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
+    reap_stale_runs();
+    let prefix = new_prefix();
+    let scenario_path = opts.run_dir.join("scenario.toml");
+    std::fs::create_dir_all(opts.run_dir.join("traces")).context("creating the traces folder")?;
+    let interrupted = Arc::new(AtomicBool::new(false));
+    signal_hook::flag::register(signal_hook::consts::SIGINT, Arc::clone(&interrupted))?;
+    signal_hook::flag::register(signal_hook::consts::SIGTERM, Arc::clone(&interrupted))?;
+
+    let result = {
+        let transport = Transport::open(
+            &prefix,
+            "launcher",
+            fdi_common::process::sizing_for(resolved),
+        )?;
+        let mut launcher = Launcher {
+            procs: Vec::new(),
+            bells: Vec::new(),
+            control: transport.publisher(Stream::Control)?,
+            status: transport.subscriber(Stream::Status)?,
+            waker: transport.waker(Wake::Launcher)?,
+            interrupted,
+        };
+        let r = spawn_and_supervise(
+            resolved,
+            opts,
+            &prefix,
+            &scenario_path,
+            &transport,
+            &mut launcher,
+        );
+        launcher.teardown();
+        r
+        // ports and node dropped here, before the files are removed
+    };
+    ipc::remove_run_resources(&prefix).ok();
+    let leftovers = ipc::leftover_files(&prefix);
+    let wall_s = result?;
+    Ok(IpcOutcome {
+        wall_s,
+        prefix,
+        leftovers,
+    })
+}
+
+fn spawn_and_supervise(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    scenario_path: &Path,
+    transport: &Transport,
+    l: &mut Launcher,
+) -> Result<f64> {
+    let mut roles: Vec<(String, String, Wake, Option<u32>)> = vec![
+        (
+            "control-center".into(),
+            "control-center".into(),
+            Wake::Center,
+            None,
+        ),
+        ("attacker".into(), "attacker".into(), Wake::Attacker, None),
+    ];
+    for a in &resolved.scenario.agents {
+        roles.push((
+            "agent".into(),
+            format!("agent-{}", a.id),
+            Wake::Agent(a.id),
+            Some(a.id),
+        ));
+    }
+    for (role, name, wake, agent) in roles {
+        l.bells.push(transport.notifier(wake)?);
+        let mut cmd = role_command(&role)?;
+        cmd.arg("--prefix")
+            .arg(prefix)
+            .arg("--scenario")
+            .arg(scenario_path)
+            .arg("--trace")
+            .arg(trace_path(&opts.run_dir, &name));
+        cmd.arg("--launcher-pid")
+            .arg(std::process::id().to_string());
+        if let Some(id) = agent {
+            cmd.arg("--agent").arg(id.to_string());
+        }
+        cmd.stdin(Stdio::null())
+            .stdout(Stdio::null())
+            .stderr(Stdio::inherit());
+        let child = cmd.spawn().with_context(|| format!("spawning {name}"))?;
+        let label = match agent {
+            Some(id) => format!("agent {id}"),
+            None => name.clone(),
+        };
+        l.procs.push(Proc {
+            label,
+            wake,
+            child,
+            status: None,
+            ready: false,
+        });
+    }
+
+    // Every process reports ready once its ports exist; only then can nothing sent be lost.
+    let began = Instant::now();
+    while l.procs.iter().any(|p| !p.ready) {
+        if let Some(failed) = l.poll_children() {
+            bail!("{failed} before the start");
+        }
+        if l.interrupted.load(Ordering::SeqCst) {
+            bail!("interrupted before the start");
+        }
+        if began.elapsed() > READY_TIMEOUT {
+            let missing: Vec<&str> = l
+                .procs
+                .iter()
+                .filter(|p| !p.ready)
+                .map(|p| p.label.as_str())
+                .collect();
+            bail!("not ready after {READY_TIMEOUT:?}: {}", missing.join(", "));
+        }
+        l.waker.wait(Duration::from_millis(20))?;
+        let procs = &mut l.procs;
+        l.status.drain(|m| {
+            if m.kind == StatusMsg::READY {
+                if let Some(p) = procs.iter_mut().find(|p| matches_status(p.wake, &m)) {
+                    p.ready = true;
+                }
+            }
+        })?;
+    }
+
+    let ticks = resolved.ticks();
+    let dt = resolved.scenario.control_period_s;
+    let bar = progress_bar(ticks, opts.progress);
+    let lead = if resolved.scenario.clock == ClockMode::Realtime {
+        REALTIME_LEAD
+    } else {
+        Duration::ZERO
+    };
+    let started = Instant::now();
+    l.broadcast(ControlMsg {
+        command: ControlMsg::START,
+        reserved: 0,
+        epoch_ns: monotonic_ns() + lead.as_nanos() as u64,
+    });
+
+    loop {
+        l.waker.wait(Duration::from_millis(50))?;
+        l.status.drain(|m| {
+            if Role::from_code(m.role) == Some(Role::Center) {
+                bar.set_position(m.tick);
+                bar.set_message(format!("{:.1} s", m.tick as f64 * dt));
+            }
+        })?;
+        if let Some(failed) = l.poll_children() {
+            bar.abandon();
+            return Err(anyhow!("run stopped: {failed}"));
+        }
+        if l.procs.iter().all(|p| p.status.is_some()) {
+            break;
+        }
+        if l.interrupted.load(Ordering::SeqCst) {
+            bar.abandon();
+            return Err(anyhow!(
+                "interrupted: every process was stopped; the traces hold the run up to that point"
+            ));
+        }
+    }
+    bar.finish_and_clear();
+    Ok(started.elapsed().as_secs_f64())
+}
+
+fn matches_status(wake: Wake, m: &StatusMsg) -> bool {
+    match (wake, Role::from_code(m.role)) {
+        (Wake::Agent(id), Some(Role::Agent)) => id == m.agent,
+        (Wake::Attacker, Some(Role::Attacker)) | (Wake::Center, Some(Role::Center)) => true,
+        _ => false,
+    }
+}
+
+fn progress_bar(ticks: u64, enabled: bool) -> ProgressBar {
+    if !enabled {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::with_draw_target(Some(ticks), ProgressDrawTarget::stderr());
+    let style = ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} sim {msg} | {pos}/{len} ticks | {per_sec} | ETA {eta}")
+        .unwrap_or_else(|_| ProgressStyle::default_bar());
+    bar.set_style(style);
+    bar
+}
