@@ -184,19 +184,16 @@ pub fn run(
             for k in 1..=ticks {
                 let t = tick_time(k, dt);
                 let deadline = epoch_ns + (t * 1e9) as u64;
-                loop {
-                    take_torques(&mut plant, ports, trace, &mut inflow, None)?;
-                    let now = monotonic_ns();
-                    if now >= deadline {
-                        break;
-                    }
+                // Pace with nanosleep (a high-resolution timer): the event wait's timeout is a
+                // socket timeout with scheduler-tick granularity (4–10 ms), far too coarse for
+                // 1 kHz. Commands that arrive meanwhile wait in the subscriber's buffer.
+                while let Some(left) = deadline.checked_sub(monotonic_ns()).filter(|l| *l > 0) {
                     if shutdown.requested() || ports.launcher.stop_requested()? {
                         return stopped(k - 1);
                     }
-                    ports
-                        .waker
-                        .wait(Duration::from_nanos(deadline - now).min(WAIT_SLICE))?;
+                    std::thread::sleep(Duration::from_nanos(left).min(WAIT_SLICE));
                 }
+                take_torques(&mut plant, ports, trace, &mut inflow, None)?;
                 let t_prev = tick_time(k - 1, dt);
                 let step = plant.advance(t_prev);
                 trace.write(&TraceRecord::Agent(agent_record(

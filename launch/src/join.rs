@@ -12,6 +12,26 @@ use fdi_common::trace::{TraceReader, TraceRecord};
 
 use crate::runtime::trace_path;
 
+/// Records that carry their tick.
+trait Tick {
+    fn tick(&self) -> u64;
+}
+impl Tick for AgentRecord {
+    fn tick(&self) -> u64 {
+        self.k
+    }
+}
+impl Tick for AttackRecord {
+    fn tick(&self) -> u64 {
+        self.k
+    }
+}
+impl Tick for CenterRecord {
+    fn tick(&self) -> u64 {
+        self.k
+    }
+}
+
 /// One trace and the records read ahead of the join, per agent.
 struct Source<T> {
     reader: TraceReader,
@@ -20,7 +40,7 @@ struct Source<T> {
     damage: Option<String>,
 }
 
-impl<T> Source<T> {
+impl<T: Tick> Source<T> {
     fn open(path: &Path, pick: fn(TraceRecord) -> Option<(u32, T)>) -> Result<Self> {
         Ok(Self {
             reader: TraceReader::open(path)?,
@@ -30,13 +50,24 @@ impl<T> Source<T> {
         })
     }
 
-    /// The next record of `agent`, reading ahead as needed; `None` at the end of the trace.
-    fn next_for(&mut self, agent: u32) -> Option<T> {
+    /// The record of `agent` for tick `k`: older records are skipped, a newer one stays for
+    /// later (the tick was lost on the way). `Err(())` at the end of the trace.
+    fn take(&mut self, agent: u32, k: u64) -> Result<Option<T>, ()> {
         loop {
-            if let Some(r) = self.pending.get_mut(&agent).and_then(VecDeque::pop_front) {
-                return Some(r);
+            if let Some(q) = self.pending.get_mut(&agent) {
+                while q.front().is_some_and(|r| r.tick() < k) {
+                    q.pop_front();
+                }
+                match q.front().map(Tick::tick) {
+                    Some(t) if t == k => return Ok(q.pop_front()),
+                    Some(_) => return Ok(None),
+                    None => {}
+                }
             }
-            match self.reader.next()? {
+            let Some(next) = self.reader.next() else {
+                return Err(());
+            };
+            match next {
                 Ok(rec) => {
                     if let Some((a, r)) = (self.pick)(rec) {
                         self.pending.entry(a).or_default().push_back(r);
@@ -44,7 +75,7 @@ impl<T> Source<T> {
                 }
                 Err(e) => {
                     self.damage = Some(e.to_string());
-                    return None;
+                    return Err(());
                 }
             }
         }
@@ -104,20 +135,26 @@ pub fn join_run(
     let mut warnings = Vec::new();
     let ticks = resolved.ticks();
     let mut joined = 0;
+    let mut lost = 0u64;
     'ticks: for k in 0..ticks {
         for (id, src) in &mut agents {
-            let (Some(a), Some(x), Some(c)) = (
-                src.next_for(*id),
-                attacker.next_for(*id),
-                center.next_for(*id),
-            ) else {
-                warnings.push(format!("traces end at tick {k} of {ticks} (agent {id})"));
+            let Ok(Some(a)) = src.take(*id, k) else {
+                warnings.push(format!("agent {id}: its trace ends at tick {k} of {ticks}"));
                 break 'ticks;
             };
-            if a.k != k || x.k != k || c.k != k {
-                warnings.push(format!("agent {id}: records out of step at tick {k} (agent {}, attacker {}, center {})", a.k, x.k, c.k));
-                break 'ticks;
-            }
+            let (x, c) = match (attacker.take(*id, k), center.take(*id, k)) {
+                (Ok(Some(x)), Ok(Some(c))) => (x, c),
+                // The measurement of this tick never reached the control center (realtime
+                // overflow or a stalled process): the agent held its last command.
+                (Ok(_), Ok(_)) => {
+                    lost += 1;
+                    continue;
+                }
+                _ => {
+                    warnings.push(format!("the attacker or control-center trace ends at tick {k} of {ticks} (agent {id})"));
+                    break 'ticks;
+                }
+            };
             let rec = TickRecord {
                 agent: a,
                 attack: x,
@@ -128,6 +165,11 @@ pub fn join_run(
             sink(&rec);
         }
         joined = k + 1;
+    }
+    if lost > 0 {
+        warnings.push(format!(
+            "{lost} agent-ticks never reached the control center and are left out of the metrics"
+        ));
     }
     for (id, src) in &agents {
         if let Some(d) = &src.damage {

@@ -98,6 +98,9 @@ impl Wake {
     }
 }
 
+/// Periods of receiver stall that realtime buffers absorb without loss.
+pub const STALL_TICKS: usize = 256;
+
 /// Sizes every process must agree on (iceoryx2 checks them when a service is opened).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Sizing {
@@ -111,7 +114,9 @@ impl Sizing {
     fn qos(self, stream: Stream) -> (usize, usize, usize) {
         // (max publishers, max subscribers, subscriber buffer)
         let n = self.agents.max(1);
-        let burst = self.in_flight.max(1) * 4;
+        // Lockstep needs `in_flight`; realtime must ride out a stall of a receiver (start-up page
+        // faults, a descheduled process) of up to STALL_TICKS periods without losing data.
+        let burst = (self.in_flight.max(1) * 4).max(STALL_TICKS);
         match stream {
             Stream::Measurement => (n, 2, burst),
             Stream::Tampered => (1, 2, n * burst),
@@ -475,6 +480,17 @@ impl Waker {
     /// Returns whether it was rung. Every pending notification is consumed.
     pub fn wait(&self, timeout: Duration) -> Result<bool, IpcError> {
         let mut rung = false;
+        // iceoryx2 turns the timeout into SO_RCVTIMEO with microsecond resolution, and a zero
+        // timeval there means "block forever": below 1 µs, only poll.
+        if timeout < Duration::from_micros(1) {
+            return match self.port.try_wait(|_| rung = true) {
+                Ok(_) => Ok(rung),
+                Err(e) => Err(IpcError::Wait {
+                    service: self.service.clone(),
+                    reason: format!("{e:?}"),
+                }),
+            };
+        }
         match self.port.timed_wait(|_| rung = true, timeout) {
             Ok(_) => {}
             Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => return Ok(false),
@@ -488,5 +504,120 @@ impl Waker {
         // Coalesce whatever else arrived meanwhile.
         let _ = self.port.try_wait(|_| rung = true);
         Ok(rung)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prefix(tag: &str) -> String {
+        format!("fdiut{}_{tag}_", std::process::id())
+    }
+
+    #[test]
+    fn waker_wait_with_a_sub_microsecond_timeout_returns_instead_of_blocking_forever() {
+        let p = prefix("w");
+        {
+            let t = Transport::open(
+                &p,
+                "test",
+                Sizing {
+                    agents: 1,
+                    in_flight: 1,
+                },
+            )
+            .expect("node");
+            let waker = t.waker(Wake::Launcher).expect("listener");
+            let started = std::time::Instant::now();
+            for ns in [0u64, 1, 500, 999] {
+                assert!(!waker.wait(Duration::from_nanos(ns)).expect("wait"));
+            }
+            // Not a timing assertion on speed: a hang here would block the test forever.
+            assert!(started.elapsed() < Duration::from_secs(60));
+            t.notifier(Wake::Launcher)
+                .expect("notifier")
+                .ring()
+                .expect("ring");
+            assert!(waker.wait(Duration::from_nanos(10)).expect("wait"));
+        }
+        remove_run_resources(&p).expect("cleanup");
+        assert!(leftover_files(&p).is_empty(), "{:?}", leftover_files(&p));
+    }
+
+    #[test]
+    fn two_prefixes_do_not_see_each_other() {
+        let (a, b) = (prefix("a"), prefix("b"));
+        {
+            let ta = Transport::open(
+                &a,
+                "a",
+                Sizing {
+                    agents: 1,
+                    in_flight: 1,
+                },
+            )
+            .expect("node a");
+            let tb = Transport::open(
+                &b,
+                "b",
+                Sizing {
+                    agents: 1,
+                    in_flight: 1,
+                },
+            )
+            .expect("node b");
+            let sub_a: Inbox<StatusMsg> = ta.subscriber(Stream::Status).expect("sub a");
+            let pub_b: Outbox<StatusMsg> = tb.publisher(Stream::Status).expect("pub b");
+            assert_eq!(
+                pub_b
+                    .send(StatusMsg {
+                        role: 1,
+                        agent: 1,
+                        kind: 1,
+                        reserved: 0,
+                        tick: 7
+                    })
+                    .expect("send"),
+                0,
+                "no subscriber in run b"
+            );
+            assert_eq!(sub_a.drain(|_| {}).expect("drain"), 0);
+        }
+        for p in [a, b] {
+            remove_run_resources(&p).expect("cleanup");
+            assert!(leftover_files(&p).is_empty());
+        }
+    }
+
+    #[test]
+    fn prefixes_are_checked() {
+        assert!(Transport::open(
+            "",
+            "x",
+            Sizing {
+                agents: 1,
+                in_flight: 1
+            }
+        )
+        .is_err());
+        assert!(Transport::open(
+            "a/b",
+            "x",
+            Sizing {
+                agents: 1,
+                in_flight: 1
+            }
+        )
+        .is_err());
+        assert!(Transport::open(
+            &"p".repeat(MAX_PREFIX_LEN + 1),
+            "x",
+            Sizing {
+                agents: 1,
+                in_flight: 1
+            }
+        )
+        .is_err());
     }
 }
