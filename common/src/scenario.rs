@@ -435,6 +435,13 @@ impl Resolved {
         toml::to_string(&s).unwrap_or_else(|e| format!("# could not serialize scenario: {e}\n"))
     }
 
+    /// Keeps only the agents `keep` accepts, and only the attack channels of those agents.
+    pub fn retain_agents(mut self, keep: impl Fn(&AgentConfig) -> bool) -> Self {
+        self.scenario.agents.retain(|a| keep(a));
+        self.attack = self.attack.for_agents(&self.scenario.agent_dofs());
+        self
+    }
+
     /// Replaces the attack (e.g. `--attack FILE|PRESET`) and re-checks it against the agents.
     pub fn with_attack(mut self, attack: AttackProfile) -> Result<Self, ScenarioError> {
         let problems: Vec<Problem> = attack
@@ -901,6 +908,14 @@ mod tests {
         let all = err.to_string();
         assert!(all.contains("frobnicate"), "{all}");
         assert!(all.contains("agents[0].delay"), "{all}");
+    }
+
+    #[test]
+    fn retaining_agents_drops_their_attack_channels_and_stays_valid() {
+        let r = paper().expect("valid").retain_agents(|a| a.id == 1);
+        assert_eq!(r.agent_count(), 1);
+        assert!(r.attack.channels.iter().all(|c| c.agent == 1));
+        load_str(&r.to_toml(), "robot 1 only", None).expect("still valid once written out");
     }
 
     #[test]

@@ -356,7 +356,7 @@ mod tests {
             alpha_velocity: Joints::from_slice(&[0.0, -1.0]),
             y: Joints::from_slice(&[1.0, 2.0]),
             yd: Joints::from_slice(&[3.0, f64::MIN_POSITIVE]),
-            active: k % 2 == 0,
+            active: k.is_multiple_of(2),
         })
     }
 

@@ -47,14 +47,23 @@ pub fn create_run_dir(root: &Path, resolved: &Resolved) -> Result<PathBuf> {
         })
         .collect();
     let base = root.join(format!("{}-{name}", timestamp()));
+    std::fs::create_dir_all(root).with_context(|| format!("creating {}", root.display()))?;
+    // `create_dir` fails if the folder exists, so two runs started in the same second (even from
+    // two launchers) never share a folder.
     let mut dir = base.clone();
     let mut n = 1;
-    while dir.exists() {
-        n += 1;
-        dir = PathBuf::from(format!("{}-{n}", base.display()));
+    loop {
+        match std::fs::create_dir(&dir) {
+            Ok(()) => break,
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists && n < 10_000 => {
+                n += 1;
+                dir = PathBuf::from(format!("{}-{n}", base.display()));
+            }
+            Err(e) => return Err(e).with_context(|| format!("creating {}", dir.display())),
+        }
     }
     std::fs::create_dir_all(dir.join("traces"))
-        .with_context(|| format!("creating {}", dir.display()))?;
+        .with_context(|| format!("creating {}/traces", dir.display()))?;
     std::fs::write(dir.join("scenario.toml"), resolved.to_toml())
         .with_context(|| format!("writing {}/scenario.toml", dir.display()))?;
     Ok(dir)
@@ -94,6 +103,23 @@ pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn run_dirs_created_at_once_never_collide() {
+        let root = std::env::temp_dir().join(format!("fdi-rundir-{}", std::process::id()));
+        let r = fdi_common::scenario::paper().expect("valid");
+        let dirs: Vec<_> = std::thread::scope(|s| {
+            let hs: Vec<_> = (0..8)
+                .map(|_| s.spawn(|| super::create_run_dir(&root, &r).expect("created")))
+                .collect();
+            hs.into_iter().map(|h| h.join().expect("thread")).collect()
+        });
+        let mut unique = dirs.clone();
+        unique.sort();
+        unique.dedup();
+        assert_eq!(unique.len(), dirs.len(), "{dirs:?}");
+        let _ = std::fs::remove_dir_all(&root);
+    }
+
     #[test]
     fn timestamp_has_the_documented_shape() {
         let t = super::timestamp();

@@ -137,9 +137,10 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
         .join(format!("{}-table2", crate::output::timestamp()));
     let mut rows = Vec::new();
     for (case, delay, paper_rmse) in paper_table2() {
-        let mut r = paper.clone();
-        r.scenario.agents.retain(|a| a.id == 1);
-        r.scenario.agents[0].delay = delay;
+        let mut r = paper.clone().retain_agents(|a| a.id == 1);
+        for a in &mut r.scenario.agents {
+            a.delay = delay;
+        }
         let summary = run_case(&r, args, &dir, case)?;
         rows.push(Table2Row {
             case,

@@ -1,1 +1,204 @@
-//! Helpers shared by the integration tests.
+//! Helpers shared by the integration tests: locating (and if needed building) the real
+//! binaries, scratch folders, process and shared-memory inspection, a watchdog.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::OnceLock;
+use std::time::{Duration, Instant};
+
+/// `target/<profile>` of the running test binary.
+fn profile_dir() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test>-<hash>
+    exe.parent()
+        .and_then(Path::parent)
+        .expect("target/<profile>")
+        .to_path_buf()
+}
+
+/// The `fdi-launch` binary of this build, with `fdi-agent`, `fdi-attacker` and
+/// `fdi-control-center` beside it. `cargo test`/`nextest` build the test targets, not the other
+/// packages' executables, so this runs `cargo build --bins` once per test process (a no-op when
+/// they are fresh): a test never runs a stale binary.
+pub fn launcher() -> PathBuf {
+    static BUILT: OnceLock<PathBuf> = OnceLock::new();
+    BUILT
+        .get_or_init(|| {
+            let dir = profile_dir();
+            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+            let mut cmd = Command::new(cargo);
+            cmd.args(["build", "--quiet", "--workspace", "--bins"]);
+            if dir.file_name().is_some_and(|n| n == "release") {
+                cmd.arg("--release");
+            }
+            cmd.current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
+            let st = cmd.status().expect("running cargo build for the binaries");
+            assert!(st.success(), "building the binaries failed");
+            dir.join("fdi-launch")
+        })
+        .clone()
+}
+
+/// A fresh scratch folder, removed on drop.
+#[derive(Debug)]
+pub struct Scratch(pub PathBuf);
+
+impl Scratch {
+    pub fn new(tag: &str) -> Self {
+        let nanos = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.subsec_nanos());
+        let p = std::env::temp_dir().join(format!("fdi-test-{tag}-{}-{nanos}", std::process::id()));
+        std::fs::create_dir_all(&p).expect("scratch folder");
+        Self(p)
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Runs `fdi-launch` with `args` (output under `out`) and waits, killing it after `limit` (a
+/// watchdog against hangs, not a speed check).
+pub fn launch(args: &[&str], out: &Path, limit: Duration) -> Output {
+    let child = spawn(args, out);
+    wait_with_watchdog(child, limit)
+}
+
+/// Starts `fdi-launch` with `args`, output under `out`.
+pub fn spawn(args: &[&str], out: &Path) -> Child {
+    Command::new(launcher())
+        .args(args)
+        .arg("--out")
+        .arg(out)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawning fdi-launch")
+}
+
+/// Waits for `child`, killing it (and failing the test) after `limit`.
+pub fn wait_with_watchdog(mut child: Child, limit: Duration) -> Output {
+    let began = Instant::now();
+    loop {
+        if child.try_wait().expect("polling fdi-launch").is_some() {
+            return child.wait_with_output().expect("collecting output");
+        }
+        if began.elapsed() > limit {
+            let pid = child.id();
+            let _ = child.kill();
+            let out = child.wait_with_output().expect("collecting output");
+            panic!(
+                "watchdog: fdi-launch (pid {pid}) still running after {limit:?}; stderr:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// The JSON object `run --json` printed.
+pub fn json(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "fdi-launch failed ({}):\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .unwrap_or_else(|| panic!("no JSON in output:\n{text}"));
+    serde_json::from_str(line).expect("valid JSON")
+}
+
+/// Pids of the processes whose parent is `pid`.
+pub fn children_of(pid: u32) -> Vec<(u32, String)> {
+    let mut out = Vec::new();
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return out;
+    };
+    for e in entries.flatten() {
+        let Ok(p) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{p}/stat")) else {
+            continue;
+        };
+        // pid (comm) state ppid ...: comm may hold spaces, so split after the last ')'.
+        let Some(rest) = stat.rsplit_once(')').map(|x| x.1) else {
+            continue;
+        };
+        let ppid = rest
+            .split_whitespace()
+            .nth(1)
+            .and_then(|x| x.parse::<u32>().ok());
+        if ppid == Some(pid) {
+            let cmdline = std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default();
+            out.push((p, String::from_utf8_lossy(&cmdline).replace('\0', " ")));
+        }
+    }
+    out
+}
+
+/// Shared-memory and iceoryx2 files left by runs of the launcher `pid`.
+pub fn leftovers_of(launcher_pid: u32) -> Vec<PathBuf> {
+    let prefix = format!("fdi{launcher_pid}_");
+    let mut out = Vec::new();
+    let root = PathBuf::from("/tmp/iceoryx2");
+    let mut dirs = vec![
+        PathBuf::from("/dev/shm"),
+        root.clone(),
+        root.join("services"),
+        root.join("nodes"),
+    ];
+    if let Ok(entries) = std::fs::read_dir(root.join("nodes")) {
+        dirs.extend(entries.flatten().map(|e| e.path()).filter(|p| p.is_dir()));
+    }
+    for d in dirs {
+        if let Ok(entries) = std::fs::read_dir(&d) {
+            out.extend(
+                entries
+                    .flatten()
+                    .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
+                    .map(|e| e.path()),
+            );
+        }
+    }
+    out
+}
+
+/// True while the process `pid` exists (and is not a zombie).
+pub fn alive(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
+        s.rsplit_once(')')
+            .is_some_and(|(_, r)| !r.trim_start().starts_with('Z'))
+    })
+}
+
+/// Sends `signal` (e.g. "-KILL") to `pid` with kill(1).
+pub fn signal(pid: u32, signal: &str) {
+    let st = Command::new("kill")
+        .arg(signal)
+        .arg(pid.to_string())
+        .status()
+        .expect("kill(1)");
+    assert!(st.success(), "kill {signal} {pid} failed");
+}
+
+/// Polls `cond` every 10 ms until it holds or `limit` passes.
+pub fn wait_until(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {
+    let began = Instant::now();
+    while began.elapsed() < limit {
+        if cond() {
+            return true;
+        }
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    cond()
+}
