@@ -11,7 +11,7 @@ use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 
-use crate::{join, output, runtime, tables};
+use crate::{bench, export, join, output, report, runtime, tables};
 
 /// Testbed for false-data-injection attacks on a multi-agent robot system (Sargolzaei et al.).
 #[derive(Debug, Parser)]
@@ -34,6 +34,18 @@ pub enum Command {
     Table1(TableArgs),
     /// Reproduce the paper's Table II (robot 1 under four time-varying delays).
     Table2(TableArgs),
+    /// Make the report of a run directory: figures (PNG, SVG), RMSE table, detection metrics,
+    /// `report.md`. `run` does this by itself at the end of every run.
+    Report {
+        /// A run directory (`runs/<timestamp>-<name>`).
+        run_dir: PathBuf,
+    },
+    /// Work with the binary traces of a run.
+    #[command(subcommand)]
+    Trace(TraceCommand),
+    /// Measurements: latency of the realtime runtime, the transport floor, lockstep speed.
+    #[command(subcommand)]
+    Bench(bench::BenchCommand),
     /// Internal: run as one of the runtime's processes (used when the sibling binaries are
     /// missing or older than fdi-launch).
     #[command(hide = true)]
@@ -42,6 +54,16 @@ pub enum Command {
         role: ProcessRole,
         #[command(flatten)]
         args: ProcessArgs,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum TraceCommand {
+    /// Export every trace of a run directory, one file per process with a row per record.
+    Export {
+        run_dir: PathBuf,
+        #[arg(long, value_enum, default_value_t = export::Format::Csv)]
+        format: export::Format,
     },
 }
 
@@ -141,6 +163,11 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Validate { scenario } => validate(&scenario),
         Command::Table1(args) => tables::table1(&args),
         Command::Table2(args) => tables::table2(&args),
+        Command::Report { run_dir } => report::report(&run_dir).map(|()| ExitCode::SUCCESS),
+        Command::Trace(TraceCommand::Export { run_dir, format }) => {
+            export::export(&run_dir, format).map(|()| ExitCode::SUCCESS)
+        }
+        Command::Bench(b) => bench::bench(&b),
         Command::Process { role, args } => Ok(match role {
             ProcessRole::Agent => fdi_agent::main_with(args),
             ProcessRole::Attacker => fdi_attacker::main_with(args),
@@ -310,6 +337,12 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
     let dir = output::create_run_dir(&args.out, &r)?;
     let summary = execute(&r, args.engine, Some(&dir), !args.json)?;
+    if let Err(e) = report::write_report(&dir, &r, &summary) {
+        eprintln!(
+            "fdi-launch: warning: the report of {} could not be made: {e:#}",
+            dir.display()
+        );
+    }
     if args.json {
         let mut v = serde_json::to_value(&summary)?;
         v["run_dir"] = serde_json::Value::String(dir.display().to_string());

@@ -1,8 +1,11 @@
 //! `fdi-launch`: the one user-facing command of fdi-mas.
 
+mod bench;
 mod cli;
+mod export;
 mod join;
 mod output;
+mod report;
 mod runtime;
 mod tables;
 
