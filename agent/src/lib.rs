@@ -1,9 +1,10 @@
 //! The agent process: a thin shell around [`fdi_common::plant::Plant`].
 //!
-//! Lockstep: publish measurement `k`, wait for torque `k`, integrate `[t_k, t_{k+1}]`.
-//! Realtime: at wall time `epoch + t_k` integrate `[t_{k−1}, t_k]` with whatever commands have
-//! arrived (a command due but missing is a deadline miss: the last one is held), then publish
-//! measurement `k`.
+//! Lockstep: publish measurement `k`, integrate `[t_k, t_{k+1}]` as soon as every command that
+//! step looks up has arrived (with `τ > Δ` that is before torque `k` itself: lookahead), publish
+//! `k + 1`, and so on. Realtime: at wall time `epoch + t_k` integrate `[t_{k−1}, t_k]` with
+//! whatever commands have arrived (a command due but missing is a deadline miss: the last one is
+//! held), then publish measurement `k`.
 
 use std::process::ExitCode;
 use std::time::Duration;
@@ -13,9 +14,10 @@ use fdi_common::ipc::msg::{check_header, from_vector, to_vector};
 use fdi_common::ipc::{
     monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
 };
-use fdi_common::plant::{Plant, PlantParams};
+use fdi_common::model::Vector;
+use fdi_common::plant::{Measurement, Plant, PlantParams};
 use fdi_common::process::{
-    self, LauncherLink, ProcessArgs, ProcessError, Shutdown, Start, WAIT_SLICE,
+    self, LauncherLink, ProcessArgs, ProcessError, Shutdown, Start, WaitStrategy, WAIT_SLICE,
 };
 use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::trace::{HopStamps, TraceError, TraceRecord, TraceWriter};
@@ -60,35 +62,49 @@ pub enum Outcome {
     Stopped { ticks: u64 },
 }
 
-/// Counts of a run's torque stream.
+/// State of the torque stream.
 #[derive(Debug, Default)]
 struct Inflow {
+    /// Sequence number of the next torque due.
+    next: u64,
     refused: u64,
 }
 
-/// Takes every waiting torque into the plant's delay line; `want` (lockstep) is the tick whose
-/// torque must arrive. Returns whether it did.
+/// A tick measured and published but not yet integrated.
+#[derive(Debug, Clone, Copy)]
+struct Published {
+    k: u64,
+    state: (Vector<2>, Vector<2>),
+    measurement: Measurement<2>,
+}
+
+/// Takes every waiting torque into the plant's delay line, in order; a torque for a tick already
+/// passed (duplicate, replay) or malformed is refused and counted. With `stamps`, the per-hop
+/// latency of every torque is recorded (realtime: in lockstep latencies say nothing).
 fn take_torques(
     plant: &mut Plant<2>,
     ports: &Ports,
     trace: &mut TraceWriter,
     inflow: &mut Inflow,
-    want: Option<u64>,
-) -> Result<bool, AgentError> {
+    stamps: bool,
+) -> Result<(), AgentError> {
     let id = plant.agent_id();
-    let mut got = false;
     let mut err = None;
     ports.torque.drain(|m| {
         let received = monotonic_ns();
-        if check_header(m.agent, m.dof, m.seq, 2, |a| a == id, want.unwrap_or(m.seq)).is_err()
-            || plant.receive(m.t_send, to_vector::<2>(&m.u)).is_err()
-        {
+        let well_formed = m.seq >= inflow.next
+            && check_header(m.agent, m.dof, m.seq, 2, |a| a == id, m.seq).is_ok();
+        if !well_formed || plant.receive(m.t_send, to_vector::<2>(&m.u)).is_err() {
             inflow.refused += 1;
             return;
         }
-        got |= want == Some(m.seq);
+        inflow.next = m.seq + 1;
+        if !stamps {
+            return;
+        }
         let stamps = HopStamps {
             agent_sent_ns: m.agent_sent_ns,
+            attacker_received_ns: m.attacker_received_ns,
             attacker_sent_ns: m.attacker_sent_ns,
             center_received_ns: m.center_received_ns,
             center_sent_ns: m.center_sent_ns,
@@ -102,18 +118,18 @@ fn take_torques(
             err = Some(e);
         }
     })?;
-    match err {
-        Some(e) => Err(e.into()),
-        None => Ok(got),
-    }
+    err.map_or(Ok(()), |e| Err(e.into()))
 }
 
+/// Measures and publishes tick `k`. Lockstep rings the attacker once per batch, realtime at
+/// every tick (`ring`).
 fn publish(
     plant: &mut Plant<2>,
     ports: &Ports,
     k: u64,
     t: f64,
-) -> Result<fdi_common::plant::Measurement<2>, AgentError> {
+    ring: bool,
+) -> Result<Measurement<2>, AgentError> {
     let m = plant.measure();
     ports.measurement.send(MeasurementMsg {
         seq: k,
@@ -123,9 +139,12 @@ fn publish(
         y: from_vector(&m.y),
         yd: from_vector(&m.yd),
         agent_sent_ns: monotonic_ns(),
+        attacker_received_ns: 0,
         attacker_sent_ns: 0,
     })?;
-    ports.attacker.ring()?;
+    if ring {
+        ports.attacker.ring()?;
+    }
     Ok(m)
 }
 
@@ -144,6 +163,7 @@ pub fn run(
         .find(|a| a.id == agent_id)
         .ok_or(AgentError::NotInScenario(agent_id))?;
     let mut plant = Plant::<2>::new(PlantParams::new(agent, s)).ok_or(AgentError::Dof(agent_id))?;
+    let strategy = WaitStrategy::for_clock(s.clock);
     let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?
@@ -157,43 +177,78 @@ pub fn run(
     let stopped = |k| Ok(Outcome::Stopped { ticks: k });
     match s.clock {
         ClockMode::Lockstep => {
-            for k in 0..ticks {
+            // Lookahead (conservative parallel simulation): step k runs as soon as the next
+            // command not yet received (stamp t_n) would not be in force at the step's latest
+            // query t − τ(t). The step then looks up exactly the commands it looks up in strict
+            // lockstep, so the trace is bit-identical; with τ > Δ the agent runs ticks ahead and
+            // the processes exchange batches instead of single messages.
+            let mut published: Option<Published> = None;
+            let mut unrung = false;
+            let mut k = 0;
+            while k < ticks {
                 let t = tick_time(k, dt);
-                let state = (plant.q, plant.qd);
-                let m = publish(&mut plant, ports, k, t)?;
-                while !take_torques(&mut plant, ports, trace, &mut inflow, Some(k))? {
+                let p = match published.take() {
+                    Some(p) if p.k == k => p,
+                    _ => {
+                        let state = (plant.q, plant.qd);
+                        let measurement = publish(&mut plant, ports, k, t, false)?;
+                        unrung = true;
+                        Published {
+                            k,
+                            state,
+                            measurement,
+                        }
+                    }
+                };
+                if tick_time(inflow.next, dt) > plant.latest_query(t) {
+                    let step = plant.advance(t);
+                    trace.write(&TraceRecord::Agent(agent_record(
+                        k,
+                        agent_id,
+                        t,
+                        (&p.state.0, &p.state.1),
+                        &p.measurement,
+                        &step,
+                    )))?;
+                    k += 1;
+                    continue;
+                }
+                published = Some(p);
+                if unrung {
+                    ports.attacker.ring()?;
+                    unrung = false;
+                }
+                let before = inflow.next;
+                while inflow.next == before {
                     if shutdown.requested() || ports.launcher.stop_requested()? {
                         return stopped(k);
                     }
-                    ports.waker.wait(WAIT_SLICE)?;
+                    strategy.wait(&ports.waker)?;
+                    take_torques(&mut plant, ports, trace, &mut inflow, false)?;
                 }
-                let step = plant.advance(t);
-                trace.write(&TraceRecord::Agent(agent_record(
-                    k,
-                    agent_id,
-                    t,
-                    (&state.0, &state.1),
-                    &m,
-                    &step,
-                )))?;
             }
         }
         ClockMode::Realtime => {
             let mut state = (plant.q, plant.qd);
-            let mut m = publish(&mut plant, ports, 0, 0.0)?;
+            let mut m = publish(&mut plant, ports, 0, 0.0, true)?;
             for k in 1..=ticks {
                 let t = tick_time(k, dt);
                 let deadline = epoch_ns + (t * 1e9) as u64;
-                // Pace with nanosleep (a high-resolution timer): the event wait's timeout is a
-                // socket timeout with scheduler-tick granularity (4–10 ms), far too coarse for
-                // 1 kHz. Commands that arrive meanwhile wait in the subscriber's buffer.
-                while let Some(left) = deadline.checked_sub(monotonic_ns()).filter(|l| *l > 0) {
+                // Wait for the deadline with a high-resolution timeout (ppoll), waking at every
+                // torque arrival to stamp it: the event wait's own timeout has scheduler-tick
+                // granularity (4–10 ms), far too coarse for 1 kHz.
+                loop {
+                    take_torques(&mut plant, ports, trace, &mut inflow, true)?;
+                    let Some(left) = deadline.checked_sub(monotonic_ns()).filter(|l| *l > 0) else {
+                        break;
+                    };
                     if shutdown.requested() || ports.launcher.stop_requested()? {
                         return stopped(k - 1);
                     }
-                    std::thread::sleep(Duration::from_nanos(left).min(WAIT_SLICE));
+                    ports
+                        .waker
+                        .wait_precise(Duration::from_nanos(left).min(WAIT_SLICE))?;
                 }
-                take_torques(&mut plant, ports, trace, &mut inflow, None)?;
                 let t_prev = tick_time(k - 1, dt);
                 let step = plant.advance(t_prev);
                 trace.write(&TraceRecord::Agent(agent_record(
@@ -206,18 +261,19 @@ pub fn run(
                 )))?;
                 if k < ticks {
                     state = (plant.q, plant.qd);
-                    m = publish(&mut plant, ports, k, t)?;
+                    m = publish(&mut plant, ports, k, t, true)?;
                 }
             }
         }
     }
     if inflow.refused > 0 {
+        let message = format!(
+            "{} torque messages refused (wrong agent, dof, sequence or stamp)",
+            inflow.refused
+        );
         trace.write(&TraceRecord::Event {
             t: s.duration_s,
-            message: format!(
-                "{} torque messages refused (wrong agent, dof, sequence or stamp)",
-                inflow.refused
-            ),
+            message,
         })?;
     }
     trace.flush()?;

@@ -6,15 +6,18 @@ use std::process::ExitCode;
 
 use fdi_common::attack::AgentAttack;
 use fdi_common::engine::{attack_record, tamper, tick_time};
-use fdi_common::ipc::msg::{check_header, from_vector, to_vector};
+use fdi_common::ipc::msg::{
+    from_vector, to_vector, validate_measurement, SeqVerdict, SequenceTracker,
+};
 use fdi_common::ipc::{
     monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, Wake,
 };
 use fdi_common::plant::Measurement;
 use fdi_common::process::{
-    self, LauncherLink, ProcessArgs, ProcessError, Shutdown, Start, WAIT_SLICE,
+    self, LauncherLink, Liveness, ProcessArgs, ProcessError, Shutdown, Start, WaitStrategy,
+    LIVENESS_CHECK, LOST_AFTER_NS,
 };
-use fdi_common::scenario::{self, Resolved};
+use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::trace::{TraceError, TraceRecord, TraceWriter};
 
 #[derive(Debug, thiserror::Error)]
@@ -68,33 +71,61 @@ pub fn run(
             next: 0,
         })
         .collect();
-    if let Start::Shutdown = ports
+    let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?
     {
-        return Ok(0);
-    }
+        Start::Go { epoch_ns } => epoch_ns,
+        Start::Shutdown => return Ok(0),
+    };
     let ticks = resolved.ticks();
     let dt = s.control_period_s;
     let mut refused = 0u64;
     let mut failure = None;
+    let strategy = WaitStrategy::for_clock(s.clock);
+    let realtime = s.clock == ClockMode::Realtime;
+    // Realtime: relaying ends when every agent has finished or fell silent (lost).
+    let mut liveness = Liveness::new(targets.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
+    let mut sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
     loop {
         let mut relayed = 0;
         ports.measurement.drain(|m| {
-            let Some(target) = targets.iter_mut().find(|t| t.id == m.agent) else {
+            let received = monotonic_ns();
+            let Some(i) = targets.iter().position(|t| t.id == m.agent) else {
                 refused += 1;
                 return;
             };
-            if let Err(e) = check_header(m.agent, m.dof, m.seq, 2, |_| true, target.next) {
-                refused += 1;
+            // Structure first (dof within the payload, finite time), then the sequence: a
+            // duplicate, a replay or a forged far-future number is refused and counted, and
+            // never moves the stream on.
+            let structure = validate_measurement(&m, 2, |_| true, m.seq).map(|_| ());
+            let verdict = structure
+                .as_ref()
+                .ok()
+                .map(|()| sequence.observe(m.agent, m.seq));
+            if let Some(SeqVerdict::Gap { missing }) = verdict {
                 let _ = trace.write(&TraceRecord::Event {
                     t: tick_time(m.seq, dt),
-                    message: e.to_string(),
+                    message: format!(
+                        "agent {}: {missing} measurements missing before tick {}",
+                        m.agent, m.seq
+                    ),
                 });
-                if m.seq < target.next {
-                    return; // duplicate or replayed: dropped
-                }
             }
+            if !verdict.is_some_and(SeqVerdict::is_accepted) {
+                refused += 1;
+                let why = match (structure, verdict) {
+                    (Err(e), _) => e.to_string(),
+                    (_, v) => format!("agent {}, sequence {}: refused ({v:?})", m.agent, m.seq),
+                };
+                let _ = trace.write(&TraceRecord::Event {
+                    t: tick_time(m.seq.min(ticks), dt),
+                    message: why,
+                });
+                return;
+            }
+            liveness.seen(i, received);
+            let target = &mut targets[i];
             target.next = m.seq + 1;
             let t = tick_time(m.seq, dt);
             let clean = Measurement {
@@ -106,6 +137,7 @@ pub fn run(
             let sent = ports.tampered.send(MeasurementMsg {
                 y: from_vector(&out.y),
                 yd: from_vector(&out.yd),
+                attacker_received_ns: received,
                 attacker_sent_ns: monotonic_ns(),
                 ..m
             });
@@ -125,13 +157,24 @@ pub fn run(
         if relayed > 0 {
             ports.center.ring()?;
         }
-        if targets.iter().all(|t| t.next >= ticks) {
+        if realtime {
+            liveness.newly_lost(monotonic_ns(), |i| targets[i].next >= ticks);
+        }
+        if targets
+            .iter()
+            .enumerate()
+            .all(|(i, t)| t.next >= ticks || liveness.is_lost(i))
+        {
             break;
         }
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(refused);
         }
-        ports.waker.wait(WAIT_SLICE)?;
+        if realtime {
+            ports.waker.wait_precise(LIVENESS_CHECK)?;
+        } else {
+            strategy.wait(&ports.waker)?;
+        }
     }
     if refused > 0 {
         trace.write(&TraceRecord::Event {

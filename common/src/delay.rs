@@ -197,14 +197,15 @@ impl<const N: usize> DelayLine<N> {
     }
 
     /// Like [`Self::value_at`], and flags a deadline miss when commands are expected every
-    /// `period` seconds and the one due at `t` has not arrived. A tolerance of 1e-6 periods
-    /// absorbs the round-off between `k·Δ` and accumulated stamps.
+    /// `period` seconds and the one due at `t` has not arrived. The tolerance of 1e-6 periods
+    /// errs on the side of "not yet due": a query a hair below the next stamp `k·Δ` (round-off
+    /// of `t − τ(t)` when τ ≈ Δ) is not a miss — the agent's lookahead steps exactly then.
     pub fn lookup(&self, t: f64, period: f64) -> Lookup<N> {
         match self.index_at(t) {
             Some(i) => {
                 let (stamp, value) = self.entries[i];
                 let is_newest = i + 1 == self.entries.len();
-                let missed = is_newest && stamp + period * (1.0 - 1e-6) <= t;
+                let missed = is_newest && stamp + period * (1.0 + 1e-6) <= t;
                 Lookup {
                     value,
                     stamp: Some(stamp),

@@ -95,6 +95,16 @@ pub fn center_record<const N: usize>(k: u64, agent: u32, o: &CenterOutput<N>) ->
     }
 }
 
+/// A realtime agent that died or fell silent while the run went on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct LostAgent {
+    pub agent: u32,
+    /// Sim time of the last tick heard from it, when the control center reported the loss.
+    pub t_s: Option<f64>,
+    /// How it ended (exit status or signal) or `fell silent`.
+    pub reason: String,
+}
+
 /// Summary of a run, as `run --json` prints it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RunSummary {
@@ -113,6 +123,9 @@ pub struct RunSummary {
     pub trace_digest: String,
     /// Per agent id: RMSE, detection, rejected inputs, deadline misses.
     pub metrics: BTreeMap<String, AgentMetrics>,
+    /// Realtime agents lost during the run (their metrics cover the time before the loss).
+    #[serde(default)]
+    pub lost_agents: Vec<LostAgent>,
 }
 
 /// Joins metrics and digest into a summary.
@@ -147,6 +160,7 @@ pub fn summarize(
             .collect(),
         trace_digest: digest.finish(),
         metrics,
+        lost_agents: Vec::new(),
     }
 }
 

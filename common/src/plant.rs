@@ -157,6 +157,22 @@ impl<const N: usize> Plant<N> {
         (qdd, look.value, look.missed)
     }
 
+    /// The latest instant `t − τ(t)` that [`Self::advance`]`(t_k)` will look a command up for,
+    /// computed with the same operations as the RK stages. A step can run as soon as the
+    /// command in force at that instant is known: lookahead without changing a single bit.
+    pub fn latest_query(&self, t_k: f64) -> f64 {
+        let m = self.params.substeps.max(1);
+        let h = self.params.control_period_s / f64::from(m);
+        let mut latest = f64::NEG_INFINITY;
+        for s in 0..m {
+            let t = t_k + f64::from(s) * h;
+            for stage in [t, t + h / 2.0, t + h] {
+                latest = latest.max(stage - self.params.delay.tau(stage));
+            }
+        }
+        latest
+    }
+
     /// Integrates `[t_k, t_k + Δ]` with RK4 (`substeps` sub-steps).
     pub fn advance(&mut self, t_k: f64) -> StepReport<N> {
         let dt_total = self.params.control_period_s;

@@ -82,6 +82,50 @@ pub const START_TIMEOUT: Duration = Duration::from_secs(60);
 /// Longest single block on a wake-up event; shutdown is checked at least this often.
 pub const WAIT_SLICE: Duration = Duration::from_millis(50);
 
+/// How a lockstep process waits for its peers: poll its wake-up event (yielding the CPU between
+/// polls) for up to `spin`, then block on it. Blocking costs a scheduler wake-up (tens of µs on
+/// the 2-vCPU machines); polling with `sched_yield` hands the CPU to whichever process has work.
+/// A zero `spin` blocks at once. Set by `FDI_SPIN_US` (the launcher passes it on).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WaitStrategy {
+    pub spin: Duration,
+}
+
+/// Default bounded spin before blocking, µs (chosen by measurement, see docs/performance.md).
+pub const DEFAULT_SPIN_US: u64 = 100;
+
+impl WaitStrategy {
+    /// Lockstep spins `FDI_SPIN_US` (default [`DEFAULT_SPIN_US`]) before blocking; realtime
+    /// never spins (the attacker and the center are purely event-driven there, so that the
+    /// agents keep the CPU for their deadlines) unless `FDI_SPIN_US` says otherwise.
+    pub fn for_clock(clock: crate::scenario::ClockMode) -> Self {
+        let env = std::env::var("FDI_SPIN_US")
+            .ok()
+            .and_then(|v| v.parse().ok());
+        let us = match clock {
+            crate::scenario::ClockMode::Lockstep => env.unwrap_or(DEFAULT_SPIN_US),
+            crate::scenario::ClockMode::Realtime => env.unwrap_or(0),
+        };
+        Self {
+            spin: Duration::from_micros(us),
+        }
+    }
+
+    /// Returns once `waker` was rung, or after [`WAIT_SLICE`].
+    pub fn wait(&self, waker: &Waker) -> Result<bool, IpcError> {
+        if !self.spin.is_zero() {
+            let began = Instant::now();
+            while began.elapsed() < self.spin {
+                if waker.wait(Duration::ZERO)? {
+                    return Ok(true);
+                }
+                std::thread::yield_now();
+            }
+        }
+        waker.wait(WAIT_SLICE)
+    }
+}
+
 /// Why a process stopped early.
 #[derive(Debug, thiserror::Error)]
 pub enum ProcessError {
@@ -118,6 +162,18 @@ impl LauncherLink {
             role: self.role.code(),
             agent: self.agent,
             kind,
+            reserved: 0,
+            tick,
+        })?;
+        self.bell.ring()
+    }
+
+    /// Tells the launcher that `agent` was declared lost after `tick`.
+    pub fn report_lost(&self, agent: u32, tick: u64) -> Result<(), IpcError> {
+        self.status.send(StatusMsg {
+            role: self.role.code(),
+            agent,
+            kind: StatusMsg::LOST,
             reserved: 0,
             tick,
         })?;
@@ -206,9 +262,13 @@ pub fn connect(
 
 /// Sizing of a run's services: every process computes the same from the scenario.
 pub fn sizing_for(resolved: &crate::scenario::Resolved) -> crate::ipc::Sizing {
+    // Lookahead lets an agent run up to τ_max/Δ ticks ahead of its commands.
+    let s = &resolved.scenario;
+    let tau_max = s.agents.iter().map(|a| a.delay.max()).fold(0.0, f64::max);
+    let ahead = (tau_max / s.control_period_s).ceil() as usize + 2;
     crate::ipc::Sizing {
         agents: resolved.agent_count(),
-        in_flight: 1,
+        in_flight: ahead,
     }
 }
 
@@ -223,5 +283,80 @@ pub fn trace_header(
         scenario_toml: resolved.to_toml(),
         seed: resolved.scenario.seed,
         clock: resolved.scenario.clock.as_str().into(),
+    }
+}
+
+/// Silence after which a realtime peer is declared lost, ns. With a liveness check every
+/// [`LIVENESS_CHECK`] the loss is reported within 45 ms of the last message.
+pub const LOST_AFTER_NS: u64 = 40_000_000;
+/// How often a realtime event-driven process checks liveness while idle.
+pub const LIVENESS_CHECK: Duration = Duration::from_millis(5);
+
+/// Which peers (agents) are still heard from. Pure bookkeeping on monotonic-clock stamps.
+#[derive(Debug, Clone)]
+pub struct Liveness {
+    last_seen_ns: Vec<u64>,
+    lost_at_ns: Vec<Option<u64>>,
+    after_ns: u64,
+}
+
+impl Liveness {
+    /// `n` peers, all heard from at `now_ns`.
+    pub fn new(n: usize, now_ns: u64, after_ns: u64) -> Self {
+        Self {
+            last_seen_ns: vec![now_ns; n],
+            lost_at_ns: vec![None; n],
+            after_ns,
+        }
+    }
+
+    /// Peer `i` was heard from at `now_ns` (never moves its stamp back: a message sent before
+    /// the realtime epoch does not shorten the grace the epoch gives).
+    pub fn seen(&mut self, i: usize, now_ns: u64) {
+        if let Some(s) = self.last_seen_ns.get_mut(i) {
+            *s = (*s).max(now_ns);
+        }
+    }
+
+    /// Peers silent for longer than the limit and not yet declared lost; declares them lost.
+    /// `finished(i)` excludes peers that ended normally.
+    pub fn newly_lost(&mut self, now_ns: u64, finished: impl Fn(usize) -> bool) -> Vec<usize> {
+        let mut out = Vec::new();
+        for (i, (seen, lost)) in self
+            .last_seen_ns
+            .iter()
+            .zip(self.lost_at_ns.iter_mut())
+            .enumerate()
+        {
+            if lost.is_none() && !finished(i) && now_ns.saturating_sub(*seen) > self.after_ns {
+                *lost = Some(now_ns);
+                out.push(i);
+            }
+        }
+        out
+    }
+
+    pub fn is_lost(&self, i: usize) -> bool {
+        self.lost_at_ns.get(i).is_some_and(Option::is_some)
+    }
+}
+
+#[cfg(test)]
+mod liveness_tests {
+    use super::Liveness;
+
+    #[test]
+    fn a_peer_is_lost_once_after_the_silence_limit_and_finished_peers_never() {
+        let mut l = Liveness::new(3, 0, 40);
+        l.seen(0, 30);
+        assert!(l.newly_lost(40, |_| false).is_empty());
+        assert_eq!(l.newly_lost(41, |i| i == 2), vec![1]);
+        assert!(l.is_lost(1) && !l.is_lost(0) && !l.is_lost(2));
+        assert_eq!(l.newly_lost(71, |i| i == 2), vec![0]);
+        assert!(l.newly_lost(1000, |i| i == 2).is_empty(), "reported once");
+        // A stamp older than the start (a message sent before the epoch) keeps the start.
+        let mut e = Liveness::new(1, 100, 40);
+        e.seen(0, 50);
+        assert!(e.newly_lost(130, |_| false).is_empty());
     }
 }

@@ -39,6 +39,7 @@ pub struct TraceHeader {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct HopStamps {
     pub agent_sent_ns: u64,
+    pub attacker_received_ns: u64,
     pub attacker_sent_ns: u64,
     pub center_received_ns: u64,
     pub center_sent_ns: u64,
@@ -90,12 +91,17 @@ fn config() -> bincode::config::Configuration {
     bincode::config::standard()
 }
 
+/// Longest time a written record may sit in the writer's buffer: a process killed outright
+/// (SIGKILL, no chance to flush) loses at most this much of its trace.
+pub const FLUSH_INTERVAL: std::time::Duration = std::time::Duration::from_millis(100);
+
 /// Appends frames to a trace file.
 #[derive(Debug)]
 pub struct TraceWriter {
     path: PathBuf,
     out: BufWriter<File>,
     buf: Vec<u8>,
+    last_flush: std::time::Instant,
 }
 
 impl TraceWriter {
@@ -110,6 +116,7 @@ impl TraceWriter {
             path: path.to_path_buf(),
             out: BufWriter::with_capacity(1 << 16, file),
             buf: Vec::with_capacity(512),
+            last_flush: std::time::Instant::now(),
         };
         w.out.write_all(MAGIC).map_err(io)?;
         w.out.write_all(&FORMAT_VERSION.to_le_bytes()).map_err(io)?;
@@ -142,11 +149,17 @@ impl TraceWriter {
             })
     }
 
+    /// Appends a record; flushes when [`FLUSH_INTERVAL`] has passed since the last flush.
     pub fn write(&mut self, record: &TraceRecord) -> Result<(), TraceError> {
-        self.frame(record)
+        self.frame(record)?;
+        if self.last_flush.elapsed() >= FLUSH_INTERVAL {
+            self.flush()?;
+        }
+        Ok(())
     }
 
     pub fn flush(&mut self) -> Result<(), TraceError> {
+        self.last_flush = std::time::Instant::now();
         self.out.flush().map_err(|source| TraceError::Io {
             path: self.path.clone(),
             source,

@@ -7,14 +7,17 @@ use std::process::ExitCode;
 
 use fdi_common::control::{CenterAgent, CenterParams};
 use fdi_common::engine::{center_record, tick_time};
-use fdi_common::ipc::msg::{check_header, from_vector, to_vector};
+use fdi_common::ipc::msg::{
+    from_vector, to_vector, validate_measurement, SeqVerdict, SequenceTracker,
+};
 use fdi_common::ipc::{
     monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
 };
 use fdi_common::process::{
-    self, LauncherLink, ProcessArgs, ProcessError, Shutdown, Start, WAIT_SLICE,
+    self, LauncherLink, Liveness, ProcessArgs, ProcessError, Shutdown, Start, WaitStrategy,
+    LIVENESS_CHECK, LOST_AFTER_NS,
 };
-use fdi_common::scenario::{self, Resolved};
+use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::trace::{TraceError, TraceRecord, TraceWriter};
 
 #[derive(Debug, thiserror::Error)]
@@ -79,17 +82,25 @@ pub fn run(
         .ok_or(CenterError::Dof(a.id))?;
         slots.push(Slot { center, next: 0 });
     }
-    if let Start::Shutdown = ports
+    let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?
     {
-        return Ok(0);
-    }
+        Start::Go { epoch_ns } => epoch_ns,
+        Start::Shutdown => return Ok(0),
+    };
     let ticks = resolved.ticks();
     let dt = s.control_period_s;
     let mut refused = 0u64;
     let mut failure = None;
     let mut reported = 0;
+    let strategy = WaitStrategy::for_clock(s.clock);
+    let realtime = s.clock == ClockMode::Realtime;
+    // Realtime: an agent silent for LOST_AFTER_NS is declared lost; the others stay controlled.
+    let mut liveness = Liveness::new(slots.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
+    let mut sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
+    // Which agents got a torque in this batch: each is woken once per batch.
+    let mut answered = vec![false; slots.len()];
     loop {
         ports.tampered.drain(|m| {
             let received = monotonic_ns();
@@ -97,17 +108,37 @@ pub fn run(
                 refused += 1;
                 return;
             };
-            let slot = &mut slots[i];
-            if let Err(e) = check_header(m.agent, m.dof, m.seq, 2, |_| true, slot.next) {
-                refused += 1;
+            // Structure first (dof within the payload, finite time), then the sequence: a
+            // duplicate, a replay or a forged far-future number is refused and counted, and
+            // never moves the stream on.
+            let structure = validate_measurement(&m, 2, |_| true, m.seq).map(|_| ());
+            let verdict = structure
+                .as_ref()
+                .ok()
+                .map(|()| sequence.observe(m.agent, m.seq));
+            if let Some(SeqVerdict::Gap { missing }) = verdict {
                 let _ = trace.write(&TraceRecord::Event {
                     t: tick_time(m.seq, dt),
-                    message: e.to_string(),
+                    message: format!(
+                        "agent {}: {missing} measurements missing before tick {}",
+                        m.agent, m.seq
+                    ),
                 });
-                if m.seq < slot.next {
-                    return; // duplicate or replayed: dropped
-                }
             }
+            if !verdict.is_some_and(SeqVerdict::is_accepted) {
+                refused += 1;
+                let why = match (structure, verdict) {
+                    (Err(e), _) => e.to_string(),
+                    (_, v) => format!("agent {}, sequence {}: refused ({v:?})", m.agent, m.seq),
+                };
+                let _ = trace.write(&TraceRecord::Event {
+                    t: tick_time(m.seq.min(ticks), dt),
+                    message: why,
+                });
+                return;
+            }
+            liveness.seen(i, received);
+            let slot = &mut slots[i];
             slot.next = m.seq + 1;
             let t = tick_time(m.seq, dt);
             let out = slot
@@ -121,13 +152,15 @@ pub fn run(
                 t_send: t,
                 u: from_vector(&out.u),
                 agent_sent_ns: m.agent_sent_ns,
+                attacker_received_ns: m.attacker_received_ns,
                 attacker_sent_ns: m.attacker_sent_ns,
                 center_received_ns: received,
                 center_sent_ns: monotonic_ns(),
             };
-            if let Err(e) = link.torque.send(msg).and_then(|_| link.bell.ring()) {
+            if let Err(e) = link.torque.send(msg) {
                 failure.get_or_insert(CenterError::from(e));
             }
+            answered[i] = true;
             if let Err(e) = trace.write(&TraceRecord::Center(center_record(m.seq, m.agent, &out))) {
                 failure.get_or_insert(CenterError::from(e));
             }
@@ -135,7 +168,30 @@ pub fn run(
         if let Some(e) = failure.take() {
             return Err(e);
         }
-        let done = slots.iter().map(|x| x.next).min().unwrap_or(ticks);
+        for (flag, link) in answered.iter_mut().zip(&ports.agents) {
+            if std::mem::take(flag) {
+                link.bell.ring()?;
+            }
+        }
+        if realtime {
+            let now = monotonic_ns();
+            for i in liveness.newly_lost(now, |i| slots[i].next >= ticks) {
+                let (id, last) = (slots[i].center.agent_id(), slots[i].next.saturating_sub(1));
+                let message = format!("agent {id} lost: no measurement for {} ms after tick {last}; the others stay controlled", LOST_AFTER_NS / 1_000_000);
+                trace.write(&TraceRecord::Event {
+                    t: tick_time(last, dt),
+                    message,
+                })?;
+                ports.launcher.report_lost(id, last)?;
+            }
+        }
+        let done = slots
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| !liveness.is_lost(*i))
+            .map(|(_, x)| x.next)
+            .min()
+            .unwrap_or(ticks);
         if done >= reported + PROGRESS_EVERY || done >= ticks {
             reported = done;
             ports.launcher.report(StatusMsg::PROGRESS, done)?;
@@ -146,7 +202,11 @@ pub fn run(
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(refused);
         }
-        ports.waker.wait(WAIT_SLICE)?;
+        if realtime {
+            ports.waker.wait_precise(LIVENESS_CHECK)?;
+        } else {
+            strategy.wait(&ports.waker)?;
+        }
     }
     let rejected: u64 = slots.iter().map(|x| x.center.rejected_inputs).sum();
     if refused > 0 || rejected > 0 {

@@ -1,16 +1,519 @@
-//! Measurements. Being written: see the performance issue.
+//! Measurements (`fdi-launch bench ...`): latency of the realtime runtime per hop, the transport
+//! floor, and lockstep speed against the in-process engine. Results are printed and written to a
+//! run directory; nothing here asserts a speed.
 
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{bail, Result};
-use clap::Subcommand;
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use fdi_common::attack::AttackProfile;
+use fdi_common::scenario::{self, ClockMode, Resolved};
+use fdi_common::trace::{TraceReader, TraceRecord};
+use hdrhistogram::Histogram;
+use serde::Serialize;
+
+use crate::cli::{execute, Engine};
+use crate::output;
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
-    /// Per-hop latency of the realtime runtime.
-    Latency,
+    /// Per-hop latency, control-center compute time, end-to-end sensor → actuation latency,
+    /// deadline misses and control-period jitter of a realtime run.
+    Latency(LatencyArgs),
+    /// Lockstep speed over IPC against the in-process engine, same scenario, same invocation.
+    Lockstep(LockstepArgs),
+    /// The transport floor (iceoryx2 ping-pong, a 3-hop chain, a Unix-socket ping-pong) with the
+    /// runtime's wait strategy, and the runtime's per-hop latency as a ratio to it.
+    Transport(TransportArgs),
 }
 
-pub fn bench(_b: &BenchCommand) -> Result<ExitCode> {
-    bail!("not implemented yet")
+#[derive(Debug, Args)]
+pub struct TransportArgs {
+    /// Round trips per transport.
+    #[arg(long, default_value_t = 20_000)]
+    pub iterations: u64,
+    /// Spin before blocking, µs. Default 0: the realtime runtime's event-driven strategy, which
+    /// the runtime's latency is measured with.
+    #[arg(long, default_value_t = 0)]
+    pub spin_us: u64,
+    /// Agents and seconds of the realtime run measured beside the floor.
+    #[arg(long, default_value_t = 1)]
+    pub agents: usize,
+    #[arg(long, default_value_t = 5.0)]
+    pub duration_s: f64,
+    #[arg(long)]
+    pub json: bool,
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct LatencyArgs {
+    /// Number of agents (the paper's four robots, repeated).
+    #[arg(long, default_value_t = 4)]
+    pub agents: usize,
+    /// Simulated (= wall-clock) duration, s.
+    #[arg(long, default_value_t = 30.0)]
+    pub duration_s: f64,
+    /// Control rate, Hz.
+    #[arg(long, default_value_t = 1000.0)]
+    pub rate_hz: f64,
+    #[arg(long)]
+    pub json: bool,
+    /// Folder that receives the run directory.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct LockstepArgs {
+    /// Agent counts to measure (repeat the flag or separate with commas).
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16, 64])]
+    pub agents: Vec<usize>,
+    /// Simulated duration of each run, s (the paper's experiment is 40 s).
+    #[arg(long, default_value_t = 10.0)]
+    pub duration_s: f64,
+    #[arg(long)]
+    pub json: bool,
+    /// Keep the traces of the measured runs (by default only their summaries stay).
+    #[arg(long)]
+    pub keep_traces: bool,
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+}
+
+pub fn bench(b: &BenchCommand) -> Result<ExitCode> {
+    match b {
+        BenchCommand::Latency(a) => latency(a),
+        BenchCommand::Lockstep(a) => lockstep(a),
+        BenchCommand::Transport(a) => transport(a),
+    }
+}
+
+/// The paper scenario with `n` agents: agent `i` is a copy of paper robot `(i − 1) % 4 + 1`,
+/// trajectory, delay and attack included.
+pub fn scaled_paper(n: usize) -> Result<Resolved> {
+    if n == 0 || n > scenario::MAX_AGENTS {
+        bail!("--agents must be in 1..={}", scenario::MAX_AGENTS);
+    }
+    let paper = scenario::paper()?;
+    let mut r = paper.clone();
+    r.scenario.agents.clear();
+    r.attack = AttackProfile {
+        name: paper.attack.name.clone(),
+        description: paper.attack.description.clone(),
+        channels: Vec::new(),
+    };
+    for i in 1..=n {
+        let src = &paper.scenario.agents[(i - 1) % paper.scenario.agents.len()];
+        let id = u32::try_from(i)?;
+        let mut a = src.clone();
+        a.id = id;
+        r.scenario.agents.push(a);
+        for ch in paper.attack.channels.iter().filter(|c| c.agent == src.id) {
+            let mut c = ch.clone();
+            c.agent = id;
+            r.attack.channels.push(c);
+        }
+    }
+    r.scenario.name = format!("paper-x{n}");
+    Ok(r)
+}
+
+/// Percentiles of one latency, µs.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Percentiles {
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+    pub p999: f64,
+    pub max: f64,
+    pub count: u64,
+}
+
+fn histogram() -> Result<Histogram<u64>> {
+    // 1 ns .. 100 s at 3 significant digits.
+    Histogram::new_with_bounds(1, 100_000_000_000, 3).context("creating a latency histogram")
+}
+
+fn percentiles(h: &Histogram<u64>) -> Percentiles {
+    let us = |ns: u64| ns as f64 / 1000.0;
+    Percentiles {
+        p50: us(h.value_at_quantile(0.5)),
+        p90: us(h.value_at_quantile(0.9)),
+        p99: us(h.value_at_quantile(0.99)),
+        p999: us(h.value_at_quantile(0.999)),
+        max: us(h.max()),
+        count: h.len(),
+    }
+}
+
+#[derive(Debug, Serialize)]
+struct Hops {
+    agent_to_attacker: Percentiles,
+    attacker_to_center: Percentiles,
+    center_to_agent: Percentiles,
+}
+
+#[derive(Debug, Serialize)]
+struct LatencyReport {
+    agents: usize,
+    rate_hz: f64,
+    duration_s: f64,
+    ticks: u64,
+    e2e_us: Percentiles,
+    hops_us: Hops,
+    attacker_processing_us: Percentiles,
+    center_compute_us: Percentiles,
+    /// |actual − nominal| interval between two consecutive measurements of an agent.
+    period_jitter_us: Percentiles,
+    deadline_misses: u64,
+    deadline_miss_ratio: f64,
+    lost_ticks: u64,
+    run_dir: String,
+}
+
+/// Measures a realtime run and returns its latency report (written into its run directory).
+fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
+    if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
+        bail!("--rate-hz must be a positive number, got {}", a.rate_hz);
+    }
+    let mut r = scaled_paper(a.agents)?;
+    r.scenario.clock = ClockMode::Realtime;
+    r.scenario.duration_s = a.duration_s;
+    r.scenario.control_period_s = 1.0 / a.rate_hz;
+    let problems = r.scenario.validate();
+    if !problems.is_empty() {
+        bail!(scenario::ScenarioError {
+            source_name: "bench latency".into(),
+            problems
+        });
+    }
+    let dir = output::create_run_dir(&a.out, &r)?;
+    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json)?;
+
+    let (mut e2e, mut h1, mut h2, mut h3, mut att, mut cc, mut jitter) = (
+        histogram()?,
+        histogram()?,
+        histogram()?,
+        histogram()?,
+        histogram()?,
+        histogram()?,
+        histogram()?,
+    );
+    let period_ns = (r.scenario.control_period_s * 1e9) as i64;
+    for agent in &r.scenario.agents {
+        let path = crate::runtime::trace_path(&dir, &format!("agent-{}", agent.id));
+        let mut last_sent: Option<u64> = None;
+        for rec in TraceReader::open(&path)? {
+            if let TraceRecord::Latency { stamps: s, .. } = rec? {
+                let rec_ns = |h: &mut Histogram<u64>, from: u64, to: u64| {
+                    if from > 0 && to >= from {
+                        let _ = h.record((to - from).max(1));
+                    }
+                };
+                rec_ns(&mut e2e, s.agent_sent_ns, s.agent_received_ns);
+                rec_ns(&mut h1, s.agent_sent_ns, s.attacker_received_ns);
+                rec_ns(&mut att, s.attacker_received_ns, s.attacker_sent_ns);
+                rec_ns(&mut h2, s.attacker_sent_ns, s.center_received_ns);
+                rec_ns(&mut cc, s.center_received_ns, s.center_sent_ns);
+                rec_ns(&mut h3, s.center_sent_ns, s.agent_received_ns);
+                if let Some(prev) = last_sent {
+                    let dev = (s.agent_sent_ns as i64 - prev as i64 - period_ns).unsigned_abs();
+                    let _ = jitter.record(dev.max(1));
+                }
+                last_sent = Some(s.agent_sent_ns);
+            }
+        }
+    }
+    let misses: u64 = summary.metrics.values().map(|m| m.deadline_misses).sum();
+    let agent_ticks = summary.ticks * a.agents as u64;
+    let report = LatencyReport {
+        agents: a.agents,
+        rate_hz: a.rate_hz,
+        duration_s: a.duration_s,
+        ticks: summary.ticks,
+        e2e_us: percentiles(&e2e),
+        hops_us: Hops {
+            agent_to_attacker: percentiles(&h1),
+            attacker_to_center: percentiles(&h2),
+            center_to_agent: percentiles(&h3),
+        },
+        attacker_processing_us: percentiles(&att),
+        center_compute_us: percentiles(&cc),
+        period_jitter_us: percentiles(&jitter),
+        deadline_misses: misses,
+        deadline_miss_ratio: if agent_ticks > 0 {
+            misses as f64 / agent_ticks as f64
+        } else {
+            0.0
+        },
+        lost_ticks: agent_ticks.saturating_sub(e2e.len()),
+        run_dir: dir.display().to_string(),
+    };
+    write_latency(&dir, &report)?;
+    Ok(report)
+}
+
+fn latency(a: &LatencyArgs) -> Result<ExitCode> {
+    let report = measure_latency(a)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_latency(&report);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(Debug, Serialize)]
+struct TransportReport {
+    floor: crate::floor::FloorResult,
+    runtime_hops_p50_us: [f64; 3],
+    /// Runtime per-hop p50 over the iceoryx2 3-hop chain's per-hop p50, per hop.
+    runtime_over_floor: [f64; 3],
+    runtime_run_dir: String,
+}
+
+fn transport(a: &TransportArgs) -> Result<ExitCode> {
+    let floor = crate::floor::run_floor(&crate::floor::FloorOptions {
+        iterations: a.iterations,
+        warmup: (a.iterations / 20).max(100),
+        spin: std::time::Duration::from_micros(a.spin_us),
+    })?;
+    let rt = measure_latency(&LatencyArgs {
+        agents: a.agents,
+        duration_s: a.duration_s,
+        rate_hz: 1000.0,
+        json: true,
+        out: a.out.clone(),
+    })?;
+    let hops = [
+        rt.hops_us.agent_to_attacker.p50,
+        rt.hops_us.attacker_to_center.p50,
+        rt.hops_us.center_to_agent.p50,
+    ];
+    let base = floor.ipc_chain.per_hop.p50_us;
+    let report = TransportReport {
+        runtime_over_floor: hops.map(|h| h / base),
+        runtime_hops_p50_us: hops,
+        floor,
+        runtime_run_dir: rt.run_dir,
+    };
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!("{}", report.floor.to_markdown());
+        println!("Runtime (realtime, {} agent(s), {} s) per-hop p50 against the iceoryx2 3-hop chain's per-hop p50 ({base:.1} µs):", a.agents, a.duration_s);
+        println!();
+        println!("| hop | runtime p50 (µs) | ratio to floor |");
+        println!("|---|---|---|");
+        for (name, (h, r)) in [
+            "agent -> attacker",
+            "attacker -> control center",
+            "control center -> agent",
+        ]
+        .iter()
+        .zip(
+            report
+                .runtime_hops_p50_us
+                .iter()
+                .zip(report.runtime_over_floor),
+        ) {
+            println!("| {name} | {h:.1} | {r:.2} |");
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn latency_rows(r: &LatencyReport) -> Vec<(&'static str, Percentiles)> {
+    vec![
+        ("end-to-end sensor -> actuation", r.e2e_us),
+        ("hop agent -> attacker", r.hops_us.agent_to_attacker),
+        ("attacker processing", r.attacker_processing_us),
+        (
+            "hop attacker -> control center",
+            r.hops_us.attacker_to_center,
+        ),
+        ("control-center compute", r.center_compute_us),
+        ("hop control center -> agent", r.hops_us.center_to_agent),
+        ("control-period jitter", r.period_jitter_us),
+    ]
+}
+
+fn write_latency(dir: &Path, r: &LatencyReport) -> Result<()> {
+    std::fs::write(
+        dir.join("latency.json"),
+        serde_json::to_string_pretty(r)? + "\n",
+    )
+    .context("writing latency.json")?;
+    let mut csv = String::from("metric,p50_us,p90_us,p99_us,p999_us,max_us,count\n");
+    for (name, p) in latency_rows(r) {
+        csv.push_str(&format!(
+            "{name},{},{},{},{},{},{}\n",
+            p.p50, p.p90, p.p99, p.p999, p.max, p.count
+        ));
+    }
+    std::fs::write(dir.join("latency.csv"), csv).context("writing latency.csv")
+}
+
+fn print_latency(r: &LatencyReport) {
+    println!(
+        "Realtime latency: {} agents at {} Hz for {} s ({} ticks)",
+        r.agents, r.rate_hz, r.duration_s, r.ticks
+    );
+    println!();
+    println!("| µs | p50 | p90 | p99 | p99.9 | max |");
+    println!("|---|---|---|---|---|---|");
+    for (name, p) in latency_rows(r) {
+        println!(
+            "| {name} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
+            p.p50, p.p90, p.p99, p.p999, p.max
+        );
+    }
+    println!();
+    println!(
+        "deadline misses {} of {} agent-ticks ({:.4} %), lost ticks {}",
+        r.deadline_misses,
+        r.ticks * r.agents as u64,
+        100.0 * r.deadline_miss_ratio,
+        r.lost_ticks
+    );
+    println!("run directory {}", r.run_dir);
+}
+
+#[derive(Debug, Serialize)]
+struct LockstepRow {
+    agents: usize,
+    processes: usize,
+    sim_s: f64,
+    ticks: u64,
+    inproc_wall_s: f64,
+    ipc_wall_s: f64,
+    ipc_over_inproc: f64,
+    ipc_realtime_factor: f64,
+    ipc_ticks_per_s: f64,
+    bit_identical: bool,
+}
+
+fn lockstep(a: &LockstepArgs) -> Result<ExitCode> {
+    let root = a
+        .out
+        .join(format!("{}-bench-lockstep", output::timestamp()));
+    let mut rows = Vec::new();
+    for &n in &a.agents {
+        let mut r = scaled_paper(n)?;
+        r.scenario.duration_s = a.duration_s;
+        let dir_in = output::create_run_dir(&root, &named(&r, "inproc"))?;
+        let inproc = execute(&r, Engine::Inproc, Some(&dir_in), false)?;
+        let dir_ipc = output::create_run_dir(&root, &named(&r, "ipc"))?;
+        let ipc = execute(&r, Engine::Ipc, Some(&dir_ipc), !a.json)?;
+        if !a.keep_traces {
+            for d in [&dir_in, &dir_ipc] {
+                let _ = std::fs::remove_dir_all(d.join("traces"));
+            }
+        }
+        let row = LockstepRow {
+            agents: n,
+            processes: n + 2,
+            sim_s: ipc.sim_s,
+            ticks: ipc.ticks,
+            inproc_wall_s: inproc.wall_s,
+            ipc_wall_s: ipc.wall_s,
+            ipc_over_inproc: ipc.wall_s / inproc.wall_s,
+            ipc_realtime_factor: ipc.sim_s / ipc.wall_s,
+            ipc_ticks_per_s: ipc.ticks as f64 / ipc.wall_s,
+            bit_identical: ipc.trace_digest == inproc.trace_digest,
+        };
+        if !a.json {
+            eprintln!(
+                "{n} agents: ipc {:.3} s, inproc {:.3} s",
+                row.ipc_wall_s, row.inproc_wall_s
+            );
+        }
+        rows.push(row);
+    }
+    std::fs::write(
+        root.join("lockstep.json"),
+        serde_json::to_string_pretty(&rows)? + "\n",
+    )
+    .context("writing lockstep.json")?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({ "duration_s": a.duration_s, "rows": rows, "dir": root.display().to_string() })
+        );
+    } else {
+        println!(
+            "Lockstep speed, {} s simulated per run (both engines write their traces)",
+            a.duration_s
+        );
+        println!();
+        println!("| agents | processes | in-process wall (s) | IPC wall (s) | IPC / in-process | IPC × real time | IPC ticks/s | bit-identical |");
+        println!("|---|---|---|---|---|---|---|---|");
+        for r in &rows {
+            println!(
+                "| {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.0} | {} |",
+                r.agents,
+                r.processes,
+                r.inproc_wall_s,
+                r.ipc_wall_s,
+                r.ipc_over_inproc,
+                r.ipc_realtime_factor,
+                r.ipc_ticks_per_s,
+                r.bit_identical
+            );
+        }
+        println!();
+        println!("results in {}", root.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn named(r: &Resolved, engine: &str) -> Resolved {
+    let mut n = r.clone();
+    n.scenario.name = format!("{}-{engine}", r.scenario.name);
+    n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scaled_paper_repeats_the_four_robots_with_their_attacks() {
+        let r = scaled_paper(9).expect("valid");
+        assert_eq!(r.agent_count(), 9);
+        assert_eq!(
+            r.scenario.agents[4].trajectory,
+            r.scenario.agents[0].trajectory
+        );
+        assert_eq!(
+            r.scenario.agents[5].trajectory,
+            r.scenario.agents[1].trajectory
+        );
+        // Every agent has the attack of the robot it copies (two channels each).
+        for id in 1..=9u32 {
+            assert_eq!(
+                r.attack.channels.iter().filter(|c| c.agent == id).count(),
+                2,
+                "agent {id}"
+            );
+        }
+        assert!(r.scenario.validate().is_empty());
+        assert!(r.attack.problems(&r.scenario.agent_dofs()).is_empty());
+        assert!(scaled_paper(0).is_err());
+    }
+
+    #[test]
+    fn percentiles_are_in_microseconds() {
+        let mut h = histogram().expect("histogram");
+        for ns in [1_000u64, 2_000, 3_000, 100_000] {
+            h.record(ns).expect("record");
+        }
+        let p = percentiles(&h);
+        assert!((p.p50 - 2.0).abs() < 0.01, "{p:?}");
+        assert!((p.max - 100.0).abs() < 0.1, "{p:?}");
+        assert_eq!(p.count, 4);
+    }
 }

@@ -46,6 +46,12 @@ pub enum Command {
     /// Measurements: latency of the realtime runtime, the transport floor, lockstep speed.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Internal: a peer process of `bench transport`.
+    #[command(hide = true)]
+    BenchPeer {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
     /// Internal: run as one of the runtime's processes (used when the sibling binaries are
     /// missing or older than fdi-launch).
     #[command(hide = true)]
@@ -168,6 +174,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
             export::export(&run_dir, format).map(|()| ExitCode::SUCCESS)
         }
         Command::Bench(b) => bench::bench(&b),
+        Command::BenchPeer { args } => crate::floor::peer_main(&args).map(|()| ExitCode::SUCCESS),
         Command::Process { role, args } => Ok(match role {
             ProcessRole::Agent => fdi_agent::main_with(args),
             ProcessRole::Attacker => fdi_attacker::main_with(args),
@@ -316,7 +323,8 @@ pub fn execute(
                     progress,
                 },
             )?;
-            let joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
+            let mut joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
+            joined.summary.lost_agents = outcome.lost;
             for w in &joined.warnings {
                 eprintln!("fdi-launch: warning: {w}");
             }
@@ -337,6 +345,15 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
     let dir = output::create_run_dir(&args.out, &r)?;
     let summary = execute(&r, args.engine, Some(&dir), !args.json)?;
+    for lost in &summary.lost_agents {
+        let when = lost
+            .t_s
+            .map_or(String::new(), |t| format!(" after t = {t:.3} s"));
+        eprintln!(
+            "fdi-launch: agent {} was lost{when}: {}",
+            lost.agent, lost.reason
+        );
+    }
     if let Err(e) = report::write_report(&dir, &r, &summary) {
         eprintln!(
             "fdi-launch: warning: the report of {} could not be made: {e:#}",
@@ -351,7 +368,12 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         print_summary(&summary);
         println!("run directory {}", dir.display());
     }
-    Ok(ExitCode::SUCCESS)
+    // A run that lost agents completed for the others, but is not a clean run.
+    Ok(if summary.lost_agents.is_empty() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::from(3)
+    })
 }
 
 fn print_summary(s: &RunSummary) {

@@ -136,11 +136,20 @@ pub fn join_run(
     let ticks = resolved.ticks();
     let mut joined = 0;
     let mut lost = 0u64;
+    // An agent whose trace ends early (lost in a realtime run) leaves the join; the others go on.
+    let mut ended = vec![false; agents.len()];
     'ticks: for k in 0..ticks {
-        for (id, src) in &mut agents {
+        for (n, (id, src)) in agents.iter_mut().enumerate() {
+            if ended[n] {
+                continue;
+            }
             let Ok(Some(a)) = src.take(*id, k) else {
                 warnings.push(format!("agent {id}: its trace ends at tick {k} of {ticks}"));
-                break 'ticks;
+                ended[n] = true;
+                if ended.iter().all(|e| *e) {
+                    break 'ticks;
+                }
+                continue;
             };
             let (x, c) = match (attacker.take(*id, k), center.take(*id, k)) {
                 (Ok(Some(x)), Ok(Some(c))) => (x, c),

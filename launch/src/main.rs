@@ -3,8 +3,10 @@
 mod bench;
 mod cli;
 mod export;
+mod floor;
 mod join;
 mod output;
+mod plot;
 mod report;
 mod runtime;
 mod tables;

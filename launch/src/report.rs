@@ -1,18 +1,719 @@
-//! Reports of run directories (figures, tables, detection metrics). Being written: see the
-//! results issue.
+//! Reports of run directories: `RUN_DIR/report/` with, per robot, the figures of the paper's
+//! Figs. 3–6 (position error, angular-velocity error, attack estimate against the true attack,
+//! acceleration-estimate error) plus torque and delay/alarm timelines, each as PNG and SVG; the
+//! detection metrics and per-segment error maxima as CSV; and `report.md` that shows it all.
+//!
+//! The figures are drawn from the joined traces ([`join::join_run`]), downsampled by min/max
+//! envelopes (about [`BUCKETS`] buckets per curve) so that short spikes stay visible while the
+//! files stay small. The per-segment table is computed at the full tick rate.
 
-use std::path::Path;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Result};
+use anyhow::{Context, Result};
 use fdi_common::engine::RunSummary;
-use fdi_common::scenario::Resolved;
+use fdi_common::records::TickRecord;
+use fdi_common::scenario::{self, Resolved, MAX_DOF};
+use fdi_common::trajectory::TrajectoryConfig;
 
-/// `fdi-launch report RUN_DIR`.
+use crate::join;
+use crate::plot::{self, Band, Envelope, Figure, Intervals, Line, Panel, PanelKind, PALETTE};
+
+/// Buckets per plotted curve (each gives its minimum and maximum).
+pub const BUCKETS: u64 = 2000;
+/// After an attack switch, the error maxima are split into this first window and the rest.
+pub const SWITCH_WINDOW_S: f64 = 1.0;
+
+/// The figure kinds made for every robot: (file suffix, what it shows).
+pub const FIGURES: [(&str, &str); 6] = [
+    ("position-error", "(a) position error q_d − q"),
+    ("velocity-error", "(b) angular-velocity error"),
+    (
+        "attack-estimate",
+        "(c) attack estimate Ŝ against the true S",
+    ),
+    ("acceleration-error", "(d) acceleration-estimate error"),
+    ("torque", "torque u sent by the control center"),
+    ("delay-alarm", "delay τ(t), attack and alarm timeline"),
+];
+
+/// `fdi-launch report RUN_DIR`: joins the traces again and recomputes the summary; the engine
+/// and the wall time, which the traces do not hold, come from `summary.json` when it is there.
 pub fn report(run_dir: &Path) -> Result<()> {
-    bail!("report of {}: not implemented yet", run_dir.display())
+    let scenario_path = run_dir.join("scenario.toml");
+    let resolved = scenario::load_file(&scenario_path)
+        .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
+    let mut warnings = Vec::new();
+    let stored = match std::fs::read_to_string(run_dir.join("summary.json")) {
+        Ok(text) => match serde_json::from_str::<RunSummary>(&text) {
+            Ok(s) => Some(s),
+            Err(e) => {
+                warnings.push(format!(
+                    "{}: cannot be read ({e}); engine and wall time are unknown",
+                    run_dir.join("summary.json").display()
+                ));
+                None
+            }
+        },
+        Err(_) => {
+            warnings.push(format!(
+                "{} is missing; engine and wall time are unknown",
+                run_dir.join("summary.json").display()
+            ));
+            None
+        }
+    };
+    let mut series = RunSeries::new(&resolved);
+    let joined = join::join_run(
+        &resolved,
+        run_dir,
+        stored.as_ref().map_or(f64::NAN, |s| s.wall_s),
+        |r| series.push(r),
+    )?;
+    warnings.extend(joined.warnings);
+    let mut summary = joined.summary;
+    match &stored {
+        Some(s) => {
+            summary.engine.clone_from(&s.engine);
+            if s.trace_digest != summary.trace_digest {
+                warnings.push(format!(
+                    "the traces' digest {} differs from the digest {} in summary.json",
+                    summary.trace_digest, s.trace_digest
+                ));
+            }
+        }
+        None => summary.engine = "unknown".into(),
+    }
+    for w in &warnings {
+        eprintln!("fdi-launch: warning: {w}");
+    }
+    let md = write(run_dir, &resolved, &summary, series, &warnings)?;
+    println!("report {}", md.display());
+    Ok(())
 }
 
-/// Called at the end of every `run`.
-pub fn write_report(_run_dir: &Path, _resolved: &Resolved, _summary: &RunSummary) -> Result<()> {
+/// Called at the end of every `run`, with the run's summary.
+pub fn write_report(run_dir: &Path, resolved: &Resolved, summary: &RunSummary) -> Result<()> {
+    let mut series = RunSeries::new(resolved);
+    let joined = join::join_run(resolved, run_dir, summary.wall_s, |r| series.push(r))?;
+    write(run_dir, resolved, summary, series, &joined.warnings)?;
     Ok(())
+}
+
+/// Maxima of one attack segment of one robot, at the full tick rate.
+#[derive(Debug, Clone)]
+struct SegmentStats {
+    from_s: f64,
+    to_s: f64,
+    /// Per link, over `[from, from + SWITCH_WINDOW_S)` and over the rest.
+    pos_first: Vec<f64>,
+    pos_rest: Vec<f64>,
+    vel_first: Vec<f64>,
+    vel_rest: Vec<f64>,
+    /// Sum of `‖Ŝ − S‖²` and ticks, for the RMS.
+    s_err_sq: f64,
+    ticks: u64,
+}
+
+impl SegmentStats {
+    fn new(from_s: f64, to_s: f64, dof: usize) -> Self {
+        Self {
+            from_s,
+            to_s,
+            pos_first: vec![0.0; dof],
+            pos_rest: vec![0.0; dof],
+            vel_first: vec![0.0; dof],
+            vel_rest: vec![0.0; dof],
+            s_err_sq: 0.0,
+            ticks: 0,
+        }
+    }
+}
+
+/// What the report draws of one robot, accumulated tick by tick.
+struct AgentSeries {
+    id: u32,
+    dof: usize,
+    trajectory: TrajectoryConfig,
+    /// Attack switch times in `(0, duration)`.
+    switches: Vec<f64>,
+    pos: Vec<Envelope>,
+    vel: Vec<Envelope>,
+    s_hat: Vec<Envelope>,
+    s_true: Vec<Envelope>,
+    acc: Vec<Envelope>,
+    u: Vec<Envelope>,
+    tau_ms: Envelope,
+    active: Intervals,
+    alarm: Intervals,
+    missed: Intervals,
+    segments: Vec<SegmentStats>,
+    last_t: f64,
+}
+
+/// Per-robot series of a run.
+struct RunSeries {
+    beta: f64,
+    period_s: f64,
+    duration_s: f64,
+    agents: Vec<AgentSeries>,
+}
+
+impl RunSeries {
+    fn new(r: &Resolved) -> Self {
+        let s = &r.scenario;
+        let ticks = r.ticks();
+        let stride = usize::try_from(ticks.div_ceil(BUCKETS)).unwrap_or(1).max(1);
+        let env = |n: usize| (0..n).map(|_| Envelope::new(stride, ticks)).collect();
+        let agents = s
+            .agents
+            .iter()
+            .map(|a| {
+                let dof = a.model.dof().min(MAX_DOF);
+                let switches = switch_times(r, a.id, s.duration_s);
+                let mut bounds = vec![0.0];
+                bounds.extend(&switches);
+                bounds.push(s.duration_s);
+                AgentSeries {
+                    id: a.id,
+                    dof,
+                    trajectory: a.trajectory.clone(),
+                    segments: bounds
+                        .windows(2)
+                        .map(|w| SegmentStats::new(w[0], w[1], dof))
+                        .collect(),
+                    switches,
+                    pos: env(dof),
+                    vel: env(dof),
+                    s_hat: env(dof),
+                    s_true: env(dof),
+                    acc: env(dof),
+                    u: env(dof),
+                    tau_ms: Envelope::new(stride, ticks),
+                    active: Intervals::default(),
+                    alarm: Intervals::default(),
+                    missed: Intervals::default(),
+                    last_t: 0.0,
+                }
+            })
+            .collect();
+        Self {
+            beta: s.controller.beta,
+            period_s: s.control_period_s,
+            duration_s: s.duration_s,
+            agents,
+        }
+    }
+
+    fn push(&mut self, r: &TickRecord) {
+        let beta = self.beta;
+        let Some(a) = self.agents.iter_mut().find(|a| a.id == r.agent.agent) else {
+            return;
+        };
+        let t = r.agent.t;
+        a.last_t = t;
+        let reference = a.trajectory.reference::<MAX_DOF>(t);
+        let seg_index = a.switches.partition_point(|s| *s <= t);
+        let seg = a.segments.get_mut(seg_index);
+        let first = seg.as_ref().is_some_and(|s| t < s.from_s + SWITCH_WINDOW_S);
+        let (q, qd, qdd) = (
+            r.agent.q.as_slice(),
+            r.agent.qd.as_slice(),
+            r.agent.qdd.as_slice(),
+        );
+        let (ap, av) = (
+            r.attack.alpha_position.as_slice(),
+            r.attack.alpha_velocity.as_slice(),
+        );
+        let (s_hat, qdd_hat, u) = (
+            r.center.s_hat.as_slice(),
+            r.center.qdd_hat.as_slice(),
+            r.center.u.as_slice(),
+        );
+        let get = |v: &[f64], i: usize| v.get(i).copied().unwrap_or(f64::NAN);
+        let mut s_err_sq = 0.0;
+        let mut seg = seg;
+        for i in 0..a.dof {
+            let e_pos = reference.q[i] - get(q, i);
+            let e_vel = reference.qd[i] - get(qd, i);
+            let s_true = get(av, i) + beta * get(ap, i);
+            let sh = get(s_hat, i);
+            a.pos[i].push(t, e_pos);
+            a.vel[i].push(t, e_vel);
+            a.s_hat[i].push(t, sh);
+            a.s_true[i].push(t, s_true);
+            a.acc[i].push(t, get(qdd, i) - get(qdd_hat, i));
+            a.u[i].push(t, get(u, i));
+            s_err_sq += (sh - s_true) * (sh - s_true);
+            if let Some(s) = seg.as_deref_mut() {
+                let (p, v) = if first {
+                    (&mut s.pos_first[i], &mut s.vel_first[i])
+                } else {
+                    (&mut s.pos_rest[i], &mut s.vel_rest[i])
+                };
+                *p = p.max(e_pos.abs());
+                *v = v.max(e_vel.abs());
+            }
+        }
+        if let Some(s) = seg {
+            s.s_err_sq += s_err_sq;
+            s.ticks += 1;
+        }
+        a.tau_ms.push(t, r.agent.tau * 1e3);
+        a.active.push(t, r.attack.active);
+        a.alarm.push(t, r.center.alarm);
+        a.missed.push(t, r.agent.missed);
+    }
+}
+
+/// Attack segment boundaries of agent `id` strictly inside `(0, duration)`.
+fn switch_times(r: &Resolved, id: u32, duration: f64) -> Vec<f64> {
+    let mut v: Vec<f64> = r
+        .attack
+        .channels
+        .iter()
+        .filter(|c| c.agent == id)
+        .flat_map(|c| c.segments.iter().map(|s| s.from_s))
+        .filter(|t| *t > 0.0 && *t < duration)
+        .collect();
+    v.sort_by(f64::total_cmp);
+    v.dedup();
+    v
+}
+
+fn links(prefix: &str, envs: Vec<Envelope>) -> Vec<Line> {
+    envs.into_iter()
+        .enumerate()
+        .map(|(i, e)| Line {
+            label: format!("{prefix}link {}", i + 1),
+            color: PALETTE[i % PALETTE.len()],
+            points: e.finish(),
+        })
+        .collect()
+}
+
+/// A figure to draw into `<stem>.png` and `<stem>.svg`.
+struct Job {
+    stem: String,
+    figure: Figure,
+    size: (u32, u32),
+}
+
+/// The figures of one robot.
+fn figures(a: AgentSeries, beta: f64, x_range: (f64, f64)) -> Vec<Job> {
+    let id = a.id;
+    let end = a.last_t;
+    let fig = |title: &str, panels: Vec<Panel>| Figure {
+        title: format!("Robot {id}: {title}"),
+        x_label: "t (s)".into(),
+        x_range,
+        markers: a.switches.clone(),
+        panels,
+    };
+    let one = |title: &str, y: &str, lines: Vec<Line>| Panel {
+        title: title.into(),
+        y_label: y.into(),
+        kind: PanelKind::Lines(lines),
+    };
+    let stem = |s: &str| format!("robot{id}-{s}");
+    let wide = (1000, 440);
+    let tall = (1000, 300 + 260 * a.dof.max(1) as u32);
+    let attack_panels: Vec<Panel> = a
+        .s_hat
+        .into_iter()
+        .zip(a.s_true)
+        .enumerate()
+        .map(|(i, (sh, st))| {
+            one(
+                &format!("link {}", i + 1),
+                "rad/s",
+                vec![
+                    Line {
+                        label: "true S".into(),
+                        color: PALETTE[1],
+                        points: st.finish(),
+                    },
+                    Line {
+                        label: "estimate Ŝ".into(),
+                        color: PALETTE[0],
+                        points: sh.finish(),
+                    },
+                ],
+            )
+        })
+        .collect();
+    let mut bands = vec![
+        Band {
+            label: "attack in force".into(),
+            color: PALETTE[1],
+            intervals: a.active.finish(end),
+        },
+        Band {
+            label: "detection alarm".into(),
+            color: PALETTE[0],
+            intervals: a.alarm.finish(end),
+        },
+    ];
+    let missed = a.missed.finish(end);
+    if !missed.is_empty() {
+        bands.push(Band {
+            label: "deadline miss".into(),
+            color: PALETTE[3],
+            intervals: missed,
+        });
+    }
+    [
+        (
+            stem("position-error"),
+            fig(
+                "(a) position error",
+                vec![one("q_d − q (true q)", "rad", links("", a.pos))],
+            ),
+            wide,
+        ),
+        (
+            stem("velocity-error"),
+            fig(
+                "(b) angular-velocity error",
+                vec![one(
+                    "dq_d/dt − dq/dt (true velocity)",
+                    "rad/s",
+                    links("", a.vel),
+                )],
+            ),
+            wide,
+        ),
+        (
+            stem("attack-estimate"),
+            fig(
+                &format!("(c) attack estimate Ŝ and true S = S₂ + β S₁ (β = {beta})"),
+                attack_panels,
+            ),
+            tall,
+        ),
+        (
+            stem("acceleration-error"),
+            fig(
+                "(d) acceleration-estimate error",
+                vec![one(
+                    "true acceleration − observer estimate",
+                    "rad/s²",
+                    links("", a.acc),
+                )],
+            ),
+            wide,
+        ),
+        (
+            stem("torque"),
+            fig(
+                "torque sent by the control center",
+                vec![one("u", "N·m", links("", a.u))],
+            ),
+            wide,
+        ),
+        (
+            stem("delay-alarm"),
+            fig(
+                "delay, attack and detection",
+                vec![
+                    one(
+                        "input delay τ(t)",
+                        "ms",
+                        vec![Line {
+                            label: "τ".into(),
+                            color: PALETTE[2],
+                            points: a.tau_ms.finish(),
+                        }],
+                    ),
+                    Panel {
+                        title: "timeline".into(),
+                        y_label: String::new(),
+                        kind: PanelKind::Timeline(bands),
+                    },
+                ],
+            ),
+            (1000, 560),
+        ),
+    ]
+    .into_iter()
+    .map(|(stem, figure, size)| Job { stem, figure, size })
+    .collect()
+}
+
+/// Writes everything into `run_dir/report/`; returns the path of `report.md`.
+fn write(
+    run_dir: &Path,
+    resolved: &Resolved,
+    summary: &RunSummary,
+    series: RunSeries,
+    warnings: &[String],
+) -> Result<PathBuf> {
+    let dir = run_dir.join("report");
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let beta = series.beta;
+    let x_range = (0.0, series.duration_s.max(series.period_s));
+    let mut segments = Vec::new();
+    let mut jobs = Vec::new();
+    for a in series.agents {
+        segments.push((a.id, a.segments.clone()));
+        jobs.extend(figures(a, beta, x_range));
+    }
+    render_all(&dir, jobs)?;
+    let md = markdown(run_dir, resolved, summary, &segments, warnings);
+    let md_path = dir.join("report.md");
+    std::fs::write(&md_path, md).with_context(|| format!("writing {}", md_path.display()))?;
+    let det = dir.join("detection.csv");
+    std::fs::write(&det, detection_csv(summary))
+        .with_context(|| format!("writing {}", det.display()))?;
+    let seg = dir.join("segments.csv");
+    std::fs::write(&seg, segments_csv(&segments))
+        .with_context(|| format!("writing {}", seg.display()))?;
+    Ok(md_path)
+}
+
+/// Renders the figures on up to two threads (the machine's cores, at most).
+fn render_all(dir: &Path, jobs: Vec<Job>) -> Result<()> {
+    let workers = std::thread::available_parallelism()
+        .map_or(1, std::num::NonZero::get)
+        .clamp(1, 4)
+        .min(jobs.len().max(1));
+    let mut shares: Vec<Vec<Job>> = (0..workers).map(|_| vec![]).collect();
+    for (i, j) in jobs.into_iter().enumerate() {
+        shares[i % workers].push(j);
+    }
+    std::thread::scope(|s| {
+        let handles: Vec<_> = shares
+            .into_iter()
+            .map(|share| {
+                s.spawn(move || -> Result<()> {
+                    for job in share {
+                        plot::save_figure(&job.figure, &dir.join(&job.stem), job.size)
+                            .with_context(|| format!("figure {}", job.stem))?;
+                    }
+                    Ok(())
+                })
+            })
+            .collect();
+        for h in handles {
+            match h.join() {
+                Ok(r) => r?,
+                Err(_) => anyhow::bail!("a figure thread panicked"),
+            }
+        }
+        Ok(())
+    })
+}
+
+fn fmt_opt_s(v: Option<f64>) -> String {
+    v.map_or_else(|| "never".into(), |d| format!("{d:.3}"))
+}
+
+fn markdown(
+    run_dir: &Path,
+    r: &Resolved,
+    s: &RunSummary,
+    segments: &[(u32, Vec<SegmentStats>)],
+    warnings: &[String],
+) -> String {
+    let c = &r.scenario.controller;
+    let mut md = String::new();
+    let _ = writeln!(md, "# Report of run `{}`\n", s.scenario);
+    let _ = writeln!(
+        md,
+        "Run directory `{}`. Regenerate with `fdi-launch report {}`.\n",
+        run_dir.display(),
+        run_dir.display()
+    );
+    md.push_str("| parameter | value |\n|---|---|\n");
+    let rows: [(&str, String); 11] = [
+        ("scenario", s.scenario.clone()),
+        ("engine", s.engine.clone()),
+        ("clock", s.clock.clone()),
+        (
+            "controller",
+            format!("{} (k = {}, β = {})", s.controller, c.gain_k, c.beta),
+        ),
+        ("attack", format!("`{}`", s.attack)),
+        ("seed", s.seed.to_string()),
+        (
+            "simulated",
+            format!(
+                "{} s: {} ticks of {} ms, {} robots",
+                s.sim_s,
+                s.ticks,
+                r.scenario.control_period_s * 1e3,
+                s.agents
+            ),
+        ),
+        (
+            "detection",
+            format!(
+                "alarm when ‖Ŝ‖ > {} for {} s",
+                c.detection.threshold, c.detection.hold_s
+            ),
+        ),
+        (
+            "wall time",
+            if s.wall_s.is_finite() {
+                format!("{:.2} s", s.wall_s)
+            } else {
+                "unknown".into()
+            },
+        ),
+        ("trace digest", format!("`{}`", s.trace_digest)),
+        (
+            "figures",
+            format!(
+                "min/max envelope of about {BUCKETS} buckets per curve; grey lines: attack switches"
+            ),
+        ),
+    ];
+    for (k, v) in rows {
+        let _ = writeln!(md, "| {k} | {v} |");
+    }
+
+    md.push_str("\n## RMSE\n\n");
+    let stored = std::fs::read_to_string(run_dir.join("rmse.md")).ok();
+    let table: Vec<&str> = stored
+        .as_deref()
+        .map(|t| t.lines().filter(|l| l.starts_with('|')).collect())
+        .unwrap_or_default();
+    if table.is_empty() {
+        md.push_str("| robot | RMSE (rad) | max abs error (rad) |\n|---|---|---|\n");
+        for (id, m) in &s.metrics {
+            let _ = writeln!(
+                md,
+                "| {id} | {:.5} | {:.5} |",
+                m.rmse_rad, m.max_abs_error_rad
+            );
+        }
+    } else {
+        for l in table {
+            md.push_str(l);
+            md.push('\n');
+        }
+        md.push_str("\n(from [`rmse.md`](../rmse.md), also [`rmse.csv`](../rmse.csv))\n");
+    }
+
+    md.push_str("\n## Detection\n\n");
+    md.push_str("| robot | attack onset (s) | time to detect (s) |\n|---|---|---|\n");
+    for (id, m) in &s.metrics {
+        if m.onsets.is_empty() {
+            let _ = writeln!(md, "| {id} | none | |");
+        }
+        for o in &m.onsets {
+            let _ = writeln!(
+                md,
+                "| {id} | {:.3} | {} |",
+                o.t_s,
+                fmt_opt_s(o.time_to_detect_s)
+            );
+        }
+    }
+    md.push_str("\n| robot | false alarms | alarm coverage of attacked ticks | rejected inputs | deadline misses |\n|---|---|---|---|---|\n");
+    for (id, m) in &s.metrics {
+        let _ = writeln!(
+            md,
+            "| {id} | {} | {:.1} % | {} | {} |",
+            m.false_alarms,
+            m.alarm_coverage * 100.0,
+            m.rejected_inputs,
+            m.deadline_misses
+        );
+    }
+    md.push_str("\n(also [`detection.csv`](detection.csv))\n");
+
+    md.push_str("\n## Tracking error per attack segment\n\n");
+    let _ = writeln!(
+        md,
+        "Largest |q_d − q| (rad) and |q̇_d − q̇| (rad/s) per link, in the first {SWITCH_WINDOW_S} s of each \
+         segment (the spike after a switch; for the first segment, the start-up) and over the rest of \
+         it, and the RMS of ‖Ŝ − S‖ (rad/s), at the full tick rate. Also [`segments.csv`](segments.csv).\n"
+    );
+    md.push_str("| robot | segment (s) | max \\|e\\| first 1 s | max \\|e\\| rest | max \\|ė\\| first 1 s | max \\|ė\\| rest | RMS ‖Ŝ − S‖ |\n|---|---|---|---|---|---|---|\n");
+    let list = |v: &[f64]| {
+        v.iter()
+            .map(|x| format!("{x:.4}"))
+            .collect::<Vec<_>>()
+            .join(" / ")
+    };
+    for (id, segs) in segments {
+        for sg in segs.iter().filter(|sg| sg.ticks > 0) {
+            let _ = writeln!(
+                md,
+                "| {id} | {}–{} | {} | {} | {} | {} | {:.4} |",
+                sg.from_s,
+                sg.to_s,
+                list(&sg.pos_first),
+                list(&sg.pos_rest),
+                list(&sg.vel_first),
+                list(&sg.vel_rest),
+                (sg.s_err_sq / sg.ticks as f64).sqrt()
+            );
+        }
+    }
+
+    for a in &r.scenario.agents {
+        let id = a.id;
+        let _ = writeln!(md, "\n## Robot {id}\n");
+        for (suffix, what) in FIGURES {
+            let stem = format!("robot{id}-{suffix}");
+            let _ = writeln!(
+                md,
+                "**{what}** ([SVG]({stem}.svg))\n\n![robot {id}: {what}]({stem}.png)\n"
+            );
+        }
+    }
+    if !warnings.is_empty() {
+        md.push_str("\n## Warnings\n\n");
+        for w in warnings {
+            let _ = writeln!(md, "* {w}");
+        }
+    }
+    md
+}
+
+fn detection_csv(s: &RunSummary) -> String {
+    let mut csv = String::from("robot,onset_s,time_to_detect_s,false_alarms,alarm_coverage\n");
+    for (id, m) in &s.metrics {
+        if m.onsets.is_empty() {
+            let _ = writeln!(csv, "{id},,,{},{}", m.false_alarms, m.alarm_coverage);
+        }
+        for o in &m.onsets {
+            let _ = writeln!(
+                csv,
+                "{id},{},{},{},{}",
+                o.t_s,
+                o.time_to_detect_s.map_or(String::new(), |d| d.to_string()),
+                m.false_alarms,
+                m.alarm_coverage
+            );
+        }
+    }
+    csv
+}
+
+fn segments_csv(segments: &[(u32, Vec<SegmentStats>)]) -> String {
+    let mut csv = String::from(
+        "robot,from_s,to_s,link,max_abs_pos_err_first_rad,max_abs_pos_err_rest_rad,max_abs_vel_err_first_rad_s,max_abs_vel_err_rest_rad_s,rms_s_err_rad_s\n",
+    );
+    for (id, segs) in segments {
+        for sg in segs.iter().filter(|sg| sg.ticks > 0) {
+            let rms = (sg.s_err_sq / sg.ticks as f64).sqrt();
+            for i in 0..sg.pos_first.len() {
+                let _ = writeln!(
+                    csv,
+                    "{id},{},{},{},{},{},{},{},{rms}",
+                    sg.from_s,
+                    sg.to_s,
+                    i + 1,
+                    sg.pos_first[i],
+                    sg.pos_rest[i],
+                    sg.vel_first[i],
+                    sg.vel_rest[i]
+                );
+            }
+        }
+    }
+    csv
 }

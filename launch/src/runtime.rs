@@ -9,6 +9,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
+use fdi_common::engine::LostAgent;
 use fdi_common::ipc::{
     self, monotonic_ns, Bell, ControlMsg, Role, StatusMsg, Stream, Transport, Wake,
 };
@@ -19,6 +20,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 const GRACE: Duration = Duration::from_secs(2);
 /// How long the processes may take to report ready.
 const READY_TIMEOUT: Duration = Duration::from_secs(30);
+/// A process stopped (SIGSTOP) this long stalls the run: the launcher stops it with a message.
+const STALL_LIMIT: Duration = Duration::from_secs(1);
 /// Realtime runs start this long after the start message, so every process sees it in time.
 const REALTIME_LEAD: Duration = Duration::from_millis(50);
 
@@ -30,6 +33,8 @@ struct Proc {
     child: Child,
     status: Option<ExitStatus>,
     ready: bool,
+    /// Since when the process has been seen stopped (SIGSTOP), for stall detection.
+    stopped_since: Option<Instant>,
 }
 
 /// The role binaries: the sibling `fdi-agent` etc. when they are at least as new as this
@@ -111,6 +116,8 @@ pub struct IpcOutcome {
     pub wall_s: f64,
     pub prefix: String,
     pub leftovers: Vec<PathBuf>,
+    /// Realtime agents that died or fell silent while the run went on.
+    pub lost: Vec<LostAgent>,
 }
 
 /// Options of one multi-process run.
@@ -127,6 +134,8 @@ pub fn trace_path(run_dir: &Path, process: &str) -> PathBuf {
 }
 
 struct Launcher {
+    realtime: bool,
+    lost: Vec<LostAgent>,
     procs: Vec<Proc>,
     bells: Vec<Bell>,
     control: ipc::Outbox<ControlMsg>,
@@ -136,23 +145,77 @@ struct Launcher {
 }
 
 impl Launcher {
+    /// Reaps exited children; returns the first abnormal exit that ends the run. In realtime an
+    /// agent's abnormal exit does not end the run (the control center keeps controlling the
+    /// others): it is recorded in `self.lost` instead.
     fn poll_children(&mut self) -> Option<String> {
         for p in &mut self.procs {
             if p.status.is_none() {
                 if let Ok(Some(st)) = p.child.try_wait() {
                     p.status = Some(st);
                     if !st.success() {
-                        return Some(format!(
-                            "{} (pid {}) {}",
-                            p.label,
-                            p.child.id(),
-                            describe_status(st)
-                        ));
+                        let what =
+                            format!("{} (pid {}) {}", p.label, p.child.id(), describe_status(st));
+                        match (self.realtime, p.wake) {
+                            (true, Wake::Agent(id)) => self.lost.push(LostAgent {
+                                agent: id,
+                                t_s: None,
+                                reason: what,
+                            }),
+                            _ => return Some(what),
+                        }
                     }
                 }
             }
         }
         None
+    }
+
+    /// A child stopped (SIGSTOP, or traced) for longer than [`STALL_LIMIT`], named.
+    fn stalled(&mut self) -> Option<String> {
+        let now = Instant::now();
+        for p in &mut self.procs {
+            if p.status.is_some() {
+                continue;
+            }
+            let stopped = std::fs::read_to_string(format!("/proc/{}/stat", p.child.id()))
+                .ok()
+                .and_then(|st| {
+                    st.rsplit_once(')')
+                        .map(|(_, rest)| rest.trim_start().starts_with(['T', 't']))
+                })
+                .unwrap_or(false);
+            match (stopped, p.stopped_since) {
+                (true, None) => p.stopped_since = Some(now),
+                (true, Some(since)) if now.duration_since(since) > STALL_LIMIT => {
+                    return Some(format!("{} (pid {}) has been stopped (SIGSTOP or a debugger) for {:.1} s; its peers are waiting for it", p.label, p.child.id(), now.duration_since(since).as_secs_f64()));
+                }
+                (false, _) => p.stopped_since = None,
+                _ => {}
+            }
+        }
+        None
+    }
+
+    /// How the children ended, e.g. `6 exited 0` or `5 exited 0, agent 2 killed by signal 9`.
+    fn exits(&self) -> String {
+        let clean = self
+            .procs
+            .iter()
+            .filter(|p| p.status.is_some_and(|s| s.success()))
+            .count();
+        let mut parts = vec![format!("{clean} exited 0")];
+        for p in self
+            .procs
+            .iter()
+            .filter(|p| !p.status.is_some_and(|s| s.success()))
+        {
+            parts.push(match p.status {
+                Some(st) => format!("{} {}", p.label, describe_status(st)),
+                None => format!("{} still running", p.label),
+            });
+        }
+        parts.join(", ")
     }
 
     fn broadcast(&self, msg: ControlMsg) {
@@ -200,13 +263,15 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     signal_hook::flag::register(signal_hook::consts::SIGINT, Arc::clone(&interrupted))?;
     signal_hook::flag::register(signal_hook::consts::SIGTERM, Arc::clone(&interrupted))?;
 
-    let result = {
+    let (result, lost) = {
         let transport = Transport::open(
             &prefix,
             "launcher",
             fdi_common::process::sizing_for(resolved),
         )?;
         let mut launcher = Launcher {
+            realtime: resolved.scenario.clock == ClockMode::Realtime,
+            lost: Vec::new(),
             procs: Vec::new(),
             bells: Vec::new(),
             control: transport.publisher(Stream::Control)?,
@@ -223,7 +288,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             &mut launcher,
         );
         launcher.teardown();
-        r
+        (r, std::mem::take(&mut launcher.lost))
         // ports and node dropped here, before the files are removed
     };
     ipc::remove_run_resources(&prefix).ok();
@@ -233,6 +298,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         wall_s,
         prefix,
         leftovers,
+        lost,
     })
 }
 
@@ -289,6 +355,7 @@ fn spawn_and_supervise(
             child,
             status: None,
             ready: false,
+            stopped_since: None,
         });
     }
 
@@ -336,30 +403,74 @@ fn spawn_and_supervise(
         epoch_ns: monotonic_ns() + lead.as_nanos() as u64,
     });
 
-    loop {
+    let mut done = vec![false; l.procs.len()];
+    let mut lost_reports = Vec::new();
+    let wall_s = loop {
         l.waker.wait(Duration::from_millis(50))?;
+        let procs = &l.procs;
         l.status.drain(|m| {
             if Role::from_code(m.role) == Some(Role::Center) {
                 bar.set_position(m.tick);
                 bar.set_message(format!("{:.1} s", m.tick as f64 * dt));
             }
+            if m.kind == StatusMsg::DONE {
+                if let Some(i) = procs.iter().position(|p| matches_status(p.wake, &m)) {
+                    done[i] = true;
+                }
+            }
+            if m.kind == StatusMsg::LOST {
+                lost_reports.push((m.agent, m.tick as f64 * dt));
+            }
         })?;
+        for (agent, t) in lost_reports.drain(..) {
+            if let Some(i) = l.procs.iter().position(|p| p.wake == Wake::Agent(agent)) {
+                done[i] = true; // a lost agent will not report done
+            }
+            match l.lost.iter_mut().find(|x| x.agent == agent) {
+                Some(x) => x.t_s = Some(t),
+                None => l.lost.push(LostAgent {
+                    agent,
+                    t_s: Some(t),
+                    reason: "fell silent".into(),
+                }),
+            }
+            bar.println(format!(
+                "fdi-launch: agent {agent} lost at t = {t:.3} s; the run goes on"
+            ));
+        }
         if let Some(failed) = l.poll_children() {
             bar.abandon();
             return Err(anyhow!("run stopped: {failed}"));
         }
-        if l.procs.iter().all(|p| p.status.is_some()) {
-            break;
+        // The simulation ends when every process has reported done (its trace is flushed by
+        // then); process exit is teardown and not part of the run's wall time.
+        let finished = |i: usize, p: &Proc| done[i] || p.status.is_some_and(|st| !st.success());
+        if l.procs.iter().enumerate().all(|(i, p)| finished(i, p))
+            || l.procs.iter().all(|p| p.status.is_some())
+        {
+            break started.elapsed().as_secs_f64();
+        }
+        if let Some(stall) = l.stalled() {
+            bar.abandon();
+            l.teardown();
+            return Err(anyhow!("run stalled: {stall} (processes: {})", l.exits()));
         }
         if l.interrupted.load(Ordering::SeqCst) {
             bar.abandon();
-            return Err(anyhow!(
-                "interrupted: every process was stopped; the traces hold the run up to that point"
-            ));
+            l.teardown();
+            return Err(anyhow!("interrupted: every process was stopped ({}); the traces hold the run up to that point", l.exits()));
         }
-    }
+    };
     bar.finish_and_clear();
-    Ok(started.elapsed().as_secs_f64())
+    // Reap the exits; a process that fails on its way out still fails the run.
+    let began = Instant::now();
+    while l.procs.iter().any(|p| p.status.is_none()) && began.elapsed() < GRACE {
+        if let Some(failed) = l.poll_children() {
+            return Err(anyhow!("run stopped: {failed}"));
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    Ok(wall_s)
 }
 
 fn matches_status(wake: Wake, m: &StatusMsg) -> bool {

@@ -1,13 +1,17 @@
 //! The paper's Tables I and II.
 
+use std::fmt::Write as _;
+use std::path::Path;
 use std::process::ExitCode;
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use fdi_common::delay::DelayProfile;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 use serde::Serialize;
 
 use crate::cli::{execute, Engine, TableArgs};
+use crate::plot::{BarChart, PALETTE};
+use plotters::style::RGBColor;
 
 /// Table I of the paper: (robot, traditional, proposed) RMSE in rad.
 const PAPER_TABLE1: [(u32, f64, f64); 4] = [
@@ -62,7 +66,14 @@ fn run_case(
             let mut named = r.clone();
             named.scenario.name = case.into();
             let d = crate::output::create_run_dir(dir, &named)?;
-            execute(r, args.engine, Some(&d), !args.json)
+            let summary = execute(r, args.engine, Some(&d), !args.json)?;
+            if let Err(e) = crate::report::write_report(&d, r, &summary) {
+                eprintln!(
+                    "fdi-launch: warning: the report of {} could not be made: {e:#}",
+                    d.display()
+                );
+            }
+            Ok(summary)
         }
     }
 }
@@ -104,30 +115,97 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
             paper_proposed: pp,
         })
         .collect();
-    if args.json {
-        println!(
-            "{}",
-            serde_json::json!({ "engine": args.engine.as_str(), "rows": rows })
+    let mut md = format!("Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}\n\n", args.engine.as_str());
+    md.push_str("| robot | traditional | proposed | ratio | paper traditional | paper proposed | paper ratio |\n");
+    md.push_str("|---|---|---|---|---|---|---|\n");
+    let mut csv = String::from(
+        "robot,traditional_rmse_rad,proposed_rmse_rad,paper_traditional_rmse_rad,paper_proposed_rmse_rad\n",
+    );
+    for r in &rows {
+        let _ = writeln!(
+            md,
+            "| {} | {:.4} | {:.4} | {:.2} | {:.3} | {:.3} | {:.2} |",
+            r.robot,
+            r.traditional_rmse_rad,
+            r.proposed_rmse_rad,
+            r.traditional_rmse_rad / r.proposed_rmse_rad,
+            r.paper_traditional,
+            r.paper_proposed,
+            r.paper_traditional / r.paper_proposed
         );
+        let _ = writeln!(
+            csv,
+            "{},{},{},{},{}",
+            r.robot,
+            r.traditional_rmse_rad,
+            r.proposed_rmse_rad,
+            r.paper_traditional,
+            r.paper_proposed
+        );
+    }
+    let json = serde_json::json!({ "engine": args.engine.as_str(), "rows": rows });
+    let chart = BarChart {
+        title: format!(
+            "Table I: RMSE per robot, this run ({} engine) beside the paper",
+            args.engine.as_str()
+        ),
+        y_label: "RMSE (rad)".into(),
+        categories: rows.iter().map(|r| format!("robot {}", r.robot)).collect(),
+        series: vec![
+            (
+                "traditional".into(),
+                PALETTE[1],
+                rows.iter().map(|r| r.traditional_rmse_rad).collect(),
+            ),
+            (
+                "paper traditional".into(),
+                PAPER_SHADE[1],
+                rows.iter().map(|r| r.paper_traditional).collect(),
+            ),
+            (
+                "proposed".into(),
+                PALETTE[0],
+                rows.iter().map(|r| r.proposed_rmse_rad).collect(),
+            ),
+            (
+                "paper proposed".into(),
+                PAPER_SHADE[0],
+                rows.iter().map(|r| r.paper_proposed).collect(),
+            ),
+        ],
+    };
+    write_table(&dir, "table1", &md, &csv, &json, &chart)?;
+    if args.json {
+        println!("{json}");
     } else {
-        println!("Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}", args.engine.as_str());
-        println!();
-        println!("| robot | traditional | proposed | ratio | paper traditional | paper proposed | paper ratio |");
-        println!("|---|---|---|---|---|---|---|");
-        for r in &rows {
-            println!(
-                "| {} | {:.4} | {:.4} | {:.2} | {:.3} | {:.3} | {:.2} |",
-                r.robot,
-                r.traditional_rmse_rad,
-                r.proposed_rmse_rad,
-                r.traditional_rmse_rad / r.proposed_rmse_rad,
-                r.paper_traditional,
-                r.paper_proposed,
-                r.paper_traditional / r.paper_proposed
-            );
-        }
+        print!("{md}");
+        println!("\ntable written to {}", dir.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Lighter shades of the palette's first two colours, for the paper's values.
+const PAPER_SHADE: [RGBColor; 2] = [RGBColor(140, 190, 225), RGBColor(240, 175, 135)];
+
+/// Writes `<name>.md`, `.csv`, `.json` and the bar chart (`.png`, `.svg`) into `dir`.
+fn write_table(
+    dir: &Path,
+    name: &str,
+    md: &str,
+    csv: &str,
+    json: &serde_json::Value,
+    chart: &BarChart,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let write = |ext: &str, text: String| -> Result<()> {
+        let p = dir.join(format!("{name}.{ext}"));
+        std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
+    };
+    write("md", format!("# {md}"))?;
+    write("csv", csv.to_string())?;
+    write("json", serde_json::to_string_pretty(json)? + "\n")?;
+    crate::plot::save_bars(chart, &dir.join(name), (900, 520))?;
+    Ok(())
 }
 
 pub fn table2(args: &TableArgs) -> Result<ExitCode> {
@@ -149,22 +227,48 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
             paper_rmse_rad: paper_rmse,
         });
     }
-    if args.json {
-        println!(
-            "{}",
-            serde_json::json!({ "engine": args.engine.as_str(), "rows": rows })
+    let mut md = format!("Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}\n\n", args.engine.as_str());
+    md.push_str("| case | tau(t) (ms) | RMSE | paper RMSE |\n|---|---|---|---|\n");
+    let mut csv = String::from("case,tau_ms,rmse_rad,paper_rmse_rad\n");
+    for r in &rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.4} | {:.4} |",
+            r.case, r.tau_ms, r.rmse_rad, r.paper_rmse_rad
         );
+        let _ = writeln!(
+            csv,
+            "{},\"{}\",{},{}",
+            r.case, r.tau_ms, r.rmse_rad, r.paper_rmse_rad
+        );
+    }
+    let json = serde_json::json!({ "engine": args.engine.as_str(), "rows": rows });
+    let chart = BarChart {
+        title: format!(
+            "Table II: RMSE of robot 1 per delay, this run ({} engine) beside the paper",
+            args.engine.as_str()
+        ),
+        y_label: "RMSE (rad)".into(),
+        categories: rows.iter().map(|r| r.case.to_string()).collect(),
+        series: vec![
+            (
+                "this run".into(),
+                PALETTE[0],
+                rows.iter().map(|r| r.rmse_rad).collect(),
+            ),
+            (
+                "paper".into(),
+                PAPER_SHADE[0],
+                rows.iter().map(|r| r.paper_rmse_rad).collect(),
+            ),
+        ],
+    };
+    write_table(&dir, "table2", &md, &csv, &json, &chart)?;
+    if args.json {
+        println!("{json}");
     } else {
-        println!("Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}", args.engine.as_str());
-        println!();
-        println!("| case | tau(t) (ms) | RMSE | paper RMSE |");
-        println!("|---|---|---|---|");
-        for r in &rows {
-            println!(
-                "| {} | {} | {:.4} | {:.4} |",
-                r.case, r.tau_ms, r.rmse_rad, r.paper_rmse_rad
-            );
-        }
+        print!("{md}");
+        println!("\ntable written to {}", dir.display());
     }
     Ok(ExitCode::SUCCESS)
 }

@@ -202,3 +202,88 @@ pub fn wait_until(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {
     }
     cond()
 }
+
+/// Runs `fdi-launch` with exactly `args` (no `--out`: for `report` and `trace export`, which
+/// take a run directory) and waits, killing it after `limit`.
+pub fn launch_plain(args: &[&str], limit: Duration) -> Output {
+    let child = Command::new(launcher())
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawning fdi-launch");
+    wait_with_watchdog(child, limit)
+}
+
+/// The run directory that `run --json` printed.
+pub fn run_dir_of(summary: &serde_json::Value) -> PathBuf {
+    PathBuf::from(
+        summary["run_dir"]
+            .as_str()
+            .expect("run_dir in the JSON summary"),
+    )
+}
+
+/// A path inside the repository (`rel` relative to the workspace root).
+pub fn repo_path(rel: &str) -> PathBuf {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/..")).join(rel)
+}
+
+/// Every record of a binary trace, failing the test on a damaged one.
+pub fn trace_records(path: &Path) -> Vec<fdi_common::trace::TraceRecord> {
+    let reader = fdi_common::trace::TraceReader::open(path)
+        .unwrap_or_else(|e| panic!("cannot open {}: {e}", path.display()));
+    reader
+        .map(|r| r.unwrap_or_else(|e| panic!("damaged {}: {e}", path.display())))
+        .collect()
+}
+
+/// What [`launch_watching_children`] saw.
+#[derive(Debug)]
+pub struct Watched {
+    pub output: Output,
+    /// The launcher's pid (its run prefix is `fdi<pid>_…`).
+    pub pid: u32,
+    /// Every child process seen while it ran: `(pid, command line)`.
+    pub children: Vec<(u32, String)>,
+}
+
+/// Runs `fdi-launch` with `args` (no `--out` added) and waits, killing it after `limit`, while
+/// polling every millisecond for processes it starts.
+pub fn launch_watching_children(args: &[&str], limit: Duration) -> Watched {
+    let mut child = Command::new(launcher())
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawning fdi-launch");
+    let pid = child.id();
+    let began = Instant::now();
+    let mut seen = Vec::new();
+    loop {
+        for c in children_of(pid) {
+            if !seen.contains(&c) {
+                seen.push(c);
+            }
+        }
+        if child.try_wait().expect("polling fdi-launch").is_some() {
+            let output = child.wait_with_output().expect("collecting output");
+            return Watched {
+                output,
+                pid,
+                children: seen,
+            };
+        }
+        if began.elapsed() > limit {
+            let _ = child.kill();
+            let out = child.wait_with_output().expect("collecting output");
+            panic!(
+                "watchdog: fdi-launch (pid {pid}) still running after {limit:?}; stderr:\n{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+}

@@ -189,3 +189,208 @@ fn ctrl_c_stops_every_process_and_removes_the_shared_memory() {
         leftovers_of(launcher)
     );
 }
+
+/// Starts a long lockstep run and returns it with the pid of the child whose command line
+/// contains `needle`, once all six processes are up.
+fn start_with(needle: &str, extra: &[&str], dir: &Scratch) -> (std::process::Child, u32) {
+    let mut args = vec!["run", "--duration-s", "600"];
+    args.extend_from_slice(extra);
+    let child = spawn(&args, &dir.0);
+    let launcher = child.id();
+    let mut found = None;
+    assert!(
+        wait_until(Duration::from_secs(60), || {
+            let kids = children_of(launcher);
+            found = kids
+                .iter()
+                .find(|(_, cmd)| cmd.contains(needle))
+                .map(|c| c.0);
+            kids.len() == 6 && found.is_some()
+        }),
+        "{needle} never started"
+    );
+    std::thread::sleep(Duration::from_millis(300));
+    (child, found.expect("found"))
+}
+
+fn stderr_of(out: &std::process::Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn killing_a_process_stops_the_run_naming_it(needle: &str, label: &str) {
+    let dir = Scratch::new("kill");
+    let (child, pid) = start_with(needle, &[], &dir);
+    let launcher = child.id();
+    let others: Vec<u32> = children_of(launcher)
+        .into_iter()
+        .map(|c| c.0)
+        .filter(|p| *p != pid)
+        .collect();
+    signal(pid, "-KILL");
+    let out = wait_with_watchdog(child, WATCHDOG);
+    assert!(!out.status.success());
+    let err = stderr_of(&out);
+    assert!(
+        err.contains(label) && err.contains("SIGKILL"),
+        "stderr: {err}"
+    );
+    assert!(others.iter().all(|p| !alive(*p)), "processes left");
+    assert!(
+        leftovers_of(launcher).is_empty(),
+        "{:?}",
+        leftovers_of(launcher)
+    );
+}
+
+#[test]
+fn killing_the_attacker_stops_the_run_naming_it() {
+    killing_a_process_stops_the_run_naming_it("attacker --prefix", "attacker");
+}
+
+#[test]
+fn killing_the_control_center_stops_the_run_naming_it() {
+    killing_a_process_stops_the_run_naming_it("control-center --prefix", "control-center");
+}
+
+#[test]
+fn realtime_agent_killed_is_declared_lost_and_the_others_finish() {
+    let dir = Scratch::new("rt-lost");
+    let child = spawn(
+        &["run", "--clock", "realtime", "--duration-s", "3", "--json"],
+        &dir.0,
+    );
+    let launcher = child.id();
+    let mut victim = None;
+    assert!(wait_until(Duration::from_secs(60), || {
+        victim = children_of(launcher)
+            .into_iter()
+            .find(|(_, c)| c.contains("--agent 2"))
+            .map(|c| c.0);
+        victim.is_some() && children_of(launcher).len() == 6
+    }));
+    std::thread::sleep(Duration::from_millis(1000));
+    signal(victim.expect("agent 2"), "-KILL");
+    let out = wait_with_watchdog(child, WATCHDOG);
+    assert_eq!(
+        out.status.code(),
+        Some(3),
+        "a run that lost an agent exits 3: {}",
+        stderr_of(&out)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    let v: serde_json::Value =
+        serde_json::from_str(text.lines().last().expect("json line")).expect("json");
+    let lost = v["lost_agents"].as_array().expect("lost_agents");
+    assert_eq!(lost.len(), 1, "{lost:?}");
+    assert_eq!(lost[0]["agent"], 2);
+    assert!(
+        lost[0]["reason"]
+            .as_str()
+            .is_some_and(|r| r.contains("SIGKILL")),
+        "{lost:?}"
+    );
+    // The others were controlled to the end: 3000 ticks joined.
+    assert_eq!(v["ticks"], 3000);
+    assert!(stderr_of(&out).contains("agent 2 was lost"));
+    assert!(leftovers_of(launcher).is_empty());
+}
+
+#[test]
+fn killing_the_launcher_makes_the_children_exit_and_the_next_run_cleans_up() {
+    let dir = Scratch::new("kill-launcher");
+    let (mut child, _) = start_with("--agent 1", &[], &dir);
+    let launcher = child.id();
+    let kids: Vec<u32> = children_of(launcher).into_iter().map(|c| c.0).collect();
+    signal(launcher, "-KILL");
+    let _ = child.wait();
+    // The children get SIGTERM from the kernel (parent-death signal) and exit on their own.
+    assert!(
+        wait_until(Duration::from_secs(30), || kids.iter().all(|p| !alive(*p))),
+        "orphans: {kids:?}"
+    );
+    // The next run reaps what the dead launcher could not remove.
+    let next = launch(&["run", "--duration-s", "0.1", "--json"], &dir.0, WATCHDOG);
+    assert!(next.status.success(), "{}", stderr_of(&next));
+    assert!(
+        leftovers_of(launcher).is_empty(),
+        "{:?}",
+        leftovers_of(launcher)
+    );
+}
+
+#[test]
+fn a_stopped_process_stalls_the_run_and_is_named() {
+    let dir = Scratch::new("sigstop");
+    let (child, pid) = start_with("--agent 3", &[], &dir);
+    let launcher = child.id();
+    signal(pid, "-STOP");
+    let out = wait_with_watchdog(child, WATCHDOG);
+    assert!(!out.status.success());
+    let err = stderr_of(&out);
+    assert!(
+        err.contains("stalled") && err.contains("agent 3"),
+        "stderr: {err}"
+    );
+    assert!(!alive(pid), "the stopped agent is killed in the teardown");
+    assert!(
+        leftovers_of(launcher).is_empty(),
+        "{:?}",
+        leftovers_of(launcher)
+    );
+}
+
+#[test]
+fn sigterm_stops_every_process_cleanly() {
+    let dir = Scratch::new("sigterm");
+    let (child, _) = start_with("--agent 1", &[], &dir);
+    let launcher = child.id();
+    signal(launcher, "-TERM");
+    let out = wait_with_watchdog(child, WATCHDOG);
+    let err = stderr_of(&out);
+    assert!(
+        err.contains("interrupted") && err.contains("6 exited 0"),
+        "stderr: {err}"
+    );
+    assert!(
+        leftovers_of(launcher).is_empty(),
+        "{:?}",
+        leftovers_of(launcher)
+    );
+    // Every trace ends on a whole frame: nothing half-written.
+    let run_dir = std::fs::read_dir(&dir.0)
+        .expect("out")
+        .flatten()
+        .next()
+        .expect("run dir")
+        .path();
+    for t in std::fs::read_dir(run_dir.join("traces"))
+        .expect("traces")
+        .flatten()
+    {
+        let reader = fdi_common::trace::TraceReader::open(&t.path()).expect("readable");
+        assert!(
+            reader.into_iter().all(|r| r.is_ok()),
+            "{} damaged",
+            t.path().display()
+        );
+    }
+}
+
+#[test]
+fn lockstep_lookahead_at_the_delay_minimum_reports_no_deadline_miss() {
+    // τ = 2 sin(t/2) + 3 ms reaches τ = Δ = 1 ms at t ≈ 9.42 s: there the agent steps before
+    // torque k exists (lookahead), and a miss used to be flagged for a query a hair below t_k.
+    let dir = Scratch::new("no-miss");
+    let v = json(&launch(
+        &["run", "--duration-s", "10", "--json"],
+        &dir.0,
+        WATCHDOG,
+    ));
+    for id in ["1", "2", "3", "4"] {
+        assert_eq!(
+            v["metrics"][id]["deadline_misses"], 0,
+            "agent {id}: {}",
+            v["metrics"][id]
+        );
+    }
+}

@@ -226,3 +226,116 @@ impl<const N: usize> CenterAgent<N> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scenario::paper;
+
+    /// Agent 1 of the paper's scenario, as the control-center process builds it.
+    fn agent1() -> CenterAgent<2> {
+        let r = paper().expect("the embedded paper scenario is valid");
+        let s = &r.scenario;
+        CenterAgent::<2>::new(CenterParams::new(
+            &s.agents[0],
+            &s.controller,
+            s.seed,
+            s.control_period_s,
+        ))
+        .expect("a two-link model")
+    }
+
+    fn finite(v: &Vector<2>) -> bool {
+        v.iter().all(|x| x.is_finite())
+    }
+
+    #[test]
+    fn a_nan_measurement_is_counted_and_never_yields_a_non_finite_torque() {
+        let dt = 1e-3;
+        // Two identical pipelines: `clean` sees the good measurement twice, `hit` sees it once,
+        // then a NaN. Holding the last good value means both compute the same torque.
+        let (mut clean, mut hit) = (agent1(), agent1());
+        let y = Vector::<2>::new(0.01, -0.02);
+        let yd = Vector::<2>::new(0.1, 0.05);
+        for k in 0..50 {
+            let t = f64::from(k) * dt;
+            assert_eq!(clean.tick(t, &y, &yd), hit.tick(t, &y, &yd));
+        }
+        let t = 50.0 * dt;
+        let want = clean.tick(t, &y, &yd);
+        let nan = Vector::<2>::new(f64::NAN, 0.0);
+        let got = hit.tick(t, &nan, &yd);
+        assert!(got.rejected_input && !want.rejected_input);
+        assert_eq!(hit.rejected_inputs, 1);
+        assert_eq!(clean.rejected_inputs, 0);
+        assert!(finite(&got.u), "torque {:?}", got.u);
+        assert_eq!(got.u, want.u, "the last good measurement is held");
+        assert_eq!(got.q_hat, want.q_hat);
+    }
+
+    #[test]
+    fn every_kind_of_bad_value_is_rejected_and_counted_and_boundary_values_are_not() {
+        let mut c = agent1();
+        let ok = Vector::<2>::new(0.01, 0.02);
+        let mut expected_rejections = 0;
+        let mut k = 0u32;
+        let mut tick = |c: &mut CenterAgent<2>, y: Vector<2>, yd: Vector<2>| {
+            k += 1;
+            c.tick(f64::from(k) * 1e-3, &y, &yd)
+        };
+        for bad in [
+            f64::NAN,
+            -f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            1e300,
+            -1e300,
+            f64::MAX,
+            MAX_ABS_MEASUREMENT * (1.0 + f64::EPSILON),
+            -1e7,
+        ] {
+            for (y, yd) in [
+                (Vector::<2>::new(bad, 0.0), ok),
+                (ok, Vector::<2>::new(0.0, bad)),
+                (Vector::<2>::new(bad, bad), Vector::<2>::new(bad, bad)),
+            ] {
+                let out = tick(&mut c, y, yd);
+                expected_rejections += 1;
+                assert!(out.rejected_input, "{bad} not rejected");
+                assert!(finite(&out.u) && finite(&out.s_hat) && finite(&out.q_hat));
+                assert_eq!(c.rejected_inputs, expected_rejections);
+            }
+        }
+        // Large but allowed, subnormal, negative zero: accepted (finite torque all the same).
+        for fine in [
+            MAX_ABS_MEASUREMENT,
+            -MAX_ABS_MEASUREMENT,
+            f64::MIN_POSITIVE / 2.0,
+            -0.0,
+        ] {
+            let out = tick(&mut c, Vector::<2>::new(fine, 0.0), ok);
+            assert!(!out.rejected_input, "{fine} rejected");
+            assert!(finite(&out.u), "{fine}: torque {:?}", out.u);
+        }
+        assert_eq!(c.rejected_inputs, expected_rejections);
+        assert_eq!(c.rejected_torques, 0);
+    }
+
+    #[test]
+    fn a_non_finite_computed_torque_is_replaced_by_the_last_good_one() {
+        let mut c = agent1();
+        let y = Vector::<2>::new(0.01, 0.02);
+        let good = c.tick(0.0, &y, &y);
+        assert!(finite(&good.u));
+        // An estimate that blows up (the oracle hook stands in for any numerical failure).
+        let inf = Vector::<2>::new(f64::INFINITY, 0.0);
+        for k in 1..20 {
+            let out = c.tick_with_estimate(f64::from(k) * 1e-3, &y, &y, Some(&inf));
+            assert!(out.rejected_torque);
+            assert!(finite(&out.u));
+            assert_eq!(out.u, good.u, "the last good torque is sent again");
+        }
+        assert_eq!(c.rejected_torques, 19);
+        assert_eq!(c.rejected_inputs, 0);
+    }
+}

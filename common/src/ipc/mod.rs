@@ -505,6 +505,45 @@ impl Waker {
         let _ = self.port.try_wait(|_| rung = true);
         Ok(rung)
     }
+
+    /// Like [`Self::wait`], with nanosecond timeout resolution: `ppoll` on the listener's file
+    /// descriptor (a high-resolution timer) instead of the socket receive timeout, whose
+    /// resolution is the scheduler tick. For realtime processes that must both keep a deadline
+    /// and notice an arrival the moment it happens.
+    #[allow(unsafe_code)]
+    pub fn wait_precise(&self, timeout: Duration) -> Result<bool, IpcError> {
+        use iceoryx2::prelude::FileDescriptorBased;
+        // SAFETY: the descriptor is owned by the listener, which outlives this call; it is
+        // only borrowed for the poll below and never closed or duplicated here.
+        let raw = unsafe { self.port.file_descriptor().native_handle() };
+        // SAFETY: `raw` is open for the whole borrow (see above).
+        let fd = unsafe { rustix::fd::BorrowedFd::borrow_raw(raw) };
+        let ts = rustix::time::Timespec {
+            tv_sec: i64::try_from(timeout.as_secs()).unwrap_or(i64::MAX),
+            tv_nsec: i64::from(timeout.subsec_nanos()),
+        };
+        let mut fds = [rustix::event::PollFd::new(
+            &fd,
+            rustix::event::PollFlags::IN,
+        )];
+        match rustix::event::poll(&mut fds, Some(&ts)) {
+            Ok(_) | Err(rustix::io::Errno::INTR) => {}
+            Err(e) => {
+                return Err(IpcError::Wait {
+                    service: self.service.clone(),
+                    reason: e.to_string(),
+                })
+            }
+        }
+        let mut rung = false;
+        self.port
+            .try_wait(|_| rung = true)
+            .map_err(|e| IpcError::Wait {
+                service: self.service.clone(),
+                reason: format!("{e:?}"),
+            })?;
+        Ok(rung)
+    }
 }
 
 #[cfg(test)]
@@ -540,6 +579,17 @@ mod tests {
                 .ring()
                 .expect("ring");
             assert!(waker.wait(Duration::from_nanos(10)).expect("wait"));
+            // The precise wait: times out without a ring, returns true after one.
+            assert!(!waker
+                .wait_precise(Duration::from_micros(200))
+                .expect("precise wait"));
+            t.notifier(Wake::Launcher)
+                .expect("notifier")
+                .ring()
+                .expect("ring");
+            assert!(waker
+                .wait_precise(Duration::from_secs(5))
+                .expect("precise wait"));
         }
         remove_run_resources(&p).expect("cleanup");
         assert!(leftover_files(&p).is_empty(), "{:?}", leftover_files(&p));

@@ -5,6 +5,7 @@
 //! (`−sin 2t` for `t ≥ 25`); the ramp uses the time since its segment began.
 
 mod constant;
+mod corrupt;
 mod noise;
 mod pulse;
 mod ramp;
@@ -12,6 +13,8 @@ mod sine;
 
 use rand_chacha::ChaCha12Rng;
 use serde::{Deserialize, Serialize};
+
+pub use corrupt::CorruptValue;
 
 /// One segment's waveform. Values are in the channel's units (rad or deg for positions, rad/s
 /// or deg/s for velocities).
@@ -52,6 +55,10 @@ pub enum Waveform {
         #[serde(default)]
         mean: f64,
     },
+    /// Fault injection: `value` as is, NaN, ±∞ or absurdly large (`{ kind = "corrupt", value =
+    /// "nan" }`, `"inf"`, `"-inf"` or a number such as `1e300`). The only waveform exempt from the
+    /// finiteness check; the control center must reject what it produces (SPEC §4.10).
+    Corrupt { value: CorruptValue },
 }
 
 impl Waveform {
@@ -74,6 +81,7 @@ impl Waveform {
             } => pulse::value(t, amplitude, period_s, width_percent, delay_s),
             Self::Ramp { slope_per_s, start } => ramp::value(t - segment_start, slope_per_s, start),
             Self::Gaussian { std, mean } => noise::value(rng, mean, std),
+            Self::Corrupt { value } => corrupt::value(value),
         }
     }
 
@@ -83,10 +91,12 @@ impl Waveform {
     }
 
     /// Every numeric parameter with its name, and the problems of this waveform's values.
+    /// Parameters must be finite, except the value of `corrupt`, whose form parsing has
+    /// already checked (any `f64` is a deliberate fault).
     pub fn problems(&self) -> Vec<(&'static str, String)> {
         let mut out = Vec::new();
         let params: Vec<(&'static str, f64)> = match *self {
-            Self::None => vec![],
+            Self::None | Self::Corrupt { .. } => vec![],
             Self::Constant { value } => vec![("value", value)],
             Self::Sine {
                 amplitude,
