@@ -227,6 +227,11 @@ pub fn run(
                     take_torques(&mut plant, ports, trace, &mut inflow, false)?;
                 }
             }
+            // The last measurements may have gone out without a ring (the final steps needed
+            // no further torque): announce them, or the attacker only sees them on a timeout.
+            if unrung {
+                ports.attacker.ring()?;
+            }
         }
         ClockMode::Realtime => {
             let mut state = (plant.q, plant.qd);

@@ -21,12 +21,14 @@ pub fn tick_time(k: u64, control_period_s: f64) -> f64 {
     k as f64 * control_period_s
 }
 
-/// The attacker's man-in-the-middle step: `y' = y + α_pos`, `ẏ' = ẏ + α_vel`.
+/// The attacker's man-in-the-middle step: `y' = y + α_pos`, `ẏ' = ẏ + α_vel`. The attack first
+/// observes the clean measurement (what a replay records and plays back against).
 pub fn tamper<const N: usize>(
     attack: &mut AgentAttack,
     t: f64,
     m: &Measurement<N>,
 ) -> (Measurement<N>, Injection<N>) {
+    attack.observe(t, m);
     let inj = attack.injection::<N>(t);
     (
         Measurement {

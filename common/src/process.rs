@@ -92,7 +92,7 @@ pub struct WaitStrategy {
 }
 
 /// Default bounded spin before blocking, µs (chosen by measurement, see docs/performance.md).
-pub const DEFAULT_SPIN_US: u64 = 100;
+pub const DEFAULT_SPIN_US: u64 = 200;
 
 impl WaitStrategy {
     /// Lockstep spins `FDI_SPIN_US` (default [`DEFAULT_SPIN_US`]) before blocking; realtime

@@ -328,7 +328,6 @@ fn spawn_and_supervise(
         ));
     }
     for (role, name, wake, agent) in roles {
-        l.bells.push(transport.notifier(wake)?);
         let mut cmd = role_command(&role)?;
         cmd.arg("--prefix")
             .arg(prefix)
@@ -388,6 +387,11 @@ fn spawn_and_supervise(
         })?;
     }
 
+    // Notifiers are created once every listener exists: a notifier created earlier may not
+    // reach a listener that appears later, and the start would then wait for a timeout.
+    for p in &l.procs {
+        l.bells.push(transport.notifier(p.wake)?);
+    }
     let ticks = resolved.ticks();
     let dt = resolved.scenario.control_period_s;
     let bar = progress_bar(ticks, opts.progress);
@@ -441,6 +445,25 @@ fn spawn_and_supervise(
         if let Some(failed) = l.poll_children() {
             bar.abandon();
             return Err(anyhow!("run stopped: {failed}"));
+        }
+        // A process that exited cleanly without reporting done (SIGTERM sent to it alone) ends
+        // the run too: its peers would wait for it. Its done may have raced its exit: drain once
+        // more before deciding.
+        let early = |done: &[bool], procs: &[Proc]| procs.iter().enumerate().position(|(i, p)| p.status.is_some_and(|st| st.success()) && !done[i]);
+        if early(&done, &l.procs).is_some() {
+            let procs = &l.procs;
+            l.status.drain(|m| {
+                if m.kind == StatusMsg::DONE {
+                    if let Some(i) = procs.iter().position(|p| matches_status(p.wake, &m)) {
+                        done[i] = true;
+                    }
+                }
+            })?;
+            if let Some(i) = early(&done, &l.procs) {
+                bar.abandon();
+                let p = &l.procs[i];
+                return Err(anyhow!("run stopped: {} (pid {}) exited before the end of the run", p.label, p.child.id()));
+            }
         }
         // The simulation ends when every process has reported done (its trace is flushed by
         // then); process exit is teardown and not part of the run's wall time.

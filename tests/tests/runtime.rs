@@ -394,3 +394,16 @@ fn lockstep_lookahead_at_the_delay_minimum_reports_no_deadline_miss() {
         );
     }
 }
+
+#[test]
+fn sigterm_to_one_child_stops_the_run_naming_it() {
+    let dir = Scratch::new("sigterm-child");
+    let (child, pid) = start_with("--agent 2", &[], &dir);
+    let launcher = child.id();
+    signal(pid, "-TERM");
+    let out = wait_with_watchdog(child, WATCHDOG);
+    assert!(!out.status.success());
+    let err = stderr_of(&out);
+    assert!(err.contains("agent 2") && err.contains("exited before the end of the run"), "stderr: {err}");
+    assert!(leftovers_of(launcher).is_empty(), "{:?}", leftovers_of(launcher));
+}

@@ -14,6 +14,7 @@ use rand_chacha::ChaCha12Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::model::Vector;
+use crate::plant::Measurement;
 use crate::rng::{stream, Purpose};
 use crate::units::AngleUnit;
 
@@ -120,6 +121,19 @@ impl AttackProfile {
                 for (field, msg) in seg.waveform.problems() {
                     out.push((at(&format!("segments[{s}].waveform.{field}")), msg));
                 }
+                if let Some((_, end)) = seg.waveform.replay_window() {
+                    if seg.from_s < end {
+                        out.push((
+                            at(&format!("segments[{s}].from_s")),
+                            format!(
+                                "a replay must start at or after the end of its recording \
+                                 (record_from_s + record_for_s = {end}), got {}: it cannot play \
+                                 back what is not recorded yet",
+                                seg.from_s
+                            ),
+                        ));
+                    }
+                }
             }
         }
         out
@@ -134,12 +148,38 @@ struct LinkChannel {
     scale: f64,
     segments: Vec<Segment>,
     rng: ChaCha12Rng,
+    /// Per segment, what a `replay` segment recorded (empty for the other waveforms).
+    recordings: Vec<Recording>,
+    /// The clean value of this signal and link at the last [`AgentAttack::observe`], rad or
+    /// rad/s.
+    clean: f64,
+}
+
+/// Clean samples of one channel recorded for a `replay` segment.
+#[derive(Debug, Clone, Default)]
+struct Recording {
+    times: Vec<f64>,
+    values: Vec<f64>,
+}
+
+impl Recording {
+    /// The sample played `elapsed` seconds after the replay began.
+    fn played(&self, elapsed: f64) -> Option<f64> {
+        let len = self.values.len();
+        let (first, last) = (*self.times.first()?, *self.times.last()?);
+        waveform::replay::index(elapsed, waveform::replay::spacing(first, last, len), len)
+            .map(|i| self.values[i])
+    }
 }
 
 impl LinkChannel {
-    fn segment_at(&self, t: f64) -> Option<&Segment> {
+    fn segment_index(&self, t: f64) -> Option<usize> {
         let n = self.segments.partition_point(|s| s.from_s <= t);
-        n.checked_sub(1).map(|i| &self.segments[i])
+        n.checked_sub(1)
+    }
+
+    fn segment_at(&self, t: f64) -> Option<&Segment> {
+        self.segment_index(t).map(|i| &self.segments[i])
     }
 }
 
@@ -175,28 +215,61 @@ impl AgentAttack {
                     signal: ch.signal,
                     link: (link as usize).saturating_sub(1),
                     scale: ch.units.to_rad(),
+                    recordings: vec![Recording::default(); segments.len()],
                     segments,
                     rng: stream(run_seed, agent_id, Purpose::AttackNoise { channel }),
+                    clean: 0.0,
                 });
             }
         }
         Self { channels }
     }
 
+    /// Shows the attacker the clean measurement of time `t`, before [`Self::injection`] of the
+    /// same tick: `replay` channels record it inside their window and play back against it.
+    pub fn observe<const N: usize>(&mut self, t: f64, clean: &Measurement<N>) {
+        for ch in &mut self.channels {
+            if ch.link >= N {
+                continue;
+            }
+            let v = match ch.signal {
+                Signal::Position => clean.y[ch.link],
+                Signal::Velocity => clean.yd[ch.link],
+            };
+            ch.clean = v;
+            for (seg, rec) in ch.segments.iter().zip(&mut ch.recordings) {
+                if let Some((from, to)) = seg.waveform.replay_window() {
+                    if from <= t && t < to {
+                        rec.times.push(t);
+                        rec.values.push(v);
+                    }
+                }
+            }
+        }
+    }
+
     /// `α(t)` for position and velocity, rad and rad/s. Channels are summed in profile order.
+    /// A `replay` channel injects `recorded − clean` against the last [`Self::observe`]d clean
+    /// value (nothing while its recording is empty).
     pub fn injection<const N: usize>(&mut self, t: f64) -> Injection<N> {
         let mut inj = Injection {
             position: Vector::<N>::zeros(),
             velocity: Vector::<N>::zeros(),
         };
         for ch in &mut self.channels {
-            let Some(seg) = ch.segment_at(t).copied() else {
+            let Some(i) = ch.segment_index(t) else {
                 continue;
             };
+            let seg = ch.segments[i];
             if ch.link >= N {
                 continue;
             }
-            let v = ch.scale * seg.waveform.value(t, seg.from_s, &mut ch.rng);
+            let v = match seg.waveform {
+                Waveform::Replay { .. } => ch.recordings[i]
+                    .played(t - seg.from_s)
+                    .map_or(0.0, |r| r - ch.clean),
+                w => ch.scale * w.value(t, seg.from_s, &mut ch.rng),
+            };
             match ch.signal {
                 Signal::Position => inj.position[ch.link] += v,
                 Signal::Velocity => inj.velocity[ch.link] += v,
@@ -312,6 +385,78 @@ mod tests {
             assert!(
                 paths.iter().any(|p| p == want),
                 "missing {want} in {paths:?}"
+            );
+        }
+    }
+
+    fn replay_profile(from_s: f64, record_for_s: f64) -> AttackProfile {
+        AttackProfile {
+            channels: vec![Channel {
+                agent: 1,
+                signal: Signal::Velocity,
+                links: vec![2],
+                units: AngleUnit::Deg,
+                segments: vec![Segment {
+                    from_s,
+                    waveform: Waveform::Replay {
+                        record_from_s: 0.5,
+                        record_for_s,
+                    },
+                }],
+            }],
+            ..AttackProfile::default()
+        }
+    }
+
+    #[test]
+    fn replay_plays_back_the_recorded_clean_values_in_a_loop() {
+        let p = replay_profile(2.0, 0.5);
+        assert!(p.problems(&dofs()).is_empty(), "{:?}", p.problems(&dofs()));
+        let mut a = AgentAttack::compile(&p, 1, 1);
+        let dt = 1e-3;
+        let clean = |k: u64| Measurement::<2> {
+            y: Vector::<2>::new(0.1, 0.2),
+            yd: Vector::<2>::new(-(k as f64), k as f64 * 0.5 + 1.0),
+        };
+        let mut seen = Vec::new();
+        for k in 0..4000u64 {
+            let t = k as f64 * dt;
+            let m = clean(k);
+            let (out, inj) = crate::engine::tamper(&mut a, t, &m);
+            assert_eq!(out.y, m.y, "positions untouched");
+            assert_eq!(out.yd[0], m.yd[0], "link 1 untouched");
+            if k < 2000 {
+                assert_eq!(inj.velocity[1], 0.0, "relay before the replay, tick {k}");
+            } else {
+                // Recorded ticks 500..1000, looped from tick 2000.
+                let recorded = clean(500 + (k - 2000) % 500).yd[1];
+                assert_eq!(inj.velocity[1], recorded - m.yd[1], "tick {k}");
+                assert!((out.yd[1] - recorded).abs() < 1e-12, "tick {k}");
+                seen.push(out.yd[1]);
+            }
+        }
+        assert!(a.is_active(2.0) && !a.is_active(1.999));
+        assert_eq!(a.onsets(4.0), vec![2.0]);
+        assert_eq!(seen.len(), 2000);
+    }
+
+    #[test]
+    fn replay_problems_name_the_field_path() {
+        let paths = |p: AttackProfile| -> Vec<String> {
+            p.problems(&dofs()).into_iter().map(|p| p.0).collect()
+        };
+        assert_eq!(
+            paths(replay_profile(0.9, 0.5)),
+            vec!["channels[0].segments[0].from_s".to_string()],
+            "a replay cannot start before its recording ends"
+        );
+        assert!(paths(replay_profile(1.0, 0.5)).is_empty());
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            assert!(
+                paths(replay_profile(10.0, bad))
+                    .iter()
+                    .any(|p| p == "channels[0].segments[0].waveform.record_for_s"),
+                "record_for_s = {bad}"
             );
         }
     }

@@ -9,6 +9,7 @@ mod corrupt;
 mod noise;
 mod pulse;
 mod ramp;
+pub mod replay;
 mod sine;
 
 use rand_chacha::ChaCha12Rng;
@@ -59,10 +60,21 @@ pub enum Waveform {
     /// "nan" }`, `"inf"`, `"-inf"` or a number such as `1e300`). The only waveform exempt from the
     /// finiteness check; the control center must reject what it produces (SPEC §4.10).
     Corrupt { value: CorruptValue },
+    /// Replay attack: the clean signal recorded over `[record_from_s, record_from_s +
+    /// record_for_s)` is played back in a loop from the segment's start, in place of the live
+    /// one. Evaluated by the compiled channel, which holds the recording
+    /// ([`crate::attack::AgentAttack::observe`]); the segment must start at or after the end of
+    /// the recording window.
+    Replay {
+        record_from_s: f64,
+        record_for_s: f64,
+    },
 }
 
 impl Waveform {
-    /// Value at absolute time `t` in a segment that began at `segment_start`.
+    /// Value at absolute time `t` in a segment that began at `segment_start`. `replay` depends
+    /// on the recorded signal, not on time alone: the compiled channel evaluates it, and this
+    /// function gives 0 for it.
     pub fn value(&self, t: f64, segment_start: f64, rng: &mut ChaCha12Rng) -> f64 {
         match *self {
             Self::None => 0.0,
@@ -82,6 +94,18 @@ impl Waveform {
             Self::Ramp { slope_per_s, start } => ramp::value(t - segment_start, slope_per_s, start),
             Self::Gaussian { std, mean } => noise::value(rng, mean, std),
             Self::Corrupt { value } => corrupt::value(value),
+            Self::Replay { .. } => 0.0,
+        }
+    }
+
+    /// The recording window `[from, to)` of a `replay`, s.
+    pub fn replay_window(&self) -> Option<(f64, f64)> {
+        match *self {
+            Self::Replay {
+                record_from_s,
+                record_for_s,
+            } => Some((record_from_s, record_from_s + record_for_s)),
+            _ => None,
         }
     }
 
@@ -133,6 +157,24 @@ impl Waveform {
             }
             Self::Ramp { slope_per_s, start } => {
                 vec![("slope_per_s", slope_per_s), ("start", start)]
+            }
+            Self::Replay {
+                record_from_s,
+                record_for_s,
+            } => {
+                if record_from_s < 0.0 {
+                    out.push((
+                        "record_from_s",
+                        format!("must be ≥ 0, got {record_from_s}"),
+                    ));
+                }
+                if !(record_for_s > 0.0) {
+                    out.push(("record_for_s", format!("must be > 0, got {record_for_s}")));
+                }
+                vec![
+                    ("record_from_s", record_from_s),
+                    ("record_for_s", record_for_s),
+                ]
             }
             Self::Gaussian { std, mean } => {
                 if std < 0.0 {
