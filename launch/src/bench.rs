@@ -207,7 +207,7 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
         let path = crate::runtime::trace_path(&dir, &format!("agent-{}", agent.id));
         let mut last_sent: Option<u64> = None;
         for rec in TraceReader::open(&path)? {
-            if let TraceRecord::Latency { stamps: s, .. } = rec? {
+            if let TraceRecord::Latency { stamps: s, k, .. } = rec? {
                 let rec_ns = |h: &mut Histogram<u64>, from: u64, to: u64| {
                     if from > 0 && to >= from {
                         let _ = h.record((to - from).max(1));
@@ -219,7 +219,9 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
                 rec_ns(&mut h2, s.attacker_sent_ns, s.center_received_ns);
                 rec_ns(&mut cc, s.center_received_ns, s.center_sent_ns);
                 rec_ns(&mut h3, s.center_sent_ns, s.agent_received_ns);
-                if let Some(prev) = last_sent {
+                // The first interval includes the realtime start lead (measurement 0 goes out on
+                // the start message, measurement 1 at the epoch): not jitter.
+                if let Some(prev) = last_sent.filter(|_| k > 1) {
                     let dev = (s.agent_sent_ns as i64 - prev as i64 - period_ns).unsigned_abs();
                     let _ = jitter.record(dev.max(1));
                 }

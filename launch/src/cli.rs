@@ -78,6 +78,9 @@ pub enum ProcessRole {
     Agent,
     Attacker,
     ControlCenter,
+    /// Plays a recorded attacker trace (its `--trace`) back to the control center
+    /// (`run --replay`).
+    Replayer,
 }
 
 /// Which engine runs the scenario.
@@ -146,6 +149,11 @@ pub struct RunArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Golden regression: re-run the control center of a recorded run directory on its recorded
+    /// tampered measurements and compare the trace digest with the recording's (exit status 1
+    /// when they differ). The scenario comes from RUN_DIR.
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed"])]
+    pub replay: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -179,6 +187,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
             ProcessRole::Agent => fdi_agent::main_with(args),
             ProcessRole::Attacker => fdi_attacker::main_with(args),
             ProcessRole::ControlCenter => fdi_control_center::main_with(args),
+            ProcessRole::Replayer => crate::replayer::main_with(&args),
         }),
     }
 }
@@ -321,6 +330,7 @@ pub fn execute(
                 &runtime::IpcOptions {
                     run_dir: dir.to_path_buf(),
                     progress,
+                    replay: false,
                 },
             )?;
             let mut joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
@@ -342,6 +352,9 @@ pub fn execute(
 }
 
 fn run(args: &RunArgs) -> Result<ExitCode> {
+    if let Some(recorded) = &args.replay {
+        return crate::replayer::replay_run(recorded, &args.out, args.json);
+    }
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
     let dir = output::create_run_dir(&args.out, &r)?;
     let summary = execute(&r, args.engine, Some(&dir), !args.json)?;

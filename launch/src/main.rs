@@ -7,6 +7,7 @@ mod floor;
 mod join;
 mod output;
 mod plot;
+mod replayer;
 mod report;
 mod runtime;
 mod tables;

@@ -126,6 +126,9 @@ pub struct IpcOptions {
     /// The run directory: `scenario.toml` is read from it, traces go to `traces/`.
     pub run_dir: PathBuf,
     pub progress: bool,
+    /// Replay mode (`run --replay`): only the control center runs, fed by a replayer process
+    /// that plays back `traces/attacker.trace` of `run_dir` (already copied there).
+    pub replay: bool,
 }
 
 /// Trace path of a process.
@@ -157,11 +160,18 @@ impl Launcher {
                         let what =
                             format!("{} (pid {}) {}", p.label, p.child.id(), describe_status(st));
                         match (self.realtime, p.wake) {
-                            (true, Wake::Agent(id)) => self.lost.push(LostAgent {
-                                agent: id,
-                                t_s: None,
-                                reason: what,
-                            }),
+                            (true, Wake::Agent(id)) => {
+                                // The control center may have reported it silent first: one
+                                // entry per agent, with the exit as its reason.
+                                match self.lost.iter_mut().find(|x| x.agent == id) {
+                                    Some(x) => x.reason = what,
+                                    None => self.lost.push(LostAgent {
+                                        agent: id,
+                                        t_s: None,
+                                        reason: what,
+                                    }),
+                                }
+                            }
                             _ => return Some(what),
                         }
                     }
@@ -310,22 +320,26 @@ fn spawn_and_supervise(
     transport: &Transport,
     l: &mut Launcher,
 ) -> Result<f64> {
-    let mut roles: Vec<(String, String, Wake, Option<u32>)> = vec![
-        (
-            "control-center".into(),
-            "control-center".into(),
-            Wake::Center,
-            None,
-        ),
-        ("attacker".into(), "attacker".into(), Wake::Attacker, None),
-    ];
-    for a in &resolved.scenario.agents {
-        roles.push((
-            "agent".into(),
-            format!("agent-{}", a.id),
-            Wake::Agent(a.id),
-            Some(a.id),
-        ));
+    let mut roles: Vec<(String, String, Wake, Option<u32>)> = vec![(
+        "control-center".into(),
+        "control-center".into(),
+        Wake::Center,
+        None,
+    )];
+    if opts.replay {
+        // The replayer stands in for the attacker (and the agents); its `--trace` is the
+        // attacker trace it plays back.
+        roles.push(("replayer".into(), "attacker".into(), Wake::Attacker, None));
+    } else {
+        roles.push(("attacker".into(), "attacker".into(), Wake::Attacker, None));
+        for a in &resolved.scenario.agents {
+            roles.push((
+                "agent".into(),
+                format!("agent-{}", a.id),
+                Wake::Agent(a.id),
+                Some(a.id),
+            ));
+        }
     }
     for (role, name, wake, agent) in roles {
         let mut cmd = role_command(&role)?;
@@ -346,7 +360,7 @@ fn spawn_and_supervise(
         let child = cmd.spawn().with_context(|| format!("spawning {name}"))?;
         let label = match agent {
             Some(id) => format!("agent {id}"),
-            None => name.clone(),
+            None => role.clone(),
         };
         l.procs.push(Proc {
             label,
@@ -449,7 +463,12 @@ fn spawn_and_supervise(
         // A process that exited cleanly without reporting done (SIGTERM sent to it alone) ends
         // the run too: its peers would wait for it. Its done may have raced its exit: drain once
         // more before deciding.
-        let early = |done: &[bool], procs: &[Proc]| procs.iter().enumerate().position(|(i, p)| p.status.is_some_and(|st| st.success()) && !done[i]);
+        let early = |done: &[bool], procs: &[Proc]| {
+            procs
+                .iter()
+                .enumerate()
+                .position(|(i, p)| p.status.is_some_and(|st| st.success()) && !done[i])
+        };
         if early(&done, &l.procs).is_some() {
             let procs = &l.procs;
             l.status.drain(|m| {
@@ -462,7 +481,11 @@ fn spawn_and_supervise(
             if let Some(i) = early(&done, &l.procs) {
                 bar.abandon();
                 let p = &l.procs[i];
-                return Err(anyhow!("run stopped: {} (pid {}) exited before the end of the run", p.label, p.child.id()));
+                return Err(anyhow!(
+                    "run stopped: {} (pid {}) exited before the end of the run",
+                    p.label,
+                    p.child.id()
+                ));
             }
         }
         // The simulation ends when every process has reported done (its trace is flushed by

@@ -281,14 +281,25 @@ fn realtime_agent_killed_is_declared_lost_and_the_others_finish() {
     let v: serde_json::Value =
         serde_json::from_str(text.lines().last().expect("json line")).expect("json");
     let lost = v["lost_agents"].as_array().expect("lost_agents");
-    assert_eq!(lost.len(), 1, "{lost:?}");
-    assert_eq!(lost[0]["agent"], 2);
+    let killed: Vec<_> = lost.iter().filter(|l| l["agent"] == 2).collect();
+    assert_eq!(killed.len(), 1, "{lost:?}");
     assert!(
-        lost[0]["reason"]
+        killed[0]["reason"]
             .as_str()
             .is_some_and(|r| r.contains("SIGKILL")),
         "{lost:?}"
     );
+    assert!(
+        killed[0]["t_s"]
+            .as_f64()
+            .is_some_and(|t| t > 0.5 && t < 3.0),
+        "when: {lost:?}"
+    );
+    // On a loaded machine a live agent may also go silent for 40 ms and be reported; it is
+    // still controlled (its ticks are joined below), so only its reason is checked.
+    for other in lost.iter().filter(|l| l["agent"] != 2) {
+        assert_eq!(other["reason"], "fell silent", "{lost:?}");
+    }
     // The others were controlled to the end: 3000 ticks joined.
     assert_eq!(v["ticks"], 3000);
     assert!(stderr_of(&out).contains("agent 2 was lost"));
@@ -404,6 +415,13 @@ fn sigterm_to_one_child_stops_the_run_naming_it() {
     let out = wait_with_watchdog(child, WATCHDOG);
     assert!(!out.status.success());
     let err = stderr_of(&out);
-    assert!(err.contains("agent 2") && err.contains("exited before the end of the run"), "stderr: {err}");
-    assert!(leftovers_of(launcher).is_empty(), "{:?}", leftovers_of(launcher));
+    assert!(
+        err.contains("agent 2") && err.contains("exited before the end of the run"),
+        "stderr: {err}"
+    );
+    assert!(
+        leftovers_of(launcher).is_empty(),
+        "{:?}",
+        leftovers_of(launcher)
+    );
 }

@@ -163,12 +163,9 @@ impl Waveform {
                 record_for_s,
             } => {
                 if record_from_s < 0.0 {
-                    out.push((
-                        "record_from_s",
-                        format!("must be ≥ 0, got {record_from_s}"),
-                    ));
+                    out.push(("record_from_s", format!("must be ≥ 0, got {record_from_s}")));
                 }
-                if !(record_for_s > 0.0) {
+                if record_for_s <= 0.0 {
                     out.push(("record_for_s", format!("must be > 0, got {record_for_s}")));
                 }
                 vec![

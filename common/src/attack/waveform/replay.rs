@@ -11,7 +11,7 @@ pub fn index(elapsed: f64, spacing: f64, len: usize) -> Option<usize> {
     if len == 0 {
         return None;
     }
-    if len == 1 || !(spacing > 0.0) || !elapsed.is_finite() || elapsed <= 0.0 {
+    if len == 1 || spacing.is_nan() || spacing <= 0.0 || !elapsed.is_finite() || elapsed <= 0.0 {
         return Some(0);
     }
     let n = (elapsed / spacing).round();
