@@ -6,9 +6,7 @@ use std::process::ExitCode;
 
 use fdi_common::attack::AgentAttack;
 use fdi_common::engine::{attack_record, tamper, tick_time};
-use fdi_common::ipc::msg::{
-    from_vector, to_vector, validate_measurement, SeqVerdict, SequenceTracker,
-};
+use fdi_common::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_common::ipc::{
     monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, Wake,
 };
@@ -95,33 +93,8 @@ pub fn run(
                 refused += 1;
                 return;
             };
-            // Structure first (dof within the payload, finite time), then the sequence: a
-            // duplicate, a replay or a forged far-future number is refused and counted, and
-            // never moves the stream on.
-            let structure = validate_measurement(&m, 2, |_| true, m.seq).map(|_| ());
-            let verdict = structure
-                .as_ref()
-                .ok()
-                .map(|()| sequence.observe(m.agent, m.seq));
-            if let Some(SeqVerdict::Gap { missing }) = verdict {
-                let _ = trace.write(&TraceRecord::Event {
-                    t: tick_time(m.seq, dt),
-                    message: format!(
-                        "agent {}: {missing} measurements missing before tick {}",
-                        m.agent, m.seq
-                    ),
-                });
-            }
-            if !verdict.is_some_and(SeqVerdict::is_accepted) {
+            if !process::admit_measurement(&m, 2, &mut sequence, dt, trace) {
                 refused += 1;
-                let why = match (structure, verdict) {
-                    (Err(e), _) => e.to_string(),
-                    (_, v) => format!("agent {}, sequence {}: refused ({v:?})", m.agent, m.seq),
-                };
-                let _ = trace.write(&TraceRecord::Event {
-                    t: tick_time(m.seq.min(ticks), dt),
-                    message: why,
-                });
                 return;
             }
             liveness.seen(i, received);

@@ -341,6 +341,48 @@ impl Liveness {
     }
 }
 
+/// What a receiver of measurements (attacker, control center) does with one message: structure
+/// first (dof within the payload before any indexing, the expected dof, a finite time stamp),
+/// then the sequence (`sequence`, limit = the run's tick count). A gap is recorded as an event; a
+/// refusal (duplicate, replay, forged far-future number, malformed) is recorded and never moves
+/// the stream on. Returns whether to use the message.
+pub fn admit_measurement(
+    m: &crate::ipc::MeasurementMsg,
+    dof: usize,
+    sequence: &mut crate::ipc::msg::SequenceTracker,
+    control_period_s: f64,
+    trace: &mut crate::trace::TraceWriter,
+) -> bool {
+    use crate::engine::tick_time;
+    use crate::ipc::msg::{validate_measurement, SeqVerdict};
+    use crate::trace::TraceRecord;
+    let structure = validate_measurement(m, dof, |_| true, m.seq).map(|_| ());
+    let verdict = structure
+        .as_ref()
+        .ok()
+        .map(|()| sequence.observe(m.agent, m.seq));
+    // Events are diagnostics: a failing trace write surfaces on the next record write.
+    if let Some(SeqVerdict::Gap { missing }) = verdict {
+        let message = format!(
+            "agent {}: {missing} measurements missing before tick {}",
+            m.agent, m.seq
+        );
+        let _ = trace.write(&TraceRecord::Event {
+            t: tick_time(m.seq, control_period_s),
+            message,
+        });
+    }
+    if verdict.is_some_and(SeqVerdict::is_accepted) {
+        return true;
+    }
+    let message = match (structure, verdict) {
+        (Err(e), _) => e.to_string(),
+        (_, v) => format!("agent {}, sequence {}: refused ({v:?})", m.agent, m.seq),
+    };
+    let _ = trace.write(&TraceRecord::Event { t: m.t, message });
+    false
+}
+
 #[cfg(test)]
 mod liveness_tests {
     use super::Liveness;
