@@ -336,6 +336,13 @@ impl Liveness {
         out
     }
 
+    /// How long peer `i` has been silent at `now_ns`.
+    pub fn silence_ns(&self, i: usize, now_ns: u64) -> u64 {
+        self.last_seen_ns
+            .get(i)
+            .map_or(0, |s| now_ns.saturating_sub(*s))
+    }
+
     pub fn is_lost(&self, i: usize) -> bool {
         self.lost_at_ns.get(i).is_some_and(Option::is_some)
     }

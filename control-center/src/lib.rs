@@ -150,7 +150,8 @@ pub fn run(
             let now = monotonic_ns();
             for i in liveness.newly_lost(now, |i| slots[i].next >= ticks) {
                 let (id, last) = (slots[i].center.agent_id(), slots[i].next.saturating_sub(1));
-                let message = format!("agent {id} lost: no measurement for {} ms after tick {last}; the others stay controlled", LOST_AFTER_NS / 1_000_000);
+                let silent_ms = liveness.silence_ns(i, now) as f64 / 1e6;
+                let message = format!("agent {id} lost: detected {silent_ms:.1} ms after its last measurement (limit {} ms, after tick {last}); the others stay controlled", LOST_AFTER_NS / 1_000_000);
                 trace.write(&TraceRecord::Event {
                     t: tick_time(last, dt),
                     message,
