@@ -223,7 +223,7 @@ pub fn run(
                     if shutdown.requested() || ports.launcher.stop_requested()? {
                         return stopped(k);
                     }
-                    strategy.wait(&ports.waker)?;
+                    strategy.wait(&ports.waker, &ports.torque)?;
                     take_torques(&mut plant, ports, trace, &mut inflow, false)?;
                 }
             }

@@ -146,7 +146,7 @@ pub fn run(
         if realtime {
             ports.waker.wait_precise(LIVENESS_CHECK)?;
         } else {
-            strategy.wait(&ports.waker)?;
+            strategy.wait(&ports.waker, &ports.measurement)?;
         }
     }
     if refused > 0 {

@@ -6,7 +6,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use crate::ipc::{Bell, ControlMsg, Inbox, IpcError, Outbox, Role, StatusMsg, Waker};
+use crate::ipc::{
+    Bell, ControlMsg, Inbox, IpcError, Outbox, Role, StatusMsg, Waker, ZeroCopySendCopy,
+};
 
 /// Arguments the launcher passes to every process.
 #[derive(Debug, Clone, clap::Args)]
@@ -111,12 +113,19 @@ impl WaitStrategy {
         }
     }
 
-    /// Returns once `waker` was rung, or after [`WAIT_SLICE`].
-    pub fn wait(&self, waker: &Waker) -> Result<bool, IpcError> {
+    /// Returns once `inbox` holds a message (or `waker` was rung), or after [`WAIT_SLICE`]. The
+    /// spin polls the inbox's shared-memory queue (no system call) and yields between polls;
+    /// the pending notification is consumed once work is found.
+    pub fn wait<T: ZeroCopySendCopy>(
+        &self,
+        waker: &Waker,
+        inbox: &crate::ipc::Inbox<T>,
+    ) -> Result<bool, IpcError> {
         if !self.spin.is_zero() {
             let began = Instant::now();
             while began.elapsed() < self.spin {
-                if waker.wait(Duration::ZERO)? {
+                if inbox.has_messages()? {
+                    waker.wait(Duration::ZERO)?;
                     return Ok(true);
                 }
                 std::thread::yield_now();

@@ -179,7 +179,7 @@ pub fn run(
         if realtime {
             ports.waker.wait_precise(LIVENESS_CHECK)?;
         } else {
-            strategy.wait(&ports.waker)?;
+            strategy.wait(&ports.waker, &ports.tampered)?;
         }
     }
     let rejected: u64 = slots.iter().map(|x| x.center.rejected_inputs).sum();

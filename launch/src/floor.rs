@@ -604,7 +604,7 @@ fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Resul
             // As the agent waits for its torque: wait on the event, then look.
             let began = Instant::now();
             loop {
-                let rung = strategy.wait(&ports.waker)?;
+                let rung = strategy.wait(&ports.waker, &ports.inbox)?;
                 if ports.take(i)? {
                     break;
                 }
@@ -685,7 +685,7 @@ fn ipc_peer(
         if stop {
             return Ok(());
         }
-        if !strategy.wait(&ports.waker)? {
+        if !strategy.wait(&ports.waker, &ports.inbox)? {
             parent.check()?;
             if last.elapsed() > PEER_IDLE_TIMEOUT {
                 bail!("bench-peer: nothing arrived for {PEER_IDLE_TIMEOUT:?}");

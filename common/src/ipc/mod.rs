@@ -437,7 +437,19 @@ pub struct Inbox<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> {
     service: String,
 }
 
+/// Payload types the transport carries (`#[repr(C)]`, zero-copy, plain data).
+pub trait ZeroCopySendCopy: ZeroCopySend + Copy + std::fmt::Debug + 'static {}
+impl<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> ZeroCopySendCopy for T {}
+
 impl<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> Inbox<T> {
+    /// True when a message is waiting (reads the shared-memory queue; no system call).
+    pub fn has_messages(&self) -> Result<bool, IpcError> {
+        self.port.has_samples().map_err(|e| IpcError::Receive {
+            service: self.service.clone(),
+            reason: format!("{e:?}"),
+        })
+    }
+
     /// Hands every waiting message to `f`, oldest first; returns how many.
     pub fn drain(&self, mut f: impl FnMut(T)) -> Result<usize, IpcError> {
         let mut n = 0;
