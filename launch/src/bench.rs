@@ -255,6 +255,15 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
         run_dir: dir.display().to_string(),
     };
     write_latency(&dir, &report)?;
+    latency_histogram_png(
+        &dir,
+        &[
+            ("end-to-end", &e2e),
+            ("agent -> attacker", &h1),
+            ("attacker -> center", &h2),
+            ("center -> agent", &h3),
+        ],
+    )?;
     Ok(report)
 }
 
@@ -357,6 +366,56 @@ fn write_latency(dir: &Path, r: &LatencyReport) -> Result<()> {
         ));
     }
     std::fs::write(dir.join("latency.csv"), csv).context("writing latency.csv")
+}
+
+/// `latency.png` / `latency.svg`: share of messages per latency bucket (log-spaced), per hop.
+fn latency_histogram_png(dir: &Path, hists: &[(&str, &Histogram<u64>)]) -> Result<()> {
+    const EDGES_US: [u64; 11] = [
+        0,
+        10,
+        20,
+        50,
+        100,
+        200,
+        500,
+        1_000,
+        2_000,
+        5_000,
+        u64::MAX / 1_000,
+    ];
+    let categories = EDGES_US
+        .windows(2)
+        .map(|w| {
+            if w[1] >= u64::MAX / 1_000 {
+                format!("≥{} µs", w[0])
+            } else {
+                format!("{}–{} µs", w[0], w[1])
+            }
+        })
+        .collect();
+    let series = hists
+        .iter()
+        .zip(crate::plot::PALETTE)
+        .map(|((name, h), color)| {
+            let total = h.len().max(1) as f64;
+            let shares = EDGES_US
+                .windows(2)
+                .map(|w| {
+                    100.0 * h.count_between(w[0] * 1_000, (w[1] * 1_000).saturating_sub(1)) as f64
+                        / total
+                })
+                .collect();
+            ((*name).to_string(), color, shares)
+        })
+        .collect();
+    let chart = crate::plot::BarChart {
+        title: "Realtime latency per hop".into(),
+        y_label: "share of messages (%)".into(),
+        categories,
+        series,
+    };
+    crate::plot::save_bars(&chart, &dir.join("latency"), (1100, 600))?;
+    Ok(())
 }
 
 fn print_latency(r: &LatencyReport) {
