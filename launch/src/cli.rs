@@ -380,6 +380,10 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     } else {
         print_summary(&summary);
         println!("run directory {}", dir.display());
+        let report = dir.join("report").join("report.md");
+        if report.is_file() {
+            println!("report {}", report.display());
+        }
     }
     // A run that lost agents completed for the others, but is not a clean run.
     Ok(if summary.lost_agents.is_empty() {
