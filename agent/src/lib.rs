@@ -17,31 +17,13 @@ use fdi_common::ipc::{
 use fdi_common::model::Vector;
 use fdi_common::plant::{Measurement, Plant, PlantParams};
 use fdi_common::process::{
-    self, LauncherLink, ProcessArgs, ProcessError, Shutdown, Start, WaitStrategy, WAIT_SLICE,
+    self, LauncherLink, ProcessArgs, Shutdown, Start, WaitStrategy, WAIT_SLICE,
 };
 use fdi_common::scenario::{self, ClockMode, Resolved};
-use fdi_common::trace::{HopStamps, TraceError, TraceRecord, TraceWriter};
+use fdi_common::trace::{HopStamps, TraceRecord, TraceWriter};
 
 /// Errors of the agent process.
-#[derive(Debug, thiserror::Error)]
-pub enum AgentError {
-    #[error(transparent)]
-    Process(#[from] ProcessError),
-    #[error(transparent)]
-    Ipc(#[from] fdi_common::ipc::IpcError),
-    #[error(transparent)]
-    Trace(#[from] TraceError),
-    #[error(transparent)]
-    Scenario(#[from] scenario::ScenarioError),
-    #[error("agent {0} is not in the scenario")]
-    NotInScenario(u32),
-    #[error("--agent is required")]
-    MissingId,
-    #[error("agent {0}: its model does not have 2 links")]
-    Dof(u32),
-    #[error("installing signal handlers: {0}")]
-    Signals(std::io::Error),
-}
+pub type AgentError = fdi_common::process::RoleError;
 
 /// The agent's ports.
 #[derive(Debug)]

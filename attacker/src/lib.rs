@@ -12,25 +12,14 @@ use fdi_common::ipc::{
 };
 use fdi_common::plant::Measurement;
 use fdi_common::process::{
-    self, LauncherLink, Liveness, ProcessArgs, ProcessError, Shutdown, Start, WaitStrategy,
-    LIVENESS_CHECK, LOST_AFTER_NS,
+    self, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy, LIVENESS_CHECK,
+    LOST_AFTER_NS,
 };
 use fdi_common::scenario::{self, ClockMode, Resolved};
-use fdi_common::trace::{TraceError, TraceRecord, TraceWriter};
+use fdi_common::trace::{TraceRecord, TraceWriter};
 
-#[derive(Debug, thiserror::Error)]
-pub enum AttackerError {
-    #[error(transparent)]
-    Process(#[from] ProcessError),
-    #[error(transparent)]
-    Ipc(#[from] fdi_common::ipc::IpcError),
-    #[error(transparent)]
-    Trace(#[from] TraceError),
-    #[error(transparent)]
-    Scenario(#[from] scenario::ScenarioError),
-    #[error("installing signal handlers: {0}")]
-    Signals(std::io::Error),
-}
+/// Errors of the attacker process.
+pub type AttackerError = fdi_common::process::RoleError;
 
 /// The attacker's ports.
 #[derive(Debug)]

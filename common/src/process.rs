@@ -146,6 +146,27 @@ pub enum ProcessError {
     StoppedBeforeStart,
 }
 
+/// Why a runtime process (agent, attacker, control center) failed: one type for all of them.
+#[derive(Debug, thiserror::Error)]
+pub enum RoleError {
+    #[error(transparent)]
+    Process(#[from] ProcessError),
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+    #[error(transparent)]
+    Trace(#[from] crate::trace::TraceError),
+    #[error(transparent)]
+    Scenario(#[from] crate::scenario::ScenarioError),
+    #[error("installing signal handlers: {0}")]
+    Signals(std::io::Error),
+    #[error("agent {0} is not in the scenario")]
+    NotInScenario(u32),
+    #[error("--agent is required")]
+    MissingId,
+    #[error("agent {0}: its model does not have 2 links")]
+    Dof(u32),
+}
+
 /// Outcome of waiting for the start.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Start {

@@ -12,27 +12,14 @@ use fdi_common::ipc::{
     monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
 };
 use fdi_common::process::{
-    self, LauncherLink, Liveness, ProcessArgs, ProcessError, Shutdown, Start, WaitStrategy,
-    LIVENESS_CHECK, LOST_AFTER_NS,
+    self, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy, LIVENESS_CHECK,
+    LOST_AFTER_NS,
 };
 use fdi_common::scenario::{self, ClockMode, Resolved};
-use fdi_common::trace::{TraceError, TraceRecord, TraceWriter};
+use fdi_common::trace::{TraceRecord, TraceWriter};
 
-#[derive(Debug, thiserror::Error)]
-pub enum CenterError {
-    #[error(transparent)]
-    Process(#[from] ProcessError),
-    #[error(transparent)]
-    Ipc(#[from] fdi_common::ipc::IpcError),
-    #[error(transparent)]
-    Trace(#[from] TraceError),
-    #[error(transparent)]
-    Scenario(#[from] scenario::ScenarioError),
-    #[error("agent {0}: its model does not have 2 links")]
-    Dof(u32),
-    #[error("installing signal handlers: {0}")]
-    Signals(std::io::Error),
-}
+/// Errors of the control-center process.
+pub type CenterError = fdi_common::process::RoleError;
 
 /// Ports towards one agent.
 #[derive(Debug)]
