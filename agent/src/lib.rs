@@ -19,7 +19,7 @@ use fdi_common::plant::{Measurement, Plant, PlantParams};
 use fdi_common::process::{
     self, LauncherLink, ProcessArgs, Shutdown, Start, WaitStrategy, WAIT_SLICE,
 };
-use fdi_common::scenario::{self, ClockMode, Resolved};
+use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{HopStamps, TraceRecord, TraceWriter};
 
 /// Errors of the agent process.
@@ -272,15 +272,8 @@ pub fn run(
 }
 
 fn open(args: &ProcessArgs) -> Result<(u32, Resolved, Ports, TraceWriter, Shutdown), AgentError> {
-    let shutdown = Shutdown::install(args.launcher_pid).map_err(AgentError::Signals)?;
     let id = args.agent.ok_or(AgentError::MissingId)?;
-    let resolved = scenario::load_file(&args.scenario)?;
-    let conn = process::connect(
-        args,
-        Role::Agent,
-        Wake::Agent(id),
-        process::sizing_for(&resolved),
-    )?;
+    let (shutdown, resolved, conn) = process::start(args, Role::Agent, Wake::Agent(id))?;
     let ports = Ports {
         measurement: conn.transport.publisher(Stream::Measurement)?,
         torque: conn.transport.subscriber(Stream::Torque(id))?,

@@ -15,7 +15,7 @@ use fdi_common::process::{
     self, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy, LIVENESS_CHECK,
     LOST_AFTER_NS,
 };
-use fdi_common::scenario::{self, ClockMode, Resolved};
+use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 
 /// Errors of the attacker process.
@@ -150,14 +150,7 @@ pub fn run(
 }
 
 fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), AttackerError> {
-    let shutdown = Shutdown::install(args.launcher_pid).map_err(AttackerError::Signals)?;
-    let resolved = scenario::load_file(&args.scenario)?;
-    let conn = process::connect(
-        args,
-        Role::Attacker,
-        Wake::Attacker,
-        process::sizing_for(&resolved),
-    )?;
+    let (shutdown, resolved, conn) = process::start(args, Role::Attacker, Wake::Attacker)?;
     let ports = Ports {
         measurement: conn.transport.subscriber(Stream::Measurement)?,
         tampered: conn.transport.publisher(Stream::Tampered)?,

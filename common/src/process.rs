@@ -290,6 +290,19 @@ pub fn connect(
     })
 }
 
+/// The start-up every process shell shares: SIGINT/SIGTERM and parent-death handling, the
+/// run's scenario, and the transport with its launcher link and waker.
+pub fn start(
+    args: &ProcessArgs,
+    role: Role,
+    wake: crate::ipc::Wake,
+) -> Result<(Shutdown, crate::scenario::Resolved, Connection), RoleError> {
+    let shutdown = Shutdown::install(args.launcher_pid).map_err(RoleError::Signals)?;
+    let resolved = crate::scenario::load_file(&args.scenario)?;
+    let conn = connect(args, role, wake, sizing_for(&resolved))?;
+    Ok((shutdown, resolved, conn))
+}
+
 /// Sizing of a run's services: every process computes the same from the scenario.
 pub fn sizing_for(resolved: &crate::scenario::Resolved) -> crate::ipc::Sizing {
     // Lookahead lets an agent run up to τ_max/Δ ticks ahead of its commands.

@@ -15,7 +15,7 @@ use fdi_common::process::{
     self, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy, LIVENESS_CHECK,
     LOST_AFTER_NS,
 };
-use fdi_common::scenario::{self, ClockMode, Resolved};
+use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 
 /// Errors of the control-center process.
@@ -179,14 +179,7 @@ pub fn run(
 }
 
 fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), CenterError> {
-    let shutdown = Shutdown::install(args.launcher_pid).map_err(CenterError::Signals)?;
-    let resolved = scenario::load_file(&args.scenario)?;
-    let conn = process::connect(
-        args,
-        Role::Center,
-        Wake::Center,
-        process::sizing_for(&resolved),
-    )?;
+    let (shutdown, resolved, conn) = process::start(args, Role::Center, Wake::Center)?;
     let mut agents = Vec::with_capacity(resolved.agent_count());
     for a in &resolved.scenario.agents {
         agents.push(AgentLink {
