@@ -28,6 +28,36 @@ pub struct ProcessArgs {
     /// Pid of the launcher: the process stops when it dies.
     #[arg(long)]
     pub launcher_pid: Option<u32>,
+    /// Run under SCHED_FIFO at this priority (1–99) instead of the default time-sharing
+    /// policy (realtime runs, `--rt-priority` of the launcher).
+    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=99))]
+    pub rt_priority: Option<u8>,
+}
+
+/// Puts the calling thread under SCHED_FIFO at `priority` (1–99); threads it starts later
+/// inherit the policy. The error says why not, in words a user can act on.
+pub fn use_fifo(priority: u8) -> Result<(), String> {
+    use thread_priority::unix::{
+        set_thread_priority_and_policy, thread_native_id, RealtimeThreadSchedulePolicy,
+        ThreadSchedulePolicy,
+    };
+    use thread_priority::{ThreadPriority, ThreadPriorityValue};
+    let value =
+        ThreadPriorityValue::try_from(priority).map_err(|e| format!("priority {priority}: {e}"))?;
+    set_thread_priority_and_policy(
+        thread_native_id(),
+        ThreadPriority::Crossplatform(value),
+        ThreadSchedulePolicy::Realtime(RealtimeThreadSchedulePolicy::Fifo),
+    )
+    .map_err(|e| match e {
+        thread_priority::Error::OS(code) if code == rustix::io::Errno::PERM.raw_os_error() => {
+            format!(
+                "SCHED_FIFO priority {priority} is not permitted for this user (it needs \
+                 CAP_SYS_NICE, or an RLIMIT_RTPRIO of at least {priority}: `ulimit -r`)"
+            )
+        }
+        other => format!("SCHED_FIFO priority {priority}: {other:?}"),
+    })
 }
 
 /// Set when the process must stop: SIGINT, SIGTERM, or the launcher died.
@@ -165,6 +195,8 @@ pub enum RoleError {
     MissingId,
     #[error("agent {0}: its model does not have 2 links")]
     Dof(u32),
+    #[error("{0}")]
+    Scheduling(String),
 }
 
 /// Outcome of waiting for the start.
@@ -298,6 +330,9 @@ pub fn start(
     wake: crate::ipc::Wake,
 ) -> Result<(Shutdown, crate::scenario::Resolved, Connection), RoleError> {
     let shutdown = Shutdown::install(args.launcher_pid).map_err(RoleError::Signals)?;
+    if let Some(priority) = args.rt_priority {
+        use_fifo(priority).map_err(RoleError::Scheduling)?;
+    }
     let resolved = crate::scenario::load_file(&args.scenario)?;
     let conn = connect(args, role, wake, sizing_for(&resolved))?;
     Ok((shutdown, resolved, conn))

@@ -64,6 +64,10 @@ pub struct LatencyArgs {
     /// Folder that receives the run directory.
     #[arg(long, default_value = "runs")]
     pub out: PathBuf,
+    /// Put every process of the run under SCHED_FIFO at this priority (1–99). Needs
+    /// CAP_SYS_NICE or an RLIMIT_RTPRIO of at least the priority.
+    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
+    pub rt_priority: Option<u8>,
 }
 
 #[derive(Debug, Args)]
@@ -171,6 +175,8 @@ struct LatencyReport {
     deadline_misses: u64,
     deadline_miss_ratio: f64,
     lost_ticks: u64,
+    /// Scheduling policy of the run's processes: `SCHED_OTHER` or `SCHED_FIFO <priority>`.
+    scheduling: String,
     run_dir: String,
 }
 
@@ -190,8 +196,9 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
             problems
         });
     }
+    crate::cli::check_scheduling(&r, Engine::Ipc, a.rt_priority)?;
     let dir = output::create_run_dir(&a.out, &r)?;
-    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json)?;
+    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json, a.rt_priority)?;
 
     let (mut e2e, mut h1, mut h2, mut h3, mut att, mut cc, mut jitter) = (
         histogram()?,
@@ -252,6 +259,9 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
             0.0
         },
         lost_ticks: agent_ticks.saturating_sub(e2e.len()),
+        scheduling: a
+            .rt_priority
+            .map_or("SCHED_OTHER".into(), |p| format!("SCHED_FIFO {p}")),
         run_dir: dir.display().to_string(),
     };
     write_latency(&dir, &report)?;
@@ -298,6 +308,7 @@ fn transport(a: &TransportArgs) -> Result<ExitCode> {
         rate_hz: 1000.0,
         json: true,
         out: a.out.clone(),
+        rt_priority: None,
     })?;
     let hops = [
         rt.hops_us.agent_to_attacker.p50,
@@ -420,8 +431,8 @@ fn latency_histogram_png(dir: &Path, hists: &[(&str, &Histogram<u64>)]) -> Resul
 
 fn print_latency(r: &LatencyReport) {
     println!(
-        "Realtime latency: {} agents at {} Hz for {} s ({} ticks)",
-        r.agents, r.rate_hz, r.duration_s, r.ticks
+        "Realtime latency: {} agents at {} Hz for {} s ({} ticks), {}",
+        r.agents, r.rate_hz, r.duration_s, r.ticks, r.scheduling
     );
     println!();
     println!("| µs | p50 | p90 | p99 | p99.9 | max |");
@@ -466,9 +477,9 @@ fn lockstep(a: &LockstepArgs) -> Result<ExitCode> {
         let mut r = scaled_paper(n)?;
         r.scenario.duration_s = a.duration_s;
         let dir_in = output::create_run_dir(&root, &named(&r, "inproc"))?;
-        let inproc = execute(&r, Engine::Inproc, Some(&dir_in), false)?;
+        let inproc = execute(&r, Engine::Inproc, Some(&dir_in), false, None)?;
         let dir_ipc = output::create_run_dir(&root, &named(&r, "ipc"))?;
-        let ipc = execute(&r, Engine::Ipc, Some(&dir_ipc), !a.json)?;
+        let ipc = execute(&r, Engine::Ipc, Some(&dir_ipc), !a.json, None)?;
         if !a.keep_traces {
             for d in [&dir_in, &dir_ipc] {
                 let _ = std::fs::remove_dir_all(d.join("traces"));

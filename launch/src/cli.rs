@@ -149,10 +149,14 @@ pub struct RunArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Realtime runs: put every process of the run under SCHED_FIFO at this priority (1–99).
+    /// Needs CAP_SYS_NICE or an RLIMIT_RTPRIO of at least the priority.
+    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
+    pub rt_priority: Option<u8>,
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
     /// tampered measurements and compare the trace digest with the recording's (exit status 1
     /// when they differ). The scenario comes from RUN_DIR.
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority"])]
     pub replay: Option<PathBuf>,
 }
 
@@ -296,6 +300,7 @@ pub fn execute(
     engine: Engine,
     run_dir: Option<&Path>,
     progress: bool,
+    rt_priority: Option<u8>,
 ) -> Result<RunSummary> {
     match (engine, run_dir) {
         (Engine::Inproc, None) => run_inproc::<2>(r, |_| {}).context("in-process engine"),
@@ -331,6 +336,7 @@ pub fn execute(
                     run_dir: dir.to_path_buf(),
                     progress,
                     replay: false,
+                    rt_priority,
                 },
             )?;
             let mut joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
@@ -351,13 +357,30 @@ pub fn execute(
     }
 }
 
+/// Refuses `--rt-priority` where it does not apply or is not permitted, before anything starts
+/// (and before a run directory exists).
+pub fn check_scheduling(r: &Resolved, engine: Engine, rt_priority: Option<u8>) -> Result<()> {
+    let Some(priority) = rt_priority else {
+        return Ok(());
+    };
+    if engine != Engine::Ipc || r.scenario.clock != ClockMode::Realtime {
+        bail!(
+            "--rt-priority {priority} applies to realtime runs of the ipc engine only \
+             (lockstep processes spin before they block: under SCHED_FIFO a spinning process \
+             would starve everything else on its CPU)"
+        );
+    }
+    runtime::check_rt_priority(priority)
+}
+
 fn run(args: &RunArgs) -> Result<ExitCode> {
     if let Some(recorded) = &args.replay {
         return crate::replayer::replay_run(recorded, &args.out, args.json);
     }
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
+    check_scheduling(&r, args.engine, args.rt_priority)?;
     let dir = output::create_run_dir(&args.out, &r)?;
-    let summary = execute(&r, args.engine, Some(&dir), !args.json)?;
+    let summary = execute(&r, args.engine, Some(&dir), !args.json, args.rt_priority)?;
     for lost in &summary.lost_agents {
         let when = lost
             .t_s

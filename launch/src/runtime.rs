@@ -129,6 +129,17 @@ pub struct IpcOptions {
     /// Replay mode (`run --replay`): only the control center runs, fed by a replayer process
     /// that plays back `traces/attacker.trace` of `run_dir` (already copied there).
     pub replay: bool,
+    /// Every process of the run under SCHED_FIFO at this priority (realtime runs).
+    pub rt_priority: Option<u8>,
+}
+
+/// Checks on a throw-away thread that this user may use SCHED_FIFO at `priority`, so that a
+/// refused request fails before any process starts, with the reason.
+pub fn check_rt_priority(priority: u8) -> Result<()> {
+    std::thread::spawn(move || fdi_common::process::use_fifo(priority))
+        .join()
+        .map_err(|_| anyhow::anyhow!("--rt-priority {priority}: the check panicked"))?
+        .map_err(|e| anyhow::anyhow!("--rt-priority {priority}: {e}"))
 }
 
 /// Trace path of a process.
@@ -353,6 +364,9 @@ fn spawn_and_supervise(
             .arg(std::process::id().to_string());
         if let Some(id) = agent {
             cmd.arg("--agent").arg(id.to_string());
+        }
+        if let Some(priority) = opts.rt_priority {
+            cmd.arg("--rt-priority").arg(priority.to_string());
         }
         cmd.stdin(Stdio::null())
             .stdout(Stdio::null())

@@ -425,3 +425,78 @@ fn sigterm_to_one_child_stops_the_run_naming_it() {
         leftovers_of(launcher)
     );
 }
+
+/// `(rt_priority, policy)` of a process from `/proc/<pid>/stat` (fields 40 and 41).
+fn scheduling_of(pid: u32) -> Option<(u32, u32)> {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
+    let after_name = &stat[stat.rfind(')')? + 1..];
+    let fields: Vec<&str> = after_name.split_whitespace().collect();
+    // `fields[0]` is field 3 (state).
+    Some((fields.get(37)?.parse().ok()?, fields.get(38)?.parse().ok()?))
+}
+
+#[test]
+fn realtime_rt_priority_puts_every_process_under_fifo_or_is_refused_with_the_reason() {
+    const SCHED_FIFO: u32 = 1;
+    let dir = Scratch::new("rt-priority");
+    // Lockstep refuses it before anything starts: no run directory.
+    let out = launch(
+        &["run", "--duration-s", "1", "--rt-priority", "7"],
+        &dir.0,
+        WATCHDOG,
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("--rt-priority 7 applies to realtime runs"),
+        "{stderr}"
+    );
+    assert_eq!(
+        std::fs::read_dir(&dir.0).map_or(0, |d| d.count()),
+        0,
+        "a refused run left a run directory"
+    );
+
+    let permitted = std::thread::spawn(|| fdi_common::process::use_fifo(7))
+        .join()
+        .expect("probe thread");
+    let child = spawn(
+        &[
+            "run",
+            "--clock",
+            "realtime",
+            "--duration-s",
+            "3",
+            "--rt-priority",
+            "7",
+            "--json",
+        ],
+        &dir.0,
+    );
+    let launcher = child.id();
+    match permitted {
+        Ok(()) => {
+            // control center, attacker, four agents: all SCHED_FIFO at priority 7.
+            assert!(
+                wait_until(Duration::from_secs(60), || {
+                    let children = children_of(launcher);
+                    children.len() == 6
+                        && children
+                            .iter()
+                            .all(|(pid, _)| scheduling_of(*pid) == Some((7, SCHED_FIFO)))
+                }),
+                "the run's processes never all ran under SCHED_FIFO 7"
+            );
+            let v = json(&wait_with_watchdog(child, WATCHDOG));
+            assert_eq!(v["clock"], "realtime");
+            assert_eq!(v["ticks"], 3000);
+        }
+        Err(reason) => {
+            let out = wait_with_watchdog(child, WATCHDOG);
+            let stderr = String::from_utf8_lossy(&out.stderr);
+            assert!(!out.status.success());
+            assert!(stderr.contains("--rt-priority 7"), "{stderr}");
+            assert!(stderr.contains(&reason), "{stderr} / {reason}");
+        }
+    }
+}
