@@ -177,6 +177,16 @@ struct LatencyReport {
     lost_ticks: u64,
     /// Scheduling policy of the run's processes: `SCHED_OTHER` or `SCHED_FIFO <priority>`.
     scheduling: String,
+    /// The machine beside the run: how late a timer thread of the launcher woke at every
+    /// period boundary (same scheduling as the run).
+    timer_probe_late_us: Percentiles,
+    /// Wake-ups of that thread late by 1 ms or more: stalls of the machine itself.
+    timer_probe_stalls_over_1ms: u64,
+    /// Deadline misses whose window (from the due command's measurement to the step that
+    /// missed it) overlaps a stall of the timer thread of 0.5 ms or more.
+    deadline_misses_in_machine_stalls: u64,
+    /// Share of all steps whose window overlaps such a stall (what chance alone would give).
+    steps_in_machine_stalls_ratio: f64,
     run_dir: String,
 }
 
@@ -198,7 +208,11 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
     }
     crate::cli::check_scheduling(&r, Engine::Ipc, a.rt_priority)?;
     let dir = output::create_run_dir(&a.out, &r)?;
-    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json, a.rt_priority)?;
+    let period_ns = (r.scenario.control_period_s * 1e9) as i64;
+    let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), a.rt_priority);
+    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json, a.rt_priority);
+    let probe = probe.finish();
+    let (summary, probe) = (summary?, probe?);
 
     let (mut e2e, mut h1, mut h2, mut h3, mut att, mut cc, mut jitter) = (
         histogram()?,
@@ -209,12 +223,21 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
         histogram()?,
         histogram()?,
     );
-    let period_ns = (r.scenario.control_period_s * 1e9) as i64;
+    // Every step as a wall-clock window `[ran − τ − 2Δ, ran]`: from when the command due
+    // could have been measured to when the step ran (and missed it, or not).
+    let (mut miss_windows, mut step_windows) = (Vec::new(), Vec::new());
     for agent in &r.scenario.agents {
         let path = crate::runtime::trace_path(&dir, &format!("agent-{}", agent.id));
         let mut last_sent: Option<u64> = None;
+        let mut sent_at = std::collections::HashMap::new();
+        let mut steps = Vec::new();
         for rec in TraceReader::open(&path)? {
-            if let TraceRecord::Latency { stamps: s, k, .. } = rec? {
+            let rec = rec?;
+            if let TraceRecord::Agent(a) = &rec {
+                steps.push((a.k, a.tau, a.missed));
+            }
+            if let TraceRecord::Latency { stamps: s, k, .. } = rec {
+                sent_at.insert(k, s.agent_sent_ns);
                 let rec_ns = |h: &mut Histogram<u64>, from: u64, to: u64| {
                     if from > 0 && to >= from {
                         let _ = h.record((to - from).max(1));
@@ -235,7 +258,30 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
                 last_sent = Some(s.agent_sent_ns);
             }
         }
+        for (k, tau, missed) in steps {
+            // The step from t_k ran just before measurement k + 1 went out.
+            let ran = sent_at
+                .get(&(k + 1))
+                .copied()
+                .or_else(|| sent_at.get(&k).map(|s| s + period_ns.unsigned_abs()));
+            if let Some(ran) = ran {
+                let reach = (tau * 1e9) as u64 + 2 * period_ns.unsigned_abs();
+                let window = (ran.saturating_sub(reach), ran);
+                step_windows.push(window);
+                if missed {
+                    miss_windows.push(window);
+                }
+            }
+        }
     }
+    let misses_in_stalls = crate::probe::overlapping(&miss_windows, &probe.stalls) as u64;
+    // What share of all steps a stall touches: the rate at which misses would fall in stalls
+    // by chance alone.
+    let stall_share = if step_windows.is_empty() {
+        0.0
+    } else {
+        crate::probe::overlapping(&step_windows, &probe.stalls) as f64 / step_windows.len() as f64
+    };
     let misses: u64 = summary.metrics.values().map(|m| m.deadline_misses).sum();
     let agent_ticks = summary.ticks * a.agents as u64;
     let report = LatencyReport {
@@ -262,6 +308,10 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
         scheduling: a
             .rt_priority
             .map_or("SCHED_OTHER".into(), |p| format!("SCHED_FIFO {p}")),
+        timer_probe_late_us: percentiles(&probe.late),
+        timer_probe_stalls_over_1ms: probe.stalls_over(1_000_000) as u64,
+        deadline_misses_in_machine_stalls: misses_in_stalls,
+        steps_in_machine_stalls_ratio: stall_share,
         run_dir: dir.display().to_string(),
     };
     write_latency(&dir, &report)?;
@@ -360,6 +410,7 @@ fn latency_rows(r: &LatencyReport) -> Vec<(&'static str, Percentiles)> {
         ("control-center compute", r.center_compute_us),
         ("hop control center -> agent", r.hops_us.center_to_agent),
         ("control-period jitter", r.period_jitter_us),
+        ("machine: timer wake-up lateness", r.timer_probe_late_us),
     ]
 }
 
@@ -450,6 +501,13 @@ fn print_latency(r: &LatencyReport) {
         r.ticks * r.agents as u64,
         100.0 * r.deadline_miss_ratio,
         r.lost_ticks
+    );
+    println!(
+        "machine stalls: timer threads beside the run (one per CPU) woke >= 1 ms late {} \
+         times; {} of the deadline misses fall in a stall of >= 0.5 ms (as do {:.2} % of all steps)",
+        r.timer_probe_stalls_over_1ms,
+        r.deadline_misses_in_machine_stalls,
+        100.0 * r.steps_in_machine_stalls_ratio
     );
     println!("run directory {}", r.run_dir);
 }

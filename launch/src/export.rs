@@ -157,7 +157,7 @@ impl Kind {
                 v("qdd_hat"),
                 v("u")
             ),
-            Self::Latency => "k,agent,agent_sent_ns,attacker_sent_ns,center_received_ns,center_sent_ns,agent_received_ns".into(),
+            Self::Latency => "k,agent,agent_sent_ns,attacker_received_ns,attacker_sent_ns,center_received_ns,center_sent_ns,agent_received_ns".into(),
         }
     }
 }
@@ -279,8 +279,9 @@ fn row(line: &mut String, rec: &TraceRecord, dof: usize) -> Result<()> {
         TraceRecord::Latency { k, agent, stamps } => {
             let _ = write!(
                 line,
-                "{k},{agent},{},{},{},{},{}",
+                "{k},{agent},{},{},{},{},{},{}",
                 stamps.agent_sent_ns,
+                stamps.attacker_received_ns,
                 stamps.attacker_sent_ns,
                 stamps.center_received_ns,
                 stamps.center_sent_ns,

@@ -7,6 +7,7 @@ mod floor;
 mod join;
 mod output;
 mod plot;
+mod probe;
 mod replayer;
 mod report;
 mod runtime;

@@ -256,6 +256,10 @@ fn assert_row_is_record(row: &BTreeMap<&str, &str>, rec: &TraceRecord) {
             assert_eq!(int(row, "k"), *k);
             assert_eq!(int(row, "agent"), u64::from(*agent));
             assert_eq!(int(row, "agent_sent_ns"), stamps.agent_sent_ns);
+            assert_eq!(
+                int(row, "attacker_received_ns"),
+                stamps.attacker_received_ns
+            );
             assert_eq!(int(row, "attacker_sent_ns"), stamps.attacker_sent_ns);
             assert_eq!(int(row, "center_received_ns"), stamps.center_received_ns);
             assert_eq!(int(row, "center_sent_ns"), stamps.center_sent_ns);
