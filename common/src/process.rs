@@ -32,6 +32,81 @@ pub struct ProcessArgs {
     /// policy (realtime runs, `--rt-priority` of the launcher).
     #[arg(long, value_parser = clap::value_parser!(u8).range(1..=99))]
     pub rt_priority: Option<u8>,
+    /// Run only on these CPUs (a list such as `1`, `0,2` or `0-3`).
+    #[arg(long, value_name = "LIST")]
+    pub cpus: Option<CpuList>,
+}
+
+/// A set of CPUs, written as a list of numbers and ranges: `1`, `0,2`, `0-3`, `0,2-3`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CpuList(Vec<usize>);
+
+impl CpuList {
+    /// The CPUs, ascending, each once.
+    pub fn cpus(&self) -> &[usize] {
+        &self.0
+    }
+
+    /// The CPUs this thread may run on.
+    pub fn allowed() -> Result<Self, String> {
+        let set = rustix::thread::sched_getaffinity(None)
+            .map_err(|e| format!("reading the CPU affinity: {e}"))?;
+        Ok(Self(
+            (0..rustix::thread::CpuSet::MAX_CPU)
+                .filter(|&c| set.is_set(c))
+                .collect(),
+        ))
+    }
+
+    /// Confines the calling thread (and the threads it starts later) to these CPUs.
+    pub fn pin(&self) -> Result<(), String> {
+        let mut set = rustix::thread::CpuSet::new();
+        for &c in &self.0 {
+            set.set(c);
+        }
+        rustix::thread::sched_setaffinity(None, &set)
+            .map_err(|e| format!("pinning to CPUs {self}: {e}"))
+    }
+}
+
+impl std::str::FromStr for CpuList {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        let cpu = |x: &str| -> Result<usize, String> {
+            let c: usize = x
+                .trim()
+                .parse()
+                .map_err(|_| format!("`{x}` is not a CPU number (in CPU list `{s}`)"))?;
+            if c >= rustix::thread::CpuSet::MAX_CPU {
+                return Err(format!("CPU {c} is out of range (in CPU list `{s}`)"));
+            }
+            Ok(c)
+        };
+        let mut cpus = Vec::new();
+        for part in s.split(',') {
+            match part.split_once('-') {
+                Some((a, b)) => {
+                    let (a, b) = (cpu(a)?, cpu(b)?);
+                    if a > b {
+                        return Err(format!("range `{part}` runs backwards (in CPU list `{s}`)"));
+                    }
+                    cpus.extend(a..=b);
+                }
+                None => cpus.push(cpu(part)?),
+            }
+        }
+        cpus.sort_unstable();
+        cpus.dedup();
+        Ok(Self(cpus))
+    }
+}
+
+impl std::fmt::Display for CpuList {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let list: Vec<String> = self.0.iter().map(ToString::to_string).collect();
+        f.write_str(&list.join(","))
+    }
 }
 
 /// Puts the calling thread under SCHED_FIFO at `priority` (1–99); threads it starts later
@@ -330,6 +405,9 @@ pub fn start(
     wake: crate::ipc::Wake,
 ) -> Result<(Shutdown, crate::scenario::Resolved, Connection), RoleError> {
     let shutdown = Shutdown::install(args.launcher_pid).map_err(RoleError::Signals)?;
+    if let Some(cpus) = &args.cpus {
+        cpus.pin().map_err(RoleError::Scheduling)?;
+    }
     if let Some(priority) = args.rt_priority {
         use_fifo(priority).map_err(RoleError::Scheduling)?;
     }
@@ -485,5 +563,52 @@ mod liveness_tests {
         let mut e = Liveness::new(1, 100, 40);
         e.seen(0, 50);
         assert!(e.newly_lost(130, |_| false).is_empty());
+    }
+}
+
+#[cfg(test)]
+mod cpu_list_tests {
+    use super::CpuList;
+
+    fn parse(s: &str) -> Result<Vec<usize>, String> {
+        s.parse::<CpuList>().map(|c| c.cpus().to_vec())
+    }
+
+    #[test]
+    fn lists_and_ranges_parse_sorted_and_once() {
+        assert_eq!(parse("1"), Ok(vec![1]));
+        assert_eq!(parse("0,2"), Ok(vec![0, 2]));
+        assert_eq!(parse("0-3"), Ok(vec![0, 1, 2, 3]));
+        assert_eq!(parse("3,0-1,1"), Ok(vec![0, 1, 3]));
+        assert_eq!(parse(" 2 - 3 "), Ok(vec![2, 3]));
+        let list: CpuList = "2-3,0".parse().expect("list");
+        assert_eq!(list.to_string(), "0,2,3");
+        assert_eq!(list.to_string().parse::<CpuList>(), Ok(list));
+    }
+
+    #[test]
+    fn bad_lists_say_what_is_wrong() {
+        for (s, says) in [
+            ("", "not a CPU number"),
+            ("a", "`a` is not a CPU number"),
+            ("1,", "not a CPU number"),
+            ("3-1", "runs backwards"),
+            ("-1", "not a CPU number"),
+            ("99999", "out of range"),
+        ] {
+            let e = parse(s).expect_err(s);
+            assert!(e.contains(says), "{s}: {e}");
+        }
+    }
+
+    #[test]
+    fn this_thread_may_run_somewhere() {
+        let allowed = CpuList::allowed().expect("affinity");
+        assert!(!allowed.cpus().is_empty());
+        // Pinning to what is allowed already changes nothing and succeeds.
+        std::thread::spawn(move || allowed.pin())
+            .join()
+            .expect("thread")
+            .expect("pin");
     }
 }

@@ -68,6 +68,10 @@ pub struct LatencyArgs {
     /// CAP_SYS_NICE or an RLIMIT_RTPRIO of at least the priority.
     #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
     pub rt_priority: Option<u8>,
+    /// Run every process of the run (and the timer probe) only on these CPUs (a list such as
+    /// `1`, `0,2` or `0-3`).
+    #[arg(long, value_name = "LIST")]
+    pub cpus: Option<fdi_common::process::CpuList>,
 }
 
 #[derive(Debug, Args)]
@@ -175,7 +179,8 @@ struct LatencyReport {
     deadline_misses: u64,
     deadline_miss_ratio: f64,
     lost_ticks: u64,
-    /// Scheduling policy of the run's processes: `SCHED_OTHER` or `SCHED_FIFO <priority>`.
+    /// Scheduling of the run's processes: `SCHED_OTHER` or `SCHED_FIFO <priority>`, and
+    /// `on CPUs <list>` when confined.
     scheduling: String,
     /// The machine beside the run: how late a timer thread of the launcher woke at every
     /// period boundary (same scheduling as the run).
@@ -206,11 +211,15 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
             problems
         });
     }
-    crate::cli::check_scheduling(&r, Engine::Ipc, a.rt_priority)?;
+    let placement = crate::runtime::Placement {
+        rt_priority: a.rt_priority,
+        cpus: a.cpus.clone(),
+    };
+    crate::cli::check_placement(&r, Engine::Ipc, &placement)?;
     let dir = output::create_run_dir(&a.out, &r)?;
     let period_ns = (r.scenario.control_period_s * 1e9) as i64;
-    let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), a.rt_priority);
-    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json, a.rt_priority);
+    let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), &placement);
+    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json, &placement);
     let probe = probe.finish();
     let (summary, probe) = (summary?, probe?);
 
@@ -305,9 +314,7 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
             0.0
         },
         lost_ticks: agent_ticks.saturating_sub(e2e.len()),
-        scheduling: a
-            .rt_priority
-            .map_or("SCHED_OTHER".into(), |p| format!("SCHED_FIFO {p}")),
+        scheduling: placement.describe(),
         timer_probe_late_us: percentiles(&probe.late),
         timer_probe_stalls_over_1ms: probe.stalls_over(1_000_000) as u64,
         deadline_misses_in_machine_stalls: misses_in_stalls,
@@ -359,6 +366,7 @@ fn transport(a: &TransportArgs) -> Result<ExitCode> {
         json: true,
         out: a.out.clone(),
         rt_priority: None,
+        cpus: None,
     })?;
     let hops = [
         rt.hops_us.agent_to_attacker.p50,
@@ -535,9 +543,21 @@ fn lockstep(a: &LockstepArgs) -> Result<ExitCode> {
         let mut r = scaled_paper(n)?;
         r.scenario.duration_s = a.duration_s;
         let dir_in = output::create_run_dir(&root, &named(&r, "inproc"))?;
-        let inproc = execute(&r, Engine::Inproc, Some(&dir_in), false, None)?;
+        let inproc = execute(
+            &r,
+            Engine::Inproc,
+            Some(&dir_in),
+            false,
+            &Default::default(),
+        )?;
         let dir_ipc = output::create_run_dir(&root, &named(&r, "ipc"))?;
-        let ipc = execute(&r, Engine::Ipc, Some(&dir_ipc), !a.json, None)?;
+        let ipc = execute(
+            &r,
+            Engine::Ipc,
+            Some(&dir_ipc),
+            !a.json,
+            &Default::default(),
+        )?;
         if !a.keep_traces {
             for d in [&dir_in, &dir_ipc] {
                 let _ = std::fs::remove_dir_all(d.join("traces"));

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use fdi_common::engine::{run_inproc, RunSummary};
-use fdi_common::process::ProcessArgs;
+use fdi_common::process::{CpuList, ProcessArgs};
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
@@ -153,10 +153,13 @@ pub struct RunArgs {
     /// Needs CAP_SYS_NICE or an RLIMIT_RTPRIO of at least the priority.
     #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
     pub rt_priority: Option<u8>,
+    /// Run every process of the run only on these CPUs (a list such as `1`, `0,2` or `0-3`).
+    #[arg(long, value_name = "LIST")]
+    pub cpus: Option<CpuList>,
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
     /// tampered measurements and compare the trace digest with the recording's (exit status 1
     /// when they differ). The scenario comes from RUN_DIR.
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus"])]
     pub replay: Option<PathBuf>,
 }
 
@@ -300,7 +303,7 @@ pub fn execute(
     engine: Engine,
     run_dir: Option<&Path>,
     progress: bool,
-    rt_priority: Option<u8>,
+    placement: &runtime::Placement,
 ) -> Result<RunSummary> {
     match (engine, run_dir) {
         (Engine::Inproc, None) => run_inproc::<2>(r, |_| {}).context("in-process engine"),
@@ -336,7 +339,7 @@ pub fn execute(
                     run_dir: dir.to_path_buf(),
                     progress,
                     replay: false,
-                    rt_priority,
+                    placement: placement.clone(),
                 },
             )?;
             let mut joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
@@ -357,20 +360,25 @@ pub fn execute(
     }
 }
 
-/// Refuses `--rt-priority` where it does not apply or is not permitted, before anything starts
-/// (and before a run directory exists).
-pub fn check_scheduling(r: &Resolved, engine: Engine, rt_priority: Option<u8>) -> Result<()> {
-    let Some(priority) = rt_priority else {
+/// Refuses `--rt-priority` / `--cpus` where they do not apply or are not permitted, before
+/// anything starts (and before a run directory exists).
+pub fn check_placement(r: &Resolved, engine: Engine, placement: &runtime::Placement) -> Result<()> {
+    if *placement == runtime::Placement::default() {
         return Ok(());
-    };
-    if engine != Engine::Ipc || r.scenario.clock != ClockMode::Realtime {
-        bail!(
-            "--rt-priority {priority} applies to realtime runs of the ipc engine only \
-             (lockstep processes spin before they block: under SCHED_FIFO a spinning process \
-             would starve everything else on its CPU)"
-        );
     }
-    runtime::check_rt_priority(priority)
+    if engine != Engine::Ipc {
+        bail!("--rt-priority and --cpus place the processes of the ipc engine only");
+    }
+    if let Some(priority) = placement.rt_priority {
+        if r.scenario.clock != ClockMode::Realtime {
+            bail!(
+                "--rt-priority {priority} applies to realtime runs only (lockstep processes \
+                 spin before they block: under SCHED_FIFO a spinning process would starve \
+                 everything else on its CPU)"
+            );
+        }
+    }
+    placement.check()
 }
 
 fn run(args: &RunArgs) -> Result<ExitCode> {
@@ -378,9 +386,13 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         return crate::replayer::replay_run(recorded, &args.out, args.json);
     }
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
-    check_scheduling(&r, args.engine, args.rt_priority)?;
+    let placement = runtime::Placement {
+        rt_priority: args.rt_priority,
+        cpus: args.cpus.clone(),
+    };
+    check_placement(&r, args.engine, &placement)?;
     let dir = output::create_run_dir(&args.out, &r)?;
-    let summary = execute(&r, args.engine, Some(&dir), !args.json, args.rt_priority)?;
+    let summary = execute(&r, args.engine, Some(&dir), !args.json, &placement)?;
     for lost in &summary.lost_agents {
         let when = lost
             .t_s

@@ -10,6 +10,9 @@ use std::thread::JoinHandle;
 
 use anyhow::{anyhow, Result};
 use fdi_common::ipc::monotonic_ns;
+use fdi_common::process::CpuList;
+
+use crate::runtime::Placement;
 use hdrhistogram::Histogram;
 
 /// Wake-ups at least this late are kept as stalls, ns.
@@ -43,17 +46,16 @@ pub struct TimerProbe {
 }
 
 impl TimerProbe {
-    /// Starts waking every `period_ns` on every CPU, under SCHED_FIFO at `rt_priority` when
-    /// given (the scheduling of the run it sits beside).
-    pub fn start(period_ns: u64, rt_priority: Option<u8>) -> Self {
+    /// Starts waking every `period_ns` on every CPU of the run it sits beside (its `--cpus`,
+    /// or every CPU this process may use), scheduled like that run.
+    pub fn start(period_ns: u64, placement: &Placement) -> Self {
         let stop = Arc::new(AtomicBool::new(false));
-        let cpus: Vec<Option<usize>> = match rustix::thread::sched_getaffinity(None) {
-            Ok(set) => (0..rustix::thread::CpuSet::MAX_CPU)
-                .filter(|&c| set.is_set(c))
-                .map(Some)
-                .collect(),
-            Err(_) => vec![None],
-        };
+        let rt_priority = placement.rt_priority;
+        let cpus: Vec<Option<usize>> =
+            match placement.cpus.clone().map_or_else(CpuList::allowed, Ok) {
+                Ok(list) => list.cpus().iter().copied().map(Some).collect(),
+                Err(_) => vec![None],
+            };
         let threads = cpus
             .into_iter()
             .map(|cpu| {
@@ -170,7 +172,7 @@ mod tests {
 
     #[test]
     fn the_probe_records_one_lateness_per_wake_up() {
-        let probe = TimerProbe::start(1_000_000, None);
+        let probe = TimerProbe::start(1_000_000, &Placement::default());
         std::thread::sleep(std::time::Duration::from_millis(30));
         let r = probe.finish().expect("probe");
         // A count, not a speed: wake-ups happened (one thread per CPU), and every stall was

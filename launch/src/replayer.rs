@@ -193,7 +193,7 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool) -> Result<ExitCode> {
             run_dir: dir.clone(),
             progress: !json,
             replay: true,
-            rt_priority: None,
+            placement: crate::runtime::Placement::default(),
         },
     )?;
     let mut joined = crate::join::join_run(&r, &dir, outcome.wall_s, |_| {})?;

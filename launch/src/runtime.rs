@@ -1,6 +1,7 @@
 //! The multi-process engine: spawns the agents, the attacker and the control center, supervises
 //! them, and tears everything down (processes and shared memory) however the run ends.
 
+use fdi_common::process::CpuList;
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -129,17 +130,57 @@ pub struct IpcOptions {
     /// Replay mode (`run --replay`): only the control center runs, fed by a replayer process
     /// that plays back `traces/attacker.trace` of `run_dir` (already copied there).
     pub replay: bool,
-    /// Every process of the run under SCHED_FIFO at this priority (realtime runs).
-    pub rt_priority: Option<u8>,
+    /// Where and how the run's processes are scheduled.
+    pub placement: Placement,
 }
 
-/// Checks on a throw-away thread that this user may use SCHED_FIFO at `priority`, so that a
-/// refused request fails before any process starts, with the reason.
-pub fn check_rt_priority(priority: u8) -> Result<()> {
-    std::thread::spawn(move || fdi_common::process::use_fifo(priority))
+/// Where and how the run's processes are scheduled (`--rt-priority`, `--cpus`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Placement {
+    /// SCHED_FIFO at this priority (realtime runs) instead of the time-sharing default.
+    pub rt_priority: Option<u8>,
+    /// Only these CPUs.
+    pub cpus: Option<CpuList>,
+}
+
+impl Placement {
+    /// Checks on a throw-away thread that this user may do what is asked, so that a refused
+    /// request fails before any process starts, with the reason.
+    pub fn check(&self) -> Result<()> {
+        if let Some(cpus) = &self.cpus {
+            let allowed = CpuList::allowed().map_err(anyhow::Error::msg)?;
+            if let Some(c) = cpus.cpus().iter().find(|c| !allowed.cpus().contains(c)) {
+                anyhow::bail!(
+                    "--cpus {cpus}: CPU {c} is not available (this process may use CPUs {allowed})"
+                );
+            }
+        }
+        let p = self.clone();
+        std::thread::spawn(move || -> Result<(), String> {
+            if let Some(cpus) = &p.cpus {
+                cpus.pin().map_err(|e| format!("--cpus: {e}"))?;
+            }
+            if let Some(priority) = p.rt_priority {
+                fdi_common::process::use_fifo(priority)
+                    .map_err(|e| format!("--rt-priority {priority}: {e}"))?;
+            }
+            Ok(())
+        })
         .join()
-        .map_err(|_| anyhow::anyhow!("--rt-priority {priority}: the check panicked"))?
-        .map_err(|e| anyhow::anyhow!("--rt-priority {priority}: {e}"))
+        .map_err(|_| anyhow::anyhow!("checking --rt-priority / --cpus: the check panicked"))?
+        .map_err(anyhow::Error::msg)
+    }
+
+    /// `SCHED_OTHER` or `SCHED_FIFO <priority>`, and the CPUs when confined.
+    pub fn describe(&self) -> String {
+        let policy = self
+            .rt_priority
+            .map_or("SCHED_OTHER".into(), |p| format!("SCHED_FIFO {p}"));
+        match &self.cpus {
+            Some(c) => format!("{policy} on CPUs {c}"),
+            None => policy,
+        }
+    }
 }
 
 /// Trace path of a process.
@@ -365,8 +406,11 @@ fn spawn_and_supervise(
         if let Some(id) = agent {
             cmd.arg("--agent").arg(id.to_string());
         }
-        if let Some(priority) = opts.rt_priority {
+        if let Some(priority) = opts.placement.rt_priority {
             cmd.arg("--rt-priority").arg(priority.to_string());
+        }
+        if let Some(cpus) = &opts.placement.cpus {
+            cmd.arg("--cpus").arg(cpus.to_string());
         }
         cmd.stdin(Stdio::null())
             .stdout(Stdio::null())

@@ -61,12 +61,12 @@ fn run_case(
     case: &str,
 ) -> Result<fdi_common::engine::RunSummary> {
     match args.engine {
-        Engine::Inproc => execute(r, args.engine, None, false, None),
+        Engine::Inproc => execute(r, args.engine, None, false, &Default::default()),
         Engine::Ipc => {
             let mut named = r.clone();
             named.scenario.name = case.into();
             let d = crate::output::create_run_dir(dir, &named)?;
-            let summary = execute(r, args.engine, Some(&d), !args.json, None)?;
+            let summary = execute(r, args.engine, Some(&d), !args.json, &Default::default())?;
             if let Err(e) = crate::report::write_report(&d, r, &summary) {
                 eprintln!(
                     "fdi-launch: warning: the report of {} could not be made: {e:#}",

@@ -500,3 +500,57 @@ fn realtime_rt_priority_puts_every_process_under_fifo_or_is_refused_with_the_rea
         }
     }
 }
+
+/// `Cpus_allowed_list` of a process, from `/proc/<pid>/status`.
+fn cpus_of(pid: u32) -> Option<String> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    status
+        .lines()
+        .find_map(|l| l.strip_prefix("Cpus_allowed_list:"))
+        .map(|v| v.trim().to_string())
+}
+
+#[test]
+fn realtime_cpus_confines_every_process_and_bad_lists_are_refused() {
+    let dir = Scratch::new("cpus");
+    for (list, says) in [
+        ("1-0", "runs backwards"),
+        ("x", "`x` is not a CPU number"),
+        ("1000", "CPU 1000 is not available"),
+    ] {
+        let out = launch(
+            &["run", "--duration-s", "1", "--cpus", list],
+            &dir.0,
+            WATCHDOG,
+        );
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert!(!out.status.success(), "--cpus {list}");
+        assert!(stderr.contains(says), "--cpus {list}: {stderr}");
+    }
+    let child = spawn(
+        &[
+            "run",
+            "--clock",
+            "realtime",
+            "--duration-s",
+            "3",
+            "--cpus",
+            "0",
+            "--json",
+        ],
+        &dir.0,
+    );
+    let launcher = child.id();
+    assert!(
+        wait_until(Duration::from_secs(60), || {
+            let children = children_of(launcher);
+            children.len() == 6
+                && children
+                    .iter()
+                    .all(|(pid, _)| cpus_of(*pid).as_deref() == Some("0"))
+        }),
+        "the run's processes never all ran on CPU 0 only"
+    );
+    let v = json(&wait_with_watchdog(child, WATCHDOG));
+    assert_eq!(v["ticks"], 3000);
+}
