@@ -236,7 +236,9 @@ impl WaitStrategy {
                 std::thread::yield_now();
             }
         }
-        waker.wait(WAIT_SLICE)
+        // The realtime processes' own blocking wait, so that the transport floor measured with
+        // this strategy waits exactly as they do.
+        waker.wait_precise(WAIT_SLICE)
     }
 }
 

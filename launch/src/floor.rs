@@ -60,6 +60,9 @@ pub struct FloorOptions {
     pub warmup: u64,
     /// Spin budget of the wait strategy (as `FDI_SPIN_US` for the runtime).
     pub spin: Duration,
+    /// Start one round trip per period (on absolute period boundaries) instead of back to back:
+    /// the processes then sleep between messages, as the runtime's do between ticks.
+    pub pace: Option<Duration>,
 }
 
 impl Default for FloorOptions {
@@ -68,8 +71,17 @@ impl Default for FloorOptions {
             iterations: 20_000,
             warmup: 1_000,
             spin: Duration::from_micros(DEFAULT_SPIN_US),
+            pace: None,
         }
     }
+}
+
+/// The iceoryx2 3-hop chain with one round trip per `opts.pace` period.
+pub fn run_paced_chain(opts: &FloorOptions) -> Result<FloorCase> {
+    if opts.pace.is_none() {
+        bail!("a paced chain needs a period");
+    }
+    ipc_case(opts, PeerKind::IpcChain, &self_command).context("iceoryx2 3-hop chain, paced")
 }
 
 /// Per-hop latency percentiles, µs.
@@ -566,10 +578,14 @@ impl IpcPorts {
 }
 
 fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Result<FloorCase> {
-    let (roles, transport_name): (&[PeerRole], _) = match kind {
-        PeerKind::IpcChain => (
+    let (roles, transport_name): (&[PeerRole], _) = match (kind, opts.pace) {
+        (PeerKind::IpcChain, None) => (
             &[PeerRole::Attacker, PeerRole::Center],
             "iceoryx2 3-hop chain",
+        ),
+        (PeerKind::IpcChain, Some(_)) => (
+            &[PeerRole::Attacker, PeerRole::Center],
+            "iceoryx2 3-hop chain, one round trip per period",
         ),
         _ => (&[PeerRole::Pong], "iceoryx2 ping-pong"),
     };
@@ -598,7 +614,22 @@ fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Resul
             )?;
         }
         ipc_connect(&ports, &mut peers)?;
+        let paced_from = monotonic_ns();
         for i in 0..opts.warmup + opts.iterations {
+            if let Some(period) = opts.pace {
+                let due = paced_from + (i + 1) * u64::try_from(period.as_nanos()).unwrap_or(0);
+                let request = rustix::time::Timespec {
+                    tv_sec: i64::try_from(due / 1_000_000_000).unwrap_or(i64::MAX),
+                    tv_nsec: i64::try_from(due % 1_000_000_000).unwrap_or(0),
+                };
+                // Interrupted: sleep again until the boundary.
+                while rustix::thread::clock_nanosleep_absolute(
+                    rustix::thread::ClockId::Monotonic,
+                    &request,
+                )
+                .is_err()
+                {}
+            }
             let t0 = monotonic_ns();
             ports.send(payload(i))?;
             // As the agent waits for its torque: wait on the event, then look.

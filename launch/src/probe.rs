@@ -18,12 +18,37 @@ use hdrhistogram::Histogram;
 /// Wake-ups at least this late are kept as stalls, ns.
 pub const STALL_NS: u64 = 500_000;
 
-/// What the timer probe saw.
+/// One wake-up of the timer probe: `(due, woke)`, CLOCK_MONOTONIC ns.
+type Wakeup = (u64, u64);
+
+/// Every wake-up of the timer probe.
+#[derive(Debug, Default)]
+pub struct Wakeups(Vec<Wakeup>);
+
+impl Wakeups {
+    /// What the probe saw of the wake-ups due in `[from, to]` (the run itself: not its start-up
+    /// or its teardown).
+    pub fn within(&self, from: u64, to: u64) -> Result<ProbeResult> {
+        let mut late = Histogram::<u64>::new(3)?;
+        let mut stalls = Vec::new();
+        for &(due, woke) in self.0.iter().filter(|(due, _)| (from..=to).contains(due)) {
+            let l = woke.saturating_sub(due);
+            late.record(l.max(1))?;
+            if l >= STALL_NS {
+                stalls.push((due, woke));
+            }
+        }
+        stalls.sort_unstable();
+        Ok(ProbeResult { late, stalls })
+    }
+}
+
+/// What the timer probe saw during a run.
 #[derive(Debug)]
 pub struct ProbeResult {
     /// Lateness of every wake-up, ns.
     pub late: Histogram<u64>,
-    /// Wake-ups at least [`STALL_NS`] late: `(due, woke)`, CLOCK_MONOTONIC ns.
+    /// Wake-ups at least [`STALL_NS`] late: `(due, woke)`, CLOCK_MONOTONIC ns, sorted.
     pub stalls: Vec<(u64, u64)>,
 }
 
@@ -42,7 +67,7 @@ impl ProbeResult {
 #[derive(Debug)]
 pub struct TimerProbe {
     stop: Arc<AtomicBool>,
-    threads: Vec<JoinHandle<Result<ProbeResult, String>>>,
+    threads: Vec<JoinHandle<Result<Vec<Wakeup>, String>>>,
 }
 
 impl TimerProbe {
@@ -66,23 +91,18 @@ impl TimerProbe {
         Self { stop, threads }
     }
 
-    /// Stops the probe and returns what it saw on every CPU (stalls sorted by when they began).
-    pub fn finish(self) -> Result<ProbeResult> {
+    /// Stops the probe and returns every wake-up it had on every CPU.
+    pub fn finish(self) -> Result<Wakeups> {
         self.stop.store(true, Ordering::Relaxed);
-        let mut all = ProbeResult {
-            late: Histogram::<u64>::new(3)?,
-            stalls: Vec::new(),
-        };
+        let mut all = Vec::new();
         for t in self.threads {
-            let r = t
-                .join()
-                .map_err(|_| anyhow!("the timer probe panicked"))?
-                .map_err(|e| anyhow!("timer probe: {e}"))?;
-            all.late.add(&r.late)?;
-            all.stalls.extend(r.stalls);
+            all.extend(
+                t.join()
+                    .map_err(|_| anyhow!("the timer probe panicked"))?
+                    .map_err(|e| anyhow!("timer probe: {e}"))?,
+            );
         }
-        all.stalls.sort_unstable();
-        Ok(all)
+        Ok(Wakeups(all))
     }
 }
 
@@ -91,7 +111,7 @@ fn probe_loop(
     period_ns: u64,
     rt_priority: Option<u8>,
     stop: &AtomicBool,
-) -> Result<ProbeResult, String> {
+) -> Result<Vec<Wakeup>, String> {
     if let Some(c) = cpu {
         let mut set = rustix::thread::CpuSet::new();
         set.set(c);
@@ -101,8 +121,7 @@ fn probe_loop(
     if let Some(p) = rt_priority {
         fdi_common::process::use_fifo(p)?;
     }
-    let mut late = Histogram::<u64>::new(3).map_err(|e| e.to_string())?;
-    let mut stalls = Vec::new();
+    let mut wakeups = Vec::new();
     let period = period_ns.max(1);
     let mut due = monotonic_ns() + period;
     while !stop.load(Ordering::Relaxed) {
@@ -115,15 +134,11 @@ fn probe_loop(
             .is_err()
         {}
         let woke = monotonic_ns();
-        let l = woke.saturating_sub(due);
-        let _ = late.record(l.max(1));
-        if l >= STALL_NS {
-            stalls.push((due, woke));
-        }
+        wakeups.push((due, woke));
         // After a stall, the next boundary still ahead (no burst of catch-up wake-ups).
-        due += period * (1 + l / period);
+        due += period * (1 + woke.saturating_sub(due) / period);
     }
-    Ok(ProbeResult { late, stalls })
+    Ok(wakeups)
 }
 
 /// How many of the `windows` (`[from, to]`, ns) overlap at least one of the `stalls`
@@ -174,7 +189,12 @@ mod tests {
     fn the_probe_records_one_lateness_per_wake_up() {
         let probe = TimerProbe::start(1_000_000, &Placement::default());
         std::thread::sleep(std::time::Duration::from_millis(30));
-        let r = probe.finish().expect("probe");
+        let all = probe.finish().expect("probe");
+        assert!(all.0.iter().all(|(due, woke)| woke >= due));
+        let r = all.within(0, u64::MAX).expect("window");
+        assert_eq!(r.late.len(), all.0.len() as u64);
+        // Nothing is due before the probe started.
+        assert!(all.within(0, 1).expect("window").late.is_empty());
         // A count, not a speed: wake-ups happened (one thread per CPU), and every stall was
         // recorded in the histogram too.
         assert!(!r.late.is_empty());
