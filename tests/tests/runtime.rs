@@ -460,38 +460,24 @@ fn realtime_rt_priority_puts_every_process_under_fifo_or_is_refused_with_the_rea
     let permitted = std::thread::spawn(|| fdi_common::process::use_fifo(7))
         .join()
         .expect("probe thread");
-    let child = spawn(
-        &[
-            "run",
-            "--clock",
-            "realtime",
-            "--duration-s",
-            "3",
-            "--rt-priority",
-            "7",
-            "--json",
-        ],
-        &dir.0,
-    );
-    let launcher = child.id();
     match permitted {
-        Ok(()) => {
-            // control center, attacker, four agents: all SCHED_FIFO at priority 7.
-            assert!(
-                wait_until(Duration::from_secs(60), || {
-                    let children = children_of(launcher);
-                    children.len() == 6
-                        && children
-                            .iter()
-                            .all(|(pid, _)| scheduling_of(*pid) == Some((7, SCHED_FIFO)))
-                }),
-                "the run's processes never all ran under SCHED_FIFO 7"
-            );
-            let v = json(&wait_with_watchdog(child, WATCHDOG));
-            assert_eq!(v["clock"], "realtime");
-            assert_eq!(v["ticks"], 3000);
-        }
+        // Control center, attacker, four agents: all SCHED_FIFO at priority 7.
+        Ok(()) => realtime_run_where_every_process(&["--rt-priority", "7"], &dir, |pid| {
+            scheduling_of(pid) == Some((7, SCHED_FIFO))
+        }),
         Err(reason) => {
+            let child = spawn(
+                &[
+                    "run",
+                    "--clock",
+                    "realtime",
+                    "--duration-s",
+                    "3",
+                    "--rt-priority",
+                    "7",
+                ],
+                &dir.0,
+            );
             let out = wait_with_watchdog(child, WATCHDOG);
             let stderr = String::from_utf8_lossy(&out.stderr);
             assert!(!out.status.success());
@@ -527,30 +513,26 @@ fn realtime_cpus_confines_every_process_and_bad_lists_are_refused() {
         assert!(!out.status.success(), "--cpus {list}");
         assert!(stderr.contains(says), "--cpus {list}: {stderr}");
     }
-    let child = spawn(
-        &[
-            "run",
-            "--clock",
-            "realtime",
-            "--duration-s",
-            "3",
-            "--cpus",
-            "0",
-            "--json",
-        ],
-        &dir.0,
-    );
+    realtime_run_where_every_process(&["--cpus", "0"], &dir, |pid| {
+        cpus_of(pid).as_deref() == Some("0")
+    });
+}
+
+/// Runs the paper scenario realtime for 3 s with `extra` options and asserts that at some moment
+/// all six of its processes satisfied `placed`, and that the run completed.
+fn realtime_run_where_every_process(extra: &[&str], dir: &Scratch, placed: impl Fn(u32) -> bool) {
+    let mut args = vec!["run", "--clock", "realtime", "--duration-s", "3", "--json"];
+    args.extend_from_slice(extra);
+    let child = spawn(&args, &dir.0);
     let launcher = child.id();
     assert!(
         wait_until(Duration::from_secs(60), || {
             let children = children_of(launcher);
-            children.len() == 6
-                && children
-                    .iter()
-                    .all(|(pid, _)| cpus_of(*pid).as_deref() == Some("0"))
+            children.len() == 6 && children.iter().all(|(pid, _)| placed(*pid))
         }),
-        "the run's processes never all ran on CPU 0 only"
+        "{extra:?}: the run's processes never all were placed so"
     );
     let v = json(&wait_with_watchdog(child, WATCHDOG));
+    assert_eq!(v["clock"], "realtime");
     assert_eq!(v["ticks"], 3000);
 }
