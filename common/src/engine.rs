@@ -128,6 +128,10 @@ pub struct RunSummary {
     /// Realtime agents lost during the run (their metrics cover the time before the loss).
     #[serde(default)]
     pub lost_agents: Vec<LostAgent>,
+    /// How the run's processes were placed when not left to the defaults: `SCHED_FIFO 10 on
+    /// CPUs 1` (`--rt-priority`, `--cpus`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub placement: Option<String>,
 }
 
 /// Joins metrics and digest into a summary.
@@ -163,6 +167,7 @@ pub fn summarize(
         trace_digest: digest.finish(),
         metrics,
         lost_agents: Vec::new(),
+        placement: None,
     }
 }
 

@@ -344,6 +344,9 @@ pub fn execute(
             )?;
             let mut joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
             joined.summary.lost_agents = outcome.lost;
+            if *placement != runtime::Placement::default() {
+                joined.summary.placement = Some(placement.describe());
+            }
             for w in &joined.warnings {
                 eprintln!("fdi-launch: warning: {w}");
             }
@@ -433,6 +436,9 @@ fn print_summary(s: &RunSummary) {
         "scenario {} | engine {} | clock {} | controller {} | attack {} | {} agents | {:.1} s simulated in {:.2} s wall",
         s.scenario, s.engine, s.clock, s.controller, s.attack, s.agents, s.sim_s, s.wall_s
     );
+    if let Some(p) = &s.placement {
+        println!("processes: {p}");
+    }
     println!("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses |");
     println!("|---|---|---|---|---|---|");
     for (id, m) in &s.metrics {

@@ -98,6 +98,7 @@ fn realtime_smoke_run_completes_and_reports_deadline_misses() {
     let v = json(&out);
     assert_eq!(v["clock"], "realtime");
     assert_eq!(v["ticks"], 1000);
+    assert!(v.get("placement").is_none(), "default placement: {v}");
     for id in ["1", "2", "3", "4"] {
         assert!(
             v["metrics"][id]["deadline_misses"].is_u64(),
@@ -462,9 +463,13 @@ fn realtime_rt_priority_puts_every_process_under_fifo_or_is_refused_with_the_rea
         .expect("probe thread");
     match permitted {
         // Control center, attacker, four agents: all SCHED_FIFO at priority 7.
-        Ok(()) => realtime_run_where_every_process(&["--rt-priority", "7"], &dir, |pid| {
-            scheduling_of(pid) == Some((7, SCHED_FIFO))
-        }),
+        Ok(()) => {
+            let v = realtime_run_where_every_process(&["--rt-priority", "7"], &dir, |pid| {
+                scheduling_of(pid) == Some((7, SCHED_FIFO))
+            });
+            // The run's summary says how its processes ran.
+            assert_eq!(v["placement"], "SCHED_FIFO 7");
+        }
         Err(reason) => {
             let child = spawn(
                 &[
@@ -513,14 +518,19 @@ fn realtime_cpus_confines_every_process_and_bad_lists_are_refused() {
         assert!(!out.status.success(), "--cpus {list}");
         assert!(stderr.contains(says), "--cpus {list}: {stderr}");
     }
-    realtime_run_where_every_process(&["--cpus", "0"], &dir, |pid| {
+    let v = realtime_run_where_every_process(&["--cpus", "0"], &dir, |pid| {
         cpus_of(pid).as_deref() == Some("0")
     });
+    assert_eq!(v["placement"], "SCHED_OTHER on CPUs 0");
 }
 
 /// Runs the paper scenario realtime for 3 s with `extra` options and asserts that at some moment
-/// all six of its processes satisfied `placed`, and that the run completed.
-fn realtime_run_where_every_process(extra: &[&str], dir: &Scratch, placed: impl Fn(u32) -> bool) {
+/// all six of its processes satisfied `placed`, and that the run completed; returns its summary.
+fn realtime_run_where_every_process(
+    extra: &[&str],
+    dir: &Scratch,
+    placed: impl Fn(u32) -> bool,
+) -> serde_json::Value {
     let mut args = vec!["run", "--clock", "realtime", "--duration-s", "3", "--json"];
     args.extend_from_slice(extra);
     let child = spawn(&args, &dir.0);
@@ -535,4 +545,5 @@ fn realtime_run_where_every_process(extra: &[&str], dir: &Scratch, placed: impl 
     let v = json(&wait_with_watchdog(child, WATCHDOG));
     assert_eq!(v["clock"], "realtime");
     assert_eq!(v["ticks"], 3000);
+    v
 }
