@@ -75,6 +75,7 @@ pub fn report(run_dir: &Path) -> Result<()> {
     match &stored {
         Some(s) => {
             summary.engine.clone_from(&s.engine);
+            summary.placement.clone_from(&s.placement);
             if s.trace_digest != summary.trace_digest {
                 warnings.push(format!(
                     "the traces' digest {} differs from the digest {} in summary.json",
@@ -570,6 +571,9 @@ fn markdown(
     ];
     for (k, v) in rows {
         let _ = writeln!(md, "| {k} | {v} |");
+    }
+    if let Some(p) = &s.placement {
+        let _ = writeln!(md, "| processes | {p} |");
     }
 
     md.push_str("\n## RMSE\n\n");

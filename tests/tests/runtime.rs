@@ -522,6 +522,12 @@ fn realtime_cpus_confines_every_process_and_bad_lists_are_refused() {
         cpus_of(pid).as_deref() == Some("0")
     });
     assert_eq!(v["placement"], "SCHED_OTHER on CPUs 0");
+    let report = std::fs::read_to_string(fdi_tests::run_dir_of(&v).join("report/report.md"))
+        .expect("report.md");
+    assert!(
+        report.contains("| processes | SCHED_OTHER on CPUs 0 |"),
+        "{report}"
+    );
 }
 
 /// Runs the paper scenario realtime for 3 s with `extra` options and asserts that at some moment
