@@ -52,7 +52,7 @@ impl AgentLoop {
 
 fn center_params(r: &Resolved, a: &AgentConfig) -> CenterParams {
     let s = &r.scenario;
-    CenterParams::new(a, &s.controller, s.seed, s.control_period_s)
+    CenterParams::new(a, s)
 }
 
 /// Agent 1's inputs over the whole run: `(t, tampered y, tampered ẏ, torque)` per tick.

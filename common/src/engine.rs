@@ -210,18 +210,12 @@ where
             })?,
         );
         attacks.push(AgentAttack::compile(&resolved.attack, a.id, s.seed));
-        centers.push(
-            CenterAgent::<N>::new(CenterParams::new(
-                a,
-                &s.controller,
-                s.seed,
-                s.control_period_s,
-            ))
-            .ok_or(EngineError::ModelDof {
+        centers.push(CenterAgent::<N>::new(CenterParams::new(a, s)).ok_or(
+            EngineError::ModelDof {
                 agent: a.id,
                 dof: N,
-            })?,
-        );
+            },
+        )?);
     }
     let ticks = resolved.ticks();
     let mut digest = TraceDigest::new();

@@ -42,6 +42,11 @@ pub struct ProcessArgs {
 pub struct CpuList(Vec<usize>);
 
 impl CpuList {
+    /// Just `cpu`.
+    pub fn single(cpu: usize) -> Self {
+        Self(vec![cpu])
+    }
+
     /// The CPUs, ascending, each once.
     pub fn cpus(&self) -> &[usize] {
         &self.0

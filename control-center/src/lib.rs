@@ -58,13 +58,8 @@ pub fn run(
     let s = &resolved.scenario;
     let mut slots = Vec::with_capacity(s.agents.len());
     for a in &s.agents {
-        let center = CenterAgent::<2>::new(CenterParams::new(
-            a,
-            &s.controller,
-            s.seed,
-            s.control_period_s,
-        ))
-        .ok_or(CenterError::Dof(a.id))?;
+        let center =
+            CenterAgent::<2>::new(CenterParams::new(a, s)).ok_or(CenterError::Dof(a.id))?;
         slots.push(Slot { center, next: 0 });
     }
     let epoch_ns = match ports

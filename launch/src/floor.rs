@@ -485,6 +485,16 @@ impl Peers {
         Ok(())
     }
 
+    /// While message `i`, sent at `sent`, has not come back: fails when a peer has ended or
+    /// the message is overdue.
+    fn check_waiting(&mut self, i: u64, sent: Instant) -> Result<()> {
+        self.check_alive()?;
+        if sent.elapsed() > STALL_TIMEOUT {
+            bail!("message {i} did not come back within {STALL_TIMEOUT:?}");
+        }
+        Ok(())
+    }
+
     /// Waits for every peer to exit, successfully, within `timeout`.
     fn finish(&mut self, timeout: Duration) -> Result<()> {
         let began = Instant::now();
@@ -618,17 +628,7 @@ fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Resul
         for i in 0..opts.warmup + opts.iterations {
             if let Some(period) = opts.pace {
                 let due = paced_from + (i + 1) * u64::try_from(period.as_nanos()).unwrap_or(0);
-                let request = rustix::time::Timespec {
-                    tv_sec: i64::try_from(due / 1_000_000_000).unwrap_or(i64::MAX),
-                    tv_nsec: i64::try_from(due % 1_000_000_000).unwrap_or(0),
-                };
-                // Interrupted: sleep again until the boundary.
-                while rustix::thread::clock_nanosleep_absolute(
-                    rustix::thread::ClockId::Monotonic,
-                    &request,
-                )
-                .is_err()
-                {}
+                fdi_common::ipc::sleep_until_ns(due);
             }
             let t0 = monotonic_ns();
             ports.send(payload(i))?;
@@ -640,10 +640,7 @@ fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Resul
                     break;
                 }
                 if !rung {
-                    peers.check_alive()?;
-                    if began.elapsed() > STALL_TIMEOUT {
-                        bail!("message {i} did not come back within {STALL_TIMEOUT:?}");
-                    }
+                    peers.check_waiting(i, began)?;
                 }
             }
             let rtt = monotonic_ns().saturating_sub(t0);
@@ -852,12 +849,7 @@ fn uds_case(opts: &FloorOptions, peer: PeerCommand<'_>) -> Result<FloorCase> {
             match rx.recv(&mut buf).context("receiving")? {
                 Some(n) if read_seq(&buf[..n]) == Some(i) => break,
                 Some(_) => {}
-                None => {
-                    peers.check_alive()?;
-                    if began.elapsed() > STALL_TIMEOUT {
-                        bail!("message {i} did not come back within {STALL_TIMEOUT:?}");
-                    }
-                }
+                None => peers.check_waiting(i, began)?,
             }
         }
         let rtt = monotonic_ns().saturating_sub(t0);

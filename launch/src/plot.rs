@@ -255,6 +255,20 @@ fn plot_err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow!("drawing a figure: {e}")
 }
 
+/// The series' legend, upper right, in every figure's style.
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::UpperRight)
+        .label_font((FONT, 13))
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(160, 160, 160))
+        .draw()
+        .map_err(plot_err)
+}
+
 /// Value range of the lines of a panel, padded by 5 %.
 fn y_range(lines: &[Line]) -> (f64, f64) {
     let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -350,14 +364,7 @@ fn figure_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) ->
                             PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
                         });
                 }
-                chart
-                    .configure_series_labels()
-                    .position(SeriesLabelPosition::UpperRight)
-                    .label_font((FONT, 13))
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(RGBColor(160, 160, 160))
-                    .draw()
-                    .map_err(plot_err)?;
+                draw_legend(&mut chart)?;
             }
             PanelKind::Timeline(bands) => {
                 let rows = bands.len().max(1) as f64;
@@ -470,14 +477,7 @@ fn bars_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &BarChart) -> R
             .label(label)
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled()));
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 13))
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()
-        .map_err(plot_err)?;
+    draw_legend(&mut chart)?;
     let style = TextStyle::from((FONT, 14).into_font()).color(&BLACK).pos(
         plotters::style::text_anchor::Pos::new(
             plotters::style::text_anchor::HPos::Center,

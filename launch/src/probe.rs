@@ -9,7 +9,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use anyhow::{anyhow, Result};
-use fdi_common::ipc::monotonic_ns;
+use fdi_common::ipc::{monotonic_ns, sleep_until_ns};
 use fdi_common::process::CpuList;
 
 use crate::runtime::Placement;
@@ -76,9 +76,13 @@ impl TimerProbe {
     pub fn start(period_ns: u64, placement: &Placement) -> Self {
         let stop = Arc::new(AtomicBool::new(false));
         let rt_priority = placement.rt_priority;
-        let cpus: Vec<Option<usize>> =
+        let cpus: Vec<Option<CpuList>> =
             match placement.cpus.clone().map_or_else(CpuList::allowed, Ok) {
-                Ok(list) => list.cpus().iter().copied().map(Some).collect(),
+                Ok(list) => list
+                    .cpus()
+                    .iter()
+                    .map(|&c| Some(CpuList::single(c)))
+                    .collect(),
                 Err(_) => vec![None],
             };
         let threads = cpus
@@ -107,16 +111,13 @@ impl TimerProbe {
 }
 
 fn probe_loop(
-    cpu: Option<usize>,
+    cpu: Option<CpuList>,
     period_ns: u64,
     rt_priority: Option<u8>,
     stop: &AtomicBool,
 ) -> Result<Vec<Wakeup>, String> {
     if let Some(c) = cpu {
-        let mut set = rustix::thread::CpuSet::new();
-        set.set(c);
-        rustix::thread::sched_setaffinity(None, &set)
-            .map_err(|e| format!("pinning to CPU {c}: {e}"))?;
+        c.pin()?;
     }
     if let Some(p) = rt_priority {
         fdi_common::process::use_fifo(p)?;
@@ -125,14 +126,7 @@ fn probe_loop(
     let period = period_ns.max(1);
     let mut due = monotonic_ns() + period;
     while !stop.load(Ordering::Relaxed) {
-        let request = rustix::time::Timespec {
-            tv_sec: i64::try_from(due / 1_000_000_000).unwrap_or(i64::MAX),
-            tv_nsec: i64::try_from(due % 1_000_000_000).unwrap_or(0),
-        };
-        // An interrupted sleep is retried: the lateness is measured on the clock.
-        while rustix::thread::clock_nanosleep_absolute(rustix::thread::ClockId::Monotonic, &request)
-            .is_err()
-        {}
+        sleep_until_ns(due);
         let woke = monotonic_ns();
         wakeups.push((due, woke));
         // After a stall, the next boundary still ahead (no burst of catch-up wake-ups).

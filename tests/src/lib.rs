@@ -88,16 +88,21 @@ pub fn wait_with_watchdog(mut child: Child, limit: Duration) -> Output {
             return child.wait_with_output().expect("collecting output");
         }
         if began.elapsed() > limit {
-            let pid = child.id();
-            let _ = child.kill();
-            let out = child.wait_with_output().expect("collecting output");
-            panic!(
-                "watchdog: fdi-launch (pid {pid}) still running after {limit:?}; stderr:\n{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
+            watchdog_fired(child, limit);
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+}
+
+/// Kills `child`, still running after `limit`, and fails the test with its stderr.
+fn watchdog_fired(mut child: Child, limit: Duration) -> ! {
+    let pid = child.id();
+    let _ = child.kill();
+    let out = child.wait_with_output().expect("collecting output");
+    panic!(
+        "watchdog: fdi-launch (pid {pid}) still running after {limit:?}; stderr:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 /// The JSON object `run --json` printed.
@@ -146,31 +151,16 @@ pub fn children_of(pid: u32) -> Vec<(u32, String)> {
     out
 }
 
-/// Shared-memory and iceoryx2 files left by runs of the launcher `pid`.
+/// Shared-memory and iceoryx2 files left by runs of the launcher `pid` (its run prefixes are
+/// `fdi<pid>_…`).
 pub fn leftovers_of(launcher_pid: u32) -> Vec<PathBuf> {
-    let prefix = format!("fdi{launcher_pid}_");
-    let mut out = Vec::new();
-    let root = PathBuf::from("/tmp/iceoryx2");
-    let mut dirs = vec![
-        PathBuf::from("/dev/shm"),
-        root.clone(),
-        root.join("services"),
-        root.join("nodes"),
-    ];
-    if let Ok(entries) = std::fs::read_dir(root.join("nodes")) {
-        dirs.extend(entries.flatten().map(|e| e.path()).filter(|p| p.is_dir()));
-    }
-    for d in dirs {
-        if let Ok(entries) = std::fs::read_dir(&d) {
-            out.extend(
-                entries
-                    .flatten()
-                    .filter(|e| e.file_name().to_string_lossy().starts_with(&prefix))
-                    .map(|e| e.path()),
-            );
-        }
-    }
-    out
+    fdi_common::ipc::leftover_files(&format!("fdi{launcher_pid}_"))
+}
+
+/// Asserts that runs of the launcher `pid` left no shared-memory or iceoryx2 file behind.
+pub fn assert_no_leftovers(launcher_pid: u32) {
+    let left = leftovers_of(launcher_pid);
+    assert!(left.is_empty(), "left behind: {left:?}");
 }
 
 /// True while the process `pid` exists (and is not a zombie).
@@ -277,12 +267,7 @@ pub fn launch_watching_children(args: &[&str], limit: Duration) -> Watched {
             };
         }
         if began.elapsed() > limit {
-            let _ = child.kill();
-            let out = child.wait_with_output().expect("collecting output");
-            panic!(
-                "watchdog: fdi-launch (pid {pid}) still running after {limit:?}; stderr:\n{}",
-                String::from_utf8_lossy(&out.stderr)
-            );
+            watchdog_fired(child, limit);
         }
         std::thread::sleep(Duration::from_millis(1));
     }

@@ -79,13 +79,7 @@ fn run_with_oracle(r: &Resolved, oracle: impl Fn(&mut AgentAttack, f64) -> Vecto
     let mut plant = Plant::<2>::new(PlantParams::new(a, s)).expect("2 links");
     let mut attack = AgentAttack::compile(&r.attack, a.id, s.seed);
     let mut oracle_attack = AgentAttack::compile(&r.attack, a.id, s.seed);
-    let mut center = CenterAgent::<2>::new(CenterParams::new(
-        a,
-        &s.controller,
-        s.seed,
-        s.control_period_s,
-    ))
-    .expect("2 links");
+    let mut center = CenterAgent::<2>::new(CenterParams::new(a, s)).expect("2 links");
     let mut sum_sq = 0.0;
     for k in 0..r.ticks() {
         let t = tick_time(k, s.control_period_s);

@@ -4,8 +4,8 @@
 use std::time::Duration;
 
 use fdi_tests::{
-    alive, children_of, json, launch, leftovers_of, signal, spawn, wait_until, wait_with_watchdog,
-    Scratch,
+    alive, assert_no_leftovers, children_of, json, launch, signal, spawn, wait_until,
+    wait_with_watchdog, Scratch,
 };
 
 const WATCHDOG: Duration = Duration::from_secs(300);
@@ -154,11 +154,7 @@ fn killing_an_agent_stops_the_run_naming_it_and_leaves_nothing_behind() {
         "processes left: {:?}",
         others.iter().filter(|p| alive(**p)).collect::<Vec<_>>()
     );
-    assert!(
-        leftovers_of(launcher).is_empty(),
-        "{:?}",
-        leftovers_of(launcher)
-    );
+    assert_no_leftovers(launcher);
 }
 
 #[test]
@@ -184,11 +180,7 @@ fn ctrl_c_stops_every_process_and_removes_the_shared_memory() {
         procs.iter().all(|p| !alive(*p)),
         "processes left: {procs:?}"
     );
-    assert!(
-        leftovers_of(launcher).is_empty(),
-        "{:?}",
-        leftovers_of(launcher)
-    );
+    assert_no_leftovers(launcher);
 }
 
 /// Starts a long lockstep run and returns it with the pid of the child whose command line
@@ -236,11 +228,7 @@ fn killing_a_process_stops_the_run_naming_it(needle: &str, label: &str) {
         "stderr: {err}"
     );
     assert!(others.iter().all(|p| !alive(*p)), "processes left");
-    assert!(
-        leftovers_of(launcher).is_empty(),
-        "{:?}",
-        leftovers_of(launcher)
-    );
+    assert_no_leftovers(launcher);
 }
 
 #[test]
@@ -304,7 +292,7 @@ fn realtime_agent_killed_is_declared_lost_and_the_others_finish() {
     // The others were controlled to the end: 3000 ticks joined.
     assert_eq!(v["ticks"], 3000);
     assert!(stderr_of(&out).contains("agent 2 was lost"));
-    assert!(leftovers_of(launcher).is_empty());
+    assert_no_leftovers(launcher);
 }
 
 #[test]
@@ -323,11 +311,7 @@ fn killing_the_launcher_makes_the_children_exit_and_the_next_run_cleans_up() {
     // The next run reaps what the dead launcher could not remove.
     let next = launch(&["run", "--duration-s", "0.1", "--json"], &dir.0, WATCHDOG);
     assert!(next.status.success(), "{}", stderr_of(&next));
-    assert!(
-        leftovers_of(launcher).is_empty(),
-        "{:?}",
-        leftovers_of(launcher)
-    );
+    assert_no_leftovers(launcher);
 }
 
 #[test]
@@ -344,11 +328,7 @@ fn a_stopped_process_stalls_the_run_and_is_named() {
         "stderr: {err}"
     );
     assert!(!alive(pid), "the stopped agent is killed in the teardown");
-    assert!(
-        leftovers_of(launcher).is_empty(),
-        "{:?}",
-        leftovers_of(launcher)
-    );
+    assert_no_leftovers(launcher);
 }
 
 #[test]
@@ -363,11 +343,7 @@ fn sigterm_stops_every_process_cleanly() {
         err.contains("interrupted") && err.contains("6 exited 0"),
         "stderr: {err}"
     );
-    assert!(
-        leftovers_of(launcher).is_empty(),
-        "{:?}",
-        leftovers_of(launcher)
-    );
+    assert_no_leftovers(launcher);
     // Every trace ends on a whole frame: nothing half-written.
     let run_dir = std::fs::read_dir(&dir.0)
         .expect("out")
@@ -420,11 +396,7 @@ fn sigterm_to_one_child_stops_the_run_naming_it() {
         err.contains("agent 2") && err.contains("exited before the end of the run"),
         "stderr: {err}"
     );
-    assert!(
-        leftovers_of(launcher).is_empty(),
-        "{:?}",
-        leftovers_of(launcher)
-    );
+    assert_no_leftovers(launcher);
 }
 
 /// `(rt_priority, policy)` of a process from `/proc/<pid>/stat` (fields 40 and 41).

@@ -27,17 +27,13 @@ pub struct CenterParams {
 }
 
 impl CenterParams {
-    pub fn new(
-        agent: &AgentConfig,
-        controller: &ControllerConfig,
-        run_seed: u64,
-        control_period_s: f64,
-    ) -> Self {
+    /// The control-center side of `agent` in `scenario` (its controller, seed and period).
+    pub fn new(agent: &AgentConfig, scenario: &crate::scenario::Scenario) -> Self {
         Self {
             agent_id: agent.id,
-            run_seed,
-            control_period_s,
-            controller: *controller,
+            run_seed: scenario.seed,
+            control_period_s: scenario.control_period_s,
+            controller: scenario.controller,
             model: agent.model,
             trajectory: agent.trajectory.clone(),
             delay: agent.delay,
@@ -236,13 +232,7 @@ mod tests {
     fn agent1() -> CenterAgent<2> {
         let r = paper().expect("the embedded paper scenario is valid");
         let s = &r.scenario;
-        CenterAgent::<2>::new(CenterParams::new(
-            &s.agents[0],
-            &s.controller,
-            s.seed,
-            s.control_period_s,
-        ))
-        .expect("a two-link model")
+        CenterAgent::<2>::new(CenterParams::new(&s.agents[0], s)).expect("a two-link model")
     }
 
     fn finite(v: &Vector<2>) -> bool {

@@ -133,6 +133,26 @@ pub fn monotonic_ns() -> u64 {
     u64::try_from(ts.tv_sec).unwrap_or(0) * 1_000_000_000 + u64::try_from(ts.tv_nsec).unwrap_or(0)
 }
 
+/// Maps a port-creation failure on `service` to [`IpcError::Port`].
+fn port_error<E: std::fmt::Debug>(service: &str) -> impl FnOnce(E) -> IpcError + '_ {
+    move |e| IpcError::Port {
+        service: service.to_string(),
+        reason: format!("{e:?}"),
+    }
+}
+
+/// Sleeps until CLOCK_MONOTONIC reads `due_ns` (an absolute deadline, as [`monotonic_ns`]
+/// counts); a sleep interrupted by a signal sleeps again.
+pub fn sleep_until_ns(due_ns: u64) {
+    let request = rustix::time::Timespec {
+        tv_sec: i64::try_from(due_ns / 1_000_000_000).unwrap_or(i64::MAX),
+        tv_nsec: i64::try_from(due_ns % 1_000_000_000).unwrap_or(0),
+    };
+    while let Err(rustix::io::Errno::INTR) =
+        rustix::thread::clock_nanosleep_absolute(rustix::thread::ClockId::Monotonic, &request)
+    {}
+}
+
 /// A process's handle on the run's shared memory.
 #[derive(Debug)]
 pub struct Transport {
@@ -230,10 +250,7 @@ impl Transport {
         let port = factory
             .publisher_builder()
             .create()
-            .map_err(|e| IpcError::Port {
-                service: service.clone(),
-                reason: format!("{e:?}"),
-            })?;
+            .map_err(port_error(&service))?;
         Ok(Outbox { port, service })
     }
 
@@ -247,10 +264,7 @@ impl Transport {
         let port = factory
             .subscriber_builder()
             .create()
-            .map_err(|e| IpcError::Port {
-                service: service.clone(),
-                reason: format!("{e:?}"),
-            })?;
+            .map_err(port_error(&service))?;
         Ok(Inbox { port, service })
     }
 
@@ -283,10 +297,7 @@ impl Transport {
             .event(wake)?
             .listener_builder()
             .create()
-            .map_err(|e| IpcError::Port {
-                service: service.clone(),
-                reason: format!("{e:?}"),
-            })?;
+            .map_err(port_error(&service))?;
         Ok(Waker { port, service })
     }
 
@@ -297,10 +308,7 @@ impl Transport {
             .event(wake)?
             .notifier_builder()
             .create()
-            .map_err(|e| IpcError::Port {
-                service: service.clone(),
-                reason: format!("{e:?}"),
-            })?;
+            .map_err(port_error(&service))?;
         Ok(Bell { port, service })
     }
 

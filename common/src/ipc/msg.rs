@@ -503,13 +503,7 @@ mod tests {
     /// The control center's pipeline of agent 1 of the paper's scenario.
     fn center(r: &Resolved) -> CenterAgent<2> {
         let s = &r.scenario;
-        CenterAgent::<2>::new(CenterParams::new(
-            &s.agents[0],
-            &s.controller,
-            s.seed,
-            s.control_period_s,
-        ))
-        .expect("a two-link model")
+        CenterAgent::<2>::new(CenterParams::new(&s.agents[0], s)).expect("a two-link model")
     }
 
     /// Any f64 bit pattern, with NaN, the infinities, subnormals, the rejection boundary and
