@@ -37,6 +37,57 @@ pub struct ProcessArgs {
     pub cpus: Option<CpuList>,
 }
 
+/// Where and how a run's processes are scheduled (`--rt-priority`, `--cpus`).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Placement {
+    /// SCHED_FIFO at this priority (realtime runs) instead of the time-sharing default.
+    pub rt_priority: Option<u8>,
+    /// Only these CPUs.
+    pub cpus: Option<CpuList>,
+}
+
+impl Placement {
+    /// Applies it to the calling thread (and the threads it starts later). The error names the
+    /// option that could not be honoured and why.
+    pub fn apply(&self) -> Result<(), String> {
+        if let Some(cpus) = &self.cpus {
+            cpus.pin().map_err(|e| format!("--cpus {cpus}: {e}"))?;
+        }
+        if let Some(priority) = self.rt_priority {
+            use_fifo(priority).map_err(|e| format!("--rt-priority {priority}: {e}"))?;
+        }
+        Ok(())
+    }
+
+    /// Checks, before anything starts, that every CPU asked for is available and (on a
+    /// throw-away thread) that this user may do what is asked.
+    pub fn check(&self) -> Result<(), String> {
+        if let Some(cpus) = &self.cpus {
+            let allowed = CpuList::allowed()?;
+            if let Some(c) = cpus.cpus().iter().find(|c| !allowed.cpus().contains(c)) {
+                return Err(format!(
+                    "--cpus {cpus}: CPU {c} is not available (this process may use CPUs {allowed})"
+                ));
+            }
+        }
+        let p = self.clone();
+        std::thread::spawn(move || p.apply())
+            .join()
+            .map_err(|_| "checking --rt-priority / --cpus: the check panicked".to_string())?
+    }
+
+    /// `SCHED_OTHER` or `SCHED_FIFO <priority>`, and the CPUs when confined.
+    pub fn describe(&self) -> String {
+        let policy = self
+            .rt_priority
+            .map_or("SCHED_OTHER".into(), |p| format!("SCHED_FIFO {p}"));
+        match &self.cpus {
+            Some(c) => format!("{policy} on CPUs {c}"),
+            None => policy,
+        }
+    }
+}
+
 /// A set of CPUs, written as a list of numbers and ranges: `1`, `0,2`, `0-3`, `0,2-3`.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct CpuList(Vec<usize>);
@@ -412,12 +463,12 @@ pub fn start(
     wake: crate::ipc::Wake,
 ) -> Result<(Shutdown, crate::scenario::Resolved, Connection), RoleError> {
     let shutdown = Shutdown::install(args.launcher_pid).map_err(RoleError::Signals)?;
-    if let Some(cpus) = &args.cpus {
-        cpus.pin().map_err(RoleError::Scheduling)?;
+    Placement {
+        rt_priority: args.rt_priority,
+        cpus: args.cpus.clone(),
     }
-    if let Some(priority) = args.rt_priority {
-        use_fifo(priority).map_err(RoleError::Scheduling)?;
-    }
+    .apply()
+    .map_err(RoleError::Scheduling)?;
     let resolved = crate::scenario::load_file(&args.scenario)?;
     let conn = connect(args, role, wake, sizing_for(&resolved))?;
     Ok((shutdown, resolved, conn))

@@ -381,7 +381,7 @@ pub fn check_placement(r: &Resolved, engine: Engine, placement: &runtime::Placem
             );
         }
     }
-    placement.check()
+    placement.check().map_err(anyhow::Error::msg)
 }
 
 fn run(args: &RunArgs) -> Result<ExitCode> {

@@ -776,19 +776,18 @@ impl<'a> UdsReceiver<'a> {
         }
         match self.sock.recv(buf) {
             Ok(n) => Ok(Some(n)),
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    io::ErrorKind::WouldBlock
-                        | io::ErrorKind::TimedOut
-                        | io::ErrorKind::Interrupted
-                ) =>
-            {
-                Ok(None)
-            }
+            Err(e) if nothing_yet(&e) => Ok(None),
             Err(e) => Err(e),
         }
     }
+}
+
+/// A receive that found nothing (yet): timed out, would block, or was interrupted.
+fn nothing_yet(e: &io::Error) -> bool {
+    matches!(
+        e.kind(),
+        io::ErrorKind::WouldBlock | io::ErrorKind::TimedOut | io::ErrorKind::Interrupted
+    )
 }
 
 fn uds_case(opts: &FloorOptions, peer: PeerCommand<'_>) -> Result<FloorCase> {
@@ -819,14 +818,7 @@ fn uds_case(opts: &FloorOptions, peer: PeerCommand<'_>) -> Result<FloorCase> {
             match sock.recv(&mut buf) {
                 Ok(n) if read_seq(&buf[..n]) == Some(HELLO) => break,
                 Ok(_) => {}
-                Err(e)
-                    if matches!(
-                        e.kind(),
-                        io::ErrorKind::WouldBlock
-                            | io::ErrorKind::TimedOut
-                            | io::ErrorKind::Interrupted
-                    ) =>
-                {
+                Err(e) if nothing_yet(&e) => {
                     peers.check_alive()?;
                     if began.elapsed() > CONNECT_TIMEOUT {
                         bail!("the peer did not connect within {CONNECT_TIMEOUT:?}");

@@ -116,12 +116,11 @@ fn probe_loop(
     rt_priority: Option<u8>,
     stop: &AtomicBool,
 ) -> Result<Vec<Wakeup>, String> {
-    if let Some(c) = cpu {
-        c.pin()?;
+    Placement {
+        rt_priority,
+        cpus: cpu,
     }
-    if let Some(p) = rt_priority {
-        fdi_common::process::use_fifo(p)?;
-    }
+    .apply()?;
     let mut wakeups = Vec::new();
     let period = period_ns.max(1);
     let mut due = monotonic_ns() + period;

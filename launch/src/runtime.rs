@@ -1,7 +1,6 @@
 //! The multi-process engine: spawns the agents, the attacker and the control center, supervises
 //! them, and tears everything down (processes and shared memory) however the run ends.
 
-use fdi_common::process::CpuList;
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
@@ -134,54 +133,7 @@ pub struct IpcOptions {
     pub placement: Placement,
 }
 
-/// Where and how the run's processes are scheduled (`--rt-priority`, `--cpus`).
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct Placement {
-    /// SCHED_FIFO at this priority (realtime runs) instead of the time-sharing default.
-    pub rt_priority: Option<u8>,
-    /// Only these CPUs.
-    pub cpus: Option<CpuList>,
-}
-
-impl Placement {
-    /// Checks on a throw-away thread that this user may do what is asked, so that a refused
-    /// request fails before any process starts, with the reason.
-    pub fn check(&self) -> Result<()> {
-        if let Some(cpus) = &self.cpus {
-            let allowed = CpuList::allowed().map_err(anyhow::Error::msg)?;
-            if let Some(c) = cpus.cpus().iter().find(|c| !allowed.cpus().contains(c)) {
-                anyhow::bail!(
-                    "--cpus {cpus}: CPU {c} is not available (this process may use CPUs {allowed})"
-                );
-            }
-        }
-        let p = self.clone();
-        std::thread::spawn(move || -> Result<(), String> {
-            if let Some(cpus) = &p.cpus {
-                cpus.pin().map_err(|e| format!("--cpus: {e}"))?;
-            }
-            if let Some(priority) = p.rt_priority {
-                fdi_common::process::use_fifo(priority)
-                    .map_err(|e| format!("--rt-priority {priority}: {e}"))?;
-            }
-            Ok(())
-        })
-        .join()
-        .map_err(|_| anyhow::anyhow!("checking --rt-priority / --cpus: the check panicked"))?
-        .map_err(anyhow::Error::msg)
-    }
-
-    /// `SCHED_OTHER` or `SCHED_FIFO <priority>`, and the CPUs when confined.
-    pub fn describe(&self) -> String {
-        let policy = self
-            .rt_priority
-            .map_or("SCHED_OTHER".into(), |p| format!("SCHED_FIFO {p}"));
-        match &self.cpus {
-            Some(c) => format!("{policy} on CPUs {c}"),
-            None => policy,
-        }
-    }
-}
+pub use fdi_common::process::Placement;
 
 /// Trace path of a process.
 pub fn trace_path(run_dir: &Path, process: &str) -> PathBuf {

@@ -69,10 +69,16 @@ pub fn launch(args: &[&str], out: &Path, limit: Duration) -> Output {
 
 /// Starts `fdi-launch` with `args`, output under `out`.
 pub fn spawn(args: &[&str], out: &Path) -> Child {
+    let out = out.to_string_lossy();
+    let mut all = args.to_vec();
+    all.extend(["--out", &out]);
+    spawn_plain(&all)
+}
+
+/// Starts `fdi-launch` with exactly `args`; stdout and stderr are captured.
+fn spawn_plain(args: &[&str]) -> Child {
     Command::new(launcher())
         .args(args)
-        .arg("--out")
-        .arg(out)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
@@ -196,14 +202,7 @@ pub fn wait_until(limit: Duration, mut cond: impl FnMut() -> bool) -> bool {
 /// Runs `fdi-launch` with exactly `args` (no `--out`: for `report` and `trace export`, which
 /// take a run directory) and waits, killing it after `limit`.
 pub fn launch_plain(args: &[&str], limit: Duration) -> Output {
-    let child = Command::new(launcher())
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawning fdi-launch");
-    wait_with_watchdog(child, limit)
+    wait_with_watchdog(spawn_plain(args), limit)
 }
 
 /// The run directory that `run --json` printed.
@@ -242,13 +241,7 @@ pub struct Watched {
 /// Runs `fdi-launch` with `args` (no `--out` added) and waits, killing it after `limit`, while
 /// polling every millisecond for processes it starts.
 pub fn launch_watching_children(args: &[&str], limit: Duration) -> Watched {
-    let mut child = Command::new(launcher())
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("spawning fdi-launch");
+    let mut child = spawn_plain(args);
     let pid = child.id();
     let began = Instant::now();
     let mut seen = Vec::new();
