@@ -28,21 +28,20 @@ pub struct ProcessArgs {
     /// Pid of the launcher: the process stops when it dies.
     #[arg(long)]
     pub launcher_pid: Option<u32>,
-    /// Run under SCHED_FIFO at this priority (1–99) instead of the default time-sharing
-    /// policy (realtime runs, `--rt-priority` of the launcher).
-    #[arg(long, value_parser = clap::value_parser!(u8).range(1..=99))]
-    pub rt_priority: Option<u8>,
-    /// Run only on these CPUs (a list such as `1`, `0,2` or `0-3`).
-    #[arg(long, value_name = "LIST")]
-    pub cpus: Option<CpuList>,
+    #[command(flatten)]
+    pub placement: Placement,
 }
 
 /// Where and how a run's processes are scheduled (`--rt-priority`, `--cpus`).
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq, Eq, clap::Args)]
 pub struct Placement {
-    /// SCHED_FIFO at this priority (realtime runs) instead of the time-sharing default.
+    /// Realtime runs: every process of the run under SCHED_FIFO at this priority (1–99)
+    /// instead of the time-sharing default. Needs CAP_SYS_NICE or an RLIMIT_RTPRIO of at least
+    /// the priority.
+    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
     pub rt_priority: Option<u8>,
-    /// Only these CPUs.
+    /// Every process of the run only on these CPUs (a list such as `1`, `0,2` or `0-3`).
+    #[arg(long, value_name = "LIST")]
     pub cpus: Option<CpuList>,
 }
 
@@ -463,12 +462,7 @@ pub fn start(
     wake: crate::ipc::Wake,
 ) -> Result<(Shutdown, crate::scenario::Resolved, Connection), RoleError> {
     let shutdown = Shutdown::install(args.launcher_pid).map_err(RoleError::Signals)?;
-    Placement {
-        rt_priority: args.rt_priority,
-        cpus: args.cpus.clone(),
-    }
-    .apply()
-    .map_err(RoleError::Scheduling)?;
+    args.placement.apply().map_err(RoleError::Scheduling)?;
     let resolved = crate::scenario::load_file(&args.scenario)?;
     let conn = connect(args, role, wake, sizing_for(&resolved))?;
     Ok((shutdown, resolved, conn))

@@ -64,14 +64,9 @@ pub struct LatencyArgs {
     /// Folder that receives the run directory.
     #[arg(long, default_value = "runs")]
     pub out: PathBuf,
-    /// Put every process of the run under SCHED_FIFO at this priority (1–99). Needs
-    /// CAP_SYS_NICE or an RLIMIT_RTPRIO of at least the priority.
-    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
-    pub rt_priority: Option<u8>,
-    /// Run every process of the run (and the timer probe) only on these CPUs (a list such as
-    /// `1`, `0,2` or `0-3`).
-    #[arg(long, value_name = "LIST")]
-    pub cpus: Option<fdi_common::process::CpuList>,
+    /// Placement of the run's processes (and of the timer probe beside them).
+    #[command(flatten)]
+    pub placement: crate::runtime::Placement,
 }
 
 #[derive(Debug, Args)]
@@ -213,15 +208,12 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
             problems
         });
     }
-    let placement = crate::runtime::Placement {
-        rt_priority: a.rt_priority,
-        cpus: a.cpus.clone(),
-    };
-    crate::cli::check_placement(&r, Engine::Ipc, &placement)?;
+    let placement = &a.placement;
+    crate::cli::check_placement(&r, Engine::Ipc, placement)?;
     let dir = output::create_run_dir(&a.out, &r)?;
     let period_ns = (r.scenario.control_period_s * 1e9) as i64;
-    let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), &placement);
-    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json, &placement);
+    let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
+    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json, placement);
     let wakeups = probe.finish();
     let (summary, wakeups) = (summary?, wakeups?);
 
@@ -395,8 +387,7 @@ fn transport(a: &TransportArgs) -> Result<ExitCode> {
         rate_hz: 1000.0,
         json: true,
         out: a.out.clone(),
-        rt_priority: None,
-        cpus: None,
+        placement: Default::default(),
     })?;
     let hops = [
         rt.hops_us.agent_to_attacker.p50,

@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use fdi_common::engine::{run_inproc, RunSummary};
-use fdi_common::process::{CpuList, ProcessArgs};
+use fdi_common::process::ProcessArgs;
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
@@ -149,13 +149,8 @@ pub struct RunArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
-    /// Realtime runs: put every process of the run under SCHED_FIFO at this priority (1–99).
-    /// Needs CAP_SYS_NICE or an RLIMIT_RTPRIO of at least the priority.
-    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
-    pub rt_priority: Option<u8>,
-    /// Run every process of the run only on these CPUs (a list such as `1`, `0,2` or `0-3`).
-    #[arg(long, value_name = "LIST")]
-    pub cpus: Option<CpuList>,
+    #[command(flatten)]
+    pub placement: runtime::Placement,
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
     /// tampered measurements and compare the trace digest with the recording's (exit status 1
     /// when they differ). The scenario comes from RUN_DIR.
@@ -389,13 +384,9 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         return crate::replayer::replay_run(recorded, &args.out, args.json);
     }
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
-    let placement = runtime::Placement {
-        rt_priority: args.rt_priority,
-        cpus: args.cpus.clone(),
-    };
-    check_placement(&r, args.engine, &placement)?;
+    check_placement(&r, args.engine, &args.placement)?;
     let dir = output::create_run_dir(&args.out, &r)?;
-    let summary = execute(&r, args.engine, Some(&dir), !args.json, &placement)?;
+    let summary = execute(&r, args.engine, Some(&dir), !args.json, &args.placement)?;
     for lost in &summary.lost_agents {
         let when = lost
             .t_s
