@@ -182,8 +182,8 @@ pub fn run(
                         }
                     }
                 };
-                if tick_time(inflow.next, dt) > plant.latest_query(t) {
-                    let step = plant.advance(t);
+                if plant.can_advance_without(k, tick_time(inflow.next, dt)) {
+                    let step = plant.advance(k);
                     trace.write(&TraceRecord::Agent(agent_record(
                         k,
                         agent_id,
@@ -237,7 +237,7 @@ pub fn run(
                         .wait_precise(Duration::from_nanos(left).min(WAIT_SLICE))?;
                 }
                 let t_prev = tick_time(k - 1, dt);
-                let step = plant.advance(t_prev);
+                let step = plant.advance(k - 1);
                 trace.write(&TraceRecord::Agent(agent_record(
                     k - 1,
                     agent_id,

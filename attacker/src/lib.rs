@@ -95,7 +95,6 @@ pub fn run(
                 yd: to_vector::<2>(&m.yd),
             };
             let (out, inj) = tamper(&mut target.attack, t, &clean);
-            let active = target.attack.is_active(t);
             let sent = ports.tampered.send(MeasurementMsg {
                 y: from_vector(&out.y),
                 yd: from_vector(&out.yd),
@@ -107,7 +106,7 @@ pub fn run(
                 failure.get_or_insert(AttackerError::from(e));
             }
             if let Err(e) = trace.write(&TraceRecord::Attack(attack_record(
-                m.seq, m.agent, &out, &inj, active,
+                m.seq, m.agent, &out, &inj,
             ))) {
                 failure.get_or_insert(AttackerError::from(e));
             }

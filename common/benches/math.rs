@@ -39,13 +39,13 @@ impl AgentLoop {
         }
     }
 
-    /// One tick at `t`; returns the tampered measurement the center saw and its torque.
-    fn tick(&mut self, t: f64) -> (Vector<2>, Vector<2>, Vector<2>) {
+    /// Tick `k` at `t`; returns the tampered measurement the center saw and its torque.
+    fn tick(&mut self, k: u64, t: f64) -> (Vector<2>, Vector<2>, Vector<2>) {
         let m = self.plant.measure();
         let (tampered, _) = tamper(&mut self.attack, t, &m);
         let out = self.center.tick(t, &tampered.y, &tampered.yd);
         let _ = self.plant.receive(t, out.u);
-        self.plant.advance(t);
+        self.plant.advance(k);
         (tampered.y, tampered.yd, out.u)
     }
 }
@@ -75,7 +75,7 @@ fn record_agent1(r: &Resolved) -> Recorded {
     };
     for k in 0..r.ticks() {
         let t = tick_time(k, r.scenario.control_period_s);
-        let (y, yd, u) = run.tick(t);
+        let (y, yd, u) = run.tick(k, t);
         rec.t.push(t);
         rec.y.push(y);
         rec.yd.push(yd);
@@ -147,7 +147,7 @@ fn benches(c: &mut Criterion) {
                 || Plant::<2>::new(PlantParams::new(a1, &r.scenario)).expect("two-link plant"),
                 |plant, k| {
                     let _ = plant.receive(black_box(rec.t[k]), black_box(rec.u[k]));
-                    black_box(plant.advance(rec.t[k]));
+                    black_box(plant.advance(k as u64));
                 },
             )
         });
@@ -168,7 +168,7 @@ fn benches(c: &mut Criterion) {
                 |agents, k| {
                     let t = tick_time(k as u64, r.scenario.control_period_s);
                     for agent in agents.iter_mut() {
-                        black_box(agent.tick(t));
+                        black_box(agent.tick(k as u64, t));
                     }
                 },
             )

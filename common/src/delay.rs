@@ -59,6 +59,35 @@ impl DelayProfile {
         }
     }
 
+    /// `τ̇(t)`.
+    pub fn rate(&self, t: f64) -> f64 {
+        match *self {
+            Self::Sine {
+                amplitude_s,
+                rate_rad_s,
+                ..
+            } => amplitude_s * rate_rad_s * (rate_rad_s * t).cos(),
+            Self::Constant { .. } => 0.0,
+        }
+    }
+
+    /// The instant `c ∈ [a, b]` at which the query `c − τ(c)` reaches `stamp`, given the queries
+    /// `qa`, `qb` at `a`, `b` with `qa < stamp < qb`: where the command stamped `stamp` takes
+    /// over inside an integration step. `c − τ(c)` increases (`|τ̇| < 1`), so Newton's method
+    /// from the linear interpolation converges; a fixed iteration count keeps it deterministic.
+    pub fn takeover_time(&self, stamp: f64, (a, qa): (f64, f64), (b, qb): (f64, f64)) -> f64 {
+        let mut c = a + (b - a) * ((stamp - qa) / (qb - qa));
+        if let Self::Constant { value_s } = *self {
+            c = stamp + value_s;
+        } else {
+            for _ in 0..4 {
+                let g = c - self.tau(c) - stamp;
+                c -= g / (1.0 - self.rate(c));
+            }
+        }
+        c.clamp(a, b)
+    }
+
     /// Upper bound of `|τ̇|`; Assumption 4 of the paper needs it below 1.
     pub fn max_rate(&self) -> f64 {
         match *self {
@@ -112,6 +141,29 @@ fn fmt_num(x: f64) -> String {
     s.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
+/// Whether a command stamped `stamp` is in force at query time `t` (the one rule every
+/// lookup, prune and lookahead decision uses): `stamp ≤ t`, where `t` may fall short of the
+/// stamp by its rounding error. A delay that is a whole number of control periods puts the
+/// query `t_k − τ` exactly on a stamp in exact arithmetic; computed in floating point it lands
+/// an ulp above or below, and a plain `≤` would pick the older command in some ticks and the
+/// newer one in others (an effective delay jittering by a whole period). The allowance,
+/// `16 ε · max(|t|, 1 s)`, covers that rounding for delays up to several seconds and is far
+/// below any real offset: at `t` = 40 s it is 1.4e-13 s, 1e-10 of a 1 ms period, so a delay of
+/// `τ + 1e-7 s` is still told apart from `τ`.
+pub fn in_force_at(stamp: f64, t: f64) -> bool {
+    stamp <= t + rounding_allowance(t)
+}
+
+/// Whether a command stamped `stamp` takes over strictly after the query time `t`, beyond the
+/// rounding allowance of [`in_force_at`] on both sides.
+fn strictly_after(stamp: f64, t: f64) -> bool {
+    stamp > t + rounding_allowance(t)
+}
+
+fn rounding_allowance(t: f64) -> f64 {
+    16.0 * f64::EPSILON * t.abs().max(1.0)
+}
+
 /// Result of looking a command up for time `t`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Lookup<const N: usize> {
@@ -120,16 +172,36 @@ pub struct Lookup<const N: usize> {
     /// Stamp of that command, `None` before the first.
     pub stamp: Option<f64>,
     /// True when a newer command should have been in force but has not arrived: the last
-    /// received command is held (SPEC §5 deadline miss).
+    /// received command is held (SPEC §5 deadline miss). Also true when [`Self::pruned`].
     pub missed: bool,
+    /// The query reached before the oldest command kept after pruning: the oldest kept
+    /// command is held (never zero) and the lookup counts as a miss.
+    pub pruned: bool,
 }
 
 /// History of `(t_send, u)` pairs, each command held from its stamp until the next one
 /// (zero-order hold). Stamps must increase strictly; older entries are pruned once no query
 /// can reach them (queries `t − τ(t)` never go back in time, because `|τ̇| < 1`).
+///
+/// Pruning keeps one entry more than the query it was given needs, so a later query that
+/// lands a rounding error before the pruning instant still finds the command in force. A query
+/// that reaches before the oldest kept entry after pruning has no answer in the history: it is
+/// never answered with zero, but with the oldest kept command held and flagged
+/// ([`Lookup::pruned`], a counted miss), or as an error ([`HistoryPruned`]) by
+/// [`Self::integral`].
 #[derive(Debug, Clone)]
 pub struct DelayLine<const N: usize> {
     entries: VecDeque<(f64, Vector<N>)>,
+    /// Some entry was pruned: the history no longer starts at the first command.
+    pruned: bool,
+}
+
+/// A query of [`DelayLine::integral`] reached before the oldest command kept after pruning.
+#[derive(Debug, Clone, Copy, PartialEq, thiserror::Error)]
+#[error("query at {query} s reaches before the oldest kept command (stamp {oldest} s): that part of the history was pruned")]
+pub struct HistoryPruned {
+    pub query: f64,
+    pub oldest: f64,
 }
 
 impl<const N: usize> Default for DelayLine<N> {
@@ -153,6 +225,7 @@ impl<const N: usize> DelayLine<N> {
     pub fn new() -> Self {
         Self {
             entries: VecDeque::with_capacity(256),
+            pruned: false,
         }
     }
 
@@ -186,23 +259,24 @@ impl<const N: usize> DelayLine<N> {
 
     /// Index of the newest entry with `stamp ≤ t`.
     fn index_at(&self, t: f64) -> Option<usize> {
-        let n = self.entries.partition_point(|e| e.0 <= t);
+        let n = self.entries.partition_point(|e| in_force_at(e.0, t));
         n.checked_sub(1)
     }
 
-    /// The command in force at `t`: the one with the largest stamp `≤ t`, zero before the first.
-    pub fn value_at(&self, t: f64) -> Vector<N> {
-        self.index_at(t)
-            .map_or_else(Vector::<N>::zeros, |i| self.entries[i].1)
+    /// Like [`Self::lookup`] without the deadline check: the command in force at `t`, zero
+    /// before the first one, the oldest kept one held (and flagged) before the pruned horizon.
+    pub fn value_at(&self, t: f64) -> Lookup<N> {
+        self.lookup(t, f64::INFINITY)
     }
 
-    /// Like [`Self::value_at`], and flags a deadline miss when commands are expected every
-    /// `period` seconds and the one due at `t` has not arrived. The tolerance of 1e-6 periods
-    /// errs on the side of "not yet due": a query a hair below the next stamp `k·Δ` (round-off
-    /// of `t − τ(t)` when τ ≈ Δ) is not a miss — the agent's lookahead steps exactly then.
+    /// The command in force at `t` — the one with the largest stamp `≤ t`, zero before the
+    /// first — and whether a deadline was missed, when commands are expected every `period`
+    /// seconds and the one due at `t` has not arrived. The tolerance of 1e-6 periods errs on
+    /// the side of "not yet due": a query a hair below the next stamp `k·Δ` (round-off of
+    /// `t − τ(t)` when τ ≈ Δ) is not a miss — the agent's lookahead steps exactly then.
     pub fn lookup(&self, t: f64, period: f64) -> Lookup<N> {
-        match self.index_at(t) {
-            Some(i) => {
+        match (self.index_at(t), self.entries.front()) {
+            (Some(i), _) => {
                 let (stamp, value) = self.entries[i];
                 let is_newest = i + 1 == self.entries.len();
                 let missed = is_newest && stamp + period * (1.0 + 1e-6) <= t;
@@ -210,24 +284,52 @@ impl<const N: usize> DelayLine<N> {
                     value,
                     stamp: Some(stamp),
                     missed,
+                    pruned: false,
                 }
             }
-            None => Lookup {
+            (None, Some(&(stamp, value))) if self.pruned => Lookup {
+                value,
+                stamp: Some(stamp),
+                missed: true,
+                pruned: true,
+            },
+            (None, _) => Lookup {
                 value: Vector::<N>::zeros(),
                 stamp: None,
                 missed: false,
+                pruned: false,
             },
         }
     }
 
+    /// The oldest command that takes over strictly between the queries `after` and `before`
+    /// (beyond the rounding allowance at both ends): where the held input next switches inside
+    /// an integration step whose queries span `[after, before]`.
+    pub fn next_switch(&self, after: f64, before: f64) -> Option<(f64, Vector<N>)> {
+        let first = self
+            .entries
+            .partition_point(|e| !strictly_after(e.0, after));
+        self.entries
+            .get(first)
+            .filter(|e| e.0 < before - rounding_allowance(before))
+            .copied()
+    }
+
     /// `∫_a^b u(s) ds` over the zero-order-held history; zero before the first command, the
-    /// newest command extends to `b`. Sums segment by segment in time order.
-    pub fn integral(&self, a: f64, b: f64) -> Vector<N> {
+    /// newest command extends to `b`. Sums segment by segment in time order. An error when
+    /// `a` reaches before the oldest command kept after pruning.
+    pub fn integral(&self, a: f64, b: f64) -> Result<Vector<N>, HistoryPruned> {
         let mut acc = Vector::<N>::zeros();
         if b <= a {
-            return acc;
+            return Ok(acc);
         }
-        let start = self.index_at(a).unwrap_or(0);
+        let start = match (self.index_at(a), self.entries.front()) {
+            (Some(i), _) => i,
+            (None, Some(&(oldest, _))) if self.pruned => {
+                return Err(HistoryPruned { query: a, oldest })
+            }
+            (None, _) => 0,
+        };
         for i in start..self.entries.len() {
             let (s0, value) = self.entries[i];
             let s1 = self.entries.get(i + 1).map_or(f64::INFINITY, |e| e.0);
@@ -240,13 +342,15 @@ impl<const N: usize> DelayLine<N> {
                 break;
             }
         }
-        acc
+        Ok(acc)
     }
 
-    /// Drops every entry that no query at or after `t` can reach (keeps the one in force at `t`).
+    /// Drops every entry that no query at or after `t` can reach. Keeps the one in force at
+    /// `t` and, as a margin against round-off in the caller's next query, the one before it.
     pub fn prune_before(&mut self, t: f64) {
-        while self.entries.len() >= 2 && self.entries[1].0 <= t {
+        while self.entries.len() >= 3 && self.entries[2].0 <= t {
             self.entries.pop_front();
+            self.pruned = true;
         }
     }
 }
@@ -272,12 +376,12 @@ mod tests {
     #[test]
     fn lookup_is_exact_at_and_between_stamps_and_zero_before_the_first() {
         let d = line(10, 0.001);
-        assert_eq!(d.value_at(-1e-9), Vector::<2>::zeros());
+        assert_eq!(d.value_at(-1e-9).value, Vector::<2>::zeros());
         for k in 0..10 {
             let t = k as f64 * 0.001;
-            assert_eq!(d.value_at(t), v(k as f64 + 1.0), "at stamp {k}");
+            assert_eq!(d.value_at(t).value, v(k as f64 + 1.0), "at stamp {k}");
             assert_eq!(
-                d.value_at(t + 0.0004),
+                d.value_at(t + 0.0004).value,
                 v(k as f64 + 1.0),
                 "between {k} and {}",
                 k + 1
@@ -298,7 +402,11 @@ mod tests {
             let t = i as f64 * dt + 0.0003;
             let q = t - tau.tau(t);
             let k = (q / dt).floor() as usize;
-            assert_eq!(d.value_at(q), v(k as f64 + 1.0), "t = {t}, t − τ = {q}");
+            assert_eq!(
+                d.value_at(q).value,
+                v(k as f64 + 1.0),
+                "t = {t}, t − τ = {q}"
+            );
         }
     }
 
@@ -326,15 +434,19 @@ mod tests {
             let n = (x / dt).floor();
             dt * dt * n * (n - 1.0) / 2.0 + n * dt * (x - n * dt)
         };
-        let got = d.integral(a, b);
+        let got = d.integral(a, b).expect("nothing pruned");
         // Summation of ~440 terms of size 1e-4: round-off well below 1e-12.
         assert_relative_eq!(got[0], stair(b) - stair(a), epsilon = 1e-12);
         assert_relative_eq!(got[1], b - a, epsilon = 1e-12);
         // Before the first command the integrand is zero.
         let mut late = DelayLine::<2>::new();
         late.push(1.0, Vector::<2>::new(2.0, 2.0)).expect("first");
-        assert_relative_eq!(late.integral(0.5, 1.5)[0], 1.0, epsilon = 1e-15);
-        assert_eq!(late.integral(0.2, 0.9), Vector::<2>::zeros());
+        assert_relative_eq!(
+            late.integral(0.5, 1.5).expect("nothing pruned")[0],
+            1.0,
+            epsilon = 1e-15
+        );
+        assert_eq!(late.integral(0.2, 0.9), Ok(Vector::<2>::zeros()));
     }
 
     #[test]
@@ -356,13 +468,71 @@ mod tests {
     fn pruning_keeps_the_command_in_force() {
         let mut d = line(100, 0.001);
         d.prune_before(0.0505);
-        assert_eq!(d.value_at(0.0505), v(51.0));
-        assert_eq!(d.len(), 50);
+        assert_eq!(d.value_at(0.0505).value, v(51.0));
+        // The command in force (stamp 50 ms) and one more before it (49 ms) are kept.
+        assert_eq!(d.len(), 51);
         assert_relative_eq!(
-            d.integral(0.0505, 0.0515)[0],
+            d.integral(0.0505, 0.0515).expect("in the kept history")[0],
             0.5e-3 * 51.0 + 0.5e-3 * 52.0,
             epsilon = 1e-15
         );
+    }
+
+    /// Regression: pruning at `(t_k + Δ) − τ` and querying at `tick_time(k + 1) − τ` — one ulp
+    /// smaller when τ is a multiple of Δ — found no command and applied zero torque.
+    #[test]
+    fn a_query_just_before_the_pruning_instant_still_finds_the_command_in_force() {
+        let dt = 0.001;
+        let mut d = line(100, dt);
+        let at = 50.0 * dt; // exactly a stamp
+        d.prune_before(at);
+        // One ulp short of a stamp is the rounding of `t − τ`: the stamp is reached.
+        let one_ulp_short = f64::from_bits(at.to_bits() - 1);
+        let l = d.lookup(one_ulp_short, dt);
+        assert_eq!(l.value, v(51.0), "the command stamped 50 ms is in force");
+        assert!(!l.pruned && !l.missed);
+        // Really before the stamp: the command before it, still kept.
+        let before = at - 1e-9;
+        let l = d.lookup(before, dt);
+        assert_eq!(l.value, v(50.0), "the command stamped 49 ms is in force");
+        assert!(!l.pruned && !l.missed);
+        assert!(d.integral(before, at).is_ok());
+    }
+
+    #[test]
+    fn a_query_on_a_stamp_picks_that_command_whichever_way_the_query_rounded() {
+        let dt = 0.001;
+        let d = line(10_000, dt);
+        for k in 10..10_000u64 {
+            for m in 1..7u64 {
+                // The rounding of t_k − τ for τ = m·Δ, against the stamp of command k − m.
+                let q = k as f64 * dt - m as f64 * dt;
+                let want = v((k - m) as f64 + 1.0);
+                assert_eq!(d.value_at(q).value, want, "k {k}, τ = {m} Δ");
+            }
+        }
+    }
+
+    #[test]
+    fn a_query_before_the_kept_history_holds_the_oldest_command_and_counts_a_miss() {
+        let dt = 0.001;
+        let mut d = line(100, dt);
+        d.prune_before(0.0505);
+        let l = d.lookup(0.0300, dt);
+        assert!(l.pruned && l.missed, "{l:?}");
+        assert_eq!(l.value, v(50.0), "the oldest kept command, never zero");
+        assert_eq!(
+            d.integral(0.0300, 0.0505),
+            Err(HistoryPruned {
+                query: 0.0300,
+                oldest: 0.049
+            })
+        );
+        // Before any pruning, a query before the first command is zero and no miss.
+        let fresh = line(3, dt);
+        let l = fresh.lookup(-0.5, dt);
+        assert_eq!(l.value, Vector::<2>::zeros());
+        assert!(!l.pruned && !l.missed);
     }
 
     #[test]

@@ -63,13 +63,12 @@ pub fn agent_record<const N: usize>(
     }
 }
 
-/// Builds the attacker's record of tick `k` for one agent.
+/// Builds the attacker's record of tick `k` for one agent (`active`: the injection is in force).
 pub fn attack_record<const N: usize>(
     k: u64,
     agent: u32,
     out: &Measurement<N>,
     inj: &Injection<N>,
-    active: bool,
 ) -> AttackRecord {
     AttackRecord {
         k,
@@ -78,7 +77,7 @@ pub fn attack_record<const N: usize>(
         alpha_velocity: inj.velocity.into(),
         y: out.y.into(),
         yd: out.yd.into(),
-        active,
+        active: inj.in_force(),
     }
 }
 
@@ -94,6 +93,9 @@ pub fn center_record<const N: usize>(k: u64, agent: u32, o: &CenterOutput<N>) ->
         u: o.u.into(),
         alarm: o.alarm,
         rejected_input: o.rejected_input,
+        rejected_torque: o.rejected_torque,
+        state_reset: o.state_reset,
+        history_miss: o.history_miss,
     }
 }
 
@@ -173,12 +175,13 @@ pub fn summarize(
 
 /// An evaluator for the agents of `resolved`.
 pub fn evaluator_for(resolved: &Resolved) -> Evaluator {
-    let s = &resolved.scenario;
-    let d = s.duration_s;
-    Evaluator::new(s.agents.iter().map(|a| {
-        let onsets = AgentAttack::compile(&resolved.attack, a.id, s.seed).onsets(d);
-        (a.id, a.trajectory.clone(), onsets)
-    }))
+    Evaluator::new(
+        resolved
+            .scenario
+            .agents
+            .iter()
+            .map(|a| (a.id, a.trajectory.clone())),
+    )
 }
 
 /// Errors of the engine.
@@ -227,14 +230,13 @@ where
             let (q, qd) = (plant.q, plant.qd);
             let m = plant.measure();
             let (tampered, inj) = tamper(attack, t, &m);
-            let active = attack.is_active(t);
             let out = center.tick(t, &tampered.y, &tampered.yd);
             // A refused command is counted by the plant; the run goes on.
             let _ = plant.receive(t, out.u);
-            let step = plant.advance(t);
+            let step = plant.advance(k);
             let rec = TickRecord {
                 agent: agent_record(k, id, t, (&q, &qd), &m, &step),
-                attack: attack_record(k, id, &tampered, &inj, active),
+                attack: attack_record(k, id, &tampered, &inj),
                 center: center_record(k, id, &out),
             };
             digest.push(&rec);

@@ -1,11 +1,13 @@
 //! The agent's side: the true robot, its sensor, and the delayed torque channel's receiving end
 //! (SPEC §2, §5). Integration: classic RK4 over each control period (optionally sub-stepped),
-//! the delayed input `u(t − τ(t))` evaluated at every RK stage time through the delay line.
+//! each sub-step split where the zero-order-held delayed input `u(t − τ(t))` switches to a
+//! newer command, so every RK stage sees the command in force over its whole piece.
 
 use rand_chacha::ChaCha12Rng;
 use rand_distr::{Distribution, Normal};
 
-use crate::delay::{DelayLine, DelayProfile, PushError};
+use crate::delay::{in_force_at, DelayLine, DelayProfile, PushError};
+use crate::engine::tick_time;
 use crate::model::{EulerLagrange, Vector};
 use crate::rng::{stream, Purpose};
 use crate::scenario::{AgentConfig, BuildModel, DisturbanceConfig, ModelConfig, NoiseConfig};
@@ -147,62 +149,99 @@ impl<const N: usize> Plant<N> {
         d
     }
 
-    /// `(q̈, u applied, missed)` at stage time `t`.
-    fn dynamics(&self, t: f64, q: &Vector<N>, qd: &Vector<N>) -> (Vector<N>, Vector<N>, bool) {
-        let tau = self.params.delay.tau(t);
-        let look = self.commands.lookup(t - tau, self.params.control_period_s);
-        let qdd = self
-            .model
-            .acceleration(q, qd, &look.value, &self.disturbance(t));
-        (qdd, look.value, look.missed)
+    /// The delay line's query for time `t`: `t − τ(t)`. Every use (the integration, the
+    /// lookahead bound, the pruning of the history) computes it here, so they agree to the bit.
+    fn query(&self, t: f64) -> f64 {
+        t - self.params.delay.tau(t)
     }
 
-    /// The latest instant `t − τ(t)` that [`Self::advance`]`(t_k)` will look a command up for,
-    /// computed with the same operations as the RK stages. A step can run as soon as the
-    /// command in force at that instant is known: lookahead without changing a single bit.
-    pub fn latest_query(&self, t_k: f64) -> f64 {
+    /// The sub-step boundaries of step `k`: `t_k + s·h` for `s = 0 ..= substeps`.
+    fn boundaries(&self, k: u64) -> impl Iterator<Item = f64> {
+        let t_k = tick_time(k, self.params.control_period_s);
         let m = self.params.substeps.max(1);
         let h = self.params.control_period_s / f64::from(m);
-        let mut latest = f64::NEG_INFINITY;
-        for s in 0..m {
-            let t = t_k + f64::from(s) * h;
-            for stage in [t, t + h / 2.0, t + h] {
-                latest = latest.max(stage - self.params.delay.tau(stage));
-            }
-        }
-        latest
+        (0..=m).map(move |s| t_k + f64::from(s) * h)
     }
 
-    /// Integrates `[t_k, t_k + Δ]` with RK4 (`substeps` sub-steps).
-    pub fn advance(&mut self, t_k: f64) -> StepReport<N> {
-        let dt_total = self.params.control_period_s;
+    /// The latest instant `t − τ(t)` that [`Self::advance`]`(k)` will look a command up for,
+    /// computed with the same operations as the integration. A step can run as soon as the
+    /// command in force at that instant is known: lookahead without changing a single bit.
+    pub fn latest_query(&self, k: u64) -> f64 {
+        self.boundaries(k)
+            .map(|t| self.query(t))
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+
+    /// Whether step `k` can run although the command stamped `missing` (and every later one)
+    /// has not arrived: it is not in force at any query of the step, by the delay line's own
+    /// rule ([`in_force_at`]). The step then looks up exactly what it looks up in strict
+    /// lockstep.
+    pub fn can_advance_without(&self, k: u64, missing: f64) -> bool {
+        !in_force_at(missing, self.latest_query(k))
+    }
+
+    /// The earliest instant that [`Self::advance`]`(k)` will look a command up for.
+    pub fn earliest_query(&self, k: u64) -> f64 {
+        self.boundaries(k)
+            .map(|t| self.query(t))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// One classic RK4 step of length `len` from `t` with the delayed input held at `u`.
+    fn rk4(&mut self, t: f64, len: f64, u: &Vector<N>) -> Vector<N> {
+        let acc = |t: f64, q: &Vector<N>, qd: &Vector<N>| {
+            self.model.acceleration(q, qd, u, &self.disturbance(t))
+        };
+        let (q, qd) = (self.q, self.qd);
+        let a1 = acc(t, &q, &qd);
+        let (q2, qd2) = (q + qd * (len / 2.0), qd + a1 * (len / 2.0));
+        let a2 = acc(t + len / 2.0, &q2, &qd2);
+        let (q3, qd3) = (q + qd2 * (len / 2.0), qd + a2 * (len / 2.0));
+        let a3 = acc(t + len / 2.0, &q3, &qd3);
+        let (q4, qd4) = (q + qd3 * len, qd + a3 * len);
+        let a4 = acc(t + len, &q4, &qd4);
+        self.q = q + (qd + qd2 * 2.0 + qd3 * 2.0 + qd4) * (len / 6.0);
+        self.qd = qd + (a1 + a2 * 2.0 + a3 * 2.0 + a4) * (len / 6.0);
+        a1
+    }
+
+    /// Integrates step `k`, `[t_k, t_k + Δ]` with `t_k =` [`tick_time`]`(k)`, sub-step by
+    /// sub-step. The delayed input `u(t − τ(t))` is piecewise constant: each sub-step is split
+    /// at the instants where a newer command takes over (its stamp reached by `t − τ(t)`), and
+    /// each piece is one RK4 step with its own held command. No RK stage straddles a switch, so
+    /// the result depends continuously on τ: a delay of exactly `m·Δ` and one a hair longer
+    /// integrate the same input over all but a hair of the step.
+    pub fn advance(&mut self, k: u64) -> StepReport<N> {
+        let period = self.params.control_period_s;
+        let t_k = tick_time(k, period);
         let m = self.params.substeps.max(1);
-        let h = dt_total / f64::from(m);
+        let h = period / f64::from(m);
         let mut report = None;
         let mut missed = false;
         for s in 0..m {
-            let t = t_k + f64::from(s) * h;
-            let (q, qd) = (self.q, self.qd);
-            let (a1, u1, m1) = self.dynamics(t, &q, &qd);
-            if report.is_none() {
-                report = Some((u1, a1));
+            let (a, b) = (t_k + f64::from(s) * h, t_k + f64::from(s + 1) * h);
+            let (qa, qb) = (self.query(a), self.query(b));
+            let start = self.commands.lookup(qa, period);
+            missed |= start.missed || self.commands.lookup(qb, period).missed;
+            let (mut from, mut from_query, mut u) = (a, qa, start.value);
+            loop {
+                let next = self.commands.next_switch(from_query, qb);
+                let to = next.map_or(b, |(stamp, _)| {
+                    self.params.delay.takeover_time(stamp, (a, qa), (b, qb))
+                });
+                if to > from {
+                    let a1 = self.rk4(from, to - from, &u);
+                    report.get_or_insert((u, a1));
+                }
+                let Some((stamp, value)) = next else { break };
+                (from, from_query, u) = (to.max(from), stamp, value);
             }
-            let (q2, qd2) = (q + qd * (h / 2.0), qd + a1 * (h / 2.0));
-            let (a2, _, m2) = self.dynamics(t + h / 2.0, &q2, &qd2);
-            let (q3, qd3) = (q + qd2 * (h / 2.0), qd + a2 * (h / 2.0));
-            let (a3, _, m3) = self.dynamics(t + h / 2.0, &q3, &qd3);
-            let (q4, qd4) = (q + qd3 * h, qd + a3 * h);
-            let (a4, _, m4) = self.dynamics(t + h, &q4, &qd4);
-            self.q = q + (qd + qd2 * 2.0 + qd3 * 2.0 + qd4) * (h / 6.0);
-            self.qd = qd + (a1 + a2 * 2.0 + a3 * 2.0 + a4) * (h / 6.0);
-            missed |= m1 || m2 || m3 || m4;
         }
         if missed {
             self.deadline_misses += 1;
         }
-        let t_next = t_k + dt_total;
-        self.commands
-            .prune_before(t_next - self.params.delay.tau(t_next));
+        // Prune at the very instant the next step's first query computes.
+        self.commands.prune_before(self.earliest_query(k + 1));
         let (u_applied, qdd) = report.unwrap_or((Vector::<N>::zeros(), Vector::<N>::zeros()));
         StepReport {
             u_applied,

@@ -117,7 +117,7 @@ pub struct AttackRecord {
     /// Tampered measurement relayed to the control center.
     pub y: Joints,
     pub yd: Joints,
-    /// Some non-`none` segment was in force.
+    /// The attack was in force: the injected value was non-zero on some link of either signal.
     pub active: bool,
 }
 
@@ -137,6 +137,12 @@ pub struct CenterRecord {
     pub alarm: bool,
     /// The measurement was rejected (non-finite or absurd).
     pub rejected_input: bool,
+    /// The computed torque was non-finite; the last good one was sent.
+    pub rejected_torque: bool,
+    /// Non-finite observer or estimator state was reset in this tick.
+    pub state_reset: bool,
+    /// `e_u`, `u_τ` were held: the torque history did not reach back to `t − τ(t)`.
+    pub history_miss: bool,
 }
 
 /// One tick of one agent, joined across processes.

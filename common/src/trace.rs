@@ -18,7 +18,7 @@ use crate::records::{AgentRecord, AttackRecord, CenterRecord};
 /// First bytes of every trace file.
 pub const MAGIC: &[u8; 8] = b"FDITRACE";
 /// Format version written by this build; readers refuse any other.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 /// Largest frame accepted when reading (guards against a corrupt length).
 pub const MAX_FRAME_BYTES: u32 = 1 << 26;
 

@@ -90,7 +90,7 @@ fn run_with_oracle(r: &Resolved, oracle: impl Fn(&mut AgentAttack, f64) -> Vecto
         let s_true = oracle(&mut oracle_attack, t);
         let out = center.tick_with_estimate(t, &tampered.y, &tampered.yd, Some(&s_true));
         plant.receive(t, out.u).expect("increasing stamps");
-        plant.advance(t);
+        plant.advance(k);
     }
     (sum_sq / (2 * r.ticks()) as f64).sqrt()
 }

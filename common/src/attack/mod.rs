@@ -190,6 +190,17 @@ pub struct Injection<const N: usize> {
     pub velocity: Vector<N>,
 }
 
+impl<const N: usize> Injection<N> {
+    /// The attack is in force: the injected value is non-zero on some link of either signal.
+    /// Every rising edge of this is an attack onset (a pulse train has one per pulse).
+    pub fn in_force(&self) -> bool {
+        self.position
+            .iter()
+            .chain(self.velocity.iter())
+            .any(|x| *x != 0.0)
+    }
+}
+
 /// The attack on one agent, compiled from a profile: what the attacker process evaluates.
 #[derive(Debug, Clone)]
 pub struct AgentAttack {
@@ -284,29 +295,6 @@ impl AgentAttack {
             .iter()
             .any(|ch| ch.segment_at(t).is_some_and(|s| !s.waveform.is_none()))
     }
-
-    /// Attack onsets in `[0, duration)`: the instants at which the agent goes from no attack
-    /// to some attack (segment boundaries only; a pulse train is one onset).
-    pub fn onsets(&self, duration: f64) -> Vec<f64> {
-        let mut bounds: Vec<f64> = self
-            .channels
-            .iter()
-            .flat_map(|c| c.segments.iter().map(|s| s.from_s))
-            .collect();
-        bounds.push(0.0);
-        bounds.sort_by(f64::total_cmp);
-        bounds.dedup();
-        let mut out = Vec::new();
-        let mut was_active = false;
-        for b in bounds.into_iter().filter(|b| *b < duration) {
-            let active = self.is_active(b);
-            if active && !was_active {
-                out.push(b);
-            }
-            was_active = active;
-        }
-        out
-    }
 }
 
 #[cfg(test)]
@@ -329,7 +317,11 @@ mod tests {
         assert_eq!(i5.velocity[0], d * (-4.0 * 5.0f64.sin()));
         let i12 = a.injection::<2>(12.0);
         assert_eq!((i12.position[0], i12.velocity[1]), (d, 7.0 * d));
-        assert_eq!(a.onsets(40.0), vec![0.0]);
+        assert!(
+            !a.injection::<2>(0.0).in_force(),
+            "sin 0 = 0: not yet in force"
+        );
+        assert!(a.injection::<2>(0.001).in_force());
     }
 
     #[test]
@@ -345,8 +337,8 @@ mod tests {
     #[test]
     fn onsets_and_activity_of_robots_2_and_3() {
         let p = presets::preset("paper").expect("paper preset");
-        let a2 = AgentAttack::compile(&p, 2, 1);
-        assert_eq!(a2.onsets(40.0), vec![5.0]);
+        let mut a2 = AgentAttack::compile(&p, 2, 1);
+        assert!(!a2.injection::<2>(4.999).in_force() && a2.injection::<2>(5.0).in_force());
         assert!(!a2.is_active(4.999) && a2.is_active(5.0));
         let a3 = AgentAttack::compile(&p, 3, 1);
         assert!(a3.is_active(29.9) && !a3.is_active(30.0));
@@ -436,7 +428,6 @@ mod tests {
             }
         }
         assert!(a.is_active(2.0) && !a.is_active(1.999));
-        assert_eq!(a.onsets(4.0), vec![2.0]);
         assert_eq!(seen.len(), 2000);
     }
 

@@ -52,7 +52,8 @@ pub struct CenterOutput<const N: usize> {
     pub q_hat: Vector<N>,
     pub qd_hat: Vector<N>,
     pub qdd_hat: Vector<N>,
-    /// `e_u` and `u_τ` used in this tick.
+    /// `e_u` used in this tick, and `u_τ`: the delayed input averaged over the observer's
+    /// step `[t_k, t_k + Δ]`.
     pub e_u: Vector<N>,
     pub u_tau: Vector<N>,
     pub alarm: bool,
@@ -60,6 +61,12 @@ pub struct CenterOutput<const N: usize> {
     pub rejected_input: bool,
     /// The computed torque was non-finite and the last good one was sent instead.
     pub rejected_torque: bool,
+    /// The observer or estimator state became non-finite in this tick and was reset
+    /// ([`CenterAgent`]'s recovery policy).
+    pub state_reset: bool,
+    /// The history of sent torques did not reach back to `t − τ(t)`: `e_u` and `u_τ` of the
+    /// previous tick were held (a counted miss; cannot happen with `|τ̇| < 1`).
+    pub history_miss: bool,
 }
 
 /// Per-agent state of the control center.
@@ -74,10 +81,16 @@ pub struct CenterAgent<const N: usize> {
     psi2_prev: Vector<N>,
     last_good: (Vector<N>, Vector<N>),
     last_u: Vector<N>,
+    /// `(e_u, u_τ)` of the last tick whose history lookup succeeded.
+    last_history: (Vector<N>, Vector<N>),
     /// Number of measurements rejected so far.
     pub rejected_inputs: u64,
     /// Number of torques replaced because they were non-finite.
     pub rejected_torques: u64,
+    /// Number of resets of non-finite observer or estimator state.
+    pub state_resets: u64,
+    /// Number of ticks whose `e_u`, `u_τ` were held because the history was pruned too far.
+    pub history_misses: u64,
 }
 
 impl<const N: usize> CenterAgent<N>
@@ -109,8 +122,11 @@ where
             psi2_prev: Vector::<N>::zeros(),
             last_good: (Vector::<N>::zeros(), Vector::<N>::zeros()),
             last_u: Vector::<N>::zeros(),
+            last_history: (Vector::<N>::zeros(), Vector::<N>::zeros()),
             rejected_inputs: 0,
             rejected_torques: 0,
+            state_resets: 0,
+            history_misses: 0,
         })
     }
 }
@@ -156,9 +172,11 @@ impl<const N: usize> CenterAgent<N> {
         // 1–3: reference, A = M(q_d)⁻¹, e_u over the zero-order-held history of sent u.
         let reference = self.params.trajectory.reference::<N>(t);
         let a: Matrix<N> = self.model.inverse_inertia(&reference.q);
-        let tau = self.params.delay.tau(t);
-        let e_u = self.sent.integral(t - tau, t);
-        let u_tau = self.sent.value_at(t - tau);
+        let query = t - self.params.delay.tau(t);
+        let (e_u, history_miss) = match self.sent.integral(query, t) {
+            Ok(e_u) => (e_u, false),
+            Err(_) => (self.last_history.0, true),
+        };
 
         // 4: NN estimate from the previous tick's Ψ2 (no algebraic loop).
         let s_hat = match (s_override, c.mode) {
@@ -178,7 +196,27 @@ impl<const N: usize> CenterAgent<N> {
             u = self.last_u;
         }
 
-        // 6: observer step.
+        // History of sent torques: u_k is in force from t_k on (the observer's input below
+        // may reach it when τ < Δ).
+        if self.sent.push(t, u).is_ok() {
+            self.last_u = u;
+        }
+
+        // 6: observer step over [t_k, t_k + Δ]. Its input u_τ is the mean of the delayed input
+        // u(s − τ(s)) over the step: `∫ u` between the queries at both ends, over their span.
+        // Sampling u at the single instant t − τ(t) instead would pick the older or the newer
+        // command when that instant falls on a stamp (τ a multiple of Δ), a whole period of
+        // effective delay that a hair of τ more or less would flip.
+        let query_next = (t + dt) - self.params.delay.tau(t + dt);
+        let u_tau = match self.sent.integral(query, query_next) {
+            Ok(sum) if !history_miss && query_next > query => sum / (query_next - query),
+            _ => self.last_history.1,
+        };
+        if !history_miss {
+            self.last_history = (e_u, u_tau);
+        } else {
+            self.history_misses += 1;
+        }
         let input = ObserverInput {
             y: &y,
             yd: &yd,
@@ -199,11 +237,22 @@ impl<const N: usize> CenterAgent<N> {
         }
         self.psi2_prev = psi2;
 
-        // History of sent torques: push u_k, drop what no future query reaches.
-        if self.sent.push(t, u).is_ok() {
-            self.last_u = u;
+        // 10: non-finite observer or estimator state never sticks. Recovery policy: the
+        // estimator restarts from its initial weights (Ŵ = 0, V̂ = V̂(0)), the observer from the
+        // measurement in use (q̂ = y, q̂̇ = ẏ), and the next NN input from Ψ2 = 0.
+        let state_reset = !(self.observer.is_finite()
+            && self.estimator.is_finite()
+            && psi2.iter().all(|x| x.is_finite()));
+        if state_reset {
+            self.state_resets += 1;
+            self.estimator.reset();
+            self.observer = Observer::at(y, yd);
+            self.psi2_prev = Vector::<N>::zeros();
         }
-        self.sent.prune_before(t - tau);
+
+        // Drop what no future query reaches: the next tick's query `t' − τ(t')` is later than
+        // this one's (`|τ̇| < 1`), and the line keeps one entry of margin besides.
+        self.sent.prune_before(query);
 
         // 9: detection.
         let alarm = self.detector.update(t, s_hat.norm());
@@ -219,6 +268,8 @@ impl<const N: usize> CenterAgent<N> {
             alarm,
             rejected_input,
             rejected_torque,
+            state_reset,
+            history_miss,
         }
     }
 }
@@ -309,6 +360,41 @@ mod tests {
         }
         assert_eq!(c.rejected_inputs, expected_rejections);
         assert_eq!(c.rejected_torques, 0);
+    }
+
+    /// Regression: a NaN in the estimator or observer stuck for good, and the center re-sent
+    /// its last good torque to the end of the run.
+    #[test]
+    fn non_finite_observer_or_estimator_state_is_reset_counted_and_recovered_from() {
+        let dt = 1e-3;
+        let mut c = agent1();
+        let y = Vector::<2>::new(0.01, -0.02);
+        let yd = Vector::<2>::new(0.1, 0.05);
+        for k in 0..100 {
+            assert!(!c.tick(f64::from(k) * dt, &y, &yd).state_reset);
+        }
+        // A NaN estimate (the oracle hook stands in for any numerical failure) poisons Ψ2 and
+        // through it the observer.
+        let nan = Vector::<2>::new(f64::NAN, 0.0);
+        let hit = c.tick_with_estimate(100.0 * dt, &y, &yd, Some(&nan));
+        assert!(hit.state_reset && hit.rejected_torque, "{hit:?}");
+        assert_eq!(c.state_resets, 1);
+        assert_eq!(hit.q_hat, y, "the observer restarts from the measurement");
+        let mut torques = Vec::new();
+        for k in 101..300 {
+            let out = c.tick(f64::from(k) * dt, &y, &yd);
+            assert!(
+                !out.state_reset && !out.rejected_torque,
+                "tick {k}: {out:?}"
+            );
+            assert!(finite(&out.s_hat) && finite(&out.q_hat) && finite(&out.u));
+            torques.push(out.u);
+        }
+        assert_eq!(c.state_resets, 1);
+        assert!(
+            torques.windows(2).any(|w| w[0] != w[1]),
+            "the center computes torques again instead of re-sending one"
+        );
     }
 
     #[test]

@@ -36,6 +36,8 @@ pub struct NnEstimator<const N: usize> {
     w: Vec<f64>,
     /// `V̂ ∈ R^{(N+1)×n_n}`, row-major.
     v: Vec<f64>,
+    /// `V̂(0)`, for [`Self::reset`].
+    v0: Vec<f64>,
     /// `δ` of the last [`Self::estimate`].
     delta: Vec<f64>,
     /// `σ` of the last [`Self::estimate`] (`σ[0] = 1`, `σ[1..] = h`).
@@ -48,7 +50,7 @@ impl<const N: usize> NnEstimator<N> {
     /// `Ŵ(0) = 0`, `V̂(0) ~ U(−init_range, init_range)` drawn from `rng` in row-major order.
     pub fn new(params: NnParams, init_range: f64, rng: &mut ChaCha12Rng) -> Self {
         let nh = params.hidden;
-        let v = (0..(N + 1) * nh)
+        let v: Vec<f64> = (0..(N + 1) * nh)
             .map(|_| {
                 if init_range > 0.0 {
                     rng.random_range(-init_range..init_range)
@@ -60,6 +62,7 @@ impl<const N: usize> NnEstimator<N> {
         Self {
             params,
             w: vec![0.0; (nh + 1) * N],
+            v0: v.clone(),
             v,
             delta: vec![0.0; N + 1],
             sigma: vec![0.0; nh + 1],
@@ -129,6 +132,20 @@ impl<const N: usize> NnEstimator<N> {
         project(&mut self.v, bound_v);
     }
 
+    /// Every weight is finite. The projection cannot tell: `NaN > bound` is false, so a NaN
+    /// passes it; the caller checks this after [`Self::update`] and resets.
+    pub fn is_finite(&self) -> bool {
+        self.w.iter().chain(&self.v).all(|x| x.is_finite())
+    }
+
+    /// Back to the initial weights `Ŵ = 0`, `V̂ = V̂(0)`.
+    pub fn reset(&mut self) {
+        self.w.iter_mut().for_each(|x| *x = 0.0);
+        self.v.copy_from_slice(&self.v0);
+        self.delta.iter_mut().for_each(|x| *x = 0.0);
+        self.sigma.iter_mut().for_each(|x| *x = 0.0);
+    }
+
     /// `‖Ŵ‖_F`.
     pub fn norm_w(&self) -> f64 {
         frobenius(&self.w)
@@ -141,13 +158,22 @@ impl<const N: usize> NnEstimator<N> {
 }
 
 fn frobenius(m: &[f64]) -> f64 {
-    m.iter().map(|x| x * x).sum::<f64>().sqrt()
+    let norm = m.iter().map(|x| x * x).sum::<f64>().sqrt();
+    if norm.is_infinite() && m.iter().all(|x| x.is_finite()) {
+        // The squares overflowed although every entry is finite: scale first.
+        let scale = m.iter().fold(0.0_f64, |a, x| a.max(x.abs()));
+        scale * m.iter().map(|x| (x / scale).powi(2)).sum::<f64>().sqrt()
+    } else {
+        norm
+    }
 }
 
-/// Scales `m` back onto the Frobenius ball of radius `bound` if it left it.
+/// Scales `m` back onto the Frobenius ball of radius `bound` if it left it. A non-finite norm
+/// is left alone (scaling would spread a NaN or an infinity over every weight): the caller
+/// sees it through [`NnEstimator::is_finite`].
 fn project(m: &mut [f64], bound: f64) {
     let norm = frobenius(m);
-    if norm > bound {
+    if norm.is_finite() && norm > bound {
         let k = bound / norm;
         m.iter_mut().for_each(|x| *x *= k);
     }
@@ -202,6 +228,37 @@ mod tests {
             (s_hat - s).norm() < 0.01 * s.norm(),
             "Ŝ = {s_hat:?}, S = {s:?}"
         );
+    }
+
+    /// Regression: a NaN passed the projection (`NaN > bound` is false) and stayed in the
+    /// weights for good.
+    #[test]
+    fn a_nan_reaching_the_weights_is_seen_and_a_reset_restores_the_initial_estimator() {
+        let mut nn = NnEstimator::<2>::new(params(), 1.0, &mut stream(1, 1, Purpose::NnInit));
+        let fresh = nn.clone();
+        let psi2 = Vector::<2>::new(0.2, -0.1);
+        for _ in 0..10 {
+            let _ = nn.estimate(&psi2);
+            nn.update(&psi2, 1e-3);
+        }
+        assert!(nn.is_finite());
+        let nan = Vector::<2>::new(f64::NAN, 0.0);
+        let _ = nn.estimate(&nan);
+        nn.update(&nan, 1e-3);
+        assert!(!nn.is_finite(), "a NaN Ψ2 must show in the weights' check");
+        nn.reset();
+        assert!(nn.is_finite());
+        assert_eq!(nn.w, fresh.w);
+        assert_eq!(nn.v, fresh.v);
+        assert_eq!(nn.estimate(&psi2), Vector::<2>::zeros());
+    }
+
+    #[test]
+    fn projection_handles_weights_whose_squares_overflow() {
+        let mut m = vec![1e200, -1e200, 3e199];
+        project(&mut m, 50.0);
+        assert!(m.iter().all(|x| x.is_finite()));
+        assert!((frobenius(&m) - 50.0).abs() < 1e-9, "{m:?}");
     }
 
     #[test]

@@ -46,6 +46,24 @@ pub struct ObserverInput<'a, const N: usize> {
 }
 
 impl<const N: usize> Observer<N> {
+    /// An observer at `q̂ = q`, `q̂̇ = qd`, `q̂̈ = 0` (the recovery from non-finite state).
+    pub fn at(q: Vector<N>, qd: Vector<N>) -> Self {
+        Self {
+            q,
+            qd,
+            qdd: Vector::<N>::zeros(),
+        }
+    }
+
+    /// Every component of the state is finite.
+    pub fn is_finite(&self) -> bool {
+        self.q
+            .iter()
+            .chain(self.qd.iter())
+            .chain(self.qdd.iter())
+            .all(|x| x.is_finite())
+    }
+
     /// `Ψ2` (23) at the current estimate.
     pub fn psi2(&self, y: &Vector<N>, yd: &Vector<N>, beta: f64, s_hat: &Vector<N>) -> Vector<N> {
         yd + y * beta - self.qd - self.q * beta - s_hat
