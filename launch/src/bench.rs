@@ -507,7 +507,7 @@ fn latency_histogram_png(dir: &Path, hists: &[(&str, &Histogram<u64>)]) -> Resul
                         / total
                 })
                 .collect();
-            ((*name).to_string(), color, shares)
+            (format!("{name} ({} messages)", h.len()), color, shares)
         })
         .collect();
     let chart = crate::plot::BarChart {

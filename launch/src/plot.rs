@@ -835,7 +835,8 @@ fn timeline_panel<DB: DrawingBackend>(
     Ok(())
 }
 
-/// Decades `[lo, hi]` that hold the positive `values` (for a logarithmic axis).
+/// Decades `[lo, hi]` that hold the positive `values` (for a logarithmic axis), with one decade
+/// below the smallest, so that the smallest bar is a bar and not a sliver.
 fn decades(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values
         .filter(|v| v.is_finite() && *v > 0.0)
@@ -845,7 +846,7 @@ fn decades(values: impl Iterator<Item = f64>) -> (f64, f64) {
     if !lo.is_finite() {
         return (0.1, 100.0);
     }
-    let lo = 10f64.powf(lo.log10().floor());
+    let lo = 10f64.powf(lo.log10().floor() - 1.0);
     let hi = 10f64.powf(hi.log10().ceil()).max(lo * 10.0);
     (lo, hi)
 }
@@ -892,7 +893,7 @@ where
     Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
 {
     let y_desc = if c.log_y {
-        format!("{} (log scale)", c.y_label)
+        format!("{}, log scale", c.y_label)
     } else {
         c.y_label.clone()
     };
@@ -970,6 +971,121 @@ mod tests {
             i.push(t, on);
         }
         assert_eq!(i.finish(5.0), vec![(1.0, 3.0), (4.0, 5.0)]);
+    }
+
+    /// A slow oscillation of ±0.01 with three short spikes of 0.43 (attack switches).
+    fn spiky() -> Vec<f64> {
+        (0..4000)
+            .map(|k| {
+                let t = f64::from(k) * 0.01;
+                match k {
+                    1000 | 1001 => -0.43,
+                    2000 | 3000 => 0.3,
+                    _ => 0.01 * (1.5 * t).sin(),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn robust_range_clips_spikes_and_keeps_the_steady_state() {
+        let r = robust_y_range(&spiky(), &[]);
+        assert!(r.clips, "{r:?}");
+        // The steady state fills the axis: ±0.01 plus the margin, not ±0.43.
+        assert!(r.lo < -0.0099 && r.lo > -0.02, "{r:?}");
+        assert!(r.hi > 0.0099 && r.hi < 0.02, "{r:?}");
+        // The full range without the spikes: nothing is clipped.
+        let calm: Vec<f64> = spiky().into_iter().filter(|v| v.abs() < 0.1).collect();
+        let r = robust_y_range(&calm, &[]);
+        assert!(!r.clips && r.lo < -0.0099 && r.hi > 0.0099, "{r:?}");
+        assert!(r.hi - r.lo < 0.03, "{r:?}");
+    }
+
+    #[test]
+    fn robust_range_holds_what_must_be_shown_and_ignores_order_and_nan() {
+        // A band wider than the data: inside, with the data.
+        let r = robust_y_range(&spiky(), &[-0.02, 0.02]);
+        assert!(
+            r.clips && r.lo <= -0.02 && r.hi >= 0.02 && r.hi < 0.1,
+            "{r:?}"
+        );
+        // A kept curve that reaches 5: inside too, so the spikes are not clipped any more.
+        let r = robust_y_range(&spiky(), &[0.0, 5.0]);
+        assert!(!r.clips && r.lo <= -0.43 && r.hi >= 5.0, "{r:?}");
+        let mut v = spiky();
+        v.reverse();
+        v.push(f64::NAN);
+        v.push(f64::INFINITY);
+        assert_eq!(robust_y_range(&v, &[]), robust_y_range(&spiky(), &[]));
+        let empty = robust_y_range(&[], &[]);
+        assert!(empty.lo < empty.hi && !empty.clips);
+        let flat = robust_y_range(&[2.0; 10], &[]);
+        assert!(flat.lo < 2.0 && flat.hi > 2.0 && !flat.clips, "{flat:?}");
+    }
+
+    #[test]
+    fn excursions_are_runs_beyond_each_edge_with_their_farthest_point() {
+        let pts: Vec<(f64, f64)> = [0.0, 2.0, 3.0, 1.5, 0.0, -2.0, -1.0, 0.5, 4.0]
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64, *v))
+            .collect();
+        let e = excursions(&pts, -1.5, 1.0);
+        let got: Vec<(f64, f64, bool, usize)> =
+            e.iter().map(|e| (e.t, e.v, e.above, e.points)).collect();
+        assert_eq!(
+            got,
+            vec![
+                (2.0, 3.0, true, 3),
+                (5.0, -2.0, false, 1),
+                (8.0, 4.0, true, 1)
+            ]
+        );
+    }
+
+    #[test]
+    fn nearby_excursions_on_one_side_share_a_marker() {
+        let ex = |t: f64, v: f64| Excursion {
+            t,
+            v,
+            above: v > 0.0,
+            points: 1,
+        };
+        let merged = merge_excursions(
+            vec![
+                ('a', ex(5.0, 0.2)),
+                ('b', ex(5.1, 0.4)),
+                ('a', ex(5.05, -0.3)),
+                ('a', ex(9.0, 0.3)),
+            ],
+            0.5,
+        );
+        let got: Vec<(char, f64, f64, usize)> = merged
+            .iter()
+            .map(|(c, e)| (*c, e.t, e.v, e.points))
+            .collect();
+        assert_eq!(
+            got,
+            vec![('b', 5.1, 0.4, 2), ('a', 5.05, -0.3, 1), ('a', 9.0, 0.3, 1)]
+        );
+    }
+
+    #[test]
+    fn log_axis_spans_whole_decades_of_the_positive_values() {
+        assert_eq!(
+            decades([0.0, 0.004, 37.0, 99.0].into_iter()),
+            (0.0001, 100.0)
+        );
+        assert_eq!(decades([0.0].into_iter()), (0.1, 100.0));
+        let (lo, hi) = decades([5.0].into_iter());
+        assert!(lo < 5.0 && hi > 5.0);
+    }
+
+    #[test]
+    fn peak_labels_have_three_digits() {
+        assert_eq!(peak(-0.4297), "\u{2212}0.430");
+        assert_eq!(peak(0.03934), "0.0393");
+        assert_eq!(peak(12.0), "12.0");
     }
 
     #[test]

@@ -906,3 +906,44 @@ fn segments_csv(segments: &[(u32, Vec<SegmentStats>)]) -> String {
     }
     csv
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn time_axis_ends_with_the_recorded_ticks() {
+        assert_eq!(recorded_span(40.0, 0.001, 40.0), (40.0, None));
+        // A sum of periods a hair short of the duration is the whole run.
+        assert_eq!(recorded_span(39.999_999_9, 0.001, 40.0), (40.0, None));
+        let (end, note) = recorded_span(12.345_000_000_01, 0.001, 40.0);
+        assert!((end - 12.345).abs() < 1e-9, "{end}");
+        assert_eq!(
+            note.as_deref(),
+            Some("partial run: 12.345 s of 40 s recorded")
+        );
+        // Nothing recorded: an axis of one period, not of the duration.
+        assert_eq!(recorded_span(0.0, 0.001, 40.0).0, 0.001);
+    }
+
+    #[test]
+    fn switch_legend_lists_the_switches_on_the_axis() {
+        assert_eq!(switch_label(&[], 40.0), "");
+        assert_eq!(switch_label(&[5.0, 20.0], 40.0), "attack switches: 5, 20 s");
+        assert_eq!(switch_label(&[5.0, 20.0], 10.0), "attack switch: 5 s");
+        assert_eq!(
+            switch_label(&[1.0, 2.0, 3.0, 4.0, 5.0], 40.0),
+            "attack switches (5)"
+        );
+    }
+
+    #[test]
+    fn paper_guides_name_the_figure_that_states_them() {
+        let (p1, v1) = paper_guides(1);
+        assert!(p1.label.contains("Fig. 3(a)") && v1.label.contains("Fig. 3(b)"));
+        assert_eq!((p1.lo, p1.hi), (-0.02, 0.02));
+        assert_eq!((v1.lo, v1.hi), (-0.01, 0.01));
+        assert!(paper_guides(4).0.label.contains("Fig. 6(a)"));
+        assert!(paper_guides(2).0.label.contains("robot 1"));
+    }
+}
