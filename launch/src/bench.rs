@@ -469,7 +469,8 @@ fn write_latency(dir: &Path, r: &LatencyReport) -> Result<()> {
     std::fs::write(dir.join("latency.csv"), csv).context("writing latency.csv")
 }
 
-/// `latency.png` / `latency.svg`: share of messages per latency bucket (log-spaced), per hop.
+/// `latency.png` / `latency.svg`: share of messages per latency bucket (log-spaced), per hop, on
+/// a logarithmic axis so that the tail (a few messages in 10⁵) shows beside the bulk.
 fn latency_histogram_png(dir: &Path, hists: &[(&str, &Histogram<u64>)]) -> Result<()> {
     const EDGES_US: [u64; 11] = [
         0,
@@ -506,7 +507,7 @@ fn latency_histogram_png(dir: &Path, hists: &[(&str, &Histogram<u64>)]) -> Resul
                         / total
                 })
                 .collect();
-            ((*name).to_string(), color, shares)
+            (format!("{name} ({} messages)", h.len()), color, shares)
         })
         .collect();
     let chart = crate::plot::BarChart {
@@ -514,6 +515,7 @@ fn latency_histogram_png(dir: &Path, hists: &[(&str, &Histogram<u64>)]) -> Resul
         y_label: "share of messages (%)".into(),
         categories,
         series,
+        log_y: true,
     };
     crate::plot::save_bars(&chart, &dir.join("latency"), (1100, 600))?;
     Ok(())

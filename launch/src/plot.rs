@@ -8,8 +8,11 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use anyhow::{anyhow, Context, Result};
+use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters::style::{register_font, FontStyle};
 
 const FONT: &str = "sans-serif";
@@ -42,6 +45,17 @@ pub struct Line {
     pub label: String,
     pub color: RGBColor,
     pub points: Vec<(f64, f64)>,
+    /// The y-axis always holds the whole curve: it is never clipped (the true attack S, the
+    /// delay τ). Other curves may be clipped by the robust range ([`robust_y_range`]).
+    pub keep: bool,
+}
+
+/// A horizontal reference band `lo ≤ y ≤ hi` drawn behind the curves (a bound the paper states).
+#[derive(Debug, Clone)]
+pub struct Guide {
+    pub label: String,
+    pub lo: f64,
+    pub hi: f64,
 }
 
 /// A row of a timeline panel: the intervals during which something held.
@@ -64,6 +78,8 @@ pub struct Panel {
     pub title: String,
     pub y_label: String,
     pub kind: PanelKind,
+    /// Reference bands of a line panel (always inside its y-range).
+    pub guides: Vec<Guide>,
 }
 
 /// Panels stacked vertically over a common time axis.
@@ -74,6 +90,8 @@ pub struct Figure {
     pub x_range: (f64, f64),
     /// Times drawn as thin vertical lines in every panel (attack switches).
     pub markers: Vec<f64>,
+    /// The legend entry of the markers (empty: none).
+    pub marker_label: String,
     pub panels: Vec<Panel>,
 }
 
@@ -85,6 +103,163 @@ pub struct BarChart {
     pub categories: Vec<String>,
     /// (label, colour, one value per category).
     pub series: Vec<(String, RGBColor, Vec<f64>)>,
+    /// A logarithmic value axis (for shares spanning decades: latency histograms). Bars of
+    /// value zero are then not drawn.
+    pub log_y: bool,
+}
+
+/// Quantiles of a line panel's (clippable) points that set its robust y-range.
+pub const ROBUST_QUANTILES: (f64, f64) = (0.005, 0.995);
+/// Margin added on each side of the robust range, as a share of its span.
+pub const ROBUST_MARGIN: f64 = 0.15;
+/// The robust range is used only when the full range is more than this many times larger;
+/// otherwise nothing is clipped.
+pub const CLIP_RATIO: f64 = 1.5;
+
+/// The y-range of a line panel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct YRange {
+    pub lo: f64,
+    pub hi: f64,
+    /// Some values lie outside `[lo, hi]`: they are drawn at the edge and marked.
+    pub clips: bool,
+}
+
+/// `(lo, hi)` padded by `share` of the span on each side; a (near) zero span gets a pad of its own.
+fn padded(lo: f64, hi: f64, share: f64) -> (f64, f64) {
+    let span = hi - lo;
+    if span <= f64::EPSILON * hi.abs().max(lo.abs()).max(1e-300) {
+        let pad = (hi.abs() * 0.1).max(1e-3);
+        return (lo - pad, hi + pad);
+    }
+    (lo - share * span, hi + share * span)
+}
+
+/// The y-range of a panel whose clippable values are `values` and whose `must_show` values (kept
+/// curves, reference bands) must all be inside. The full range (all values, padded by 5 %) is
+/// used unless it is more than [`CLIP_RATIO`] times the robust range: the
+/// [`ROBUST_QUANTILES`] of `values`, widened to hold `must_show`, padded by [`ROBUST_MARGIN`].
+/// A few spikes (attack switches) then no longer squash the steady state into a few pixels.
+/// Non-finite values are ignored. Deterministic: depends on the values only, not their order.
+pub fn robust_y_range(values: &[f64], must_show: &[f64]) -> YRange {
+    let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    v.sort_by(f64::total_cmp);
+    let must = must_show.iter().copied().filter(|x| x.is_finite());
+    let (mut mlo, mut mhi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for x in must {
+        mlo = mlo.min(x);
+        mhi = mhi.max(x);
+    }
+    let (Some(&vmin), Some(&vmax)) = (v.first(), v.last()) else {
+        if mlo.is_finite() {
+            let (lo, hi) = padded(mlo, mhi, 0.05);
+            return YRange {
+                lo,
+                hi,
+                clips: false,
+            };
+        }
+        return YRange {
+            lo: -1.0,
+            hi: 1.0,
+            clips: false,
+        };
+    };
+    let (flo, fhi) = padded(vmin.min(mlo), vmax.max(mhi), 0.05);
+    let q = |p: f64| v[((v.len() - 1) as f64 * p).round() as usize];
+    let (a, b) = (
+        q(ROBUST_QUANTILES.0).min(mlo),
+        q(ROBUST_QUANTILES.1).max(mhi),
+    );
+    let (rlo, rhi) = padded(a, b, ROBUST_MARGIN);
+    if fhi - flo <= CLIP_RATIO * (rhi - rlo) || (vmin >= rlo && vmax <= rhi) {
+        return YRange {
+            lo: flo,
+            hi: fhi,
+            clips: false,
+        };
+    }
+    YRange {
+        lo: rlo,
+        hi: rhi,
+        clips: true,
+    }
+}
+
+/// A run of consecutive points of one curve beyond one edge of the y-range.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Excursion {
+    /// Time and value of the point farthest beyond the edge.
+    pub t: f64,
+    pub v: f64,
+    /// Above the top edge (else below the bottom one).
+    pub above: bool,
+    /// Points in the run.
+    pub points: usize,
+}
+
+/// The runs of `points` outside `[lo, hi]`, in time order.
+pub fn excursions(points: &[(f64, f64)], lo: f64, hi: f64) -> Vec<Excursion> {
+    let mut out: Vec<Excursion> = Vec::new();
+    let mut open: Option<Excursion> = None;
+    for &(t, v) in points {
+        let side = if v > hi {
+            Some(true)
+        } else if v < lo {
+            Some(false)
+        } else {
+            None
+        };
+        match (open.as_mut(), side) {
+            (Some(e), Some(above)) if e.above == above => {
+                e.points += 1;
+                if (above && v > e.v) || (!above && v < e.v) {
+                    e.t = t;
+                    e.v = v;
+                }
+            }
+            (_, side) => {
+                out.extend(open.take());
+                open = side.map(|above| Excursion {
+                    t,
+                    v,
+                    above,
+                    points: 1,
+                });
+            }
+        }
+    }
+    out.extend(open);
+    out
+}
+
+/// `beyond` (excursions of the curves of one panel, with their colours) with those on the same
+/// side less than `gap` apart in time merged into one: the farthest, with the points of all.
+/// One marker then stands for an oscillating spike however many times it crosses the edge.
+pub fn merge_excursions<C: Copy>(mut beyond: Vec<(C, Excursion)>, gap: f64) -> Vec<(C, Excursion)> {
+    // A stable sort: ties keep the curves' order.
+    beyond.sort_by(|a, b| a.1.t.total_cmp(&b.1.t));
+    let mut out: Vec<(C, Excursion)> = Vec::new();
+    for (c, e) in beyond {
+        let near = out
+            .iter_mut()
+            .rev()
+            .take_while(|(_, o)| e.t - o.t < gap)
+            .find(|(_, o)| o.above == e.above);
+        match near {
+            Some((oc, o)) => {
+                let farther = if e.above { e.v > o.v } else { e.v < o.v };
+                let points = o.points + e.points;
+                if farther {
+                    *oc = c;
+                    *o = e;
+                }
+                o.points = points;
+            }
+            None => out.push((c, e)),
+        }
+    }
+    out
 }
 
 /// Min/max decimation: every `stride` samples become the smallest and the largest of them, in
@@ -269,26 +444,6 @@ fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
         .map_err(plot_err)
 }
 
-/// Value range of the lines of a panel, padded by 5 %.
-fn y_range(lines: &[Line]) -> (f64, f64) {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for l in lines {
-        for &(_, v) in &l.points {
-            lo = lo.min(v);
-            hi = hi.max(v);
-        }
-    }
-    if !lo.is_finite() || !hi.is_finite() {
-        return (-1.0, 1.0);
-    }
-    let span = hi - lo;
-    if span <= f64::EPSILON * hi.abs().max(lo.abs()).max(1e-300) {
-        let pad = (hi.abs() * 0.1).max(1e-3);
-        return (lo - pad, hi + pad);
-    }
-    (lo - 0.05 * span, hi + 0.05 * span)
-}
-
 /// Tick label: short, and without the float noise of `{}`; `span` is the axis length, below
 /// a millionth of which a value is zero.
 fn tick(v: f64, span: f64) -> String {
@@ -309,6 +464,130 @@ fn tick(v: f64, span: f64) -> String {
     s.replace('-', "\u{2212}")
 }
 
+/// Width of the legend column right of every panel, px.
+const LEGEND_W: u32 = 270;
+/// Colour of the reference bands (the paper's bounds).
+const GUIDE: RGBColor = RGBColor(0, 158, 115);
+/// Excursions beyond the y-range of a panel that get their value written beside their marker;
+/// with more, only the farthest above and the farthest below do.
+pub const LABELLED_EXCURSIONS: usize = 6;
+/// Excursions on the same side closer than this share of the time axis get one marker.
+pub const MERGE_SHARE: f64 = 0.015;
+
+fn key_style() -> TextStyle<'static> {
+    TextStyle::from((FONT, 13).into_font())
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Left, VPos::Center))
+}
+
+/// One entry of the legend column beside a panel.
+enum Key {
+    Line(RGBColor, String),
+    Guide(String),
+    Marker(String),
+    Clipped(String),
+    /// A swatch of a timeline row.
+    Row(RGBColor, String),
+    /// A further line of text under the previous entry.
+    Text(String),
+}
+
+/// A triangle pointing out of the plot, apex at (0, 0) (backend pixels relative to its anchor).
+fn triangle(above: bool) -> Vec<(i32, i32)> {
+    let d = if above { 9 } else { -9 };
+    vec![(0, 0), (-5, d), (5, d)]
+}
+
+/// Draws `keys` top down in `area` (pixels relative to it), the first centred at `top`.
+fn draw_keys<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    keys: &[Key],
+    top: i32,
+) -> Result<()> {
+    let (x, tx) = (8, 40);
+    for (i, k) in keys.iter().enumerate() {
+        let y = top + 19 * i as i32;
+        let label = match k {
+            Key::Line(c, l) => {
+                area.draw(&PathElement::new(
+                    vec![(x, y), (x + 24, y)],
+                    c.stroke_width(2),
+                ))
+                .map_err(plot_err)?;
+                l
+            }
+            Key::Guide(l) => {
+                area.draw(&Rectangle::new(
+                    [(x, y - 6), (x + 24, y + 6)],
+                    GUIDE.mix(0.18).filled(),
+                ))
+                .map_err(plot_err)?;
+                area.draw(&Rectangle::new(
+                    [(x, y - 6), (x + 24, y + 6)],
+                    GUIDE.mix(0.8),
+                ))
+                .map_err(plot_err)?;
+                l
+            }
+            Key::Marker(l) => {
+                area.draw(&PathElement::new(
+                    vec![(x + 12, y - 8), (x + 12, y + 8)],
+                    MARKER,
+                ))
+                .map_err(plot_err)?;
+                l
+            }
+            Key::Clipped(l) => {
+                area.draw(&Polygon::new(
+                    triangle(true)
+                        .into_iter()
+                        .map(|(a, b)| (x + 6 + a, y - 5 + b))
+                        .collect::<Vec<_>>(),
+                    BLACK.filled(),
+                ))
+                .map_err(plot_err)?;
+                area.draw(&Polygon::new(
+                    triangle(false)
+                        .into_iter()
+                        .map(|(a, b)| (x + 18 + a, y + 5 + b))
+                        .collect::<Vec<_>>(),
+                    BLACK.filled(),
+                ))
+                .map_err(plot_err)?;
+                l
+            }
+            Key::Row(c, l) => {
+                area.draw(&Rectangle::new([(x, y - 6), (x + 24, y + 6)], c.filled()))
+                    .map_err(plot_err)?;
+                l
+            }
+            Key::Text(l) => l,
+        };
+        area.draw(&Text::new(label.clone(), (tx, y), key_style()))
+            .map_err(plot_err)?;
+    }
+    Ok(())
+}
+
+/// The legend entry of the figure's markers, if one of them is drawn in `(x0, x1)`.
+fn marker_key(fig: &Figure, x0: f64, x1: f64) -> Option<Key> {
+    let shown = fig.markers.iter().any(|m| *m > x0 && *m < x1);
+    (shown && !fig.marker_label.is_empty()).then(|| Key::Marker(fig.marker_label.clone()))
+}
+
+/// A value beside its clip marker: three significant digits.
+fn peak(v: f64) -> String {
+    if v == 0.0 || !v.is_finite() {
+        return tick(v, 1.0);
+    }
+    let a = v.abs();
+    if !(1e-3..1e5).contains(&a) {
+        return format!("{v:.2e}").replace('-', "\u{2212}");
+    }
+    let decimals = (2.0 - a.log10().floor()).clamp(0.0, 6.0) as usize;
+    format!("{v:.decimals$}").replace('-', "\u{2212}")
+}
+
 fn figure_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) -> Result<()> {
     root.fill(&WHITE).map_err(plot_err)?;
     let body = root
@@ -322,105 +601,14 @@ fn figure_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) ->
         (fig.x_range.0, fig.x_range.0 + 1.0)
     };
     for (panel, area) in fig.panels.iter().zip(&areas) {
+        let (plot_area, key_area) =
+            area.split_horizontally(area.dim_in_pixel().0.saturating_sub(LEGEND_W));
         match &panel.kind {
             PanelKind::Lines(lines) => {
-                let (y0, y1) = y_range(lines);
-                let (xs, ys) = (x1 - x0, y1 - y0);
-                let mut chart = ChartBuilder::on(area)
-                    .caption(&panel.title, (FONT, 16))
-                    .margin(8)
-                    .margin_right(20)
-                    .x_label_area_size(36)
-                    .y_label_area_size(72)
-                    .build_cartesian_2d(x0..x1, y0..y1)
-                    .map_err(plot_err)?;
-                chart
-                    .configure_mesh()
-                    .x_desc(&fig.x_label)
-                    .y_desc(&panel.y_label)
-                    .label_style((FONT, 13))
-                    .axis_desc_style((FONT, 14))
-                    .light_line_style(RGBColor(238, 238, 238))
-                    .bold_line_style(RGBColor(210, 210, 210))
-                    .x_label_formatter(&|v| tick(*v, xs))
-                    .y_label_formatter(&|v| tick(*v, ys))
-                    .draw()
-                    .map_err(plot_err)?;
-                chart
-                    .draw_series(
-                        fig.markers
-                            .iter()
-                            .filter(|m| **m > x0 && **m < x1)
-                            .map(|&m| PathElement::new(vec![(m, y0), (m, y1)], MARKER)),
-                    )
-                    .map_err(plot_err)?;
-                for l in lines {
-                    let color = l.color;
-                    chart
-                        .draw_series(LineSeries::new(l.points.iter().copied(), color))
-                        .map_err(plot_err)?
-                        .label(&l.label)
-                        .legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                        });
-                }
-                draw_legend(&mut chart)?;
+                lines_panel(fig, panel, lines, &plot_area, &key_area, (x0, x1))?
             }
             PanelKind::Timeline(bands) => {
-                let rows = bands.len().max(1) as f64;
-                let mut chart = ChartBuilder::on(area)
-                    .caption(&panel.title, (FONT, 16))
-                    .margin(8)
-                    .margin_right(20)
-                    .x_label_area_size(36)
-                    .y_label_area_size(72)
-                    .build_cartesian_2d(x0..x1, 0.0..rows)
-                    .map_err(plot_err)?;
-                chart
-                    .configure_mesh()
-                    .x_desc(&fig.x_label)
-                    .y_desc(&panel.y_label)
-                    .y_labels(0)
-                    .disable_y_mesh()
-                    .label_style((FONT, 13))
-                    .axis_desc_style((FONT, 14))
-                    .light_line_style(RGBColor(238, 238, 238))
-                    .bold_line_style(RGBColor(210, 210, 210))
-                    .x_label_formatter(&|v| tick(*v, x1 - x0))
-                    .draw()
-                    .map_err(plot_err)?;
-                chart
-                    .draw_series(
-                        fig.markers
-                            .iter()
-                            .filter(|m| **m > x0 && **m < x1)
-                            .map(|&m| PathElement::new(vec![(m, 0.0), (m, rows)], MARKER)),
-                    )
-                    .map_err(plot_err)?;
-                for (i, b) in bands.iter().enumerate() {
-                    // The first band on top.
-                    let row = rows - 1.0 - i as f64;
-                    let color = b.color;
-                    chart
-                        .draw_series(b.intervals.iter().map(|&(a, e)| {
-                            // At least one pixel wide.
-                            let e = e.max(a + (x1 - x0) * 1e-3);
-                            Rectangle::new([(a, row + 0.2), (e, row + 0.8)], color.filled())
-                        }))
-                        .map_err(plot_err)?;
-                    let label = if b.intervals.is_empty() {
-                        format!("{} (never)", b.label)
-                    } else {
-                        b.label.clone()
-                    };
-                    chart
-                        .draw_series(std::iter::once(Text::new(
-                            label,
-                            (x0 + (x1 - x0) * 0.005, row + 0.95),
-                            (FONT, 13).into_font().color(&BLACK),
-                        )))
-                        .map_err(plot_err)?;
-                }
+                timeline_panel(fig, panel, bands, &plot_area, &key_area, (x0, x1))?;
             }
         }
     }
@@ -428,34 +616,297 @@ fn figure_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) ->
     Ok(())
 }
 
-fn bars_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &BarChart) -> Result<()> {
-    root.fill(&WHITE).map_err(plot_err)?;
-    let cats = c.categories.len().max(1);
-    let top = c
-        .series
+fn lines_panel<DB: DrawingBackend>(
+    fig: &Figure,
+    panel: &Panel,
+    lines: &[Line],
+    plot_area: &DrawingArea<DB, Shift>,
+    key_area: &DrawingArea<DB, Shift>,
+    (x0, x1): (f64, f64),
+) -> Result<()> {
+    let clippable: Vec<f64> = lines
         .iter()
-        .flat_map(|s| s.2.iter().copied())
-        .filter(|v| v.is_finite())
-        .fold(0.0_f64, f64::max);
-    let top = if top > 0.0 { top * 1.2 } else { 1.0 };
-    let mut chart = ChartBuilder::on(root)
-        .caption(&c.title, (FONT, 20))
-        .margin(12)
-        .margin_right(24)
-        .x_label_area_size(40)
+        .filter(|l| !l.keep)
+        .flat_map(|l| l.points.iter().map(|p| p.1))
+        .collect();
+    let mut must: Vec<f64> = lines
+        .iter()
+        .filter(|l| l.keep)
+        .flat_map(|l| l.points.iter().map(|p| p.1))
+        .collect();
+    for g in &panel.guides {
+        must.extend([g.lo, g.hi]);
+    }
+    let YRange {
+        lo: y0,
+        hi: y1,
+        clips,
+    } = robust_y_range(&clippable, &must);
+    let (xs, ys) = (x1 - x0, y1 - y0);
+    let mut chart = ChartBuilder::on(plot_area)
+        .caption(&panel.title, (FONT, 16))
+        .margin(8)
+        .margin_right(12)
+        .x_label_area_size(36)
         .y_label_area_size(72)
-        .build_cartesian_2d(0.0..cats as f64, 0.0..top)
+        .build_cartesian_2d(x0..x1, y0..y1)
         .map_err(plot_err)?;
     chart
         .configure_mesh()
-        .disable_x_mesh()
-        .x_labels(0)
-        .y_desc(&c.y_label)
+        .x_desc(&fig.x_label)
+        .y_desc(&panel.y_label)
         .label_style((FONT, 13))
         .axis_desc_style((FONT, 14))
         .light_line_style(RGBColor(238, 238, 238))
         .bold_line_style(RGBColor(210, 210, 210))
-        .y_label_formatter(&|v| tick(*v, top))
+        .x_label_formatter(&|v| tick(*v, xs))
+        .y_label_formatter(&|v| tick(*v, ys))
+        .draw()
+        .map_err(plot_err)?;
+    let mut keys = Vec::new();
+    for g in &panel.guides {
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(x0, g.lo), (x1, g.hi)],
+                GUIDE.mix(0.12).filled(),
+            )))
+            .map_err(plot_err)?;
+        chart
+            .draw_series(
+                [g.lo, g.hi].map(|y| PathElement::new(vec![(x0, y), (x1, y)], GUIDE.mix(0.7))),
+            )
+            .map_err(plot_err)?;
+        keys.push(Key::Guide(g.label.clone()));
+    }
+    chart
+        .draw_series(
+            fig.markers
+                .iter()
+                .filter(|m| **m > x0 && **m < x1)
+                .map(|&m| PathElement::new(vec![(m, y0), (m, y1)], MARKER)),
+        )
+        .map_err(plot_err)?;
+    let mut beyond: Vec<(RGBColor, Excursion)> = Vec::new();
+    let (mut clipped, mut total) = (0usize, 0usize);
+    for l in lines {
+        let color = l.color;
+        chart
+            .draw_series(LineSeries::new(
+                l.points.iter().map(|&(t, v)| (t, v.clamp(y0, y1))),
+                color,
+            ))
+            .map_err(plot_err)?;
+        keys.push(Key::Line(color, l.label.clone()));
+        if clips && !l.keep {
+            total += l.points.len();
+            for e in excursions(&l.points, y0, y1) {
+                clipped += e.points;
+                beyond.push((color, e));
+            }
+        }
+    }
+    keys.extend(marker_key(fig, x0, x1));
+    if clipped > 0 {
+        let (vmin, vmax) = clippable
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        keys.push(Key::Clipped(format!(
+            "clipped: {clipped} of {total} points"
+        )));
+        keys.push(Key::Text(format!(
+            "all values: {} … {} {}",
+            tick(vmin, ys),
+            tick(vmax, ys),
+            panel.y_label
+        )));
+        let beyond = merge_excursions(beyond, MERGE_SHARE * (x1 - x0));
+        // The index of the farthest excursion on each side.
+        let far = |above: bool| {
+            beyond
+                .iter()
+                .enumerate()
+                .filter(|(_, (_, e))| e.above == above)
+                .max_by(|(_, (_, a)), (_, (_, b))| {
+                    if above {
+                        a.v.total_cmp(&b.v)
+                    } else {
+                        b.v.total_cmp(&a.v)
+                    }
+                })
+                .map(|(i, _)| i)
+        };
+        let (far_up, far_down) = (far(true), far(false));
+        let style = (FONT, 12).into_font().color(&BLACK);
+        for (i, (color, e)) in beyond.iter().enumerate() {
+            let edge = if e.above { y1 } else { y0 };
+            let label =
+                beyond.len() <= LABELLED_EXCURSIONS || Some(i) == far_up || Some(i) == far_down;
+            let text = if label { peak(e.v) } else { String::new() };
+            let dy = if e.above { 2 } else { -14 };
+            chart
+                .draw_series(std::iter::once(
+                    EmptyElement::at((e.t, edge))
+                        + Polygon::new(triangle(e.above), color.filled())
+                        + Text::new(text, (7, dy), style.clone()),
+                ))
+                .map_err(plot_err)?;
+        }
+    }
+    let top = chart.plotting_area().get_base_pixel().1 - key_area.get_base_pixel().1 + 10;
+    draw_keys(key_area, &keys, top)
+}
+
+fn timeline_panel<DB: DrawingBackend>(
+    fig: &Figure,
+    panel: &Panel,
+    bands: &[Band],
+    plot_area: &DrawingArea<DB, Shift>,
+    key_area: &DrawingArea<DB, Shift>,
+    (x0, x1): (f64, f64),
+) -> Result<()> {
+    let rows = bands.len().max(1) as f64;
+    let mut chart = ChartBuilder::on(plot_area)
+        .caption(&panel.title, (FONT, 16))
+        .margin(8)
+        .margin_right(12)
+        .x_label_area_size(36)
+        .y_label_area_size(72)
+        .build_cartesian_2d(x0..x1, 0.0..rows)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc(&fig.x_label)
+        .y_desc(&panel.y_label)
+        .y_labels(0)
+        .disable_y_mesh()
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 14))
+        .light_line_style(RGBColor(238, 238, 238))
+        .bold_line_style(RGBColor(210, 210, 210))
+        .x_label_formatter(&|v| tick(*v, x1 - x0))
+        .draw()
+        .map_err(plot_err)?;
+    chart
+        .draw_series(
+            fig.markers
+                .iter()
+                .filter(|m| **m > x0 && **m < x1)
+                .map(|&m| PathElement::new(vec![(m, 0.0), (m, rows)], MARKER)),
+        )
+        .map_err(plot_err)?;
+    // Every interval is at least two pixels wide, so that short pulses stay visible.
+    let px = f64::from(chart.plotting_area().dim_in_pixel().0.max(1));
+    let min_w = 2.0 * (x1 - x0) / px;
+    let base = key_area.get_base_pixel().1;
+    for (i, b) in bands.iter().enumerate() {
+        // The first band on top.
+        let row = rows - 1.0 - i as f64;
+        let color = b.color;
+        chart
+            .draw_series(b.intervals.iter().map(|&(a, e)| {
+                let e = e.max(a + min_w);
+                Rectangle::new([(a, row + 0.2), (e, row + 0.8)], color.filled())
+            }))
+            .map_err(plot_err)?;
+        let held: f64 = b
+            .intervals
+            .iter()
+            .map(|&(a, e)| (e.min(x1) - a.max(x0)).max(0.0))
+            .sum();
+        let n = b.intervals.len();
+        let detail = match n {
+            0 => "never".to_string(),
+            1 => format!("1 interval, {:.1} % of the time", 100.0 * held / (x1 - x0)),
+            n => format!(
+                "{n} intervals, {:.1} % of the time",
+                100.0 * held / (x1 - x0)
+            ),
+        };
+        let y = chart.backend_coord(&(x0, row + 0.5)).1 - base;
+        draw_keys(
+            key_area,
+            &[Key::Row(color, b.label.clone()), Key::Text(detail)],
+            y - 9,
+        )?;
+    }
+    Ok(())
+}
+
+/// Decades `[lo, hi]` that hold the positive `values` (for a logarithmic axis), with one decade
+/// below the smallest, so that the smallest bar is a bar and not a sliver.
+fn decades(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
+            (a.min(v), b.max(v))
+        });
+    if !lo.is_finite() {
+        return (0.1, 100.0);
+    }
+    let lo = 10f64.powf(lo.log10().floor() - 1.0);
+    let hi = 10f64.powf(hi.log10().ceil()).max(lo * 10.0);
+    (lo, hi)
+}
+
+fn bars_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &BarChart) -> Result<()> {
+    root.fill(&WHITE).map_err(plot_err)?;
+    let cats = c.categories.len().max(1) as f64;
+    let values = || c.series.iter().flat_map(|s| s.2.iter().copied());
+    let builder = |root| {
+        let mut b = ChartBuilder::on(root);
+        b.caption(&c.title, (FONT, 20))
+            .margin(12)
+            .margin_right(24)
+            .x_label_area_size(40)
+            .y_label_area_size(72);
+        b
+    };
+    if c.log_y {
+        let (lo, hi) = decades(values());
+        let chart = builder(root)
+            .build_cartesian_2d(0.0..cats, (lo..hi).log_scale())
+            .map_err(plot_err)?;
+        bars_body(root, chart, c, lo, hi)
+    } else {
+        let top = values().filter(|v| v.is_finite()).fold(0.0_f64, f64::max);
+        let top = if top > 0.0 { top * 1.2 } else { 1.0 };
+        let chart = builder(root)
+            .build_cartesian_2d(0.0..cats, 0.0..top)
+            .map_err(plot_err)?;
+        bars_body(root, chart, c, 0.0, top)
+    }
+}
+
+/// The bars of `c` from `base` up, on a chart whose value axis is `Y` (linear or logarithmic).
+fn bars_body<'a, DB, Y>(
+    root: &DrawingArea<DB, Shift>,
+    mut chart: ChartContext<'a, DB, Cartesian2d<RangedCoordf64, Y>>,
+    c: &BarChart,
+    base: f64,
+    top: f64,
+) -> Result<()>
+where
+    DB: DrawingBackend + 'a,
+    Y: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let y_desc = if c.log_y {
+        format!("{}, log scale", c.y_label)
+    } else {
+        c.y_label.clone()
+    };
+    chart
+        .configure_mesh()
+        .disable_x_mesh()
+        .x_labels(0)
+        .y_desc(y_desc)
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 14))
+        .light_line_style(RGBColor(238, 238, 238))
+        .bold_line_style(RGBColor(210, 210, 210))
+        .y_label_formatter(&|v| tick(*v, if c.log_y { *v } else { top }))
         .draw()
         .map_err(plot_err)?;
     let k = c.series.len().max(1) as f64;
@@ -467,10 +918,10 @@ fn bars_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &BarChart) -> R
                 values
                     .iter()
                     .enumerate()
-                    .filter(|(_, v)| v.is_finite())
+                    .filter(|(_, v)| v.is_finite() && **v > base)
                     .map(|(i, &v)| {
                         let x = i as f64 + 0.1 + j as f64 * width;
-                        Rectangle::new([(x, 0.0), (x + width * 0.9, v)], color.filled())
+                        Rectangle::new([(x, base), (x + width * 0.9, v)], color.filled())
                     }),
             )
             .map_err(plot_err)?
@@ -478,14 +929,11 @@ fn bars_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &BarChart) -> R
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled()));
     }
     draw_legend(&mut chart)?;
-    let style = TextStyle::from((FONT, 14).into_font()).color(&BLACK).pos(
-        plotters::style::text_anchor::Pos::new(
-            plotters::style::text_anchor::HPos::Center,
-            plotters::style::text_anchor::VPos::Top,
-        ),
-    );
+    let style = TextStyle::from((FONT, 14).into_font())
+        .color(&BLACK)
+        .pos(Pos::new(HPos::Center, VPos::Top));
     for (i, name) in c.categories.iter().enumerate() {
-        let (px, py) = chart.backend_coord(&(i as f64 + 0.5, 0.0));
+        let (px, py) = chart.backend_coord(&(i as f64 + 0.5, base));
         root.draw(&Text::new(name.clone(), (px, py + 8), style.clone()))
             .map_err(plot_err)?;
     }
@@ -523,6 +971,121 @@ mod tests {
             i.push(t, on);
         }
         assert_eq!(i.finish(5.0), vec![(1.0, 3.0), (4.0, 5.0)]);
+    }
+
+    /// A slow oscillation of ±0.01 with three short spikes of 0.43 (attack switches).
+    fn spiky() -> Vec<f64> {
+        (0..4000)
+            .map(|k| {
+                let t = f64::from(k) * 0.01;
+                match k {
+                    1000 | 1001 => -0.43,
+                    2000 | 3000 => 0.3,
+                    _ => 0.01 * (1.5 * t).sin(),
+                }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn robust_range_clips_spikes_and_keeps_the_steady_state() {
+        let r = robust_y_range(&spiky(), &[]);
+        assert!(r.clips, "{r:?}");
+        // The steady state fills the axis: ±0.01 plus the margin, not ±0.43.
+        assert!(r.lo < -0.0099 && r.lo > -0.02, "{r:?}");
+        assert!(r.hi > 0.0099 && r.hi < 0.02, "{r:?}");
+        // The full range without the spikes: nothing is clipped.
+        let calm: Vec<f64> = spiky().into_iter().filter(|v| v.abs() < 0.1).collect();
+        let r = robust_y_range(&calm, &[]);
+        assert!(!r.clips && r.lo < -0.0099 && r.hi > 0.0099, "{r:?}");
+        assert!(r.hi - r.lo < 0.03, "{r:?}");
+    }
+
+    #[test]
+    fn robust_range_holds_what_must_be_shown_and_ignores_order_and_nan() {
+        // A band wider than the data: inside, with the data.
+        let r = robust_y_range(&spiky(), &[-0.02, 0.02]);
+        assert!(
+            r.clips && r.lo <= -0.02 && r.hi >= 0.02 && r.hi < 0.1,
+            "{r:?}"
+        );
+        // A kept curve that reaches 5: inside too, so the spikes are not clipped any more.
+        let r = robust_y_range(&spiky(), &[0.0, 5.0]);
+        assert!(!r.clips && r.lo <= -0.43 && r.hi >= 5.0, "{r:?}");
+        let mut v = spiky();
+        v.reverse();
+        v.push(f64::NAN);
+        v.push(f64::INFINITY);
+        assert_eq!(robust_y_range(&v, &[]), robust_y_range(&spiky(), &[]));
+        let empty = robust_y_range(&[], &[]);
+        assert!(empty.lo < empty.hi && !empty.clips);
+        let flat = robust_y_range(&[2.0; 10], &[]);
+        assert!(flat.lo < 2.0 && flat.hi > 2.0 && !flat.clips, "{flat:?}");
+    }
+
+    #[test]
+    fn excursions_are_runs_beyond_each_edge_with_their_farthest_point() {
+        let pts: Vec<(f64, f64)> = [0.0, 2.0, 3.0, 1.5, 0.0, -2.0, -1.0, 0.5, 4.0]
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (i as f64, *v))
+            .collect();
+        let e = excursions(&pts, -1.5, 1.0);
+        let got: Vec<(f64, f64, bool, usize)> =
+            e.iter().map(|e| (e.t, e.v, e.above, e.points)).collect();
+        assert_eq!(
+            got,
+            vec![
+                (2.0, 3.0, true, 3),
+                (5.0, -2.0, false, 1),
+                (8.0, 4.0, true, 1)
+            ]
+        );
+    }
+
+    #[test]
+    fn nearby_excursions_on_one_side_share_a_marker() {
+        let ex = |t: f64, v: f64| Excursion {
+            t,
+            v,
+            above: v > 0.0,
+            points: 1,
+        };
+        let merged = merge_excursions(
+            vec![
+                ('a', ex(5.0, 0.2)),
+                ('b', ex(5.1, 0.4)),
+                ('a', ex(5.05, -0.3)),
+                ('a', ex(9.0, 0.3)),
+            ],
+            0.5,
+        );
+        let got: Vec<(char, f64, f64, usize)> = merged
+            .iter()
+            .map(|(c, e)| (*c, e.t, e.v, e.points))
+            .collect();
+        assert_eq!(
+            got,
+            vec![('b', 5.1, 0.4, 2), ('a', 5.05, -0.3, 1), ('a', 9.0, 0.3, 1)]
+        );
+    }
+
+    #[test]
+    fn log_axis_spans_whole_decades_of_the_positive_values() {
+        assert_eq!(
+            decades([0.0, 0.004, 37.0, 99.0].into_iter()),
+            (0.0001, 100.0)
+        );
+        assert_eq!(decades([0.0].into_iter()), (0.1, 100.0));
+        let (lo, hi) = decades([5.0].into_iter());
+        assert!(lo < 5.0 && hi > 5.0);
+    }
+
+    #[test]
+    fn peak_labels_have_three_digits() {
+        assert_eq!(peak(-0.4297), "\u{2212}0.430");
+        assert_eq!(peak(0.03934), "0.0393");
+        assert_eq!(peak(12.0), "12.0");
     }
 
     #[test]

@@ -17,12 +17,59 @@ use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::trajectory::TrajectoryConfig;
 
 use crate::join;
-use crate::plot::{self, Band, Envelope, Figure, Intervals, Line, Panel, PanelKind, PALETTE};
+use crate::plot::{
+    self, Band, Envelope, Figure, Guide, Intervals, Line, Panel, PanelKind, PALETTE,
+};
 
 /// Buckets per plotted curve (each gives its minimum and maximum).
 pub const BUCKETS: u64 = 2000;
 /// After an attack switch, the error maxima are split into this first window and the rest.
 pub const SWITCH_WINDOW_S: f64 = 1.0;
+
+/// Scenario names taken for the paper's experiment: their position- and velocity-error figures
+/// show the bounds the paper states ([`PAPER_POSITION_BOUND_RAD`], [`PAPER_VELOCITY_BOUND_RAD_S`])
+/// as a band. `paper` is the embedded default and `scenarios/paper.toml`; `paper-linkwise` is the
+/// same experiment under the link-wise reading of the attack. Command-line overrides (attack,
+/// controller, duration) keep the name, and the band, as a reference to compare with.
+pub const PAPER_SCENARIOS: [&str; 2] = ["paper", "paper-linkwise"];
+/// The paper's bound on the position error (Section VII: robot 1, Fig. 3(a); robot 4, Fig. 6(a)).
+pub const PAPER_POSITION_BOUND_RAD: f64 = 0.02;
+/// The paper's bound on the angular-velocity error (Section VII: robot 1, Fig. 3(b)).
+pub const PAPER_VELOCITY_BOUND_RAD_S: f64 = 0.01;
+
+/// Whether the report draws the paper's bounds for this scenario.
+pub fn is_paper_scenario(r: &Resolved) -> bool {
+    PAPER_SCENARIOS.contains(&r.scenario.name.as_str())
+}
+
+/// The paper's bands for robot `id`: (position, velocity). The paper states the position bound
+/// for robots 1 and 4 and the velocity bound for robot 1; the other robots get robot 1's bound
+/// as a reference, labelled as such.
+fn paper_guides(id: u32) -> (Guide, Guide) {
+    let b = PAPER_POSITION_BOUND_RAD;
+    let v = PAPER_VELOCITY_BOUND_RAD_S;
+    let pos = match id {
+        1 => format!("paper, Fig. 3(a): ±{b} rad"),
+        4 => format!("paper, Fig. 6(a): ±{b} rad"),
+        _ => format!("paper (robot 1): ±{b} rad"),
+    };
+    let vel = match id {
+        1 => format!("paper, Fig. 3(b): ±{v} rad/s"),
+        _ => format!("paper (robot 1): ±{v} rad/s"),
+    };
+    (
+        Guide {
+            label: pos,
+            lo: -b,
+            hi: b,
+        },
+        Guide {
+            label: vel,
+            lo: -v,
+            hi: v,
+        },
+    )
+}
 
 /// The figure kinds made for every robot: (file suffix, what it shows).
 pub const FIGURES: [(&str, &str); 6] = [
@@ -150,6 +197,8 @@ struct AgentSeries {
     missed: Intervals,
     segments: Vec<SegmentStats>,
     last_t: f64,
+    /// Ticks recorded (joined) for this robot.
+    ticks: u64,
 }
 
 /// Per-robot series of a run.
@@ -195,6 +244,7 @@ impl RunSeries {
                     alarm: Intervals::default(),
                     missed: Intervals::default(),
                     last_t: 0.0,
+                    ticks: 0,
                 }
             })
             .collect();
@@ -213,6 +263,7 @@ impl RunSeries {
         };
         let t = r.agent.t;
         a.last_t = t;
+        a.ticks += 1;
         let reference = a.trajectory.reference::<MAX_DOF>(t);
         let seg_index = a.switches.partition_point(|s| *s <= t);
         let seg = a.segments.get_mut(seg_index);
@@ -289,6 +340,7 @@ fn links(prefix: &str, envs: Vec<Envelope>) -> Vec<Line> {
             label: format!("{prefix}link {}", i + 1),
             color: PALETTE[i % PALETTE.len()],
             points: e.finish(),
+            keep: false,
         })
         .collect()
 }
@@ -300,21 +352,59 @@ struct Job {
     size: (u32, u32),
 }
 
+/// The legend entry of a robot's attack switch lines.
+fn switch_label(switches: &[f64], x_end: f64) -> String {
+    let shown: Vec<String> = switches
+        .iter()
+        .filter(|t| **t < x_end)
+        .map(|t| format!("{t}"))
+        .collect();
+    match shown.len() {
+        0 => String::new(),
+        1 => format!("attack switch: {} s", shown[0]),
+        2..=4 => format!("attack switches: {} s", shown.join(", ")),
+        n => format!("attack switches ({n})"),
+    }
+}
+
+/// How the figures are drawn: shared by every robot of a run.
+struct Layout {
+    beta: f64,
+    /// The time axis: from 0 to the end of the recorded ticks.
+    x_range: (f64, f64),
+    /// Title suffix of a partial run.
+    partial: String,
+    paper: bool,
+    period_s: f64,
+}
+
 /// The figures of one robot.
-fn figures(a: AgentSeries, beta: f64, x_range: (f64, f64)) -> Vec<Job> {
+fn figures(a: AgentSeries, l: &Layout) -> Vec<Job> {
     let id = a.id;
-    let end = a.last_t;
+    let beta = l.beta;
+    // A sample holds until the next tick.
+    let end = a.last_t + l.period_s;
+    let marker_label = switch_label(&a.switches, l.x_range.1);
     let fig = |title: &str, panels: Vec<Panel>| Figure {
-        title: format!("Robot {id}: {title}"),
+        title: format!("Robot {id}: {title}{}", l.partial),
         x_label: "t (s)".into(),
-        x_range,
+        x_range: l.x_range,
         markers: a.switches.clone(),
+        marker_label: marker_label.clone(),
         panels,
     };
     let one = |title: &str, y: &str, lines: Vec<Line>| Panel {
         title: title.into(),
         y_label: y.into(),
         kind: PanelKind::Lines(lines),
+        guides: Vec::new(),
+    };
+    let (pos_guide, vel_guide) = paper_guides(id);
+    let with = |mut p: Panel, g: Guide| {
+        if l.paper {
+            p.guides.push(g);
+        }
+        p
     };
     let stem = |s: &str| format!("robot{id}-{s}");
     let wide = (1000, 440);
@@ -333,11 +423,13 @@ fn figures(a: AgentSeries, beta: f64, x_range: (f64, f64)) -> Vec<Job> {
                         label: "true S".into(),
                         color: PALETTE[1],
                         points: st.finish(),
+                        keep: true,
                     },
                     Line {
                         label: "estimate Ŝ".into(),
                         color: PALETTE[0],
                         points: sh.finish(),
+                        keep: false,
                     },
                 ],
             )
@@ -368,7 +460,10 @@ fn figures(a: AgentSeries, beta: f64, x_range: (f64, f64)) -> Vec<Job> {
             stem("position-error"),
             fig(
                 "(a) position error",
-                vec![one("q_d − q (true q)", "rad", links("", a.pos))],
+                vec![with(
+                    one("q_d − q (true q)", "rad", links("", a.pos)),
+                    pos_guide,
+                )],
             ),
             wide,
         ),
@@ -376,10 +471,9 @@ fn figures(a: AgentSeries, beta: f64, x_range: (f64, f64)) -> Vec<Job> {
             stem("velocity-error"),
             fig(
                 "(b) angular-velocity error",
-                vec![one(
-                    "dq_d/dt − dq/dt (true velocity)",
-                    "rad/s",
-                    links("", a.vel),
+                vec![with(
+                    one("dq_d/dt − dq/dt (true velocity)", "rad/s", links("", a.vel)),
+                    vel_guide,
                 )],
             ),
             wide,
@@ -424,12 +518,14 @@ fn figures(a: AgentSeries, beta: f64, x_range: (f64, f64)) -> Vec<Job> {
                             label: "τ".into(),
                             color: PALETTE[2],
                             points: a.tau_ms.finish(),
+                            keep: true,
                         }],
                     ),
                     Panel {
                         title: "timeline".into(),
                         y_label: String::new(),
                         kind: PanelKind::Timeline(bands),
+                        guides: Vec::new(),
                     },
                 ],
             ),
@@ -451,16 +547,37 @@ fn write(
 ) -> Result<PathBuf> {
     let dir = run_dir.join("report");
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let beta = series.beta;
-    let x_range = (0.0, series.duration_s.max(series.period_s));
+    let recorded = series
+        .agents
+        .iter()
+        .filter(|a| a.ticks > 0)
+        .map(|a| a.last_t + series.period_s)
+        .fold(0.0, f64::max);
+    let (x_end, partial) = recorded_span(recorded, series.period_s, series.duration_s);
+    let layout = Layout {
+        beta: series.beta,
+        x_range: (0.0, x_end),
+        partial: partial
+            .as_ref()
+            .map_or_else(String::new, |p| format!(" ({p})")),
+        paper: is_paper_scenario(resolved),
+        period_s: series.period_s,
+    };
     let mut segments = Vec::new();
     let mut jobs = Vec::new();
     for a in series.agents {
         segments.push((a.id, a.segments.clone()));
-        jobs.extend(figures(a, beta, x_range));
+        jobs.extend(figures(a, &layout));
     }
     render_all(&dir, jobs)?;
-    let md = markdown(run_dir, resolved, summary, &segments, warnings);
+    let md = markdown(
+        run_dir,
+        resolved,
+        summary,
+        &segments,
+        warnings,
+        partial.as_deref(),
+    );
     let md_path = dir.join("report.md");
     std::fs::write(&md_path, md).with_context(|| format!("writing {}", md_path.display()))?;
     let det = dir.join("detection.csv");
@@ -470,6 +587,22 @@ fn write(
     std::fs::write(&seg, segments_csv(&segments))
         .with_context(|| format!("writing {}", seg.display()))?;
     Ok(md_path)
+}
+
+/// The end of the time axis of a run whose last recorded tick ends at `recorded` s: the
+/// scenario's duration when the run is complete, else `recorded` (never `duration_s` of a run
+/// that stopped early); and, for a partial run, the note that its figure titles carry.
+fn recorded_span(recorded: f64, period_s: f64, duration_s: f64) -> (f64, Option<String>) {
+    if recorded >= duration_s - 0.5 * period_s {
+        (duration_s.max(period_s), None)
+    } else {
+        // To the millisecond, without the float noise of a sum of periods.
+        let shown = (recorded * 1e3).round() / 1e3;
+        (
+            recorded.max(period_s),
+            Some(format!("partial run: {shown} s of {duration_s} s recorded")),
+        )
+    }
 }
 
 /// Renders the figures on up to two threads (the machine's cores, at most).
@@ -515,6 +648,7 @@ fn markdown(
     s: &RunSummary,
     segments: &[(u32, Vec<SegmentStats>)],
     warnings: &[String],
+    partial: Option<&str>,
 ) -> String {
     let c = &r.scenario.controller;
     let mut md = String::new();
@@ -565,7 +699,8 @@ fn markdown(
         (
             "figures",
             format!(
-                "min/max envelope of about {BUCKETS} buckets per curve; grey lines: attack switches"
+                "min/max envelope of about {BUCKETS} buckets per curve; robust y-axis, values beyond \
+                 it clipped and marked ▲▼ (see below)"
             ),
         ),
     ];
@@ -657,6 +792,8 @@ fn markdown(
         }
     }
 
+    md.push_str("\n## Reading the figures\n\n");
+    md.push_str(&figure_notes(r, partial));
     for a in &r.scenario.agents {
         let id = a.id;
         let _ = writeln!(md, "\n## Robot {id}\n");
@@ -673,6 +810,54 @@ fn markdown(
         for w in warnings {
             let _ = writeln!(md, "* {w}");
         }
+    }
+    md
+}
+
+/// How the figures were drawn, for `report.md`.
+fn figure_notes(r: &Resolved, partial: Option<&str>) -> String {
+    let (lo, hi) = plot::ROBUST_QUANTILES;
+    let mut md = format!(
+        "* Time axis: the recorded ticks, from 0 to the end of the last one. Grey vertical \
+         lines: the robot's attack switches (segment boundaries of its attack schedule), listed \
+         in the legend.\n\
+         * Y-axis: when a few spikes (attack switches) would squash the rest, the axis spans the \
+         {} % to {} % quantiles of the plotted points, plus {} % of that span on each side, \
+         widened to hold the true attack S, the delay τ and the paper's band, which are never \
+         clipped. This robust range is used only when the full range is more than {}× larger. \
+         Values beyond it are drawn at the edge and marked ▲ (above) or ▼ (below), one marker \
+         per spike (excursions less than {} % of the time axis apart share one), with the value \
+         of the farthest point written beside it (beside every marker when there are at most {}, \
+         else beside the farthest on each side); the legend gives how many of the plotted points \
+         were clipped and the range of all values. Points are those of the min/max envelope \
+         (each the smallest or largest of a bucket of ticks).\n\
+         * Timeline: the attack row is drawn from the attacker's per-tick `active` flag, one bar \
+         per interval in which it held (at least two pixels wide), with the number of intervals \
+         and the share of the time in the legend; likewise the alarm and, if any, the deadline \
+         misses.\n",
+        lo * 100.0,
+        hi * 100.0,
+        plot::ROBUST_MARGIN * 100.0,
+        plot::CLIP_RATIO,
+        plot::MERGE_SHARE * 100.0,
+        plot::LABELLED_EXCURSIONS,
+    );
+    if is_paper_scenario(r) {
+        let _ = writeln!(
+            md,
+            "* Green band (scenario `{}`, the paper's experiment): the bounds the paper states in \
+             Section VII, |q_d − q| ≤ {PAPER_POSITION_BOUND_RAD} rad (robot 1, Fig. 3(a); robot \
+             4, Fig. 6(a)) and |q̇_d − q̇| ≤ {PAPER_VELOCITY_BOUND_RAD_S} rad/s (robot 1, Fig. \
+             3(b)). The other robots show robot 1's bound as a reference, labelled \"paper (robot \
+             1)\".",
+            r.scenario.name
+        );
+    }
+    if let Some(p) = partial {
+        let _ = writeln!(
+            md,
+            "* This run is partial ({p}): its figures end where its traces end."
+        );
     }
     md
 }
@@ -720,4 +905,45 @@ fn segments_csv(segments: &[(u32, Vec<SegmentStats>)]) -> String {
         }
     }
     csv
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn time_axis_ends_with_the_recorded_ticks() {
+        assert_eq!(recorded_span(40.0, 0.001, 40.0), (40.0, None));
+        // A sum of periods a hair short of the duration is the whole run.
+        assert_eq!(recorded_span(39.999_999_9, 0.001, 40.0), (40.0, None));
+        let (end, note) = recorded_span(12.345_000_000_01, 0.001, 40.0);
+        assert!((end - 12.345).abs() < 1e-9, "{end}");
+        assert_eq!(
+            note.as_deref(),
+            Some("partial run: 12.345 s of 40 s recorded")
+        );
+        // Nothing recorded: an axis of one period, not of the duration.
+        assert_eq!(recorded_span(0.0, 0.001, 40.0).0, 0.001);
+    }
+
+    #[test]
+    fn switch_legend_lists_the_switches_on_the_axis() {
+        assert_eq!(switch_label(&[], 40.0), "");
+        assert_eq!(switch_label(&[5.0, 20.0], 40.0), "attack switches: 5, 20 s");
+        assert_eq!(switch_label(&[5.0, 20.0], 10.0), "attack switch: 5 s");
+        assert_eq!(
+            switch_label(&[1.0, 2.0, 3.0, 4.0, 5.0], 40.0),
+            "attack switches (5)"
+        );
+    }
+
+    #[test]
+    fn paper_guides_name_the_figure_that_states_them() {
+        let (p1, v1) = paper_guides(1);
+        assert!(p1.label.contains("Fig. 3(a)") && v1.label.contains("Fig. 3(b)"));
+        assert_eq!((p1.lo, p1.hi), (-0.02, 0.02));
+        assert_eq!((v1.lo, v1.hi), (-0.01, 0.01));
+        assert!(paper_guides(4).0.label.contains("Fig. 6(a)"));
+        assert!(paper_guides(2).0.label.contains("robot 1"));
+    }
 }

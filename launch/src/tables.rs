@@ -150,6 +150,7 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
             args.engine.as_str()
         ),
         y_label: "RMSE (rad)".into(),
+        log_y: false,
         categories: rows.iter().map(|r| format!("robot {}", r.robot)).collect(),
         series: vec![
             (
@@ -249,6 +250,7 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
             args.engine.as_str()
         ),
         y_label: "RMSE (rad)".into(),
+        log_y: false,
         categories: rows.iter().map(|r| r.case.to_string()).collect(),
         series: vec![
             (

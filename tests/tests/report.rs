@@ -428,3 +428,253 @@ fn trace_of_an_unknown_format_version_is_refused_naming_file_and_version() {
     let msg = stderr(&out);
     assert!(msg.contains("version 99"), "{msg}");
 }
+
+/// The text elements of an SVG figure: (x, y, text).
+fn svg_texts(svg: &str) -> Vec<(String, String, String)> {
+    let mut out = Vec::new();
+    let mut rest = svg;
+    while let Some(start) = rest.find("<text") {
+        rest = &rest[start..];
+        let Some(open_end) = rest.find('>') else {
+            break;
+        };
+        let Some(close) = rest.find("</text>") else {
+            break;
+        };
+        let attrs = &rest[..open_end];
+        let attr = |name: &str| {
+            let key = format!(" {name}=\"");
+            attrs
+                .find(&key)
+                .and_then(|i| attrs[i + key.len()..].split('"').next())
+                .unwrap_or_default()
+                .to_string()
+        };
+        out.push((
+            attr("x"),
+            attr("y"),
+            rest[open_end + 1..close].trim().to_string(),
+        ));
+        rest = &rest[close..];
+    }
+    out
+}
+
+/// The numeric tick labels of a figure's first panel axes: (time axis, value axis). The time
+/// axis labels share a `y` attribute, the value axis labels an `x` attribute; each axis is the
+/// largest such group.
+fn axis_ticks(svg: &str) -> (Vec<f64>, Vec<f64>) {
+    let numeric: Vec<(String, String, f64)> = svg_texts(svg)
+        .into_iter()
+        .filter_map(|(x, y, t)| {
+            t.replace('\u{2212}', "-")
+                .parse::<f64>()
+                .ok()
+                .map(|v| (x, y, v))
+        })
+        .collect();
+    let largest_group = |key: fn(&(String, String, f64)) -> &String| {
+        let mut groups: BTreeMap<&String, Vec<f64>> = BTreeMap::new();
+        for n in &numeric {
+            groups.entry(key(n)).or_default().push(n.2);
+        }
+        groups
+            .into_values()
+            .max_by_key(Vec::len)
+            .unwrap_or_default()
+    };
+    (largest_group(|n| &n.1), largest_group(|n| &n.0))
+}
+
+fn max_of(v: &[f64]) -> f64 {
+    v.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+}
+
+fn min_of(v: &[f64]) -> f64 {
+    v.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+fn figure_svg(run_dir: &Path, stem: &str) -> String {
+    let p = run_dir.join(format!("report/{stem}.svg"));
+    std::fs::read_to_string(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+}
+
+#[test]
+fn paper_figures_show_the_papers_bounds_and_clip_the_switch_spikes() {
+    let dir = Scratch::new("report-paper-figures");
+    let run_dir = run_dir_of(&json(&launch(
+        &["run", "--engine", "inproc", "--json"],
+        &dir.0,
+        WATCHDOG,
+    )));
+    let pos = figure_svg(&run_dir, "robot1-position-error");
+    assert!(pos.contains("paper, Fig. 3(a): ±0.02 rad"), "no band label");
+    let (t, y) = axis_ticks(&pos);
+    assert_eq!(max_of(&t), 40.0, "time axis {t:?}");
+    assert!(
+        min_of(&y) <= -0.02 && max_of(&y) >= 0.02,
+        "band off the axis {y:?}"
+    );
+    let vel = figure_svg(&run_dir, "robot1-velocity-error");
+    assert!(
+        vel.contains("paper, Fig. 3(b): ±0.01 rad/s"),
+        "no band label"
+    );
+    assert!(figure_svg(&run_dir, "robot4-position-error").contains("paper, Fig. 6(a)"));
+
+    // Robot 2's velocity error spikes to about 0.43 rad/s at the 5 s switch; its steady state
+    // is near ±0.01 rad/s. The axis follows the steady state, the spikes are clipped and their
+    // values written beside their markers.
+    let vel2 = figure_svg(&run_dir, "robot2-velocity-error");
+    let (_, y) = axis_ticks(&vel2);
+    assert!(
+        max_of(&y) < 0.1 && min_of(&y) > -0.1,
+        "axis set by the spikes: {y:?}"
+    );
+    assert!(vel2.contains("clipped: "), "no clip note");
+    assert!(
+        vel2.contains("attack switches: 5, 20 s"),
+        "switches not in the legend"
+    );
+    let peaks: Vec<f64> = svg_texts(&vel2)
+        .into_iter()
+        .filter_map(|(_, _, t)| t.replace('\u{2212}', "-").parse::<f64>().ok())
+        .filter(|v| v.abs() > 0.2)
+        .collect();
+    assert!(!peaks.is_empty(), "no spike value written");
+    let md = std::fs::read_to_string(run_dir.join("report/report.md")).expect("report.md");
+    assert!(
+        md.contains("## Reading the figures") && md.contains("Green band"),
+        "{md}"
+    );
+}
+
+#[test]
+fn other_scenarios_get_no_paper_band() {
+    let dir = Scratch::new("report-no-band");
+    let scenario = fdi_tests::repo_path("scenarios/no-attack.toml");
+    let run_dir = run_dir_of(&json(&launch(
+        &[
+            "run",
+            scenario.to_str().expect("utf-8 path"),
+            "--engine",
+            "inproc",
+            "--duration-s",
+            "2",
+            "--json",
+        ],
+        &dir.0,
+        WATCHDOG,
+    )));
+    for f in ["robot1-position-error", "robot1-velocity-error"] {
+        let svg = figure_svg(&run_dir, f);
+        assert!(svg.contains("<polyline"), "{f} not drawn");
+        assert!(!svg.contains("paper"), "{f} has a paper band");
+    }
+    let md = std::fs::read_to_string(run_dir.join("report/report.md")).expect("report.md");
+    assert!(!md.contains("Green band"), "{md}");
+}
+
+#[test]
+fn partial_run_figures_span_only_the_recorded_time() {
+    let dir = Scratch::new("report-partial");
+    let run_dir = run_dir_of(&json(&launch(
+        &["run", "--engine", "inproc", "--duration-s", "2", "--json"],
+        &dir.0,
+        WATCHDOG,
+    )));
+    // The traces hold 2 s; the scenario now says 6 s: a run stopped a third of the way.
+    let path = run_dir.join("scenario.toml");
+    let text = std::fs::read_to_string(&path).expect("scenario.toml");
+    let cut: String = text
+        .lines()
+        .map(|l| {
+            if l.starts_with("duration_s") {
+                "duration_s = 6.0".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    assert_ne!(cut, text, "no duration_s line in {}", path.display());
+    std::fs::write(&path, cut).expect("rewrite scenario.toml");
+    let out = launch_plain(&["report", run_dir.to_str().expect("utf-8 path")], WATCHDOG);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for id in ROBOTS {
+        for f in FIGURES {
+            let svg = figure_svg(&run_dir, &format!("robot{id}-{f}"));
+            assert!(
+                svg.contains("partial run: 2 s of 6 s recorded"),
+                "robot{id}-{f}: no partial-run title"
+            );
+            let (t, _) = axis_ticks(&svg);
+            let end = max_of(&t);
+            assert!((1.5..=2.0).contains(&end), "robot{id}-{f}: time axis {t:?}");
+        }
+    }
+    // Robot 1 is attacked from t = 0: in force over all of the recorded time.
+    let timeline = figure_svg(&run_dir, "robot1-delay-alarm");
+    assert!(
+        timeline.contains("1 interval, 100.0 % of the time"),
+        "robot 1's attack interval is not the recorded time"
+    );
+    let md = std::fs::read_to_string(run_dir.join("report/report.md")).expect("report.md");
+    assert!(md.contains("This run is partial"), "{md}");
+}
+
+#[test]
+fn timeline_draws_every_interval_of_the_per_tick_attack_flag() {
+    let dir = Scratch::new("report-intervals");
+    // 24 attacks of 40 ms on robot 1, one every 80 ms: separate intervals of the
+    // per-tick flag, whatever its reading of the schedule (the value is non-zero in each).
+    let mut segments = String::new();
+    for k in 0..24 {
+        let on = 50 + 80 * k;
+        let _ = std::fmt::Write::write_fmt(
+            &mut segments,
+            format_args!(
+                "  {{ from_s = {}, waveform = {{ kind = \"constant\", value = 5.0 }} }},\n  \
+                 {{ from_s = {}, waveform = {{ kind = \"none\" }} }},\n",
+                f64::from(on) / 1000.0,
+                f64::from(on + 40) / 1000.0
+            ),
+        );
+    }
+    let profile = format!(
+        "name = \"pulses\"\n[[channels]]\nagent = 1\nsignal = \"velocity\"\nlinks = [1, 2]\n\
+         units = \"deg\"\nsegments = [\n  {{ from_s = 0.0, waveform = {{ kind = \"none\" }} }},\n\
+         {segments}]\n"
+    );
+    let file = dir.0.join("pulses.toml");
+    std::fs::write(&file, profile).expect("attack file");
+    let run_dir = run_dir_of(&json(&launch(
+        &[
+            "run",
+            "--engine",
+            "inproc",
+            "--duration-s",
+            "2",
+            "--attack",
+            file.to_str().expect("utf-8 path"),
+            "--json",
+        ],
+        &dir.0,
+        WATCHDOG,
+    )));
+    let svg = figure_svg(&run_dir, "robot1-delay-alarm");
+    assert!(
+        svg.contains("24 intervals, 48.0 % of the time"),
+        "{:?}",
+        svg_texts(&svg)
+            .into_iter()
+            .map(|t| t.2)
+            .filter(|t| t.contains("interval"))
+            .collect::<Vec<_>>()
+    );
+    // One bar per interval in the attack colour, and the legend swatch.
+    let bars = svg.matches("fill=\"#D55E00\"").count();
+    assert_eq!(bars, 24 + 1, "attack bars in robot1-delay-alarm.svg");
+    // The robots without an attack.
+    assert!(figure_svg(&run_dir, "robot2-delay-alarm").contains("never"));
+}
