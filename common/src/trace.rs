@@ -125,17 +125,17 @@ pub enum Damage {
 /// Trace errors name the file and, for damage, the byte offset.
 #[derive(Debug, thiserror::Error)]
 pub enum TraceError {
-    #[error("{op} {}: {source}", path.display())]
+    #[error("{op} {}: {cause}", path.display())]
     Io {
         op: TraceOp,
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
     #[error("{}: not a regular file ({kind}); a trace must be a regular file", path.display())]
     NotAFile { path: PathBuf, kind: &'static str },
-    #[error("{}: not an fdi-mas trace (bad magic)", path.display())]
+    #[error("{}: not an fdi-mas trace (no `FDITRACE` at byte offset 0)", path.display())]
     BadMagic { path: PathBuf },
-    #[error("{}: trace format version {found} is not supported (this build reads version {FORMAT_VERSION})", path.display())]
+    #[error("{}: trace format version {found} (byte offset 8) is not supported (this build reads version {FORMAT_VERSION})", path.display())]
     UnknownVersion { path: PathBuf, found: u32 },
     #[error("{}: damaged frame at byte offset {offset}: {damage}", path.display())]
     Damaged {
@@ -143,16 +143,16 @@ pub enum TraceError {
         offset: u64,
         damage: Damage,
     },
-    #[error("{}: damaged frame at byte offset {offset}: cannot decode frame: {source}", path.display())]
+    #[error("{}: damaged frame at byte offset {offset}: cannot decode frame: {}", path.display(), describe_decode(cause))]
     Decode {
         path: PathBuf,
         offset: u64,
-        source: bincode::error::DecodeError,
+        cause: bincode::error::DecodeError,
     },
-    #[error("{}: cannot encode record: {source}", path.display())]
+    #[error("{}: cannot encode record: {cause}", path.display())]
     Encode {
         path: PathBuf,
-        source: bincode::error::EncodeError,
+        cause: bincode::error::EncodeError,
     },
     #[error("{}: a {what} frame of {len} bytes is over the {limit} byte limit readers accept", path.display())]
     FrameTooLarge {
@@ -168,6 +168,8 @@ impl TraceError {
     pub fn offset(&self) -> Option<u64> {
         match self {
             Self::Damaged { offset, .. } | Self::Decode { offset, .. } => Some(*offset),
+            Self::BadMagic { .. } => Some(0),
+            Self::UnknownVersion { .. } => Some(8),
             _ => None,
         }
     }
@@ -184,6 +186,18 @@ impl TraceError {
             | Self::Encode { path, .. }
             | Self::FrameTooLarge { path, .. } => path,
         }
+    }
+}
+
+/// Words for the decode errors a damaged frame gives.
+fn describe_decode(e: &bincode::error::DecodeError) -> String {
+    use bincode::error::DecodeError as D;
+    match e {
+        D::LimitExceeded => "a length inside it claims more than a frame may hold".into(),
+        D::UnexpectedEnd { additional } => {
+            format!("it ends {additional} bytes before its content does")
+        }
+        other => other.to_string(),
     }
 }
 
@@ -234,21 +248,21 @@ fn config() -> bincode::config::Configuration {
     bincode::config::standard()
 }
 
-/// Decoding under a limit: a length inside a frame that claims more than a frame may hold is
-/// refused before bincode allocates for it.
+/// Decoding under a limit: a length inside a frame that claims more than the frame could hold
+/// is refused before bincode allocates for it. The limit is the smallest of a few sizes that is
+/// not below the frame's length, so what a corrupt length can make bincode allocate stays
+/// within a small multiple of the frame (and never above [`MAX_HEADER_BYTES`]).
 fn decode<T: serde::de::DeserializeOwned>(
     bytes: &[u8],
-    kind: FrameKind,
 ) -> Result<(T, usize), bincode::error::DecodeError> {
-    const HEADER: usize = MAX_HEADER_BYTES as usize;
-    const RECORD: usize = MAX_RECORD_BYTES as usize;
-    match kind {
-        FrameKind::Header => {
-            bincode::serde::decode_from_slice(bytes, config().with_limit::<HEADER>())
-        }
-        FrameKind::Record => {
-            bincode::serde::decode_from_slice(bytes, config().with_limit::<RECORD>())
-        }
+    const SMALL: usize = 1 << 12;
+    const MEDIUM: usize = 1 << 16;
+    const LARGE: usize = MAX_HEADER_BYTES as usize;
+    let c = config();
+    match bytes.len() {
+        n if n <= SMALL => bincode::serde::decode_from_slice(bytes, c.with_limit::<SMALL>()),
+        n if n <= MEDIUM => bincode::serde::decode_from_slice(bytes, c.with_limit::<MEDIUM>()),
+        _ => bincode::serde::decode_from_slice(bytes, c.with_limit::<LARGE>()),
     }
 }
 
@@ -268,10 +282,10 @@ pub struct TraceWriter {
 impl TraceWriter {
     /// Creates (truncates) `path` and writes the magic, version and header.
     pub fn create(path: &Path, header: &TraceHeader) -> Result<Self, TraceError> {
-        let file = File::create(path).map_err(|source| TraceError::Io {
+        let file = File::create(path).map_err(|cause| TraceError::Io {
             op: TraceOp::Creating,
             path: path.to_path_buf(),
-            source,
+            cause,
         })?;
         let mut w = Self {
             path: path.to_path_buf(),
@@ -286,22 +300,22 @@ impl TraceWriter {
         Ok(w)
     }
 
-    fn io(&self, source: std::io::Error) -> TraceError {
+    fn io(&self, cause: std::io::Error) -> TraceError {
         TraceError::Io {
             op: TraceOp::Writing,
             path: self.path.clone(),
-            source,
+            cause,
         }
     }
 
     fn frame<T: Serialize>(&mut self, value: &T, kind: FrameKind) -> Result<(), TraceError> {
         self.buf.clear();
-        bincode::serde::encode_into_std_write(value, &mut self.buf, config()).map_err(
-            |source| TraceError::Encode {
+        bincode::serde::encode_into_std_write(value, &mut self.buf, config()).map_err(|cause| {
+            TraceError::Encode {
                 path: self.path.clone(),
-                source,
-            },
-        )?;
+                cause,
+            }
+        })?;
         let len = match u32::try_from(self.buf.len()) {
             Ok(len) if len <= kind.limit() => len,
             _ => {
@@ -351,6 +365,8 @@ pub struct TraceReader {
     path: PathBuf,
     input: BufReader<File>,
     offset: u64,
+    /// Byte offset of the frame read last.
+    last: u64,
     /// The file's length when it was opened: no frame may reach beyond it.
     file_len: u64,
     header: TraceHeader,
@@ -361,10 +377,10 @@ pub struct TraceReader {
 impl TraceReader {
     /// Opens a trace and reads its header. Refuses anything but a regular file.
     pub fn open(path: &Path) -> Result<Self, TraceError> {
-        let io = |op, source| TraceError::Io {
+        let io = |op, cause| TraceError::Io {
             op,
             path: path.to_path_buf(),
-            source,
+            cause,
         };
         let file = File::open(path).map_err(|e| io(TraceOp::Opening, e))?;
         let meta = file.metadata().map_err(|e| io(TraceOp::Opening, e))?;
@@ -402,6 +418,7 @@ impl TraceReader {
             path: path.to_path_buf(),
             input,
             offset: 12,
+            last: 12,
             file_len: meta.len(),
             header: TraceHeader {
                 format_version: found,
@@ -438,6 +455,12 @@ impl TraceReader {
         &self.path
     }
 
+    /// Byte offset of the record returned last (of the header before the first), so that a
+    /// record found wrong can be named by where it is.
+    pub fn last_offset(&self) -> u64 {
+        self.last
+    }
+
     fn damaged(&mut self, offset: u64, damage: Damage) -> TraceError {
         self.done = true;
         TraceError::Damaged {
@@ -452,12 +475,12 @@ impl TraceReader {
         kind: FrameKind,
     ) -> Result<Option<T>, TraceError> {
         let start = self.offset;
-        let io = |s: &mut Self, source| {
+        let io = |s: &mut Self, cause| {
             s.done = true;
             TraceError::Io {
                 op: TraceOp::Reading,
                 path: s.path.clone(),
-                source,
+                cause,
             }
         };
         let mut len = [0u8; 4];
@@ -491,8 +514,9 @@ impl TraceReader {
             Ok(got) => return Err(self.damaged(start, Damage::EndsInFrame { got, len })),
             Err(e) => return Err(io(self, e)),
         }
-        match decode::<T>(&self.buf, kind) {
+        match decode::<T>(&self.buf) {
             Ok((v, used)) if used == self.buf.len() => {
+                self.last = start;
                 self.offset = start + 4 + u64::from(len);
                 Ok(Some(v))
             }
@@ -500,12 +524,12 @@ impl TraceReader {
                 let trailing = self.buf.len() - used;
                 Err(self.damaged(start, Damage::Trailing(trailing)))
             }
-            Err(source) => {
+            Err(cause) => {
                 self.done = true;
                 Err(TraceError::Decode {
                     path: self.path.clone(),
                     offset: start,
-                    source,
+                    cause,
                 })
             }
         }
@@ -734,9 +758,9 @@ mod tests {
         match &e {
             TraceError::Io {
                 op: TraceOp::Writing,
-                source,
+                cause,
                 ..
-            } => assert_eq!(source.kind(), std::io::ErrorKind::StorageFull, "{e}"),
+            } => assert_eq!(cause.kind(), std::io::ErrorKind::StorageFull, "{e}"),
             other => panic!("not a write error: {other}"),
         }
         let text = e.to_string();
