@@ -249,20 +249,25 @@ fn config() -> bincode::config::Configuration {
 }
 
 /// Decoding under a limit: a length inside a frame that claims more than the frame could hold
-/// is refused before bincode allocates for it. The limit is the smallest of a few sizes that is
-/// not below the frame's length, so what a corrupt length can make bincode allocate stays
-/// within a small multiple of the frame (and never above [`MAX_HEADER_BYTES`]).
+/// is refused before bincode allocates for it. bincode counts what it decodes by in-memory size
+/// (a one-byte varint length counts 8 bytes, an `f64` 8), so an undamaged frame of `n` bytes
+/// counts at most `8 n`; the limit is the smallest of a few sizes that is not below that, and
+/// what a corrupt length can make bincode allocate stays within 16 times that bound (at most
+/// 16 MiB, for the largest header).
 fn decode<T: serde::de::DeserializeOwned>(
     bytes: &[u8],
 ) -> Result<(T, usize), bincode::error::DecodeError> {
     const SMALL: usize = 1 << 12;
     const MEDIUM: usize = 1 << 16;
-    const LARGE: usize = MAX_HEADER_BYTES as usize;
+    const LARGE: usize = 1 << 20;
+    const HUGE: usize = 1 << 24;
+    const _: () = assert!(8 * (MAX_HEADER_BYTES as usize) <= HUGE);
     let c = config();
-    match bytes.len() {
+    match bytes.len().saturating_mul(8) {
         n if n <= SMALL => bincode::serde::decode_from_slice(bytes, c.with_limit::<SMALL>()),
         n if n <= MEDIUM => bincode::serde::decode_from_slice(bytes, c.with_limit::<MEDIUM>()),
-        _ => bincode::serde::decode_from_slice(bytes, c.with_limit::<LARGE>()),
+        n if n <= LARGE => bincode::serde::decode_from_slice(bytes, c.with_limit::<LARGE>()),
+        _ => bincode::serde::decode_from_slice(bytes, c.with_limit::<HUGE>()),
     }
 }
 
@@ -787,6 +792,38 @@ mod tests {
             TraceWriter::create(&p, &big),
             Err(TraceError::FrameTooLarge { .. })
         ));
+        let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn headers_and_records_of_every_size_round_trip_under_the_decode_limit() {
+        // A 4095-byte header (the corrupt-values scenario's) used to be refused: bincode counts
+        // a varint length as 8 bytes against the limit, so a frame needs more than its length.
+        let p = tmp("sizes");
+        let mut sizes: Vec<usize> = vec![0, 1, 100, 4000, 4095, 4096, 8192, 65_536, 131_072];
+        sizes.push(crate::scenario::MAX_FILE_BYTES as usize);
+        for n in sizes {
+            let mut h = header();
+            h.scenario_toml = "x".repeat(n);
+            let message = "m".repeat(n.min(MAX_RECORD_BYTES as usize - 64));
+            {
+                let mut w = TraceWriter::create(&p, &h).expect("create");
+                w.write(&TraceRecord::Event {
+                    t: 1.0,
+                    message: message.clone(),
+                })
+                .expect("write");
+                w.write(&record(3)).expect("write");
+            }
+            let r = TraceReader::open(&p).unwrap_or_else(|e| panic!("{n}: {e}"));
+            assert_eq!(r.header(), &h);
+            let got: Vec<TraceRecord> = r.map(|x| x.expect("record")).collect();
+            assert_eq!(
+                got,
+                vec![TraceRecord::Event { t: 1.0, message }, record(3)],
+                "{n}"
+            );
+        }
         let _ = std::fs::remove_file(&p);
     }
 }

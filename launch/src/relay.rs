@@ -34,11 +34,17 @@ impl StderrRelay {
         self.last.as_deref()
     }
 
-    /// The cause a failed process gave: its last line without the `fdi-<role>: ` it starts with.
+    /// The cause a failed process gave: its last line without the `fdi-<role>: ` (or
+    /// `fdi-agent <id>: `) it starts with.
     pub fn cause(&mut self) -> Option<String> {
         let line = self.last_line()?.trim();
+        let named = |program: &str| {
+            let mut words = program.split(' ');
+            words.next().is_some_and(|w| w.starts_with("fdi-"))
+                && words.all(|w| !w.is_empty() && w.bytes().all(|b| b.is_ascii_digit()))
+        };
         let cause = match line.split_once(": ") {
-            Some((program, rest)) if program.starts_with("fdi-") && !program.contains(' ') => rest,
+            Some((program, rest)) if named(program) => rest,
             _ => line,
         };
         (!cause.is_empty()).then(|| cause.to_string())
@@ -94,6 +100,24 @@ mod tests {
             Some(
                 "writing runs/x/traces/control-center.trace: No space left on device (os error 28)"
             )
+        );
+    }
+
+    #[test]
+    fn an_agent_is_named_with_the_cause_without_its_program_name_and_id() {
+        let mut child = Command::new("sh")
+            .args([
+                "-c",
+                "echo 'fdi-agent 3: writing a.trace: No space left on device (os error 28)' >&2; exit 1",
+            ])
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("sh");
+        let mut relay = StderrRelay::start(child.stderr.take().expect("pipe"), "sh");
+        assert!(!child.wait().expect("wait").success());
+        assert_eq!(
+            relay.cause().as_deref(),
+            Some("writing a.trace: No space left on device (os error 28)")
         );
     }
 
