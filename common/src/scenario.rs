@@ -678,19 +678,45 @@ impl Scenario {
     }
 }
 
-/// Reads a TOML file of at most [`MAX_FILE_BYTES`].
+/// Reads a TOML file of at most [`MAX_FILE_BYTES`]. Only a regular file is read (a device, a
+/// pipe or a directory is refused without reading from it), and never more than the limit
+/// whatever size the file claims (files in `/proc` claim 0 bytes; a file may grow while read).
 pub fn read_limited(path: &Path) -> Result<String, String> {
-    let meta =
-        std::fs::metadata(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-    if meta.len() > MAX_FILE_BYTES {
+    use std::io::Read;
+    let cannot = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
+    let file = std::fs::File::open(path).map_err(cannot)?;
+    let meta = file.metadata().map_err(cannot)?;
+    if !meta.is_file() {
         return Err(format!(
-            "{} is {} bytes, larger than the {} byte limit",
+            "{} is not a regular file ({}): scenario and attack files must be regular files of at most {MAX_FILE_BYTES} bytes",
             path.display(),
-            meta.len(),
-            MAX_FILE_BYTES
+            crate::trace::file_kind(meta.file_type()),
         ));
     }
-    std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))
+    if meta.len() > MAX_FILE_BYTES {
+        return Err(format!(
+            "{} is {} bytes, larger than the {MAX_FILE_BYTES} byte limit",
+            path.display(),
+            meta.len()
+        ));
+    }
+    let mut bytes = Vec::new();
+    file.take(MAX_FILE_BYTES + 1)
+        .read_to_end(&mut bytes)
+        .map_err(cannot)?;
+    if bytes.len() as u64 > MAX_FILE_BYTES {
+        return Err(format!(
+            "{} holds more than the {MAX_FILE_BYTES} byte limit",
+            path.display()
+        ));
+    }
+    String::from_utf8(bytes).map_err(|e| {
+        format!(
+            "cannot read {}: not UTF-8 text (byte offset {})",
+            path.display(),
+            e.utf8_error().valid_up_to()
+        )
+    })
 }
 
 /// Deserializes `text`, collecting every unknown key (each one is removed and parsing retried)
@@ -889,6 +915,38 @@ pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_device_or_a_directory_as_scenario_or_attack_file_is_refused_without_reading_it() {
+        // `/dev/zero` claims 0 bytes and never ends: it used to be read until memory ran out.
+        for (path, kind) in [
+            ("/dev/zero", "a character device"),
+            ("/dev/null", "a character device"),
+            ("/", "a directory"),
+        ] {
+            let e = load_file(Path::new(path)).expect_err("refused");
+            let msg = e.to_string();
+            assert!(
+                msg.contains(&format!("{path} is not a regular file ({kind})"))
+                    && msg.contains(&format!("at most {MAX_FILE_BYTES} bytes")),
+                "{msg}"
+            );
+            let e = load_attack_file(Path::new(path)).expect_err("refused");
+            assert!(e.to_string().contains("not a regular file"), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_file_that_is_not_utf8_is_refused_naming_the_offset() {
+        let p = std::env::temp_dir().join(format!("fdi-scenario-utf8-{}", std::process::id()));
+        std::fs::write(&p, b"name = \"x\xff\"\n").expect("write");
+        let e = load_file(&p).expect_err("not UTF-8");
+        assert!(
+            e.to_string().contains("not UTF-8 text (byte offset 9)"),
+            "{e}"
+        );
+        let _ = std::fs::remove_file(&p);
+    }
 
     #[test]
     fn embedded_paper_scenario_validates() {

@@ -6,6 +6,14 @@
 //! text, seed); every later frame is one [`TraceRecord`]. Writers flush on drop, so a process
 //! that ends by a handled signal keeps every record it wrote; a file cut short by a crash reads
 //! up to its last whole frame and names the byte offset of the damage.
+//!
+//! Reading never trusts a length from the file: a frame is at most [`MAX_HEADER_BYTES`] (the
+//! header) or [`MAX_RECORD_BYTES`] (a record) long and never longer than what is left of the
+//! file, checked before its buffer is sized; bincode decodes it under the same limit, so a
+//! corrupt string or sequence length inside a frame is refused before anything is allocated for
+//! it. Only regular files are read. Every damage is an error naming the file and the byte offset
+//! of the frame, and the records before it stay readable. Writers refuse frames the reader
+//! would refuse.
 
 use std::fs::File;
 use std::io::{BufReader, BufWriter, Read, Write};
@@ -19,8 +27,12 @@ use crate::records::{AgentRecord, AttackRecord, CenterRecord};
 pub const MAGIC: &[u8; 8] = b"FDITRACE";
 /// Format version written by this build; readers refuse any other.
 pub const FORMAT_VERSION: u32 = 2;
-/// Largest frame accepted when reading (guards against a corrupt length).
-pub const MAX_FRAME_BYTES: u32 = 1 << 26;
+/// Largest header frame written or read: the scenario as used (at most
+/// [`crate::scenario::MAX_FILE_BYTES`]) and a few names.
+pub const MAX_HEADER_BYTES: u32 = (crate::scenario::MAX_FILE_BYTES as u32) + (1 << 16);
+/// Largest record frame written or read (the largest record, an event with its message, is a
+/// few hundred bytes).
+pub const MAX_RECORD_BYTES: u32 = 1 << 16;
 
 /// First frame of a trace.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -65,30 +77,198 @@ pub enum TraceRecord {
     },
 }
 
+/// What a trace was being used for when an I/O error happened.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TraceOp {
+    Creating,
+    Writing,
+    Opening,
+    Reading,
+}
+
+impl std::fmt::Display for TraceOp {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Creating => "creating",
+            Self::Writing => "writing",
+            Self::Opening => "opening",
+            Self::Reading => "reading",
+        })
+    }
+}
+
+/// How a trace file is damaged at some byte offset.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum Damage {
+    #[error("file ends inside the version")]
+    EndsInVersion,
+    #[error("no header frame")]
+    NoHeader,
+    #[error("file ends inside a frame length")]
+    EndsInLength,
+    #[error("frame length {len} exceeds the {limit} byte limit of a {what} frame")]
+    TooLong {
+        len: u32,
+        limit: u32,
+        what: &'static str,
+    },
+    #[error("frame length {len} exceeds the {left} bytes left in the file")]
+    BeyondEnd { len: u32, left: u64 },
+    #[error("file ends inside a frame ({got} of {len} bytes)")]
+    EndsInFrame { got: usize, len: u32 },
+    #[error("frame has {0} trailing bytes")]
+    Trailing(usize),
+    #[error("header says format version {found}, the file {file}")]
+    HeaderVersion { found: u32, file: u32 },
+}
+
 /// Trace errors name the file and, for damage, the byte offset.
 #[derive(Debug, thiserror::Error)]
 pub enum TraceError {
-    #[error("{path}: {source}")]
+    #[error("{op} {}: {cause}", path.display())]
     Io {
+        op: TraceOp,
         path: PathBuf,
-        source: std::io::Error,
+        cause: std::io::Error,
     },
-    #[error("{path}: not an fdi-mas trace (bad magic)")]
+    #[error("{}: not a regular file ({kind}); a trace must be a regular file", path.display())]
+    NotAFile { path: PathBuf, kind: &'static str },
+    #[error("{}: not an fdi-mas trace (no `FDITRACE` at byte offset 0)", path.display())]
     BadMagic { path: PathBuf },
-    #[error("{path}: trace format version {found} is not supported (this build reads version {FORMAT_VERSION})")]
+    #[error("{}: trace format version {found} (byte offset 8) is not supported (this build reads version {FORMAT_VERSION})", path.display())]
     UnknownVersion { path: PathBuf, found: u32 },
-    #[error("{path}: damaged frame at byte offset {offset}: {reason}")]
+    #[error("{}: damaged frame at byte offset {offset}: {damage}", path.display())]
     Damaged {
         path: PathBuf,
         offset: u64,
-        reason: String,
+        damage: Damage,
     },
-    #[error("{path}: cannot encode record: {reason}")]
-    Encode { path: PathBuf, reason: String },
+    #[error("{}: damaged frame at byte offset {offset}: cannot decode frame: {}", path.display(), describe_decode(cause))]
+    Decode {
+        path: PathBuf,
+        offset: u64,
+        cause: bincode::error::DecodeError,
+    },
+    #[error("{}: cannot encode record: {cause}", path.display())]
+    Encode {
+        path: PathBuf,
+        cause: bincode::error::EncodeError,
+    },
+    #[error("{}: a {what} frame of {len} bytes is over the {limit} byte limit readers accept", path.display())]
+    FrameTooLarge {
+        path: PathBuf,
+        what: &'static str,
+        len: usize,
+        limit: u32,
+    },
+}
+
+impl TraceError {
+    /// The byte offset of the damage, for a damaged file.
+    pub fn offset(&self) -> Option<u64> {
+        match self {
+            Self::Damaged { offset, .. } | Self::Decode { offset, .. } => Some(*offset),
+            Self::BadMagic { .. } => Some(0),
+            Self::UnknownVersion { .. } => Some(8),
+            _ => None,
+        }
+    }
+
+    /// The file concerned.
+    pub fn path(&self) -> &Path {
+        match self {
+            Self::Io { path, .. }
+            | Self::NotAFile { path, .. }
+            | Self::BadMagic { path }
+            | Self::UnknownVersion { path, .. }
+            | Self::Damaged { path, .. }
+            | Self::Decode { path, .. }
+            | Self::Encode { path, .. }
+            | Self::FrameTooLarge { path, .. } => path,
+        }
+    }
+}
+
+/// Words for the decode errors a damaged frame gives.
+fn describe_decode(e: &bincode::error::DecodeError) -> String {
+    use bincode::error::DecodeError as D;
+    match e {
+        D::LimitExceeded => "a length inside it claims more than a frame may hold".into(),
+        D::UnexpectedEnd { additional } => {
+            format!("it ends {additional} bytes before its content does")
+        }
+        other => other.to_string(),
+    }
+}
+
+/// What a file that is not a regular one is, for messages.
+pub fn file_kind(t: std::fs::FileType) -> &'static str {
+    use std::os::unix::fs::FileTypeExt;
+    if t.is_dir() {
+        "a directory"
+    } else if t.is_char_device() {
+        "a character device"
+    } else if t.is_block_device() {
+        "a block device"
+    } else if t.is_fifo() {
+        "a named pipe"
+    } else if t.is_socket() {
+        "a socket"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "a special file"
+    }
+}
+
+/// Which frame is read or written: the header or a record, with its size limit.
+#[derive(Debug, Clone, Copy)]
+enum FrameKind {
+    Header,
+    Record,
+}
+
+impl FrameKind {
+    fn limit(self) -> u32 {
+        match self {
+            Self::Header => MAX_HEADER_BYTES,
+            Self::Record => MAX_RECORD_BYTES,
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Self::Header => "header",
+            Self::Record => "record",
+        }
+    }
 }
 
 fn config() -> bincode::config::Configuration {
     bincode::config::standard()
+}
+
+/// Decoding under a limit: a length inside a frame that claims more than the frame could hold
+/// is refused before bincode allocates for it. bincode counts what it decodes by in-memory size
+/// (a one-byte varint length counts 8 bytes, an `f64` 8), so an undamaged frame of `n` bytes
+/// counts at most `8 n`; the limit is the smallest of a few sizes that is not below that, and
+/// what a corrupt length can make bincode allocate stays within 16 times that bound (at most
+/// 16 MiB, for the largest header).
+fn decode<T: serde::de::DeserializeOwned>(
+    bytes: &[u8],
+) -> Result<(T, usize), bincode::error::DecodeError> {
+    const SMALL: usize = 1 << 12;
+    const MEDIUM: usize = 1 << 16;
+    const LARGE: usize = 1 << 20;
+    const HUGE: usize = 1 << 24;
+    const _: () = assert!(8 * (MAX_HEADER_BYTES as usize) <= HUGE);
+    let c = config();
+    match bytes.len().saturating_mul(8) {
+        n if n <= SMALL => bincode::serde::decode_from_slice(bytes, c.with_limit::<SMALL>()),
+        n if n <= MEDIUM => bincode::serde::decode_from_slice(bytes, c.with_limit::<MEDIUM>()),
+        n if n <= LARGE => bincode::serde::decode_from_slice(bytes, c.with_limit::<LARGE>()),
+        _ => bincode::serde::decode_from_slice(bytes, c.with_limit::<HUGE>()),
+    }
 }
 
 /// Longest time a written record may sit in the writer's buffer: a process killed outright
@@ -107,51 +287,60 @@ pub struct TraceWriter {
 impl TraceWriter {
     /// Creates (truncates) `path` and writes the magic, version and header.
     pub fn create(path: &Path, header: &TraceHeader) -> Result<Self, TraceError> {
-        let io = |source| TraceError::Io {
+        let file = File::create(path).map_err(|cause| TraceError::Io {
+            op: TraceOp::Creating,
             path: path.to_path_buf(),
-            source,
-        };
-        let file = File::create(path).map_err(io)?;
+            cause,
+        })?;
         let mut w = Self {
             path: path.to_path_buf(),
             out: BufWriter::with_capacity(1 << 16, file),
             buf: Vec::with_capacity(512),
             last_flush: std::time::Instant::now(),
         };
-        w.out.write_all(MAGIC).map_err(io)?;
-        w.out.write_all(&FORMAT_VERSION.to_le_bytes()).map_err(io)?;
-        w.frame(header)?;
+        let mut start = MAGIC.to_vec();
+        start.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+        w.out.write_all(&start).map_err(|e| w.io(e))?;
+        w.frame(header, FrameKind::Header)?;
         Ok(w)
     }
 
-    fn frame<T: Serialize>(&mut self, value: &T) -> Result<(), TraceError> {
+    fn io(&self, cause: std::io::Error) -> TraceError {
+        TraceError::Io {
+            op: TraceOp::Writing,
+            path: self.path.clone(),
+            cause,
+        }
+    }
+
+    fn frame<T: Serialize>(&mut self, value: &T, kind: FrameKind) -> Result<(), TraceError> {
         self.buf.clear();
-        bincode::serde::encode_into_std_write(value, &mut self.buf, config()).map_err(|e| {
+        bincode::serde::encode_into_std_write(value, &mut self.buf, config()).map_err(|cause| {
             TraceError::Encode {
                 path: self.path.clone(),
-                reason: e.to_string(),
+                cause,
             }
         })?;
-        let len = u32::try_from(self.buf.len()).map_err(|_| TraceError::Encode {
-            path: self.path.clone(),
-            reason: "frame over 4 GiB".into(),
-        })?;
-        let io = |source| TraceError::Io {
-            path: self.path.clone(),
-            source,
+        let len = match u32::try_from(self.buf.len()) {
+            Ok(len) if len <= kind.limit() => len,
+            _ => {
+                return Err(TraceError::FrameTooLarge {
+                    path: self.path.clone(),
+                    what: kind.name(),
+                    len: self.buf.len(),
+                    limit: kind.limit(),
+                })
+            }
         };
-        self.out.write_all(&len.to_le_bytes()).map_err(io)?;
         self.out
-            .write_all(&self.buf)
-            .map_err(|source| TraceError::Io {
-                path: self.path.clone(),
-                source,
-            })
+            .write_all(&len.to_le_bytes())
+            .map_err(|e| self.io(e))?;
+        self.out.write_all(&self.buf).map_err(|e| self.io(e))
     }
 
     /// Appends a record; flushes when [`FLUSH_INTERVAL`] has passed since the last flush.
     pub fn write(&mut self, record: &TraceRecord) -> Result<(), TraceError> {
-        self.frame(record)?;
+        self.frame(record, FrameKind::Record)?;
         if self.last_flush.elapsed() >= FLUSH_INTERVAL {
             self.flush()?;
         }
@@ -160,10 +349,7 @@ impl TraceWriter {
 
     pub fn flush(&mut self) -> Result<(), TraceError> {
         self.last_flush = std::time::Instant::now();
-        self.out.flush().map_err(|source| TraceError::Io {
-            path: self.path.clone(),
-            source,
-        })
+        self.out.flush().map_err(|e| self.io(e))
     }
 
     pub fn path(&self) -> &Path {
@@ -184,30 +370,48 @@ pub struct TraceReader {
     path: PathBuf,
     input: BufReader<File>,
     offset: u64,
+    /// Byte offset of the frame read last.
+    last: u64,
+    /// The file's length when it was opened: no frame may reach beyond it.
+    file_len: u64,
     header: TraceHeader,
     buf: Vec<u8>,
     done: bool,
 }
 
 impl TraceReader {
+    /// Opens a trace and reads its header. Refuses anything but a regular file.
     pub fn open(path: &Path) -> Result<Self, TraceError> {
-        let io = |source| TraceError::Io {
+        let io = |op, cause| TraceError::Io {
+            op,
             path: path.to_path_buf(),
-            source,
+            cause,
         };
-        let mut input = BufReader::with_capacity(1 << 16, File::open(path).map_err(io)?);
+        let file = File::open(path).map_err(|e| io(TraceOp::Opening, e))?;
+        let meta = file.metadata().map_err(|e| io(TraceOp::Opening, e))?;
+        if !meta.is_file() {
+            return Err(TraceError::NotAFile {
+                path: path.to_path_buf(),
+                kind: file_kind(meta.file_type()),
+            });
+        }
+        let mut input = BufReader::with_capacity(1 << 16, file);
         let mut magic = [0u8; 8];
-        if input.read_exact(&mut magic).is_err() || &magic != MAGIC {
+        if read_full(&mut input, &mut magic).map_err(|e| io(TraceOp::Reading, e))? < 8
+            || &magic != MAGIC
+        {
             return Err(TraceError::BadMagic {
                 path: path.to_path_buf(),
             });
         }
         let mut v = [0u8; 4];
-        input.read_exact(&mut v).map_err(|_| TraceError::Damaged {
-            path: path.to_path_buf(),
-            offset: 8,
-            reason: "file ends inside the version".into(),
-        })?;
+        if read_full(&mut input, &mut v).map_err(|e| io(TraceOp::Reading, e))? < 4 {
+            return Err(TraceError::Damaged {
+                path: path.to_path_buf(),
+                offset: 8,
+                damage: Damage::EndsInVersion,
+            });
+        }
         let found = u32::from_le_bytes(v);
         if found != FORMAT_VERSION {
             return Err(TraceError::UnknownVersion {
@@ -219,6 +423,8 @@ impl TraceReader {
             path: path.to_path_buf(),
             input,
             offset: 12,
+            last: 12,
+            file_len: meta.len(),
             header: TraceHeader {
                 format_version: found,
                 process: String::new(),
@@ -229,16 +435,20 @@ impl TraceReader {
             buf: Vec::new(),
             done: false,
         };
-        r.header = match r.next_frame::<TraceHeader>()? {
+        let header = match r.next_frame::<TraceHeader>(FrameKind::Header)? {
             Some(h) => h,
-            None => {
-                return Err(TraceError::Damaged {
-                    path: path.to_path_buf(),
-                    offset: 12,
-                    reason: "no header frame".into(),
-                })
-            }
+            None => return Err(r.damaged(12, Damage::NoHeader)),
         };
+        if header.format_version != found {
+            return Err(r.damaged(
+                12,
+                Damage::HeaderVersion {
+                    found: header.format_version,
+                    file: found,
+                },
+            ));
+        }
+        r.header = header;
         Ok(r)
     }
 
@@ -250,63 +460,83 @@ impl TraceReader {
         &self.path
     }
 
-    fn damaged(&mut self, offset: u64, reason: impl Into<String>) -> TraceError {
+    /// Byte offset of the record returned last (of the header before the first), so that a
+    /// record found wrong can be named by where it is.
+    pub fn last_offset(&self) -> u64 {
+        self.last
+    }
+
+    fn damaged(&mut self, offset: u64, damage: Damage) -> TraceError {
         self.done = true;
         TraceError::Damaged {
             path: self.path.clone(),
             offset,
-            reason: reason.into(),
+            damage,
         }
     }
 
-    fn next_frame<T: serde::de::DeserializeOwned>(&mut self) -> Result<Option<T>, TraceError> {
+    fn next_frame<T: serde::de::DeserializeOwned>(
+        &mut self,
+        kind: FrameKind,
+    ) -> Result<Option<T>, TraceError> {
         let start = self.offset;
+        let io = |s: &mut Self, cause| {
+            s.done = true;
+            TraceError::Io {
+                op: TraceOp::Reading,
+                path: s.path.clone(),
+                cause,
+            }
+        };
         let mut len = [0u8; 4];
         match read_full(&mut self.input, &mut len) {
             Ok(0) => return Ok(None),
             Ok(4) => {}
-            Ok(_) => return Err(self.damaged(start, "file ends inside a frame length")),
-            Err(e) => {
-                return Err(TraceError::Io {
-                    path: self.path.clone(),
-                    source: e,
-                })
-            }
+            Ok(_) => return Err(self.damaged(start, Damage::EndsInLength)),
+            Err(e) => return Err(io(self, e)),
         }
         let len = u32::from_le_bytes(len);
-        if len > MAX_FRAME_BYTES {
+        // Both bounds are checked before the buffer is sized for the frame.
+        if len > kind.limit() {
             return Err(self.damaged(
                 start,
-                format!("frame length {len} exceeds the {MAX_FRAME_BYTES} byte limit"),
+                Damage::TooLong {
+                    len,
+                    limit: kind.limit(),
+                    what: kind.name(),
+                },
             ));
         }
+        let left = self.file_len.saturating_sub(start + 4);
+        if u64::from(len) > left {
+            return Err(self.damaged(start, Damage::BeyondEnd { len, left }));
+        }
+        self.buf.clear();
         self.buf.resize(len as usize, 0);
         match read_full(&mut self.input, &mut self.buf) {
             Ok(n) if n == len as usize => {}
-            Ok(n) => {
-                return Err(self.damaged(
-                    start,
-                    format!("file ends inside a frame ({n} of {len} bytes)"),
-                ))
-            }
-            Err(e) => {
-                return Err(TraceError::Io {
-                    path: self.path.clone(),
-                    source: e,
-                })
-            }
+            // The file shrank since it was opened.
+            Ok(got) => return Err(self.damaged(start, Damage::EndsInFrame { got, len })),
+            Err(e) => return Err(io(self, e)),
         }
-        let decoded = bincode::serde::decode_from_slice::<T, _>(&self.buf, config());
-        match decoded {
+        match decode::<T>(&self.buf) {
             Ok((v, used)) if used == self.buf.len() => {
+                self.last = start;
                 self.offset = start + 4 + u64::from(len);
                 Ok(Some(v))
             }
-            Ok((_, used)) => Err(self.damaged(
-                start,
-                format!("frame has {} trailing bytes", self.buf.len() - used),
-            )),
-            Err(e) => Err(self.damaged(start, format!("cannot decode frame: {e}"))),
+            Ok((_, used)) => {
+                let trailing = self.buf.len() - used;
+                Err(self.damaged(start, Damage::Trailing(trailing)))
+            }
+            Err(cause) => {
+                self.done = true;
+                Err(TraceError::Decode {
+                    path: self.path.clone(),
+                    offset: start,
+                    cause,
+                })
+            }
         }
     }
 }
@@ -331,7 +561,7 @@ impl Iterator for TraceReader {
         if self.done {
             return None;
         }
-        match self.next_frame::<TraceRecord>() {
+        match self.next_frame::<TraceRecord>(FrameKind::Record) {
             Ok(Some(r)) => Some(Ok(r)),
             Ok(None) => {
                 self.done = true;
@@ -431,6 +661,169 @@ mod tests {
             TraceReader::open(&p),
             Err(TraceError::BadMagic { .. })
         ));
+        let _ = std::fs::remove_file(&p);
+    }
+
+    /// Every record of `p` that reads, and the error that ends the reading (if any).
+    fn read_all(p: &Path) -> (usize, Option<TraceError>) {
+        let mut ok = 0;
+        let r = match TraceReader::open(p) {
+            Ok(r) => r,
+            Err(e) => return (0, Some(e)),
+        };
+        for rec in r {
+            match rec {
+                Ok(_) => ok += 1,
+                Err(e) => return (ok, Some(e)),
+            }
+        }
+        (ok, None)
+    }
+
+    #[test]
+    fn a_corrupt_string_length_in_the_header_is_an_error_naming_the_offset_not_an_allocation() {
+        let p = tmp("header-len");
+        {
+            let mut w = TraceWriter::create(&p, &header()).expect("create");
+            w.write(&record(0)).expect("write");
+        }
+        let good = std::fs::read(&p).expect("read");
+        // Offset 17: the varint length of `process`. 0xfd says "a u64 follows": the next eight
+        // bytes (the name itself) become a length of about 8e18 bytes; 0xfc a u32 length.
+        for marker in [0xfd_u8, 0xfc, 0xfb] {
+            let mut bytes = good.clone();
+            bytes[17] = marker;
+            std::fs::write(&p, &bytes).expect("write");
+            let e = TraceReader::open(&p).expect_err("damaged header");
+            assert_eq!(e.offset(), Some(12), "{e}");
+            assert!(e.to_string().contains(&p.display().to_string()), "{e}");
+        }
+        let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn a_corrupt_frame_length_is_refused_before_its_buffer_is_sized_and_earlier_records_read() {
+        let p = tmp("frame-len");
+        let mut ends = Vec::new();
+        {
+            let mut w = TraceWriter::create(&p, &header()).expect("create");
+            for k in 0..5 {
+                w.flush().expect("flush");
+                ends.push(std::fs::metadata(&p).expect("meta").len());
+                w.write(&record(k)).expect("write");
+            }
+        }
+        let good = std::fs::read(&p).expect("read");
+        // The length of record 3, within the per-frame limit but beyond the end of the file,
+        // then over the limit.
+        let at = ends[3] as usize;
+        for len in [40_000_u32, u32::MAX] {
+            let mut bytes = good.clone();
+            bytes[at..at + 4].copy_from_slice(&len.to_le_bytes());
+            std::fs::write(&p, &bytes).expect("write");
+            let (ok, e) = read_all(&p);
+            let e = e.expect("an error");
+            assert_eq!(ok, 3, "{e}");
+            assert_eq!(e.offset(), Some(ends[3]), "{e}");
+            assert!(
+                matches!(
+                    e,
+                    TraceError::Damaged {
+                        damage: Damage::BeyondEnd { .. } | Damage::TooLong { .. },
+                        ..
+                    }
+                ),
+                "{e}"
+            );
+        }
+        let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn special_files_are_refused_as_traces_without_reading_them() {
+        let e = TraceReader::open(Path::new("/dev/zero")).expect_err("a device");
+        assert!(
+            matches!(e, TraceError::NotAFile { .. }) && e.to_string().contains("/dev/zero"),
+            "{e}"
+        );
+        let e = TraceReader::open(&std::env::temp_dir()).expect_err("a directory");
+        assert!(matches!(e, TraceError::NotAFile { .. }), "{e}");
+    }
+
+    #[test]
+    fn a_full_disk_is_reported_as_no_space_writing_the_trace() {
+        // /dev/full fails every write with ENOSPC, like a full file system.
+        let p = Path::new("/dev/full");
+        if !p.exists() {
+            eprintln!("skipped: no /dev/full on this system");
+            return;
+        }
+        let mut w = TraceWriter::create(p, &header()).expect("opening /dev/full succeeds");
+        let e = w.flush().expect_err("ENOSPC");
+        match &e {
+            TraceError::Io {
+                op: TraceOp::Writing,
+                cause,
+                ..
+            } => assert_eq!(cause.kind(), std::io::ErrorKind::StorageFull, "{e}"),
+            other => panic!("not a write error: {other}"),
+        }
+        let text = e.to_string();
+        assert!(
+            text.starts_with("writing /dev/full: ") && text.contains("No space left on device"),
+            "{text}"
+        );
+    }
+
+    #[test]
+    fn frames_over_the_readers_limit_are_refused_by_the_writer() {
+        let p = tmp("too-large");
+        let mut w = TraceWriter::create(&p, &header()).expect("create");
+        let e = w
+            .write(&TraceRecord::Event {
+                t: 0.0,
+                message: "x".repeat(MAX_RECORD_BYTES as usize),
+            })
+            .expect_err("over the limit");
+        assert!(matches!(e, TraceError::FrameTooLarge { .. }), "{e}");
+        let mut big = header();
+        big.scenario_toml = "#".repeat(MAX_HEADER_BYTES as usize);
+        assert!(matches!(
+            TraceWriter::create(&p, &big),
+            Err(TraceError::FrameTooLarge { .. })
+        ));
+        let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn headers_and_records_of_every_size_round_trip_under_the_decode_limit() {
+        // A 4095-byte header (the corrupt-values scenario's) used to be refused: bincode counts
+        // a varint length as 8 bytes against the limit, so a frame needs more than its length.
+        let p = tmp("sizes");
+        let mut sizes: Vec<usize> = vec![0, 1, 100, 4000, 4095, 4096, 8192, 65_536, 131_072];
+        sizes.push(crate::scenario::MAX_FILE_BYTES as usize);
+        for n in sizes {
+            let mut h = header();
+            h.scenario_toml = "x".repeat(n);
+            let message = "m".repeat(n.min(MAX_RECORD_BYTES as usize - 64));
+            {
+                let mut w = TraceWriter::create(&p, &h).expect("create");
+                w.write(&TraceRecord::Event {
+                    t: 1.0,
+                    message: message.clone(),
+                })
+                .expect("write");
+                w.write(&record(3)).expect("write");
+            }
+            let r = TraceReader::open(&p).unwrap_or_else(|e| panic!("{n}: {e}"));
+            assert_eq!(r.header(), &h);
+            let got: Vec<TraceRecord> = r.map(|x| x.expect("record")).collect();
+            assert_eq!(
+                got,
+                vec![TraceRecord::Event { t: 1.0, message }, record(3)],
+                "{n}"
+            );
+        }
         let _ = std::fs::remove_file(&p);
     }
 }

@@ -213,7 +213,10 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
     let dir = output::create_run_dir(&a.out, &r)?;
     let period_ns = (r.scenario.control_period_s * 1e9) as i64;
     let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
-    let summary = execute(&r, Engine::Ipc, Some(&dir), !a.json, placement);
+    let summary = output::discard_if_not_started(
+        &dir,
+        execute(&r, Engine::Ipc, Some(&dir), !a.json, placement),
+    );
     let wakeups = probe.finish();
     let (summary, wakeups) = (summary?, wakeups?);
 

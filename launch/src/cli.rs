@@ -174,6 +174,13 @@ pub struct TableArgs {
 }
 
 pub fn dispatch(cli: Cli) -> Result<ExitCode> {
+    // What runs killed outright left (SIGKILL of their launcher) goes at the next command.
+    if !matches!(
+        cli.command,
+        Command::Process { .. } | Command::BenchPeer { .. }
+    ) {
+        runtime::reap_stale_runs();
+    }
     match cli.command {
         Command::Run(args) => run(&args),
         Command::Validate { scenario } => validate(&scenario),
@@ -303,7 +310,7 @@ pub fn execute(
     match (engine, run_dir) {
         (Engine::Inproc, None) => run_inproc::<2>(r, |_| {}).context("in-process engine"),
         (Engine::Inproc, Some(dir)) => {
-            let mut traces = InprocTraces::create(dir, r)?;
+            let mut traces = InprocTraces::create(dir, r).context(runtime::DidNotStart)?;
             let mut failure = None;
             let summary = run_inproc::<2>(r, |rec| {
                 if let Err(e) = traces.write(rec) {
@@ -386,7 +393,10 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
     check_placement(&r, args.engine, &args.placement)?;
     let dir = output::create_run_dir(&args.out, &r)?;
-    let summary = execute(&r, args.engine, Some(&dir), !args.json, &args.placement)?;
+    let summary = output::discard_if_not_started(
+        &dir,
+        execute(&r, args.engine, Some(&dir), !args.json, &args.placement),
+    )?;
     for lost in &summary.lost_agents {
         let when = lost
             .t_s

@@ -177,7 +177,7 @@ fn main_kind(process: &str) -> Option<Kind> {
 
 /// Exports one trace, counting its records in `n`. Records before a damage are written.
 fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result<()> {
-    let reader = TraceReader::open(path)?;
+    let mut reader = TraceReader::open(path)?;
     let stem = path
         .file_stem()
         .map_or_else(|| "trace".into(), |s| s.to_string_lossy().into_owned());
@@ -201,7 +201,7 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
         files.insert(k, Csv::create(&file_for(k), &k.header(dof))?);
     }
     let mut failure = None;
-    for rec in reader {
+    while let Some(rec) = reader.next() {
         let rec = match rec {
             Ok(r) => r,
             Err(e) => {
@@ -227,8 +227,13 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
                 e.insert(Csv::create(&file_for(kind), &kind.header(dof))?)
             }
         };
-        row(&mut csv.line, &rec, dof)
-            .with_context(|| format!("{}: record {n} does not fit the columns", path.display()))?;
+        let at = reader.last_offset();
+        row(&mut csv.line, &rec, dof).with_context(|| {
+            format!(
+                "{}: record {n} (byte offset {at}) does not fit the columns",
+                path.display()
+            )
+        })?;
         csv.end()?;
     }
     for (_, c) in files {

@@ -82,6 +82,22 @@ impl<T: Tick> Source<T> {
     }
 }
 
+impl<T> Source<T> {
+    /// Reads what the join did not need (records after the last tick, the closing events) to
+    /// its end, so that damage there is reported too.
+    fn finish(&mut self) {
+        if self.damage.is_some() {
+            return;
+        }
+        for rec in self.reader.by_ref() {
+            if let Err(e) = rec {
+                self.damage = Some(e.to_string());
+                return;
+            }
+        }
+    }
+}
+
 fn pick_agent(r: TraceRecord) -> Option<(u32, AgentRecord)> {
     match r {
         TraceRecord::Agent(a) => Some((a.agent, a)),
@@ -180,6 +196,11 @@ pub fn join_run(
             "{lost} agent-ticks never reached the control center and are left out of the metrics"
         ));
     }
+    for (_, src) in &mut agents {
+        src.finish();
+    }
+    attacker.finish();
+    center.finish();
     for (id, src) in &agents {
         if let Some(d) = &src.damage {
             warnings.push(format!("agent {id}: {d}"));

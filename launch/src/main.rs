@@ -8,10 +8,14 @@ mod join;
 mod output;
 mod plot;
 mod probe;
+mod relay;
 mod replayer;
 mod report;
 mod runtime;
 mod tables;
+
+#[cfg(test)]
+mod damage_tests;
 
 use clap::Parser;
 

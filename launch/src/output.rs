@@ -4,9 +4,9 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use fdi_common::engine::RunSummary;
-use fdi_common::scenario::Resolved;
+use fdi_common::scenario::{Resolved, MAX_FILE_BYTES};
 
 /// `YYYYMMDD-HHMMSS` in UTC.
 pub fn timestamp() -> String {
@@ -32,8 +32,17 @@ pub fn timestamp() -> String {
     )
 }
 
-/// Creates a fresh run directory under `root` and writes the scenario as used into it.
+/// Creates a fresh run directory under `root` and writes the scenario as used into it. A
+/// scenario whose text as used (attack inlined) is over the size limit of scenario files is
+/// refused before anything is created: the processes read it back from the run directory.
 pub fn create_run_dir(root: &Path, resolved: &Resolved) -> Result<PathBuf> {
+    let toml = resolved.to_toml();
+    if toml.len() as u64 > MAX_FILE_BYTES {
+        bail!(
+            "the scenario as used (its attack inlined) is {} bytes, larger than the {MAX_FILE_BYTES} byte limit of scenario files (the processes read it back from the run directory)",
+            toml.len()
+        );
+    }
     let name: String = resolved
         .scenario
         .name
@@ -62,11 +71,39 @@ pub fn create_run_dir(root: &Path, resolved: &Resolved) -> Result<PathBuf> {
             Err(e) => return Err(e).with_context(|| format!("creating {}", dir.display())),
         }
     }
-    std::fs::create_dir_all(dir.join("traces"))
-        .with_context(|| format!("creating {}/traces", dir.display()))?;
-    std::fs::write(dir.join("scenario.toml"), resolved.to_toml())
-        .with_context(|| format!("writing {}/scenario.toml", dir.display()))?;
+    if let Err(e) = std::fs::create_dir(dir.join("traces"))
+        .with_context(|| format!("creating {}/traces", dir.display()))
+        .and_then(|()| {
+            std::fs::write(dir.join("scenario.toml"), toml)
+                .with_context(|| format!("writing {}/scenario.toml", dir.display()))
+        })
+    {
+        remove_run_dir(&dir);
+        return Err(e);
+    }
     Ok(dir)
+}
+
+/// Removes a run directory that holds nothing of a run (it was refused or failed before its
+/// processes started). Best effort: a folder that cannot be removed is named in a warning.
+pub fn remove_run_dir(dir: &Path) {
+    if let Err(e) = std::fs::remove_dir_all(dir) {
+        eprintln!(
+            "fdi-launch: warning: the run directory {} of a run that did not start could not be removed: {e}",
+            dir.display()
+        );
+    }
+}
+
+/// Passes `result` on; when it is the error of a run that did not start
+/// ([`crate::runtime::DidNotStart`]), removes the run directory `dir` made for it first.
+pub fn discard_if_not_started<T>(dir: &Path, result: Result<T>) -> Result<T> {
+    if let Err(e) = &result {
+        if e.downcast_ref::<crate::runtime::DidNotStart>().is_some() {
+            remove_run_dir(dir);
+        }
+    }
+    result
 }
 
 /// Writes `summary.json`, `rmse.md` and `rmse.csv`.

@@ -27,15 +27,16 @@ pub fn load_recording(resolved: &Resolved, path: &Path) -> Result<Vec<Vec<Attack
     let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
     let ticks = resolved.ticks();
     let mut per_agent: Vec<Vec<AttackRecord>> = vec![Vec::new(); ids.len()];
-    let reader = TraceReader::open(path).context("the recording cannot be replayed")?;
-    for rec in reader {
+    let mut reader = TraceReader::open(path).context("the recording cannot be replayed")?;
+    while let Some(rec) = reader.next() {
         let rec = rec.context("the recording cannot be replayed")?;
         let TraceRecord::Attack(a) = rec else {
             continue;
         };
+        let at = reader.last_offset();
         let Some(i) = ids.iter().position(|id| *id == a.agent) else {
             bail!(
-                "{}: agent {} is not in the recorded scenario",
+                "{}: the record at byte offset {at}: agent {} is not in the recorded scenario",
                 path.display(),
                 a.agent
             );
@@ -43,7 +44,7 @@ pub fn load_recording(resolved: &Resolved, path: &Path) -> Result<Vec<Vec<Attack
         let want = per_agent[i].len() as u64;
         if a.k != want || a.y.as_slice().len() > MAX_DOF {
             bail!(
-                "{}: agent {}: tick {} where tick {want} was expected (only a complete recording can be replayed)",
+                "{}: the record at byte offset {at}: agent {}: tick {} where tick {want} was expected (only a complete recording can be replayed)",
                 path.display(),
                 a.agent,
                 a.k
@@ -158,12 +159,26 @@ fn check_trace(path: &Path) -> Result<()> {
     Ok(())
 }
 
+/// Checks the traces of the recorded run `recorded` that a replay reads (the attacker's, played
+/// back, and the agents', copied): every one must read to its end. Returns their paths.
+pub fn check_recording(r: &Resolved, recorded: &Path) -> Result<Vec<std::path::PathBuf>> {
+    let attacker = crate::runtime::trace_path(recorded, "attacker");
+    load_recording(r, &attacker)?;
+    let mut copies = vec![attacker];
+    for a in &r.scenario.agents {
+        let p = crate::runtime::trace_path(recorded, &format!("agent-{}", a.id));
+        check_trace(&p)?;
+        copies.push(p);
+    }
+    Ok(copies)
+}
+
 /// `run --replay RUN_DIR`: re-runs the recorded run's control center on its recorded tampered
 /// measurements in a fresh run directory under `out`, and compares the trace digests.
 pub fn replay_run(recorded: &Path, out: &Path, json: bool) -> Result<ExitCode> {
     let summary_path = recorded.join("summary.json");
-    let text = std::fs::read_to_string(&summary_path)
-        .with_context(|| format!("reading {}", summary_path.display()))?;
+    // Bounded, and only from a regular file, like scenario files.
+    let text = scenario::read_limited(&summary_path).map_err(anyhow::Error::msg)?;
     let recorded_summary: fdi_common::engine::RunSummary = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a run summary", summary_path.display()))?;
     let scenario_path = recorded.join("scenario.toml");
@@ -171,30 +186,30 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool) -> Result<ExitCode> {
         .with_context(|| format!("reading {}", scenario_path.display()))?;
     // The center is event-driven: the replay is lockstep whatever the recording's clock.
     r.scenario.clock = scenario::ClockMode::Lockstep;
-    let attacker = crate::runtime::trace_path(recorded, "attacker");
-    load_recording(&r, &attacker)?;
-    let mut copies = vec![attacker];
-    for a in &r.scenario.agents {
-        let p = crate::runtime::trace_path(recorded, &format!("agent-{}", a.id));
-        check_trace(&p)?;
-        copies.push(p);
-    }
+    let copies = check_recording(&r, recorded)?;
     let dir = crate::output::create_run_dir(out, &r)?;
-    for from in &copies {
+    let copied = copies.iter().try_for_each(|from| {
         let to = dir
             .join("traces")
             .join(from.file_name().unwrap_or_default());
         std::fs::copy(from, &to)
-            .with_context(|| format!("copying {} to {}", from.display(), to.display()))?;
-    }
-    let outcome = crate::runtime::run_ipc(
-        &r,
-        &crate::runtime::IpcOptions {
-            run_dir: dir.clone(),
-            progress: !json,
-            replay: true,
-            placement: crate::runtime::Placement::default(),
-        },
+            .map(|_| ())
+            .with_context(|| format!("copying {} to {}", from.display(), to.display()))
+            .context(crate::runtime::DidNotStart)
+    });
+    let outcome = crate::output::discard_if_not_started(
+        &dir,
+        copied.and_then(|()| {
+            crate::runtime::run_ipc(
+                &r,
+                &crate::runtime::IpcOptions {
+                    run_dir: dir.clone(),
+                    progress: !json,
+                    replay: true,
+                    placement: crate::runtime::Placement::default(),
+                },
+            )
+        }),
     )?;
     let mut joined = crate::join::join_run(&r, &dir, outcome.wall_s, |_| {})?;
     joined.summary.engine = "replay".into();

@@ -35,6 +35,28 @@ struct Proc {
     ready: bool,
     /// Since when the process has been seen stopped (SIGSTOP), for stall detection.
     stopped_since: Option<Instant>,
+    /// Its stderr, relayed to ours; its last line is the cause of a failure.
+    stderr: Option<crate::relay::StderrRelay>,
+}
+
+impl Proc {
+    /// How the process ended: with the cause it printed last when it exited with a status (a
+    /// failure it reported), else the signal or the status alone.
+    fn ended(&mut self, st: ExitStatus) -> String {
+        let pid = self.child.id();
+        let cause = match (st.code(), &mut self.stderr) {
+            (Some(_), Some(relay)) => relay.cause(),
+            _ => None,
+        };
+        match cause {
+            Some(c) => format!(
+                "{} (pid {pid}) failed: {c} ({})",
+                self.label,
+                describe_status(st)
+            ),
+            None => format!("{} (pid {pid}) {}", self.label, describe_status(st)),
+        }
+    }
 }
 
 /// The role binaries: the sibling `fdi-agent` etc. when they are at least as new as this
@@ -82,32 +104,61 @@ pub fn new_prefix() -> String {
     format!("fdi{}_{:x}_", std::process::id(), nanos & 0xff_ffff)
 }
 
-/// Removes the resources of runs whose launcher is dead (a killed launcher cannot clean up).
-pub fn reap_stale_runs() -> usize {
-    let Ok(entries) = std::fs::read_dir("/dev/shm") else {
-        return 0;
+/// The run prefix (`fdi<pid>_<tag>_`, see [`new_prefix`]) a file name starts with, and the
+/// launcher's pid.
+fn parse_prefix(name: &str) -> Option<(String, u32)> {
+    let rest = name.strip_prefix("fdi")?;
+    let (pid, tail) = rest.split_once('_')?;
+    let (tag, _) = tail.split_once('_')?;
+    let pid = pid.parse::<u32>().ok()?;
+    if tag.is_empty() || !tag.bytes().all(|b| b.is_ascii_hexdigit()) {
+        return None;
+    }
+    Some((format!("fdi{pid}_{tag}_"), pid))
+}
+
+/// True while a process of the run `prefix` may still use its files: its launcher `pid` lives,
+/// or some process names the prefix on its command line (a child outliving a killed launcher
+/// for the moment it takes to exit).
+fn run_alive(prefix: &str, pid: u32) -> bool {
+    if Path::new("/proc").join(pid.to_string()).exists() {
+        return true;
+    }
+    let Ok(entries) = std::fs::read_dir("/proc") else {
+        return true; // cannot tell: leave it
     };
-    let mut prefixes: Vec<String> = entries
-        .flatten()
-        .filter_map(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            let rest = name.strip_prefix("fdi")?;
-            let (pid, tail) = rest.split_once('_')?;
-            let (tag, _) = tail.split_once('_')?;
-            pid.parse::<u32>().ok()?;
-            Some(format!("fdi{pid}_{tag}_"))
-        })
-        .collect();
-    prefixes.sort();
-    prefixes.dedup();
+    let needle = prefix.as_bytes();
+    entries.flatten().any(|e| {
+        e.file_name().to_string_lossy().parse::<u32>().is_ok()
+            && std::fs::read(e.path().join("cmdline"))
+                .is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle))
+    })
+}
+
+/// Removes the resources of runs whose launcher is dead (a killed launcher cannot clean up),
+/// wherever iceoryx2 left them. Every command but the runtime's own processes calls it first.
+pub fn reap_stale_runs() -> usize {
     let mut n = 0;
-    for p in prefixes {
-        let pid = p.trim_start_matches("fdi").split('_').next().unwrap_or("");
-        if !Path::new("/proc").join(pid).exists() {
+    for p in ipc::run_prefixes(|name| parse_prefix(name).map(|(p, _)| p)) {
+        let Some((_, pid)) = parse_prefix(&p) else {
+            continue;
+        };
+        if !run_alive(&p, pid) {
             n += ipc::remove_run_resources(&p).unwrap_or(0);
         }
     }
     n
+}
+
+/// Marks the error of a run that failed before its start was broadcast: nothing was recorded,
+/// and the caller removes the run directory it made for it (`anyhow::Error::downcast_ref`).
+#[derive(Debug, Clone, Copy)]
+pub struct DidNotStart;
+
+impl std::fmt::Display for DidNotStart {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("the run did not start")
+    }
 }
 
 /// What the caller needs after the processes ended.
@@ -149,6 +200,8 @@ struct Launcher {
     status: ipc::Inbox<StatusMsg>,
     waker: ipc::Waker,
     interrupted: Arc<AtomicBool>,
+    /// The start was broadcast: from then on the run records.
+    started: bool,
 }
 
 impl Launcher {
@@ -161,8 +214,7 @@ impl Launcher {
                 if let Ok(Some(st)) = p.child.try_wait() {
                     p.status = Some(st);
                     if !st.success() {
-                        let what =
-                            format!("{} (pid {}) {}", p.label, p.child.id(), describe_status(st));
+                        let what = p.ended(st);
                         match (self.realtime, p.wake) {
                             (true, Wake::Agent(id)) => {
                                 // The control center may have reported it silent first: one
@@ -282,16 +334,18 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             &prefix,
             "launcher",
             fdi_common::process::sizing_for(resolved),
-        )?;
+        )
+        .context(DidNotStart)?;
         let mut launcher = Launcher {
             realtime: resolved.scenario.clock == ClockMode::Realtime,
             lost: Vec::new(),
             procs: Vec::new(),
             bells: Vec::new(),
-            control: transport.publisher(Stream::Control)?,
-            status: transport.subscriber(Stream::Status)?,
-            waker: transport.waker(Wake::Launcher)?,
+            control: transport.publisher(Stream::Control).context(DidNotStart)?,
+            status: transport.subscriber(Stream::Status).context(DidNotStart)?,
+            waker: transport.waker(Wake::Launcher).context(DidNotStart)?,
             interrupted,
+            started: false,
         };
         let r = spawn_and_supervise(
             resolved,
@@ -302,6 +356,16 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             &mut launcher,
         );
         launcher.teardown();
+        // Every child has exited: what they printed is relayed whole before we go on.
+        for p in &mut launcher.procs {
+            if let Some(relay) = &mut p.stderr {
+                relay.last_line();
+            }
+        }
+        let r = match r {
+            Err(e) if !launcher.started => Err(e.context(DidNotStart)),
+            r => r,
+        };
         (r, std::mem::take(&mut launcher.lost))
         // ports and node dropped here, before the files are removed
     };
@@ -366,8 +430,12 @@ fn spawn_and_supervise(
         }
         cmd.stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(Stdio::inherit());
-        let child = cmd.spawn().with_context(|| format!("spawning {name}"))?;
+            .stderr(Stdio::piped());
+        let mut child = cmd.spawn().with_context(|| format!("spawning {name}"))?;
+        let stderr = child
+            .stderr
+            .take()
+            .map(|e| crate::relay::StderrRelay::start(e, &name));
         let label = match agent {
             Some(id) => format!("agent {id}"),
             None => role.clone(),
@@ -379,6 +447,7 @@ fn spawn_and_supervise(
             status: None,
             ready: false,
             stopped_since: None,
+            stderr,
         });
     }
 
@@ -425,6 +494,7 @@ fn spawn_and_supervise(
         Duration::ZERO
     };
     let started = Instant::now();
+    l.started = true;
     l.broadcast(ControlMsg {
         command: ControlMsg::START,
         reserved: 0,

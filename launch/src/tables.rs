@@ -66,7 +66,10 @@ fn run_case(
             let mut named = r.clone();
             named.scenario.name = case.into();
             let d = crate::output::create_run_dir(dir, &named)?;
-            let summary = execute(r, args.engine, Some(&d), !args.json, &Default::default())?;
+            let summary = crate::output::discard_if_not_started(
+                &d,
+                execute(r, args.engine, Some(&d), !args.json, &Default::default()),
+            )?;
             if let Err(e) = crate::report::write_report(&d, r, &summary) {
                 eprintln!(
                     "fdi-launch: warning: the report of {} could not be made: {e:#}",

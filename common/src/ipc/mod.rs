@@ -373,6 +373,26 @@ pub fn remove_run_resources(prefix: &str) -> Result<usize, IpcError> {
     Ok(removed)
 }
 
+/// Every folder where iceoryx2 keeps files of a run: the shared-memory folder, its root folder,
+/// the root's `services/` and `nodes/`, and each per-node folder in `nodes/`.
+fn resource_dirs(root: &Path) -> Vec<PathBuf> {
+    let mut dirs = vec![
+        PathBuf::from("/dev/shm"),
+        root.to_path_buf(),
+        root.join("services"),
+        root.join("nodes"),
+    ];
+    if let Ok(entries) = std::fs::read_dir(root.join("nodes")) {
+        dirs.extend(entries.flatten().map(|e| e.path()).filter(|p| p.is_dir()));
+    }
+    dirs
+}
+
+/// The iceoryx2 root folder (the same for every prefix).
+fn root_dir() -> PathBuf {
+    PathBuf::from(Config::default().global.root_path().to_string())
+}
+
 /// Files of `prefix` still present (for tests and the launcher's final check).
 pub fn leftover_files(prefix: &str) -> Vec<PathBuf> {
     let Ok(config) = config_for(prefix) else {
@@ -380,16 +400,7 @@ pub fn leftover_files(prefix: &str) -> Vec<PathBuf> {
     };
     let root = PathBuf::from(config.global.root_path().to_string());
     let mut out = Vec::new();
-    let mut dirs = vec![
-        PathBuf::from("/dev/shm"),
-        root.clone(),
-        root.join("services"),
-        root.join("nodes"),
-    ];
-    if let Ok(entries) = std::fs::read_dir(root.join("nodes")) {
-        dirs.extend(entries.flatten().map(|e| e.path()).filter(|p| p.is_dir()));
-    }
-    for d in dirs {
+    for d in resource_dirs(&root) {
         if let Ok(entries) = std::fs::read_dir(&d) {
             out.extend(
                 entries
@@ -399,6 +410,22 @@ pub fn leftover_files(prefix: &str) -> Vec<PathBuf> {
             );
         }
     }
+    out
+}
+
+/// The run prefixes that have files in any folder where iceoryx2 keeps them (shared memory and
+/// its root folder alike): `parse` gets each file name and returns the prefix it starts with, if
+/// it is one of the caller's. Sorted, without duplicates. For finding what dead runs left.
+pub fn run_prefixes(parse: impl Fn(&str) -> Option<String>) -> Vec<String> {
+    let mut out: Vec<String> = resource_dirs(&root_dir())
+        .iter()
+        .filter_map(|d| std::fs::read_dir(d).ok())
+        .flat_map(|entries| entries.flatten())
+        .filter_map(|e| parse(&e.file_name().to_string_lossy()))
+        .filter(|p| config_for(p).is_ok())
+        .collect();
+    out.sort();
+    out.dedup();
     out
 }
 
@@ -588,6 +615,37 @@ mod tests {
 
     fn prefix(tag: &str) -> String {
         format!("fdiut{}_{tag}_", std::process::id())
+    }
+
+    #[test]
+    fn a_run_whose_files_are_only_in_the_iceoryx2_root_is_still_found_and_removed() {
+        let p = prefix("rp");
+        let mine = |name: &str| name.starts_with(&p).then(|| p.clone());
+        {
+            let t = Transport::open(
+                &p,
+                "test",
+                Sizing {
+                    agents: 1,
+                    in_flight: 1,
+                },
+            )
+            .expect("node");
+            let _w = t.waker(Wake::Launcher).expect("listener");
+            assert_eq!(run_prefixes(mine), vec![p.clone()]);
+            // A killed run's leftovers need not include a shared-memory file (the launcher's
+            // stale-run search used to look in /dev/shm only).
+            for f in leftover_files(&p) {
+                if f.starts_with("/dev/shm") {
+                    std::fs::remove_file(&f).expect("remove");
+                }
+            }
+            assert!(!leftover_files(&p).is_empty(), "files in the root folder");
+            assert_eq!(run_prefixes(mine), vec![p.clone()]);
+        }
+        remove_run_resources(&p).expect("removed");
+        assert_eq!(leftover_files(&p), Vec::<PathBuf>::new());
+        assert!(run_prefixes(mine).is_empty());
     }
 
     #[test]
