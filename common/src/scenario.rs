@@ -100,8 +100,9 @@ pub struct ControllerConfig {
     /// `V̂(0) ~ U(−a, a)` elementwise, typical 1.
     pub initial_v_range: f64,
     pub detection: DetectionConfig,
-    /// `[controller.update_law]`: robust modifications of (37), (38) for long horizons
-    /// (leakage, dead zone; units and typical values at [`UpdateLaw`]). Absent: the paper's laws.
+    /// `[controller.update_law]`: robust modifications of (37), (38) for long horizons (a slow
+    /// innovation baseline, leakage of `Ŵ`; units and typical values at [`UpdateLaw`]). Absent
+    /// or all 0: the paper's laws.
     #[serde(default, skip_serializing_if = "UpdateLaw::is_paper")]
     pub update_law: UpdateLaw,
 }

@@ -31,12 +31,13 @@ use crate::scenario::{ControllerConfig, Problem};
 #[serde(default, deny_unknown_fields)]
 pub struct UpdateLaw {
     /// `T`, s: time over which a persistent innovation is attributed to model mismatch rather
-    /// than to an attack. 0 = off (the paper). Typical 10–40 s; must be 0 or ≥ the control
-    /// period.
+    /// than to an attack. 0 = off (the paper). Typical 20–120 s (the shipped
+    /// `paper-long-horizon.toml`: 120 s); must be 0 or ≥ the control period.
     pub innovation_time_constant_s: f64,
     /// `λ`, 1/s: leakage rate of `Ŵ` towards 0. In steady state a constant `S` is then
     /// compensated to `1 / (1 + λ / (Γ1 L1))` of its value (`Γ1 L1 = 50 1/s` in the
-    /// calibration). 0 = off (the paper). Typical 1–10; `λ Δ` must stay below 1.
+    /// calibration). 0 = off (the paper). Typical 5–20 1/s (`paper-long-horizon.toml`: 20);
+    /// `λ Δ` must stay below 1.
     pub leakage_w_per_s: f64,
 }
 
