@@ -351,7 +351,7 @@ mod tests {
     /// projection), rad/s.
     fn psi2_at(k: u32) -> Vector<2> {
         let t = f64::from(k) * 1e-3;
-        let big = if k % 401 == 0 { 40.0 } else { 1.0 };
+        let big = if k.is_multiple_of(401) { 40.0 } else { 1.0 };
         Vector::<2>::new(0.3 * (7.0 * t).sin() * big, -0.2 * (3.0 * t).cos() + 0.05)
     }
 
