@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::attack::{presets, AttackProfile};
+use crate::control::UpdateLaw;
 use crate::delay::DelayProfile;
 use crate::model::{EulerLagrange, TwoLink, TwoLinkParams};
 use crate::trajectory::TrajectoryConfig;
@@ -99,6 +100,11 @@ pub struct ControllerConfig {
     /// `V̂(0) ~ U(−a, a)` elementwise, typical 1.
     pub initial_v_range: f64,
     pub detection: DetectionConfig,
+    /// `[controller.update_law]`: robust modifications of (37), (38) for long horizons (a slow
+    /// innovation baseline, leakage of `Ŵ`; units and typical values at [`UpdateLaw`]). Absent
+    /// or all 0: the paper's laws.
+    #[serde(default, skip_serializing_if = "UpdateLaw::is_paper")]
+    pub update_law: UpdateLaw,
 }
 
 /// Gaussian sensor noise θ (SPEC §2).
@@ -533,6 +539,12 @@ impl Scenario {
                     format!("must be finite and ≥ 0, got {v}"),
                 );
             }
+        }
+        for p in c
+            .update_law
+            .problems("controller.update_law", self.control_period_s)
+        {
+            push(p.path, p.message);
         }
         if !(1..=64).contains(&c.hidden_neurons) {
             push(

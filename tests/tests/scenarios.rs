@@ -70,6 +70,7 @@ fn shipped_scenarios_have_the_names_and_attacks_they_claim() {
         ("table2-large-fast.toml", "table2-large-fast", "paper", 1),
         ("table2-small-slow.toml", "table2-small-slow", "paper", 1),
         ("table2-large-slow.toml", "table2-large-slow", "paper", 1),
+        ("paper-long-horizon.toml", "paper-long-horizon", "none", 4),
         (
             "example-custom-attack.toml",
             "example-custom-attack",
@@ -95,6 +96,19 @@ fn shipped_scenarios_have_the_names_and_attacks_they_claim() {
             "{file} differs from paper.toml beyond name and attack"
         );
     }
+
+    // The long-horizon scenario: the paper's, 300 s without attack, with a robust update law.
+    let mut s = load("paper-long-horizon.toml").scenario;
+    assert_eq!(s.duration_s, 300.0);
+    assert!(!s.controller.update_law.is_paper());
+    s.name = paper.name.clone();
+    s.attack = paper.attack.clone();
+    s.duration_s = paper.duration_s;
+    s.controller.update_law = paper.controller.update_law;
+    assert_eq!(
+        s, paper,
+        "paper-long-horizon.toml differs from paper.toml beyond name, duration, attack and update law"
+    );
 
     // Table II: robot 1 of the paper with the delays of the table (ms → s).
     for (case, amplitude_ms, offset_ms, rate) in [

@@ -102,15 +102,7 @@ where
         let model = params.model.build_model()?;
         let c = &params.controller;
         let mut rng = stream(params.run_seed, params.agent_id, Purpose::NnInit);
-        let nn = NnParams {
-            hidden: c.hidden_neurons,
-            gamma_w: c.learning_rate_w,
-            gamma_v: c.learning_rate_v,
-            l1: c.observer_gain_l1,
-            bound_w: c.weight_bound_w,
-            bound_v: c.weight_bound_v,
-        };
-        let estimator = NnEstimator::new(nn, c.initial_v_range, &mut rng);
+        let estimator = NnEstimator::new(NnParams::from_controller(c), c.initial_v_range, &mut rng);
         let detector = Detector::new(c.detection.threshold, c.detection.hold_s);
         Some(Self {
             params,

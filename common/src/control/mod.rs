@@ -8,5 +8,5 @@ pub mod observer;
 
 pub use center::{CenterAgent, CenterOutput, CenterParams};
 pub use detection::Detector;
-pub use estimator::{NnEstimator, NnParams};
+pub use estimator::{NnEstimator, NnParams, UpdateLaw};
 pub use observer::Observer;

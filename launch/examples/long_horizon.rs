@@ -1,0 +1,573 @@
+//! Long-horizon behaviour of the controller (docs/model.md, "Long horizons"): runs scenarios in
+//! process and measures, in windows of simulated time, what the NN estimate absorbs and how the
+//! weights and the observer move.
+//!
+//! ```sh
+//! cargo run --release -p fdi-launch --example long_horizon -- series --duration-s 300 --attack none
+//! cargo run --release -p fdi-launch --example long_horizon -- summary --duration-s 300 --attack none --gamma-w 1000
+//! cargo run --release -p fdi-launch --example long_horizon -- delay-sweep scenarios/table2-large-slow.toml
+//! cargo run --release -p fdi-launch --example long_horizon -- figure docs/figures/long-horizon-robot1
+//! ```
+//!
+//! `figure` writes a PNG and an SVG; docs/ keeps the PNG.
+//!
+//! The weights are not part of the trace: a shadow estimator, built like the control center's
+//! and fed with `Ψ2` rebuilt from the records, follows them. It must reproduce the recorded `Ŝ`
+//! bit for bit, or the program stops with an error.
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+use anyhow::{anyhow, bail, Context, Result};
+use clap::{Args, Parser, Subcommand};
+
+use fdi_common::attack::presets;
+use fdi_common::control::{NnEstimator, NnParams, Observer};
+use fdi_common::delay::DelayProfile;
+use fdi_common::engine::{run_inproc, RunSummary};
+use fdi_common::model::Vector;
+use fdi_common::records::TickRecord;
+use fdi_common::rng::{stream, Purpose};
+use fdi_common::scenario::{self, ControllerMode, Resolved};
+use fdi_common::trajectory::TrajectoryConfig;
+
+#[allow(dead_code)] // only the line figures of the launcher's plotting are used here
+#[path = "../src/plot.rs"]
+mod plot;
+
+/// Links of the paper's robots.
+const N: usize = 2;
+
+#[derive(Debug, Parser)]
+#[command(about = "Long-horizon measurements of the proposed controller (in-process runs)")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// One CSV row per agent and window: errors, attack-estimation error, weights, observer.
+    Series {
+        #[command(flatten)]
+        setup: Setup,
+        /// Window length, s.
+        #[arg(long, default_value_t = 5.0)]
+        window_s: f64,
+    },
+    /// One row per agent: RMSE, false alarms, first and last window of the series.
+    Summary {
+        #[command(flatten)]
+        setup: Setup,
+        /// Window length, s.
+        #[arg(long, default_value_t = 5.0)]
+        window_s: f64,
+    },
+    /// RMSE of the first agent under constant delays (ms), each a separate run. The defaults
+    /// are off the 1 ms grid (exact multiples of Δ behave differently, docs/model.md).
+    DelaySweep {
+        #[command(flatten)]
+        setup: Setup,
+        /// Constant delays to try, ms.
+        #[arg(
+            long,
+            value_delimiter = ',',
+            default_value = "3.06,10.5,20.5,30.5,40.5,45.5,46.5,46.9,47.1,47.5,48.5,49.5,49.9,50.1"
+        )]
+        delays_ms: Vec<f64>,
+    },
+    /// The figure of docs/model.md: robot 1 over 300 s without attack, the paper's laws, the
+    /// remedy of `scenarios/paper-long-horizon.toml` and the traditional controller.
+    Figure {
+        /// Output stem: writes STEM.png and STEM.svg.
+        stem: PathBuf,
+        /// The scenario with the remedy on.
+        #[arg(long, default_value = "scenarios/paper-long-horizon.toml")]
+        remedy: PathBuf,
+        /// Simulated time, s.
+        #[arg(long, default_value_t = 300.0)]
+        duration_s: f64,
+        /// Window length, s; default one period of robot 1's q_d (2π / 1.5 rad/s), so that the
+        /// window means do not alias with the trajectory.
+        #[arg(long, default_value_t = 2.0 * std::f64::consts::PI / 1.5)]
+        window_s: f64,
+    },
+}
+
+/// The scenario of a run and what to change in it.
+#[derive(Debug, Clone, Default, Args)]
+struct Setup {
+    /// Scenario file; without it the embedded paper scenario.
+    scenario: Option<PathBuf>,
+    #[arg(long)]
+    duration_s: Option<f64>,
+    /// Attack preset (paper, paper-linkwise, none).
+    #[arg(long)]
+    attack: Option<String>,
+    /// `proposed` or `traditional`.
+    #[arg(long)]
+    controller: Option<String>,
+    /// `Γ1` (learning_rate_w).
+    #[arg(long)]
+    gamma_w: Option<f64>,
+    /// `Γ2` (learning_rate_v).
+    #[arg(long)]
+    gamma_v: Option<f64>,
+    /// `L1` (observer_gain_l1).
+    #[arg(long)]
+    l1: Option<f64>,
+    /// `L2` (observer_gain_l2).
+    #[arg(long)]
+    l2: Option<f64>,
+    /// `controller.update_law.leakage_w_per_s`, 1/s.
+    #[arg(long)]
+    leakage_w: Option<f64>,
+    /// `controller.update_law.innovation_time_constant_s`, s.
+    #[arg(long)]
+    innovation_t: Option<f64>,
+    /// Control period Δ, ms.
+    #[arg(long)]
+    period_ms: Option<f64>,
+    /// Replace every agent's delay by this constant, ms.
+    #[arg(long)]
+    delay_ms: Option<f64>,
+    /// Keep only these agent ids.
+    #[arg(long, value_delimiter = ',')]
+    agents: Vec<u32>,
+}
+
+impl Setup {
+    fn resolve(&self) -> Result<Resolved> {
+        let mut r = match &self.scenario {
+            Some(p) => scenario::load_file(p)?,
+            None => scenario::paper()?,
+        };
+        if let Some(name) = &self.attack {
+            let p = presets::preset(name).ok_or_else(|| {
+                anyhow!(
+                    "unknown attack preset {name} (known: {})",
+                    presets::names().join(", ")
+                )
+            })?;
+            let p = p.for_agents(&r.scenario.agent_dofs());
+            r = r.with_attack(p)?;
+        }
+        let s = &mut r.scenario;
+        let c = &mut s.controller;
+        match self.controller.as_deref() {
+            None => {}
+            Some("proposed") => c.mode = ControllerMode::Proposed,
+            Some("traditional") => c.mode = ControllerMode::Traditional,
+            Some(other) => bail!("--controller {other}: proposed or traditional"),
+        }
+        for (field, v) in [
+            (&mut c.learning_rate_w, self.gamma_w),
+            (&mut c.learning_rate_v, self.gamma_v),
+            (&mut c.observer_gain_l1, self.l1),
+            (&mut c.observer_gain_l2, self.l2),
+            (&mut c.update_law.leakage_w_per_s, self.leakage_w),
+            (
+                &mut c.update_law.innovation_time_constant_s,
+                self.innovation_t,
+            ),
+            (&mut s.duration_s, self.duration_s),
+            (&mut s.control_period_s, self.period_ms.map(|ms| ms * 1e-3)),
+        ] {
+            if let Some(v) = v {
+                *field = v;
+            }
+        }
+        if let Some(ms) = self.delay_ms {
+            for a in &mut s.agents {
+                a.delay = DelayProfile::Constant { value_s: ms * 1e-3 };
+            }
+        }
+        if !self.agents.is_empty() {
+            let keep = self.agents.clone();
+            r = r.retain_agents(|a| keep.contains(&a.id));
+        }
+        let problems = r.scenario.validate();
+        if !problems.is_empty() {
+            let all: Vec<String> = problems.iter().map(ToString::to_string).collect();
+            bail!("the changed scenario is invalid:\n{}", all.join("\n"));
+        }
+        Ok(r)
+    }
+}
+
+/// Sums over one window of one agent.
+#[derive(Debug, Clone, Default)]
+struct Window {
+    n: u64,
+    /// Σ e (per link), Σ |e|² (over links), e = q_d − q.
+    e_sum: [f64; N],
+    e_sq: f64,
+    /// Σ ‖Ŝ − S‖², Σ Ŝ (per link), Σ S (per link).
+    s_err_sq: f64,
+    s_hat_sum: [f64; N],
+    s_sum: [f64; N],
+    /// Σ ‖r̃‖² with r̃ = (ẏ − q̂̇) + β (y − q̂) of the tampered measurement, Σ ‖Ψ2‖².
+    r_tilde_sq: f64,
+    psi2_sq: f64,
+    /// Σ (q − q̂) per link (observer position error against the true state).
+    q_tilde_sum: [f64; N],
+    /// Last ‖Ŵ‖, ‖bias row of Ŵ‖, ‖V̂ − V̂(0)‖.
+    w_norm: f64,
+    w_bias: f64,
+    v_moved: f64,
+}
+
+/// One finished window, as printed.
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    t_end: f64,
+    e_mean: [f64; N],
+    e_rms: f64,
+    s_err_rms: f64,
+    s_hat_mean: [f64; N],
+    s_mean: [f64; N],
+    r_tilde_rms: f64,
+    psi2_rms: f64,
+    q_tilde_mean: [f64; N],
+    w_norm: f64,
+    w_bias: f64,
+    v_moved: f64,
+}
+
+impl Window {
+    fn row(&self, t_end: f64) -> Row {
+        let n = self.n.max(1) as f64;
+        let mean = |a: [f64; N]| a.map(|x| x / n);
+        Row {
+            t_end,
+            e_mean: mean(self.e_sum),
+            e_rms: (self.e_sq / (n * N as f64)).sqrt(),
+            s_err_rms: (self.s_err_sq / n).sqrt(),
+            s_hat_mean: mean(self.s_hat_sum),
+            s_mean: mean(self.s_sum),
+            r_tilde_rms: (self.r_tilde_sq / n).sqrt(),
+            psi2_rms: (self.psi2_sq / n).sqrt(),
+            q_tilde_mean: mean(self.q_tilde_sum),
+            w_norm: self.w_norm,
+            w_bias: self.w_bias,
+            v_moved: self.v_moved,
+        }
+    }
+}
+
+/// Per-agent state of the measurement: the shadow estimator and the previous tick's observer.
+struct Tracker {
+    trajectory: TrajectoryConfig,
+    nn: Option<NnEstimator<N>>,
+    v0: Vec<f64>,
+    prev_observer: Observer<N>,
+    psi2_prev: Vector<N>,
+    window: Window,
+    rows: Vec<Row>,
+}
+
+struct Measured {
+    summary: RunSummary,
+    /// Per agent id, the windows in time order.
+    rows: BTreeMap<u32, Vec<Row>>,
+}
+
+fn measure(r: &Resolved, window_s: f64) -> Result<Measured> {
+    if !(window_s.is_finite() && window_s > 0.0) {
+        bail!("--window-s must be > 0, got {window_s}");
+    }
+    let s = &r.scenario;
+    let c = s.controller;
+    let beta = c.beta;
+    let dt = s.control_period_s;
+    let per_window = ((window_s / dt).round() as u64).max(1);
+    let nn_params = NnParams::from_controller(&c);
+    let mut trackers: BTreeMap<u32, Tracker> = s
+        .agents
+        .iter()
+        .map(|a| {
+            let nn = (c.mode == ControllerMode::Proposed).then(|| {
+                let mut rng = stream(s.seed, a.id, Purpose::NnInit);
+                NnEstimator::<N>::new(nn_params, c.initial_v_range, &mut rng)
+            });
+            let v0 = nn
+                .as_ref()
+                .map_or_else(Vec::new, |n| n.weights_v().to_vec());
+            let t = Tracker {
+                trajectory: a.trajectory.clone(),
+                nn,
+                v0,
+                prev_observer: Observer::default(),
+                psi2_prev: Vector::<N>::zeros(),
+                window: Window::default(),
+                rows: Vec::new(),
+            };
+            (a.id, t)
+        })
+        .collect();
+    let mut mismatch: Option<String> = None;
+    let summary = run_inproc::<N>(r, |rec: &TickRecord| {
+        let id = rec.agent.agent;
+        let Some(tr) = trackers.get_mut(&id) else {
+            return;
+        };
+        let t = rec.agent.t;
+        let q = rec.agent.q.to_vector::<N>();
+        let qd = rec.agent.qd.to_vector::<N>();
+        let y = rec.attack.y.to_vector::<N>();
+        let yd = rec.attack.yd.to_vector::<N>();
+        let s_hat = rec.center.s_hat.to_vector::<N>();
+        let reference = tr.trajectory.reference::<N>(t);
+        // Ψ2 as the center computed it: the observer state before this tick's step.
+        let psi2 = tr.prev_observer.psi2(&y, &yd, beta, &s_hat);
+        let r_tilde = (yd - tr.prev_observer.qd) + (y - tr.prev_observer.q) * beta;
+        if let Some(nn) = tr.nn.as_mut() {
+            let shadow = nn.estimate(&tr.psi2_prev);
+            if shadow != s_hat && mismatch.is_none() {
+                mismatch = Some(format!(
+                    "agent {id}, t = {t}: shadow Ŝ {shadow:?} differs from the recorded {s_hat:?}"
+                ));
+            }
+            nn.update(&psi2, dt);
+        }
+        tr.psi2_prev = psi2;
+        tr.prev_observer.q = rec.center.q_hat.to_vector::<N>();
+        tr.prev_observer.qd = rec.center.qd_hat.to_vector::<N>();
+
+        let e = reference.q - q;
+        let s_true = (yd - qd) + (y - q) * beta;
+        let q_tilde = q - tr.prev_observer.q;
+        let w = &mut tr.window;
+        w.n += 1;
+        for l in 0..N {
+            w.e_sum[l] += e[l];
+            w.s_hat_sum[l] += s_hat[l];
+            w.s_sum[l] += s_true[l];
+            w.q_tilde_sum[l] += q_tilde[l];
+        }
+        w.e_sq += e.norm_squared();
+        w.s_err_sq += (s_hat - s_true).norm_squared();
+        w.r_tilde_sq += r_tilde.norm_squared();
+        w.psi2_sq += psi2.norm_squared();
+        if let Some(nn) = &tr.nn {
+            w.w_norm = nn.norm_w();
+            w.w_bias = nn.weights_w()[..N]
+                .iter()
+                .map(|x| x * x)
+                .sum::<f64>()
+                .sqrt();
+            w.v_moved = nn
+                .weights_v()
+                .iter()
+                .zip(&tr.v0)
+                .map(|(a, b)| (a - b) * (a - b))
+                .sum::<f64>()
+                .sqrt();
+        }
+        if w.n == per_window {
+            let row = w.row(t + dt);
+            tr.rows.push(row);
+            tr.window = Window::default();
+        }
+    })?;
+    if let Some(m) = mismatch {
+        bail!("the shadow estimator does not follow the control center: {m}");
+    }
+    Ok(Measured {
+        summary,
+        rows: trackers.into_iter().map(|(id, t)| (id, t.rows)).collect(),
+    })
+}
+
+/// The columns of a [`Row`].
+const COLUMNS: &str = "t_end_s,e1_mean_rad,e2_mean_rad,e_rms_rad,s_err_rms_rad_s,s_hat1_mean,s_hat2_mean,s1_mean,s2_mean,r_tilde_rms_rad_s,psi2_rms_rad_s,q_tilde1_mean_rad,q_tilde2_mean_rad,w_norm,w_bias_norm,v_moved";
+
+fn csv_fields(r: &Row) -> String {
+    format!(
+        "{:.1},{:.5},{:.5},{:.5},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.5},{:.5},{:.4},{:.4},{:.4}",
+        r.t_end,
+        r.e_mean[0],
+        r.e_mean[1],
+        r.e_rms,
+        r.s_err_rms,
+        r.s_hat_mean[0],
+        r.s_hat_mean[1],
+        r.s_mean[0],
+        r.s_mean[1],
+        r.r_tilde_rms,
+        r.psi2_rms,
+        r.q_tilde_mean[0],
+        r.q_tilde_mean[1],
+        r.w_norm,
+        r.w_bias,
+        r.v_moved
+    )
+}
+
+fn series(setup: &Setup, window_s: f64) -> Result<()> {
+    let m = measure(&setup.resolve()?, window_s)?;
+    println!("agent,{COLUMNS}");
+    for (id, rows) in &m.rows {
+        for r in rows {
+            println!("{id},{}", csv_fields(r));
+        }
+    }
+    Ok(())
+}
+
+fn summary(setup: &Setup, window_s: f64) -> Result<()> {
+    let m = measure(&setup.resolve()?, window_s)?;
+    println!("digest {}", m.summary.trace_digest);
+    println!("agent,rmse_rad,false_alarms,window,{COLUMNS}");
+    for (id, rows) in &m.rows {
+        let metrics = m
+            .summary
+            .metrics
+            .get(&id.to_string())
+            .context("an agent without metrics")?;
+        for (which, r) in [("first", rows.first()), ("last", rows.last())] {
+            if let Some(r) = r {
+                println!(
+                    "{id},{:.4},{},{which},{}",
+                    metrics.rmse_rad,
+                    metrics.false_alarms,
+                    csv_fields(r)
+                );
+            }
+        }
+    }
+    Ok(())
+}
+
+fn delay_sweep(setup: &Setup, delays_ms: &[f64]) -> Result<()> {
+    println!("delay_ms,agent,rmse_rad,max_abs_error_rad");
+    for &ms in delays_ms {
+        let mut s = setup.clone();
+        s.delay_ms = Some(ms);
+        let r = s.resolve()?;
+        let summary = run_inproc::<N>(&r, |_| {})?;
+        let (id, m) = summary
+            .metrics
+            .iter()
+            .next()
+            .context("a scenario without agents")?;
+        println!("{ms},{id},{:.4},{:.4}", m.rmse_rad, m.max_abs_error_rad);
+    }
+    Ok(())
+}
+
+fn figure(
+    stem: &std::path::Path,
+    remedy: &std::path::Path,
+    duration_s: f64,
+    window_s: f64,
+) -> Result<()> {
+    let base = Setup {
+        duration_s: Some(duration_s),
+        attack: Some("none".into()),
+        agents: vec![1],
+        ..Setup::default()
+    };
+    let runs = [
+        ("proposed, paper's laws (37)-(38)", base.clone()),
+        (
+            "proposed, with the remedy",
+            Setup {
+                scenario: Some(remedy.to_path_buf()),
+                ..base.clone()
+            },
+        ),
+        (
+            "traditional",
+            Setup {
+                controller: Some("traditional".into()),
+                ..base
+            },
+        ),
+    ];
+    let mut e1 = Vec::new();
+    let mut s_err = Vec::new();
+    let mut weights = Vec::new();
+    let mut q_tilde = Vec::new();
+    let mut innovation = Vec::new();
+    for (i, (label, setup)) in runs.iter().enumerate() {
+        let m = measure(&setup.resolve()?, window_s)?;
+        let rows = m.rows.get(&1).context("robot 1 not in the run")?;
+        let color = plot::PALETTE[i];
+        let line = |f: &dyn Fn(&Row) -> f64, label: String| plot::Line {
+            label,
+            color,
+            points: rows.iter().map(|r| (r.t_end, f(r))).collect(),
+        };
+        e1.push(line(&|r| r.e_mean[0], label.to_string()));
+        q_tilde.push(line(&|r| r.q_tilde_mean[0], label.to_string()));
+        if i == 0 {
+            innovation.push(line(
+                &|r| r.r_tilde_rms,
+                "innovation ẏ + βy − (observer's)".into(),
+            ));
+            innovation.push(plot::Line {
+                color: plot::PALETTE[3],
+                ..line(&|r| r.psi2_rms, "Ψ2 = innovation − Ŝ".into())
+            });
+        }
+        if setup.controller.is_none() {
+            s_err.push(line(&|r| r.s_err_rms, label.to_string()));
+            weights.push(line(&|r| r.w_bias, format!("{label}: bias row of Ŵ")));
+            weights.push(plot::Line {
+                color: plot::PALETTE[i + 3],
+                ..line(
+                    &|r| r.v_moved,
+                    format!("{label}: inner weights, distance from V(0)"),
+                )
+            });
+        }
+    }
+    let panel = |title: &str, y_label: &str, lines: Vec<plot::Line>| plot::Panel {
+        title: title.into(),
+        y_label: y_label.into(),
+        kind: plot::PanelKind::Lines(lines),
+    };
+    let fig = plot::Figure {
+        title: format!(
+            "Robot 1, no attack, {duration_s} s: means and RMS over windows of {window_s:.2} s"
+        ),
+        x_label: "t (s)".into(),
+        x_range: (0.0, duration_s),
+        markers: vec![40.0],
+        panels: vec![
+            panel("link-1 position error q_d1 − q1 (mean)", "rad", e1),
+            panel("attack-estimation error ‖Ŝ − S‖ (RMS)", "rad/s", s_err),
+            panel(
+                "paper's laws: the innovation and what Ŝ leaves of it, Ψ2 (RMS; Ψ2 stays at the noise floor)",
+                "rad/s",
+                innovation,
+            ),
+            panel(
+                "output-layer bias and inner-weight change",
+                "rad/s, 1",
+                weights,
+            ),
+            panel("observer error: q1 minus the observer's estimate (mean)", "rad", q_tilde),
+        ],
+    };
+    let written = plot::save_figure(&fig, stem, (1100, 1600))?;
+    for p in written {
+        println!("{}", p.display());
+    }
+    Ok(())
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().command {
+        Command::Series { setup, window_s } => series(&setup, window_s),
+        Command::Summary { setup, window_s } => summary(&setup, window_s),
+        Command::DelaySweep { setup, delays_ms } => delay_sweep(&setup, &delays_ms),
+        Command::Figure {
+            stem,
+            remedy,
+            duration_s,
+            window_s,
+        } => figure(&stem, &remedy, duration_s, window_s),
+    }
+}
