@@ -498,6 +498,7 @@ fn figure(
             label,
             color,
             points: rows.iter().map(|r| (r.t_end, f(r))).collect(),
+            keep: true,
         };
         e1.push(line(&|r| r.e_mean[0], label.to_string()));
         q_tilde.push(line(&|r| r.q_tilde_mean[0], label.to_string()));
@@ -527,6 +528,7 @@ fn figure(
         title: title.into(),
         y_label: y_label.into(),
         kind: plot::PanelKind::Lines(lines),
+        guides: Vec::new(),
     };
     let fig = plot::Figure {
         title: format!(
@@ -535,6 +537,7 @@ fn figure(
         x_label: "t (s)".into(),
         x_range: (0.0, duration_s),
         markers: vec![40.0],
+        marker_label: "end of Table I's 40 s".into(),
         panels: vec![
             panel("link-1 position error q_d1 − q1 (mean)", "rad", e1),
             panel("attack-estimation error ‖Ŝ − S‖ (RMS)", "rad/s", s_err),
