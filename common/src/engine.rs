@@ -134,6 +134,32 @@ pub struct RunSummary {
     /// CPUs 1` (`--rt-priority`, `--cpus`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub placement: Option<String>,
+    /// Set when the run ended before its scenario's end (interrupted): every metric covers the
+    /// `ticks` recorded, not the `planned_ticks`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub partial: Option<Partial>,
+}
+
+/// What a run that ended early covers.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Partial {
+    /// Why it ended early, e.g. `interrupted by SIGINT`.
+    pub reason: String,
+    /// Ticks of the scenario as planned (`ticks` of the summary holds those recorded).
+    pub planned_ticks: u64,
+    /// The signal that interrupted the run, if a signal did.
+    #[serde(default)]
+    pub signal: Option<i32>,
+}
+
+impl RunSummary {
+    /// `(agent, t)` of every robot that diverged, in agent order.
+    pub fn diverged(&self) -> Vec<(&str, f64)> {
+        self.metrics
+            .iter()
+            .filter_map(|(id, m)| m.diverged_at_s.map(|t| (id.as_str(), t)))
+            .collect()
+    }
 }
 
 /// Joins metrics and digest into a summary.
@@ -170,6 +196,7 @@ pub fn summarize(
         metrics,
         lost_agents: Vec::new(),
         placement: None,
+        partial: None,
     }
 }
 

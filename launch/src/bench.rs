@@ -218,7 +218,7 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
         execute(&r, Engine::Ipc, Some(&dir), !a.json, placement),
     );
     let wakeups = probe.finish();
-    let (summary, wakeups) = (summary?, wakeups?);
+    let (summary, wakeups) = (crate::cli::require_whole(summary?)?, wakeups?);
 
     let (mut e2e, mut h1, mut h2, mut h3, mut att, mut cc, mut jitter) = (
         histogram()?,
@@ -593,7 +593,8 @@ fn lockstep(a: &LockstepArgs) -> Result<ExitCode> {
             Some(&dir_ipc),
             !a.json,
             &Default::default(),
-        )?;
+        )
+        .and_then(crate::cli::require_whole)?;
         if !a.keep_traces {
             for d in [&dir_in, &dir_ipc] {
                 let _ = std::fs::remove_dir_all(d.join("traces"));

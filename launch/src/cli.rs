@@ -5,7 +5,8 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use fdi_common::engine::{run_inproc, RunSummary};
+use fdi_common::engine::{run_inproc, Partial, RunSummary};
+use fdi_common::metrics::Onset;
 use fdi_common::process::ProcessArgs;
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
@@ -346,6 +347,21 @@ pub fn execute(
             )?;
             let mut joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
             joined.summary.lost_agents = outcome.lost;
+            if let Some(signal) = outcome.interrupted {
+                let s = &mut joined.summary;
+                eprintln!(
+                    "fdi-launch: interrupted by {} after {:.3} s of {} s simulated: every process was stopped ({}); the run directory keeps what was recorded",
+                    runtime::signal_name(signal),
+                    s.sim_s,
+                    r.scenario.duration_s,
+                    outcome.exits
+                );
+                s.partial = Some(Partial {
+                    reason: format!("interrupted by {}", runtime::signal_name(signal)),
+                    planned_ticks: r.ticks(),
+                    signal: Some(signal),
+                });
+            }
             if *placement != runtime::Placement::default() {
                 joined.summary.placement = Some(placement.describe());
             }
@@ -424,12 +440,50 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
             println!("report {}", report.display());
         }
     }
-    // A run that lost agents completed for the others, but is not a clean run.
-    Ok(if summary.lost_agents.is_empty() {
-        ExitCode::SUCCESS
-    } else {
+    Ok(exit_code(&summary))
+}
+
+/// The exit status of a run that produced a summary: 128 + signal when interrupted, 4 when a
+/// robot diverged, 3 when a realtime run lost agents (it completed for the others, but is not
+/// a clean run), else 0.
+fn exit_code(summary: &RunSummary) -> ExitCode {
+    if let Some(signal) = summary.partial.as_ref().and_then(|p| p.signal) {
+        ExitCode::from(
+            runtime::Interrupted {
+                signal,
+                phase: "during the run",
+            }
+            .exit_code(),
+        )
+    } else if !summary.diverged().is_empty() {
+        ExitCode::from(4)
+    } else if !summary.lost_agents.is_empty() {
         ExitCode::from(3)
-    })
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
+/// Refuses a summary that covers less than its scenario: tables and benchmarks need whole
+/// runs.
+pub fn require_whole(summary: RunSummary) -> Result<RunSummary> {
+    match &summary.partial {
+        Some(Partial {
+            signal: Some(signal),
+            ..
+        }) => Err(runtime::Interrupted {
+            signal: *signal,
+            phase: "during the run",
+        }
+        .into()),
+        Some(p) => bail!(
+            "the run ended early ({}): {} of {} ticks",
+            p.reason,
+            summary.ticks,
+            p.planned_ticks
+        ),
+        None => Ok(summary),
+    }
 }
 
 fn print_summary(s: &RunSummary) {
@@ -440,31 +494,57 @@ fn print_summary(s: &RunSummary) {
     if let Some(p) = &s.placement {
         println!("processes: {p}");
     }
+    if let Some(p) = &s.partial {
+        println!(
+            "PARTIAL RUN ({}): every metric covers the {} ticks recorded ({:.3} s) of {} planned",
+            p.reason, s.ticks, s.sim_s, p.planned_ticks
+        );
+    }
     println!("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses |");
     println!("|---|---|---|---|---|---|");
     for (id, m) in &s.metrics {
-        let onsets: Vec<String> = m
-            .onsets
-            .iter()
-            .map(|o| {
-                format!(
-                    "{:.1}: {}",
-                    o.t_s,
-                    o.time_to_detect_s
-                        .map_or("never".into(), |d| format!("{d:.3}"))
-                )
-            })
-            .collect();
+        let rmse = match m.diverged_at_s {
+            Some(t) => format!("diverged at t = {t:.3} s"),
+            None => format!("{:.4}", m.rmse_rad),
+        };
         println!(
-            "| {id} | {:.4} | {:.4} | {} | {} | {} |",
-            m.rmse_rad,
+            "| {id} | {rmse} | {:.4} | {} | {} | {} |",
             m.max_abs_error_rad,
-            onsets.join(", "),
+            describe_onsets(&m.onsets),
             m.false_alarms,
             m.deadline_misses
         );
     }
+    for (id, t) in s.diverged() {
+        eprintln!("fdi-launch: robot {id} diverged at t = {t:.3} s (its state left the bound of {} rad or became non-finite): its metrics are not results", fdi_common::metrics::DIVERGENCE_BOUND_RAD);
+    }
     println!("trace digest {}", s.trace_digest);
+}
+
+/// Onsets as `t: time to detect` (`never` when undetected); a long train is summarised.
+pub fn describe_onsets(onsets: &[Onset]) -> String {
+    let one = |o: &Onset| {
+        format!(
+            "{:.1}: {}",
+            o.t_s,
+            o.time_to_detect_s
+                .map_or("never".into(), |d| format!("{d:.3}"))
+        )
+    };
+    if onsets.len() <= 4 {
+        return onsets.iter().map(one).collect::<Vec<_>>().join(", ");
+    }
+    let mut detected: Vec<f64> = onsets.iter().filter_map(|o| o.time_to_detect_s).collect();
+    detected.sort_by(f64::total_cmp);
+    let median = detected
+        .get(detected.len() / 2)
+        .map_or("-".into(), |d| format!("{d:.3}"));
+    format!(
+        "{} onsets (first {}), {} detected, median {median}",
+        onsets.len(),
+        one(&onsets[0]),
+        detected.len()
+    )
 }
 
 fn validate(path: &Path) -> Result<ExitCode> {

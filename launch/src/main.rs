@@ -25,7 +25,10 @@ fn main() -> std::process::ExitCode {
         Ok(code) => code,
         Err(e) => {
             eprintln!("fdi-launch: error: {e:#}");
-            std::process::ExitCode::FAILURE
+            match e.downcast_ref::<runtime::Interrupted>() {
+                Some(i) => std::process::ExitCode::from(i.exit_code()),
+                None => std::process::ExitCode::FAILURE,
+            }
         }
     }
 }

@@ -117,20 +117,44 @@ pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
         "# RMSE of run `{}` ({} engine, {} clock, {} controller, attack `{}`)\n\n",
         s.scenario, s.engine, s.clock, s.controller, s.attack
     );
-    md.push_str("| robot | RMSE (rad) | max abs error (rad) | false alarms | deadline misses | rejected inputs |\n|---|---|---|---|---|---|\n");
-    let mut csv = String::from(
-        "robot,rmse_rad,max_abs_error_rad,false_alarms,deadline_misses,rejected_inputs\n",
-    );
-    for (id, m) in &s.metrics {
+    if let Some(p) = &s.partial {
         let _ = writeln!(
             md,
-            "| {id} | {:.5} | {:.5} | {} | {} | {} |",
-            m.rmse_rad, m.max_abs_error_rad, m.false_alarms, m.deadline_misses, m.rejected_inputs
+            "**Partial run** ({}): every figure covers the {} ticks recorded ({:.3} s) of {} planned.\n",
+            p.reason, s.ticks, s.sim_s, p.planned_ticks
+        );
+    }
+    md.push_str("| robot | RMSE (rad) | max abs error (rad) | false alarms | deadline misses | rejected inputs | rejected torques | state resets |\n|---|---|---|---|---|---|---|---|\n");
+    let mut csv = String::from(
+        "robot,rmse_rad,max_abs_error_rad,false_alarms,deadline_misses,rejected_inputs,rejected_torques,state_resets,diverged_at_s,ticks\n",
+    );
+    for (id, m) in &s.metrics {
+        let rmse = match m.diverged_at_s {
+            Some(t) => format!("diverged at t = {t:.3} s"),
+            None => format!("{:.5}", m.rmse_rad),
+        };
+        let _ = writeln!(
+            md,
+            "| {id} | {rmse} | {:.5} | {} | {} | {} | {} | {} |",
+            m.max_abs_error_rad,
+            m.false_alarms,
+            m.deadline_misses,
+            m.rejected_inputs,
+            m.rejected_torques,
+            m.state_resets
         );
         let _ = writeln!(
             csv,
-            "{id},{},{},{},{},{}",
-            m.rmse_rad, m.max_abs_error_rad, m.false_alarms, m.deadline_misses, m.rejected_inputs
+            "{id},{},{},{},{},{},{},{},{},{}",
+            m.rmse_rad,
+            m.max_abs_error_rad,
+            m.false_alarms,
+            m.deadline_misses,
+            m.rejected_inputs,
+            m.rejected_torques,
+            m.state_resets,
+            m.diverged_at_s.map_or(String::new(), |t| t.to_string()),
+            m.ticks
         );
     }
     std::fs::write(dir.join("rmse.md"), md).context("writing rmse.md")?;

@@ -1,10 +1,11 @@
 //! The multi-process engine: spawns the agents, the attacker and the control center, supervises
 //! them, and tears everything down (processes and shared memory) however the run ends.
 
+use std::os::unix::process::CommandExt;
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -76,23 +77,37 @@ fn role_command(role: &str) -> Result<Command> {
     Ok(c)
 }
 
+/// `SIGINT`, `SIGKILL`, ...: the name of signal `sig`, or its number.
+pub fn signal_name(sig: i32) -> String {
+    signal_hook::low_level::signal_name(sig).map_or_else(|| format!("signal {sig}"), Into::into)
+}
+
 /// Describes how a child ended, naming the signal.
 pub fn describe_status(status: ExitStatus) -> String {
     if let Some(sig) = status.signal() {
-        let name = match sig {
-            1 => "SIGHUP",
-            2 => "SIGINT",
-            6 => "SIGABRT",
-            9 => "SIGKILL",
-            11 => "SIGSEGV",
-            15 => "SIGTERM",
-            _ => "",
-        };
-        format!("was killed by signal {sig} {name}")
-            .trim_end()
-            .to_string()
+        match signal_hook::low_level::signal_name(sig) {
+            Some(name) => format!("was killed by signal {sig} {name}"),
+            None => format!("was killed by signal {sig}"),
+        }
     } else {
         format!("exited with status {}", status.code().unwrap_or(-1))
+    }
+}
+
+/// The launcher was interrupted (SIGINT, SIGTERM). `fdi-launch` exits with `128 + signal`, as
+/// a shell reports a process killed by it.
+#[derive(Debug, Clone, Copy, thiserror::Error)]
+#[error("interrupted by {} {phase}: every process was stopped", signal_name(*.signal))]
+pub struct Interrupted {
+    pub signal: i32,
+    /// `before the start` (nothing recorded) or `during the run`.
+    pub phase: &'static str,
+}
+
+impl Interrupted {
+    /// The exit status `fdi-launch` ends with: 130 for SIGINT, 143 for SIGTERM.
+    pub fn exit_code(&self) -> u8 {
+        u8::try_from(128 + self.signal).unwrap_or(1)
     }
 }
 
@@ -169,6 +184,17 @@ pub struct IpcOutcome {
     pub leftovers: Vec<PathBuf>,
     /// Realtime agents that died or fell silent while the run went on.
     pub lost: Vec<LostAgent>,
+    /// The signal (SIGINT, SIGTERM) that interrupted the run after its start; the traces hold
+    /// the run up to that point.
+    pub interrupted: Option<i32>,
+    /// How the processes ended, when interrupted.
+    pub exits: String,
+}
+
+/// How the supervision of a started run ended.
+struct Supervised {
+    wall_s: f64,
+    interrupted: Option<i32>,
 }
 
 /// Options of one multi-process run.
@@ -199,12 +225,21 @@ struct Launcher {
     control: ipc::Outbox<ControlMsg>,
     status: ipc::Inbox<StatusMsg>,
     waker: ipc::Waker,
-    interrupted: Arc<AtomicBool>,
+    /// The signal that interrupted the launcher (0: none).
+    interrupted: Arc<AtomicUsize>,
     /// The start was broadcast: from then on the run records.
     started: bool,
 }
 
 impl Launcher {
+    /// The signal (SIGINT, SIGTERM) the launcher received, if any.
+    fn interrupt(&self) -> Option<i32> {
+        match self.interrupted.load(Ordering::SeqCst) {
+            0 => None,
+            sig => i32::try_from(sig).ok(),
+        }
+    }
+
     /// Reaps exited children; returns the first abnormal exit that ends the run. In realtime an
     /// agent's abnormal exit does not end the run (the control center keeps controlling the
     /// others): it is recorded in `self.lost` instead.
@@ -325,11 +360,12 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     let prefix = new_prefix();
     let scenario_path = opts.run_dir.join("scenario.toml");
     std::fs::create_dir_all(opts.run_dir.join("traces")).context("creating the traces folder")?;
-    let interrupted = Arc::new(AtomicBool::new(false));
-    signal_hook::flag::register(signal_hook::consts::SIGINT, Arc::clone(&interrupted))?;
-    signal_hook::flag::register(signal_hook::consts::SIGTERM, Arc::clone(&interrupted))?;
+    let interrupted = Arc::new(AtomicUsize::new(0));
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register_usize(sig, Arc::clone(&interrupted), sig as usize)?;
+    }
 
-    let (result, lost) = {
+    let result = {
         let transport = Transport::open(
             &prefix,
             "launcher",
@@ -366,17 +402,23 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             Err(e) if !launcher.started => Err(e.context(DidNotStart)),
             r => r,
         };
-        (r, std::mem::take(&mut launcher.lost))
+        (r, std::mem::take(&mut launcher.lost), launcher.exits())
         // ports and node dropped here, before the files are removed
     };
+    let (result, lost, exits) = result;
     ipc::remove_run_resources(&prefix).ok();
     let leftovers = ipc::leftover_files(&prefix);
-    let wall_s = result?;
+    let Supervised {
+        wall_s,
+        interrupted,
+    } = result?;
     Ok(IpcOutcome {
         wall_s,
         prefix,
         leftovers,
         lost,
+        interrupted,
+        exits,
     })
 }
 
@@ -387,7 +429,7 @@ fn spawn_and_supervise(
     scenario_path: &Path,
     transport: &Transport,
     l: &mut Launcher,
-) -> Result<f64> {
+) -> Result<Supervised> {
     let mut roles: Vec<(String, String, Wake, Option<u32>)> = vec![(
         "control-center".into(),
         "control-center".into(),
@@ -428,9 +470,13 @@ fn spawn_and_supervise(
         if let Some(cpus) = &opts.placement.cpus {
             cmd.arg("--cpus").arg(cpus.to_string());
         }
+        // Each child in a process group of its own: the terminal's Ctrl-C (SIGINT to the
+        // foreground group) reaches the launcher alone, which stops the run in order (STOP
+        // message, then SIGTERM) — a child never dies of it half-started or mid-record.
         cmd.stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(Stdio::piped());
+            .stderr(Stdio::piped())
+            .process_group(0);
         let mut child = cmd.spawn().with_context(|| format!("spawning {name}"))?;
         let stderr = child
             .stderr
@@ -454,11 +500,15 @@ fn spawn_and_supervise(
     // Every process reports ready once its ports exist; only then can nothing sent be lost.
     let began = Instant::now();
     while l.procs.iter().any(|p| !p.ready) {
+        if let Some(signal) = l.interrupt() {
+            return Err(Interrupted {
+                signal,
+                phase: "before the start",
+            }
+            .into());
+        }
         if let Some(failed) = l.poll_children() {
             bail!("{failed} before the start");
-        }
-        if l.interrupted.load(Ordering::SeqCst) {
-            bail!("interrupted before the start");
         }
         if began.elapsed() > READY_TIMEOUT {
             let missing: Vec<&str> = l
@@ -503,8 +553,14 @@ fn spawn_and_supervise(
 
     let mut done = vec![false; l.procs.len()];
     let mut lost_reports = Vec::new();
-    let wall_s = loop {
+    let (wall_s, interrupted) = loop {
         l.waker.wait(Duration::from_millis(50))?;
+        // An interrupt comes first: whatever a child did after it is part of the stop.
+        if let Some(signal) = l.interrupt() {
+            bar.abandon();
+            l.teardown();
+            break (started.elapsed().as_secs_f64(), Some(signal));
+        }
         let procs = &l.procs;
         l.status.drain(|m| {
             if Role::from_code(m.role) == Some(Role::Center) {
@@ -574,19 +630,20 @@ fn spawn_and_supervise(
         if l.procs.iter().enumerate().all(|(i, p)| finished(i, p))
             || l.procs.iter().all(|p| p.status.is_some())
         {
-            break started.elapsed().as_secs_f64();
+            break (started.elapsed().as_secs_f64(), None);
         }
         if let Some(stall) = l.stalled() {
             bar.abandon();
             l.teardown();
             return Err(anyhow!("run stalled: {stall} (processes: {})", l.exits()));
         }
-        if l.interrupted.load(Ordering::SeqCst) {
-            bar.abandon();
-            l.teardown();
-            return Err(anyhow!("interrupted: every process was stopped ({}); the traces hold the run up to that point", l.exits()));
-        }
     };
+    if interrupted.is_some() {
+        return Ok(Supervised {
+            wall_s,
+            interrupted,
+        });
+    }
     bar.finish_and_clear();
     // Reap the exits; a process that fails on its way out still fails the run.
     let began = Instant::now();
@@ -596,7 +653,10 @@ fn spawn_and_supervise(
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    Ok(wall_s)
+    Ok(Supervised {
+        wall_s,
+        interrupted: None,
+    })
 }
 
 fn matches_status(wake: Wake, m: &StatusMsg) -> bool {

@@ -69,7 +69,8 @@ fn run_case(
             let summary = crate::output::discard_if_not_started(
                 &d,
                 execute(r, args.engine, Some(&d), !args.json, &Default::default()),
-            )?;
+            )
+            .and_then(crate::cli::require_whole)?;
             if let Err(e) = crate::report::write_report(&d, r, &summary) {
                 eprintln!(
                     "fdi-launch: warning: the report of {} could not be made: {e:#}",

@@ -552,3 +552,63 @@ fn realtime_run_where_every_process(
     assert_eq!(v["ticks"], 3000);
     v
 }
+
+/// Regression: SIGINT to the whole process group (what a terminal's Ctrl-C sends) of a realtime
+/// run sometimes reported `agent 4 ... exited before the end of the run` (exit 1): the children
+/// got the signal too and their clean exit raced the launcher's. An interrupted run always says
+/// so, exits 128 + signal, and keeps a partial summary and its report.
+#[test]
+fn realtime_interrupt_of_the_process_group_is_always_an_interrupt_with_a_partial_summary() {
+    use std::os::unix::process::CommandExt;
+    use std::process::{Command, Stdio};
+    for (attempt, sig, name, code) in [
+        (1, "-INT", "SIGINT", 130),
+        (2, "-INT", "SIGINT", 130),
+        (3, "-INT", "SIGINT", 130),
+        (4, "-TERM", "SIGTERM", 143),
+    ] {
+        let dir = Scratch::new(&format!("group-interrupt-{attempt}"));
+        let child = Command::new(fdi_tests::launcher())
+            .args(["run", "--clock", "realtime", "--duration-s", "30", "--json"])
+            .arg("--out")
+            .arg(&dir.0)
+            .process_group(0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawning fdi-launch");
+        let launcher = child.id();
+        assert!(
+            wait_until(Duration::from_secs(60), || children_of(launcher).len() == 6),
+            "the six processes never started"
+        );
+        std::thread::sleep(Duration::from_millis(400));
+        // The whole group, as a terminal does (the launcher leads it).
+        let group = Command::new("kill")
+            .args([sig, "--", &format!("-{launcher}")])
+            .status()
+            .expect("kill(1)");
+        assert!(group.success());
+        let out = wait_with_watchdog(child, WATCHDOG);
+        let err = stderr_of(&out);
+        assert_eq!(out.status.code(), Some(code), "attempt {attempt}: {err}");
+        assert!(
+            err.contains(&format!("interrupted by {name}")) && !err.contains("exited before"),
+            "attempt {attempt}: {err}"
+        );
+        let summary: serde_json::Value =
+            serde_json::from_slice(&out.stdout).expect("the summary as JSON on stdout");
+        let partial = &summary["partial"];
+        assert_eq!(partial["signal"].as_i64(), Some(i64::from(code - 128)));
+        let (ticks, planned) = (summary["ticks"].as_u64(), partial["planned_ticks"].as_u64());
+        assert!(
+            ticks.is_some_and(|t| t > 0) && ticks < planned,
+            "{ticks:?} of {planned:?}"
+        );
+        let run_dir = fdi_tests::run_dir_of(&summary);
+        assert!(run_dir.join("summary.json").is_file());
+        assert!(run_dir.join("report").join("report.md").is_file());
+        assert_no_leftovers(launcher);
+    }
+}
