@@ -21,6 +21,12 @@ pub const MAX_AGENTS: usize = 256;
 pub const MAX_FILE_BYTES: u64 = 1 << 20;
 /// Largest number of links a model may have (fixed-size message payloads).
 pub const MAX_DOF: usize = 6;
+/// `validate` warns about a controller gain more than this many times its calibration.
+pub const IMPLAUSIBLE_FACTOR: f64 = 100.0;
+/// `validate` warns about a reference turning more than this per control period, rad.
+pub const MAX_PHASE_PER_PERIOD_RAD: f64 = 0.1;
+/// `validate` warns about an attack injecting more than this, rad or rad/s.
+pub const MAX_PLAUSIBLE_ATTACK_RAD: f64 = 10.0;
 
 /// The embedded default scenario: the paper's experiment (identical to `scenarios/paper.toml`).
 pub const PAPER_SCENARIO: &str = include_str!("../../scenarios/paper.toml");
@@ -470,6 +476,55 @@ impl Resolved {
 }
 
 impl Scenario {
+    /// Values that validate but are implausible for a research run (a gain far beyond the
+    /// calibration, a reference the control period under-samples, an attack of many radians):
+    /// `validate` prints them as warnings and still accepts the scenario. Each names its field.
+    pub fn warnings(&self, attack: &AttackProfile) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
+        let c = &self.controller;
+        for (field, value, calibrated) in [
+            ("gain_k", c.gain_k, 21.0),
+            ("beta", c.beta, 30.0),
+            ("observer_gain_l1", c.observer_gain_l1, 0.01),
+            ("observer_gain_l2", c.observer_gain_l2, 0.012),
+            ("learning_rate_w", c.learning_rate_w, 5000.0),
+            ("learning_rate_v", c.learning_rate_v, 10.0),
+        ] {
+            if value.abs() > IMPLAUSIBLE_FACTOR * calibrated {
+                push(
+                    format!("controller.{field}"),
+                    format!("{value} is more than {IMPLAUSIBLE_FACTOR}× the calibration ({calibrated}): the closed loop may diverge (a run says so, and exits 4)"),
+                );
+            }
+        }
+        let dt = self.control_period_s;
+        for (i, a) in self.agents.iter().enumerate() {
+            for (j, link) in a.trajectory.links.iter().enumerate() {
+                for (name, value) in link.parameters() {
+                    if name == "omega_rad_s" && (value * dt).abs() > MAX_PHASE_PER_PERIOD_RAD {
+                        push(
+                            format!("agents[{i}].trajectory.links[{j}].omega_rad_s"),
+                            format!("{value} rad/s turns {:.3} rad per control period ({dt} s): the reference is under-sampled (more than {MAX_PHASE_PER_PERIOD_RAD} rad per period)", value * dt),
+                        );
+                    }
+                }
+            }
+        }
+        for (i, ch) in attack.channels.iter().enumerate() {
+            for (j, seg) in ch.segments.iter().enumerate() {
+                let rad = seg.waveform.magnitude() * ch.units.to_rad();
+                if rad > MAX_PLAUSIBLE_ATTACK_RAD {
+                    push(
+                        format!("attack.channels[{i}].segments[{j}].waveform"),
+                        format!("injects up to {rad:.3e} rad (or rad/s), more than {MAX_PLAUSIBLE_ATTACK_RAD}: measurements that far off may drive the plant beyond any bound"),
+                    );
+                }
+            }
+        }
+        out
+    }
+
     /// Ids and link counts of the agents.
     pub fn agent_dofs(&self) -> BTreeMap<u32, usize> {
         self.agents.iter().map(|a| (a.id, a.model.dof())).collect()

@@ -557,6 +557,9 @@ fn validate(path: &Path) -> Result<ExitCode> {
                 r.ticks(),
                 r.attack.name
             );
+            for w in r.scenario.warnings(&r.attack) {
+                println!("  warning: {}: {}", w.path, w.message);
+            }
             Ok(ExitCode::SUCCESS)
         }
         Err(e) => {

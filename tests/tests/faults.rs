@@ -277,3 +277,53 @@ fn bad_scenario_files_are_refused_with_their_field_paths_before_anything_is_spaw
         "attack-arg-missing",
     );
 }
+
+/// Regression: a scenario that validates but makes the plant blow up (max |error| 1e72 rad)
+/// ran to the end and exited 0 with RMSE `NaN`. Each robot's divergence is named with its
+/// time, the run exits 4 on both engines, and `validate` warns about the implausible value
+/// while still accepting it.
+#[test]
+fn a_diverging_scenario_names_each_robot_and_its_time_and_exits_non_zero() {
+    let dir = Scratch::new("diverging");
+    let text = PAPER_SCENARIO
+        .replace("beta = 30.0", "beta = 1e9")
+        .replace("duration_s = 40.0", "duration_s = 0.2");
+    assert_ne!(text, PAPER_SCENARIO, "the paper scenario's beta line moved");
+    let path = dir.0.join("huge-beta.toml");
+    fs::write(&path, text).expect("writing the scenario");
+    let file = path.to_string_lossy();
+
+    let validated = fdi_tests::launch_plain(&["validate", &file], Duration::from_secs(60));
+    let said = String::from_utf8_lossy(&validated.stdout);
+    assert!(validated.status.success(), "{said}");
+    assert!(said.contains("warning: controller.beta"), "{said}");
+
+    for engine in ["inproc", "ipc"] {
+        let out = fdi_tests::launch(
+            &["run", &file, "--engine", engine],
+            &dir.0,
+            Duration::from_secs(300),
+        );
+        let (stdout, stderr) = (
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr),
+        );
+        assert_eq!(out.status.code(), Some(4), "{engine}: {stdout}{stderr}");
+        for robot in 1..=4 {
+            assert!(
+                stderr.contains(&format!("robot {robot} diverged at t = ")),
+                "{engine}: {stderr}"
+            );
+        }
+        assert!(stdout.contains("| diverged at t = "), "{engine}: {stdout}");
+    }
+    // The shipped paper scenario draws no warning.
+    let paper = fdi_tests::launch_plain(
+        &[
+            "validate",
+            &fdi_tests::repo_path("scenarios/paper.toml").to_string_lossy(),
+        ],
+        Duration::from_secs(60),
+    );
+    assert!(!String::from_utf8_lossy(&paper.stdout).contains("warning"));
+}

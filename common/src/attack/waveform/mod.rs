@@ -109,6 +109,23 @@ impl Waveform {
         }
     }
 
+    /// The size of what the waveform injects at its start or at its peak, in its channel's units
+    /// (a ramp: its start; noise: mean plus four standard deviations; corrupt and replay:
+    /// zero, they have no magnitude of their own). For the implausibility warnings of
+    /// `validate`.
+    pub fn magnitude(&self) -> f64 {
+        match *self {
+            Self::None | Self::Corrupt { .. } | Self::Replay { .. } => 0.0,
+            Self::Constant { value } => value.abs(),
+            Self::Sine {
+                amplitude, offset, ..
+            } => amplitude.abs() + offset.abs(),
+            Self::Pulse { amplitude, .. } => amplitude.abs(),
+            Self::Ramp { start, .. } => start.abs(),
+            Self::Gaussian { std, mean } => mean.abs() + 4.0 * std.abs(),
+        }
+    }
+
     /// True for `none`: the segment injects nothing.
     pub fn is_none(&self) -> bool {
         matches!(self, Self::None)
