@@ -73,6 +73,7 @@ pub fn run(
     let realtime = s.clock == ClockMode::Realtime;
     // Realtime: relaying ends when every agent has finished or fell silent (lost).
     let mut liveness = Liveness::new(targets.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
+    let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
     let mut sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
     loop {
         let mut relayed = 0;
@@ -118,13 +119,15 @@ pub fn run(
         if relayed > 0 {
             ports.center.ring()?;
         }
+        let now = monotonic_ns();
         if realtime {
-            liveness.newly_lost(monotonic_ns(), |i| targets[i].next >= ticks);
+            liveness.newly_lost(now, |i| targets[i].next >= ticks);
         }
+        // A lost agent may rejoin until the run's wall-clock end: relaying goes on till then.
         if targets
             .iter()
             .enumerate()
-            .all(|(i, t)| t.next >= ticks || liveness.is_lost(i))
+            .all(|(i, t)| liveness.settled(i, t.next >= ticks, now, end_ns))
         {
             break;
         }

@@ -107,6 +107,10 @@ pub struct LostAgent {
     pub t_s: Option<f64>,
     /// How it ended (exit status or signal) or `fell silent`.
     pub reason: String,
+    /// Sim time of the tick at which it was heard from again and controlled again (it
+    /// rejoined: the gap is from `t_s` to here); `None` while it stayed lost to the end.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rejoined_t_s: Option<f64>,
 }
 
 /// Summary of a run, as `run --json` prints it.

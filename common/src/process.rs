@@ -362,6 +362,18 @@ impl LauncherLink {
         self.bell.ring()
     }
 
+    /// Tells the launcher that `agent`, declared lost, is heard from again at `tick`.
+    pub fn report_rejoined(&self, agent: u32, tick: u64) -> Result<(), IpcError> {
+        self.status.send(StatusMsg {
+            role: self.role.code(),
+            agent,
+            kind: StatusMsg::REJOINED,
+            reserved: 0,
+            tick,
+        })?;
+        self.bell.ring()
+    }
+
     /// Tells the launcher that `agent` was declared lost after `tick`.
     pub fn report_lost(&self, agent: u32, tick: u64) -> Result<(), IpcError> {
         self.status.send(StatusMsg {
@@ -497,6 +509,12 @@ pub fn trace_header(
 /// Silence after which a realtime peer is declared lost, ns. With a liveness check every
 /// [`LIVENESS_CHECK`] the loss is reported within 45 ms of the last message.
 pub const LOST_AFTER_NS: u64 = 40_000_000;
+
+/// The wall-clock instant after which a realtime peer that is still lost stays lost: the run's
+/// end (epoch + duration) plus the loss limit.
+pub fn realtime_end_ns(epoch_ns: u64, duration_s: f64) -> u64 {
+    epoch_ns + (duration_s * 1e9) as u64 + LOST_AFTER_NS
+}
 /// How often a realtime event-driven process checks liveness while idle.
 pub const LIVENESS_CHECK: Duration = Duration::from_millis(5);
 
@@ -519,11 +537,19 @@ impl Liveness {
     }
 
     /// Peer `i` was heard from at `now_ns` (never moves its stamp back: a message sent before
-    /// the realtime epoch does not shorten the grace the epoch gives).
-    pub fn seen(&mut self, i: usize, now_ns: u64) {
-        if let Some(s) = self.last_seen_ns.get_mut(i) {
-            *s = (*s).max(now_ns);
-        }
+    /// the realtime epoch does not shorten the grace the epoch gives). A peer declared lost
+    /// rejoins: returns how long it had been silent, ns.
+    pub fn seen(&mut self, i: usize, now_ns: u64) -> Option<u64> {
+        let s = self.last_seen_ns.get_mut(i)?;
+        let silent = now_ns.saturating_sub(*s);
+        *s = (*s).max(now_ns);
+        self.lost_at_ns.get_mut(i)?.take().map(|_| silent)
+    }
+
+    /// Whether peer `i` is done with: finished normally, or lost and the run's wall-clock end
+    /// (`end_ns`: epoch + duration + the loss limit) has passed, so it can no longer rejoin.
+    pub fn settled(&self, i: usize, finished: bool, now_ns: u64, end_ns: u64) -> bool {
+        finished || (self.is_lost(i) && now_ns >= end_ns)
     }
 
     /// Peers silent for longer than the limit and not yet declared lost; declares them lost.

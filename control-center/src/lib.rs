@@ -78,6 +78,9 @@ pub fn run(
     let realtime = s.clock == ClockMode::Realtime;
     // Realtime: an agent silent for LOST_AFTER_NS is declared lost; the others stay controlled.
     let mut liveness = Liveness::new(slots.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
+    let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
+    // Agents heard from again after being declared lost: (slot, silence in ns, tick).
+    let mut rejoined: Vec<(usize, u64, u64)> = Vec::new();
     let mut sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
     // Which agents got a torque in this batch: each is woken once per batch.
     let mut answered = vec![false; slots.len()];
@@ -92,7 +95,9 @@ pub fn run(
                 refused += 1;
                 return;
             }
-            liveness.seen(i, received);
+            if let Some(silent) = liveness.seen(i, received) {
+                rejoined.push((i, silent, m.seq));
+            }
             let slot = &mut slots[i];
             slot.next = m.seq + 1;
             let t = tick_time(m.seq, dt);
@@ -128,8 +133,20 @@ pub fn run(
                 link.bell.ring()?;
             }
         }
+        for (i, silent, k) in rejoined.drain(..) {
+            let id = slots[i].center.agent_id();
+            let message = format!(
+                "agent {id} rejoined at tick {k} after {:.1} ms of silence; controlled again",
+                silent as f64 / 1e6
+            );
+            trace.write(&TraceRecord::Event {
+                t: tick_time(k, dt),
+                message,
+            })?;
+            ports.launcher.report_rejoined(id, k)?;
+        }
+        let now = monotonic_ns();
         if realtime {
-            let now = monotonic_ns();
             for i in liveness.newly_lost(now, |i| slots[i].next >= ticks) {
                 let (id, last) = (slots[i].center.agent_id(), slots[i].next.saturating_sub(1));
                 let silent_ms = liveness.silence_ns(i, now) as f64 / 1e6;
@@ -141,18 +158,24 @@ pub fn run(
                 ports.launcher.report_lost(id, last)?;
             }
         }
+        // Progress over the agents controlled now; the end once every agent finished, or is
+        // lost past the run's wall-clock end (until then a lost agent may rejoin).
         let done = slots
             .iter()
             .enumerate()
             .filter(|(i, _)| !liveness.is_lost(*i))
             .map(|(_, x)| x.next)
             .min()
-            .unwrap_or(ticks);
+            .unwrap_or(0);
         if done >= reported + PROGRESS_EVERY || done >= ticks {
             reported = done;
             ports.launcher.report(StatusMsg::PROGRESS, done)?;
         }
-        if done >= ticks {
+        if slots
+            .iter()
+            .enumerate()
+            .all(|(i, x)| liveness.settled(i, x.next >= ticks, now, end_ns))
+        {
             break;
         }
         if shutdown.requested() || ports.launcher.stop_requested()? {

@@ -417,10 +417,16 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         let when = lost
             .t_s
             .map_or(String::new(), |t| format!(" after t = {t:.3} s"));
-        eprintln!(
-            "fdi-launch: agent {} was lost{when}: {}",
-            lost.agent, lost.reason
-        );
+        match lost.rejoined_t_s {
+            Some(back) => eprintln!(
+                "fdi-launch: agent {} was lost{when} ({}) and rejoined at t = {back:.3} s: its metrics count the gap's ticks as missing",
+                lost.agent, lost.reason
+            ),
+            None => eprintln!(
+                "fdi-launch: agent {} was lost{when}: {}",
+                lost.agent, lost.reason
+            ),
+        }
     }
     if let Err(e) = report::write_report(&dir, &r, &summary) {
         eprintln!(
@@ -457,7 +463,7 @@ fn exit_code(summary: &RunSummary) -> ExitCode {
         )
     } else if !summary.diverged().is_empty() {
         ExitCode::from(4)
-    } else if !summary.lost_agents.is_empty() {
+    } else if summary.lost_agents.iter().any(|l| l.rejoined_t_s.is_none()) {
         ExitCode::from(3)
     } else {
         ExitCode::SUCCESS

@@ -260,6 +260,7 @@ impl Launcher {
                                         agent: id,
                                         t_s: None,
                                         reason: what,
+                                        rejoined_t_s: None,
                                     }),
                                 }
                             }
@@ -553,6 +554,7 @@ fn spawn_and_supervise(
 
     let mut done = vec![false; l.procs.len()];
     let mut lost_reports = Vec::new();
+    let mut rejoin_reports = Vec::new();
     let (wall_s, interrupted) = loop {
         l.waker.wait(Duration::from_millis(50))?;
         // An interrupt comes first: whatever a child did after it is part of the stop.
@@ -575,6 +577,9 @@ fn spawn_and_supervise(
             if m.kind == StatusMsg::LOST {
                 lost_reports.push((m.agent, m.tick as f64 * dt));
             }
+            if m.kind == StatusMsg::REJOINED {
+                rejoin_reports.push((m.agent, m.tick as f64 * dt));
+            }
         })?;
         for (agent, t) in lost_reports.drain(..) {
             if let Some(i) = l.procs.iter().position(|p| p.wake == Wake::Agent(agent)) {
@@ -586,10 +591,27 @@ fn spawn_and_supervise(
                     agent,
                     t_s: Some(t),
                     reason: "fell silent".into(),
+                    rejoined_t_s: None,
                 }),
             }
             bar.println(format!(
                 "fdi-launch: agent {agent} lost at t = {t:.3} s; the run goes on"
+            ));
+        }
+        for (agent, t) in rejoin_reports.drain(..) {
+            let Some(x) = l.lost.iter_mut().find(|x| x.agent == agent) else {
+                continue;
+            };
+            x.rejoined_t_s = Some(t);
+            // It is controlled again and will report done itself, unless its process ended.
+            if let Some(i) = l.procs.iter().position(|p| p.wake == Wake::Agent(agent)) {
+                done[i] = l.procs[i].status.is_some();
+            }
+            let gap = x.t_s.map_or(String::new(), |from| {
+                format!(" after a gap of {:.3} s", t - from)
+            });
+            bar.println(format!(
+                "fdi-launch: agent {agent} rejoined at t = {t:.3} s{gap}"
             ));
         }
         if let Some(failed) = l.poll_children() {

@@ -612,3 +612,46 @@ fn realtime_interrupt_of_the_process_group_is_always_an_interrupt_with_a_partial
         assert_no_leftovers(launcher);
     }
 }
+
+/// Regression: SIGSTOP of the attacker for 0.5 s declared every agent lost for good (exit 3)
+/// although all of them resumed. A lost agent heard from again rejoins, with its gap counted
+/// and reported; only one silent to the end stays lost.
+#[test]
+fn realtime_attacker_stalled_half_a_second_every_agent_rejoins_and_the_run_exits_0() {
+    let dir = Scratch::new("rt-rejoin");
+    let child = spawn(
+        &["run", "--clock", "realtime", "--duration-s", "6", "--json"],
+        &dir.0,
+    );
+    let launcher = child.id();
+    assert!(
+        wait_until(Duration::from_secs(60), || children_of(launcher).len() == 6),
+        "the six processes never started"
+    );
+    std::thread::sleep(Duration::from_millis(1500));
+    let attacker = children_of(launcher)
+        .into_iter()
+        .find(|(_, cmd)| cmd.contains("process attacker"))
+        .map(|(pid, _)| pid)
+        .expect("the attacker process");
+    signal(attacker, "-STOP");
+    std::thread::sleep(Duration::from_millis(500));
+    signal(attacker, "-CONT");
+    let out = wait_with_watchdog(child, WATCHDOG);
+    let err = stderr_of(&out);
+    assert_eq!(out.status.code(), Some(0), "{err}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("summary JSON");
+    let lost = v["lost_agents"].as_array().expect("lost_agents");
+    // Each agent is declared lost at most once and, if it was, rejoined after its loss.
+    for l in lost {
+        let (from, back) = (l["t_s"].as_f64(), l["rejoined_t_s"].as_f64());
+        assert!(
+            from.zip(back).is_some_and(|(a, b)| b > a),
+            "a lost agent without its gap: {lost:?}"
+        );
+    }
+    // Half a second is far beyond the 40 ms loss limit: every agent was lost, and came back.
+    assert_eq!(lost.len(), 4, "{lost:?}");
+    assert!(err.contains("rejoined"), "{err}");
+    assert_no_leftovers(launcher);
+}

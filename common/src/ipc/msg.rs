@@ -107,6 +107,9 @@ impl StatusMsg {
     /// Sent by the control center: the agent in [`StatusMsg::agent`] fell silent (realtime) and
     /// is no longer controlled; `tick` is the last tick heard from it.
     pub const LOST: u32 = 4;
+    /// Sent by the control center: the lost agent in [`StatusMsg::agent`] is heard from again
+    /// at `tick` and controlled again.
+    pub const REJOINED: u32 = 5;
 }
 
 /// Which process a status message comes from.
