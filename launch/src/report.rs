@@ -711,6 +711,36 @@ fn markdown(
         let _ = writeln!(md, "| processes | {p} |");
     }
 
+    if let Some(p) = &s.partial {
+        let _ = writeln!(
+            md,
+            "\n**Partial run** ({}): everything below covers the {} ticks recorded ({:.3} s) of {} planned.",
+            p.reason, s.ticks, s.sim_s, p.planned_ticks
+        );
+    }
+    for (id, t) in s.diverged() {
+        let _ = writeln!(
+            md,
+            "\n**Robot {id} diverged at t = {t:.3} s**: its state left the bound of {} rad or became non-finite; its metrics are not results.",
+            fdi_common::metrics::DIVERGENCE_BOUND_RAD
+        );
+    }
+    for l in &s.lost_agents {
+        let from = l.t_s.map_or("?".into(), |t| format!("{t:.3} s"));
+        let _ = match l.rejoined_t_s {
+            Some(back) => writeln!(
+                md,
+                "\nAgent {} was lost after t = {from} ({}) and rejoined at t = {back:.3} s.",
+                l.agent, l.reason
+            ),
+            None => writeln!(
+                md,
+                "\nAgent {} was lost after t = {from} ({}) and stayed lost.",
+                l.agent, l.reason
+            ),
+        };
+    }
+
     md.push_str("\n## RMSE\n\n");
     let stored = std::fs::read_to_string(run_dir.join("rmse.md")).ok();
     let table: Vec<&str> = stored

@@ -141,3 +141,51 @@ fn proposed_beats_traditional_on_a_shortened_paper_run() {
         assert!(q > 1.5 * p, "robot {id}: traditional {q} vs proposed {p}");
     }
 }
+
+/// Regression: with τ a whole number of control periods, the agent pruned the command in force
+/// before the next step looked it up, applied zero torque without counting a miss (RMSE 2.4×
+/// that of τ + 1e-7 s at 4 ms), and exact multiples picked the older or the newer command
+/// depending on the rounding of `t − τ`. Results are now continuous in τ.
+#[test]
+fn constant_delays_on_the_tick_grid_equal_the_same_delay_plus_a_hair() {
+    use fdi_common::delay::DelayProfile;
+    let with_delay = |value_s: f64| {
+        let mut r = paper(10.0);
+        for a in &mut r.scenario.agents {
+            a.delay = DelayProfile::Constant { value_s };
+        }
+        r
+    };
+    for ms in 1..=5u32 {
+        let tau = f64::from(ms) * 1e-3;
+        let (exact, _) = trace(&with_delay(tau));
+        let (hair, _) = trace(&with_delay(tau + 1e-7));
+        let rmse = |recs: &[TickRecord]| {
+            let r = paper(10.0);
+            let mut e = fdi_common::engine::evaluator_for(&r);
+            for rec in recs {
+                e.push::<2>(rec);
+            }
+            e.finish()
+        };
+        let (a, b) = (rmse(&exact), rmse(&hair));
+        for (id, m) in &a {
+            let other = b[id].rmse_rad;
+            assert!(
+                (m.rmse_rad - other).abs() <= 0.01 * other,
+                "τ = {ms} ms, robot {id}: RMSE {} vs {other} at τ + 1e-7 s",
+                m.rmse_rad
+            );
+            assert_eq!(m.deadline_misses, 0, "τ = {ms} ms, robot {id}");
+        }
+        // Once the first command is due (t ≥ τ), no step applies zero torque.
+        for rec in exact.iter().filter(|r| r.agent.t >= tau) {
+            assert!(
+                rec.agent.u_applied.as_slice().iter().any(|u| *u != 0.0),
+                "τ = {ms} ms: zero torque applied at t = {} (robot {})",
+                rec.agent.t,
+                rec.agent.agent
+            );
+        }
+    }
+}
