@@ -64,7 +64,8 @@ enum Command {
         window_s: f64,
     },
     /// RMSE of the first agent under constant delays (ms), each a separate run. The defaults
-    /// are off the 1 ms grid (exact multiples of Δ behave differently, docs/model.md).
+    /// are the sweep of docs/model.md ("The large-slow delay"); whole multiples of Δ give the
+    /// same values as their neighbours (docs/model.md, "Numerics of the delayed input").
     DelaySweep {
         #[command(flatten)]
         setup: Setup,
@@ -72,7 +73,7 @@ enum Command {
         #[arg(
             long,
             value_delimiter = ',',
-            default_value = "3.06,10.5,20.5,30.5,40.5,45.5,46.5,46.9,47.1,47.5,48.5,49.5,49.9,50.1"
+            default_value = "3.06,10.5,20.5,30.5,40.5,45.5,46.5,46.9,47.1,47.5,48,48.5,49,49.5,50.1,51,52"
         )]
         delays_ms: Vec<f64>,
     },

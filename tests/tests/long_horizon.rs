@@ -1,52 +1,85 @@
-//! Long horizons (docs/model.md, "Long horizons"): over 150 s without attack the paper's update
-//! laws let robot 1 drift away from the traditional controller's accuracy, and the robust update
-//! law of `scenarios/paper-long-horizon.toml` keeps it there.
+//! Long horizons (docs/model.md, "Long horizons"), without attack: what the paper's update laws
+//! do over hundreds of seconds against the traditional controller, and what the robust update
+//! law of `scenarios/paper-long-horizon.toml` changes.
 
 use std::path::Path;
 
 use fdi_common::engine::{run_inproc, RunSummary};
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 
-/// 150 s: the paper's laws are already 30–40 % worse than the traditional controller on robot 1
-/// (and raise false alarms); at 40 s they are not (Table I hides the drift).
-const HORIZON_S: f64 = 150.0;
-
-fn robot1(mut r: Resolved, mode: ControllerMode) -> RunSummary {
-    r.scenario.duration_s = HORIZON_S;
+/// RMSE (rad) and false alarms of one robot of `r`, run alone for `duration_s`.
+fn run_robot(mut r: Resolved, id: u32, mode: ControllerMode, duration_s: f64) -> (f64, u64) {
+    r.scenario.duration_s = duration_s;
     r.scenario.controller.mode = mode;
-    let r = r.retain_agents(|a| a.id == 1);
-    run_inproc::<2>(&r, |_| {}).expect("the engine runs")
+    let r = r.retain_agents(|a| a.id == id);
+    let s: RunSummary = run_inproc::<2>(&r, |_| {}).expect("the engine runs");
+    let m = &s.metrics[&id.to_string()];
+    (m.rmse_rad, m.false_alarms)
 }
 
-fn long_horizon_scenario() -> Resolved {
+/// The scenario file with the remedy on (300 s, no attack).
+fn with_remedy() -> Resolved {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/paper-long-horizon.toml");
-    scenario::load_file(&path).unwrap_or_else(|e| panic!("{e}"))
+    let r = scenario::load_file(&path).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!r.scenario.controller.update_law.is_paper());
+    assert!(
+        r.attack.channels.is_empty(),
+        "the scenario runs without attack"
+    );
+    r
+}
+
+/// The same scenario with the paper's update laws (37)-(38).
+fn paper_laws() -> Resolved {
+    let mut r = with_remedy();
+    r.scenario.controller.update_law = Default::default();
+    r
 }
 
 #[test]
-fn the_robust_update_law_keeps_robot_1_as_accurate_as_the_traditional_controller() {
-    let remedy = long_horizon_scenario();
-    assert!(!remedy.scenario.controller.update_law.is_paper());
+fn robot_1_under_the_paper_laws_does_not_drift_between_150_and_300_s() {
+    // Before the observer's input was the delayed input's mean over its step, this grew from
+    // 0.0118 rad at 150 s to 0.0207 rad at 300 s. Measured now: 0.0101 and 0.0103 rad.
+    let (at_150, _) = run_robot(paper_laws(), 1, ControllerMode::Proposed, 150.0);
+    let (at_300, alarms) = run_robot(paper_laws(), 1, ControllerMode::Proposed, 300.0);
     assert!(
-        remedy.attack.channels.is_empty(),
-        "the scenario runs without attack"
+        at_300 <= 1.05 * at_150,
+        "robot 1 drifts: RMSE {at_150} at 150 s, {at_300} at 300 s"
     );
-    let mut paper_laws = remedy.clone();
-    paper_laws.scenario.controller.update_law = Default::default();
+    assert_eq!(alarms, 0, "false alarms over 300 s without attack");
+}
 
-    let traditional = robot1(remedy.clone(), ControllerMode::Traditional);
-    let with_remedy = robot1(remedy, ControllerMode::Proposed);
-    let without = robot1(paper_laws, ControllerMode::Proposed);
-    let rmse = |s: &RunSummary| s.metrics["1"].rmse_rad;
-    let (t, r, p) = (rmse(&traditional), rmse(&with_remedy), rmse(&without));
-
-    // The horizon must expose the drift, or the next assertion proves nothing. Measured:
-    // paper's laws 0.0118 rad, traditional 0.0087 rad (+36 %).
+#[test]
+fn the_robust_update_law_keeps_robot_1_within_10_percent_of_the_traditional_controller() {
+    // Measured at 300 s: remedy 0.0091 rad, traditional 0.0088 rad (+3 %); the paper's laws
+    // 0.0103 rad (+17 %).
+    let (traditional, _) = run_robot(with_remedy(), 1, ControllerMode::Traditional, 300.0);
+    let (remedy, alarms) = run_robot(with_remedy(), 1, ControllerMode::Proposed, 300.0);
     assert!(
-        p > 1.25 * t,
-        "paper's laws {p} vs traditional {t}: no drift to remove"
+        remedy <= 1.10 * traditional,
+        "remedy {remedy} vs traditional {traditional}"
     );
-    // The acceptance criterion of the remedy (measured 0.0093 rad, +7 %) and no false alarm.
-    assert!(r <= 1.10 * t, "remedy {r} vs traditional {t}");
-    assert_eq!(with_remedy.metrics["1"].false_alarms, 0);
+    assert_eq!(alarms, 0, "false alarms with the remedy");
+}
+
+#[test]
+fn robot_2_drifts_under_the_paper_laws_over_1000_s_and_the_robust_update_law_stops_it() {
+    // Measured at 1000 s: paper's laws 0.0113 rad with 28 false alarms (the error keeps
+    // growing: 0.0189 rad and 68 false alarms at 3000 s), remedy 0.0061 rad with none,
+    // traditional 0.0051 rad.
+    const HORIZON_S: f64 = 1000.0;
+    let (traditional, _) = run_robot(with_remedy(), 2, ControllerMode::Traditional, HORIZON_S);
+    let (paper, paper_alarms) = run_robot(paper_laws(), 2, ControllerMode::Proposed, HORIZON_S);
+    let (remedy, remedy_alarms) = run_robot(with_remedy(), 2, ControllerMode::Proposed, HORIZON_S);
+    // The documented remaining drift of the paper's laws (docs/model.md): if this fails, the
+    // drift is gone and the documentation is out of date.
+    assert!(
+        paper > 1.5 * traditional && paper_alarms > 0,
+        "paper's laws {paper} ({paper_alarms} false alarms) vs traditional {traditional}"
+    );
+    assert!(
+        remedy <= 1.3 * traditional,
+        "remedy {remedy} vs traditional {traditional}"
+    );
+    assert_eq!(remedy_alarms, 0, "false alarms with the remedy");
 }
