@@ -297,10 +297,10 @@ pub fn main_with(args: ProcessArgs) -> ExitCode {
     match result {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!(
+            fdi_common::process::print_failure(format_args!(
                 "fdi-agent {}: {e}",
                 args.agent.map_or("?".into(), |a| a.to_string())
-            );
+            ));
             ExitCode::FAILURE
         }
     }

@@ -172,7 +172,7 @@ pub fn main_with(args: ProcessArgs) -> ExitCode {
     }) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("fdi-attacker: {e}");
+            fdi_common::process::print_failure(format_args!("fdi-attacker: {e}"));
             ExitCode::FAILURE
         }
     }

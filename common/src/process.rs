@@ -510,6 +510,14 @@ pub fn trace_header(
 /// [`LIVENESS_CHECK`] the loss is reported within 45 ms of the last message.
 pub const LOST_AFTER_NS: u64 = 40_000_000;
 
+/// Prints a child process's failure on its stderr, which the launcher relays. A write error
+/// is ignored: the launcher that read the pipe may be gone (killed), and `eprintln!` would then
+/// panic on the broken pipe instead of exiting with the failure's status.
+pub fn print_failure(message: std::fmt::Arguments<'_>) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{message}");
+}
+
 /// The wall-clock instant after which a realtime peer that is still lost stays lost: the run's
 /// end (epoch + duration) plus the loss limit.
 pub fn realtime_end_ns(epoch_ns: u64, duration_s: f64) -> u64 {

@@ -226,7 +226,7 @@ pub fn main_with(args: ProcessArgs) -> ExitCode {
     }) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("fdi-control-center: {e}");
+            fdi_common::process::print_failure(format_args!("fdi-control-center: {e}"));
             ExitCode::FAILURE
         }
     }

@@ -144,7 +144,7 @@ pub fn main_with(args: &ProcessArgs) -> ExitCode {
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("fdi-replayer: {e:#}");
+            fdi_common::process::print_failure(format_args!("fdi-replayer: {e:#}"));
             ExitCode::FAILURE
         }
     }

@@ -192,13 +192,26 @@ impl Transport {
             reason,
         };
         let node_name = NodeName::new(name).map_err(|e| err(format!("{e:?}")))?;
-        let node = NodeBuilder::new()
-            .name(&node_name)
-            .config(&config)
-            // Signals are ours: the processes set a flag on SIGINT/SIGTERM and flush traces.
-            .signal_handling_mode(SignalHandlingMode::Disabled)
-            .create::<ipc::Service>()
-            .map_err(|e| err(format!("{e:?}")))?;
+        // iceoryx2 reports an `InternalError` when a file of its shared node registry changes
+        // under it while the node's files are created (another run being cleaned up at that
+        // moment): transient, so a few bounded retries.
+        let mut attempt = 0;
+        let node = loop {
+            let created = NodeBuilder::new()
+                .name(&node_name)
+                .config(&config)
+                // Signals are ours: the processes set a flag on SIGINT/SIGTERM and flush traces.
+                .signal_handling_mode(SignalHandlingMode::Disabled)
+                .create::<ipc::Service>();
+            match created {
+                Ok(node) => break node,
+                Err(iceoryx2::node::NodeCreationFailure::InternalError) if attempt < 5 => {
+                    attempt += 1;
+                    std::thread::sleep(std::time::Duration::from_millis(20));
+                }
+                Err(e) => return Err(err(format!("{e:?}"))),
+            }
+        };
         Ok(Self {
             node,
             config,
