@@ -579,11 +579,27 @@ fn realtime_interrupt_of_the_process_group_is_always_an_interrupt_with_a_partial
             .spawn()
             .expect("spawning fdi-launch");
         let launcher = child.id();
+        // Mid-run: the agent's trace grows (its records are being written), so the start has
+        // been broadcast; an interrupt before it is another case (nothing recorded).
+        let trace_size = || {
+            std::fs::read_dir(&dir.0)
+                .ok()
+                .and_then(|mut d| d.next())
+                .and_then(|e| e.ok())
+                .and_then(|e| std::fs::metadata(e.path().join("traces/agent-1.trace")).ok())
+                .map_or(0, |m| m.len())
+        };
+        let mut last = trace_size();
         assert!(
-            wait_until(Duration::from_secs(60), || children_of(launcher).len() == 6),
-            "the six processes never started"
+            wait_until(Duration::from_secs(60), || {
+                std::thread::sleep(Duration::from_millis(100));
+                let now = trace_size();
+                let growing = last > 0 && now > last;
+                last = now;
+                growing
+            }),
+            "the run never started recording"
         );
-        std::thread::sleep(Duration::from_millis(400));
         // The whole group, as a terminal does (the launcher leads it).
         let group = Command::new("kill")
             .args([sig, "--", &format!("-{launcher}")])
