@@ -76,15 +76,16 @@ impl DelayProfile {
     /// over inside an integration step. `c − τ(c)` increases (`|τ̇| < 1`), so Newton's method
     /// from the linear interpolation converges; a fixed iteration count keeps it deterministic.
     pub fn takeover_time(&self, stamp: f64, (a, qa): (f64, f64), (b, qb): (f64, f64)) -> f64 {
-        let mut c = a + (b - a) * ((stamp - qa) / (qb - qa));
-        if let Self::Constant { value_s } = *self {
-            c = stamp + value_s;
-        } else {
-            for _ in 0..4 {
-                let g = c - self.tau(c) - stamp;
-                c -= g / (1.0 - self.rate(c));
+        let c = match *self {
+            Self::Constant { value_s } => stamp + value_s,
+            Self::Sine { .. } => {
+                let mut c = a + (b - a) * ((stamp - qa) / (qb - qa));
+                for _ in 0..4 {
+                    c -= (c - self.tau(c) - stamp) / (1.0 - self.rate(c));
+                }
+                c
             }
-        }
+        };
         c.clamp(a, b)
     }
 

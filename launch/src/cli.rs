@@ -500,21 +500,15 @@ fn print_summary(s: &RunSummary) {
     if let Some(p) = &s.placement {
         println!("processes: {p}");
     }
-    if let Some(p) = &s.partial {
-        println!(
-            "PARTIAL RUN ({}): every metric covers the {} ticks recorded ({:.3} s) of {} planned",
-            p.reason, s.ticks, s.sim_s, p.planned_ticks
-        );
+    if let Some(notice) = output::partial_notice(s) {
+        println!("{}", notice.to_uppercase());
     }
     println!("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses |");
     println!("|---|---|---|---|---|---|");
     for (id, m) in &s.metrics {
-        let rmse = match m.diverged_at_s {
-            Some(t) => format!("diverged at t = {t:.3} s"),
-            None => format!("{:.4}", m.rmse_rad),
-        };
         println!(
-            "| {id} | {rmse} | {:.4} | {} | {} | {} |",
+            "| {id} | {} | {:.4} | {} | {} | {} |",
+            output::rmse_cell(m, 4),
             m.max_abs_error_rad,
             describe_onsets(&m.onsets),
             m.false_alarms,

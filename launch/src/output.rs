@@ -6,6 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use fdi_common::engine::RunSummary;
+use fdi_common::metrics::AgentMetrics;
 use fdi_common::scenario::{Resolved, MAX_FILE_BYTES};
 
 /// `YYYYMMDD-HHMMSS` in UTC.
@@ -106,6 +107,25 @@ pub fn discard_if_not_started<T>(dir: &Path, result: Result<T>) -> Result<T> {
     result
 }
 
+/// The RMSE of one robot as a table cell, or `diverged at t = … s` for a robot that diverged.
+pub fn rmse_cell(m: &AgentMetrics, decimals: usize) -> String {
+    match m.diverged_at_s {
+        Some(t) => format!("diverged at t = {t:.3} s"),
+        None => format!("{:.decimals$}", m.rmse_rad),
+    }
+}
+
+/// What a partial run's figures cover, e.g. `partial run (interrupted by SIGINT): every metric
+/// covers the 2862 ticks recorded (2.862 s) of 20000 planned`; `None` for a whole run.
+pub fn partial_notice(s: &RunSummary) -> Option<String> {
+    s.partial.as_ref().map(|p| {
+        format!(
+            "partial run ({}): every metric covers the {} ticks recorded ({:.3} s) of {} planned",
+            p.reason, s.ticks, s.sim_s, p.planned_ticks
+        )
+    })
+}
+
 /// Writes `summary.json`, `rmse.md` and `rmse.csv`.
 pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
     std::fs::write(
@@ -117,25 +137,18 @@ pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
         "# RMSE of run `{}` ({} engine, {} clock, {} controller, attack `{}`)\n\n",
         s.scenario, s.engine, s.clock, s.controller, s.attack
     );
-    if let Some(p) = &s.partial {
-        let _ = writeln!(
-            md,
-            "**Partial run** ({}): every figure covers the {} ticks recorded ({:.3} s) of {} planned.\n",
-            p.reason, s.ticks, s.sim_s, p.planned_ticks
-        );
+    if let Some(notice) = partial_notice(s) {
+        let _ = writeln!(md, "**{notice}.**\n");
     }
     md.push_str("| robot | RMSE (rad) | max abs error (rad) | false alarms | deadline misses | rejected inputs | rejected torques | state resets |\n|---|---|---|---|---|---|---|---|\n");
     let mut csv = String::from(
         "robot,rmse_rad,max_abs_error_rad,false_alarms,deadline_misses,rejected_inputs,rejected_torques,state_resets,diverged_at_s,ticks\n",
     );
     for (id, m) in &s.metrics {
-        let rmse = match m.diverged_at_s {
-            Some(t) => format!("diverged at t = {t:.3} s"),
-            None => format!("{:.5}", m.rmse_rad),
-        };
         let _ = writeln!(
             md,
-            "| {id} | {rmse} | {:.5} | {} | {} | {} | {} | {} |",
+            "| {id} | {} | {:.5} | {} | {} | {} | {} | {} |",
+            rmse_cell(m, 5),
             m.max_abs_error_rad,
             m.false_alarms,
             m.deadline_misses,

@@ -81,22 +81,27 @@ mod tests {
     use super::*;
     use std::process::{Command, Stdio};
 
-    #[test]
-    fn a_failed_child_is_named_with_the_cause_it_printed_last() {
+    /// The cause a relay reports for a child running `script` under `sh`, which fails.
+    fn cause_of(script: &str) -> Option<String> {
         let mut child = Command::new("sh")
-            .args([
-                "-c",
-                "echo 'fdi-control-center: a warning first' >&2; \
-                 echo 'fdi-control-center: writing runs/x/traces/control-center.trace: No space left on device (os error 28)' >&2; \
-                 exit 1",
-            ])
+            .args(["-c", script])
             .stderr(Stdio::piped())
             .spawn()
             .expect("sh");
         let mut relay = StderrRelay::start(child.stderr.take().expect("pipe"), "sh");
         assert!(!child.wait().expect("wait").success());
+        relay.cause()
+    }
+
+    #[test]
+    fn a_failed_child_is_named_with_the_cause_it_printed_last() {
         assert_eq!(
-            relay.cause().as_deref(),
+            cause_of(
+                "echo 'fdi-control-center: a warning first' >&2; \
+                 echo 'fdi-control-center: writing runs/x/traces/control-center.trace: No space left on device (os error 28)' >&2; \
+                 exit 1"
+            )
+            .as_deref(),
             Some(
                 "writing runs/x/traces/control-center.trace: No space left on device (os error 28)"
             )
@@ -105,31 +110,17 @@ mod tests {
 
     #[test]
     fn an_agent_is_named_with_the_cause_without_its_program_name_and_id() {
-        let mut child = Command::new("sh")
-            .args([
-                "-c",
-                "echo 'fdi-agent 3: writing a.trace: No space left on device (os error 28)' >&2; exit 1",
-            ])
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("sh");
-        let mut relay = StderrRelay::start(child.stderr.take().expect("pipe"), "sh");
-        assert!(!child.wait().expect("wait").success());
         assert_eq!(
-            relay.cause().as_deref(),
+            cause_of(
+                "echo 'fdi-agent 3: writing a.trace: No space left on device (os error 28)' >&2; exit 1"
+            )
+            .as_deref(),
             Some("writing a.trace: No space left on device (os error 28)")
         );
     }
 
     #[test]
     fn a_child_that_printed_nothing_gives_no_cause() {
-        let mut child = Command::new("sh")
-            .args(["-c", "exit 1"])
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("sh");
-        let mut relay = StderrRelay::start(child.stderr.take().expect("pipe"), "sh");
-        assert!(!child.wait().expect("wait").success());
-        assert_eq!(relay.cause(), None);
+        assert_eq!(cause_of("exit 1"), None);
     }
 }

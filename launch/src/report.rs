@@ -711,12 +711,8 @@ fn markdown(
         let _ = writeln!(md, "| processes | {p} |");
     }
 
-    if let Some(p) = &s.partial {
-        let _ = writeln!(
-            md,
-            "\n**Partial run** ({}): everything below covers the {} ticks recorded ({:.3} s) of {} planned.",
-            p.reason, s.ticks, s.sim_s, p.planned_ticks
-        );
+    if let Some(notice) = crate::output::partial_notice(s) {
+        let _ = writeln!(md, "\n**{notice}.**");
     }
     for (id, t) in s.diverged() {
         let _ = writeln!(

@@ -630,20 +630,25 @@ mod tests {
         format!("fdiut{}_{tag}_", std::process::id())
     }
 
+    /// A node `name` of run `prefix`, sized for one agent and one message in flight.
+    fn open_small(prefix: &str, name: &str) -> Transport {
+        Transport::open(
+            prefix,
+            name,
+            Sizing {
+                agents: 1,
+                in_flight: 1,
+            },
+        )
+        .expect("node")
+    }
+
     #[test]
     fn a_run_whose_files_are_only_in_the_iceoryx2_root_is_still_found_and_removed() {
         let p = prefix("rp");
         let mine = |name: &str| name.starts_with(&p).then(|| p.clone());
         {
-            let t = Transport::open(
-                &p,
-                "test",
-                Sizing {
-                    agents: 1,
-                    in_flight: 1,
-                },
-            )
-            .expect("node");
+            let t = open_small(&p, "test");
             let _w = t.waker(Wake::Launcher).expect("listener");
             assert_eq!(run_prefixes(mine), vec![p.clone()]);
             // A killed run's leftovers need not include a shared-memory file (the launcher's
@@ -665,15 +670,7 @@ mod tests {
     fn waker_wait_with_a_sub_microsecond_timeout_returns_instead_of_blocking_forever() {
         let p = prefix("w");
         {
-            let t = Transport::open(
-                &p,
-                "test",
-                Sizing {
-                    agents: 1,
-                    in_flight: 1,
-                },
-            )
-            .expect("node");
+            let t = open_small(&p, "test");
             let waker = t.waker(Wake::Launcher).expect("listener");
             let started = std::time::Instant::now();
             for ns in [0u64, 1, 500, 999] {
@@ -777,24 +774,8 @@ mod tests {
     fn two_prefixes_do_not_see_each_other() {
         let (a, b) = (prefix("a"), prefix("b"));
         {
-            let ta = Transport::open(
-                &a,
-                "a",
-                Sizing {
-                    agents: 1,
-                    in_flight: 1,
-                },
-            )
-            .expect("node a");
-            let tb = Transport::open(
-                &b,
-                "b",
-                Sizing {
-                    agents: 1,
-                    in_flight: 1,
-                },
-            )
-            .expect("node b");
+            let ta = open_small(&a, "a");
+            let tb = open_small(&b, "b");
             let sub_a: Inbox<StatusMsg> = ta.subscriber(Stream::Status).expect("sub a");
             let pub_b: Outbox<StatusMsg> = tb.publisher(Stream::Status).expect("pub b");
             assert_eq!(
