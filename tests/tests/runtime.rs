@@ -202,8 +202,34 @@ fn start_with(needle: &str, extra: &[&str], dir: &Scratch) -> (std::process::Chi
         }),
         "{needle} never started"
     );
-    std::thread::sleep(Duration::from_millis(300));
+    wait_until_recording(dir);
     (child, found.expect("found"))
+}
+
+/// Waits until the run under `dir` is mid-run: agent 1's trace grows (its records are being
+/// written), so the start has been broadcast. A signal before it is another case (nothing
+/// recorded, "before the start").
+fn wait_until_recording(dir: &Scratch) {
+    // Summed over every run directory under `dir`: a test may run there more than once.
+    let trace_size = || -> u64 {
+        std::fs::read_dir(&dir.0).map_or(0, |d| {
+            d.flatten()
+                .filter_map(|e| std::fs::metadata(e.path().join("traces/agent-1.trace")).ok())
+                .map(|m| m.len())
+                .sum()
+        })
+    };
+    let mut last = trace_size();
+    assert!(
+        wait_until(Duration::from_secs(60), || {
+            std::thread::sleep(Duration::from_millis(100));
+            let now = trace_size();
+            let growing = last > 0 && now > last;
+            last = now;
+            growing
+        }),
+        "the run never started recording"
+    );
 }
 
 fn stderr_of(out: &std::process::Output) -> String {
@@ -579,27 +605,7 @@ fn realtime_interrupt_of_the_process_group_is_always_an_interrupt_with_a_partial
             .spawn()
             .expect("spawning fdi-launch");
         let launcher = child.id();
-        // Mid-run: the agent's trace grows (its records are being written), so the start has
-        // been broadcast; an interrupt before it is another case (nothing recorded).
-        let trace_size = || {
-            std::fs::read_dir(&dir.0)
-                .ok()
-                .and_then(|mut d| d.next())
-                .and_then(|e| e.ok())
-                .and_then(|e| std::fs::metadata(e.path().join("traces/agent-1.trace")).ok())
-                .map_or(0, |m| m.len())
-        };
-        let mut last = trace_size();
-        assert!(
-            wait_until(Duration::from_secs(60), || {
-                std::thread::sleep(Duration::from_millis(100));
-                let now = trace_size();
-                let growing = last > 0 && now > last;
-                last = now;
-                growing
-            }),
-            "the run never started recording"
-        );
+        wait_until_recording(&dir);
         // The whole group, as a terminal does (the launcher leads it).
         let group = Command::new("kill")
             .args([sig, "--", &format!("-{launcher}")])
