@@ -10,20 +10,20 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use fdi_common::engine::{agent_record, tick_time};
-use fdi_common::ipc::msg::{check_header, from_vector, to_vector};
-use fdi_common::ipc::{
-    monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
-};
 use fdi_common::model::Vector;
 use fdi_common::plant::{Measurement, Plant, PlantParams};
-use fdi_common::process::{
-    self, LauncherLink, ProcessArgs, Shutdown, Start, WaitStrategy, WAIT_SLICE,
-};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{HopStamps, TraceRecord, TraceWriter};
+use fdi_runtime::ipc::msg::{check_header, from_vector, to_vector};
+use fdi_runtime::ipc::{
+    monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
+};
+use fdi_runtime::process::{
+    self, LauncherLink, ProcessArgs, Shutdown, Start, WaitStrategy, WAIT_SLICE,
+};
 
 /// Errors of the agent process.
-pub type AgentError = fdi_common::process::RoleError;
+pub type AgentError = fdi_runtime::process::RoleError;
 
 /// The agent's ports.
 #[derive(Debug)]
@@ -31,10 +31,10 @@ pub struct Ports {
     pub measurement: Outbox<MeasurementMsg>,
     pub torque: Inbox<TorqueMsg>,
     pub attacker: Bell,
-    pub waker: fdi_common::ipc::Waker,
+    pub waker: fdi_runtime::ipc::Waker,
     pub launcher: LauncherLink,
     /// The node; declared last so that it is dropped after the ports.
-    pub transport: fdi_common::ipc::Transport,
+    pub transport: fdi_runtime::ipc::Transport,
 }
 
 /// How the run ended.
@@ -297,7 +297,7 @@ pub fn main_with(args: ProcessArgs) -> ExitCode {
     match result {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            fdi_common::process::print_failure(format_args!(
+            fdi_runtime::process::print_failure(format_args!(
                 "fdi-agent {}: {e}",
                 args.agent.map_or("?".into(), |a| a.to_string())
             ));

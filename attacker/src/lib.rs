@@ -6,20 +6,20 @@ use std::process::ExitCode;
 
 use fdi_common::attack::AgentAttack;
 use fdi_common::engine::{attack_record, tamper, tick_time};
-use fdi_common::ipc::msg::{from_vector, to_vector, SequenceTracker};
-use fdi_common::ipc::{
+use fdi_common::plant::Measurement;
+use fdi_common::scenario::{ClockMode, Resolved};
+use fdi_common::trace::{TraceRecord, TraceWriter};
+use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
+use fdi_runtime::ipc::{
     monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, Wake,
 };
-use fdi_common::plant::Measurement;
-use fdi_common::process::{
+use fdi_runtime::process::{
     self, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy, LIVENESS_CHECK,
     LOST_AFTER_NS,
 };
-use fdi_common::scenario::{ClockMode, Resolved};
-use fdi_common::trace::{TraceRecord, TraceWriter};
 
 /// Errors of the attacker process.
-pub type AttackerError = fdi_common::process::RoleError;
+pub type AttackerError = fdi_runtime::process::RoleError;
 
 /// The attacker's ports.
 #[derive(Debug)]
@@ -27,10 +27,10 @@ pub struct Ports {
     pub measurement: Inbox<MeasurementMsg>,
     pub tampered: Outbox<MeasurementMsg>,
     pub center: Bell,
-    pub waker: fdi_common::ipc::Waker,
+    pub waker: fdi_runtime::ipc::Waker,
     pub launcher: LauncherLink,
     /// The node; declared last so that it is dropped after the ports.
-    pub transport: fdi_common::ipc::Transport,
+    pub transport: fdi_runtime::ipc::Transport,
 }
 
 /// One attacked agent.
@@ -172,7 +172,7 @@ pub fn main_with(args: ProcessArgs) -> ExitCode {
     }) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            fdi_common::process::print_failure(format_args!("fdi-attacker: {e}"));
+            fdi_runtime::process::print_failure(format_args!("fdi-attacker: {e}"));
             ExitCode::FAILURE
         }
     }

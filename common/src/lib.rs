@@ -5,17 +5,19 @@
 //! Euler–Lagrange agents ([`model`], [`plant`]), an attacker that injects false data into their
 //! measurements ([`attack`]), and a control center with a nonlinear observer, an NN attack
 //! estimator and a delay-compensating controller ([`control`]), over a delayed torque channel
-//! ([`delay`]). Nothing here does I/O except [`scenario`] loading files.
+//! ([`delay`]).
+//!
+//! Pure: no transport, no processes, no signals. The only I/O is on files named by the caller:
+//! [`scenario`] reads scenario files and [`trace`] writes and reads trace files. The process
+//! side (transport, process shell) is the `fdi-runtime` crate.
 
 pub mod attack;
 pub mod control;
 pub mod delay;
 pub mod engine;
-pub mod ipc;
 pub mod metrics;
 pub mod model;
 pub mod plant;
-pub mod process;
 pub mod records;
 pub mod rng;
 pub mod scenario;

@@ -7,19 +7,19 @@ use std::process::ExitCode;
 
 use fdi_common::control::{CenterAgent, CenterParams};
 use fdi_common::engine::{center_record, tick_time};
-use fdi_common::ipc::msg::{from_vector, to_vector, SequenceTracker};
-use fdi_common::ipc::{
+use fdi_common::scenario::{ClockMode, Resolved};
+use fdi_common::trace::{TraceRecord, TraceWriter};
+use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
+use fdi_runtime::ipc::{
     monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
 };
-use fdi_common::process::{
+use fdi_runtime::process::{
     self, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy, LIVENESS_CHECK,
     LOST_AFTER_NS,
 };
-use fdi_common::scenario::{ClockMode, Resolved};
-use fdi_common::trace::{TraceRecord, TraceWriter};
 
 /// Errors of the control-center process.
-pub type CenterError = fdi_common::process::RoleError;
+pub type CenterError = fdi_runtime::process::RoleError;
 
 /// Ports towards one agent.
 #[derive(Debug)]
@@ -34,10 +34,10 @@ pub struct Ports {
     pub tampered: Inbox<MeasurementMsg>,
     /// In the scenario's agent order.
     pub agents: Vec<AgentLink>,
-    pub waker: fdi_common::ipc::Waker,
+    pub waker: fdi_runtime::ipc::Waker,
     pub launcher: LauncherLink,
     /// The node; declared last so that it is dropped after the ports.
-    pub transport: fdi_common::ipc::Transport,
+    pub transport: fdi_runtime::ipc::Transport,
 }
 
 /// Ticks between two progress reports to the launcher.
@@ -226,7 +226,7 @@ pub fn main_with(args: ProcessArgs) -> ExitCode {
     }) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
-            fdi_common::process::print_failure(format_args!("fdi-control-center: {e}"));
+            fdi_runtime::process::print_failure(format_args!("fdi-control-center: {e}"));
             ExitCode::FAILURE
         }
     }

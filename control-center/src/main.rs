@@ -1,7 +1,7 @@
 //! `fdi-control-center`: started by `fdi-launch`.
 
 use clap::Parser;
-use fdi_common::process::ProcessArgs;
+use fdi_runtime::process::ProcessArgs;
 
 #[derive(Debug, Parser)]
 #[command(

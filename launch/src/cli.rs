@@ -7,10 +7,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use fdi_common::engine::{run_inproc, Partial, RunSummary};
 use fdi_common::metrics::Onset;
-use fdi_common::process::ProcessArgs;
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
+use fdi_runtime::process::ProcessArgs;
 
 use crate::{bench, export, join, output, report, runtime, tables};
 
@@ -254,7 +254,7 @@ struct InprocTraces {
 
 impl InprocTraces {
     fn create(dir: &Path, r: &Resolved) -> Result<Self> {
-        let header = |p: &str| fdi_common::process::trace_header(p, r);
+        let header = |p: &str| fdi_runtime::process::trace_header(p, r);
         let mut agents = Vec::new();
         for a in &r.scenario.agents {
             let name = format!("agent-{}", a.id);

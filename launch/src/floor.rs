@@ -43,11 +43,11 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use clap::{Parser, ValueEnum};
-use fdi_common::ipc::{
+use fdi_common::scenario::MAX_DOF;
+use fdi_runtime::ipc::{
     self, monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Sizing, Stream, Transport, Wake, Waker,
 };
-use fdi_common::process::{WaitStrategy, DEFAULT_SPIN_US, WAIT_SLICE};
-use fdi_common::scenario::MAX_DOF;
+use fdi_runtime::process::{WaitStrategy, DEFAULT_SPIN_US, WAIT_SLICE};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 
@@ -628,7 +628,7 @@ fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Resul
         for i in 0..opts.warmup + opts.iterations {
             if let Some(period) = opts.pace {
                 let due = paced_from + (i + 1) * u64::try_from(period.as_nanos()).unwrap_or(0);
-                fdi_common::ipc::sleep_until_ns(due);
+                fdi_runtime::ipc::sleep_until_ns(due);
             }
             let t0 = monotonic_ns();
             ports.send(payload(i))?;

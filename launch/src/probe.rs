@@ -9,8 +9,8 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 
 use anyhow::{anyhow, Result};
-use fdi_common::ipc::{monotonic_ns, sleep_until_ns};
-use fdi_common::process::CpuList;
+use fdi_runtime::ipc::{monotonic_ns, sleep_until_ns};
+use fdi_runtime::process::CpuList;
 
 use crate::runtime::Placement;
 use hdrhistogram::Histogram;

@@ -10,11 +10,11 @@ use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use fdi_common::engine::tick_time;
-use fdi_common::ipc::{Inbox, MeasurementMsg, Role, StatusMsg, Stream, TorqueMsg, Wake};
-use fdi_common::process::{self, ProcessArgs, Shutdown, Start};
 use fdi_common::records::AttackRecord;
 use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::trace::{TraceReader, TraceRecord};
+use fdi_runtime::ipc::{Inbox, MeasurementMsg, Role, StatusMsg, Stream, TorqueMsg, Wake};
+use fdi_runtime::process::{self, ProcessArgs, Shutdown, Start};
 
 /// Ticks one agent may be ahead of its last torque (well within every stream's buffer).
 const AHEAD: u64 = 64;
@@ -144,7 +144,7 @@ pub fn main_with(args: &ProcessArgs) -> ExitCode {
     match run(args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            fdi_common::process::print_failure(format_args!("fdi-replayer: {e:#}"));
+            fdi_runtime::process::print_failure(format_args!("fdi-replayer: {e:#}"));
             ExitCode::FAILURE
         }
     }

@@ -11,10 +11,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
 use fdi_common::engine::LostAgent;
-use fdi_common::ipc::{
+use fdi_common::scenario::{ClockMode, Resolved};
+use fdi_runtime::ipc::{
     self, monotonic_ns, Bell, ControlMsg, Role, StatusMsg, Stream, Transport, Wake,
 };
-use fdi_common::scenario::{ClockMode, Resolved};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Grace period between SIGTERM and SIGKILL when a run is torn down.
@@ -210,7 +210,7 @@ pub struct IpcOptions {
     pub placement: Placement,
 }
 
-pub use fdi_common::process::Placement;
+pub use fdi_runtime::process::Placement;
 
 /// Trace path of a process.
 pub fn trace_path(run_dir: &Path, process: &str) -> PathBuf {
@@ -370,7 +370,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         let transport = Transport::open(
             &prefix,
             "launcher",
-            fdi_common::process::sizing_for(resolved),
+            fdi_runtime::process::sizing_for(resolved),
         )
         .context(DidNotStart)?;
         let mut launcher = Launcher {

@@ -6,7 +6,7 @@
 //! * bad scenario files are refused with their field paths before anything is created or spawned.
 //!
 //! Malformed payloads and sequence numbers are unit- and property-tested in
-//! `common/src/ipc/msg.rs`; the control center's input guard in `common/src/control/center.rs`.
+//! `common/runtime/src/ipc/msg.rs`; the control center's input guard in `common/src/control/center.rs`.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;

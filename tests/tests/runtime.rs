@@ -483,7 +483,7 @@ fn realtime_rt_priority_puts_every_process_under_fifo_or_is_refused_with_the_rea
         "a refused run left a run directory"
     );
 
-    let permitted = std::thread::spawn(|| fdi_common::process::use_fifo(7))
+    let permitted = std::thread::spawn(|| fdi_runtime::process::use_fifo(7))
         .join()
         .expect("probe thread");
     match permitted {

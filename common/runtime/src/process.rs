@@ -260,13 +260,13 @@ impl WaitStrategy {
     /// Lockstep spins `FDI_SPIN_US` (default [`DEFAULT_SPIN_US`]) before blocking; realtime
     /// never spins (the attacker and the center are purely event-driven there, so that the
     /// agents keep the CPU for their deadlines) unless `FDI_SPIN_US` says otherwise.
-    pub fn for_clock(clock: crate::scenario::ClockMode) -> Self {
+    pub fn for_clock(clock: fdi_common::scenario::ClockMode) -> Self {
         let env = std::env::var("FDI_SPIN_US")
             .ok()
             .and_then(|v| v.parse().ok());
         let us = match clock {
-            crate::scenario::ClockMode::Lockstep => env.unwrap_or(DEFAULT_SPIN_US),
-            crate::scenario::ClockMode::Realtime => env.unwrap_or(0),
+            fdi_common::scenario::ClockMode::Lockstep => env.unwrap_or(DEFAULT_SPIN_US),
+            fdi_common::scenario::ClockMode::Realtime => env.unwrap_or(0),
         };
         Self {
             spin: Duration::from_micros(us),
@@ -316,9 +316,9 @@ pub enum RoleError {
     #[error(transparent)]
     Ipc(#[from] IpcError),
     #[error(transparent)]
-    Trace(#[from] crate::trace::TraceError),
+    Trace(#[from] fdi_common::trace::TraceError),
     #[error(transparent)]
-    Scenario(#[from] crate::scenario::ScenarioError),
+    Scenario(#[from] fdi_common::scenario::ScenarioError),
     #[error("installing signal handlers: {0}")]
     Signals(std::io::Error),
     #[error("agent {0} is not in the scenario")]
@@ -472,16 +472,16 @@ pub fn start(
     args: &ProcessArgs,
     role: Role,
     wake: crate::ipc::Wake,
-) -> Result<(Shutdown, crate::scenario::Resolved, Connection), RoleError> {
+) -> Result<(Shutdown, fdi_common::scenario::Resolved, Connection), RoleError> {
     let shutdown = Shutdown::install(args.launcher_pid).map_err(RoleError::Signals)?;
     args.placement.apply().map_err(RoleError::Scheduling)?;
-    let resolved = crate::scenario::load_file(&args.scenario)?;
+    let resolved = fdi_common::scenario::load_file(&args.scenario)?;
     let conn = connect(args, role, wake, sizing_for(&resolved))?;
     Ok((shutdown, resolved, conn))
 }
 
 /// Sizing of a run's services: every process computes the same from the scenario.
-pub fn sizing_for(resolved: &crate::scenario::Resolved) -> crate::ipc::Sizing {
+pub fn sizing_for(resolved: &fdi_common::scenario::Resolved) -> crate::ipc::Sizing {
     // Lookahead lets an agent run up to τ_max/Δ ticks ahead of its commands.
     let s = &resolved.scenario;
     let tau_max = s.agents.iter().map(|a| a.delay.max()).fold(0.0, f64::max);
@@ -495,10 +495,10 @@ pub fn sizing_for(resolved: &crate::scenario::Resolved) -> crate::ipc::Sizing {
 /// Header of the trace a process writes.
 pub fn trace_header(
     process: &str,
-    resolved: &crate::scenario::Resolved,
-) -> crate::trace::TraceHeader {
-    crate::trace::TraceHeader {
-        format_version: crate::trace::FORMAT_VERSION,
+    resolved: &fdi_common::scenario::Resolved,
+) -> fdi_common::trace::TraceHeader {
+    fdi_common::trace::TraceHeader {
+        format_version: fdi_common::trace::FORMAT_VERSION,
         process: process.into(),
         scenario_toml: resolved.to_toml(),
         seed: resolved.scenario.seed,
@@ -600,11 +600,11 @@ pub fn admit_measurement(
     dof: usize,
     sequence: &mut crate::ipc::msg::SequenceTracker,
     control_period_s: f64,
-    trace: &mut crate::trace::TraceWriter,
+    trace: &mut fdi_common::trace::TraceWriter,
 ) -> bool {
-    use crate::engine::tick_time;
     use crate::ipc::msg::{validate_measurement, SeqVerdict};
-    use crate::trace::TraceRecord;
+    use fdi_common::engine::tick_time;
+    use fdi_common::trace::TraceRecord;
     let structure = validate_measurement(m, dof, |_| true, m.seq).map(|_| ());
     let verdict = structure
         .as_ref()

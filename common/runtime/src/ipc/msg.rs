@@ -3,8 +3,8 @@
 
 use iceoryx2::prelude::ZeroCopySend;
 
-use crate::model::Vector;
-use crate::scenario::MAX_DOF;
+use fdi_common::model::Vector;
+use fdi_common::scenario::MAX_DOF;
 
 /// Copies the first `N` entries of a payload array into a vector.
 pub fn to_vector<const N: usize>(a: &[f64; MAX_DOF]) -> Vector<N> {
@@ -228,7 +228,7 @@ fn check_structure(
 /// time stamp `t` is finite. Returns the first `dof` entries of `y` and `ẏ`.
 ///
 /// The values themselves are not checked: a non-finite or absurd `y`/`ẏ` is the control
-/// center's business ([`crate::control::CenterAgent::tick`] rejects, counts and holds the last
+/// center's business ([`fdi_common::control::CenterAgent::tick`] rejects, counts and holds the last
 /// good one). To leave the sequence to a [`SequenceTracker`], pass `msg.seq` as `expected_seq`.
 pub fn validate_measurement(
     msg: &MeasurementMsg,
@@ -254,7 +254,7 @@ pub fn validate_measurement(
 /// [`validate_measurement`] for a torque command on agent `own_agent`'s channel: the message
 /// must name that agent, have `expected_dof` links and `expected_seq`, and a finite `t_send`.
 /// Returns the first `dof` entries of `u`. Non-finite torques are refused by the agent's delay
-/// line ([`crate::plant::Plant::receive`]), which also refuses stamps that do not increase.
+/// line ([`fdi_common::plant::Plant::receive`]), which also refuses stamps that do not increase.
 pub fn validate_torque(
     msg: &TorqueMsg,
     expected_dof: usize,
@@ -353,7 +353,7 @@ struct AgentSeq {
 /// gap, duplicate, replay, late (out of order), out of range. Every sender starts at 0.
 ///
 /// ```
-/// use fdi_common::ipc::msg::{SeqVerdict, SequenceTracker};
+/// use fdi_runtime::ipc::msg::{SeqVerdict, SequenceTracker};
 /// let mut t = SequenceTracker::new([1, 2], 1000);
 /// assert_eq!(t.observe(1, 0), SeqVerdict::InOrder);
 /// assert_eq!(t.observe(1, 3), SeqVerdict::Gap { missing: 2 });   // 1 and 2 lost (so far)
@@ -492,11 +492,11 @@ impl SequenceTracker {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::control::center::MAX_ABS_MEASUREMENT;
-    use crate::control::{CenterAgent, CenterParams};
-    use crate::engine::tick_time;
-    use crate::plant::{Plant, PlantParams};
-    use crate::scenario::{paper, Resolved};
+    use fdi_common::control::center::MAX_ABS_MEASUREMENT;
+    use fdi_common::control::{CenterAgent, CenterParams};
+    use fdi_common::engine::tick_time;
+    use fdi_common::plant::{Plant, PlantParams};
+    use fdi_common::scenario::{paper, Resolved};
     use proptest::prelude::*;
 
     fn paper_scenario() -> Resolved {
@@ -642,8 +642,8 @@ mod tests {
                         prop_assert_eq!((v.y.len(), v.yd.len()), (2, 2));
                         let bad = !(sane(v.y) && sane(v.yd));
                         let before = center.rejected_inputs;
-                        let y = crate::model::Vector::<2>::from_column_slice(v.y);
-                        let yd = crate::model::Vector::<2>::from_column_slice(v.yd);
+                        let y = fdi_common::model::Vector::<2>::from_column_slice(v.y);
+                        let yd = fdi_common::model::Vector::<2>::from_column_slice(v.yd);
                         let out = center.tick(tick_time(seq, dt), &y, &yd);
                         prop_assert_eq!(out.rejected_input, bad);
                         prop_assert_eq!(center.rejected_inputs, before + u64::from(bad));
@@ -692,7 +692,7 @@ mod tests {
                         let takeable = u.iter().all(|x| x.is_finite())
                             && newest.is_none_or(|n| m.t_send > n);
                         let refused_before = plant.refused_commands;
-                        let got = plant.receive(m.t_send, crate::model::Vector::<2>::from_column_slice(u));
+                        let got = plant.receive(m.t_send, fdi_common::model::Vector::<2>::from_column_slice(u));
                         prop_assert_eq!(got.is_ok(), takeable);
                         prop_assert_eq!(plant.refused_commands, refused_before + u64::from(!takeable));
                         expected += 1;

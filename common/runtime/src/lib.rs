@@ -1,0 +1,10 @@
+//! fdi-runtime: the process side every fdi-mas role shares.
+//!
+//! [`ipc`] is the transport: the only code that calls iceoryx2 and knows where its files live.
+//! [`process`] is the shell around a role's loop: the launcher's arguments and the placement of
+//! the process, shutdown on signals or the launcher's death, the start handshake and status
+//! reports, admission of received messages, and the liveness of realtime peers. The math the
+//! roles run is in `fdi-common`, which does no I/O besides reading scenario and trace files.
+
+pub mod ipc;
+pub mod process;
