@@ -10,11 +10,11 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use fdi_common::engine::{agent_record, tick_time};
-use fdi_common::model::Vector;
+use fdi_common::model::{EulerLagrange, ForLinks, Vector};
 use fdi_common::plant::{Measurement, Plant, PlantParams};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{HopStamps, TraceRecord, TraceWriter};
-use fdi_runtime::ipc::msg::{check_header, from_vector, to_vector};
+use fdi_runtime::ipc::msg::from_vector;
 use fdi_runtime::ipc::{
     monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
 };
@@ -54,17 +54,17 @@ struct Inflow {
 
 /// A tick measured and published but not yet integrated.
 #[derive(Debug, Clone, Copy)]
-struct Published {
+struct Published<const N: usize> {
     k: u64,
-    state: (Vector<2>, Vector<2>),
-    measurement: Measurement<2>,
+    state: (Vector<N>, Vector<N>),
+    measurement: Measurement<N>,
 }
 
 /// Takes every waiting torque into the plant's delay line, in order; a torque for a tick already
 /// passed (duplicate, replay) or malformed is refused and counted. With `stamps`, the per-hop
 /// latency of every torque is recorded (realtime: in lockstep latencies say nothing).
-fn take_torques(
-    plant: &mut Plant<2>,
+fn take_torques<const N: usize>(
+    plant: &mut Plant<N>,
     ports: &Ports,
     trace: &mut TraceWriter,
     inflow: &mut Inflow,
@@ -74,9 +74,8 @@ fn take_torques(
     let mut err = None;
     ports.torque.drain(|m| {
         let received = monotonic_ns();
-        let well_formed = m.seq >= inflow.next
-            && check_header(m.agent, m.dof, m.seq, 2, |a| a == id, m.seq).is_ok();
-        if !well_formed || plant.receive(m.t_send, to_vector::<2>(&m.u)).is_err() {
+        let admitted = process::admit_torque::<N>(&m, id, inflow.next);
+        if !admitted.is_ok_and(|u| plant.receive(m.t_send, u).is_ok()) {
             inflow.refused += 1;
             return;
         }
@@ -105,18 +104,18 @@ fn take_torques(
 
 /// Measures and publishes tick `k`. Lockstep rings the attacker once per batch, realtime at
 /// every tick (`ring`).
-fn publish(
-    plant: &mut Plant<2>,
+fn publish<const N: usize>(
+    plant: &mut Plant<N>,
     ports: &Ports,
     k: u64,
     t: f64,
     ring: bool,
-) -> Result<Measurement<2>, AgentError> {
+) -> Result<Measurement<N>, AgentError> {
     let m = plant.measure();
     ports.measurement.send(MeasurementMsg {
         seq: k,
         agent: plant.agent_id(),
-        dof: 2,
+        dof: N as u32,
         t,
         y: from_vector(&m.y),
         yd: from_vector(&m.yd),
@@ -131,7 +130,7 @@ fn publish(
 }
 
 /// Runs agent `agent_id` of `resolved` to the end (or until `shutdown`).
-pub fn run(
+pub fn run<const N: usize>(
     agent_id: u32,
     resolved: &Resolved,
     ports: &Ports,
@@ -144,7 +143,7 @@ pub fn run(
         .iter()
         .find(|a| a.id == agent_id)
         .ok_or(AgentError::NotInScenario(agent_id))?;
-    let mut plant = Plant::<2>::new(PlantParams::new(agent, s)).ok_or(AgentError::Dof(agent_id))?;
+    let mut plant = Plant::<N>::new(PlantParams::new(agent, s)).ok_or(AgentError::Dof(agent_id))?;
     let strategy = WaitStrategy::for_clock(s.clock);
     let epoch_ns = match ports
         .launcher
@@ -164,7 +163,7 @@ pub fn run(
             // query t − τ(t). The step then looks up exactly the commands it looks up in strict
             // lockstep, so the trace is bit-identical; with τ > Δ the agent runs ticks ahead and
             // the processes exchange batches instead of single messages.
-            let mut published: Option<Published> = None;
+            let mut published: Option<Published<N>> = None;
             let mut unrung = false;
             let mut k = 0;
             while k < ticks {
@@ -271,6 +270,48 @@ pub fn run(
     })
 }
 
+/// [`run`] with the number of links of agent `agent_id`'s model.
+pub fn run_any(
+    agent_id: u32,
+    resolved: &Resolved,
+    ports: &Ports,
+    shutdown: &Shutdown,
+    trace: &mut TraceWriter,
+) -> Result<Outcome, AgentError> {
+    struct Run<'a> {
+        agent_id: u32,
+        resolved: &'a Resolved,
+        ports: &'a Ports,
+        shutdown: &'a Shutdown,
+        trace: &'a mut TraceWriter,
+    }
+    impl ForLinks for Run<'_> {
+        type Output = Result<Outcome, AgentError>;
+        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
+            run::<N>(
+                self.agent_id,
+                self.resolved,
+                self.ports,
+                self.shutdown,
+                self.trace,
+            )
+        }
+    }
+    let agent = resolved
+        .scenario
+        .agents
+        .iter()
+        .find(|a| a.id == agent_id)
+        .ok_or(AgentError::NotInScenario(agent_id))?;
+    agent.model.with_links(Run {
+        agent_id,
+        resolved,
+        ports,
+        shutdown,
+        trace,
+    })
+}
+
 fn open(args: &ProcessArgs) -> Result<(u32, Resolved, Ports, TraceWriter, Shutdown), AgentError> {
     let id = args.agent.ok_or(AgentError::MissingId)?;
     let (shutdown, resolved, conn) = process::start(args, Role::Agent, Wake::Agent(id))?;
@@ -292,7 +333,7 @@ fn open(args: &ProcessArgs) -> Result<(u32, Resolved, Ports, TraceWriter, Shutdo
 /// Entry point of the `fdi-agent` binary (and of `fdi-launch`'s multi-call fallback).
 pub fn main_with(args: ProcessArgs) -> ExitCode {
     let result = open(&args).and_then(|(id, resolved, ports, mut trace, shutdown)| {
-        run(id, &resolved, &ports, &shutdown, &mut trace)
+        run_any(id, &resolved, &ports, &shutdown, &mut trace)
     });
     match result {
         Ok(_) => ExitCode::SUCCESS,

@@ -6,6 +6,7 @@ use std::process::ExitCode;
 
 use fdi_common::attack::AgentAttack;
 use fdi_common::engine::{attack_record, tamper, tick_time};
+use fdi_common::model::{EulerLagrange, ForLinks};
 use fdi_common::plant::Measurement;
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
@@ -42,7 +43,7 @@ struct Target {
 }
 
 /// Relays until every agent's last tick went through (or `shutdown`). Returns messages refused.
-pub fn run(
+pub fn run<const N: usize>(
     resolved: &Resolved,
     ports: &Ports,
     shutdown: &Shutdown,
@@ -83,7 +84,7 @@ pub fn run(
                 refused += 1;
                 return;
             };
-            if !process::admit_measurement(&m, 2, &mut sequence, dt, trace) {
+            if !process::admit_measurement(&m, N, &mut sequence, dt, trace) {
                 refused += 1;
                 return;
             }
@@ -92,8 +93,8 @@ pub fn run(
             target.next = m.seq + 1;
             let t = tick_time(m.seq, dt);
             let clean = Measurement {
-                y: to_vector::<2>(&m.y),
-                yd: to_vector::<2>(&m.yd),
+                y: to_vector::<N>(&m.y),
+                yd: to_vector::<N>(&m.yd),
             };
             let (out, inj) = tamper(&mut target.attack, t, &clean);
             let sent = ports.tampered.send(MeasurementMsg {
@@ -151,6 +152,35 @@ pub fn run(
     Ok(refused)
 }
 
+/// [`run`] with the number of links of the run's agents.
+pub fn run_any(
+    resolved: &Resolved,
+    ports: &Ports,
+    shutdown: &Shutdown,
+    trace: &mut TraceWriter,
+) -> Result<u64, AttackerError> {
+    struct Run<'a> {
+        resolved: &'a Resolved,
+        ports: &'a Ports,
+        shutdown: &'a Shutdown,
+        trace: &'a mut TraceWriter,
+    }
+    impl ForLinks for Run<'_> {
+        type Output = Result<u64, AttackerError>;
+        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
+            run::<N>(self.resolved, self.ports, self.shutdown, self.trace)
+        }
+    }
+    resolved
+        .with_links(Run {
+            resolved,
+            ports,
+            shutdown,
+            trace,
+        })
+        .unwrap_or(Ok(0))
+}
+
 fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), AttackerError> {
     let (shutdown, resolved, conn) = process::start(args, Role::Attacker, Wake::Attacker)?;
     let ports = Ports {
@@ -168,7 +198,7 @@ fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), 
 /// Entry point of the `fdi-attacker` binary.
 pub fn main_with(args: ProcessArgs) -> ExitCode {
     match open(&args).and_then(|(resolved, ports, mut trace, shutdown)| {
-        run(&resolved, &ports, &shutdown, &mut trace)
+        run_any(&resolved, &ports, &shutdown, &mut trace)
     }) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {

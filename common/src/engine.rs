@@ -12,9 +12,10 @@ use crate::attack::{AgentAttack, Injection};
 use crate::control::{CenterAgent, CenterOutput, CenterParams};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::Vector;
+use crate::model::{EulerLagrange, ForLinks};
 use crate::plant::{Measurement, Plant, PlantParams, StepReport};
 use crate::records::{AgentRecord, AttackRecord, CenterRecord, TickRecord, TraceDigest};
-use crate::scenario::{BuildModel, ModelConfig, Resolved};
+use crate::scenario::Resolved;
 
 /// `t_k = k · Δ`, computed the same way in every process.
 pub fn tick_time(k: u64, control_period_s: f64) -> f64 {
@@ -211,7 +212,7 @@ pub fn evaluator_for(resolved: &Resolved) -> Evaluator {
             .scenario
             .agents
             .iter()
-            .map(|a| (a.id, a.trajectory.clone())),
+            .map(|a| (a.id, a.trajectory.clone(), a.model)),
     )
 }
 
@@ -220,6 +221,28 @@ pub fn evaluator_for(resolved: &Resolved) -> Evaluator {
 pub enum EngineError {
     #[error("agent {agent}: its model does not have {dof} links")]
     ModelDof { agent: u32, dof: usize },
+    #[error("the scenario has no agents")]
+    NoAgents,
+}
+
+/// [`run_inproc`] with the number of links of the run's agents.
+pub fn run_inproc_any(
+    resolved: &Resolved,
+    sink: impl FnMut(&TickRecord),
+) -> Result<RunSummary, EngineError> {
+    struct Run<'a, F> {
+        resolved: &'a Resolved,
+        sink: F,
+    }
+    impl<F: FnMut(&TickRecord)> ForLinks for Run<'_, F> {
+        type Output = Result<RunSummary, EngineError>;
+        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
+            run_inproc::<N>(self.resolved, self.sink)
+        }
+    }
+    resolved
+        .with_links(Run { resolved, sink })
+        .ok_or(EngineError::NoAgents)?
 }
 
 /// Runs `resolved` to the end on this thread; `sink` sees every joined tick record in digest
@@ -227,10 +250,7 @@ pub enum EngineError {
 pub fn run_inproc<const N: usize>(
     resolved: &Resolved,
     mut sink: impl FnMut(&TickRecord),
-) -> Result<RunSummary, EngineError>
-where
-    ModelConfig: BuildModel<N>,
-{
+) -> Result<RunSummary, EngineError> {
     let started = Instant::now();
     let s = &resolved.scenario;
     let mut plants = Vec::with_capacity(s.agents.len());
@@ -271,7 +291,7 @@ where
                 center: center_record(k, id, &out),
             };
             digest.push(&rec);
-            evaluator.push::<N>(&rec);
+            evaluator.push(&rec);
             sink(&rec);
         }
     }

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::model::{EulerLagrange, ForLinks, ModelConfig};
 use crate::records::TickRecord;
 use crate::trajectory::TrajectoryConfig;
 
@@ -63,9 +64,13 @@ pub struct AgentMetrics {
     pub ticks: u64,
 }
 
+/// Adds one record's squared tracking errors into an [`Acc`], for the model's number of links.
+type TrackingFn = fn(&mut Acc, &TickRecord);
+
 #[derive(Debug, Clone)]
 struct Acc {
     trajectory: TrajectoryConfig,
+    tracking: TrackingFn,
     sum_sq: f64,
     count: u64,
     ticks: u64,
@@ -85,6 +90,27 @@ struct Acc {
     diverged_at: Option<f64>,
 }
 
+impl Acc {
+    /// The tracking error `q_d − q` of each of the `N` links: its square into the RMSE, its
+    /// magnitude into the maximum, and divergence (non-finite state, or beyond the bound).
+    fn track<const N: usize>(&mut self, r: &TickRecord) {
+        let t = r.agent.t;
+        let qd = self.trajectory.reference::<N>(t).q;
+        let q = r.agent.q.to_vector::<N>();
+        let mut diverged = r.agent.qd.as_slice().iter().any(|x| !x.is_finite());
+        for i in 0..N {
+            let e = qd[i] - q[i];
+            self.sum_sq += e * e;
+            diverged |= e.is_nan() || e.abs() > DIVERGENCE_BOUND_RAD;
+            self.max_abs = self.max_abs.max(e.abs());
+        }
+        if diverged && self.diverged_at.is_none() {
+            self.diverged_at = Some(t);
+        }
+        self.count += N as u64;
+    }
+}
+
 /// Accumulates metrics tick by tick.
 #[derive(Debug, Clone)]
 pub struct Evaluator {
@@ -92,15 +118,23 @@ pub struct Evaluator {
 }
 
 impl Evaluator {
-    /// `agents`: `(id, desired trajectory)`.
-    pub fn new(agents: impl IntoIterator<Item = (u32, TrajectoryConfig)>) -> Self {
+    /// `agents`: `(id, desired trajectory, robot model)`.
+    pub fn new(agents: impl IntoIterator<Item = (u32, TrajectoryConfig, ModelConfig)>) -> Self {
+        struct Tracking;
+        impl ForLinks for Tracking {
+            type Output = TrackingFn;
+            fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> TrackingFn {
+                Acc::track::<N>
+            }
+        }
         let agents = agents
             .into_iter()
-            .map(|(id, trajectory)| {
+            .map(|(id, trajectory, model)| {
                 (
                     id,
                     Acc {
                         trajectory,
+                        tracking: model.with_links(Tracking),
                         sum_sq: 0.0,
                         count: 0,
                         ticks: 0,
@@ -126,24 +160,12 @@ impl Evaluator {
 
     /// Feeds one joined tick record (ticks of one agent in order; other agents' records are
     /// interleaved freely).
-    pub fn push<const N: usize>(&mut self, r: &TickRecord) {
+    pub fn push(&mut self, r: &TickRecord) {
         let Some(acc) = self.agents.get_mut(&r.agent.agent) else {
             return;
         };
         let t = r.agent.t;
-        let qd = acc.trajectory.reference::<N>(t).q;
-        let q = r.agent.q.to_vector::<N>();
-        let mut diverged = r.agent.qd.as_slice().iter().any(|x| !x.is_finite());
-        for i in 0..N {
-            let e = qd[i] - q[i];
-            acc.sum_sq += e * e;
-            diverged |= e.is_nan() || e.abs() > DIVERGENCE_BOUND_RAD;
-            acc.max_abs = acc.max_abs.max(e.abs());
-        }
-        if diverged && acc.diverged_at.is_none() {
-            acc.diverged_at = Some(t);
-        }
-        acc.count += N as u64;
+        (acc.tracking)(acc, r);
         acc.ticks += 1;
         let alarm = r.center.alarm;
         if r.attack.active {
@@ -270,9 +292,10 @@ mod tests {
     }
 
     fn evaluate(records: impl IntoIterator<Item = TickRecord>) -> AgentMetrics {
-        let mut e = Evaluator::new([(1, at_rest())]);
+        let two_link = ModelConfig::TwoLink(crate::model::TwoLinkParams::PAPER);
+        let mut e = Evaluator::new([(1, at_rest(), two_link)]);
         for r in records {
-            e.push::<2>(&r);
+            e.push(&r);
         }
         e.finish().remove(&1).expect("agent 1")
     }

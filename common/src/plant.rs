@@ -10,7 +10,7 @@ use crate::delay::{in_force_at, DelayLine, DelayProfile, PushError};
 use crate::engine::tick_time;
 use crate::model::{EulerLagrange, Vector};
 use crate::rng::{stream, Purpose};
-use crate::scenario::{AgentConfig, BuildModel, DisturbanceConfig, ModelConfig, NoiseConfig};
+use crate::scenario::{AgentConfig, DisturbanceConfig, ModelConfig, NoiseConfig};
 
 /// Everything that configures one agent's plant.
 #[derive(Debug, Clone)]
@@ -81,13 +81,10 @@ pub struct Plant<const N: usize> {
     pub refused_commands: u64,
 }
 
-impl<const N: usize> Plant<N>
-where
-    ModelConfig: BuildModel<N>,
-{
+impl<const N: usize> Plant<N> {
     /// Starts at rest at `q = q̇ = 0`. `None` when the model does not have `N` links.
     pub fn new(params: PlantParams) -> Option<Self> {
-        let model = params.model.build_model()?;
+        let model = params.model.build::<N>()?;
         let noise_rng = stream(params.run_seed, params.agent_id, Purpose::SensorNoise);
         let normal = |std: f64| (std > 0.0).then(|| Normal::new(0.0, std).ok()).flatten();
         Some(Self {

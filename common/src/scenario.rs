@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use crate::attack::{presets, AttackProfile};
 use crate::control::UpdateLaw;
 use crate::delay::DelayProfile;
-use crate::model::{EulerLagrange, TwoLink, TwoLinkParams};
+pub use crate::model::ModelConfig;
 use crate::trajectory::TrajectoryConfig;
 use crate::units::AngleUnit;
 
@@ -147,125 +147,6 @@ impl DisturbanceConfig {
         let scale = self.units.to_rad();
         for (o, l) in out.iter_mut().zip(&self.links) {
             *o = scale * l.amplitude * (l.omega_rad_s * t).sin();
-        }
-    }
-}
-
-/// The robot of one agent. One variant per model file in `model/`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
-pub enum ModelConfig {
-    /// Two-link planar manipulator (eq. 67); parameters default to the paper's.
-    TwoLink {
-        #[serde(default = "paper_p1")]
-        p1: f64,
-        #[serde(default = "paper_p2")]
-        p2: f64,
-        #[serde(default = "paper_p3")]
-        p3: f64,
-        #[serde(default = "paper_fd1")]
-        fd1: f64,
-        #[serde(default = "paper_fd2")]
-        fd2: f64,
-    },
-}
-
-fn paper_p1() -> f64 {
-    TwoLinkParams::PAPER.p1
-}
-fn paper_p2() -> f64 {
-    TwoLinkParams::PAPER.p2
-}
-fn paper_p3() -> f64 {
-    TwoLinkParams::PAPER.p3
-}
-fn paper_fd1() -> f64 {
-    TwoLinkParams::PAPER.fd1
-}
-fn paper_fd2() -> f64 {
-    TwoLinkParams::PAPER.fd2
-}
-
-impl ModelConfig {
-    /// Number of links.
-    pub fn dof(&self) -> usize {
-        match self {
-            Self::TwoLink { .. } => 2,
-        }
-    }
-
-    /// The two-link model, if this is one.
-    pub fn two_link(&self) -> TwoLink {
-        match *self {
-            Self::TwoLink {
-                p1,
-                p2,
-                p3,
-                fd1,
-                fd2,
-            } => TwoLink::new(TwoLinkParams {
-                p1,
-                p2,
-                p3,
-                fd1,
-                fd2,
-            }),
-        }
-    }
-
-    fn problems(&self) -> Vec<(String, String)> {
-        let mut out = Vec::new();
-        match *self {
-            Self::TwoLink {
-                p1,
-                p2,
-                p3,
-                fd1,
-                fd2,
-            } => {
-                for (name, v) in [
-                    ("p1", p1),
-                    ("p2", p2),
-                    ("p3", p3),
-                    ("fd1", fd1),
-                    ("fd2", fd2),
-                ] {
-                    if !v.is_finite() {
-                        out.push((name.to_string(), format!("must be finite, got {v}")));
-                    }
-                }
-                for (name, v) in [("fd1", fd1), ("fd2", fd2)] {
-                    if v < 0.0 {
-                        out.push((name.to_string(), format!("friction must be ≥ 0, got {v}")));
-                    }
-                }
-                if !(TwoLinkParams {
-                    p1,
-                    p2,
-                    p3,
-                    fd1,
-                    fd2,
-                })
-                .is_positive_definite()
-                {
-                    out.push(("p2".into(), format!("inertia not positive definite: need p2 > 0 and p2(p1 − p2) > p3² (p1={p1}, p2={p2}, p3={p3})")));
-                }
-            }
-        }
-        out
-    }
-}
-
-/// Builds the model of a [`ModelConfig`] for robots with `N` links. A model with another number
-/// of links yields `None` (validation makes every agent of a run share one link count).
-pub trait BuildModel<const N: usize> {
-    fn build_model(&self) -> Option<Box<dyn EulerLagrange<N>>>;
-}
-
-impl BuildModel<2> for ModelConfig {
-    fn build_model(&self) -> Option<Box<dyn EulerLagrange<2>>> {
-        match self {
-            Self::TwoLink { .. } => Some(Box::new(self.two_link())),
         }
     }
 }
@@ -426,6 +307,15 @@ pub struct Resolved {
 }
 
 impl Resolved {
+    /// Runs `work` with the number of links every agent of the run has (validation makes them
+    /// share one) and the first agent's model; `None` for a run without agents.
+    pub fn with_links<W: crate::model::ForLinks>(&self, work: W) -> Option<W::Output> {
+        self.scenario
+            .agents
+            .first()
+            .map(|a| a.model.with_links(work))
+    }
+
     /// Number of agents.
     pub fn agent_count(&self) -> usize {
         self.scenario.agents.len()

@@ -7,6 +7,7 @@ use std::process::ExitCode;
 
 use fdi_common::control::{CenterAgent, CenterParams};
 use fdi_common::engine::{center_record, tick_time};
+use fdi_common::model::{EulerLagrange, ForLinks};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
@@ -43,13 +44,13 @@ pub struct Ports {
 /// Ticks between two progress reports to the launcher.
 const PROGRESS_EVERY: u64 = 500;
 
-struct Slot {
-    center: CenterAgent<2>,
+struct Slot<const N: usize> {
+    center: CenterAgent<N>,
     next: u64,
 }
 
 /// Controls every agent until their last tick (or `shutdown`).
-pub fn run(
+pub fn run<const N: usize>(
     resolved: &Resolved,
     ports: &Ports,
     shutdown: &Shutdown,
@@ -59,7 +60,7 @@ pub fn run(
     let mut slots = Vec::with_capacity(s.agents.len());
     for a in &s.agents {
         let center =
-            CenterAgent::<2>::new(CenterParams::new(a, s)).ok_or(CenterError::Dof(a.id))?;
+            CenterAgent::<N>::new(CenterParams::new(a, s)).ok_or(CenterError::Dof(a.id))?;
         slots.push(Slot { center, next: 0 });
     }
     let epoch_ns = match ports
@@ -91,7 +92,7 @@ pub fn run(
                 refused += 1;
                 return;
             };
-            if !process::admit_measurement(&m, 2, &mut sequence, dt, trace) {
+            if !process::admit_measurement(&m, N, &mut sequence, dt, trace) {
                 refused += 1;
                 return;
             }
@@ -103,12 +104,12 @@ pub fn run(
             let t = tick_time(m.seq, dt);
             let out = slot
                 .center
-                .tick(t, &to_vector::<2>(&m.y), &to_vector::<2>(&m.yd));
+                .tick(t, &to_vector::<N>(&m.y), &to_vector::<N>(&m.yd));
             let link = &ports.agents[i];
             let msg = TorqueMsg {
                 seq: m.seq,
                 agent: m.agent,
-                dof: 2,
+                dof: N as u32,
                 t_send: t,
                 u: from_vector(&out.u),
                 agent_sent_ns: m.agent_sent_ns,
@@ -196,6 +197,35 @@ pub fn run(
     Ok(refused)
 }
 
+/// [`run`] with the number of links of the run's agents.
+pub fn run_any(
+    resolved: &Resolved,
+    ports: &Ports,
+    shutdown: &Shutdown,
+    trace: &mut TraceWriter,
+) -> Result<u64, CenterError> {
+    struct Run<'a> {
+        resolved: &'a Resolved,
+        ports: &'a Ports,
+        shutdown: &'a Shutdown,
+        trace: &'a mut TraceWriter,
+    }
+    impl ForLinks for Run<'_> {
+        type Output = Result<u64, CenterError>;
+        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
+            run::<N>(self.resolved, self.ports, self.shutdown, self.trace)
+        }
+    }
+    resolved
+        .with_links(Run {
+            resolved,
+            ports,
+            shutdown,
+            trace,
+        })
+        .unwrap_or(Ok(0))
+}
+
 fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), CenterError> {
     let (shutdown, resolved, conn) = process::start(args, Role::Center, Wake::Center)?;
     let mut agents = Vec::with_capacity(resolved.agent_count());
@@ -222,7 +252,7 @@ fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), 
 /// Entry point of the `fdi-control-center` binary.
 pub fn main_with(args: ProcessArgs) -> ExitCode {
     match open(&args).and_then(|(resolved, ports, mut trace, shutdown)| {
-        run(&resolved, &ports, &shutdown, &mut trace)
+        run_any(&resolved, &ports, &shutdown, &mut trace)
     }) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {

@@ -5,7 +5,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use fdi_common::engine::{run_inproc, Partial, RunSummary};
+use fdi_common::engine::{run_inproc_any, Partial, RunSummary};
 use fdi_common::metrics::Onset;
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
@@ -309,11 +309,11 @@ pub fn execute(
     placement: &runtime::Placement,
 ) -> Result<RunSummary> {
     match (engine, run_dir) {
-        (Engine::Inproc, None) => run_inproc::<2>(r, |_| {}).context("in-process engine"),
+        (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
         (Engine::Inproc, Some(dir)) => {
             let mut traces = InprocTraces::create(dir, r).context(runtime::DidNotStart)?;
             let mut failure = None;
-            let summary = run_inproc::<2>(r, |rec| {
+            let summary = run_inproc_any(r, |rec| {
                 if let Err(e) = traces.write(rec) {
                     failure.get_or_insert(e);
                 }

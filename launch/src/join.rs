@@ -186,7 +186,7 @@ pub fn join_run(
                 center: c,
             };
             digest.push(&rec);
-            evaluator.push::<2>(&rec);
+            evaluator.push(&rec);
             sink(&rec);
         }
         joined = k + 1;

@@ -164,7 +164,7 @@ fn constant_delays_on_the_tick_grid_equal_the_same_delay_plus_a_hair() {
             let r = paper(10.0);
             let mut e = fdi_common::engine::evaluator_for(&r);
             for rec in recs {
-                e.push::<2>(rec);
+                e.push(rec);
             }
             e.finish()
         };

@@ -325,7 +325,7 @@ pub enum RoleError {
     NotInScenario(u32),
     #[error("--agent is required")]
     MissingId,
-    #[error("agent {0}: its model does not have 2 links")]
+    #[error("agent {0}: its model has another number of links than the run's first agent")]
     Dof(u32),
     #[error("{0}")]
     Scheduling(String),
@@ -602,10 +602,10 @@ pub fn admit_measurement(
     control_period_s: f64,
     trace: &mut fdi_common::trace::TraceWriter,
 ) -> bool {
-    use crate::ipc::msg::{validate_measurement, SeqVerdict};
+    use crate::ipc::msg::{validate_measurement, SeqRule, SeqVerdict};
     use fdi_common::engine::tick_time;
     use fdi_common::trace::TraceRecord;
-    let structure = validate_measurement(m, dof, |_| true, m.seq).map(|_| ());
+    let structure = validate_measurement(m, dof, |_| true, SeqRule::Tracked).map(|_| ());
     let verdict = structure
         .as_ref()
         .ok()
@@ -630,6 +630,20 @@ pub fn admit_measurement(
     };
     let _ = trace.write(&TraceRecord::Event { t: m.t, message });
     false
+}
+
+/// What the agent does with one torque message on its own channel: it must name this agent,
+/// carry `N` links, a finite stamp, and a sequence number no older than `next_seq` (the one
+/// after the last admitted; a later one means the ones between never came). Returns the torque
+/// to take into the delay line, which refuses non-finite values and stamps that do not increase.
+pub fn admit_torque<const N: usize>(
+    m: &crate::ipc::TorqueMsg,
+    own_agent: u32,
+    next_seq: u64,
+) -> Result<fdi_common::model::Vector<N>, crate::ipc::msg::MsgError> {
+    use crate::ipc::msg::{to_vector, validate_torque, SeqRule};
+    validate_torque(m, N, own_agent, SeqRule::AtLeast(next_seq))?;
+    Ok(to_vector::<N>(&m.u))
 }
 
 #[cfg(test)]

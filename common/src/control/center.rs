@@ -3,7 +3,7 @@
 use crate::delay::{DelayLine, DelayProfile};
 use crate::model::{EulerLagrange, Matrix, Vector};
 use crate::rng::{stream, Purpose};
-use crate::scenario::{AgentConfig, BuildModel, ControllerConfig, ControllerMode, ModelConfig};
+use crate::scenario::{AgentConfig, ControllerConfig, ControllerMode, ModelConfig};
 use crate::trajectory::{Reference, TrajectoryConfig};
 
 use super::estimator::{NnEstimator, NnParams};
@@ -93,13 +93,10 @@ pub struct CenterAgent<const N: usize> {
     pub history_misses: u64,
 }
 
-impl<const N: usize> CenterAgent<N>
-where
-    ModelConfig: BuildModel<N>,
-{
+impl<const N: usize> CenterAgent<N> {
     /// `None` when the model has another number of links than `N`.
     pub fn new(params: CenterParams) -> Option<Self> {
-        let model = params.model.build_model()?;
+        let model = params.model.build::<N>()?;
         let c = &params.controller;
         let mut rng = stream(params.run_seed, params.agent_id, Purpose::NnInit);
         let estimator = NnEstimator::new(NnParams::from_controller(c), c.initial_v_range, &mut rng);

@@ -1,13 +1,80 @@
 //! Euler–Lagrange robot models, `M(q) q̈ + V(q, q̇) q̇ + G(q) + F(q̇) + d(t) = u` (paper eq. 1).
 //!
-//! A new robot is one new file implementing [`EulerLagrange`] plus one variant in
-//! [`crate::scenario::ModelConfig`].
+//! A new robot is one new file implementing [`EulerLagrange`] for its number of links, one
+//! variant of [`ModelConfig`] and one arm of [`ModelConfig::with_links`]: everything else (the
+//! plant, the control center, the processes, the launcher) is generic over the number of links.
 
 pub mod two_link;
 
 use nalgebra::{SMatrix, SVector};
+use serde::{Deserialize, Serialize};
 
 pub use two_link::{TwoLink, TwoLinkParams};
+
+/// The robot of one agent (`model = { kind = "…", … }` in a scenario): one variant per model
+/// file, its parameters defaulting field by field.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum ModelConfig {
+    /// Two-link planar manipulator (eq. 67); parameters default to the paper's.
+    TwoLink(TwoLinkParams),
+}
+
+/// Work that is generic over the number of links, run by [`ModelConfig::with_links`] with the
+/// model's own `N` and the model built.
+pub trait ForLinks {
+    type Output;
+    fn call<const N: usize>(self, model: Box<dyn EulerLagrange<N>>) -> Self::Output;
+}
+
+impl ModelConfig {
+    /// Runs `work` with this model's number of links and the model: the one place that maps a
+    /// model kind to its number of links.
+    pub fn with_links<W: ForLinks>(&self, work: W) -> W::Output {
+        match *self {
+            Self::TwoLink(p) => work.call::<2>(Box::new(TwoLink::new(p))),
+        }
+    }
+
+    /// Number of links.
+    pub fn dof(&self) -> usize {
+        struct Links;
+        impl ForLinks for Links {
+            type Output = usize;
+            fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> usize {
+                N
+            }
+        }
+        self.with_links(Links)
+    }
+
+    /// The model for robots with `N` links; `None` when it has another number of links
+    /// (validation makes every agent of a run share one link count).
+    pub fn build<const N: usize>(&self) -> Option<Box<dyn EulerLagrange<N>>> {
+        struct Build<const N: usize>;
+        impl<const N: usize> ForLinks for Build<N> {
+            type Output = Option<Box<dyn EulerLagrange<N>>>;
+            fn call<const M: usize>(self, model: Box<dyn EulerLagrange<M>>) -> Self::Output {
+                // `Box<dyn EulerLagrange<M>>` is a `Box<dyn EulerLagrange<N>>` exactly when M = N.
+                let any: Box<dyn std::any::Any> = Box::new(model);
+                any.downcast::<Box<dyn EulerLagrange<N>>>().ok().map(|m| *m)
+            }
+        }
+        self.with_links(Build::<N>)
+    }
+
+    /// Physically meaningless parameters, as `(field, why)`.
+    pub fn problems(&self) -> Vec<(&'static str, String)> {
+        struct Problems;
+        impl ForLinks for Problems {
+            type Output = Vec<(&'static str, String)>;
+            fn call<const N: usize>(self, model: Box<dyn EulerLagrange<N>>) -> Self::Output {
+                model.problems()
+            }
+        }
+        self.with_links(Problems)
+    }
+}
 
 /// Column vector of generalized coordinates (or torques) of an `N`-dof robot.
 pub type Vector<const N: usize> = SVector<f64, N>;
@@ -16,6 +83,9 @@ pub type Matrix<const N: usize> = SMatrix<f64, N, N>;
 
 /// The known dynamics of one agent. Pure: no state, no I/O.
 pub trait EulerLagrange<const N: usize>: Send + Sync + std::fmt::Debug {
+    /// Every way the parameters are physically meaningless, as `(field, why)`; empty for a
+    /// model whose inertia is positive definite everywhere and whose friction is dissipative.
+    fn problems(&self) -> Vec<(&'static str, String)>;
     /// Generalized inertia `M(q)`, symmetric positive definite.
     fn inertia(&self, q: &Vector<N>) -> Matrix<N>;
     /// Time derivative `Ṁ(q, q̇)` (used by the passivity property tests).

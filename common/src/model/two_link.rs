@@ -9,7 +9,7 @@ use super::{EulerLagrange, Matrix, Vector};
 
 /// Inertia and friction parameters of [`TwoLink`].
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(default, deny_unknown_fields)]
 pub struct TwoLinkParams {
     /// kg·m², typical 3.473 (paper).
     pub p1: f64,
@@ -37,6 +37,45 @@ impl TwoLinkParams {
     pub fn is_positive_definite(&self) -> bool {
         self.p2 > 0.0 && self.p2 * (self.p1 - self.p2) > self.p3 * self.p3
     }
+
+    /// Every way the parameters are physically meaningless, as `(field, why)`: non-finite
+    /// values, negative friction, an inertia that is not positive definite.
+    pub fn problems(&self) -> Vec<(&'static str, String)> {
+        let Self {
+            p1,
+            p2,
+            p3,
+            fd1,
+            fd2,
+        } = *self;
+        let mut out = Vec::new();
+        for (name, v) in [
+            ("p1", p1),
+            ("p2", p2),
+            ("p3", p3),
+            ("fd1", fd1),
+            ("fd2", fd2),
+        ] {
+            if !v.is_finite() {
+                out.push((name, format!("must be finite, got {v}")));
+            }
+        }
+        for (name, v) in [("fd1", fd1), ("fd2", fd2)] {
+            if v < 0.0 {
+                out.push((name, format!("friction must be ≥ 0, got {v}")));
+            }
+        }
+        if !self.is_positive_definite() {
+            out.push((
+                "p2",
+                format!(
+                    "inertia not positive definite: need p2 > 0 and p2(p1 − p2) > p3² \
+                     (p1={p1}, p2={p2}, p3={p3})"
+                ),
+            ));
+        }
+        out
+    }
 }
 
 impl Default for TwoLinkParams {
@@ -58,6 +97,10 @@ impl TwoLink {
 }
 
 impl EulerLagrange<2> for TwoLink {
+    fn problems(&self) -> Vec<(&'static str, String)> {
+        self.params.problems()
+    }
+
     fn inertia(&self, q: &Vector<2>) -> Matrix<2> {
         let TwoLinkParams { p1, p2, p3, .. } = self.params;
         let c2 = q[1].cos();

@@ -152,21 +152,45 @@ pub enum MsgError {
     },
     #[error("agent {agent}: sequence {seq} where {expected} was expected")]
     OutOfSequence { agent: u32, seq: u64, expected: u64 },
+    #[error(
+        "agent {agent}: sequence {seq} is behind the next one due, {next} (duplicate or replay)"
+    )]
+    Stale { agent: u32, seq: u64, next: u64 },
     #[error("agent {agent}: dof {dof} exceeds the {MAX_DOF} entries a payload holds")]
     DofOutOfRange { agent: u32, dof: u32 },
     #[error("agent {agent}, sequence {seq}: time stamp {t} is not finite")]
     BadTime { agent: u32, seq: u64, t: f64 },
 }
 
+/// Which sequence numbers a receiver takes at this point of the stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SeqRule {
+    /// Exactly this one (strict lockstep order).
+    Exactly(u64),
+    /// This one or a later one: a later one means the ones between never came (realtime); an
+    /// earlier one is a duplicate or a replay.
+    AtLeast(u64),
+    /// Any: the receiver judges the number itself with a [`SequenceTracker`], which tells gaps,
+    /// duplicates, replays and forged numbers apart.
+    Tracked,
+}
+
+impl From<u64> for SeqRule {
+    fn from(seq: u64) -> Self {
+        Self::Exactly(seq)
+    }
+}
+
 /// Checks the structure of a message (not its values: non-finite data is the control center's
-/// business, it rejects and counts it). `expected_seq` is the next tick due from that agent.
+/// business, it rejects and counts it): the agent is `known`, `dof` is `expected_dof` and `seq`
+/// follows `rule`.
 pub fn check_header(
     agent: u32,
     dof: u32,
     seq: u64,
     expected_dof: usize,
     known: impl Fn(u32) -> bool,
-    expected_seq: u64,
+    rule: impl Into<SeqRule>,
 ) -> Result<(), MsgError> {
     if !known(agent) {
         return Err(MsgError::UnknownAgent { agent });
@@ -178,14 +202,15 @@ pub fn check_header(
             expected: expected_dof,
         });
     }
-    if seq != expected_seq {
-        return Err(MsgError::OutOfSequence {
+    match rule.into() {
+        SeqRule::Exactly(expected) if seq != expected => Err(MsgError::OutOfSequence {
             agent,
             seq,
-            expected: expected_seq,
-        });
+            expected,
+        }),
+        SeqRule::AtLeast(next) if seq < next => Err(MsgError::Stale { agent, seq, next }),
+        _ => Ok(()),
     }
-    Ok(())
 }
 
 /// The values of a measurement that passed [`validate_measurement`]: exactly `dof` entries each.
@@ -206,7 +231,7 @@ fn check_structure(
     t: f64,
     expected_dof: usize,
     known: impl Fn(u32) -> bool,
-    expected_seq: u64,
+    rule: SeqRule,
 ) -> Result<usize, MsgError> {
     let n = dof as usize;
     if n > MAX_DOF {
@@ -216,7 +241,7 @@ fn check_structure(
         }
         return Err(MsgError::DofOutOfRange { agent, dof });
     }
-    check_header(agent, dof, seq, expected_dof, known, expected_seq)?;
+    check_header(agent, dof, seq, expected_dof, known, rule)?;
     if !t.is_finite() {
         return Err(MsgError::BadTime { agent, seq, t });
     }
@@ -224,17 +249,17 @@ fn check_structure(
 }
 
 /// Everything a receiver must check on a measurement before it uses any value of it: the agent
-/// is `known`, `dof` fits the payload and equals `expected_dof`, `seq` is `expected_seq`, the
+/// is `known`, `dof` fits the payload and equals `expected_dof`, `seq` follows `rule`, the
 /// time stamp `t` is finite. Returns the first `dof` entries of `y` and `ẏ`.
 ///
 /// The values themselves are not checked: a non-finite or absurd `y`/`ẏ` is the control
 /// center's business ([`fdi_common::control::CenterAgent::tick`] rejects, counts and holds the last
-/// good one). To leave the sequence to a [`SequenceTracker`], pass `msg.seq` as `expected_seq`.
+/// good one). To leave the sequence to a [`SequenceTracker`], pass [`SeqRule::Tracked`].
 pub fn validate_measurement(
     msg: &MeasurementMsg,
     expected_dof: usize,
     known: impl Fn(u32) -> bool,
-    expected_seq: u64,
+    rule: impl Into<SeqRule>,
 ) -> Result<MeasuredValues<'_>, MsgError> {
     let n = check_structure(
         msg.agent,
@@ -243,7 +268,7 @@ pub fn validate_measurement(
         msg.t,
         expected_dof,
         known,
-        expected_seq,
+        rule.into(),
     )?;
     Ok(MeasuredValues {
         y: &msg.y[..n],
@@ -252,14 +277,15 @@ pub fn validate_measurement(
 }
 
 /// [`validate_measurement`] for a torque command on agent `own_agent`'s channel: the message
-/// must name that agent, have `expected_dof` links and `expected_seq`, and a finite `t_send`.
+/// must name that agent, have `expected_dof` links, a `seq` that follows `rule`, and a finite
+/// `t_send`.
 /// Returns the first `dof` entries of `u`. Non-finite torques are refused by the agent's delay
 /// line ([`fdi_common::plant::Plant::receive`]), which also refuses stamps that do not increase.
 pub fn validate_torque(
     msg: &TorqueMsg,
     expected_dof: usize,
     own_agent: u32,
-    expected_seq: u64,
+    rule: impl Into<SeqRule>,
 ) -> Result<&[f64], MsgError> {
     let n = check_structure(
         msg.agent,
@@ -268,7 +294,7 @@ pub fn validate_torque(
         msg.t_send,
         expected_dof,
         |a| a == own_agent,
-        expected_seq,
+        rule.into(),
     )?;
     Ok(&msg.u[..n])
 }
