@@ -47,6 +47,44 @@ fn lockstep_ipc_digest_equals_the_in_process_digest() {
     }
 }
 
+/// The second robot class: three-link arms, over IPC in lockstep, give the in-process digest;
+/// the traces carry three joints per agent.
+#[test]
+fn three_link_lockstep_ipc_digest_equals_the_in_process_digest() {
+    let dir = Scratch::new("three-link");
+    let scenario = fdi_tests::repo_path("scenarios/three-link.toml");
+    let scenario = scenario.to_string_lossy();
+    let args = |engine: &'static str| {
+        [
+            "run",
+            &*scenario,
+            "--duration-s",
+            "2",
+            "--json",
+            "--engine",
+            engine,
+        ]
+        .map(String::from)
+    };
+    let run = |engine| {
+        let a = args(engine);
+        let a: Vec<&str> = a.iter().map(String::as_str).collect();
+        json(&launch(&a, dir.0.as_path(), WATCHDOG))
+    };
+    let (ipc, inproc) = (run("ipc"), run("inproc"));
+    assert_eq!(ipc["engine"], "ipc");
+    assert_eq!(ipc["trace_digest"], inproc["trace_digest"]);
+    assert_eq!(ipc["rmse_rad"], inproc["rmse_rad"]);
+    assert_eq!(ipc["ticks"], 2000);
+    let run_dir = fdi_tests::run_dir_of(&ipc);
+    let records = fdi_tests::trace_records(&run_dir.join("traces/agent-2.trace"));
+    let joints = records.iter().find_map(|r| match r {
+        fdi_common::trace::TraceRecord::Agent(a) => Some(a.q.as_slice().len()),
+        _ => None,
+    });
+    assert_eq!(joints, Some(3));
+}
+
 #[test]
 fn two_runs_at_once_do_not_interfere() {
     let dir = Scratch::new("concurrent");

@@ -4,11 +4,13 @@
 //! variant of [`ModelConfig`] and one arm of [`ModelConfig::with_links`]: everything else (the
 //! plant, the control center, the processes, the launcher) is generic over the number of links.
 
+pub mod three_link;
 pub mod two_link;
 
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
+pub use three_link::{ThreeLink, ThreeLinkParams};
 pub use two_link::{TwoLink, TwoLinkParams};
 
 /// The robot of one agent (`model = { kind = "…", … }` in a scenario): one variant per model
@@ -18,6 +20,8 @@ pub use two_link::{TwoLink, TwoLinkParams};
 pub enum ModelConfig {
     /// Two-link planar manipulator (eq. 67); parameters default to the paper's.
     TwoLink(TwoLinkParams),
+    /// Three-link planar arm; parameters default to [`ThreeLinkParams::DEFAULT`].
+    ThreeLink(ThreeLinkParams),
 }
 
 /// Work that is generic over the number of links, run by [`ModelConfig::with_links`] with the
@@ -33,6 +37,7 @@ impl ModelConfig {
     pub fn with_links<W: ForLinks>(&self, work: W) -> W::Output {
         match *self {
             Self::TwoLink(p) => work.call::<2>(Box::new(TwoLink::new(p))),
+            Self::ThreeLink(p) => work.call::<3>(Box::new(ThreeLink::new(p))),
         }
     }
 
@@ -129,5 +134,52 @@ pub trait EulerLagrange<const N: usize>: Send + Sync + std::fmt::Debug {
     /// Kinetic energy `½ q̇ᵀ M q̇`.
     fn kinetic_energy(&self, q: &Vector<N>, qd: &Vector<N>) -> f64 {
         0.5 * qd.dot(&(self.inertia(q) * qd))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(toml_text: &str) -> Result<ModelConfig, String> {
+        toml::from_str(toml_text).map_err(|e| e.to_string())
+    }
+
+    #[test]
+    fn each_kind_dispatches_to_its_own_number_of_links_and_no_other() {
+        let two = parse(r#"kind = "two-link""#).expect("two-link");
+        let three = parse(r#"kind = "three-link""#).expect("three-link");
+        assert_eq!(two, ModelConfig::TwoLink(TwoLinkParams::PAPER));
+        assert_eq!(three, ModelConfig::ThreeLink(ThreeLinkParams::DEFAULT));
+        assert_eq!((two.dof(), three.dof()), (2, 3));
+        assert!(two.build::<2>().is_some() && two.build::<3>().is_none());
+        assert!(three.build::<3>().is_some() && three.build::<2>().is_none());
+        // The model built is the one configured, not a default.
+        let q = Vector::<3>::new(0.1, 0.2, 0.3);
+        let heavy = ModelConfig::ThreeLink(ThreeLinkParams {
+            mass_kg: [6.0, 4.0, 3.0],
+            ..ThreeLinkParams::DEFAULT
+        });
+        let built = heavy.build::<3>().expect("three links");
+        assert_ne!(
+            built.inertia(&q),
+            three.build::<3>().expect("three links").inertia(&q)
+        );
+    }
+
+    #[test]
+    fn parameters_default_field_by_field_and_unknown_fields_are_named() {
+        let m = parse("kind = \"three-link\"\nmass_kg = [1.0, 1.0, 1.0]").expect("valid");
+        let ModelConfig::ThreeLink(p) = m else {
+            panic!("three-link expected, got {m:?}");
+        };
+        assert_eq!(p.mass_kg, [1.0; 3]);
+        assert_eq!(p.length_m, ThreeLinkParams::DEFAULT.length_m);
+        let e = parse("kind = \"two-link\"\np4 = 1.0").expect_err("p4 is no field");
+        assert!(e.contains("p4"), "{e}");
+        let e = parse("kind = \"four-link\"").expect_err("no such kind");
+        assert!(e.contains("four-link"), "{e}");
+        let bad = parse("kind = \"three-link\"\nmass_kg = [1.0, -1.0, 1.0]").expect("parses");
+        assert_eq!(bad.problems().first().map(|p| p.0), Some("mass_kg"));
     }
 }

@@ -1,0 +1,441 @@
+//! A three-link revolute planar arm: three rigid links in a chain, joint angles relative to the
+//! previous link, viscous friction at each joint and gravity along −y of the arm's plane
+//! (`gravity_m_s2 = 0`, the default, is an arm moving in a horizontal plane like the paper's).
+//!
+//! With absolute link angles `θ_i = q_1 + … + q_i` and `ℓ_a` the length of link `a` (or, for the
+//! link whose centre of mass is meant, its distance `c_a` from its joint), the centre of mass of
+//! link `i` moves with `∂p_i/∂q_k = Σ_{a=k..i} ℓ_a (−sin θ_a, cos θ_a)`, so
+//!
+//! * `M_kl = Σ_i [ m_i Σ_{a≥k, b≥l; a,b≤i} ℓ_a ℓ_b cos(θ_a − θ_b) + I_i [k ≤ i][l ≤ i] ]`,
+//! * `V` from the Christoffel symbols of `M` (which makes `Ṁ − 2V` skew-symmetric),
+//! * `G_k = g Σ_i m_i Σ_{a=k..i} ℓ_a cos θ_a`, `F = diag(f_i) q̇`.
+
+use serde::{Deserialize, Serialize};
+
+use super::{EulerLagrange, Matrix, Vector};
+
+/// Mass, geometry and friction of [`ThreeLink`]; each array is indexed by link, base first.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ThreeLinkParams {
+    /// Link masses, kg.
+    pub mass_kg: [f64; 3],
+    /// Link lengths (joint to joint), m.
+    pub length_m: [f64; 3],
+    /// Distance of each link's centre of mass from its joint, m (within the link).
+    pub com_m: [f64; 3],
+    /// Moment of inertia of each link about its centre of mass, kg·m².
+    pub inertia_kg_m2: [f64; 3],
+    /// Viscous friction at each joint, N·m·s.
+    pub friction_n_m_s: [f64; 3],
+    /// Gravity along −y of the arm's plane, m/s²; 0 for a horizontal arm.
+    pub gravity_m_s2: f64,
+}
+
+impl ThreeLinkParams {
+    /// A horizontal arm of about the paper's two-link size: 1 m in all, base link heaviest.
+    pub const DEFAULT: Self = Self {
+        mass_kg: [6.0, 4.0, 2.5],
+        length_m: [0.45, 0.35, 0.25],
+        com_m: [0.225, 0.175, 0.125],
+        inertia_kg_m2: [0.5, 0.4, 0.3],
+        friction_n_m_s: [5.3, 1.1, 0.8],
+        gravity_m_s2: 0.0,
+    };
+
+    /// Every way the parameters can be physically meaningless, as `(field, why)`: masses,
+    /// lengths and inertias positive, centres of mass within their links, friction and gravity
+    /// non-negative, all finite. Positive masses and inertias make `M(q)` positive definite for
+    /// every `q` (each link adds `m_i J_iᵀJ_i + I_i ω_iᵀω_i`, and the rotational terms alone span
+    /// every direction).
+    pub fn problems(&self) -> Vec<(&'static str, String)> {
+        let mut out = Vec::new();
+        let mut check = |field: &'static str, values: &[f64], ok: fn(f64) -> bool, want: &str| {
+            for (i, v) in values.iter().enumerate() {
+                if !(v.is_finite() && ok(*v)) {
+                    out.push((field, format!("link {} is {v}, must be {want}", i + 1)));
+                }
+            }
+        };
+        check("mass_kg", &self.mass_kg, |v| v > 0.0, "> 0");
+        check("length_m", &self.length_m, |v| v > 0.0, "> 0");
+        check("inertia_kg_m2", &self.inertia_kg_m2, |v| v > 0.0, "> 0");
+        check("friction_n_m_s", &self.friction_n_m_s, |v| v >= 0.0, ">= 0");
+        check("com_m", &self.com_m, |v| v >= 0.0, ">= 0");
+        check("gravity_m_s2", &[self.gravity_m_s2], |v| v >= 0.0, ">= 0");
+        for i in 0..3 {
+            if self.com_m[i] > self.length_m[i] {
+                out.push((
+                    "com_m",
+                    format!(
+                        "link {} is {}, beyond the link's length {}",
+                        i + 1,
+                        self.com_m[i],
+                        self.length_m[i]
+                    ),
+                ));
+            }
+        }
+        out
+    }
+}
+
+impl Default for ThreeLinkParams {
+    fn default() -> Self {
+        Self::DEFAULT
+    }
+}
+
+/// Three-link planar arm.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ThreeLink {
+    pub params: ThreeLinkParams,
+}
+
+impl ThreeLink {
+    pub fn new(params: ThreeLinkParams) -> Self {
+        Self { params }
+    }
+
+    /// Absolute link angles `θ_i = q_1 + … + q_i`.
+    fn absolute(q: &Vector<3>) -> [f64; 3] {
+        [q[0], q[0] + q[1], q[0] + q[1] + q[2]]
+    }
+
+    /// `ℓ_a` as seen from link `i`'s centre of mass: the full length of the links before it,
+    /// the centre-of-mass distance of link `i` itself.
+    fn lever(&self, a: usize, i: usize) -> f64 {
+        if a == i {
+            self.params.com_m[a]
+        } else {
+            self.params.length_m[a]
+        }
+    }
+
+    /// `∂M/∂q_m`: `∂cos(θ_a − θ_b)/∂q_m = −sin(θ_a − θ_b) ([m ≤ a] − [m ≤ b])`.
+    fn inertia_partial(&self, q: &Vector<3>, m: usize) -> Matrix<3> {
+        let th = Self::absolute(q);
+        let mut out = Matrix::<3>::zeros();
+        for i in 0..3 {
+            let mass = self.params.mass_kg[i];
+            for k in 0..=i {
+                for l in 0..=i {
+                    let mut sum = 0.0;
+                    for a in k..=i {
+                        for b in l..=i {
+                            let d = f64::from(u8::from(m <= a)) - f64::from(u8::from(m <= b));
+                            if d != 0.0 {
+                                sum -=
+                                    self.lever(a, i) * self.lever(b, i) * (th[a] - th[b]).sin() * d;
+                            }
+                        }
+                    }
+                    out[(k, l)] += mass * sum;
+                }
+            }
+        }
+        out
+    }
+
+    /// Potential energy `g Σ m_i y_i` of the centres of mass (zero at `q = 0`'s height, the base).
+    pub fn potential_energy(&self, q: &Vector<3>) -> f64 {
+        let th = Self::absolute(q);
+        (0..3)
+            .map(|i| {
+                let height: f64 = (0..=i).map(|a| self.lever(a, i) * th[a].sin()).sum();
+                self.params.mass_kg[i] * self.params.gravity_m_s2 * height
+            })
+            .sum()
+    }
+}
+
+impl EulerLagrange<3> for ThreeLink {
+    fn problems(&self) -> Vec<(&'static str, String)> {
+        self.params.problems()
+    }
+
+    fn inertia(&self, q: &Vector<3>) -> Matrix<3> {
+        let th = Self::absolute(q);
+        let mut out = Matrix::<3>::zeros();
+        for i in 0..3 {
+            let mass = self.params.mass_kg[i];
+            for k in 0..=i {
+                for l in 0..=i {
+                    let mut sum = 0.0;
+                    for a in k..=i {
+                        for b in l..=i {
+                            sum += self.lever(a, i) * self.lever(b, i) * (th[a] - th[b]).cos();
+                        }
+                    }
+                    out[(k, l)] += mass * sum + self.params.inertia_kg_m2[i];
+                }
+            }
+        }
+        out
+    }
+
+    fn inertia_rate(&self, q: &Vector<3>, qd: &Vector<3>) -> Matrix<3> {
+        (0..3).fold(Matrix::<3>::zeros(), |acc, m| {
+            acc + self.inertia_partial(q, m) * qd[m]
+        })
+    }
+
+    /// `V_kj = Σ_i Γ_kij q̇_i`, `Γ_kij = ½ (∂M_kj/∂q_i + ∂M_ki/∂q_j − ∂M_ij/∂q_k)`.
+    fn coriolis(&self, q: &Vector<3>, qd: &Vector<3>) -> Matrix<3> {
+        let partial = [
+            self.inertia_partial(q, 0),
+            self.inertia_partial(q, 1),
+            self.inertia_partial(q, 2),
+        ];
+        Matrix::<3>::from_fn(|k, j| {
+            (0..3)
+                .map(|i| {
+                    0.5 * (partial[i][(k, j)] + partial[j][(k, i)] - partial[k][(i, j)]) * qd[i]
+                })
+                .sum()
+        })
+    }
+
+    fn gravity(&self, q: &Vector<3>) -> Vector<3> {
+        let th = Self::absolute(q);
+        let g = self.params.gravity_m_s2;
+        Vector::<3>::from_fn(|k, _| {
+            (k..3)
+                .map(|i| {
+                    let arm: f64 = (k..=i).map(|a| self.lever(a, i) * th[a].cos()).sum();
+                    self.params.mass_kg[i] * g * arm
+                })
+                .sum()
+        })
+    }
+
+    fn friction(&self, qd: &Vector<3>) -> Vector<3> {
+        Vector::<3>::from_fn(|i, _| self.params.friction_n_m_s[i] * qd[i])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn arm() -> ThreeLink {
+        ThreeLink::new(ThreeLinkParams::DEFAULT)
+    }
+
+    /// The same arm in a vertical plane, so that `G` is exercised.
+    fn vertical() -> ThreeLink {
+        ThreeLink::new(ThreeLinkParams {
+            gravity_m_s2: 9.81,
+            ..ThreeLinkParams::DEFAULT
+        })
+    }
+
+    fn grid() -> impl Iterator<Item = Vector<3>> {
+        (-4..=4).flat_map(|i| {
+            (-4..=4).flat_map(move |j| {
+                (-4..=4).map(move |k| {
+                    Vector::<3>::new(
+                        f64::from(i) * 0.71,
+                        f64::from(j) * 0.83,
+                        f64::from(k) * 0.77,
+                    )
+                })
+            })
+        })
+    }
+
+    /// RK4 of the free arm (u = 0, d = 0), returning the total energy after each step.
+    fn free_energies(arm: &ThreeLink, q0: Vector<3>, qd0: Vector<3>, steps: usize) -> Vec<f64> {
+        let zero = Vector::<3>::zeros();
+        let f = |q: &Vector<3>, qd: &Vector<3>| arm.acceleration(q, qd, &zero, &zero);
+        let energy =
+            |q: &Vector<3>, qd: &Vector<3>| arm.kinetic_energy(q, qd) + arm.potential_energy(q);
+        let (mut q, mut qd) = (q0, qd0);
+        let dt = 1e-3;
+        let mut out = vec![energy(&q, &qd)];
+        for _ in 0..steps {
+            let k1 = (qd, f(&q, &qd));
+            let k2 = (
+                qd + k1.1 * (dt / 2.0),
+                f(&(q + k1.0 * (dt / 2.0)), &(qd + k1.1 * (dt / 2.0))),
+            );
+            let k3 = (
+                qd + k2.1 * (dt / 2.0),
+                f(&(q + k2.0 * (dt / 2.0)), &(qd + k2.1 * (dt / 2.0))),
+            );
+            let k4 = (qd + k3.1 * dt, f(&(q + k3.0 * dt), &(qd + k3.1 * dt)));
+            q += (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0) * (dt / 6.0);
+            qd += (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1) * (dt / 6.0);
+            out.push(energy(&q, &qd));
+        }
+        out
+    }
+
+    #[test]
+    fn inertia_is_symmetric_positive_definite_over_a_grid() {
+        let arm = arm();
+        for q in grid() {
+            let m = arm.inertia(&q);
+            assert_relative_eq!(m, m.transpose(), epsilon = 1e-15);
+            let eig = m.symmetric_eigenvalues();
+            assert!(eig.min() > 0.0, "M not PD at {q:?}: {eig:?}");
+        }
+        assert!(ThreeLinkParams::DEFAULT.problems().is_empty());
+    }
+
+    #[test]
+    fn inertia_matches_the_kinetic_energy_of_the_centres_of_mass() {
+        // ½ q̇ᵀ M q̇ = Σ ½ m_i |v_i|² + ½ I_i ω_i², with v_i differentiated numerically from the
+        // positions of the centres of mass: checks M against an independent formula.
+        let arm = arm();
+        let p = arm.params;
+        let com = |q: &Vector<3>, i: usize| {
+            let th = ThreeLink::absolute(q);
+            (0..=i).fold((0.0, 0.0), |(x, y), a| {
+                let l = if a == i { p.com_m[a] } else { p.length_m[a] };
+                (x + l * th[a].cos(), y + l * th[a].sin())
+            })
+        };
+        let h = 1e-6;
+        for q in grid().step_by(11) {
+            for qd in [
+                Vector::<3>::new(0.7, -1.3, 2.1),
+                Vector::<3>::new(-2.0, 0.4, -0.9),
+            ] {
+                let (qa, qb) = (q + qd * h, q - qd * h);
+                let mut energy = 0.0;
+                for i in 0..3 {
+                    let (xa, ya) = com(&qa, i);
+                    let (xb, yb) = com(&qb, i);
+                    let (vx, vy) = ((xa - xb) / (2.0 * h), (ya - yb) / (2.0 * h));
+                    let omega: f64 = qd.iter().take(i + 1).sum();
+                    energy += 0.5 * p.mass_kg[i] * (vx * vx + vy * vy)
+                        + 0.5 * p.inertia_kg_m2[i] * omega * omega;
+                }
+                assert_relative_eq!(arm.kinetic_energy(&q, &qd), energy, max_relative = 1e-8);
+            }
+        }
+    }
+
+    #[test]
+    fn inertia_rate_minus_twice_coriolis_is_skew_symmetric() {
+        let arm = arm();
+        for q in grid().step_by(5) {
+            for qd in grid().step_by(97) {
+                let s = arm.inertia_rate(&q, &qd) - 2.0 * arm.coriolis(&q, &qd);
+                assert_relative_eq!(s, -s.transpose(), epsilon = 1e-12);
+                for x in grid().step_by(131) {
+                    let v = x.dot(&(s * x));
+                    assert!(v.abs() < 1e-11, "xᵀ(Ṁ−2V)x = {v} at q={q:?} q̇={qd:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn inertia_rate_matches_finite_difference() {
+        let arm = arm();
+        let h = 1e-6;
+        for q in grid().step_by(23) {
+            let qd = Vector::<3>::new(1.1, -2.3, 0.6);
+            let fd = (arm.inertia(&(q + qd * h)) - arm.inertia(&(q - qd * h))) / (2.0 * h);
+            assert_relative_eq!(arm.inertia_rate(&q, &qd), fd, epsilon = 1e-8);
+        }
+    }
+
+    #[test]
+    fn gravity_is_the_gradient_of_the_potential_energy() {
+        let arm = vertical();
+        let h = 1e-6;
+        for q in grid().step_by(13) {
+            let g = arm.gravity(&q);
+            for k in 0..3 {
+                let mut e = Vector::<3>::zeros();
+                e[k] = h;
+                let fd =
+                    (arm.potential_energy(&(q + e)) - arm.potential_energy(&(q - e))) / (2.0 * h);
+                assert_relative_eq!(g[k], fd, epsilon = 1e-7);
+            }
+        }
+        assert_eq!(
+            self::arm().gravity(&Vector::<3>::new(0.3, 0.2, 0.1)),
+            Vector::<3>::zeros()
+        );
+    }
+
+    #[test]
+    fn unforced_arm_with_friction_loses_energy() {
+        // dE/dt = −q̇ᵀ F q̇ < 0 for q̇ ≠ 0 with E = kinetic + potential (Ṁ − 2V skew): the total
+        // energy falls at every step, horizontal or vertical.
+        for arm in [arm(), vertical()] {
+            let e = free_energies(
+                &arm,
+                Vector::<3>::new(0.4, -1.0, 0.8),
+                Vector::<3>::new(2.0, -3.0, 4.0),
+                3000,
+            );
+            for w in e.windows(2) {
+                assert!(
+                    w[1] < w[0],
+                    "energy rose from {} to {} (g = {})",
+                    w[0],
+                    w[1],
+                    arm.params.gravity_m_s2
+                );
+            }
+        }
+        // Without gravity the arm comes to rest: friction removes nearly all the energy.
+        let e = free_energies(
+            &arm(),
+            Vector::<3>::new(0.4, -1.0, 0.8),
+            Vector::<3>::new(2.0, -3.0, 4.0),
+            5000,
+        );
+        assert!(
+            e[e.len() - 1] < 0.01 * e[0],
+            "after 5 s friction should remove >99% of {}, left {}",
+            e[0],
+            e[e.len() - 1]
+        );
+    }
+
+    #[test]
+    fn without_friction_or_input_the_energy_is_conserved() {
+        let arm = ThreeLink::new(ThreeLinkParams {
+            friction_n_m_s: [0.0; 3],
+            gravity_m_s2: 9.81,
+            ..ThreeLinkParams::DEFAULT
+        });
+        let e = free_energies(
+            &arm,
+            Vector::<3>::new(0.4, -1.0, 0.8),
+            Vector::<3>::new(2.0, -3.0, 4.0),
+            2000,
+        );
+        let drift = e.iter().map(|x| (x - e[0]).abs()).fold(0.0, f64::max);
+        assert!(
+            drift < 1e-6 * e[0].abs().max(1.0),
+            "energy drifted by {drift} from {}",
+            e[0]
+        );
+    }
+
+    #[test]
+    fn meaningless_parameters_are_named() {
+        let bad = ThreeLinkParams {
+            mass_kg: [1.0, 0.0, 1.0],
+            com_m: [0.1, 0.5, 0.1],
+            friction_n_m_s: [1.0, 1.0, f64::NAN],
+            ..ThreeLinkParams::DEFAULT
+        };
+        let fields: Vec<&str> = bad.problems().iter().map(|(f, _)| *f).collect();
+        assert_eq!(
+            fields,
+            ["mass_kg", "friction_n_m_s", "com_m"],
+            "{:?}",
+            bad.problems()
+        );
+        assert!(bad.problems()[0].1.contains("link 2"));
+    }
+}
