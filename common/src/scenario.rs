@@ -50,6 +50,33 @@ impl ControllerMode {
     }
 }
 
+/// What the observer (22) takes as its input `u_τ` over its Euler step `[t_k, t_k + Δ]`
+/// (docs/model.md, "Numerics of the delayed input").
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ObserverInput {
+    /// The mean of the delayed input `u(s − τ(s))` over the step: the input the plant
+    /// integrates over that step.
+    #[default]
+    StepMean,
+    /// The single sample `u(t_k − τ(t_k))` held over the step (SPEC §4.6 as written; the
+    /// numerics of the SPEC's prototype). It lags the plant's input by about half a period.
+    Sample,
+}
+
+impl ObserverInput {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::StepMean => "step-mean",
+            Self::Sample => "sample",
+        }
+    }
+
+    fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
 /// How processes are clocked (SPEC §6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -111,6 +138,10 @@ pub struct ControllerConfig {
     /// or all 0: the paper's laws.
     #[serde(default, skip_serializing_if = "UpdateLaw::is_paper")]
     pub update_law: UpdateLaw,
+    /// `observer_input`: `"step-mean"` (default) or `"sample"`, the discretization of the
+    /// observer's input `u_τ` ([`ObserverInput`]).
+    #[serde(default, skip_serializing_if = "ObserverInput::is_default")]
+    pub observer_input: ObserverInput,
 }
 
 /// Gaussian sensor noise θ (SPEC §2).
@@ -931,6 +962,32 @@ mod tests {
         assert_eq!(r.agent_count(), 1);
         assert!(r.attack.channels.iter().all(|c| c.agent == 1));
         load_str(&r.to_toml(), "robot 1 only", None).expect("still valid once written out");
+    }
+
+    #[test]
+    fn observer_input_parses_round_trips_and_a_bad_value_names_the_field() {
+        assert_eq!(
+            paper().expect("valid").scenario.controller.observer_input,
+            ObserverInput::StepMean,
+            "absent means step-mean"
+        );
+        let anchor = "detection = { threshold = 0.6, hold_s = 0.05 }\n";
+        assert!(PAPER_SCENARIO.contains(anchor));
+        let with =
+            |v: &str| PAPER_SCENARIO.replace(anchor, &format!("{anchor}observer_input = {v}\n"));
+        let r = load_str(&with("\"sample\""), "t", None).expect("valid");
+        assert_eq!(r.scenario.controller.observer_input, ObserverInput::Sample);
+        let again = load_str(&r.to_toml(), "again", None).expect("round trip");
+        assert_eq!(again.scenario.controller, r.scenario.controller);
+        assert!(
+            !paper().expect("valid").to_toml().contains("observer_input"),
+            "the default is not written out"
+        );
+        for bad in ["\"midpoint\"", "1"] {
+            let err = load_str(&with(bad), "t", None).expect_err("invalid");
+            let all = err.to_string();
+            assert!(all.contains("observer_input"), "{bad}: {all}");
+        }
     }
 
     #[test]

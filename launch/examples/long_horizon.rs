@@ -28,7 +28,7 @@ use fdi_common::engine::{run_inproc, RunSummary};
 use fdi_common::model::Vector;
 use fdi_common::records::TickRecord;
 use fdi_common::rng::{stream, Purpose};
-use fdi_common::scenario::{self, ControllerMode, Resolved};
+use fdi_common::scenario::{self, ControllerMode, ObserverInput, Resolved};
 use fdi_common::trajectory::TrajectoryConfig;
 
 #[allow(dead_code)] // only the line figures of the launcher's plotting are used here
@@ -76,6 +76,29 @@ enum Command {
             default_value = "3.06,10.5,20.5,30.5,40.5,45.5,46.5,46.9,47.1,47.5,48,48.5,49,49.5,50.1,51,52"
         )]
         delays_ms: Vec<f64>,
+    },
+    /// The remedy's two acceptance checks for every combination of the lists (each list
+    /// replaces the scenario's value; an empty list keeps it): per robot, the RMSE and false
+    /// alarms over the long horizon without attack, against the traditional controller's, and
+    /// Table I's RMSE (40 s, the paper's attack) against the paper's. One CSV row per
+    /// combination; the traditional reference first.
+    Grid {
+        #[command(flatten)]
+        setup: Setup,
+        /// Long horizon, s.
+        #[arg(long, default_value_t = 300.0)]
+        horizon_s: f64,
+        #[arg(long, value_delimiter = ',')]
+        observer_inputs: Vec<String>,
+        /// `innovation_time_constant_s` values, s.
+        #[arg(long, value_delimiter = ',')]
+        innovation_ts: Vec<f64>,
+        /// `leakage_w_per_s` values, 1/s.
+        #[arg(long, value_delimiter = ',')]
+        leakages_w: Vec<f64>,
+        /// `dead_zone_rad_s` values, rad/s.
+        #[arg(long, value_delimiter = ',')]
+        dead_zones: Vec<f64>,
     },
     /// The figure of docs/model.md: robot 1 over 300 s without attack, the paper's laws, the
     /// remedy of `scenarios/paper-long-horizon.toml` and the traditional controller.
@@ -126,6 +149,12 @@ struct Setup {
     /// `controller.update_law.innovation_time_constant_s`, s.
     #[arg(long)]
     innovation_t: Option<f64>,
+    /// `controller.update_law.dead_zone_rad_s`, rad/s.
+    #[arg(long)]
+    dead_zone: Option<f64>,
+    /// `controller.observer_input`: step-mean or sample.
+    #[arg(long)]
+    observer_input: Option<String>,
     /// Control period Δ, ms.
     #[arg(long)]
     period_ms: Option<f64>,
@@ -161,12 +190,19 @@ impl Setup {
             Some("traditional") => c.mode = ControllerMode::Traditional,
             Some(other) => bail!("--controller {other}: proposed or traditional"),
         }
+        match self.observer_input.as_deref() {
+            None => {}
+            Some("step-mean") => c.observer_input = ObserverInput::StepMean,
+            Some("sample") => c.observer_input = ObserverInput::Sample,
+            Some(other) => bail!("--observer-input {other}: step-mean or sample"),
+        }
         for (field, v) in [
             (&mut c.learning_rate_w, self.gamma_w),
             (&mut c.learning_rate_v, self.gamma_v),
             (&mut c.observer_gain_l1, self.l1),
             (&mut c.observer_gain_l2, self.l2),
             (&mut c.update_law.leakage_w_per_s, self.leakage_w),
+            (&mut c.update_law.dead_zone_rad_s, self.dead_zone),
             (
                 &mut c.update_law.innovation_time_constant_s,
                 self.innovation_t,
@@ -457,6 +493,119 @@ fn delay_sweep(setup: &Setup, delays_ms: &[f64]) -> Result<()> {
     Ok(())
 }
 
+/// Table I of the paper, proposed controller, robots 1–4 (SPEC §8).
+const PAPER_TABLE1_PROPOSED: [(u32, f64); 4] = [(1, 0.008), (2, 0.013), (3, 0.009), (4, 0.010)];
+
+/// Per agent id, RMSE (rad) and false alarms of one in-process run.
+fn rmse_and_alarms(setup: &Setup) -> Result<BTreeMap<u32, (f64, u64)>> {
+    let summary = run_inproc::<N>(&setup.resolve()?, |_| {})?;
+    summary
+        .metrics
+        .iter()
+        .map(|(id, m)| {
+            let id: u32 = id
+                .parse()
+                .context("a non-numeric agent id in the metrics")?;
+            Ok((id, (m.rmse_rad, m.false_alarms)))
+        })
+        .collect()
+}
+
+/// A list of values to try, or the scenario's own when the list is empty.
+fn or_keep<T: Clone>(list: &[T]) -> Vec<Option<T>> {
+    if list.is_empty() {
+        vec![None]
+    } else {
+        list.iter().cloned().map(Some).collect()
+    }
+}
+
+fn grid(
+    setup: &Setup,
+    horizon_s: f64,
+    observer_inputs: &[String],
+    innovation_ts: &[f64],
+    leakages_w: &[f64],
+    dead_zones: &[f64],
+) -> Result<()> {
+    let long = Setup {
+        duration_s: Some(horizon_s),
+        attack: Some("none".into()),
+        ..setup.clone()
+    };
+    let table1 = Setup {
+        duration_s: Some(40.0),
+        attack: Some("paper".into()),
+        ..setup.clone()
+    };
+    let traditional = rmse_and_alarms(&Setup {
+        controller: Some("traditional".into()),
+        ..long.clone()
+    })?;
+    let ids: Vec<u32> = traditional.keys().copied().collect();
+    let head: Vec<String> = ids
+        .iter()
+        .map(|id| format!("r{id}_long,r{id}_alarms,r{id}_vs_trad,r{id}_table1,r{id}_vs_paper"))
+        .collect();
+    println!(
+        "observer_input,innovation_t_s,leakage_w_per_s,dead_zone_rad_s,{},worst_vs_trad,worst_vs_paper",
+        head.join(",")
+    );
+    let trad: Vec<String> = ids
+        .iter()
+        .map(|id| format!("{:.5},{},1.000,,", traditional[id].0, traditional[id].1))
+        .collect();
+    println!("traditional,,,,{},,", trad.join(","));
+    for input in or_keep(observer_inputs) {
+        for t in or_keep(innovation_ts) {
+            for l in or_keep(leakages_w) {
+                for dz in or_keep(dead_zones) {
+                    let with = |s: &Setup| Setup {
+                        controller: Some("proposed".into()),
+                        observer_input: input.clone().or_else(|| s.observer_input.clone()),
+                        innovation_t: t.or(s.innovation_t),
+                        leakage_w: l.or(s.leakage_w),
+                        dead_zone: dz.or(s.dead_zone),
+                        ..s.clone()
+                    };
+                    let r = with(&long).resolve()?;
+                    let c = r.scenario.controller;
+                    let long_m = rmse_and_alarms(&with(&long))?;
+                    let t1 = rmse_and_alarms(&with(&table1))?;
+                    let (mut worst_trad, mut worst_paper) = (0.0_f64, 0.0_f64);
+                    let mut cells = Vec::new();
+                    for id in &ids {
+                        let (rmse, alarms) = long_m[id];
+                        let vs_trad = rmse / traditional[id].0;
+                        worst_trad = worst_trad.max(vs_trad);
+                        let paper = PAPER_TABLE1_PROPOSED.iter().find(|(i, _)| i == id);
+                        let (t1_rmse, vs_paper) = match (t1.get(id), paper) {
+                            (Some(&(x, _)), Some(&(_, p))) => {
+                                worst_paper = worst_paper.max((x / p - 1.0).abs());
+                                (format!("{x:.5}"), format!("{:.3}", x / p))
+                            }
+                            _ => (String::new(), String::new()),
+                        };
+                        cells.push(format!(
+                            "{rmse:.5},{alarms},{vs_trad:.3},{t1_rmse},{vs_paper}"
+                        ));
+                    }
+                    println!(
+                        "{},{},{},{},{},{worst_trad:.3},{:.3}",
+                        c.observer_input.as_str(),
+                        c.update_law.innovation_time_constant_s,
+                        c.update_law.leakage_w_per_s,
+                        c.update_law.dead_zone_rad_s,
+                        cells.join(","),
+                        1.0 + worst_paper
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
 fn figure(
     stem: &std::path::Path,
     remedy: &std::path::Path,
@@ -567,6 +716,21 @@ fn main() -> Result<()> {
         Command::Series { setup, window_s } => series(&setup, window_s),
         Command::Summary { setup, window_s } => summary(&setup, window_s),
         Command::DelaySweep { setup, delays_ms } => delay_sweep(&setup, &delays_ms),
+        Command::Grid {
+            setup,
+            horizon_s,
+            observer_inputs,
+            innovation_ts,
+            leakages_w,
+            dead_zones,
+        } => grid(
+            &setup,
+            horizon_s,
+            &observer_inputs,
+            &innovation_ts,
+            &leakages_w,
+            &dead_zones,
+        ),
         Command::Figure {
             stem,
             remedy,

@@ -29,10 +29,11 @@ fn with_remedy() -> Resolved {
     r
 }
 
-/// The same scenario with the paper's update laws (37)-(38).
+/// The same scenario with the paper's update laws (37)-(38) and the default observer input.
 fn paper_laws() -> Resolved {
     let mut r = with_remedy();
     r.scenario.controller.update_law = Default::default();
+    r.scenario.controller.observer_input = Default::default();
     r
 }
 
@@ -49,24 +50,47 @@ fn robot_1_under_the_paper_laws_does_not_drift_between_150_and_300_s() {
     assert_eq!(alarms, 0, "false alarms over 300 s without attack");
 }
 
+/// Table I of the paper, proposed controller (SPEC §8).
+const PAPER_TABLE1: [(u32, f64); 4] = [(1, 0.008), (2, 0.013), (3, 0.009), (4, 0.010)];
+
 #[test]
-fn the_robust_update_law_keeps_robot_1_within_10_percent_of_the_traditional_controller() {
-    // Measured at 300 s: remedy 0.0091 rad, traditional 0.0088 rad (+3 %); the paper's laws
-    // 0.0103 rad (+17 %).
-    let (traditional, _) = run_robot(with_remedy(), 1, ControllerMode::Traditional, 300.0);
-    let (remedy, alarms) = run_robot(with_remedy(), 1, ControllerMode::Proposed, 300.0);
-    assert!(
-        remedy <= 1.10 * traditional,
-        "remedy {remedy} vs traditional {traditional}"
-    );
-    assert_eq!(alarms, 0, "false alarms with the remedy");
+fn the_remedy_meets_both_acceptance_bounds_of_issue_10() {
+    // Measured: 300 s without attack, remedy / traditional 0.00901 / 0.00880, 0.00548 / 0.00509,
+    // 0.00905 / 0.00880, 0.00908 / 0.00880 rad (worst 1.077, robot 2), no false alarm; Table I
+    // with the remedy 0.00996 / 0.01045 / 0.01026 / 0.00830 rad, 0.80–1.245 of the paper. The
+    // margin is thin on robot 1's Table I value (bound 0.0100): docs/model.md, "Long horizons".
+    for (id, _) in PAPER_TABLE1 {
+        let (traditional, _) = run_robot(with_remedy(), id, ControllerMode::Traditional, 300.0);
+        let (remedy, alarms) = run_robot(with_remedy(), id, ControllerMode::Proposed, 300.0);
+        assert!(
+            remedy <= 1.10 * traditional,
+            "robot {id}: remedy {remedy} vs traditional {traditional}"
+        );
+        assert_eq!(alarms, 0, "robot {id}: false alarms with the remedy");
+    }
+    let mut table1 = with_remedy();
+    table1.scenario.duration_s = 40.0;
+    let paper_attack = fdi_common::attack::presets::preset("paper")
+        .expect("the paper's attack preset")
+        .for_agents(&table1.scenario.agent_dofs());
+    let table1 = table1
+        .with_attack(paper_attack)
+        .expect("valid with the paper's attack");
+    let s = run_inproc::<2>(&table1, |_| {}).expect("the engine runs");
+    for (id, paper) in PAPER_TABLE1 {
+        let rmse = s.metrics[&id.to_string()].rmse_rad;
+        assert!(
+            (rmse / paper - 1.0).abs() <= 0.25,
+            "robot {id}: Table I with the remedy {rmse}, paper {paper}"
+        );
+    }
 }
 
 #[test]
 fn robot_2_drifts_under_the_paper_laws_over_1000_s_and_the_robust_update_law_stops_it() {
     // Measured at 1000 s: paper's laws 0.0113 rad with 28 false alarms (the error keeps
-    // growing: 0.0189 rad and 68 false alarms at 3000 s), remedy 0.0061 rad with none,
-    // traditional 0.0051 rad.
+    // growing: 0.0189 rad and 68 false alarms at 3000 s), remedy 0.00548 rad with none,
+    // traditional 0.00511 rad.
     const HORIZON_S: f64 = 1000.0;
     let (traditional, _) = run_robot(with_remedy(), 2, ControllerMode::Traditional, HORIZON_S);
     let (paper, paper_alarms) = run_robot(paper_laws(), 2, ControllerMode::Proposed, HORIZON_S);

@@ -97,7 +97,8 @@ fn shipped_scenarios_have_the_names_and_attacks_they_claim() {
         );
     }
 
-    // The long-horizon scenario: the paper's, 300 s without attack, with a robust update law.
+    // The long-horizon scenario: the paper's, 300 s without attack, with a robust update law
+    // and the sampled observer input.
     let mut s = load("paper-long-horizon.toml").scenario;
     assert_eq!(s.duration_s, 300.0);
     assert!(!s.controller.update_law.is_paper());
@@ -105,9 +106,10 @@ fn shipped_scenarios_have_the_names_and_attacks_they_claim() {
     s.attack = paper.attack.clone();
     s.duration_s = paper.duration_s;
     s.controller.update_law = paper.controller.update_law;
+    s.controller.observer_input = paper.controller.observer_input;
     assert_eq!(
         s, paper,
-        "paper-long-horizon.toml differs from paper.toml beyond name, duration, attack and update law"
+        "paper-long-horizon.toml differs from paper.toml beyond name, duration, attack, update law and observer input"
     );
 
     // Table II: robot 1 of the paper with the delays of the table (ms → s).

@@ -3,7 +3,9 @@
 use crate::delay::{DelayLine, DelayProfile};
 use crate::model::{EulerLagrange, Matrix, Vector};
 use crate::rng::{stream, Purpose};
-use crate::scenario::{AgentConfig, ControllerConfig, ControllerMode, ModelConfig};
+use crate::scenario::{
+    AgentConfig, ControllerConfig, ControllerMode, ModelConfig, ObserverInput as ObserverInputMode,
+};
 use crate::trajectory::{Reference, TrajectoryConfig};
 
 use super::estimator::{NnEstimator, NnParams};
@@ -53,7 +55,7 @@ pub struct CenterOutput<const N: usize> {
     pub qd_hat: Vector<N>,
     pub qdd_hat: Vector<N>,
     /// `e_u` used in this tick, and `u_τ`: the delayed input averaged over the observer's
-    /// step `[t_k, t_k + Δ]`.
+    /// step `[t_k, t_k + Δ]` (or its sample at `t_k − τ(t_k)`, per `observer_input`).
     pub e_u: Vector<N>,
     pub u_tau: Vector<N>,
     pub alarm: bool,
@@ -196,10 +198,18 @@ impl<const N: usize> CenterAgent<N> {
         // Sampling u at the single instant t − τ(t) instead would pick the older or the newer
         // command when that instant falls on a stamp (τ a multiple of Δ), a whole period of
         // effective delay that a hair of τ more or less would flip.
+        // With `observer_input = "sample"` (SPEC §4.6 as written), u_τ is the command in force
+        // at `t − τ(t)`, held over the step.
         let query_next = (t + dt) - self.params.delay.tau(t + dt);
-        let u_tau = match self.sent.integral(query, query_next) {
-            Ok(sum) if !history_miss && query_next > query => sum / (query_next - query),
-            _ => self.last_history.1,
+        let u_tau = match c.observer_input {
+            ObserverInputMode::StepMean => match self.sent.integral(query, query_next) {
+                Ok(sum) if !history_miss && query_next > query => sum / (query_next - query),
+                _ => self.last_history.1,
+            },
+            ObserverInputMode::Sample => match self.sent.value_at(query) {
+                l if !history_miss && !l.pruned => l.value,
+                _ => self.last_history.1,
+            },
         };
         if !history_miss {
             self.last_history = (e_u, u_tau);
@@ -273,6 +283,48 @@ mod tests {
         let r = paper().expect("the embedded paper scenario is valid");
         let s = &r.scenario;
         CenterAgent::<2>::new(CenterParams::new(&s.agents[0], s)).expect("a two-link model")
+    }
+
+    /// Agent 1 with a constant delay of 2.5 periods and the given observer input.
+    fn agent1_with(input: ObserverInputMode) -> CenterAgent<2> {
+        let r = paper().expect("the embedded paper scenario is valid");
+        let s = &r.scenario;
+        let mut p = CenterParams::new(&s.agents[0], s);
+        p.delay = DelayProfile::Constant { value_s: 2.5e-3 };
+        p.controller.observer_input = input;
+        CenterAgent::<2>::new(p).expect("a two-link model")
+    }
+
+    #[test]
+    fn the_observer_input_is_the_step_mean_or_the_sample_of_the_delayed_input() {
+        // τ = 2.5 Δ: at tick k the step's queries are (k − 2.5) Δ and (k − 1.5) Δ, so the mean
+        // of the delayed input over the step is (u_{k−3} + u_{k−2}) / 2, its sample at
+        // t_k − τ is u_{k−3}.
+        let dt = 1e-3;
+        for input in [ObserverInputMode::StepMean, ObserverInputMode::Sample] {
+            let mut c = agent1_with(input);
+            let mut sent = Vec::new();
+            for k in 0..40u32 {
+                let t = f64::from(k) * dt;
+                let y = Vector::<2>::new(0.01 * (t * 50.0).sin(), -0.02 * f64::from(k % 7));
+                let out = c.tick(t, &y, &(y * 3.0));
+                sent.push(out.u);
+                if k < 3 {
+                    continue;
+                }
+                let k = k as usize;
+                let want = match input {
+                    ObserverInputMode::StepMean => (sent[k - 3] + sent[k - 2]) / 2.0,
+                    ObserverInputMode::Sample => sent[k - 3],
+                };
+                assert!(
+                    (out.u_tau - want).norm() <= 1e-9 * want.norm().max(1.0),
+                    "{input:?}, tick {k}: u_τ {:?}, want {want:?}",
+                    out.u_tau
+                );
+            }
+            assert!(sent.windows(2).any(|w| w[0] != w[1]), "the torque varies");
+        }
     }
 
     fn finite(v: &Vector<2>) -> bool {

@@ -39,6 +39,12 @@ pub struct UpdateLaw {
     /// calibration). 0 = off (the paper). Typical 5–20 1/s (`paper-long-horizon.toml`: 20);
     /// `λ Δ` must stay below 1.
     pub leakage_w_per_s: f64,
+    /// `ε`, rad/s: dead zone on the learning signal. The laws learn from
+    /// `e · max(0, 1 − ε/‖e‖)` (`e = Ψ2`, or `Ψ2 − b`): nothing while `‖e‖ ≤ ε`, only the part
+    /// beyond ε otherwise (continuous in e). An innovation smaller than ε is left to the
+    /// measurement feedback instead of being absorbed by `Ŝ`. 0 = off (the paper). The sensor
+    /// noise puts `‖Ψ2‖` at ~0.0045 rad/s RMS in the calibration; ε must be finite and ≥ 0.
+    pub dead_zone_rad_s: f64,
 }
 
 impl UpdateLaw {
@@ -58,7 +64,11 @@ impl UpdateLaw {
             })
         };
         let (t, l) = (self.innovation_time_constant_s, self.leakage_w_per_s);
-        for (name, v) in [("innovation_time_constant_s", t), ("leakage_w_per_s", l)] {
+        for (name, v) in [
+            ("innovation_time_constant_s", t),
+            ("leakage_w_per_s", l),
+            ("dead_zone_rad_s", self.dead_zone_rad_s),
+        ] {
             if !(v.is_finite() && v >= 0.0) {
                 push(name, format!("must be finite and ≥ 0, got {v}"));
             }
@@ -204,7 +214,15 @@ impl<const N: usize> NnEstimator<N> {
         } = self.params;
         let slow = law.innovation_time_constant_s > 0.0;
         // The learning signal: Ψ2 (the paper), or Ψ2 − b.
-        let e = if slow { psi2 - self.baseline } else { *psi2 };
+        let mut e = if slow { psi2 - self.baseline } else { *psi2 };
+        if law.dead_zone_rad_s > 0.0 {
+            let norm = e.norm();
+            e *= if norm > law.dead_zone_rad_s {
+                1.0 - law.dead_zone_rad_s / norm
+            } else {
+                0.0
+            };
+        }
         // (eᵀ Ŵᵀ σ')_j = (1 − h_j²) Σ_l e_l Ŵ[j+1, l]; σ' = [0ᵀ; diag(1 − h²)].
         for j in 0..nh {
             let h = self.sigma[j + 1];
@@ -447,6 +465,10 @@ mod tests {
                 leakage_w_per_s: 1.0,
                 ..UpdateLaw::default()
             },
+            UpdateLaw {
+                dead_zone_rad_s: 0.01,
+                ..UpdateLaw::default()
+            },
         ] {
             let mk = |law| {
                 let p = NnParams { law, ..params() };
@@ -543,6 +565,7 @@ mod tests {
         let bad = UpdateLaw {
             innovation_time_constant_s: 1e-4,
             leakage_w_per_s: f64::NAN,
+            dead_zone_rad_s: -0.01,
         };
         let problems = bad.problems("controller.update_law", 1e-3);
         let paths: Vec<&str> = problems.iter().map(|p| p.path.as_str()).collect();
@@ -550,6 +573,7 @@ mod tests {
             paths,
             [
                 "controller.update_law.leakage_w_per_s",
+                "controller.update_law.dead_zone_rad_s",
                 "controller.update_law.innovation_time_constant_s"
             ],
             "{problems:?}"
@@ -565,6 +589,41 @@ mod tests {
             ..UpdateLaw::default()
         };
         assert_eq!(negative.problems("u", 1e-3).len(), 1);
+    }
+
+    #[test]
+    fn the_dead_zone_ignores_a_small_innovation_and_learns_only_the_part_beyond_it() {
+        // Estimator-only error loop (Ψ2 = S − Ŝ), S constant. Below the dead zone ε the weights
+        // never move; above it, Ŝ converges until ‖S − Ŝ‖ = ε, along S (the learning signal is
+        // e (1 − ε/‖e‖), parallel to e).
+        let eps = 0.02;
+        let law = UpdateLaw {
+            dead_zone_rad_s: eps,
+            ..UpdateLaw::default()
+        };
+        let run = |s: Vector<2>| {
+            let p = NnParams { law, ..params() };
+            let mut nn = NnEstimator::<2>::new(p, 1.0, &mut stream(3, 1, Purpose::NnInit));
+            let (mut psi2, mut s_hat) = (Vector::<2>::zeros(), Vector::<2>::zeros());
+            for _ in 0..10_000 {
+                s_hat = nn.estimate(&psi2);
+                psi2 = s - s_hat;
+                nn.update(&psi2, 1e-3);
+            }
+            (s_hat, nn.norm_w())
+        };
+        let small = Vector::<2>::new(0.012, -0.015); // ‖·‖ = 0.0192 < ε
+        let (s_hat, w) = run(small);
+        assert_eq!((s_hat, w), (Vector::<2>::zeros(), 0.0));
+        let large = Vector::<2>::new(0.3, -0.12);
+        let (s_hat, _) = run(large);
+        let residual = (large - s_hat).norm();
+        assert!(
+            (residual - eps).abs() < 1e-3 * eps,
+            "‖S − Ŝ‖ = {residual}, ε = {eps}"
+        );
+        let along = (large - s_hat).normalize().dot(&large.normalize());
+        assert!(along > 1.0 - 1e-6, "residual not along S: cos = {along}");
     }
 
     #[test]

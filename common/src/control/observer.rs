@@ -38,7 +38,8 @@ pub struct ObserverInput<'a, const N: usize> {
     pub a: &'a Matrix<N>,
     /// `e_u = ∫_{t−τ}^{t} u ds`.
     pub e_u: &'a Vector<N>,
-    /// `u_τ = u(t − τ(t))`.
+    /// `u_τ`: the delayed input over the step (its mean, or its sample at `t − τ(t)`; the
+    /// scenario's `controller.observer_input`).
     pub u_tau: &'a Vector<N>,
     pub beta: f64,
     pub l1: f64,
