@@ -10,7 +10,9 @@ use crate::delay::{in_force_at, DelayLine, DelayProfile, PushError};
 use crate::engine::tick_time;
 use crate::model::{EulerLagrange, Vector};
 use crate::rng::{stream, Purpose};
-use crate::scenario::{AgentConfig, DisturbanceConfig, ModelConfig, NoiseConfig};
+use crate::scenario::{AgentConfig, ModelConfig};
+use crate::units::AngleUnit;
+use serde::{Deserialize, Serialize};
 
 /// Everything that configures one agent's plant.
 #[derive(Debug, Clone)]
@@ -245,6 +247,45 @@ impl<const N: usize> Plant<N> {
             qdd,
             tau: self.params.delay.tau(t_k),
             missed,
+        }
+    }
+}
+// `[noise]` and `[disturbance]` of a scenario: read by the plant only.
+
+/// Gaussian sensor noise θ (SPEC §2).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseConfig {
+    /// Standard deviation of θ1, rad; typical 1e-4.
+    pub position_std_rad: f64,
+    /// Standard deviation of θ2, rad/s; typical 1e-4.
+    pub velocity_std_rad_s: f64,
+}
+
+/// One link's additive disturbance `amplitude · sin(omega t)`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisturbanceLink {
+    pub amplitude: f64,
+    pub omega_rad_s: f64,
+}
+
+/// Exogenous disturbance `d(t)` of (1), N·m.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DisturbanceConfig {
+    /// `deg` multiplies the amplitudes by π/180, the paper's reading ("0.2 sin(0.1t) deg");
+    /// `rad` takes them as N·m.
+    pub units: AngleUnit,
+    pub links: Vec<DisturbanceLink>,
+}
+
+impl DisturbanceConfig {
+    /// `d(t)` into `out`, N·m.
+    pub fn value_into(&self, t: f64, out: &mut [f64]) {
+        let scale = self.units.to_rad();
+        for (o, l) in out.iter_mut().zip(&self.links) {
+            *o = scale * l.amplitude * (l.omega_rad_s * t).sin();
         }
     }
 }

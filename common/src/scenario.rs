@@ -9,11 +9,13 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::attack::{presets, AttackProfile};
-use crate::control::UpdateLaw;
+pub use crate::control::{
+    ControllerConfig, ControllerMode, DetectionConfig, ObserverInput, UpdateLaw,
+};
 use crate::delay::DelayProfile;
 pub use crate::model::ModelConfig;
+pub use crate::plant::{DisturbanceConfig, DisturbanceLink, NoiseConfig};
 use crate::trajectory::TrajectoryConfig;
-use crate::units::AngleUnit;
 
 /// Largest number of agents a scenario may hold.
 pub const MAX_AGENTS: usize = 256;
@@ -31,52 +33,6 @@ pub const MAX_PLAUSIBLE_ATTACK_RAD: f64 = 10.0;
 /// The embedded default scenario: the paper's experiment (identical to `scenarios/paper.toml`).
 pub const PAPER_SCENARIO: &str = include_str!("../../scenarios/paper.toml");
 
-/// Controller variant (SPEC §4.8).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ControllerMode {
-    /// Observer + NN attack estimate `Ŝ` in (12) and (23).
-    Proposed,
-    /// The paper's baseline: `Ŝ ≡ 0`, weights not updated.
-    Traditional,
-}
-
-impl ControllerMode {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Proposed => "proposed",
-            Self::Traditional => "traditional",
-        }
-    }
-}
-
-/// What the observer (22) takes as its input `u_τ` over its Euler step `[t_k, t_k + Δ]`
-/// (docs/model.md, "Numerics of the delayed input").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum ObserverInput {
-    /// The mean of the delayed input `u(s − τ(s))` over the step: the input the plant
-    /// integrates over that step.
-    #[default]
-    StepMean,
-    /// The single sample `u(t_k − τ(t_k))` held over the step (SPEC §4.6 as written; the
-    /// numerics of the SPEC's prototype). It lags the plant's input by about half a period.
-    Sample,
-}
-
-impl ObserverInput {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::StepMean => "step-mean",
-            Self::Sample => "sample",
-        }
-    }
-
-    fn is_default(&self) -> bool {
-        *self == Self::default()
-    }
-}
-
 /// How processes are clocked (SPEC §6).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -93,91 +49,6 @@ impl ClockMode {
         match self {
             Self::Lockstep => "lockstep",
             Self::Realtime => "realtime",
-        }
-    }
-}
-
-/// Alarm when `‖Ŝ‖` stays above a threshold for a hold time (beyond the paper, SPEC §4.9).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DetectionConfig {
-    /// Threshold on `‖Ŝ‖` (rad/s, the units of `S = S2 + β S1`).
-    pub threshold: f64,
-    /// How long `‖Ŝ‖` must stay above the threshold before the alarm is raised, s.
-    pub hold_s: f64,
-}
-
-/// Gains of the control center (SPEC §4, calibration there).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct ControllerConfig {
-    pub mode: ControllerMode,
-    /// `k` of `u = k r̂` (14), typical 21.
-    pub gain_k: f64,
-    /// `β` of (7), (12), (23), 1/s; typical 30.
-    pub beta: f64,
-    /// Observer gain `L1` of (22), typical 0.01.
-    pub observer_gain_l1: f64,
-    /// Observer gain `L2` of (22), typical 0.012.
-    pub observer_gain_l2: f64,
-    /// Hidden neurons `n_n` of the NN (32), typical 3.
-    pub hidden_neurons: usize,
-    /// `Γ1 = value · I` of (37), typical 5000.
-    pub learning_rate_w: f64,
-    /// `Γ2 = value · I` of (38), typical 10.
-    pub learning_rate_v: f64,
-    /// Frobenius-ball radius `W̄` of the projection of `Ŵ`, typical 50.
-    pub weight_bound_w: f64,
-    /// Frobenius-ball radius `V̄` of the projection of `V̂`, typical 50.
-    pub weight_bound_v: f64,
-    /// `V̂(0) ~ U(−a, a)` elementwise, typical 1.
-    pub initial_v_range: f64,
-    pub detection: DetectionConfig,
-    /// `[controller.update_law]`: robust modifications of (37), (38) for long horizons (a slow
-    /// innovation baseline, leakage of `Ŵ`; units and typical values at [`UpdateLaw`]). Absent
-    /// or all 0: the paper's laws.
-    #[serde(default, skip_serializing_if = "UpdateLaw::is_paper")]
-    pub update_law: UpdateLaw,
-    /// `observer_input`: `"step-mean"` (default) or `"sample"`, the discretization of the
-    /// observer's input `u_τ` ([`ObserverInput`]).
-    #[serde(default, skip_serializing_if = "ObserverInput::is_default")]
-    pub observer_input: ObserverInput,
-}
-
-/// Gaussian sensor noise θ (SPEC §2).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct NoiseConfig {
-    /// Standard deviation of θ1, rad; typical 1e-4.
-    pub position_std_rad: f64,
-    /// Standard deviation of θ2, rad/s; typical 1e-4.
-    pub velocity_std_rad_s: f64,
-}
-
-/// One link's additive disturbance `amplitude · sin(omega t)`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DisturbanceLink {
-    pub amplitude: f64,
-    pub omega_rad_s: f64,
-}
-
-/// Exogenous disturbance `d(t)` of (1), N·m.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DisturbanceConfig {
-    /// `deg` multiplies the amplitudes by π/180, the paper's reading ("0.2 sin(0.1t) deg");
-    /// `rad` takes them as N·m.
-    pub units: AngleUnit,
-    pub links: Vec<DisturbanceLink>,
-}
-
-impl DisturbanceConfig {
-    /// `d(t)` into `out`, N·m.
-    pub fn value_into(&self, t: f64, out: &mut [f64]) {
-        let scale = self.units.to_rad();
-        for (o, l) in out.iter_mut().zip(&self.links) {
-            *o = scale * l.amplitude * (l.omega_rad_s * t).sin();
         }
     }
 }

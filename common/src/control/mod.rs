@@ -2,11 +2,13 @@
 //! (38), controller (12), (14) and the detection alarm. Pure: no I/O, no clocks.
 
 pub mod center;
+pub mod config;
 pub mod detection;
 pub mod estimator;
 pub mod observer;
 
 pub use center::{CenterAgent, CenterOutput, CenterParams};
+pub use config::{ControllerConfig, ControllerMode, DetectionConfig, ObserverInput};
 pub use detection::Detector;
 pub use estimator::{NnEstimator, NnParams, UpdateLaw};
 pub use observer::Observer;
