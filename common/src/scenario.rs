@@ -1021,7 +1021,7 @@ mod tests {
         let text = "name = \"x\"\nseed = 1\nduration_s = 1.0.0\n";
         let e = parse_collecting::<toml::Table>(text, "case.toml").expect_err("refused");
         let msg = e.to_string();
-        assert!(msg.contains("TOML syntax at line 3, column 14:"), "{msg}");
+        assert!(msg.contains("TOML syntax at line 3, column 17:"), "{msg}");
         assert_eq!(line_column("ab\ncdé\nx", 7), (2, 4));
         assert_eq!(line_column("", 5), (1, 1));
     }
