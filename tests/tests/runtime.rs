@@ -95,7 +95,7 @@ fn realtime_smoke_run_completes_and_reports_deadline_misses() {
         &dir.0,
         WATCHDOG,
     );
-    let v = json(&out);
+    let v = fdi_tests::json_realtime(&out);
     assert_eq!(v["clock"], "realtime");
     assert_eq!(v["ticks"], 1000);
     assert!(v.get("placement").is_none(), "default placement: {v}");
@@ -573,7 +573,7 @@ fn realtime_run_where_every_process(
         }),
         "{extra:?}: the run's processes never all were placed so"
     );
-    let v = json(&wait_with_watchdog(child, WATCHDOG));
+    let v = fdi_tests::json_realtime(&wait_with_watchdog(child, WATCHDOG));
     assert_eq!(v["clock"], "realtime");
     assert_eq!(v["ticks"], 3000);
     v
