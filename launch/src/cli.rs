@@ -504,33 +504,35 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
 /// What a run that is not a clean success amounts to, in words (printed last), for the exit
 /// codes 5 and 3: which robots ran without control and for how long.
 fn verdict(s: &RunSummary) -> Option<String> {
-    if s.partial.is_some() {
+    if s.partial.is_some() || s.lost_agents.is_empty() {
         return None;
     }
-    let uncontrolled: Vec<String> = s
-        .uncontrolled()
+    // Per robot that was lost: the ticks the center never computed, and the steps the robot
+    // itself found without the command due (late commands after a stall count there).
+    let mut ids: Vec<u32> = s.lost_agents.iter().map(|l| l.agent).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let robots: Vec<String> = ids
         .iter()
-        .map(|(id, n, of)| {
+        .filter_map(|id| s.metrics.get(&id.to_string()).map(|m| (id, m)))
+        .map(|(id, m)| {
             format!(
-                "robot {id} {n} of {of} ticks ({:.1} %)",
-                100.0 * *n as f64 / (*of).max(1) as f64
+                "robot {id} {} ticks never controlled and {} deadline misses in {} steps",
+                m.uncontrolled_ticks, m.deadline_misses, m.agent_ticks
             )
         })
         .collect();
-    let uncontrolled = if uncontrolled.is_empty() {
-        String::new()
-    } else {
-        format!("; ran without control: {}", uncontrolled.join(", "))
-    };
     if s.lost_every_agent() {
         Some(format!(
-            "run failed (exit 5): the control center lost every robot for good, none was controlled to the end{uncontrolled}"
+            "run failed (exit 5): the control center lost every robot for good, none was controlled to the end ({})",
+            robots.join("; ")
         ))
-    } else if !s.lost_agents.is_empty() && s.diverged().is_empty() {
+    } else if s.diverged().is_empty() {
         Some(format!(
-            "not a clean run (exit 3): {} of {} robots were lost for a while{uncontrolled}; the metrics cover only the controlled ticks",
-            s.lost_agents.len(),
-            s.agents
+            "not a clean run (exit 3): {} of {} robots were lost for a while and ran without control meanwhile ({}); the tracking metrics cover only the controlled ticks",
+            ids.len(),
+            s.agents,
+            robots.join("; ")
         ))
     } else {
         None

@@ -138,6 +138,9 @@ pub fn report(run_dir: &Path) -> Result<()> {
         Some(s) => {
             summary.engine.clone_from(&s.engine);
             summary.placement.clone_from(&s.placement);
+            // What only the run knew: which robots were lost, and why it ended early.
+            summary.lost_agents.clone_from(&s.lost_agents);
+            summary.partial.clone_from(&s.partial);
             if s.trace_digest != summary.trace_digest {
                 warnings.push(format!(
                     "the traces' digest {} differs from the digest {} in summary.json",

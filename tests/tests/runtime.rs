@@ -700,7 +700,8 @@ fn realtime_attacker_stalled_half_a_second_every_agent_rejoins_its_uncontrolled_
         assert!(uncontrolled >= 40 && misses >= 40, "robot {id}: {m}");
     }
     assert!(
-        err.contains("not a clean run (exit 3)") && err.contains("ran without control: robot 1"),
+        err.contains("not a clean run (exit 3)")
+            && err.contains("ran without control meanwhile (robot 1 "),
         "{err}"
     );
     let rmse = std::fs::read_to_string(fdi_tests::run_dir_of(&v).join("rmse.md")).expect("rmse.md");
