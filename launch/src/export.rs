@@ -368,7 +368,8 @@ mod tests {
         assert_eq!(fields[9].to_bits(), (1.0_f64 / 3.0).to_bits());
         assert_eq!(fields[12].to_bits(), (-0.0_f64).to_bits());
         assert_eq!(Kind::Attack.header(2).split(',').count(), 11);
-        assert_eq!(Kind::Center.header(2).split(',').count(), 14);
+        // k, agent, 5 joint pairs, alarm, rejected_input, rejected_torque, state_reset, history_miss
+        assert_eq!(Kind::Center.header(2).split(',').count(), 17);
     }
 
     #[test]
