@@ -124,7 +124,12 @@ pub struct RunSummary {
     pub attack: String,
     pub seed: u64,
     pub agents: usize,
+    /// Ticks joined (every process recorded them): what the metrics cover at most.
     pub ticks: u64,
+    /// Ticks of the scenario as planned; `ticks` (and each robot's `metrics.ticks`) of it is the
+    /// share the metrics cover. 0 in summaries written before it existed.
+    #[serde(default)]
+    pub planned_ticks: u64,
     pub sim_s: f64,
     pub wall_s: f64,
     /// RMSE per agent id, rad.
@@ -158,6 +163,30 @@ pub struct Partial {
 }
 
 impl RunSummary {
+    /// True when the control center lost every robot for good (none rejoined): from then on no
+    /// robot was controlled, so the run failed whatever its metrics say.
+    pub fn lost_every_agent(&self) -> bool {
+        let mut gone: Vec<u32> = self
+            .lost_agents
+            .iter()
+            .filter(|l| l.rejoined_t_s.is_none())
+            .map(|l| l.agent)
+            .collect();
+        gone.sort_unstable();
+        gone.dedup();
+        self.agents > 0 && gone.len() >= self.agents
+    }
+
+    /// `(agent, uncontrolled ticks, ticks it recorded)` of every robot that ran without control
+    /// for some ticks, in agent order.
+    pub fn uncontrolled(&self) -> Vec<(&str, u64, u64)> {
+        self.metrics
+            .iter()
+            .filter(|(_, m)| m.uncontrolled_ticks > 0)
+            .map(|(id, m)| (id.as_str(), m.uncontrolled_ticks, m.agent_ticks))
+            .collect()
+    }
+
     /// `(agent, t)` of every robot that diverged, in agent order.
     pub fn diverged(&self) -> Vec<(&str, f64)> {
         self.metrics
@@ -191,6 +220,7 @@ pub fn summarize(
         seed: s.seed,
         agents: s.agents.len(),
         ticks,
+        planned_ticks: resolved.ticks(),
         sim_s: tick_time(ticks, s.control_period_s),
         wall_s,
         rmse_rad: metrics

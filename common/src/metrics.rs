@@ -54,7 +54,17 @@ pub struct AgentMetrics {
     /// Ticks whose torque history lookup failed (`e_u`, `u_τ` held).
     #[serde(default)]
     pub history_misses: u64,
+    /// Steps the robot itself recorded as missing their deadline (no command due in force), over
+    /// every tick it recorded: those the control center never saw (the robot uncontrolled) too.
     pub deadline_misses: u64,
+    /// Ticks the robot itself recorded (its own trace), controlled or not.
+    #[serde(default)]
+    pub agent_ticks: u64,
+    /// Of `agent_ticks`, those with no control-center record: the robot ran without control
+    /// (its measurement never reached the center, or the center had given it up). Left out of
+    /// every metric but `deadline_misses`.
+    #[serde(default)]
+    pub uncontrolled_ticks: u64,
     /// First tick time at which the true state was non-finite or the tracking error exceeded
     /// [`DIVERGENCE_BOUND_RAD`]; `None` when the robot stayed bounded.
     #[serde(default)]
@@ -87,6 +97,8 @@ struct Acc {
     state_resets: u64,
     history_misses: u64,
     missed: u64,
+    agent_ticks: u64,
+    uncontrolled: u64,
     diverged_at: Option<f64>,
 }
 
@@ -150,6 +162,8 @@ impl Evaluator {
                         state_resets: 0,
                         history_misses: 0,
                         missed: 0,
+                        agent_ticks: 0,
+                        uncontrolled: 0,
                         diverged_at: None,
                     },
                 )
@@ -199,6 +213,19 @@ impl Evaluator {
         acc.state_resets += u64::from(r.center.state_reset);
         acc.history_misses += u64::from(r.center.history_miss);
         acc.missed += u64::from(r.agent.missed);
+        acc.agent_ticks += 1;
+    }
+
+    /// Feeds a tick the robot recorded that has no control-center record: it ran uncontrolled.
+    /// Only its deadline miss and the count of such ticks are kept (no RMSE, no detection: the
+    /// center computed nothing for it).
+    pub fn push_uncontrolled(&mut self, a: &crate::records::AgentRecord) {
+        let Some(acc) = self.agents.get_mut(&a.agent) else {
+            return;
+        };
+        acc.missed += u64::from(a.missed);
+        acc.agent_ticks += 1;
+        acc.uncontrolled += 1;
     }
 
     pub fn finish(self) -> BTreeMap<u32, AgentMetrics> {
@@ -225,6 +252,8 @@ impl Evaluator {
                     state_resets: a.state_resets,
                     history_misses: a.history_misses,
                     deadline_misses: a.missed,
+                    agent_ticks: a.agent_ticks,
+                    uncontrolled_ticks: a.uncontrolled,
                     diverged_at_s: a.diverged_at,
                     ticks: a.ticks,
                 };
@@ -329,6 +358,29 @@ mod tests {
         assert_eq!(m.false_alarms, 0);
         assert_eq!(m.diverged_at_s, None);
         assert_eq!(m.ticks, 5000);
+    }
+
+    /// Regression (issue 18): the ticks a robot ran uncontrolled (no control-center record)
+    /// were left out of everything, its deadline misses too, so a robot that ran 20 s without
+    /// control showed 1–3 misses.
+    #[test]
+    fn uncontrolled_ticks_count_their_deadline_misses_but_no_tracking_metric() {
+        let two_link = ModelConfig::TwoLink(crate::model::TwoLinkParams::PAPER);
+        let mut e = Evaluator::new([(1, at_rest(), two_link)]);
+        for k in 0..100 {
+            e.push(&record(k, 0.01, false, false));
+        }
+        for k in 100..400 {
+            let mut a = record(k, 50.0, false, false).agent;
+            a.missed = k % 3 == 0;
+            e.push_uncontrolled(&a);
+        }
+        let m = e.finish().remove(&1).expect("agent 1");
+        assert_eq!(m.ticks, 100);
+        assert_eq!(m.agent_ticks, 400);
+        assert_eq!(m.uncontrolled_ticks, 300);
+        assert_eq!(m.deadline_misses, 100);
+        assert!((m.max_abs_error_rad - 0.01).abs() < 1e-12, "{m:?}");
     }
 
     #[test]

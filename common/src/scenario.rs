@@ -586,10 +586,14 @@ fn parse_collecting<T: serde::de::DeserializeOwned>(
 ) -> Result<(Option<T>, Vec<Problem>), ScenarioError> {
     // Syntax errors first, with their line and column.
     let mut value: toml::Table = toml::from_str(text).map_err(|e| {
+        let at = e.span().map_or(String::new(), |span| {
+            let (line, column) = line_column(text, span.start);
+            format!(" at line {line}, column {column}")
+        });
         ScenarioError::one(
             source_name,
             "<file>",
-            format!("TOML syntax: {}", e.message()),
+            format!("TOML syntax{at}: {}", e.message().trim_end()),
         )
     })?;
     apply_agent_defaults(&mut value);
@@ -758,22 +762,96 @@ pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, 
         return Ok(p.for_agents(&scenario.agent_dofs()));
     }
     let path = Path::new(arg);
-    if !path.exists() {
-        return Err(ScenarioError::one(
+    // `Path::exists` is false for any error (a symlink loop, no permission): only a name that
+    // is truly absent is "neither"; any other failure is said as the system says it.
+    match std::fs::metadata(path) {
+        Ok(_) => load_attack_file(path),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
+            let message = if std::fs::symlink_metadata(path).is_ok() {
+                "a symbolic link whose target does not exist".to_string()
+            } else {
+                format!(
+                    "neither a preset ({}) nor an existing file",
+                    presets::names().join(", ")
+                )
+            };
+            Err(ScenarioError::one(arg, "--attack", message))
+        }
+        Err(e) => Err(ScenarioError::one(
             arg,
             "--attack",
-            format!(
-                "neither a preset ({}) nor an existing file",
-                presets::names().join(", ")
-            ),
-        ));
+            format!("cannot be read as an attack file: {e}"),
+        )),
     }
-    load_attack_file(path)
+}
+
+/// `line L, column C` (1-based, columns in characters) of byte `offset` of `text`.
+fn line_column(text: &str, offset: usize) -> (usize, usize) {
+    let mut end = offset.min(text.len());
+    while !text.is_char_boundary(end) {
+        end -= 1;
+    }
+    let before = &text[..end];
+    let line = before.matches('\n').count() + 1;
+    let column = before
+        .rsplit_once('\n')
+        .map_or(before, |(_, tail)| tail)
+        .chars()
+        .count()
+        + 1;
+    (line, column)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Regression (issue 18): syntax errors said only `TOML syntax: invalid float`, without
+    /// where, although the code said they carried their line and column.
+    #[test]
+    fn a_toml_syntax_error_names_its_line_and_column() {
+        let text = "name = \"x\"\nseed = 1\nduration_s = 1.0.0\n";
+        let e = parse_collecting::<toml::Table>(text, "case.toml").expect_err("refused");
+        let msg = e.to_string();
+        assert!(msg.contains("TOML syntax at line 3, column 17:"), "{msg}");
+        assert_eq!(line_column("ab\ncdé\nx", 7), (2, 4));
+        assert_eq!(line_column("", 5), (1, 1));
+    }
+
+    /// Regression (issue 18): `--attack` naming a symlink loop said "neither a preset nor an
+    /// existing file" (`Path::exists` is false for any error).
+    #[test]
+    fn an_attack_argument_that_cannot_be_read_says_why_not_that_it_is_missing() {
+        let dir = std::env::temp_dir().join(format!("fdi-attack-arg-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).expect("dir");
+        let a = dir.join("a.toml");
+        let b = dir.join("b.toml");
+        std::os::unix::fs::symlink(&b, &a).expect("link");
+        std::os::unix::fs::symlink(&a, &b).expect("link");
+        let dangling = dir.join("dangling.toml");
+        std::os::unix::fs::symlink(dir.join("absent"), &dangling).expect("link");
+        let scenario = paper().expect("paper").scenario;
+        let msg = |p: &Path| {
+            attack_from_arg(p.to_str().expect("utf-8"), &scenario)
+                .expect_err("refused")
+                .to_string()
+        };
+        let looped = msg(&a);
+        assert!(
+            looped.contains("cannot be read as an attack file")
+                && looped.contains("symbolic links")
+                && !looped.contains("neither a preset"),
+            "{looped}"
+        );
+        assert!(
+            msg(&dangling).contains("a symbolic link whose target does not exist"),
+            "{}",
+            msg(&dangling)
+        );
+        assert!(msg(&dir.join("absent.toml")).contains("neither a preset"));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn a_device_or_a_directory_as_scenario_or_attack_file_is_refused_without_reading_it() {

@@ -175,6 +175,14 @@ pub struct TableArgs {
 }
 
 pub fn dispatch(cli: Cli) -> Result<ExitCode> {
+    // Commands that run or report handle SIGINT/SIGTERM from the first moment: every phase
+    // checks the flag, so an interrupt stops at once, keeps what is done and says so.
+    if matches!(
+        cli.command,
+        Command::Run(_) | Command::Report { .. } | Command::Table1(_) | Command::Table2(_)
+    ) {
+        crate::interrupt::install();
+    }
     // What runs killed outright left (SIGKILL of their launcher) goes at the next command.
     if !matches!(
         cli.command,
@@ -200,6 +208,25 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
             ProcessRole::Replayer => crate::replayer::main_with(&args),
         }),
     }
+}
+
+/// An error and its causes, joined by `: `, leaving out a cause whose text is already there (an
+/// I/O error is often both the tail of its context's message and that context's source, and
+/// was printed twice: `No space left on device (os error 28): No space left on device (os
+/// error 28)`).
+pub fn describe_error(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
 }
 
 /// Loads a scenario file or the embedded paper scenario.
@@ -408,6 +435,7 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     }
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
     check_placement(&r, args.engine, &args.placement)?;
+    crate::interrupt::check(runtime::BEFORE_THE_START)?;
     let dir = output::create_run_dir(&args.out, &r)?;
     let summary = output::discard_if_not_started(
         &dir,
@@ -417,23 +445,34 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
         let when = lost
             .t_s
             .map_or(String::new(), |t| format!(" after t = {t:.3} s"));
+        let uncontrolled = summary
+            .metrics
+            .get(&lost.agent.to_string())
+            .map_or(String::new(), |m| {
+                format!(
+                    "; it ran uncontrolled for {} of its {} ticks, with {} deadline misses; its metrics cover {}",
+                    m.uncontrolled_ticks,
+                    m.agent_ticks,
+                    m.deadline_misses,
+                    output::coverage(m.ticks, summary.planned_ticks)
+                )
+            });
         match lost.rejoined_t_s {
             Some(back) => eprintln!(
-                "fdi-launch: agent {} was lost{when} ({}) and rejoined at t = {back:.3} s: its metrics count the gap's ticks as missing",
+                "fdi-launch: agent {} was lost{when} ({}) and rejoined at t = {back:.3} s{uncontrolled}",
                 lost.agent, lost.reason
             ),
             None => eprintln!(
-                "fdi-launch: agent {} was lost{when}: {}",
+                "fdi-launch: agent {} was lost{when}: {}{uncontrolled}",
                 lost.agent, lost.reason
             ),
         }
     }
-    if let Err(e) = report::write_report(&dir, &r, &summary) {
-        eprintln!(
-            "fdi-launch: warning: the report of {} could not be made: {e:#}",
-            dir.display()
-        );
-    }
+    // The report is written whole or not at all; an interrupt stops it at once.
+    let report = match report::write_report(&dir, &r, &summary) {
+        Err(e) if e.downcast_ref::<runtime::Interrupted>().is_some() => return Err(e),
+        other => other,
+    };
     if args.json {
         let mut v = serde_json::to_value(&summary)?;
         v["run_dir"] = serde_json::Value::String(dir.display().to_string());
@@ -441,29 +480,83 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     } else {
         print_summary(&summary);
         println!("run directory {}", dir.display());
-        let report = dir.join("report").join("report.md");
-        if report.is_file() {
-            println!("report {}", report.display());
+        let md = dir.join("report").join("report.md");
+        if md.is_file() {
+            println!("report {}", md.display());
         }
     }
-    Ok(exit_code(&summary))
+    if let Err(e) = report {
+        eprintln!(
+            "fdi-launch: error: the report of {} could not be made: {}; summary.json, rmse.md and the traces are kept (`fdi-launch report {}` makes it)",
+            dir.display(),
+            describe_error(&e),
+            dir.display()
+        );
+        return Ok(ExitCode::FAILURE);
+    }
+    let code = exit_code(&summary);
+    if let Some(verdict) = verdict(&summary) {
+        eprintln!("fdi-launch: {verdict}");
+    }
+    Ok(code)
 }
 
-/// The exit status of a run that produced a summary: 128 + signal when interrupted, 4 when a
-/// robot diverged, 3 when a realtime run lost agents (it completed for the others, but is not
-/// a clean run), else 0.
-fn exit_code(summary: &RunSummary) -> ExitCode {
+/// What a run that is not a clean success amounts to, in words (printed last), for the exit
+/// codes 5 and 3: which robots ran without control and for how long.
+fn verdict(s: &RunSummary) -> Option<String> {
+    if s.partial.is_some() || s.lost_agents.is_empty() {
+        return None;
+    }
+    // Per robot that was lost: the ticks the center never computed, and the steps the robot
+    // itself found without the command due (late commands after a stall count there).
+    let mut ids: Vec<u32> = s.lost_agents.iter().map(|l| l.agent).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let robots: Vec<String> = ids
+        .iter()
+        .filter_map(|id| s.metrics.get(&id.to_string()).map(|m| (id, m)))
+        .map(|(id, m)| {
+            format!(
+                "robot {id} {} ticks never controlled and {} deadline misses in {} steps",
+                m.uncontrolled_ticks, m.deadline_misses, m.agent_ticks
+            )
+        })
+        .collect();
+    if s.lost_every_agent() {
+        Some(format!(
+            "run failed (exit 5): the control center lost every robot for good, none was controlled to the end ({})",
+            robots.join("; ")
+        ))
+    } else if s.diverged().is_empty() {
+        Some(format!(
+            "not a clean run (exit 3): {} of {} robots were lost for a while and ran without control meanwhile ({}); the tracking metrics cover only the controlled ticks",
+            ids.len(),
+            s.agents,
+            robots.join("; ")
+        ))
+    } else {
+        None
+    }
+}
+
+/// The exit status of a run that produced a summary: 128 + signal when interrupted, 5 when the
+/// control center lost every robot for good (the run failed: none was controlled to its end),
+/// 4 when a robot diverged, 3 when a realtime run lost a robot for a while, rejoined or not (it
+/// ran uncontrolled meanwhile: not a clean run), else 0.
+pub fn exit_code(summary: &RunSummary) -> ExitCode {
     if let Some(signal) = summary.partial.as_ref().and_then(|p| p.signal) {
         ExitCode::from(
             runtime::Interrupted {
                 signal,
-                phase: "during the run",
+                phase: runtime::DURING_THE_RUN,
             }
             .exit_code(),
         )
+    } else if summary.lost_every_agent() {
+        ExitCode::from(5)
     } else if !summary.diverged().is_empty() {
         ExitCode::from(4)
-    } else if summary.lost_agents.iter().any(|l| l.rejoined_t_s.is_none()) {
+    } else if !summary.lost_agents.is_empty() {
         ExitCode::from(3)
     } else {
         ExitCode::SUCCESS
@@ -479,7 +572,7 @@ pub fn require_whole(summary: RunSummary) -> Result<RunSummary> {
             ..
         }) => Err(runtime::Interrupted {
             signal: *signal,
-            phase: "during the run",
+            phase: runtime::DURING_THE_RUN,
         }
         .into()),
         Some(p) => bail!(
@@ -503,16 +596,18 @@ fn print_summary(s: &RunSummary) {
     if let Some(notice) = output::partial_notice(s) {
         println!("{}", notice.to_uppercase());
     }
-    println!("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses |");
-    println!("|---|---|---|---|---|---|");
+    println!("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses | uncontrolled ticks | metrics cover |");
+    println!("|---|---|---|---|---|---|---|---|");
     for (id, m) in &s.metrics {
         println!(
-            "| {id} | {} | {:.4} | {} | {} | {} |",
+            "| {id} | {} | {:.4} | {} | {} | {} | {} | {} |",
             output::rmse_cell(m, 4),
             m.max_abs_error_rad,
             describe_onsets(&m.onsets),
             m.false_alarms,
-            m.deadline_misses
+            m.deadline_misses,
+            m.uncontrolled_ticks,
+            output::coverage(m.ticks, s.planned_ticks)
         );
     }
     for (id, t) in s.diverged() {
@@ -566,5 +661,28 @@ fn validate(path: &Path) -> Result<ExitCode> {
             eprintln!("{e}");
             Ok(ExitCode::from(2))
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    /// Regression (issue 18): an I/O error that is both the tail of its context's message and
+    /// that context's source was printed twice (`No space left on device (os error 28): No
+    /// space left on device (os error 28)`).
+    #[test]
+    fn an_error_whose_cause_is_already_in_its_message_is_described_once() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("writing report.png: {0}")]
+        struct Writing(#[source] std::io::Error);
+        let io = std::io::Error::from_raw_os_error(28);
+        let e = anyhow::Error::new(Writing(io)).context("figure robot1");
+        let text = super::describe_error(&e);
+        assert_eq!(text.matches("os error 28").count(), 1, "{text}");
+        assert!(
+            text.starts_with("figure robot1: writing report.png: "),
+            "{text}"
+        );
+        let plain = anyhow::anyhow!("a").context("b");
+        assert_eq!(super::describe_error(&plain), "b: a");
     }
 }

@@ -150,7 +150,7 @@ impl Kind {
                 v("yd")
             ),
             Self::Center => format!(
-                "k,agent,{},{},{},{},{},alarm,rejected_input",
+                "k,agent,{},{},{},{},{},alarm,rejected_input,rejected_torque,state_reset,history_miss",
                 v("s_hat"),
                 v("q_hat"),
                 v("qd_hat"),
@@ -321,7 +321,15 @@ fn center_row(line: &mut String, c: &CenterRecord, dof: usize) -> Result<()> {
     for j in [&c.s_hat, &c.q_hat, &c.qd_hat, &c.qdd_hat, &c.u] {
         joints(line, j, dof)?;
     }
-    let _ = write!(line, ",{},{}", flag(c.alarm), flag(c.rejected_input));
+    let _ = write!(
+        line,
+        ",{},{},{},{},{}",
+        flag(c.alarm),
+        flag(c.rejected_input),
+        flag(c.rejected_torque),
+        flag(c.state_reset),
+        flag(c.history_miss)
+    );
     Ok(())
 }
 
@@ -360,7 +368,8 @@ mod tests {
         assert_eq!(fields[9].to_bits(), (1.0_f64 / 3.0).to_bits());
         assert_eq!(fields[12].to_bits(), (-0.0_f64).to_bits());
         assert_eq!(Kind::Attack.header(2).split(',').count(), 11);
-        assert_eq!(Kind::Center.header(2).split(',').count(), 14);
+        // k, agent, 5 joint pairs, alarm, rejected_input, rejected_torque, state_reset, history_miss
+        assert_eq!(Kind::Center.header(2).split(',').count(), 17);
     }
 
     #[test]

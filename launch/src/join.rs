@@ -130,7 +130,19 @@ pub fn join_run(
     resolved: &Resolved,
     run_dir: &Path,
     wall_s: f64,
+    sink: impl FnMut(&TickRecord),
+) -> Result<Joined> {
+    join_run_until(resolved, run_dir, wall_s, sink, || Ok(()))
+}
+
+/// [`join_run`], calling `stop` every few thousand ticks: its error (an interrupt) ends the
+/// join at once.
+pub fn join_run_until(
+    resolved: &Resolved,
+    run_dir: &Path,
+    wall_s: f64,
     mut sink: impl FnMut(&TickRecord),
+    stop: impl Fn() -> Result<()>,
 ) -> Result<Joined> {
     let s = &resolved.scenario;
     let mut agents = Vec::with_capacity(s.agents.len());
@@ -152,9 +164,16 @@ pub fn join_run(
     let ticks = resolved.ticks();
     let mut joined = 0;
     let mut lost = 0u64;
+    // Ticks the agents recorded after the attacker or control-center trace ended: they ran on
+    // without control, and their own records (deadline misses) still count.
+    let mut after_control = 0u64;
+    let mut control_ended = false;
     // An agent whose trace ends early (lost in a realtime run) leaves the join; the others go on.
     let mut ended = vec![false; agents.len()];
     'ticks: for k in 0..ticks {
+        if k % 4096 == 4095 {
+            stop()?;
+        }
         for (n, (id, src)) in agents.iter_mut().enumerate() {
             if ended[n] {
                 continue;
@@ -167,17 +186,27 @@ pub fn join_run(
                 }
                 continue;
             };
+            if control_ended {
+                after_control += 1;
+                evaluator.push_uncontrolled(&a);
+                continue;
+            }
             let (x, c) = match (attacker.take(*id, k), center.take(*id, k)) {
                 (Ok(Some(x)), Ok(Some(c))) => (x, c),
                 // The measurement of this tick never reached the control center (realtime
-                // overflow or a stalled process): the agent held its last command.
+                // overflow, a stalled process, an agent given up as lost): the agent held its
+                // last command, uncontrolled.
                 (Ok(_), Ok(_)) => {
                     lost += 1;
+                    evaluator.push_uncontrolled(&a);
                     continue;
                 }
                 _ => {
                     warnings.push(format!("the attacker or control-center trace ends at tick {k} of {ticks} (agent {id})"));
-                    break 'ticks;
+                    control_ended = true;
+                    after_control += 1;
+                    evaluator.push_uncontrolled(&a);
+                    continue;
                 }
             };
             let rec = TickRecord {
@@ -189,11 +218,18 @@ pub fn join_run(
             evaluator.push(&rec);
             sink(&rec);
         }
-        joined = k + 1;
+        if !control_ended {
+            joined = k + 1;
+        }
     }
     if lost > 0 {
         warnings.push(format!(
-            "{lost} agent-ticks never reached the control center and are left out of the metrics"
+            "{lost} agent-ticks never reached the control center (the robots ran uncontrolled): left out of the metrics but their deadline misses"
+        ));
+    }
+    if after_control > 0 {
+        warnings.push(format!(
+            "{after_control} agent-ticks were recorded after the control stopped (the robots ran uncontrolled): left out of the metrics but their deadline misses"
         ));
     }
     for (_, src) in &mut agents {

@@ -4,6 +4,7 @@ mod bench;
 mod cli;
 mod export;
 mod floor;
+mod interrupt;
 mod join;
 mod output;
 mod plot;
@@ -24,7 +25,7 @@ fn main() -> std::process::ExitCode {
     match cli::dispatch(cli) {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("fdi-launch: error: {e:#}");
+            eprintln!("fdi-launch: error: {}", cli::describe_error(&e));
             match e.downcast_ref::<runtime::Interrupted>() {
                 Some(i) => std::process::ExitCode::from(i.exit_code()),
                 None => std::process::ExitCode::FAILURE,

@@ -91,7 +91,8 @@ pub fn report(run_dir: &Path) -> Result<()> {
     let resolved = scenario::load_file(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
     let mut warnings = Vec::new();
-    let stored = match std::fs::read_to_string(run_dir.join("summary.json")) {
+    let summary_path = run_dir.join("summary.json");
+    let stored = match std::fs::read_to_string(&summary_path) {
         Ok(text) => match serde_json::from_str::<RunSummary>(&text) {
             Ok(s) => Some(s),
             Err(e) => {
@@ -102,20 +103,34 @@ pub fn report(run_dir: &Path) -> Result<()> {
                 None
             }
         },
-        Err(_) => {
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             warnings.push(format!(
                 "{} is missing; engine and wall time are unknown",
-                run_dir.join("summary.json").display()
+                summary_path.display()
+            ));
+            None
+        }
+        // A directory, text that is not UTF-8, no permission: said as it is, not "missing".
+        Err(e) => {
+            let why = match e.kind() {
+                std::io::ErrorKind::InvalidData => "it is not UTF-8 text".to_string(),
+                std::io::ErrorKind::IsADirectory => "it is a directory".to_string(),
+                _ => e.to_string(),
+            };
+            warnings.push(format!(
+                "{} cannot be read ({why}); engine and wall time are unknown",
+                summary_path.display()
             ));
             None
         }
     };
     let mut series = RunSeries::new(&resolved);
-    let joined = join::join_run(
+    let joined = join::join_run_until(
         &resolved,
         run_dir,
         stored.as_ref().map_or(f64::NAN, |s| s.wall_s),
         |r| series.push(r),
+        report_interrupted,
     )?;
     warnings.extend(joined.warnings);
     let mut summary = joined.summary;
@@ -123,6 +138,9 @@ pub fn report(run_dir: &Path) -> Result<()> {
         Some(s) => {
             summary.engine.clone_from(&s.engine);
             summary.placement.clone_from(&s.placement);
+            // What only the run knew: which robots were lost, and why it ended early.
+            summary.lost_agents.clone_from(&s.lost_agents);
+            summary.partial.clone_from(&s.partial);
             if s.trace_digest != summary.trace_digest {
                 warnings.push(format!(
                     "the traces' digest {} differs from the digest {} in summary.json",
@@ -143,9 +161,20 @@ pub fn report(run_dir: &Path) -> Result<()> {
 /// Called at the end of every `run`, with the run's summary.
 pub fn write_report(run_dir: &Path, resolved: &Resolved, summary: &RunSummary) -> Result<()> {
     let mut series = RunSeries::new(resolved);
-    let joined = join::join_run(resolved, run_dir, summary.wall_s, |r| series.push(r))?;
+    let joined = join::join_run_until(
+        resolved,
+        run_dir,
+        summary.wall_s,
+        |r| series.push(r),
+        report_interrupted,
+    )?;
     write(run_dir, resolved, summary, series, &joined.warnings)?;
     Ok(())
+}
+
+/// `Err(Interrupted)` once SIGINT or SIGTERM arrived: the report stops at once.
+fn report_interrupted() -> Result<()> {
+    crate::interrupt::check(crate::runtime::WHILE_REPORTING)
 }
 
 /// Maxima of one attack segment of one robot, at the full tick rate.
@@ -538,6 +567,9 @@ fn figures(a: AgentSeries, l: &Layout) -> Vec<Job> {
 }
 
 /// Writes everything into `run_dir/report/`; returns the path of `report.md`.
+/// Writes the report whole or not at all: into a folder of its own beside `report/`, which
+/// replaces `report/` once every file is written. A failure (disk full) or an interrupt
+/// removes that folder and leaves any earlier `report/` as it was.
 fn write(
     run_dir: &Path,
     resolved: &Resolved,
@@ -545,8 +577,39 @@ fn write(
     series: RunSeries,
     warnings: &[String],
 ) -> Result<PathBuf> {
+    let staging = run_dir.join(format!(".report-partial-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&staging);
+    let written = write_into(&staging, run_dir, resolved, summary, series, warnings)
+        .and_then(|()| report_interrupted());
+    if let Err(e) = written {
+        let _ = std::fs::remove_dir_all(&staging);
+        return Err(e);
+    }
     let dir = run_dir.join("report");
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    match std::fs::remove_dir_all(&dir) {
+        Ok(()) => {}
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => {
+            let _ = std::fs::remove_dir_all(&staging);
+            return Err(e).with_context(|| format!("replacing {}", dir.display()));
+        }
+    }
+    if let Err(e) = std::fs::rename(&staging, &dir) {
+        let _ = std::fs::remove_dir_all(&staging);
+        return Err(e).with_context(|| format!("moving the report to {}", dir.display()));
+    }
+    Ok(dir.join("report.md"))
+}
+
+fn write_into(
+    dir: &Path,
+    run_dir: &Path,
+    resolved: &Resolved,
+    summary: &RunSummary,
+    series: RunSeries,
+    warnings: &[String],
+) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let recorded = series
         .agents
         .iter()
@@ -569,7 +632,7 @@ fn write(
         segments.push((a.id, a.segments.clone()));
         jobs.extend(figures(a, &layout));
     }
-    render_all(&dir, jobs)?;
+    render_all(dir, jobs)?;
     let md = markdown(
         run_dir,
         resolved,
@@ -586,7 +649,7 @@ fn write(
     let seg = dir.join("segments.csv");
     std::fs::write(&seg, segments_csv(&segments))
         .with_context(|| format!("writing {}", seg.display()))?;
-    Ok(md_path)
+    Ok(())
 }
 
 /// The end of the time axis of a run whose last recorded tick ends at `recorded` s: the
@@ -621,6 +684,7 @@ fn render_all(dir: &Path, jobs: Vec<Job>) -> Result<()> {
             .map(|share| {
                 s.spawn(move || -> Result<()> {
                     for job in share {
+                        report_interrupted()?;
                         plot::save_figure(&job.figure, &dir.join(&job.stem), job.size)
                             .with_context(|| format!("figure {}", job.stem))?;
                     }
@@ -775,15 +839,18 @@ fn markdown(
             );
         }
     }
-    md.push_str("\n| robot | false alarms | alarm coverage of attacked ticks | rejected inputs | deadline misses |\n|---|---|---|---|---|\n");
+    md.push_str("\n| robot | false alarms | alarm coverage of attacked ticks | rejected inputs | rejected torques | deadline misses | uncontrolled ticks | metrics cover |\n|---|---|---|---|---|---|---|---|\n");
     for (id, m) in &s.metrics {
         let _ = writeln!(
             md,
-            "| {id} | {} | {:.1} % | {} | {} |",
+            "| {id} | {} | {:.1} % | {} | {} | {} | {} | {} |",
             m.false_alarms,
             m.alarm_coverage * 100.0,
             m.rejected_inputs,
-            m.deadline_misses
+            m.rejected_torques,
+            m.deadline_misses,
+            m.uncontrolled_ticks,
+            crate::output::coverage(m.ticks, s.planned_ticks)
         );
     }
     md.push_str("\n(also [`detection.csv`](detection.csv))\n");

@@ -97,12 +97,22 @@ pub fn describe_status(status: ExitStatus) -> String {
 /// The launcher was interrupted (SIGINT, SIGTERM). `fdi-launch` exits with `128 + signal`, as
 /// a shell reports a process killed by it.
 #[derive(Debug, Clone, Copy, thiserror::Error)]
-#[error("interrupted by {} {phase}: every process was stopped", signal_name(*.signal))]
+#[error("interrupted by {} {phase}", signal_name(*.signal))]
 pub struct Interrupted {
     pub signal: i32,
-    /// `before the start` (nothing recorded) or `during the run`.
+    /// When, and what was kept: [`BEFORE_THE_START`], [`DURING_THE_RUN`],
+    /// [`WHILE_REPORTING`].
     pub phase: &'static str,
 }
+
+/// An interrupt before the start: nothing was recorded, nothing is kept.
+pub const BEFORE_THE_START: &str =
+    "before the start: every process was stopped, nothing was recorded";
+/// An interrupt during the run: the run directory keeps what was recorded.
+pub const DURING_THE_RUN: &str = "during the run: every process was stopped";
+/// An interrupt while the report was written: the run's summary, `rmse.md` and traces are kept,
+/// the report is not (it is written whole or not at all).
+pub const WHILE_REPORTING: &str = "while the report was written: the run directory keeps summary.json, rmse.md and the traces; the report was not made (`fdi-launch report RUN_DIR` makes it)";
 
 impl Interrupted {
     /// The exit status `fdi-launch` ends with: 130 for SIGINT, 143 for SIGTERM.
@@ -225,7 +235,7 @@ struct Launcher {
     control: ipc::Outbox<ControlMsg>,
     status: ipc::Inbox<StatusMsg>,
     waker: ipc::Waker,
-    /// The signal that interrupted the launcher (0: none).
+    /// The signal that interrupted the launcher (0: none): [`crate::interrupt::flag`].
     interrupted: Arc<AtomicUsize>,
     /// The start was broadcast: from then on the run records.
     started: bool,
@@ -240,8 +250,8 @@ impl Launcher {
         }
     }
 
-    /// Reaps exited children; returns the first abnormal exit that ends the run. In realtime an
-    /// agent's abnormal exit does not end the run (the control center keeps controlling the
+    /// Reaps exited children; returns the first abnormal exit that ends the run. Once a realtime
+    /// run has started, an agent's abnormal exit does not end the run (the control center keeps controlling the
     /// others): it is recorded in `self.lost` instead.
     fn poll_children(&mut self) -> Option<String> {
         for p in &mut self.procs {
@@ -250,7 +260,7 @@ impl Launcher {
                     p.status = Some(st);
                     if !st.success() {
                         let what = p.ended(st);
-                        match (self.realtime, p.wake) {
+                        match (self.realtime && self.started, p.wake) {
                             (true, Wake::Agent(id)) => {
                                 // The control center may have reported it silent first: one
                                 // entry per agent, with the exit as its reason.
@@ -338,6 +348,10 @@ impl Launcher {
             if p.status.is_none() {
                 if let Some(pid) = rustix::process::Pid::from_raw(p.child.id() as i32) {
                     let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
+                    // A stopped process (SIGSTOP) acts on the SIGTERM only once continued: it
+                    // then exits on its own with its trace flushed, not SIGKILLed after the
+                    // grace.
+                    let _ = rustix::process::kill_process(pid, rustix::process::Signal::CONT);
                 }
             }
         }
@@ -361,10 +375,8 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     let prefix = new_prefix();
     let scenario_path = opts.run_dir.join("scenario.toml");
     std::fs::create_dir_all(opts.run_dir.join("traces")).context("creating the traces folder")?;
-    let interrupted = Arc::new(AtomicUsize::new(0));
-    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register_usize(sig, Arc::clone(&interrupted), sig as usize)?;
-    }
+    let interrupted = crate::interrupt::flag();
+    crate::interrupt::check(BEFORE_THE_START).context(DidNotStart)?;
 
     let result = {
         let transport = Transport::open(
@@ -413,6 +425,10 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         wall_s,
         interrupted,
     } = result?;
+    if interrupted.is_some() {
+        // Acted on: from here on (the join, the report) only a new signal interrupts.
+        crate::interrupt::take();
+    }
     Ok(IpcOutcome {
         wall_s,
         prefix,
@@ -453,6 +469,13 @@ fn spawn_and_supervise(
         }
     }
     for (role, name, wake, agent) in roles {
+        if let Some(signal) = l.interrupt() {
+            return Err(Interrupted {
+                signal,
+                phase: BEFORE_THE_START,
+            }
+            .into());
+        }
         let mut cmd = role_command(&role)?;
         cmd.arg("--prefix")
             .arg(prefix)
@@ -504,12 +527,37 @@ fn spawn_and_supervise(
         if let Some(signal) = l.interrupt() {
             return Err(Interrupted {
                 signal,
-                phase: "before the start",
+                phase: BEFORE_THE_START,
             }
             .into());
         }
         if let Some(failed) = l.poll_children() {
+            // A signal to the process group reaches the launcher in the same kill() as the
+            // child: if the child died of it, the launcher's flag is set by now.
+            if let Some(signal) = l.interrupt() {
+                return Err(Interrupted {
+                    signal,
+                    phase: BEFORE_THE_START,
+                }
+                .into());
+            }
             bail!("{failed} before the start");
+        }
+        // A process that ended cleanly before it was ready (SIGTERM sent to it alone) will
+        // never be: named at once, as during the run.
+        if let Some(p) = l
+            .procs
+            .iter()
+            .find(|p| !p.ready && p.status.is_some_and(|st| st.success()))
+        {
+            bail!(
+                "{} (pid {}) exited before it was ready (before the start)",
+                p.label,
+                p.child.id()
+            );
+        }
+        if let Some(stall) = l.stalled() {
+            bail!("{stall} (before the start)");
         }
         if began.elapsed() > READY_TIMEOUT {
             let missing: Vec<&str> = l
@@ -615,6 +663,13 @@ fn spawn_and_supervise(
             ));
         }
         if let Some(failed) = l.poll_children() {
+            // A child killed by the signal that interrupted the launcher (the same kill() of the
+            // process group) is part of the interrupt, not a failure.
+            if let Some(signal) = l.interrupt() {
+                bar.abandon();
+                l.teardown();
+                break (started.elapsed().as_secs_f64(), Some(signal));
+            }
             bar.abandon();
             return Err(anyhow!("run stopped: {failed}"));
         }

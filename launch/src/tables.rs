@@ -72,9 +72,13 @@ fn run_case(
             )
             .and_then(crate::cli::require_whole)?;
             if let Err(e) = crate::report::write_report(&d, r, &summary) {
+                if e.downcast_ref::<crate::runtime::Interrupted>().is_some() {
+                    return Err(e);
+                }
                 eprintln!(
-                    "fdi-launch: warning: the report of {} could not be made: {e:#}",
-                    d.display()
+                    "fdi-launch: warning: the report of {} could not be made: {}",
+                    d.display(),
+                    crate::cli::describe_error(&e)
                 );
             }
             Ok(summary)

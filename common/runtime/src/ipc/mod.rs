@@ -178,6 +178,7 @@ fn config_for(prefix: &str) -> Result<Config, IpcError> {
             "only ASCII letters, digits, `_` and `-` are allowed".into()
         ));
     }
+    route_iceoryx2_log();
     let mut config = Config::default();
     config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| bad(format!("{e:?}")))?;
     Ok(config)
@@ -401,8 +402,82 @@ fn resource_dirs(root: &Path) -> Vec<PathBuf> {
     dirs
 }
 
+/// Longest line of iceoryx2's log that is printed; the rest is counted, not shown (an error
+/// after the launcher's death once dumped 6 KB of internal state).
+pub const LOG_LINE_BYTES: usize = 300;
+
+/// iceoryx2's log, through the project's own output: one line on stderr per message, named
+/// by the program (`fdi-agent: iceoryx2 error: …`), at most [`LOG_LINE_BYTES`].
+struct Iceoryx2Log;
+
+impl iceoryx2_log_types::Log for Iceoryx2Log {
+    fn log(
+        &self,
+        level: iceoryx2_log_types::LogLevel,
+        origin: std::fmt::Arguments,
+        message: std::fmt::Arguments,
+    ) {
+        let program = std::env::args_os()
+            .next()
+            .and_then(|a| {
+                Path::new(&a)
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+            })
+            .unwrap_or_else(|| "fdi".into());
+        crate::process::print_failure(format_args!(
+            "{program}: {}",
+            log_line(level, &origin.to_string(), &message.to_string())
+        ));
+    }
+}
+
+/// One line of iceoryx2's log: `iceoryx2 <level>: <origin>: <message>`, whitespace runs (line
+/// breaks of a multi-line dump) made one space, cut at [`LOG_LINE_BYTES`] with the count of
+/// what was left out.
+pub fn log_line(level: iceoryx2_log_types::LogLevel, origin: &str, message: &str) -> String {
+    use iceoryx2_log_types::LogLevel as L;
+    let level = match level {
+        L::Trace => "trace",
+        L::Debug => "debug",
+        L::Info => "info",
+        L::Warn => "warning",
+        L::Error => "error",
+        L::Fatal => "fatal error",
+    };
+    let text = format!("{origin}: {message}");
+    let words: Vec<&str> = text.split_whitespace().collect();
+    let mut line = format!("iceoryx2 {level}: {}", words.join(" "));
+    if line.len() > LOG_LINE_BYTES {
+        let mut cut = LOG_LINE_BYTES;
+        while !line.is_char_boundary(cut) {
+            cut -= 1;
+        }
+        let left = line.len() - cut;
+        line.truncate(cut);
+        line.push_str(&format!(
+            " … ({left} more bytes; IOX2_LOG_LEVEL sets what iceoryx2 logs)"
+        ));
+    }
+    line
+}
+
+/// Routes iceoryx2's log through [`Iceoryx2Log`], from `Error` up (its warnings are about its
+/// own fallbacks, e.g. `No config file was loaded` on every dead-node cleanup; the transport
+/// always passes its own config); `IOX2_LOG_LEVEL` (iceoryx2's variable) asks for more. Once
+/// per process, before any other iceoryx2 call of the transport.
+fn route_iceoryx2_log() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        static LOGGER: Iceoryx2Log = Iceoryx2Log;
+        iceoryx2::prelude::set_logger(&LOGGER);
+        iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
+    });
+}
+
 /// The iceoryx2 root folder (the same for every prefix).
 fn root_dir() -> PathBuf {
+    route_iceoryx2_log();
     PathBuf::from(Config::default().global.root_path().to_string())
 }
 
@@ -624,6 +699,30 @@ impl Waker {
 
 #[cfg(test)]
 mod tests {
+    /// Regression (issue 18): iceoryx2 printed `[W] Config::global_config() No config file was
+    /// loaded` on its own console logger, and a child a 6 KB multi-line dump after the launcher
+    /// was killed. Its log now goes through one bounded line of ours.
+    #[test]
+    fn iceoryx2_log_is_one_bounded_line_of_ours() {
+        use iceoryx2_log_types::LogLevel;
+        let dump = format!(
+            "state {{\n    a: 1,\n{}\n}}",
+            "    field: value,\n".repeat(400)
+        );
+        let line = super::log_line(LogLevel::Error, "Node::cleanup", &dump);
+        assert!(
+            line.starts_with("iceoryx2 error: Node::cleanup: state { a: 1, field: value,"),
+            "{line}"
+        );
+        assert!(!line.contains('\n'), "{line}");
+        assert!(line.len() < super::LOG_LINE_BYTES + 100, "{}", line.len());
+        assert!(line.contains("more bytes; IOX2_LOG_LEVEL"), "{line}");
+        let short = super::log_line(LogLevel::Warn, "o", "é".repeat(10).as_str());
+        assert_eq!(short, format!("iceoryx2 warning: o: {}", "é".repeat(10)));
+        let cut = super::log_line(LogLevel::Fatal, "o", "é".repeat(400).as_str());
+        assert!(cut.starts_with("iceoryx2 fatal error: o: é"), "{cut}");
+    }
+
     use super::*;
 
     fn prefix(tag: &str) -> String {
