@@ -38,7 +38,6 @@ use std::io;
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -406,16 +405,10 @@ fn run_floor_with(opts: &FloorOptions, peer: PeerCommand<'_>) -> Result<FloorRes
     })
 }
 
-static NEXT_RUN: AtomicU64 = AtomicU64::new(0);
-
-/// A fresh run prefix in the launcher's format (`fdi<pid>_<tag>_`), so that the launcher's
-/// reaping of dead runs also covers a floor whose process was killed.
+/// A fresh run prefix in the launcher's format, so that the launcher's reaping of dead runs
+/// also covers a floor whose process was killed.
 fn new_prefix() -> String {
-    format!(
-        "fdi{}_fl{}_",
-        std::process::id(),
-        NEXT_RUN.fetch_add(1, Ordering::Relaxed)
-    )
+    fdi_runtime::ipc::RunPrefix::fresh().to_string()
 }
 
 /// Removes a run prefix's resources when dropped (declare it before anything that opens them).
@@ -429,28 +422,6 @@ impl Drop for PrefixCleanup {
                 self.0
             );
         }
-    }
-}
-
-/// A temporary folder, removed with its contents when dropped.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new() -> Result<Self> {
-        let p = std::env::temp_dir().join(format!(
-            "fdi-floor-{}-{}",
-            std::process::id(),
-            NEXT_RUN.fetch_add(1, Ordering::Relaxed)
-        ));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).with_context(|| format!("creating {}", p.display()))?;
-        Ok(Self(p))
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
     }
 }
 
@@ -791,8 +762,11 @@ fn nothing_yet(e: &io::Error) -> bool {
 }
 
 fn uds_case(opts: &FloorOptions, peer: PeerCommand<'_>) -> Result<FloorCase> {
-    let dir = TempDir::new()?;
-    let (a, b) = (dir.0.join("a.sock"), dir.0.join("b.sock"));
+    let dir = tempfile::Builder::new()
+        .prefix("fdi-floor-")
+        .tempdir()
+        .context("creating a temporary folder for the sockets")?;
+    let (a, b) = (dir.path().join("a.sock"), dir.path().join("b.sock"));
     let mut rec = HopRecorder::new(2)?;
     let sock = UnixDatagram::bind(&a).with_context(|| format!("binding {}", a.display()))?;
     let mut peers = Peers::default();
@@ -802,7 +776,7 @@ fn uds_case(opts: &FloorOptions, peer: PeerCommand<'_>) -> Result<FloorCase> {
             PeerKind::UdsPair.name().to_string(),
             PeerRole::Pong.name().to_string(),
             "--dir".into(),
-            dir.0.display().to_string(),
+            dir.path().display().to_string(),
             "--spin-us".into(),
             opts.spin.as_micros().to_string(),
             "--parent-pid".into(),

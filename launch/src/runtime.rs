@@ -123,23 +123,7 @@ impl Interrupted {
 
 /// A unique run prefix (short: iceoryx2 puts it into socket paths).
 pub fn new_prefix() -> String {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.subsec_nanos());
-    format!("fdi{}_{:x}_", std::process::id(), nanos & 0xff_ffff)
-}
-
-/// The run prefix (`fdi<pid>_<tag>_`, see [`new_prefix`]) a file name starts with, and the
-/// launcher's pid.
-fn parse_prefix(name: &str) -> Option<(String, u32)> {
-    let rest = name.strip_prefix("fdi")?;
-    let (pid, tail) = rest.split_once('_')?;
-    let (tag, _) = tail.split_once('_')?;
-    let pid = pid.parse::<u32>().ok()?;
-    if tag.is_empty() || !tag.bytes().all(|b| b.is_ascii_hexdigit()) {
-        return None;
-    }
-    Some((format!("fdi{pid}_{tag}_"), pid))
+    ipc::RunPrefix::fresh().to_string()
 }
 
 /// True while a process of the run `prefix` may still use its files: its launcher `pid` lives,
@@ -164,8 +148,9 @@ fn run_alive(prefix: &str, pid: u32) -> bool {
 /// wherever iceoryx2 left them. Every command but the runtime's own processes calls it first.
 pub fn reap_stale_runs() -> usize {
     let mut n = 0;
-    for p in ipc::run_prefixes(|name| parse_prefix(name).map(|(p, _)| p)) {
-        let Some((_, pid)) = parse_prefix(&p) else {
+    let parse = |name: &str| ipc::RunPrefix::parse_start(name).map(|p| p.to_string());
+    for p in ipc::run_prefixes(parse) {
+        let Some(pid) = ipc::RunPrefix::parse_start(&p).map(|p| p.launcher_pid()) else {
             continue;
         };
         if !run_alive(&p, pid) {
@@ -220,7 +205,7 @@ pub struct IpcOptions {
     pub placement: Placement,
 }
 
-pub use fdi_runtime::process::Placement;
+pub use fdi_runtime::process::{Placement, ProcessArgs};
 
 /// Trace path of a process.
 pub fn trace_path(run_dir: &Path, process: &str) -> PathBuf {
@@ -477,23 +462,15 @@ fn spawn_and_supervise(
             .into());
         }
         let mut cmd = role_command(&role)?;
-        cmd.arg("--prefix")
-            .arg(prefix)
-            .arg("--scenario")
-            .arg(scenario_path)
-            .arg("--trace")
-            .arg(trace_path(&opts.run_dir, &name));
-        cmd.arg("--launcher-pid")
-            .arg(std::process::id().to_string());
-        if let Some(id) = agent {
-            cmd.arg("--agent").arg(id.to_string());
-        }
-        if let Some(priority) = opts.placement.rt_priority {
-            cmd.arg("--rt-priority").arg(priority.to_string());
-        }
-        if let Some(cpus) = &opts.placement.cpus {
-            cmd.arg("--cpus").arg(cpus.to_string());
-        }
+        let args = ProcessArgs {
+            prefix: prefix.to_string(),
+            scenario: scenario_path.to_path_buf(),
+            trace: trace_path(&opts.run_dir, &name),
+            agent,
+            launcher_pid: Some(std::process::id()),
+            placement: opts.placement.clone(),
+        };
+        cmd.args(args.to_args());
         // Each child in a process group of its own: the terminal's Ctrl-C (SIGINT to the
         // foreground group) reaches the launcher alone, which stops the run in order (STOP
         // message, then SIGTERM) — a child never dies of it half-started or mid-record.

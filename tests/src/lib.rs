@@ -183,7 +183,7 @@ pub fn children_of(pid: u32) -> Vec<(u32, String)> {
 /// Shared-memory and iceoryx2 files left by runs of the launcher `pid` (its run prefixes are
 /// `fdi<pid>_…`).
 pub fn leftovers_of(launcher_pid: u32) -> Vec<PathBuf> {
-    fdi_runtime::ipc::leftover_files(&format!("fdi{launcher_pid}_"))
+    fdi_runtime::ipc::leftover_files(&fdi_runtime::ipc::RunPrefix::of_launcher(launcher_pid))
 }
 
 /// Asserts that runs of the launcher `pid` left no shared-memory or iceoryx2 file behind.

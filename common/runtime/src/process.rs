@@ -10,8 +10,9 @@ use crate::ipc::{
     Bell, ControlMsg, Inbox, IpcError, Outbox, Role, StatusMsg, Waker, ZeroCopySendCopy,
 };
 
-/// Arguments the launcher passes to every process.
-#[derive(Debug, Clone, clap::Args)]
+/// Arguments the launcher passes to every process: the child parses them (clap), the launcher
+/// builds a child's command line from the same struct ([`ProcessArgs::to_args`]).
+#[derive(Debug, Clone, PartialEq, clap::Args)]
 pub struct ProcessArgs {
     /// Run prefix (iceoryx2 `global.prefix`): isolates this run's services.
     #[arg(long)]
@@ -30,6 +31,34 @@ pub struct ProcessArgs {
     pub launcher_pid: Option<u32>,
     #[command(flatten)]
     pub placement: Placement,
+}
+
+impl ProcessArgs {
+    /// The command line that parses back into `self`: what the launcher passes to a child.
+    /// Checked against the parser by `process_args_round_trip_through_the_command_line`.
+    pub fn to_args(&self) -> Vec<std::ffi::OsString> {
+        let mut out: Vec<std::ffi::OsString> = vec![
+            "--prefix".into(),
+            self.prefix.clone().into(),
+            "--scenario".into(),
+            self.scenario.clone().into(),
+            "--trace".into(),
+            self.trace.clone().into(),
+        ];
+        if let Some(id) = self.agent {
+            out.extend(["--agent".into(), id.to_string().into()]);
+        }
+        if let Some(pid) = self.launcher_pid {
+            out.extend(["--launcher-pid".into(), pid.to_string().into()]);
+        }
+        if let Some(priority) = self.placement.rt_priority {
+            out.extend(["--rt-priority".into(), priority.to_string().into()]);
+        }
+        if let Some(cpus) = &self.placement.cpus {
+            out.extend(["--cpus".into(), cpus.to_string().into()]);
+        }
+        out
+    }
 }
 
 /// Where and how a run's processes are scheduled (`--rt-priority`, `--cpus`).
@@ -663,6 +692,45 @@ mod liveness_tests {
         let mut e = Liveness::new(1, 100, 40);
         e.seen(0, 50);
         assert!(e.newly_lost(130, |_| false).is_empty());
+    }
+}
+
+#[cfg(test)]
+mod args_tests {
+    use super::{CpuList, Placement, ProcessArgs};
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Child {
+        #[command(flatten)]
+        args: ProcessArgs,
+    }
+
+    #[test]
+    fn process_args_round_trip_through_the_command_line() {
+        let base = ProcessArgs {
+            prefix: "fdi12_ab_".into(),
+            scenario: "run dir/scenario.toml".into(),
+            trace: "run dir/traces/agent-3.trace".into(),
+            agent: None,
+            launcher_pid: None,
+            placement: Placement::default(),
+        };
+        let full = ProcessArgs {
+            agent: Some(3),
+            launcher_pid: Some(4242),
+            placement: Placement {
+                rt_priority: Some(20),
+                cpus: Some("0,2-3".parse::<CpuList>().expect("list")),
+            },
+            ..base.clone()
+        };
+        for args in [base, full] {
+            let mut line = vec![std::ffi::OsString::from("fdi-agent")];
+            line.extend(args.to_args());
+            let parsed = Child::try_parse_from(line).expect("parses").args;
+            assert_eq!(parsed, args);
+        }
     }
 }
 

@@ -21,6 +21,7 @@
 //! old, which is why the launcher starts the run only after every process reported ready.
 
 pub mod msg;
+pub mod prefix;
 
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -32,6 +33,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
 pub use msg::{ControlMsg, MeasurementMsg, Role, StatusMsg, TorqueMsg};
+pub use prefix::RunPrefix;
 
 /// Longest run prefix: iceoryx2 puts it into Unix socket paths (108 bytes in all).
 pub const MAX_PREFIX_LEN: usize = 40;
