@@ -32,7 +32,7 @@ use fdi_common::scenario::{self, ControllerMode, ObserverInput, Resolved};
 use fdi_common::trajectory::TrajectoryConfig;
 
 #[allow(dead_code)] // only the line figures of the launcher's plotting are used here
-#[path = "../src/plot.rs"]
+#[path = "../src/reporting/plot.rs"]
 mod plot;
 
 /// Links of the paper's robots.

@@ -2,18 +2,13 @@
 
 mod bench;
 mod cli;
-mod export;
-mod floor;
-mod interrupt;
-mod join;
-mod output;
-mod plot;
-mod probe;
-mod relay;
-mod replayer;
-mod report;
-mod runtime;
-mod tables;
+mod reporting;
+mod run;
+
+// Short paths for the modules the jobs share.
+use bench::{floor, probe};
+use reporting::{export, output, plot, report, tables};
+use run::{interrupt, join, relay, replayer, runtime};
 
 #[cfg(test)]
 mod damage_tests;

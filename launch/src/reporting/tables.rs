@@ -1,17 +1,33 @@
 //! The paper's Tables I and II.
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
+use clap::Args;
 use fdi_common::delay::DelayProfile;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 use serde::Serialize;
 
-use crate::cli::{execute, Engine, TableArgs};
 use crate::plot::{BarChart, PALETTE};
+use crate::run::{execute, Engine};
 use plotters::style::RGBColor;
+
+#[derive(Debug, Args)]
+pub struct TableArgs {
+    #[arg(long, value_enum, default_value_t = Engine::Ipc)]
+    pub engine: Engine,
+    /// Print JSON instead of markdown.
+    #[arg(long)]
+    pub json: bool,
+    /// Shorten every run to this many seconds (the paper's tables use 40 s).
+    #[arg(long)]
+    pub duration_s: Option<f64>,
+    /// Folder that receives the table's run directories.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+}
 
 /// Table I of the paper: (robot, traditional, proposed) RMSE in rad.
 const PAPER_TABLE1: [(u32, f64, f64); 4] = [
@@ -70,7 +86,7 @@ fn run_case(
                 &d,
                 execute(r, args.engine, Some(&d), !args.json, &Default::default()),
             )
-            .and_then(crate::cli::require_whole)?;
+            .and_then(crate::run::require_whole)?;
             if let Err(e) = crate::report::write_report(&d, r, &summary) {
                 if e.downcast_ref::<crate::runtime::Interrupted>().is_some() {
                     return Err(e);
@@ -78,7 +94,7 @@ fn run_case(
                 eprintln!(
                     "fdi-launch: warning: the report of {} could not be made: {}",
                     d.display(),
-                    crate::cli::describe_error(&e)
+                    crate::reporting::output::describe_error(&e)
                 );
             }
             Ok(summary)

@@ -178,6 +178,25 @@ pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
     Ok(())
 }
 
+/// An error and its causes, joined by `: `, leaving out a cause whose text is already there (an
+/// I/O error is often both the tail of its context's message and that context's source, and
+/// was printed twice: `No space left on device (os error 28): No space left on device (os
+/// error 28)`).
+pub fn describe_error(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if text.is_empty() || out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -1,6 +1,6 @@
 //! Figures as data ([`Figure`], [`BarChart`]) and their rendering to PNG and SVG with plotters.
 //!
-//! Text is drawn with the DejaVu Sans font embedded in the binary (`src/fonts/`, Bitstream Vera
+//! Text is drawn with the DejaVu Sans font embedded in the binary (`src/reporting/fonts/`, Bitstream Vera
 //! license), so figures render the same on a machine without any system font. PNG files are
 //! encoded with the `png` crate from plotters' RGB buffer.
 

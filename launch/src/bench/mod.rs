@@ -2,6 +2,9 @@
 //! floor, and lockstep speed against the in-process engine. Results are printed and written to a
 //! run directory; nothing here asserts a speed.
 
+pub mod floor;
+pub mod probe;
+
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
@@ -13,8 +16,8 @@ use fdi_common::trace::{TraceReader, TraceRecord};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 
-use crate::cli::{execute, Engine};
 use crate::output;
+use crate::run::{execute, Engine};
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
@@ -209,7 +212,7 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
         });
     }
     let placement = &a.placement;
-    crate::cli::check_placement(&r, Engine::Ipc, placement)?;
+    crate::run::check_placement(&r, Engine::Ipc, placement)?;
     let dir = output::create_run_dir(&a.out, &r)?;
     let period_ns = (r.scenario.control_period_s * 1e9) as i64;
     let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
@@ -218,7 +221,7 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
         execute(&r, Engine::Ipc, Some(&dir), !a.json, placement),
     );
     let wakeups = probe.finish();
-    let (summary, wakeups) = (crate::cli::require_whole(summary?)?, wakeups?);
+    let (summary, wakeups) = (crate::run::require_whole(summary?)?, wakeups?);
 
     let (mut e2e, mut h1, mut h2, mut h3, mut att, mut cc, mut jitter) = (
         histogram()?,
@@ -594,7 +597,7 @@ fn lockstep(a: &LockstepArgs) -> Result<ExitCode> {
             !a.json,
             &Default::default(),
         )
-        .and_then(crate::cli::require_whole)?;
+        .and_then(crate::run::require_whole)?;
         if !a.keep_traces {
             for d in [&dir_in, &dir_ipc] {
                 let _ = std::fs::remove_dir_all(d.join("traces"));

@@ -1,0 +1,219 @@
+//! Run orchestration: a resolved scenario on an engine. The multi-process runtime (spawn,
+//! supervise, tear down: [`runtime`]), the join of its traces into tick records ([`join`]), the
+//! relay of the children's stderr ([`relay`]), interrupts ([`interrupt`]) and the replay of a
+//! recorded attacker ([`replayer`]); the in-process engine is `fdi_common::engine`.
+
+pub mod interrupt;
+pub mod join;
+pub mod relay;
+pub mod replayer;
+pub mod runtime;
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use clap::ValueEnum;
+use fdi_common::engine::{run_inproc_any, Partial, RunSummary};
+use fdi_common::records::TickRecord;
+use fdi_common::scenario::{ClockMode, Resolved};
+use fdi_common::trace::{TraceRecord, TraceWriter};
+
+use crate::reporting::output;
+
+/// Which engine runs the scenario.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Engine {
+    /// One process per agent, an attacker and a control center over iceoryx2 shared memory.
+    Ipc,
+    /// Everything on one thread, no IPC (the oracle).
+    Inproc,
+}
+
+impl Engine {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Ipc => "ipc",
+            Self::Inproc => "inproc",
+        }
+    }
+}
+
+/// Writes the records of an in-process run as the per-process traces a multi-process run
+/// leaves, so that reports and exports read both alike.
+struct InprocTraces {
+    agents: Vec<(u32, TraceWriter)>,
+    attacker: TraceWriter,
+    center: TraceWriter,
+}
+
+impl InprocTraces {
+    fn create(dir: &Path, r: &Resolved) -> Result<Self> {
+        let header = |p: &str| fdi_runtime::process::trace_header(p, r);
+        let mut agents = Vec::new();
+        for a in &r.scenario.agents {
+            let name = format!("agent-{}", a.id);
+            agents.push((
+                a.id,
+                TraceWriter::create(&runtime::trace_path(dir, &name), &header(&name))?,
+            ));
+        }
+        Ok(Self {
+            agents,
+            attacker: TraceWriter::create(
+                &runtime::trace_path(dir, "attacker"),
+                &header("attacker"),
+            )?,
+            center: TraceWriter::create(
+                &runtime::trace_path(dir, "control-center"),
+                &header("control-center"),
+            )?,
+        })
+    }
+
+    fn write(&mut self, rec: &TickRecord) -> Result<()> {
+        if let Some((_, w)) = self
+            .agents
+            .iter_mut()
+            .find(|(id, _)| *id == rec.agent.agent)
+        {
+            w.write(&TraceRecord::Agent(rec.agent))?;
+        }
+        self.attacker.write(&TraceRecord::Attack(rec.attack))?;
+        self.center.write(&TraceRecord::Center(rec.center))?;
+        Ok(())
+    }
+
+    fn flush(mut self) -> Result<()> {
+        for (_, w) in &mut self.agents {
+            w.flush()?;
+        }
+        self.attacker.flush()?;
+        self.center.flush()?;
+        Ok(())
+    }
+}
+
+/// Runs a resolved scenario on an engine. With `run_dir`, traces and the summary go there; an
+/// ipc run without one uses a scratch folder under the system's temporary directory.
+pub fn execute(
+    r: &Resolved,
+    engine: Engine,
+    run_dir: Option<&Path>,
+    progress: bool,
+    placement: &runtime::Placement,
+) -> Result<RunSummary> {
+    match (engine, run_dir) {
+        (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
+        (Engine::Inproc, Some(dir)) => {
+            let mut traces = InprocTraces::create(dir, r).context(runtime::DidNotStart)?;
+            let mut failure = None;
+            let summary = run_inproc_any(r, |rec| {
+                if let Err(e) = traces.write(rec) {
+                    failure.get_or_insert(e);
+                }
+            })
+            .context("in-process engine")?;
+            if let Some(e) = failure {
+                return Err(e);
+            }
+            traces.flush()?;
+            output::write_summary(dir, &summary)?;
+            Ok(summary)
+        }
+        (Engine::Ipc, dir) => {
+            let scratch;
+            let dir = match dir {
+                Some(d) => d,
+                None => {
+                    scratch =
+                        output::create_run_dir(&std::env::temp_dir().join("fdi-mas-runs"), r)?;
+                    &scratch
+                }
+            };
+            let outcome = runtime::run_ipc(
+                r,
+                &runtime::IpcOptions {
+                    run_dir: dir.to_path_buf(),
+                    progress,
+                    replay: false,
+                    placement: placement.clone(),
+                },
+            )?;
+            let mut joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
+            joined.summary.lost_agents = outcome.lost;
+            if let Some(signal) = outcome.interrupted {
+                let s = &mut joined.summary;
+                eprintln!(
+                    "fdi-launch: interrupted by {} after {:.3} s of {} s simulated: every process was stopped ({}); the run directory keeps what was recorded",
+                    runtime::signal_name(signal),
+                    s.sim_s,
+                    r.scenario.duration_s,
+                    outcome.exits
+                );
+                s.partial = Some(Partial {
+                    reason: format!("interrupted by {}", runtime::signal_name(signal)),
+                    planned_ticks: r.ticks(),
+                    signal: Some(signal),
+                });
+            }
+            if *placement != runtime::Placement::default() {
+                joined.summary.placement = Some(placement.describe());
+            }
+            for w in &joined.warnings {
+                eprintln!("fdi-launch: warning: {w}");
+            }
+            if !outcome.leftovers.is_empty() {
+                eprintln!(
+                    "fdi-launch: warning: {} shared-memory files of run {} could not be removed",
+                    outcome.leftovers.len(),
+                    outcome.prefix
+                );
+            }
+            output::write_summary(dir, &joined.summary)?;
+            Ok(joined.summary)
+        }
+    }
+}
+
+/// Refuses `--rt-priority` / `--cpus` where they do not apply or are not permitted, before
+/// anything starts (and before a run directory exists).
+pub fn check_placement(r: &Resolved, engine: Engine, placement: &runtime::Placement) -> Result<()> {
+    if *placement == runtime::Placement::default() {
+        return Ok(());
+    }
+    if engine != Engine::Ipc {
+        bail!("--rt-priority and --cpus place the processes of the ipc engine only");
+    }
+    if let Some(priority) = placement.rt_priority {
+        if r.scenario.clock != ClockMode::Realtime {
+            bail!(
+                "--rt-priority {priority} applies to realtime runs only (lockstep processes \
+                 spin before they block: under SCHED_FIFO a spinning process would starve \
+                 everything else on its CPU)"
+            );
+        }
+    }
+    placement.check().map_err(anyhow::Error::msg)
+}
+
+/// Refuses a summary that covers less than its scenario: tables and benchmarks need whole
+/// runs.
+pub fn require_whole(summary: RunSummary) -> Result<RunSummary> {
+    match &summary.partial {
+        Some(Partial {
+            signal: Some(signal),
+            ..
+        }) => Err(runtime::Interrupted {
+            signal: *signal,
+            phase: runtime::DURING_THE_RUN,
+        }
+        .into()),
+        Some(p) => bail!(
+            "the run ended early ({}): {} of {} ticks",
+            p.reason,
+            summary.ticks,
+            p.planned_ticks
+        ),
+        None => Ok(summary),
+    }
+}
