@@ -38,23 +38,54 @@ pub use prefix::RunPrefix;
 /// Longest run prefix: iceoryx2 puts it into Unix socket paths (108 bytes in all).
 pub const MAX_PREFIX_LEN: usize = 40;
 
-/// Transport errors name the service or port concerned.
+/// The error an iceoryx2 call (or a check of ours) returned, kept as the source.
+pub type Source = Box<dyn std::error::Error + Send + Sync>;
+
+/// Transport errors name the service or port concerned and keep the underlying error.
 #[derive(Debug, thiserror::Error)]
 pub enum IpcError {
-    #[error("run prefix `{prefix}`: {reason}")]
-    Prefix { prefix: String, reason: String },
-    #[error("creating the iceoryx2 node `{name}`: {reason}")]
-    Node { name: String, reason: String },
-    #[error("service `{service}`: {reason}")]
-    Service { service: String, reason: String },
-    #[error("port on `{service}`: {reason}")]
-    Port { service: String, reason: String },
-    #[error("sending on `{service}`: {reason}")]
-    Send { service: String, reason: String },
-    #[error("receiving on `{service}`: {reason}")]
-    Receive { service: String, reason: String },
-    #[error("waiting on `{service}`: {reason}")]
-    Wait { service: String, reason: String },
+    #[error("run prefix `{prefix}`: {source}")]
+    Prefix {
+        prefix: String,
+        #[source]
+        source: Source,
+    },
+    #[error("creating the iceoryx2 node `{name}`: {source}")]
+    Node {
+        name: String,
+        #[source]
+        source: Source,
+    },
+    #[error("service `{service}`: {source}")]
+    Service {
+        service: String,
+        #[source]
+        source: Source,
+    },
+    #[error("port on `{service}`: {source}")]
+    Port {
+        service: String,
+        #[source]
+        source: Source,
+    },
+    #[error("sending on `{service}`: {source}")]
+    Send {
+        service: String,
+        #[source]
+        source: Source,
+    },
+    #[error("receiving on `{service}`: {source}")]
+    Receive {
+        service: String,
+        #[source]
+        source: Source,
+    },
+    #[error("waiting on `{service}`: {source}")]
+    Wait {
+        service: String,
+        #[source]
+        source: Source,
+    },
 }
 
 /// Publish–subscribe streams of a run.
@@ -136,10 +167,12 @@ pub fn monotonic_ns() -> u64 {
 }
 
 /// Maps a port-creation failure on `service` to [`IpcError::Port`].
-fn port_error<E: std::fmt::Debug>(service: &str) -> impl FnOnce(E) -> IpcError + '_ {
+fn port_error<E: std::error::Error + Send + Sync + 'static>(
+    service: &str,
+) -> impl FnOnce(E) -> IpcError + '_ {
     move |e| IpcError::Port {
         service: service.to_string(),
-        reason: format!("{e:?}"),
+        source: e.into(),
     }
 }
 
@@ -165,12 +198,12 @@ pub struct Transport {
 }
 
 fn config_for(prefix: &str) -> Result<Config, IpcError> {
-    let bad = |reason: String| IpcError::Prefix {
+    let bad = |source: Source| IpcError::Prefix {
         prefix: prefix.into(),
-        reason,
+        source,
     };
     if prefix.is_empty() || prefix.len() > MAX_PREFIX_LEN {
-        return Err(bad(format!("must be 1..={MAX_PREFIX_LEN} bytes")));
+        return Err(bad(format!("must be 1..={MAX_PREFIX_LEN} bytes").into()));
     }
     if !prefix
         .bytes()
@@ -182,7 +215,7 @@ fn config_for(prefix: &str) -> Result<Config, IpcError> {
     }
     route_iceoryx2_log();
     let mut config = Config::default();
-    config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| bad(format!("{e:?}")))?;
+    config.global.prefix = FileName::new(prefix.as_bytes()).map_err(|e| bad(e.into()))?;
     Ok(config)
 }
 
@@ -190,11 +223,11 @@ impl Transport {
     /// Opens this process's node `name` in the run `prefix`.
     pub fn open(prefix: &str, name: &str, sizing: Sizing) -> Result<Self, IpcError> {
         let config = config_for(prefix)?;
-        let err = |reason: String| IpcError::Node {
+        let err = |source: Source| IpcError::Node {
             name: name.into(),
-            reason,
+            source,
         };
-        let node_name = NodeName::new(name).map_err(|e| err(format!("{e:?}")))?;
+        let node_name = NodeName::new(name).map_err(|e| err(e.into()))?;
         // iceoryx2 reports an `InternalError` when a file of its shared node registry changes
         // under it while the node's files are created (another run being cleaned up at that
         // moment): transient, so a few bounded retries.
@@ -212,7 +245,7 @@ impl Transport {
                     attempt += 1;
                     std::thread::sleep(std::time::Duration::from_millis(20));
                 }
-                Err(e) => return Err(err(format!("{e:?}"))),
+                Err(e) => return Err(err(e.into())),
             }
         };
         Ok(Self {
@@ -238,7 +271,7 @@ impl Transport {
         let (pubs, subs, buffer) = self.sizing.qos(stream);
         let name = ServiceName::new(&service).map_err(|e| IpcError::Service {
             service: service.clone(),
-            reason: format!("{e:?}"),
+            source: e.into(),
         })?;
         self.node
             .service_builder(&name)
@@ -252,7 +285,7 @@ impl Transport {
             .open_or_create()
             .map_err(|e| IpcError::Service {
                 service,
-                reason: format!("{e:?}"),
+                source: e.into(),
             })
     }
 
@@ -291,7 +324,7 @@ impl Transport {
         let service = wake.service_name();
         let name = ServiceName::new(&service).map_err(|e| IpcError::Service {
             service: service.clone(),
-            reason: format!("{e:?}"),
+            source: e.into(),
         })?;
         self.node
             .service_builder(&name)
@@ -302,7 +335,7 @@ impl Transport {
             .open_or_create()
             .map_err(|e| IpcError::Service {
                 service,
-                reason: format!("{e:?}"),
+                source: e.into(),
             })
     }
 
@@ -543,15 +576,15 @@ pub struct Outbox<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> {
 impl<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> Outbox<T> {
     /// Publishes `value`; returns the number of subscribers reached.
     pub fn send(&self, value: T) -> Result<usize, IpcError> {
-        let err = |reason: String| IpcError::Send {
+        let err = |source: Source| IpcError::Send {
             service: self.service.clone(),
-            reason,
+            source,
         };
-        let sample = self.port.loan_uninit().map_err(|e| err(format!("{e:?}")))?;
+        let sample = self.port.loan_uninit().map_err(|e| err(e.into()))?;
         sample
             .write_payload(value)
             .send()
-            .map_err(|e| err(format!("{e:?}")))
+            .map_err(|e| err(e.into()))
     }
 }
 
@@ -571,7 +604,7 @@ impl<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> Inbox<T> {
     pub fn has_messages(&self) -> Result<bool, IpcError> {
         self.port.has_samples().map_err(|e| IpcError::Receive {
             service: self.service.clone(),
-            reason: format!("{e:?}"),
+            source: e.into(),
         })
     }
 
@@ -580,7 +613,7 @@ impl<T: ZeroCopySend + Copy + std::fmt::Debug + 'static> Inbox<T> {
         let mut n = 0;
         while let Some(sample) = self.port.receive().map_err(|e| IpcError::Receive {
             service: self.service.clone(),
-            reason: format!("{e:?}"),
+            source: e.into(),
         })? {
             f(*sample.payload());
             n += 1;
@@ -600,7 +633,7 @@ impl Bell {
     pub fn ring(&self) -> Result<(), IpcError> {
         self.port.notify().map(|_| ()).map_err(|e| IpcError::Send {
             service: self.service.clone(),
-            reason: format!("{e:?}"),
+            source: e.into(),
         })
     }
 }
@@ -624,7 +657,7 @@ impl Waker {
                 Ok(_) => Ok(rung),
                 Err(e) => Err(IpcError::Wait {
                     service: self.service.clone(),
-                    reason: format!("{e:?}"),
+                    source: e.into(),
                 }),
             };
         }
@@ -634,7 +667,7 @@ impl Waker {
             Err(e) => {
                 return Err(IpcError::Wait {
                     service: self.service.clone(),
-                    reason: format!("{e:?}"),
+                    source: e.into(),
                 })
             }
         }
@@ -679,7 +712,7 @@ impl Waker {
             Err(e) => {
                 return Err(IpcError::Wait {
                     service: self.service.clone(),
-                    reason: e.to_string(),
+                    source: e.into(),
                 })
             }
         }
@@ -693,7 +726,7 @@ impl Waker {
             .try_wait(|_| rung = true)
             .map_err(|e| IpcError::Wait {
                 service: self.service.clone(),
-                reason: format!("{e:?}"),
+                source: e.into(),
             })?;
         Ok(rung)
     }
