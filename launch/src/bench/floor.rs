@@ -28,8 +28,8 @@
 //!   --parent-pid         stop when this process is no longer the parent
 //! ```
 //!
-//! Each iceoryx2 case runs in its own run prefix (`fdi<pid>_fl<n>_`, the launcher's format, so a
-//! killed launcher's leftovers are reaped by the next run), and uses the runtime's own service
+//! Each iceoryx2 case runs in its own run prefix (a fresh `ipc::RunPrefix`, the launcher's
+//! format, so a killed launcher's leftovers are reaped by the next run), and uses the runtime's own service
 //! names, all carrying [`MeasurementMsg`]. A peer relays every message it receives and exits
 //! after relaying the stop message; it also exits when its parent dies (the kernel sends SIGTERM)
 //! or when nothing arrives for [`PEER_IDLE_TIMEOUT`].
