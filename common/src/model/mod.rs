@@ -137,6 +137,37 @@ pub trait EulerLagrange<const N: usize>: Send + Sync + std::fmt::Debug {
     }
 }
 
+/// The states `(q, q̇)` of the free arm (`u = 0`, `d = 0`) from `(q0, q̇0)` after each of
+/// `steps` classic RK4 steps of `dt`: what the models' energy property tests integrate.
+#[cfg(test)]
+pub(crate) fn free_motion<const N: usize>(
+    arm: &dyn EulerLagrange<N>,
+    (q0, qd0): (Vector<N>, Vector<N>),
+    dt: f64,
+    steps: usize,
+) -> Vec<(Vector<N>, Vector<N>)> {
+    let zero = Vector::<N>::zeros();
+    let f = |q: &Vector<N>, qd: &Vector<N>| arm.acceleration(q, qd, &zero, &zero);
+    let (mut q, mut qd) = (q0, qd0);
+    let mut out = Vec::with_capacity(steps);
+    for _ in 0..steps {
+        let k1 = (qd, f(&q, &qd));
+        let k2 = (
+            qd + k1.1 * (dt / 2.0),
+            f(&(q + k1.0 * (dt / 2.0)), &(qd + k1.1 * (dt / 2.0))),
+        );
+        let k3 = (
+            qd + k2.1 * (dt / 2.0),
+            f(&(q + k2.0 * (dt / 2.0)), &(qd + k2.1 * (dt / 2.0))),
+        );
+        let k4 = (qd + k3.1 * dt, f(&(q + k3.0 * dt), &(qd + k3.1 * dt)));
+        q += (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0) * (dt / 6.0);
+        qd += (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1) * (dt / 6.0);
+        out.push((q, qd));
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -112,8 +112,14 @@ impl ThreeLink {
         }
     }
 
-    /// `∂M/∂q_m`: `∂cos(θ_a − θ_b)/∂q_m = −sin(θ_a − θ_b) ([m ≤ a] − [m ≤ b])`.
-    fn inertia_partial(&self, q: &Vector<3>, m: usize) -> Matrix<3> {
+    /// `Σ_i [ m_i Σ_{a≥k, b≥l; a,b≤i} term(a, b, ℓ_a ℓ_b, θ_a − θ_b) + own(i) ]` for each
+    /// `(k, l)`: the shape of `M` and of its partial derivatives.
+    fn chain_sum(
+        &self,
+        q: &Vector<3>,
+        term: impl Fn(usize, usize, f64, f64) -> f64,
+        own: impl Fn(usize) -> f64,
+    ) -> Matrix<3> {
         let th = Self::absolute(q);
         let mut out = Matrix::<3>::zeros();
         for i in 0..3 {
@@ -123,18 +129,28 @@ impl ThreeLink {
                     let mut sum = 0.0;
                     for a in k..=i {
                         for b in l..=i {
-                            let d = f64::from(u8::from(m <= a)) - f64::from(u8::from(m <= b));
-                            if d != 0.0 {
-                                sum -=
-                                    self.lever(a, i) * self.lever(b, i) * (th[a] - th[b]).sin() * d;
-                            }
+                            let levers = self.lever(a, i) * self.lever(b, i);
+                            sum += term(a, b, levers, th[a] - th[b]);
                         }
                     }
-                    out[(k, l)] += mass * sum;
+                    out[(k, l)] += mass * sum + own(i);
                 }
             }
         }
         out
+    }
+
+    /// `∂M/∂q_m`: `∂cos(θ_a − θ_b)/∂q_m = −sin(θ_a − θ_b) ([m ≤ a] − [m ≤ b])`.
+    fn inertia_partial(&self, q: &Vector<3>, m: usize) -> Matrix<3> {
+        let term = |a: usize, b: usize, levers: f64, dth: f64| {
+            let d = f64::from(u8::from(m <= a)) - f64::from(u8::from(m <= b));
+            if d == 0.0 {
+                0.0
+            } else {
+                -(levers * dth.sin() * d)
+            }
+        };
+        self.chain_sum(q, term, |_| 0.0)
     }
 
     /// Potential energy `g Σ m_i y_i` of the centres of mass (zero at `q = 0`'s height, the base).
@@ -155,23 +171,11 @@ impl EulerLagrange<3> for ThreeLink {
     }
 
     fn inertia(&self, q: &Vector<3>) -> Matrix<3> {
-        let th = Self::absolute(q);
-        let mut out = Matrix::<3>::zeros();
-        for i in 0..3 {
-            let mass = self.params.mass_kg[i];
-            for k in 0..=i {
-                for l in 0..=i {
-                    let mut sum = 0.0;
-                    for a in k..=i {
-                        for b in l..=i {
-                            sum += self.lever(a, i) * self.lever(b, i) * (th[a] - th[b]).cos();
-                        }
-                    }
-                    out[(k, l)] += mass * sum + self.params.inertia_kg_m2[i];
-                }
-            }
-        }
-        out
+        self.chain_sum(
+            q,
+            |_, _, levers, dth| levers * dth.cos(),
+            |i| self.params.inertia_kg_m2[i],
+        )
     }
 
     fn inertia_rate(&self, q: &Vector<3>, qd: &Vector<3>) -> Matrix<3> {
@@ -247,29 +251,15 @@ mod tests {
 
     /// RK4 of the free arm (u = 0, d = 0), returning the total energy after each step.
     fn free_energies(arm: &ThreeLink, q0: Vector<3>, qd0: Vector<3>, steps: usize) -> Vec<f64> {
-        let zero = Vector::<3>::zeros();
-        let f = |q: &Vector<3>, qd: &Vector<3>| arm.acceleration(q, qd, &zero, &zero);
         let energy =
             |q: &Vector<3>, qd: &Vector<3>| arm.kinetic_energy(q, qd) + arm.potential_energy(q);
-        let (mut q, mut qd) = (q0, qd0);
-        let dt = 1e-3;
-        let mut out = vec![energy(&q, &qd)];
-        for _ in 0..steps {
-            let k1 = (qd, f(&q, &qd));
-            let k2 = (
-                qd + k1.1 * (dt / 2.0),
-                f(&(q + k1.0 * (dt / 2.0)), &(qd + k1.1 * (dt / 2.0))),
-            );
-            let k3 = (
-                qd + k2.1 * (dt / 2.0),
-                f(&(q + k2.0 * (dt / 2.0)), &(qd + k2.1 * (dt / 2.0))),
-            );
-            let k4 = (qd + k3.1 * dt, f(&(q + k3.0 * dt), &(qd + k3.1 * dt)));
-            q += (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0) * (dt / 6.0);
-            qd += (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1) * (dt / 6.0);
-            out.push(energy(&q, &qd));
-        }
-        out
+        std::iter::once(energy(&q0, &qd0))
+            .chain(
+                crate::model::free_motion(arm, (q0, qd0), 1e-3, steps)
+                    .iter()
+                    .map(|(q, qd)| energy(q, qd)),
+            )
+            .collect()
     }
 
     #[test]

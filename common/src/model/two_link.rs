@@ -219,25 +219,10 @@ mod tests {
         // Integrate the free arm (u = 0, d = 0) with small RK4 steps: kinetic energy must fall
         // monotonically, since dE/dt = −q̇ᵀ F q̇ < 0 for q̇ ≠ 0 (G = 0, Ṁ − 2V skew).
         let arm = arm();
-        let zero = Vector::<2>::zeros();
-        let (mut q, mut qd) = (Vector::<2>::new(0.4, -1.0), Vector::<2>::new(2.0, -3.0));
+        let (q, qd) = (Vector::<2>::new(0.4, -1.0), Vector::<2>::new(2.0, -3.0));
         let mut energy = arm.kinetic_energy(&q, &qd);
         let e0 = energy;
-        let dt = 1e-3;
-        for _ in 0..2000 {
-            let f = |q: &Vector<2>, qd: &Vector<2>| arm.acceleration(q, qd, &zero, &zero);
-            let k1 = (qd, f(&q, &qd));
-            let k2 = (
-                qd + k1.1 * (dt / 2.0),
-                f(&(q + k1.0 * (dt / 2.0)), &(qd + k1.1 * (dt / 2.0))),
-            );
-            let k3 = (
-                qd + k2.1 * (dt / 2.0),
-                f(&(q + k2.0 * (dt / 2.0)), &(qd + k2.1 * (dt / 2.0))),
-            );
-            let k4 = (qd + k3.1 * dt, f(&(q + k3.0 * dt), &(qd + k3.1 * dt)));
-            q += (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0) * (dt / 6.0);
-            qd += (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1) * (dt / 6.0);
+        for (q, qd) in crate::model::free_motion(&arm, (q, qd), 1e-3, 2000) {
             let e = arm.kinetic_energy(&q, &qd);
             assert!(e < energy, "energy rose from {energy} to {e}");
             energy = e;
