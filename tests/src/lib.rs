@@ -288,3 +288,31 @@ pub fn launch_watching_children(args: &[&str], limit: Duration) -> Watched {
         std::thread::sleep(Duration::from_millis(1));
     }
 }
+
+/// A tmpfs of `size` mounted at a fresh folder, unmounted on drop: a file system that fills up.
+#[derive(Debug)]
+pub struct Tmpfs(pub Scratch);
+
+impl Tmpfs {
+    /// `Err` (with the reason) when this user may not mount.
+    pub fn mount(tag: &str, size: &str) -> Result<Self, String> {
+        let dir = Scratch::new(&format!("tmpfs-{tag}"));
+        let st = Command::new("mount")
+            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
+            .arg(&dir.0)
+            .stderr(Stdio::piped())
+            .output()
+            .map_err(|e| format!("mount: {e}"))?;
+        if st.status.success() {
+            Ok(Self(dir))
+        } else {
+            Err(String::from_utf8_lossy(&st.stderr).trim().to_string())
+        }
+    }
+}
+
+impl Drop for Tmpfs {
+    fn drop(&mut self) {
+        let _ = Command::new("umount").arg(&self.0 .0).status();
+    }
+}

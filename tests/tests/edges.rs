@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use fdi_tests::{
     alive, assert_no_leftovers, children_of, launcher, signal, wait_until, wait_with_watchdog,
-    Scratch,
+    Scratch, Tmpfs,
 };
 
 const WATCHDOG: Duration = Duration::from_secs(300);
@@ -264,33 +264,6 @@ fn realtime_every_robot_lost_for_good_is_a_failed_run_exit_5() {
     assert_no_leftovers(leader);
 }
 
-/// A tmpfs of `size` mounted at a fresh folder, unmounted on drop.
-struct Tmpfs(Scratch);
-
-impl Tmpfs {
-    /// `None` (with the reason) when this user may not mount.
-    fn mount(size: &str) -> Result<Self, String> {
-        let dir = Scratch::new("tmpfs-report");
-        let st = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
-            .arg(&dir.0)
-            .stderr(Stdio::piped())
-            .output()
-            .map_err(|e| format!("mount: {e}"))?;
-        if st.status.success() {
-            Ok(Self(dir))
-        } else {
-            Err(String::from_utf8_lossy(&st.stderr).trim().to_string())
-        }
-    }
-}
-
-impl Drop for Tmpfs {
-    fn drop(&mut self) {
-        let _ = Command::new("umount").arg(&self.0 .0).status();
-    }
-}
-
 /// Regression (issue 18): a report that failed (disk full) left a partial `report/` and the run
 /// exited 0, and the cause was printed twice (`No space left on device (os error 28): No space
 /// left on device (os error 28)`). The report is written whole or not at all, the run exits 1
@@ -299,7 +272,7 @@ impl Drop for Tmpfs {
 fn a_report_that_fails_leaves_no_partial_report_and_the_run_exits_1_naming_the_cause_once() {
     // The traces of this 2 s lockstep run take 2.5 MB, its report 2.6 MB more: in 3.2 MB the
     // run fits and its report does not. Needs root (a tmpfs); skipped with the reason otherwise.
-    let fs_ = match Tmpfs::mount("3200k") {
+    let fs_ = match Tmpfs::mount("report", "3200k") {
         Ok(t) => t,
         Err(why) => {
             eprintln!("skipped: cannot mount a tmpfs to fill up (needs root): {why}");

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use fdi_tests::{
     json, launch, launch_plain, launch_watching_children, launcher, leftovers_of, run_dir_of,
-    wait_with_watchdog, Scratch,
+    wait_with_watchdog, Scratch, Tmpfs,
 };
 
 const WATCHDOG: Duration = Duration::from_secs(300);
@@ -201,38 +201,11 @@ fn a_run_whose_process_fails_at_start_removes_its_run_directory_and_names_the_ca
     assert!(left.is_empty(), "iceoryx2 files: {left:?}");
 }
 
-/// A tmpfs of `size` mounted at a fresh folder, unmounted on drop.
-struct Tmpfs(Scratch);
-
-impl Tmpfs {
-    /// `None` (with the reason) when this user may not mount.
-    fn mount(size: &str) -> Result<Self, String> {
-        let dir = Scratch::new("tmpfs");
-        let st = Command::new("mount")
-            .args(["-t", "tmpfs", "-o", &format!("size={size}"), "tmpfs"])
-            .arg(&dir.0)
-            .stderr(Stdio::piped())
-            .output()
-            .map_err(|e| format!("mount: {e}"))?;
-        if st.status.success() {
-            Ok(Self(dir))
-        } else {
-            Err(String::from_utf8_lossy(&st.stderr).trim().to_string())
-        }
-    }
-}
-
-impl Drop for Tmpfs {
-    fn drop(&mut self) {
-        let _ = Command::new("umount").arg(&self.0 .0).status();
-    }
-}
-
 #[test]
 fn a_full_disk_is_the_headline_naming_the_trace_and_the_partial_traces_stay_readable() {
     // Needs a file system that fills up: a small tmpfs (root only). The mechanism is also
     // unit-tested without mounts (trace.rs: /dev/full; relay.rs: the headline).
-    let fs_ = match Tmpfs::mount("400k") {
+    let fs_ = match Tmpfs::mount("disk", "400k") {
         Ok(t) => t,
         Err(why) => {
             eprintln!("skipped: cannot mount a tmpfs to fill up (needs root): {why}");
