@@ -16,10 +16,11 @@ use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{HopStamps, TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::from_vector;
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
+    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, TorqueMsg,
+    Transport, Wake, Waker as _,
 };
 use fdi_runtime::process::{
-    self, LauncherLink, ProcessArgs, Shutdown, Start, WaitStrategy, WAIT_SLICE,
+    self, Connection, LauncherLink, ProcessArgs, Shutdown, Start, WaitStrategy, WAIT_SLICE,
 };
 
 /// Errors of the agent process.
@@ -27,14 +28,34 @@ pub type AgentError = fdi_runtime::process::RoleError;
 
 /// The agent's ports.
 #[derive(Debug)]
-pub struct Ports {
-    pub measurement: Outbox<MeasurementMsg>,
-    pub torque: Inbox<TorqueMsg>,
-    pub attacker: Bell,
-    pub waker: fdi_runtime::ipc::Waker,
-    pub launcher: LauncherLink,
+pub struct Ports<X: Transport> {
+    pub measurement: X::Outbox<MeasurementMsg>,
+    pub torque: X::Inbox<TorqueMsg>,
+    pub attacker: X::Bell,
+    pub waker: X::Waker,
+    pub launcher: LauncherLink<X>,
     /// The node; declared last so that it is dropped after the ports.
-    pub transport: fdi_runtime::ipc::Transport,
+    pub transport: X,
+}
+
+impl<X: Transport> Ports<X> {
+    /// Opens agent `id`'s node in the run `prefix` and its ports.
+    pub fn open(prefix: &str, id: u32, resolved: &Resolved) -> Result<Self, AgentError> {
+        let conn: Connection<X> = process::connect(
+            prefix,
+            Role::Agent,
+            Wake::Agent(id),
+            process::sizing_for(resolved),
+        )?;
+        Ok(Self {
+            measurement: conn.transport.publisher(Stream::Measurement)?,
+            torque: conn.transport.subscriber(Stream::Torque(id))?,
+            attacker: conn.transport.notifier(Wake::Attacker)?,
+            waker: conn.waker,
+            launcher: conn.launcher,
+            transport: conn.transport,
+        })
+    }
 }
 
 /// How the run ended.
@@ -45,11 +66,14 @@ pub enum Outcome {
 }
 
 /// State of the torque stream.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 struct Inflow {
     /// Sequence number of the next torque due.
     next: u64,
     refused: u64,
+    /// The run's tick count: no torque is numbered beyond.
+    ticks: u64,
+    clock: ClockMode,
 }
 
 /// A tick measured and published but not yet integrated.
@@ -63,9 +87,9 @@ struct Published<const N: usize> {
 /// Takes every waiting torque into the plant's delay line, in order; a torque for a tick already
 /// passed (duplicate, replay) or malformed is refused and counted. With `stamps`, the per-hop
 /// latency of every torque is recorded (realtime: in lockstep latencies say nothing).
-fn take_torques<const N: usize>(
+fn take_torques<X: Transport, const N: usize>(
     plant: &mut Plant<N>,
-    ports: &Ports,
+    ports: &Ports<X>,
     trace: &mut TraceWriter,
     inflow: &mut Inflow,
     stamps: bool,
@@ -74,7 +98,7 @@ fn take_torques<const N: usize>(
     let mut err = None;
     ports.torque.drain(|m| {
         let received = monotonic_ns();
-        let admitted = process::admit_torque::<N>(&m, id, inflow.next);
+        let admitted = process::admit_torque::<N>(&m, id, inflow.next, inflow.ticks, inflow.clock);
         if !admitted.is_ok_and(|u| plant.receive(m.t_send, u).is_ok()) {
             inflow.refused += 1;
             return;
@@ -104,9 +128,9 @@ fn take_torques<const N: usize>(
 
 /// Measures and publishes tick `k`. Lockstep rings the attacker once per batch, realtime at
 /// every tick (`ring`).
-fn publish<const N: usize>(
+fn publish<X: Transport, const N: usize>(
     plant: &mut Plant<N>,
-    ports: &Ports,
+    ports: &Ports<X>,
     k: u64,
     t: f64,
     ring: bool,
@@ -130,10 +154,10 @@ fn publish<const N: usize>(
 }
 
 /// Runs agent `agent_id` of `resolved` to the end (or until `shutdown`).
-pub fn run<const N: usize>(
+pub fn run<X: Transport, const N: usize>(
     agent_id: u32,
     resolved: &Resolved,
-    ports: &Ports,
+    ports: &Ports<X>,
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
 ) -> Result<Outcome, AgentError> {
@@ -154,7 +178,12 @@ pub fn run<const N: usize>(
     };
     let ticks = resolved.ticks();
     let dt = s.control_period_s;
-    let mut inflow = Inflow::default();
+    let mut inflow = Inflow {
+        next: 0,
+        refused: 0,
+        ticks,
+        clock: s.clock,
+    };
     let stopped = |k| Ok(Outcome::Stopped { ticks: k });
     match s.clock {
         ClockMode::Lockstep => {
@@ -263,7 +292,9 @@ pub fn run<const N: usize>(
         })?;
     }
     trace.flush()?;
-    ports.launcher.report(StatusMsg::DONE, ticks)?;
+    ports
+        .launcher
+        .done_and_hold(ticks, &ports.waker, shutdown)?;
     Ok(Outcome::Completed {
         ticks,
         deadline_misses: plant.deadline_misses,
@@ -271,24 +302,24 @@ pub fn run<const N: usize>(
 }
 
 /// [`run`] with the number of links of agent `agent_id`'s model.
-pub fn run_any(
+pub fn run_any<X: Transport>(
     agent_id: u32,
     resolved: &Resolved,
-    ports: &Ports,
+    ports: &Ports<X>,
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
 ) -> Result<Outcome, AgentError> {
-    struct Run<'a> {
+    struct Run<'a, X: Transport> {
         agent_id: u32,
         resolved: &'a Resolved,
-        ports: &'a Ports,
+        ports: &'a Ports<X>,
         shutdown: &'a Shutdown,
         trace: &'a mut TraceWriter,
     }
-    impl ForLinks for Run<'_> {
+    impl<X: Transport> ForLinks for Run<'_, X> {
         type Output = Result<Outcome, AgentError>;
         fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            run::<N>(
+            run::<X, N>(
                 self.agent_id,
                 self.resolved,
                 self.ports,
@@ -312,17 +343,12 @@ pub fn run_any(
     })
 }
 
-fn open(args: &ProcessArgs) -> Result<(u32, Resolved, Ports, TraceWriter, Shutdown), AgentError> {
+type Opened = (u32, Resolved, Ports<Shm>, TraceWriter, Shutdown);
+
+fn open(args: &ProcessArgs) -> Result<Opened, AgentError> {
     let id = args.agent.ok_or(AgentError::MissingId)?;
-    let (shutdown, resolved, conn) = process::start(args, Role::Agent, Wake::Agent(id))?;
-    let ports = Ports {
-        measurement: conn.transport.publisher(Stream::Measurement)?,
-        torque: conn.transport.subscriber(Stream::Torque(id))?,
-        attacker: conn.transport.notifier(Wake::Attacker)?,
-        waker: conn.waker,
-        launcher: conn.launcher,
-        transport: conn.transport,
-    };
+    let (shutdown, resolved) = process::start(args)?;
+    let ports = Ports::open(&args.prefix, id, &resolved)?;
     let trace = TraceWriter::create(
         &args.trace,
         &process::trace_header(&format!("agent-{id}"), &resolved),

@@ -12,11 +12,12 @@ use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, Wake,
+    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, Transport,
+    Wake, Waker as _,
 };
 use fdi_runtime::process::{
-    self, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy, LIVENESS_CHECK,
-    LOST_AFTER_NS,
+    self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
+    LIVENESS_CHECK, LOST_AFTER_NS,
 };
 
 /// Errors of the attacker process.
@@ -24,14 +25,34 @@ pub type AttackerError = fdi_runtime::process::RoleError;
 
 /// The attacker's ports.
 #[derive(Debug)]
-pub struct Ports {
-    pub measurement: Inbox<MeasurementMsg>,
-    pub tampered: Outbox<MeasurementMsg>,
-    pub center: Bell,
-    pub waker: fdi_runtime::ipc::Waker,
-    pub launcher: LauncherLink,
+pub struct Ports<X: Transport> {
+    pub measurement: X::Inbox<MeasurementMsg>,
+    pub tampered: X::Outbox<MeasurementMsg>,
+    pub center: X::Bell,
+    pub waker: X::Waker,
+    pub launcher: LauncherLink<X>,
     /// The node; declared last so that it is dropped after the ports.
-    pub transport: fdi_runtime::ipc::Transport,
+    pub transport: X,
+}
+
+impl<X: Transport> Ports<X> {
+    /// Opens the attacker's node in the run `prefix` and its ports.
+    pub fn open(prefix: &str, resolved: &Resolved) -> Result<Self, AttackerError> {
+        let conn: Connection<X> = process::connect(
+            prefix,
+            Role::Attacker,
+            Wake::Attacker,
+            process::sizing_for(resolved),
+        )?;
+        Ok(Self {
+            measurement: conn.transport.subscriber(Stream::Measurement)?,
+            tampered: conn.transport.publisher(Stream::Tampered)?,
+            center: conn.transport.notifier(Wake::Center)?,
+            waker: conn.waker,
+            launcher: conn.launcher,
+            transport: conn.transport,
+        })
+    }
 }
 
 /// One attacked agent.
@@ -43,9 +64,9 @@ struct Target {
 }
 
 /// Relays until every agent's last tick went through (or `shutdown`). Returns messages refused.
-pub fn run<const N: usize>(
+pub fn run<X: Transport, const N: usize>(
     resolved: &Resolved,
-    ports: &Ports,
+    ports: &Ports<X>,
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
 ) -> Result<u64, AttackerError> {
@@ -148,27 +169,29 @@ pub fn run<const N: usize>(
         })?;
     }
     trace.flush()?;
-    ports.launcher.report(StatusMsg::DONE, ticks)?;
+    ports
+        .launcher
+        .done_and_hold(ticks, &ports.waker, shutdown)?;
     Ok(refused)
 }
 
 /// [`run`] with the number of links of the run's agents.
-pub fn run_any(
+pub fn run_any<X: Transport>(
     resolved: &Resolved,
-    ports: &Ports,
+    ports: &Ports<X>,
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
 ) -> Result<u64, AttackerError> {
-    struct Run<'a> {
+    struct Run<'a, X: Transport> {
         resolved: &'a Resolved,
-        ports: &'a Ports,
+        ports: &'a Ports<X>,
         shutdown: &'a Shutdown,
         trace: &'a mut TraceWriter,
     }
-    impl ForLinks for Run<'_> {
+    impl<X: Transport> ForLinks for Run<'_, X> {
         type Output = Result<u64, AttackerError>;
         fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            run::<N>(self.resolved, self.ports, self.shutdown, self.trace)
+            run::<X, N>(self.resolved, self.ports, self.shutdown, self.trace)
         }
     }
     resolved
@@ -181,16 +204,11 @@ pub fn run_any(
         .unwrap_or(Ok(0))
 }
 
-fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), AttackerError> {
-    let (shutdown, resolved, conn) = process::start(args, Role::Attacker, Wake::Attacker)?;
-    let ports = Ports {
-        measurement: conn.transport.subscriber(Stream::Measurement)?,
-        tampered: conn.transport.publisher(Stream::Tampered)?,
-        center: conn.transport.notifier(Wake::Center)?,
-        waker: conn.waker,
-        launcher: conn.launcher,
-        transport: conn.transport,
-    };
+type Opened = (Resolved, Ports<Shm>, TraceWriter, Shutdown);
+
+fn open(args: &ProcessArgs) -> Result<Opened, AttackerError> {
+    let (shutdown, resolved) = process::start(args)?;
+    let ports = Ports::open(&args.prefix, &resolved)?;
     let trace = TraceWriter::create(&args.trace, &process::trace_header("attacker", &resolved))?;
     Ok((resolved, ports, trace, shutdown))
 }

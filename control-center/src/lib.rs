@@ -12,11 +12,12 @@ use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Role, StatusMsg, Stream, TorqueMsg, Wake,
+    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, StatusMsg, Stream,
+    TorqueMsg, Transport, Wake, Waker as _,
 };
 use fdi_runtime::process::{
-    self, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy, LIVENESS_CHECK,
-    LOST_AFTER_NS,
+    self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
+    LIVENESS_CHECK, LOST_AFTER_NS,
 };
 
 /// Errors of the control-center process.
@@ -24,21 +25,47 @@ pub type CenterError = fdi_runtime::process::RoleError;
 
 /// Ports towards one agent.
 #[derive(Debug)]
-pub struct AgentLink {
-    pub torque: Outbox<TorqueMsg>,
-    pub bell: Bell,
+pub struct AgentLink<X: Transport> {
+    pub torque: X::Outbox<TorqueMsg>,
+    pub bell: X::Bell,
 }
 
 /// The control center's ports.
 #[derive(Debug)]
-pub struct Ports {
-    pub tampered: Inbox<MeasurementMsg>,
+pub struct Ports<X: Transport> {
+    pub tampered: X::Inbox<MeasurementMsg>,
     /// In the scenario's agent order.
-    pub agents: Vec<AgentLink>,
-    pub waker: fdi_runtime::ipc::Waker,
-    pub launcher: LauncherLink,
+    pub agents: Vec<AgentLink<X>>,
+    pub waker: X::Waker,
+    pub launcher: LauncherLink<X>,
     /// The node; declared last so that it is dropped after the ports.
-    pub transport: fdi_runtime::ipc::Transport,
+    pub transport: X,
+}
+
+impl<X: Transport> Ports<X> {
+    /// Opens the control center's node in the run `prefix` and its ports.
+    pub fn open(prefix: &str, resolved: &Resolved) -> Result<Self, CenterError> {
+        let conn: Connection<X> = process::connect(
+            prefix,
+            Role::Center,
+            Wake::Center,
+            process::sizing_for(resolved),
+        )?;
+        let mut agents = Vec::with_capacity(resolved.agent_count());
+        for a in &resolved.scenario.agents {
+            agents.push(AgentLink {
+                torque: conn.transport.publisher(Stream::Torque(a.id))?,
+                bell: conn.transport.notifier(Wake::Agent(a.id))?,
+            });
+        }
+        Ok(Self {
+            tampered: conn.transport.subscriber(Stream::Tampered)?,
+            agents,
+            waker: conn.waker,
+            launcher: conn.launcher,
+            transport: conn.transport,
+        })
+    }
 }
 
 /// Ticks between two progress reports to the launcher.
@@ -50,9 +77,9 @@ struct Slot<const N: usize> {
 }
 
 /// Controls every agent until their last tick (or `shutdown`).
-pub fn run<const N: usize>(
+pub fn run<X: Transport, const N: usize>(
     resolved: &Resolved,
-    ports: &Ports,
+    ports: &Ports<X>,
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
 ) -> Result<u64, CenterError> {
@@ -193,27 +220,29 @@ pub fn run<const N: usize>(
         trace.write(&TraceRecord::Event { t: s.duration_s, message: format!("{refused} messages refused, {rejected} measurements rejected as non-finite or absurd") })?;
     }
     trace.flush()?;
-    ports.launcher.report(StatusMsg::DONE, ticks)?;
+    ports
+        .launcher
+        .done_and_hold(ticks, &ports.waker, shutdown)?;
     Ok(refused)
 }
 
 /// [`run`] with the number of links of the run's agents.
-pub fn run_any(
+pub fn run_any<X: Transport>(
     resolved: &Resolved,
-    ports: &Ports,
+    ports: &Ports<X>,
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
 ) -> Result<u64, CenterError> {
-    struct Run<'a> {
+    struct Run<'a, X: Transport> {
         resolved: &'a Resolved,
-        ports: &'a Ports,
+        ports: &'a Ports<X>,
         shutdown: &'a Shutdown,
         trace: &'a mut TraceWriter,
     }
-    impl ForLinks for Run<'_> {
+    impl<X: Transport> ForLinks for Run<'_, X> {
         type Output = Result<u64, CenterError>;
         fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            run::<N>(self.resolved, self.ports, self.shutdown, self.trace)
+            run::<X, N>(self.resolved, self.ports, self.shutdown, self.trace)
         }
     }
     resolved
@@ -226,22 +255,11 @@ pub fn run_any(
         .unwrap_or(Ok(0))
 }
 
-fn open(args: &ProcessArgs) -> Result<(Resolved, Ports, TraceWriter, Shutdown), CenterError> {
-    let (shutdown, resolved, conn) = process::start(args, Role::Center, Wake::Center)?;
-    let mut agents = Vec::with_capacity(resolved.agent_count());
-    for a in &resolved.scenario.agents {
-        agents.push(AgentLink {
-            torque: conn.transport.publisher(Stream::Torque(a.id))?,
-            bell: conn.transport.notifier(Wake::Agent(a.id))?,
-        });
-    }
-    let ports = Ports {
-        tampered: conn.transport.subscriber(Stream::Tampered)?,
-        agents,
-        waker: conn.waker,
-        launcher: conn.launcher,
-        transport: conn.transport,
-    };
+type Opened = (Resolved, Ports<Shm>, TraceWriter, Shutdown);
+
+fn open(args: &ProcessArgs) -> Result<Opened, CenterError> {
+    let (shutdown, resolved) = process::start(args)?;
+    let ports = Ports::open(&args.prefix, &resolved)?;
     let trace = TraceWriter::create(
         &args.trace,
         &process::trace_header("control-center", &resolved),

@@ -1,6 +1,8 @@
 //! Helpers shared by the integration tests: locating (and if needed building) the real
 //! binaries, scratch folders, process and shared-memory inspection, a watchdog.
 
+pub mod threads;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
@@ -183,7 +185,8 @@ pub fn children_of(pid: u32) -> Vec<(u32, String)> {
 /// Shared-memory and iceoryx2 files left by runs of the launcher `pid` (its run prefixes are
 /// `fdi<pid>_…`).
 pub fn leftovers_of(launcher_pid: u32) -> Vec<PathBuf> {
-    fdi_runtime::ipc::leftover_files(&fdi_runtime::ipc::RunPrefix::of_launcher(launcher_pid))
+    use fdi_runtime::ipc::{RunPrefix, Shm, Transport};
+    Shm::leftovers(&RunPrefix::of_launcher(launcher_pid))
 }
 
 /// Asserts that runs of the launcher `pid` left no shared-memory or iceoryx2 file behind.

@@ -1,6 +1,8 @@
 //! fdi-runtime: the process side every fdi-mas role shares.
 //!
-//! [`ipc`] is the transport: the only code that calls iceoryx2 and knows where its files live.
+//! [`ipc`] is the transport: the [`ipc::Transport`] trait the roles are generic over, and its
+//! iceoryx2 implementation (shared memory between processes, or in-process between threads for
+//! tests), the only code that calls iceoryx2 and knows where its files live.
 //! [`process`] is the shell around a role's loop: the launcher's arguments and the placement of
 //! the process, shutdown on signals or the launcher's death, the start handshake and status
 //! reports, admission of received messages, and the liveness of realtime peers. The math the

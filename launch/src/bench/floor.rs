@@ -44,7 +44,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Parser, ValueEnum};
 use fdi_common::scenario::MAX_DOF;
 use fdi_runtime::ipc::{
-    self, monotonic_ns, Bell, Inbox, MeasurementMsg, Outbox, Sizing, Stream, Transport, Wake, Waker,
+    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Shm, Sizing, Stream,
+    Transport, Wake, Waker as _,
 };
 use fdi_runtime::process::{WaitStrategy, DEFAULT_SPIN_US, WAIT_SLICE};
 use hdrhistogram::Histogram;
@@ -205,10 +206,7 @@ const HELLO: u64 = u64::MAX - 1;
 const PROBE: u64 = 1 << 62;
 
 /// One agent, in-flight batch of one: every service the floor opens fits.
-const SIZING: Sizing = Sizing {
-    agents: 1,
-    in_flight: 1,
-};
+const SIZING: Sizing = Sizing::new(1, 1);
 
 /// Bytes of one message.
 const PAYLOAD_BYTES: usize = std::mem::size_of::<MeasurementMsg>();
@@ -416,7 +414,7 @@ struct PrefixCleanup(String);
 
 impl Drop for PrefixCleanup {
     fn drop(&mut self) {
-        if let Err(e) = ipc::remove_run_resources(&self.0) {
+        if let Err(e) = Shm::remove_leftovers(&self.0) {
             eprintln!(
                 "fdi-launch: warning: cleaning up run prefix {}: {e}",
                 self.0
@@ -521,17 +519,17 @@ impl ParentWatch {
 }
 
 /// One process's ports on the ring.
-struct IpcPorts {
-    inbox: Inbox<MeasurementMsg>,
-    outbox: Outbox<MeasurementMsg>,
-    bell: Bell,
-    waker: Waker,
+struct IpcPorts<X: Transport> {
+    inbox: X::Inbox<MeasurementMsg>,
+    outbox: X::Outbox<MeasurementMsg>,
+    bell: X::Bell,
+    waker: X::Waker,
 }
 
-impl IpcPorts {
+impl<X: Transport> IpcPorts<X> {
     /// Opens the ports of `route`; the waker first, so no ring for a message this process can
     /// receive goes unheard.
-    fn open(transport: &Transport, route: Route) -> Result<Self> {
+    fn open(transport: &X, route: Route) -> Result<Self> {
         let waker = transport.waker(route.own)?;
         let inbox = transport.subscriber(route.input)?;
         let outbox = transport.publisher(route.output)?;
@@ -576,7 +574,7 @@ fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Resul
     let mut rec = HopRecorder::new(hops)?;
     let strategy = WaitStrategy { spin: opts.spin };
     {
-        let transport = Transport::open(&prefix, "floor", SIZING)?;
+        let transport = Shm::open(&prefix, "floor", SIZING)?;
         let ports = IpcPorts::open(&transport, Route::initiator(kind))?;
         let mut peers = Peers::default();
         for role in roles {
@@ -632,7 +630,7 @@ fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Resul
 }
 
 /// Sends probes around the ring until one comes back: then every port is connected.
-fn ipc_connect(ports: &IpcPorts, peers: &mut Peers) -> Result<()> {
+fn ipc_connect<X: Transport>(ports: &IpcPorts<X>, peers: &mut Peers) -> Result<()> {
     let began = Instant::now();
     let mut attempt = 0;
     loop {
@@ -662,7 +660,7 @@ fn ipc_peer(
     strategy: WaitStrategy,
     parent: &ParentWatch,
 ) -> Result<()> {
-    let transport = Transport::open(prefix, &format!("floor-{}", role.name()), SIZING)?;
+    let transport = Shm::open(prefix, &format!("floor-{}", role.name()), SIZING)?;
     let ports = IpcPorts::open(&transport, route)?;
     let mut last = Instant::now();
     loop {

@@ -13,7 +13,10 @@ use fdi_common::engine::tick_time;
 use fdi_common::records::AttackRecord;
 use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::trace::{TraceReader, TraceRecord};
-use fdi_runtime::ipc::{Inbox, MeasurementMsg, Role, StatusMsg, Stream, TorqueMsg, Wake};
+use fdi_runtime::ipc::{
+    Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, TorqueMsg, Transport,
+    Wake, Waker as _,
+};
 use fdi_runtime::process::{self, ProcessArgs, Shutdown, Start};
 
 /// Ticks one agent may be ahead of its last torque (well within every stream's buffer).
@@ -76,8 +79,8 @@ fn run(args: &ProcessArgs) -> Result<()> {
     let shutdown = Shutdown::install(args.launcher_pid).context("installing signal handlers")?;
     let resolved = scenario::load_file(&args.scenario)?;
     let recording = load_recording(&resolved, &args.trace)?;
-    let conn = process::connect(
-        args,
+    let conn = process::connect::<Shm>(
+        &args.prefix,
         Role::Attacker,
         Wake::Attacker,
         process::sizing_for(&resolved),
@@ -85,11 +88,11 @@ fn run(args: &ProcessArgs) -> Result<()> {
     let tampered = conn
         .transport
         .publisher::<MeasurementMsg>(Stream::Tampered)?;
-    let torques: Vec<Inbox<TorqueMsg>> = resolved
+    let torques: Vec<_> = resolved
         .scenario
         .agents
         .iter()
-        .map(|a| conn.transport.subscriber(Stream::Torque(a.id)))
+        .map(|a| conn.transport.subscriber::<TorqueMsg>(Stream::Torque(a.id)))
         .collect::<Result<_, _>>()?;
     match conn.launcher.ready_and_wait_start(&conn.waker, &shutdown)? {
         Start::Go { .. } => {}
@@ -135,7 +138,7 @@ fn run(args: &ProcessArgs) -> Result<()> {
         }
         conn.waker.wait_precise(POLL)?;
     }
-    conn.launcher.report(StatusMsg::DONE, ticks)?;
+    conn.launcher.done_and_hold(ticks, &conn.waker, &shutdown)?;
     Ok(())
 }
 

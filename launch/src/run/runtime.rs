@@ -13,7 +13,8 @@ use anyhow::{anyhow, bail, Context, Result};
 use fdi_common::engine::LostAgent;
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_runtime::ipc::{
-    self, monotonic_ns, Bell, ControlMsg, Role, StatusMsg, Stream, Transport, Wake,
+    self, monotonic_ns, Bell as _, ControlMsg, Inbox as _, Outbox as _, Role, Shm, StatusMsg,
+    Stream, Transport, Wake, Waker as _,
 };
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
@@ -149,12 +150,12 @@ fn run_alive(prefix: &str, pid: u32) -> bool {
 pub fn reap_stale_runs() -> usize {
     let mut n = 0;
     let parse = |name: &str| ipc::RunPrefix::parse_start(name).map(|p| p.to_string());
-    for p in ipc::run_prefixes(parse) {
+    for p in Shm::runs_with_leftovers(parse) {
         let Some(pid) = ipc::RunPrefix::parse_start(&p).map(|p| p.launcher_pid()) else {
             continue;
         };
         if !run_alive(&p, pid) {
-            n += ipc::remove_run_resources(&p).unwrap_or(0);
+            n += Shm::remove_leftovers(&p).unwrap_or(0);
         }
     }
     n
@@ -212,21 +213,21 @@ pub fn trace_path(run_dir: &Path, process: &str) -> PathBuf {
     run_dir.join("traces").join(format!("{process}.trace"))
 }
 
-struct Launcher {
+struct Launcher<X: Transport> {
     realtime: bool,
     lost: Vec<LostAgent>,
     procs: Vec<Proc>,
-    bells: Vec<Bell>,
-    control: ipc::Outbox<ControlMsg>,
-    status: ipc::Inbox<StatusMsg>,
-    waker: ipc::Waker,
+    bells: Vec<X::Bell>,
+    control: X::Outbox<ControlMsg>,
+    status: X::Inbox<StatusMsg>,
+    waker: X::Waker,
     /// The signal that interrupted the launcher (0: none): [`crate::interrupt::flag`].
     interrupted: Arc<AtomicUsize>,
     /// The start was broadcast: from then on the run records.
     started: bool,
 }
 
-impl Launcher {
+impl<X: Transport> Launcher<X> {
     /// The signal (SIGINT, SIGTERM) the launcher received, if any.
     fn interrupt(&self) -> Option<i32> {
         match self.interrupted.load(Ordering::SeqCst) {
@@ -364,7 +365,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     crate::interrupt::check(BEFORE_THE_START).context(DidNotStart)?;
 
     let result = {
-        let transport = Transport::open(
+        let transport = Shm::open(
             &prefix,
             "launcher",
             fdi_runtime::process::sizing_for(resolved),
@@ -404,8 +405,8 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         // ports and node dropped here, before the files are removed
     };
     let (result, lost, exits) = result;
-    ipc::remove_run_resources(&prefix).ok();
-    let leftovers = ipc::leftover_files(&prefix);
+    Shm::remove_leftovers(&prefix).ok();
+    let leftovers = Shm::leftovers(&prefix);
     let Supervised {
         wall_s,
         interrupted,
@@ -424,13 +425,13 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     })
 }
 
-fn spawn_and_supervise(
+fn spawn_and_supervise<X: Transport>(
     resolved: &Resolved,
     opts: &IpcOptions,
     prefix: &str,
     scenario_path: &Path,
-    transport: &Transport,
-    l: &mut Launcher,
+    transport: &X,
+    l: &mut Launcher<X>,
 ) -> Result<Supervised> {
     let mut roles: Vec<(String, String, Wake, Option<u32>)> = vec![(
         "control-center".into(),
@@ -699,6 +700,13 @@ fn spawn_and_supervise(
         });
     }
     bar.finish_and_clear();
+    // Every process is done: the stop lets them go (each keeps its ports until then, so that
+    // no last message leaves with its sender).
+    l.broadcast(ControlMsg {
+        command: ControlMsg::STOP,
+        reserved: 0,
+        epoch_ns: 0,
+    });
     // Reap the exits; a process that fails on its way out still fails the run.
     let began = Instant::now();
     while l.procs.iter().any(|p| p.status.is_none()) && began.elapsed() < GRACE {

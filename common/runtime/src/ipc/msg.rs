@@ -156,6 +156,8 @@ pub enum MsgError {
         "agent {agent}: sequence {seq} is behind the next one due, {next} (duplicate or replay)"
     )]
     Stale { agent: u32, seq: u64, next: u64 },
+    #[error("agent {agent}: sequence {seq} is beyond the run's last tick ({limit} ticks): forged or corrupted")]
+    SeqOutOfRange { agent: u32, seq: u64, limit: u64 },
     #[error("agent {agent}: dof {dof} exceeds the {MAX_DOF} entries a payload holds")]
     DofOutOfRange { agent: u32, dof: u32 },
     #[error("agent {agent}, sequence {seq}: time stamp {t} is not finite")]

@@ -3,7 +3,13 @@
 use std::time::Instant;
 
 use super::{ProcessArgs, ProcessError, RoleError, Shutdown, START_TIMEOUT, WAIT_SLICE};
-use crate::ipc::{Bell, ControlMsg, Inbox, IpcError, Outbox, Role, StatusMsg, Waker};
+use crate::ipc::{
+    Bell as _, ControlMsg, Inbox as _, IpcError, Outbox as _, Role, Sizing, StatusMsg, Stream,
+    Transport, Wake, Waker,
+};
+
+/// Longest hold of a finished role for the launcher's stop ([`LauncherLink::done_and_hold`]).
+pub const HOLD_LIMIT: std::time::Duration = std::time::Duration::from_secs(30);
 
 /// Outcome of waiting for the start.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -16,15 +22,15 @@ pub enum Start {
 
 /// The process's link to the launcher.
 #[derive(Debug)]
-pub struct LauncherLink {
+pub struct LauncherLink<X: Transport> {
     pub role: Role,
     pub agent: u32,
-    pub control: Inbox<ControlMsg>,
-    pub status: Outbox<StatusMsg>,
-    pub bell: Bell,
+    pub control: X::Inbox<ControlMsg>,
+    pub status: X::Outbox<StatusMsg>,
+    pub bell: X::Bell,
 }
 
-impl LauncherLink {
+impl<X: Transport> LauncherLink<X> {
     pub fn report(&self, kind: u32, tick: u64) -> Result<(), IpcError> {
         self.status.send(StatusMsg {
             role: self.role.code(),
@@ -60,6 +66,25 @@ impl LauncherLink {
         self.bell.ring()
     }
 
+    /// Reports done after the role's last message, then keeps the process's ports open until
+    /// the launcher's stop (it sends one once every process is done), a signal or the
+    /// launcher's death, or [`HOLD_LIMIT`]: a message not yet read when its publisher goes away
+    /// is lost, so a role that left at once could take its last messages with it while a peer
+    /// still needs them.
+    pub fn done_and_hold(
+        &self,
+        ticks: u64,
+        waker: &impl Waker,
+        shutdown: &Shutdown,
+    ) -> Result<(), IpcError> {
+        self.report(StatusMsg::DONE, ticks)?;
+        let began = Instant::now();
+        while !self.stop_requested()? && !shutdown.requested() && began.elapsed() < HOLD_LIMIT {
+            waker.wait(WAIT_SLICE)?;
+        }
+        Ok(())
+    }
+
     /// True when the launcher has sent a stop.
     pub fn stop_requested(&self) -> Result<bool, IpcError> {
         let mut stop = false;
@@ -71,7 +96,7 @@ impl LauncherLink {
     /// Reports ready, then blocks on `waker` until the launcher's start.
     pub fn ready_and_wait_start(
         &self,
-        waker: &Waker,
+        waker: &impl Waker,
         shutdown: &Shutdown,
     ) -> Result<Start, ProcessError> {
         self.report(StatusMsg::READY, 0)?;
@@ -101,69 +126,69 @@ impl LauncherLink {
     }
 }
 
-/// Everything a process opens on the transport at start-up.
+/// Everything a process opens on the transport at start-up. Fields drop in order: the ports
+/// before the node.
 #[derive(Debug)]
-pub struct Connection {
-    pub transport: crate::ipc::Transport,
-    pub launcher: LauncherLink,
+pub struct Connection<X: Transport> {
+    pub launcher: LauncherLink<X>,
     /// This process's own wake-up event.
-    pub waker: Waker,
+    pub waker: X::Waker,
+    pub transport: X,
 }
 
-/// Opens the node, the launcher link and this process's waker.
-pub fn connect(
-    args: &ProcessArgs,
-    role: Role,
-    wake: crate::ipc::Wake,
-    sizing: crate::ipc::Sizing,
-) -> Result<Connection, IpcError> {
-    use crate::ipc::{Stream, Transport, Wake};
-    let name = match wake {
+/// The node name of the process behind `wake`.
+pub fn node_name(wake: Wake) -> String {
+    match wake {
         Wake::Agent(id) => format!("agent-{id}"),
         Wake::Attacker => "attacker".into(),
         Wake::Center => "control-center".into(),
         Wake::Launcher => "launcher".into(),
-    };
-    let transport = Transport::open(&args.prefix, &name, sizing)?;
+    }
+}
+
+/// Opens the node of the process behind `wake` in the run `prefix`, its launcher link and its
+/// waker.
+pub fn connect<X: Transport>(
+    prefix: &str,
+    role: Role,
+    wake: Wake,
+    sizing: Sizing,
+) -> Result<Connection<X>, IpcError> {
+    let transport = X::open(prefix, &node_name(wake), sizing)?;
     let launcher = LauncherLink {
         role,
-        agent: args.agent.unwrap_or(0),
+        agent: match wake {
+            Wake::Agent(id) => id,
+            _ => 0,
+        },
         control: transport.subscriber(Stream::Control)?,
         status: transport.publisher(Stream::Status)?,
         bell: transport.notifier(Wake::Launcher)?,
     };
     let waker = transport.waker(wake)?;
     Ok(Connection {
-        transport,
         launcher,
         waker,
+        transport,
     })
 }
 
-/// The start-up every process shell shares: SIGINT/SIGTERM and parent-death handling, the
-/// run's scenario, and the transport with its launcher link and waker.
-pub fn start(
-    args: &ProcessArgs,
-    role: Role,
-    wake: crate::ipc::Wake,
-) -> Result<(Shutdown, fdi_common::scenario::Resolved, Connection), RoleError> {
+/// The start-up every process shell shares: SIGINT/SIGTERM and parent-death handling, its
+/// placement, and the run's scenario. The role then [`connect`]s.
+pub fn start(args: &ProcessArgs) -> Result<(Shutdown, fdi_common::scenario::Resolved), RoleError> {
     let shutdown = Shutdown::install(args.launcher_pid).map_err(RoleError::Signals)?;
     args.placement.apply().map_err(RoleError::Scheduling)?;
     let resolved = fdi_common::scenario::load_file(&args.scenario)?;
-    let conn = connect(args, role, wake, sizing_for(&resolved))?;
-    Ok((shutdown, resolved, conn))
+    Ok((shutdown, resolved))
 }
 
 /// Sizing of a run's services: every process computes the same from the scenario.
-pub fn sizing_for(resolved: &fdi_common::scenario::Resolved) -> crate::ipc::Sizing {
+pub fn sizing_for(resolved: &fdi_common::scenario::Resolved) -> Sizing {
     // Lookahead lets an agent run up to τ_max/Δ ticks ahead of its commands.
     let s = &resolved.scenario;
     let tau_max = s.agents.iter().map(|a| a.delay.max()).fold(0.0, f64::max);
     let ahead = (tau_max / s.control_period_s).ceil() as usize + 2;
-    crate::ipc::Sizing {
-        agents: resolved.agent_count(),
-        in_flight: ahead,
-    }
+    Sizing::new(resolved.agent_count(), ahead)
 }
 
 /// Header of the trace a process writes.

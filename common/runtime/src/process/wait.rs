@@ -2,7 +2,7 @@
 
 use std::time::{Duration, Instant};
 
-use crate::ipc::{IpcError, Waker, ZeroCopySendCopy};
+use crate::ipc::{Inbox, IpcError, Payload, Waker};
 
 /// How long a process waits for the launcher's start before giving up.
 pub const START_TIMEOUT: Duration = Duration::from_secs(60);
@@ -41,10 +41,10 @@ impl WaitStrategy {
     /// Returns once `inbox` holds a message (or `waker` was rung), or after [`WAIT_SLICE`]. The
     /// spin polls the inbox's shared-memory queue (no system call) and yields between polls;
     /// the pending notification is consumed once work is found.
-    pub fn wait<T: ZeroCopySendCopy>(
+    pub fn wait<T: Payload>(
         &self,
-        waker: &Waker,
-        inbox: &crate::ipc::Inbox<T>,
+        waker: &impl Waker,
+        inbox: &impl Inbox<T>,
     ) -> Result<bool, IpcError> {
         if !self.spin.is_zero() {
             let began = Instant::now();
