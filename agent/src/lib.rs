@@ -168,7 +168,6 @@ pub fn run<X: Transport, const N: usize>(
         .find(|a| a.id == agent_id)
         .ok_or(AgentError::NotInScenario(agent_id))?;
     let mut plant = Plant::<N>::new(PlantParams::new(agent, s)).ok_or(AgentError::Dof(agent_id))?;
-    let strategy = WaitStrategy::for_clock(s.clock);
     let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?
@@ -184,102 +183,20 @@ pub fn run<X: Transport, const N: usize>(
         ticks,
         clock: s.clock,
     };
-    let stopped = |k| Ok(Outcome::Stopped { ticks: k });
-    match s.clock {
-        ClockMode::Lockstep => {
-            // Lookahead (conservative parallel simulation): step k runs as soon as the next
-            // command not yet received (stamp t_n) would not be in force at the step's latest
-            // query t − τ(t). The step then looks up exactly the commands it looks up in strict
-            // lockstep, so the trace is bit-identical; with τ > Δ the agent runs ticks ahead and
-            // the processes exchange batches instead of single messages.
-            let mut published: Option<Published<N>> = None;
-            let mut unrung = false;
-            let mut k = 0;
-            while k < ticks {
-                let t = tick_time(k, dt);
-                let p = match published.take() {
-                    Some(p) if p.k == k => p,
-                    _ => {
-                        let state = (plant.q, plant.qd);
-                        let measurement = publish(&mut plant, ports, k, t, false)?;
-                        unrung = true;
-                        Published {
-                            k,
-                            state,
-                            measurement,
-                        }
-                    }
-                };
-                if plant.can_advance_without(k, tick_time(inflow.next, dt)) {
-                    let step = plant.advance(k);
-                    trace.write(&TraceRecord::Agent(agent_record(
-                        k,
-                        agent_id,
-                        t,
-                        (&p.state.0, &p.state.1),
-                        &p.measurement,
-                        &step,
-                    )))?;
-                    k += 1;
-                    continue;
-                }
-                published = Some(p);
-                if unrung {
-                    ports.attacker.ring()?;
-                    unrung = false;
-                }
-                let before = inflow.next;
-                while inflow.next == before {
-                    if shutdown.requested() || ports.launcher.stop_requested()? {
-                        return stopped(k);
-                    }
-                    strategy.wait(&ports.waker, &ports.torque)?;
-                    take_torques(&mut plant, ports, trace, &mut inflow, false)?;
-                }
-            }
-            // The last measurements may have gone out without a ring (the final steps needed
-            // no further torque): announce them, or the attacker only sees them on a timeout.
-            if unrung {
-                ports.attacker.ring()?;
-            }
-        }
-        ClockMode::Realtime => {
-            let mut state = (plant.q, plant.qd);
-            let mut m = publish(&mut plant, ports, 0, 0.0, true)?;
-            for k in 1..=ticks {
-                let t = tick_time(k, dt);
-                let deadline = epoch_ns + (t * 1e9) as u64;
-                // Wait for the deadline with a high-resolution timeout (ppoll), waking at every
-                // torque arrival to stamp it: the event wait's own timeout has scheduler-tick
-                // granularity (4–10 ms), far too coarse for 1 kHz.
-                loop {
-                    take_torques(&mut plant, ports, trace, &mut inflow, true)?;
-                    let Some(left) = deadline.checked_sub(monotonic_ns()).filter(|l| *l > 0) else {
-                        break;
-                    };
-                    if shutdown.requested() || ports.launcher.stop_requested()? {
-                        return stopped(k - 1);
-                    }
-                    ports
-                        .waker
-                        .wait_precise(Duration::from_nanos(left).min(WAIT_SLICE))?;
-                }
-                let t_prev = tick_time(k - 1, dt);
-                let step = plant.advance(k - 1);
-                trace.write(&TraceRecord::Agent(agent_record(
-                    k - 1,
-                    agent_id,
-                    t_prev,
-                    (&state.0, &state.1),
-                    &m,
-                    &step,
-                )))?;
-                if k < ticks {
-                    state = (plant.q, plant.qd);
-                    m = publish(&mut plant, ports, k, t, true)?;
-                }
-            }
-        }
+    let stopped_at = match s.clock {
+        ClockMode::Lockstep => lockstep(&mut plant, ports, shutdown, trace, &mut inflow, dt)?,
+        ClockMode::Realtime => realtime(
+            &mut plant,
+            ports,
+            shutdown,
+            trace,
+            &mut inflow,
+            dt,
+            epoch_ns,
+        )?,
+    };
+    if let Some(k) = stopped_at {
+        return Ok(Outcome::Stopped { ticks: k });
     }
     if inflow.refused > 0 {
         let message = format!(
@@ -299,6 +216,125 @@ pub fn run<X: Transport, const N: usize>(
         ticks,
         deadline_misses: plant.deadline_misses,
     })
+}
+
+/// The lockstep loop. Returns the tick it stopped at, when stopped before the end.
+fn lockstep<X: Transport, const N: usize>(
+    plant: &mut Plant<N>,
+    ports: &Ports<X>,
+    shutdown: &Shutdown,
+    trace: &mut TraceWriter,
+    inflow: &mut Inflow,
+    dt: f64,
+) -> Result<Option<u64>, AgentError> {
+    let (ticks, agent_id) = (inflow.ticks, plant.agent_id());
+    let strategy = WaitStrategy::for_clock(ClockMode::Lockstep);
+    // Lookahead (conservative parallel simulation): step k runs as soon as the next
+    // command not yet received (stamp t_n) would not be in force at the step's latest
+    // query t − τ(t). The step then looks up exactly the commands it looks up in strict
+    // lockstep, so the trace is bit-identical; with τ > Δ the agent runs ticks ahead and
+    // the processes exchange batches instead of single messages.
+    let mut published: Option<Published<N>> = None;
+    let mut unrung = false;
+    let mut k = 0;
+    while k < ticks {
+        let t = tick_time(k, dt);
+        let p = match published.take() {
+            Some(p) if p.k == k => p,
+            _ => {
+                let state = (plant.q, plant.qd);
+                let measurement = publish(plant, ports, k, t, false)?;
+                unrung = true;
+                Published {
+                    k,
+                    state,
+                    measurement,
+                }
+            }
+        };
+        if plant.can_advance_without(k, tick_time(inflow.next, dt)) {
+            let step = plant.advance(k);
+            trace.write(&TraceRecord::Agent(agent_record(
+                k,
+                agent_id,
+                t,
+                (&p.state.0, &p.state.1),
+                &p.measurement,
+                &step,
+            )))?;
+            k += 1;
+            continue;
+        }
+        published = Some(p);
+        if unrung {
+            ports.attacker.ring()?;
+            unrung = false;
+        }
+        let before = inflow.next;
+        while inflow.next == before {
+            if shutdown.requested() || ports.launcher.stop_requested()? {
+                return Ok(Some(k));
+            }
+            strategy.wait(&ports.waker, &ports.torque)?;
+            take_torques(plant, ports, trace, inflow, false)?;
+        }
+    }
+    // The last measurements may have gone out without a ring (the final steps needed
+    // no further torque): announce them, or the attacker only sees them on a timeout.
+    if unrung {
+        ports.attacker.ring()?;
+    }
+    Ok(None)
+}
+
+/// The realtime loop, paced from `epoch_ns`. Returns the tick it stopped at, when stopped
+/// before the end.
+fn realtime<X: Transport, const N: usize>(
+    plant: &mut Plant<N>,
+    ports: &Ports<X>,
+    shutdown: &Shutdown,
+    trace: &mut TraceWriter,
+    inflow: &mut Inflow,
+    dt: f64,
+    epoch_ns: u64,
+) -> Result<Option<u64>, AgentError> {
+    let (ticks, agent_id) = (inflow.ticks, plant.agent_id());
+    let mut state = (plant.q, plant.qd);
+    let mut m = publish(plant, ports, 0, 0.0, true)?;
+    for k in 1..=ticks {
+        let t = tick_time(k, dt);
+        let deadline = epoch_ns + (t * 1e9) as u64;
+        // Wait for the deadline with a high-resolution timeout (ppoll), waking at every
+        // torque arrival to stamp it: the event wait's own timeout has scheduler-tick
+        // granularity (4–10 ms), far too coarse for 1 kHz.
+        loop {
+            take_torques(plant, ports, trace, inflow, true)?;
+            let Some(left) = deadline.checked_sub(monotonic_ns()).filter(|l| *l > 0) else {
+                break;
+            };
+            if shutdown.requested() || ports.launcher.stop_requested()? {
+                return Ok(Some(k - 1));
+            }
+            ports
+                .waker
+                .wait_precise(Duration::from_nanos(left).min(WAIT_SLICE))?;
+        }
+        let t_prev = tick_time(k - 1, dt);
+        let step = plant.advance(k - 1);
+        trace.write(&TraceRecord::Agent(agent_record(
+            k - 1,
+            agent_id,
+            t_prev,
+            (&state.0, &state.1),
+            &m,
+            &step,
+        )))?;
+        if k < ticks {
+            state = (plant.q, plant.qd);
+            m = publish(plant, ports, k, t, true)?;
+        }
+    }
+    Ok(None)
 }
 
 /// [`run`] with the number of links of agent `agent_id`'s model.

@@ -63,6 +63,39 @@ struct Target {
     next: u64,
 }
 
+/// Tampers the admitted measurement `m` (received at `received`) with `target`'s attack,
+/// relays it to the control center and records what was injected.
+fn relay<X: Transport, const N: usize>(
+    target: &mut Target,
+    m: &MeasurementMsg,
+    received: u64,
+    ports: &Ports<X>,
+    dt: f64,
+    trace: &mut TraceWriter,
+) -> Result<(), AttackerError> {
+    target.next = m.seq + 1;
+    let t = tick_time(m.seq, dt);
+    let clean = Measurement {
+        y: to_vector::<N>(&m.y),
+        yd: to_vector::<N>(&m.yd),
+    };
+    let (out, inj) = tamper(&mut target.attack, t, &clean);
+    let sent = ports.tampered.send(MeasurementMsg {
+        y: from_vector(&out.y),
+        yd: from_vector(&out.yd),
+        attacker_received_ns: received,
+        attacker_sent_ns: monotonic_ns(),
+        ..*m
+    });
+    // The record is written even when the send failed: the trace shows what was injected.
+    let written = trace.write(&TraceRecord::Attack(attack_record(
+        m.seq, m.agent, &out, &inj,
+    )));
+    sent?;
+    written?;
+    Ok(())
+}
+
 /// Relays until every agent's last tick went through (or `shutdown`). Returns messages refused.
 pub fn run<X: Transport, const N: usize>(
     resolved: &Resolved,
@@ -110,28 +143,8 @@ pub fn run<X: Transport, const N: usize>(
                 return;
             }
             liveness.seen(i, received);
-            let target = &mut targets[i];
-            target.next = m.seq + 1;
-            let t = tick_time(m.seq, dt);
-            let clean = Measurement {
-                y: to_vector::<N>(&m.y),
-                yd: to_vector::<N>(&m.yd),
-            };
-            let (out, inj) = tamper(&mut target.attack, t, &clean);
-            let sent = ports.tampered.send(MeasurementMsg {
-                y: from_vector(&out.y),
-                yd: from_vector(&out.yd),
-                attacker_received_ns: received,
-                attacker_sent_ns: monotonic_ns(),
-                ..m
-            });
-            if let Err(e) = sent {
-                failure.get_or_insert(AttackerError::from(e));
-            }
-            if let Err(e) = trace.write(&TraceRecord::Attack(attack_record(
-                m.seq, m.agent, &out, &inj,
-            ))) {
-                failure.get_or_insert(AttackerError::from(e));
+            if let Err(e) = relay::<X, N>(&mut targets[i], &m, received, ports, dt, trace) {
+                failure.get_or_insert(e);
             }
             relayed += 1;
         })?;

@@ -76,6 +76,64 @@ struct Slot<const N: usize> {
     next: u64,
 }
 
+/// Computes agent `slot`'s tick from the admitted measurement `m` (received at `received`),
+/// sends the torque back on `link`, stamped with its tick time, and records it.
+fn control<X: Transport, const N: usize>(
+    slot: &mut Slot<N>,
+    m: &MeasurementMsg,
+    received: u64,
+    link: &AgentLink<X>,
+    dt: f64,
+    trace: &mut TraceWriter,
+) -> Result<(), CenterError> {
+    slot.next = m.seq + 1;
+    let t = tick_time(m.seq, dt);
+    let out = slot
+        .center
+        .tick(t, &to_vector::<N>(&m.y), &to_vector::<N>(&m.yd));
+    let sent = link.torque.send(TorqueMsg {
+        seq: m.seq,
+        agent: m.agent,
+        dof: N as u32,
+        t_send: t,
+        u: from_vector(&out.u),
+        agent_sent_ns: m.agent_sent_ns,
+        attacker_received_ns: m.attacker_received_ns,
+        attacker_sent_ns: m.attacker_sent_ns,
+        center_received_ns: received,
+        center_sent_ns: monotonic_ns(),
+    });
+    // The record is written even when the send failed: the trace shows what was computed.
+    let written = trace.write(&TraceRecord::Center(center_record(m.seq, m.agent, &out)));
+    sent?;
+    written?;
+    Ok(())
+}
+
+/// Realtime: records and reports every agent silent for [`LOST_AFTER_NS`] as lost (the
+/// others stay controlled).
+fn declare_lost<X: Transport, const N: usize>(
+    slots: &[Slot<N>],
+    liveness: &mut Liveness,
+    now: u64,
+    ticks: u64,
+    dt: f64,
+    ports: &Ports<X>,
+    trace: &mut TraceWriter,
+) -> Result<(), CenterError> {
+    for i in liveness.newly_lost(now, |i| slots[i].next >= ticks) {
+        let (id, last) = (slots[i].center.agent_id(), slots[i].next.saturating_sub(1));
+        let silent_ms = liveness.silence_ns(i, now) as f64 / 1e6;
+        let message = format!("agent {id} lost: detected {silent_ms:.1} ms after its last measurement (limit {} ms, after tick {last}); the others stay controlled", LOST_AFTER_NS / 1_000_000);
+        trace.write(&TraceRecord::Event {
+            t: tick_time(last, dt),
+            message,
+        })?;
+        ports.launcher.report_lost(id, last)?;
+    }
+    Ok(())
+}
+
 /// Controls every agent until their last tick (or `shutdown`).
 pub fn run<X: Transport, const N: usize>(
     resolved: &Resolved,
@@ -126,32 +184,10 @@ pub fn run<X: Transport, const N: usize>(
             if let Some(silent) = liveness.seen(i, received) {
                 rejoined.push((i, silent, m.seq));
             }
-            let slot = &mut slots[i];
-            slot.next = m.seq + 1;
-            let t = tick_time(m.seq, dt);
-            let out = slot
-                .center
-                .tick(t, &to_vector::<N>(&m.y), &to_vector::<N>(&m.yd));
-            let link = &ports.agents[i];
-            let msg = TorqueMsg {
-                seq: m.seq,
-                agent: m.agent,
-                dof: N as u32,
-                t_send: t,
-                u: from_vector(&out.u),
-                agent_sent_ns: m.agent_sent_ns,
-                attacker_received_ns: m.attacker_received_ns,
-                attacker_sent_ns: m.attacker_sent_ns,
-                center_received_ns: received,
-                center_sent_ns: monotonic_ns(),
-            };
-            if let Err(e) = link.torque.send(msg) {
-                failure.get_or_insert(CenterError::from(e));
+            if let Err(e) = control(&mut slots[i], &m, received, &ports.agents[i], dt, trace) {
+                failure.get_or_insert(e);
             }
             answered[i] = true;
-            if let Err(e) = trace.write(&TraceRecord::Center(center_record(m.seq, m.agent, &out))) {
-                failure.get_or_insert(CenterError::from(e));
-            }
         })?;
         if let Some(e) = failure.take() {
             return Err(e);
@@ -175,16 +211,7 @@ pub fn run<X: Transport, const N: usize>(
         }
         let now = monotonic_ns();
         if realtime {
-            for i in liveness.newly_lost(now, |i| slots[i].next >= ticks) {
-                let (id, last) = (slots[i].center.agent_id(), slots[i].next.saturating_sub(1));
-                let silent_ms = liveness.silence_ns(i, now) as f64 / 1e6;
-                let message = format!("agent {id} lost: detected {silent_ms:.1} ms after its last measurement (limit {} ms, after tick {last}); the others stay controlled", LOST_AFTER_NS / 1_000_000);
-                trace.write(&TraceRecord::Event {
-                    t: tick_time(last, dt),
-                    message,
-                })?;
-                ports.launcher.report_lost(id, last)?;
-            }
+            declare_lost(&slots, &mut liveness, now, ticks, dt, ports, trace)?;
         }
         // Progress over the agents controlled now; the end once every agent finished, or is
         // lost past the run's wall-clock end (until then a lost agent may rejoin).
