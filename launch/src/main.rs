@@ -8,7 +8,7 @@ mod run;
 // Short paths for the modules the jobs share.
 use bench::{floor, probe};
 use reporting::{export, output, plot, report, tables};
-use run::{interrupt, join, relay, replayer, runtime};
+use run::{interrupt, join, relay, replayer, runtime, supervisor};
 
 #[cfg(test)]
 mod damage_tests;

@@ -37,7 +37,7 @@
 use std::io;
 use std::os::unix::net::UnixDatagram;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -48,6 +48,8 @@ use fdi_runtime::ipc::{
     Transport, Wake, Waker as _,
 };
 use fdi_runtime::process::{WaitStrategy, DEFAULT_SPIN_US, WAIT_SLICE};
+
+use crate::supervisor::Supervisor;
 use hdrhistogram::Histogram;
 use serde::Serialize;
 
@@ -423,32 +425,23 @@ impl Drop for PrefixCleanup {
     }
 }
 
-/// The peers of one case; any still running when dropped are killed.
+/// The peers of one case, under the launcher's supervisor: any still running when dropped are
+/// killed.
 #[derive(Default)]
-struct Peers(Vec<(String, Child)>);
+struct Peers(Supervisor<()>);
 
 impl Peers {
     fn spawn(&mut self, peer: PeerCommand<'_>, args: &[String]) -> Result<()> {
         let label = args.iter().take(2).cloned().collect::<Vec<_>>().join(" ");
-        let child = peer(args)?
-            .stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::inherit())
-            .spawn()
-            .with_context(|| format!("starting the peer `{label}`"))?;
-        self.0.push((label, child));
-        Ok(())
+        self.0.spawn(format!("the peer `{label}`"), (), peer(args)?)
     }
 
     /// Fails when a peer has ended.
     fn check_alive(&mut self) -> Result<()> {
-        for (label, child) in &mut self.0 {
-            if let Some(st) = child.try_wait()? {
-                bail!(
-                    "the peer `{label}` (pid {}) {} before the end",
-                    child.id(),
-                    crate::runtime::describe_status(st)
-                );
+        self.0.reap();
+        for c in self.0.iter_mut() {
+            if let Some(st) = c.status {
+                bail!("{} before the end", c.ended(st));
             }
         }
         Ok(())
@@ -466,40 +459,7 @@ impl Peers {
 
     /// Waits for every peer to exit, successfully, within `timeout`.
     fn finish(&mut self, timeout: Duration) -> Result<()> {
-        let began = Instant::now();
-        for (label, child) in &mut self.0 {
-            let st = loop {
-                if let Some(st) = child.try_wait()? {
-                    break st;
-                }
-                if began.elapsed() > timeout {
-                    bail!(
-                        "the peer `{label}` (pid {}) did not exit within {timeout:?}",
-                        child.id()
-                    );
-                }
-                std::thread::sleep(Duration::from_millis(1));
-            };
-            if !st.success() {
-                bail!(
-                    "the peer `{label}` (pid {}) {}",
-                    child.id(),
-                    crate::runtime::describe_status(st)
-                );
-            }
-        }
-        Ok(())
-    }
-}
-
-impl Drop for Peers {
-    fn drop(&mut self) {
-        for (_, child) in &mut self.0 {
-            if matches!(child.try_wait(), Ok(None)) {
-                let _ = child.kill();
-            }
-            let _ = child.wait();
-        }
+        self.0.wait_all(timeout)
     }
 }
 

@@ -135,6 +135,54 @@ pub fn join_run(
     join_run_until(resolved, run_dir, wall_s, sink, || Ok(()))
 }
 
+/// The traces of a run's processes, each read ahead as the join needs.
+struct Traces {
+    agents: Vec<(u32, Source<AgentRecord>)>,
+    attacker: Source<AttackRecord>,
+    center: Source<CenterRecord>,
+}
+
+impl Traces {
+    fn open(resolved: &Resolved, run_dir: &Path) -> Result<Self> {
+        let mut agents = Vec::with_capacity(resolved.scenario.agents.len());
+        for a in &resolved.scenario.agents {
+            let p = trace_path(run_dir, &format!("agent-{}", a.id));
+            agents.push((
+                a.id,
+                Source::open(&p, pick_agent)
+                    .with_context(|| format!("opening the trace of agent {}", a.id))?,
+            ));
+        }
+        Ok(Self {
+            agents,
+            attacker: Source::open(&trace_path(run_dir, "attacker"), pick_attack)
+                .context("opening the attacker trace")?,
+            center: Source::open(&trace_path(run_dir, "control-center"), pick_center)
+                .context("opening the control-center trace")?,
+        })
+    }
+
+    /// Reads every trace to its end and adds what damage they showed to `warnings`.
+    fn finish(mut self, warnings: &mut Vec<String>) {
+        for (_, src) in &mut self.agents {
+            src.finish();
+        }
+        self.attacker.finish();
+        self.center.finish();
+        for (id, src) in &self.agents {
+            if let Some(d) = &src.damage {
+                warnings.push(format!("agent {id}: {d}"));
+            }
+        }
+        for d in [&self.attacker.damage, &self.center.damage]
+            .into_iter()
+            .flatten()
+        {
+            warnings.push(d.clone());
+        }
+    }
+}
+
 /// [`join_run`], calling `stop` every few thousand ticks: its error (an interrupt) ends the
 /// join at once.
 pub fn join_run_until(
@@ -144,20 +192,11 @@ pub fn join_run_until(
     mut sink: impl FnMut(&TickRecord),
     stop: impl Fn() -> Result<()>,
 ) -> Result<Joined> {
-    let s = &resolved.scenario;
-    let mut agents = Vec::with_capacity(s.agents.len());
-    for a in &s.agents {
-        let p = trace_path(run_dir, &format!("agent-{}", a.id));
-        agents.push((
-            a.id,
-            Source::open(&p, pick_agent)
-                .with_context(|| format!("opening the trace of agent {}", a.id))?,
-        ));
-    }
-    let mut attacker = Source::open(&trace_path(run_dir, "attacker"), pick_attack)
-        .context("opening the attacker trace")?;
-    let mut center = Source::open(&trace_path(run_dir, "control-center"), pick_center)
-        .context("opening the control-center trace")?;
+    let Traces {
+        mut agents,
+        mut attacker,
+        mut center,
+    } = Traces::open(resolved, run_dir)?;
     let mut digest = TraceDigest::new();
     let mut evaluator = evaluator_for(resolved);
     let mut warnings = Vec::new();
@@ -232,19 +271,12 @@ pub fn join_run_until(
             "{after_control} agent-ticks were recorded after the control stopped (the robots ran uncontrolled): left out of the metrics but their deadline misses"
         ));
     }
-    for (_, src) in &mut agents {
-        src.finish();
+    Traces {
+        agents,
+        attacker,
+        center,
     }
-    attacker.finish();
-    center.finish();
-    for (id, src) in &agents {
-        if let Some(d) = &src.damage {
-            warnings.push(format!("agent {id}: {d}"));
-        }
-    }
-    for d in [&attacker.damage, &center.damage].into_iter().flatten() {
-        warnings.push(d.clone());
-    }
+    .finish(&mut warnings);
     Ok(Joined {
         summary: summarize(resolved, "ipc", joined, wall_s, digest, evaluator),
         warnings,

@@ -8,6 +8,7 @@ pub mod join;
 pub mod relay;
 pub mod replayer;
 pub mod runtime;
+pub mod supervisor;
 
 use std::path::Path;
 

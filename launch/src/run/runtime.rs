@@ -1,15 +1,14 @@
 //! The multi-process engine: spawns the agents, the attacker and the control center, supervises
 //! them, and tears everything down (processes and shared memory) however the run ends.
 
-use std::os::unix::process::CommandExt;
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, ExitStatus, Stdio};
+use std::process::{Command, ExitStatus};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{bail, Context, Result};
 use fdi_common::engine::LostAgent;
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_runtime::ipc::{
@@ -17,6 +16,8 @@ use fdi_runtime::ipc::{
     Stream, Transport, Wake, Waker as _,
 };
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::supervisor::{Child, Supervisor};
 
 /// Grace period between SIGTERM and SIGKILL when a run is torn down.
 const GRACE: Duration = Duration::from_secs(2);
@@ -27,39 +28,14 @@ const STALL_LIMIT: Duration = Duration::from_secs(1);
 /// Realtime runs start this long after the start message, so every process sees it in time.
 const REALTIME_LEAD: Duration = Duration::from_millis(50);
 
-/// One supervised child.
+/// What the launcher keeps about each of its children.
 #[derive(Debug)]
-struct Proc {
-    label: String,
+struct Slot {
     wake: Wake,
-    child: Child,
-    status: Option<ExitStatus>,
     ready: bool,
-    /// Since when the process has been seen stopped (SIGSTOP), for stall detection.
-    stopped_since: Option<Instant>,
-    /// Its stderr, relayed to ours; its last line is the cause of a failure.
-    stderr: Option<crate::relay::StderrRelay>,
 }
 
-impl Proc {
-    /// How the process ended: with the cause it printed last when it exited with a status (a
-    /// failure it reported), else the signal or the status alone.
-    fn ended(&mut self, st: ExitStatus) -> String {
-        let pid = self.child.id();
-        let cause = match (st.code(), &mut self.stderr) {
-            (Some(_), Some(relay)) => relay.cause(),
-            _ => None,
-        };
-        match cause {
-            Some(c) => format!(
-                "{} (pid {pid}) failed: {c} ({})",
-                self.label,
-                describe_status(st)
-            ),
-            None => format!("{} (pid {pid}) {}", self.label, describe_status(st)),
-        }
-    }
-}
+type Proc = Child<Slot>;
 
 /// The role binaries: the sibling `fdi-agent` etc. when they are at least as new as this
 /// executable, else this executable in the hidden multi-call mode (`fdi-launch process ROLE`),
@@ -216,7 +192,7 @@ pub fn trace_path(run_dir: &Path, process: &str) -> PathBuf {
 struct Launcher<X: Transport> {
     realtime: bool,
     lost: Vec<LostAgent>,
-    procs: Vec<Proc>,
+    procs: Supervisor<Slot>,
     bells: Vec<X::Bell>,
     control: X::Outbox<ControlMsg>,
     status: X::Inbox<StatusMsg>,
@@ -240,80 +216,135 @@ impl<X: Transport> Launcher<X> {
     /// run has started, an agent's abnormal exit does not end the run (the control center keeps controlling the
     /// others): it is recorded in `self.lost` instead.
     fn poll_children(&mut self) -> Option<String> {
-        for p in &mut self.procs {
-            if p.status.is_none() {
-                if let Ok(Some(st)) = p.child.try_wait() {
-                    p.status = Some(st);
-                    if !st.success() {
-                        let what = p.ended(st);
-                        match (self.realtime && self.started, p.wake) {
-                            (true, Wake::Agent(id)) => {
-                                // The control center may have reported it silent first: one
-                                // entry per agent, with the exit as its reason.
-                                match self.lost.iter_mut().find(|x| x.agent == id) {
-                                    Some(x) => x.reason = what,
-                                    None => self.lost.push(LostAgent {
-                                        agent: id,
-                                        t_s: None,
-                                        reason: what,
-                                        rejoined_t_s: None,
-                                    }),
-                                }
-                            }
-                            _ => return Some(what),
-                        }
+        let mut failure = None;
+        for i in self.procs.reap() {
+            let p = &mut self.procs[i];
+            let Some(st) = p.status.filter(|st| !st.success()) else {
+                continue;
+            };
+            let what = p.ended(st);
+            match (self.realtime && self.started, p.meta.wake) {
+                (true, Wake::Agent(id)) => {
+                    // The control center may have reported it silent first: one entry per
+                    // agent, with the exit as its reason.
+                    match self.lost.iter_mut().find(|x| x.agent == id) {
+                        Some(x) => x.reason = what,
+                        None => self.lost.push(LostAgent {
+                            agent: id,
+                            t_s: None,
+                            reason: what,
+                            rejoined_t_s: None,
+                        }),
                     }
+                }
+                _ => {
+                    failure.get_or_insert(what);
                 }
             }
         }
-        None
+        failure
     }
 
     /// A child stopped (SIGSTOP, or traced) for longer than [`STALL_LIMIT`], named.
     fn stalled(&mut self) -> Option<String> {
-        let now = Instant::now();
-        for p in &mut self.procs {
-            if p.status.is_some() {
-                continue;
-            }
-            let stopped = std::fs::read_to_string(format!("/proc/{}/stat", p.child.id()))
-                .ok()
-                .and_then(|st| {
-                    st.rsplit_once(')')
-                        .map(|(_, rest)| rest.trim_start().starts_with(['T', 't']))
-                })
-                .unwrap_or(false);
-            match (stopped, p.stopped_since) {
-                (true, None) => p.stopped_since = Some(now),
-                (true, Some(since)) if now.duration_since(since) > STALL_LIMIT => {
-                    return Some(format!("{} (pid {}) has been stopped (SIGSTOP or a debugger) for {:.1} s; its peers are waiting for it", p.label, p.child.id(), now.duration_since(since).as_secs_f64()));
-                }
-                (false, _) => p.stopped_since = None,
-                _ => {}
-            }
-        }
-        None
+        self.procs.stalled(STALL_LIMIT)
     }
 
     /// How the children ended, e.g. `6 exited 0` or `5 exited 0, agent 2 killed by signal 9`.
     fn exits(&self) -> String {
-        let clean = self
-            .procs
-            .iter()
-            .filter(|p| p.status.is_some_and(|s| s.success()))
-            .count();
-        let mut parts = vec![format!("{clean} exited 0")];
-        for p in self
-            .procs
-            .iter()
-            .filter(|p| !p.status.is_some_and(|s| s.success()))
-        {
-            parts.push(match p.status {
-                Some(st) => format!("{} {}", p.label, describe_status(st)),
-                None => format!("{} still running", p.label),
-            });
+        self.procs.exits()
+    }
+
+    /// Reads the processes' status reports: progress (the control center's), done, agents
+    /// lost and rejoined (realtime).
+    fn take_status(&mut self, done: &mut [bool], bar: &ProgressBar, dt: f64) -> Result<()> {
+        let (mut lost, mut rejoined) = (Vec::new(), Vec::new());
+        let procs = &self.procs;
+        self.status.drain(|m| {
+            if Role::from_code(m.role) == Some(Role::Center) {
+                bar.set_position(m.tick);
+                bar.set_message(format!("{:.1} s", m.tick as f64 * dt));
+            }
+            if m.kind == StatusMsg::DONE {
+                if let Some(i) = procs.iter().position(|p| matches_status(p.meta.wake, &m)) {
+                    done[i] = true;
+                }
+            }
+            if m.kind == StatusMsg::LOST {
+                lost.push((m.agent, m.tick as f64 * dt));
+            }
+            if m.kind == StatusMsg::REJOINED {
+                rejoined.push((m.agent, m.tick as f64 * dt));
+            }
+        })?;
+        let slot = |procs: &Supervisor<Slot>, agent| {
+            procs.iter().position(|p| p.meta.wake == Wake::Agent(agent))
+        };
+        for (agent, t) in lost {
+            if let Some(i) = slot(&self.procs, agent) {
+                done[i] = true; // a lost agent will not report done
+            }
+            match self.lost.iter_mut().find(|x| x.agent == agent) {
+                Some(x) => x.t_s = Some(t),
+                None => self.lost.push(LostAgent {
+                    agent,
+                    t_s: Some(t),
+                    reason: "fell silent".into(),
+                    rejoined_t_s: None,
+                }),
+            }
+            bar.println(format!(
+                "fdi-launch: agent {agent} lost at t = {t:.3} s; the run goes on"
+            ));
         }
-        parts.join(", ")
+        for (agent, t) in rejoined {
+            let Some(x) = self.lost.iter_mut().find(|x| x.agent == agent) else {
+                continue;
+            };
+            x.rejoined_t_s = Some(t);
+            // It is controlled again and will report done itself, unless its process ended.
+            if let Some(i) = slot(&self.procs, agent) {
+                done[i] = self.procs[i].status.is_some();
+            }
+            let gap = x.t_s.map_or(String::new(), |from| {
+                format!(" after a gap of {:.3} s", t - from)
+            });
+            bar.println(format!(
+                "fdi-launch: agent {agent} rejoined at t = {t:.3} s{gap}"
+            ));
+        }
+        Ok(())
+    }
+
+    /// A process that exited cleanly without reporting done (SIGTERM sent to it alone) ends the
+    /// run too: its peers would wait for it. Its done may have raced its exit: the reports are
+    /// read once more before deciding. Names it.
+    fn ended_early(&mut self, done: &mut [bool]) -> Result<Option<String>> {
+        let early = |done: &[bool], procs: &[Proc]| {
+            procs
+                .iter()
+                .enumerate()
+                .position(|(i, p)| p.status.is_some_and(|st| st.success()) && !done[i])
+        };
+        if early(done, &self.procs).is_none() {
+            return Ok(None);
+        }
+        let procs = &self.procs;
+        self.status.drain(|m| {
+            if m.kind == StatusMsg::DONE {
+                if let Some(i) = procs.iter().position(|p| matches_status(p.meta.wake, &m)) {
+                    done[i] = true;
+                }
+            }
+        })?;
+        Ok(early(done, &self.procs).map(|i| {
+            let p = &self.procs[i];
+            format!(
+                "{} (pid {}) exited before the end of the run",
+                p.label,
+                p.pid()
+            )
+        }))
     }
 
     fn broadcast(&self, msg: ControlMsg) {
@@ -330,28 +361,15 @@ impl<X: Transport> Launcher<X> {
             reserved: 0,
             epoch_ns: 0,
         });
-        for p in &self.procs {
-            if p.status.is_none() {
-                if let Some(pid) = rustix::process::Pid::from_raw(p.child.id() as i32) {
-                    let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
-                    // A stopped process (SIGSTOP) acts on the SIGTERM only once continued: it
-                    // then exits on its own with its trace flushed, not SIGKILLed after the
-                    // grace.
-                    let _ = rustix::process::kill_process(pid, rustix::process::Signal::CONT);
-                }
-            }
-        }
+        // A stopped process (SIGSTOP) acts on the SIGTERM only once continued: it then exits on
+        // its own with its trace flushed, not SIGKILLed after the grace.
+        self.procs.signal_term();
         let began = Instant::now();
         while self.procs.iter().any(|p| p.status.is_none()) && began.elapsed() < GRACE {
             self.poll_children();
             std::thread::sleep(Duration::from_millis(10));
         }
-        for p in &mut self.procs {
-            if p.status.is_none() {
-                let _ = p.child.kill();
-                p.status = p.child.wait().ok();
-            }
-        }
+        self.procs.kill_rest();
     }
 }
 
@@ -374,7 +392,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         let mut launcher = Launcher {
             realtime: resolved.scenario.clock == ClockMode::Realtime,
             lost: Vec::new(),
-            procs: Vec::new(),
+            procs: Supervisor::default(),
             bells: Vec::new(),
             control: transport.publisher(Stream::Control).context(DidNotStart)?,
             status: transport.subscriber(Stream::Status).context(DidNotStart)?,
@@ -392,11 +410,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         );
         launcher.teardown();
         // Every child has exited: what they printed is relayed whole before we go on.
-        for p in &mut launcher.procs {
-            if let Some(relay) = &mut p.stderr {
-                relay.last_line();
-            }
-        }
+        launcher.procs.drain_stderr();
         let r = match r {
             Err(e) if !launcher.started => Err(e.context(DidNotStart)),
             r => r,
@@ -433,6 +447,34 @@ fn spawn_and_supervise<X: Transport>(
     transport: &X,
     l: &mut Launcher<X>,
 ) -> Result<Supervised> {
+    spawn_roles(resolved, opts, prefix, scenario_path, l)?;
+    await_ready(l)?;
+    let bar = progress_bar(resolved.ticks(), opts.progress);
+    let started = start_run(resolved, transport, l)?;
+    let (wall_s, interrupted) = supervise(resolved, l, &bar, started)?;
+    if interrupted.is_some() {
+        return Ok(Supervised {
+            wall_s,
+            interrupted,
+        });
+    }
+    bar.finish_and_clear();
+    release_and_reap(l)?;
+    Ok(Supervised {
+        wall_s,
+        interrupted: None,
+    })
+}
+
+/// Spawns the run's processes: the control center, the attacker (or the replayer) and the
+/// agents.
+fn spawn_roles<X: Transport>(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    scenario_path: &Path,
+    l: &mut Launcher<X>,
+) -> Result<()> {
     let mut roles: Vec<(String, String, Wake, Option<u32>)> = vec![(
         "control-center".into(),
         "control-center".into(),
@@ -472,36 +514,21 @@ fn spawn_and_supervise<X: Transport>(
             placement: opts.placement.clone(),
         };
         cmd.args(args.to_args());
-        // Each child in a process group of its own: the terminal's Ctrl-C (SIGINT to the
-        // foreground group) reaches the launcher alone, which stops the run in order (STOP
-        // message, then SIGTERM) — a child never dies of it half-started or mid-record.
-        cmd.stdin(Stdio::null())
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .process_group(0);
-        let mut child = cmd.spawn().with_context(|| format!("spawning {name}"))?;
-        let stderr = child
-            .stderr
-            .take()
-            .map(|e| crate::relay::StderrRelay::start(e, &name));
         let label = match agent {
             Some(id) => format!("agent {id}"),
             None => role.clone(),
         };
-        l.procs.push(Proc {
-            label,
-            wake,
-            child,
-            status: None,
-            ready: false,
-            stopped_since: None,
-            stderr,
-        });
+        l.procs.spawn(label, Slot { wake, ready: false }, cmd)?;
     }
 
-    // Every process reports ready once its ports exist; only then can nothing sent be lost.
+    Ok(())
+}
+
+/// Waits until every process reported ready (its ports exist; only then can nothing sent be
+/// lost), naming the first that fails, stalls or never gets there.
+fn await_ready<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
     let began = Instant::now();
-    while l.procs.iter().any(|p| !p.ready) {
+    while l.procs.iter().any(|p| !p.meta.ready) {
         if let Some(signal) = l.interrupt() {
             return Err(Interrupted {
                 signal,
@@ -526,12 +553,12 @@ fn spawn_and_supervise<X: Transport>(
         if let Some(p) = l
             .procs
             .iter()
-            .find(|p| !p.ready && p.status.is_some_and(|st| st.success()))
+            .find(|p| !p.meta.ready && p.status.is_some_and(|st| st.success()))
         {
             bail!(
                 "{} (pid {}) exited before it was ready (before the start)",
                 p.label,
-                p.child.id()
+                p.pid()
             );
         }
         if let Some(stall) = l.stalled() {
@@ -541,7 +568,7 @@ fn spawn_and_supervise<X: Transport>(
             let missing: Vec<&str> = l
                 .procs
                 .iter()
-                .filter(|p| !p.ready)
+                .filter(|p| !p.meta.ready)
                 .map(|p| p.label.as_str())
                 .collect();
             bail!("not ready after {READY_TIMEOUT:?}: {}", missing.join(", "));
@@ -550,21 +577,27 @@ fn spawn_and_supervise<X: Transport>(
         let procs = &mut l.procs;
         l.status.drain(|m| {
             if m.kind == StatusMsg::READY {
-                if let Some(p) = procs.iter_mut().find(|p| matches_status(p.wake, &m)) {
-                    p.ready = true;
+                if let Some(p) = procs.iter_mut().find(|p| matches_status(p.meta.wake, &m)) {
+                    p.meta.ready = true;
                 }
             }
         })?;
     }
 
+    Ok(())
+}
+
+/// Broadcasts the start (realtime: sim time zero a short lead ahead); returns when.
+fn start_run<X: Transport>(
+    resolved: &Resolved,
+    transport: &X,
+    l: &mut Launcher<X>,
+) -> Result<Instant> {
     // Notifiers are created once every listener exists: a notifier created earlier may not
     // reach a listener that appears later, and the start would then wait for a timeout.
-    for p in &l.procs {
-        l.bells.push(transport.notifier(p.wake)?);
+    for p in l.procs.iter() {
+        l.bells.push(transport.notifier(p.meta.wake)?);
     }
-    let ticks = resolved.ticks();
-    let dt = resolved.scenario.control_period_s;
-    let bar = progress_bar(ticks, opts.progress);
     let lead = if resolved.scenario.clock == ClockMode::Realtime {
         REALTIME_LEAD
     } else {
@@ -577,107 +610,45 @@ fn spawn_and_supervise<X: Transport>(
         reserved: 0,
         epoch_ns: monotonic_ns() + lead.as_nanos() as u64,
     });
+    Ok(started)
+}
 
+/// Supervises the started run until every process is done (or an interrupt, a failure, a
+/// stall). Returns the run's wall time and the interrupting signal, if any.
+fn supervise<X: Transport>(
+    resolved: &Resolved,
+    l: &mut Launcher<X>,
+    bar: &ProgressBar,
+    started: Instant,
+) -> Result<(f64, Option<i32>)> {
+    let dt = resolved.scenario.control_period_s;
     let mut done = vec![false; l.procs.len()];
-    let mut lost_reports = Vec::new();
-    let mut rejoin_reports = Vec::new();
-    let (wall_s, interrupted) = loop {
-        l.waker.wait(Duration::from_millis(50))?;
-        // An interrupt comes first: whatever a child did after it is part of the stop.
-        if let Some(signal) = l.interrupt() {
+    let interrupted = |l: &mut Launcher<X>| {
+        l.interrupt().map(|signal| {
             bar.abandon();
             l.teardown();
-            break (started.elapsed().as_secs_f64(), Some(signal));
+            (started.elapsed().as_secs_f64(), Some(signal))
+        })
+    };
+    loop {
+        l.waker.wait(Duration::from_millis(50))?;
+        // An interrupt comes first: whatever a child did after it is part of the stop.
+        if let Some(end) = interrupted(l) {
+            return Ok(end);
         }
-        let procs = &l.procs;
-        l.status.drain(|m| {
-            if Role::from_code(m.role) == Some(Role::Center) {
-                bar.set_position(m.tick);
-                bar.set_message(format!("{:.1} s", m.tick as f64 * dt));
-            }
-            if m.kind == StatusMsg::DONE {
-                if let Some(i) = procs.iter().position(|p| matches_status(p.wake, &m)) {
-                    done[i] = true;
-                }
-            }
-            if m.kind == StatusMsg::LOST {
-                lost_reports.push((m.agent, m.tick as f64 * dt));
-            }
-            if m.kind == StatusMsg::REJOINED {
-                rejoin_reports.push((m.agent, m.tick as f64 * dt));
-            }
-        })?;
-        for (agent, t) in lost_reports.drain(..) {
-            if let Some(i) = l.procs.iter().position(|p| p.wake == Wake::Agent(agent)) {
-                done[i] = true; // a lost agent will not report done
-            }
-            match l.lost.iter_mut().find(|x| x.agent == agent) {
-                Some(x) => x.t_s = Some(t),
-                None => l.lost.push(LostAgent {
-                    agent,
-                    t_s: Some(t),
-                    reason: "fell silent".into(),
-                    rejoined_t_s: None,
-                }),
-            }
-            bar.println(format!(
-                "fdi-launch: agent {agent} lost at t = {t:.3} s; the run goes on"
-            ));
-        }
-        for (agent, t) in rejoin_reports.drain(..) {
-            let Some(x) = l.lost.iter_mut().find(|x| x.agent == agent) else {
-                continue;
-            };
-            x.rejoined_t_s = Some(t);
-            // It is controlled again and will report done itself, unless its process ended.
-            if let Some(i) = l.procs.iter().position(|p| p.wake == Wake::Agent(agent)) {
-                done[i] = l.procs[i].status.is_some();
-            }
-            let gap = x.t_s.map_or(String::new(), |from| {
-                format!(" after a gap of {:.3} s", t - from)
-            });
-            bar.println(format!(
-                "fdi-launch: agent {agent} rejoined at t = {t:.3} s{gap}"
-            ));
-        }
+        l.take_status(&mut done, bar, dt)?;
         if let Some(failed) = l.poll_children() {
             // A child killed by the signal that interrupted the launcher (the same kill() of the
             // process group) is part of the interrupt, not a failure.
-            if let Some(signal) = l.interrupt() {
-                bar.abandon();
-                l.teardown();
-                break (started.elapsed().as_secs_f64(), Some(signal));
+            if let Some(end) = interrupted(l) {
+                return Ok(end);
             }
             bar.abandon();
-            return Err(anyhow!("run stopped: {failed}"));
+            bail!("run stopped: {failed}");
         }
-        // A process that exited cleanly without reporting done (SIGTERM sent to it alone) ends
-        // the run too: its peers would wait for it. Its done may have raced its exit: drain once
-        // more before deciding.
-        let early = |done: &[bool], procs: &[Proc]| {
-            procs
-                .iter()
-                .enumerate()
-                .position(|(i, p)| p.status.is_some_and(|st| st.success()) && !done[i])
-        };
-        if early(&done, &l.procs).is_some() {
-            let procs = &l.procs;
-            l.status.drain(|m| {
-                if m.kind == StatusMsg::DONE {
-                    if let Some(i) = procs.iter().position(|p| matches_status(p.wake, &m)) {
-                        done[i] = true;
-                    }
-                }
-            })?;
-            if let Some(i) = early(&done, &l.procs) {
-                bar.abandon();
-                let p = &l.procs[i];
-                return Err(anyhow!(
-                    "run stopped: {} (pid {}) exited before the end of the run",
-                    p.label,
-                    p.child.id()
-                ));
-            }
+        if let Some(early) = l.ended_early(&mut done)? {
+            bar.abandon();
+            bail!("run stopped: {early}");
         }
         // The simulation ends when every process has reported done (its trace is flushed by
         // then); process exit is teardown and not part of the run's wall time.
@@ -685,40 +656,33 @@ fn spawn_and_supervise<X: Transport>(
         if l.procs.iter().enumerate().all(|(i, p)| finished(i, p))
             || l.procs.iter().all(|p| p.status.is_some())
         {
-            break (started.elapsed().as_secs_f64(), None);
+            return Ok((started.elapsed().as_secs_f64(), None));
         }
         if let Some(stall) = l.stalled() {
             bar.abandon();
             l.teardown();
-            return Err(anyhow!("run stalled: {stall} (processes: {})", l.exits()));
+            bail!("run stalled: {stall} (processes: {})", l.exits());
         }
-    };
-    if interrupted.is_some() {
-        return Ok(Supervised {
-            wall_s,
-            interrupted,
-        });
     }
-    bar.finish_and_clear();
-    // Every process is done: the stop lets them go (each keeps its ports until then, so that
-    // no last message leaves with its sender).
+}
+
+/// Every process is done: the stop lets them go (each keeps its ports until then, so that no
+/// last message leaves with its sender); their exits are reaped, and a process that fails on
+/// its way out still fails the run.
+fn release_and_reap<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
     l.broadcast(ControlMsg {
         command: ControlMsg::STOP,
         reserved: 0,
         epoch_ns: 0,
     });
-    // Reap the exits; a process that fails on its way out still fails the run.
     let began = Instant::now();
     while l.procs.iter().any(|p| p.status.is_none()) && began.elapsed() < GRACE {
         if let Some(failed) = l.poll_children() {
-            return Err(anyhow!("run stopped: {failed}"));
+            bail!("run stopped: {failed}");
         }
         std::thread::sleep(Duration::from_millis(1));
     }
-    Ok(Supervised {
-        wall_s,
-        interrupted: None,
-    })
+    Ok(())
 }
 
 fn matches_status(wake: Wake, m: &StatusMsg) -> bool {
