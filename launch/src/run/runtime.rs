@@ -15,6 +15,7 @@ use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_runtime::ipc::{
     self, monotonic_ns, Bell, ControlMsg, Role, StatusMsg, Stream, Transport, Wake,
 };
+use fdi_runtime::process::procfs;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 /// Grace period between SIGTERM and SIGKILL when a run is torn down.
@@ -130,18 +131,15 @@ pub fn new_prefix() -> String {
 /// or some process names the prefix on its command line (a child outliving a killed launcher
 /// for the moment it takes to exit).
 fn run_alive(prefix: &str, pid: u32) -> bool {
-    if Path::new("/proc").join(pid.to_string()).exists() {
+    if procfs::exists(pid) {
         return true;
     }
-    let Ok(entries) = std::fs::read_dir("/proc") else {
+    let Ok(pids) = procfs::pids() else {
         return true; // cannot tell: leave it
     };
     let needle = prefix.as_bytes();
-    entries.flatten().any(|e| {
-        e.file_name().to_string_lossy().parse::<u32>().is_ok()
-            && std::fs::read(e.path().join("cmdline"))
-                .is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle))
-    })
+    pids.into_iter()
+        .any(|p| procfs::cmdline(p).is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle)))
 }
 
 /// Removes the resources of runs whose launcher is dead (a killed launcher cannot clean up),
@@ -275,13 +273,7 @@ impl Launcher {
             if p.status.is_some() {
                 continue;
             }
-            let stopped = std::fs::read_to_string(format!("/proc/{}/stat", p.child.id()))
-                .ok()
-                .and_then(|st| {
-                    st.rsplit_once(')')
-                        .map(|(_, rest)| rest.trim_start().starts_with(['T', 't']))
-                })
-                .unwrap_or(false);
+            let stopped = procfs::state(p.child.id()).is_ok_and(|s| matches!(s, 'T' | 't'));
             match (stopped, p.stopped_since) {
                 (true, None) => p.stopped_since = Some(now),
                 (true, Some(since)) if now.duration_since(since) > STALL_LIMIT => {
