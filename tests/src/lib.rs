@@ -8,6 +8,8 @@ use std::process::{Child, Command, Output, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
+use fdi_runtime::process::procfs;
+
 /// `target/<profile>` of the running test binary.
 fn profile_dir() -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
@@ -155,31 +157,16 @@ pub fn json(out: &Output) -> serde_json::Value {
 
 /// Pids of the processes whose parent is `pid`.
 pub fn children_of(pid: u32) -> Vec<(u32, String)> {
-    let mut out = Vec::new();
-    let Ok(entries) = std::fs::read_dir("/proc") else {
-        return out;
+    let Ok(pids) = procfs::pids() else {
+        return Vec::new();
     };
-    for e in entries.flatten() {
-        let Ok(p) = e.file_name().to_string_lossy().parse::<u32>() else {
-            continue;
-        };
-        let Ok(stat) = std::fs::read_to_string(format!("/proc/{p}/stat")) else {
-            continue;
-        };
-        // pid (comm) state ppid ...: comm may hold spaces, so split after the last ')'.
-        let Some(rest) = stat.rsplit_once(')').map(|x| x.1) else {
-            continue;
-        };
-        let ppid = rest
-            .split_whitespace()
-            .nth(1)
-            .and_then(|x| x.parse::<u32>().ok());
-        if ppid == Some(pid) {
-            let cmdline = std::fs::read(format!("/proc/{p}/cmdline")).unwrap_or_default();
-            out.push((p, String::from_utf8_lossy(&cmdline).replace('\0', " ")));
-        }
-    }
-    out
+    pids.into_iter()
+        .filter(|&p| procfs::parent(p).is_ok_and(|parent| parent == pid))
+        .map(|p| {
+            let cmdline = procfs::cmdline(p).unwrap_or_default();
+            (p, String::from_utf8_lossy(&cmdline).replace('\0', " "))
+        })
+        .collect()
 }
 
 /// Shared-memory and iceoryx2 files left by runs of the launcher `pid` (its run prefixes are
@@ -197,10 +184,7 @@ pub fn assert_no_leftovers(launcher_pid: u32) {
 
 /// True while the process `pid` exists (and is not a zombie).
 pub fn alive(pid: u32) -> bool {
-    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
-        s.rsplit_once(')')
-            .is_some_and(|(_, r)| !r.trim_start().starts_with('Z'))
-    })
+    procfs::state(pid).is_ok_and(|s| s != 'Z')
 }
 
 /// Sends `signal` (e.g. "-KILL") to `pid` with kill(1).

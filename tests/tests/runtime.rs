@@ -492,11 +492,8 @@ fn sigterm_to_one_child_stops_the_run_naming_it() {
 
 /// `(rt_priority, policy)` of a process from `/proc/<pid>/stat` (fields 40 and 41).
 fn scheduling_of(pid: u32) -> Option<(u32, u32)> {
-    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
-    let after_name = &stat[stat.rfind(')')? + 1..];
-    let fields: Vec<&str> = after_name.split_whitespace().collect();
-    // `fields[0]` is field 3 (state).
-    Some((fields.get(37)?.parse().ok()?, fields.get(38)?.parse().ok()?))
+    let stat = fdi_runtime::process::procfs::stat(pid).ok()?;
+    Some((stat.field(40)?.parse().ok()?, stat.field(41)?.parse().ok()?))
 }
 
 #[test]

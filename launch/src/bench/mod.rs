@@ -465,14 +465,26 @@ fn write_latency(dir: &Path, r: &LatencyReport) -> Result<()> {
         serde_json::to_string_pretty(r)? + "\n",
     )
     .context("writing latency.json")?;
-    let mut csv = String::from("metric,p50_us,p90_us,p99_us,p999_us,max_us,count\n");
-    for (name, p) in latency_rows(r) {
-        csv.push_str(&format!(
-            "{name},{},{},{},{},{},{}\n",
-            p.p50, p.p90, p.p99, p.p999, p.max, p.count
-        ));
-    }
-    std::fs::write(dir.join("latency.csv"), csv).context("writing latency.csv")
+    std::fs::write(dir.join("latency.csv"), latency_csv(r)?).context("writing latency.csv")
+}
+
+/// `latency.csv`: one row per measured latency, in µs.
+fn latency_csv(r: &LatencyReport) -> Result<Vec<u8>> {
+    const HEADER: [&str; 7] = [
+        "metric", "p50_us", "p90_us", "p99_us", "p999_us", "max_us", "count",
+    ];
+    let rows = latency_rows(r).into_iter().map(|(name, p)| {
+        [
+            name.to_string(),
+            p.p50.to_string(),
+            p.p90.to_string(),
+            p.p99.to_string(),
+            p.p999.to_string(),
+            p.max.to_string(),
+            p.count.to_string(),
+        ]
+    });
+    crate::output::csv_bytes(&HEADER, rows).context("writing latency.csv")
 }
 
 /// `latency.png` / `latency.svg`: share of messages per latency bucket (log-spaced), per hop, on
@@ -693,6 +705,51 @@ mod tests {
         assert!(r.scenario.validate().is_empty());
         assert!(r.attack.problems(&r.scenario.agent_dofs()).is_empty());
         assert!(scaled_paper(0).is_err());
+    }
+
+    #[test]
+    fn latency_csv_has_a_header_and_a_row_per_latency() {
+        let mut h = histogram().expect("histogram");
+        for ns in [1_000u64, 2_000, 3_000, 100_000] {
+            h.record(ns).expect("record");
+        }
+        let p = percentiles(&h);
+        let report = LatencyReport {
+            agents: 1,
+            rate_hz: 1000.0,
+            duration_s: 1.0,
+            ticks: 1000,
+            e2e_us: p,
+            hops_us: Hops {
+                agent_to_attacker: p,
+                attacker_to_center: p,
+                center_to_agent: p,
+            },
+            attacker_processing_us: p,
+            center_compute_us: p,
+            period_jitter_us: p,
+            deadline_misses: 0,
+            deadline_miss_ratio: 0.0,
+            lost_ticks: 0,
+            scheduling: "SCHED_OTHER".into(),
+            timer_probe_late_us: p,
+            timer_probe_stalls_over_1ms: 0,
+            deadline_misses_in_machine_stalls: 0,
+            steps_in_machine_stalls_ratio: 0.0,
+            run_dir: String::new(),
+        };
+        let bytes = latency_csv(&report).expect("csv");
+        let mut r = csv::Reader::from_reader(bytes.as_slice());
+        assert_eq!(
+            r.headers().expect("header"),
+            vec!["metric", "p50_us", "p90_us", "p99_us", "p999_us", "max_us", "count"]
+        );
+        let rows: Vec<csv::StringRecord> = r.records().map(|x| x.expect("row")).collect();
+        assert_eq!(rows.len(), latency_rows(&report).len());
+        assert_eq!(&rows[0][0], "end-to-end sensor -> actuation");
+        assert_eq!(rows[0][1].parse::<f64>().ok(), Some(p.p50));
+        assert_eq!(rows[0][5].parse::<f64>().ok(), Some(p.max));
+        assert_eq!(&rows[0][6], "4");
     }
 
     #[test]

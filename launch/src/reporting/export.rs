@@ -5,13 +5,13 @@
 //!
 //! Floats are written with Rust's `{}` (shortest text that parses back to the same `f64`, bit for
 //! bit), flags as `0`/`1`, vectors as one column per link (`q1`, `q2`, …; a record with fewer
-//! links than the trace's scenario leaves the extra cells empty). A damaged trace is exported up
-//! to its last whole record, then the export fails naming the file and the byte offset.
+//! links than the trace's scenario leaves the extra cells empty). Fields are quoted where CSV
+//! needs it (a comma, a quote or a line break in an event message). A damaged trace is exported
+//! up to its last whole record, then the export fails naming the file and the byte offset.
 
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
+use std::fmt::{Display, Write as _};
 use std::fs::File;
-use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
@@ -45,7 +45,7 @@ fn export_csv(run_dir: &Path) -> Result<()> {
     let out = run_dir.join("export");
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let events_path = out.join("events.csv");
-    let mut events = Csv::create(&events_path, "process,t,message")?;
+    let mut events = Csv::create(&events_path, &["process", "t", "message"])?;
     let mut failures = Vec::new();
     for f in &files {
         let mut n = 0;
@@ -69,34 +69,53 @@ fn export_csv(run_dir: &Path) -> Result<()> {
     }
 }
 
-/// A CSV file being written.
+/// One row being built: its fields, each formatted with `{}`.
+#[derive(Default)]
+struct Row {
+    record: csv::ByteRecord,
+    field: String,
+}
+
+impl Row {
+    fn push(&mut self, value: impl Display) {
+        self.field.clear();
+        let _ = write!(self.field, "{value}");
+        self.record.push_field(self.field.as_bytes());
+    }
+
+    fn push_empty(&mut self) {
+        self.record.push_field(b"");
+    }
+}
+
+/// A CSV file being written. A row reaches the file whole or not at all.
 struct Csv {
     path: PathBuf,
-    out: BufWriter<File>,
-    line: String,
+    out: csv::Writer<File>,
+    row: Row,
 }
 
 impl Csv {
-    fn create(path: &Path, header: &str) -> Result<Self> {
+    fn create<H: AsRef<[u8]>>(path: &Path, header: &[H]) -> Result<Self> {
         let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
         let mut c = Self {
             path: path.to_path_buf(),
-            out: BufWriter::with_capacity(1 << 16, file),
-            line: String::with_capacity(512),
+            out: csv::WriterBuilder::new()
+                .buffer_capacity(1 << 16)
+                .from_writer(file),
+            row: Row::default(),
         };
-        c.line.push_str(header);
-        c.end()?;
+        c.out
+            .write_record(header)
+            .with_context(|| format!("writing {}", c.path.display()))?;
         Ok(c)
     }
 
-    /// Writes the line built so far.
+    /// Writes the row built so far and starts the next.
     fn end(&mut self) -> Result<()> {
-        self.line.push('\n');
-        self.out
-            .write_all(self.line.as_bytes())
-            .with_context(|| format!("writing {}", self.path.display()))?;
-        self.line.clear();
-        Ok(())
+        let written = self.out.write_byte_record(&self.row.record);
+        self.row.record.clear();
+        written.with_context(|| format!("writing {}", self.path.display()))
     }
 
     fn finish(mut self) -> Result<()> {
@@ -125,40 +144,53 @@ impl Kind {
         }
     }
 
-    fn header(self, dof: usize) -> String {
-        let v = |name: &str| -> String {
-            (1..=dof)
-                .map(|i| format!("{name}{i}"))
-                .collect::<Vec<_>>()
-                .join(",")
+    /// The column names: one per field, vectors as `<name>1` … `<name><dof>`.
+    fn header(self, dof: usize) -> Vec<String> {
+        let (head, vectors, tail): (&[&str], &[&str], &[&str]) = match self {
+            Self::Agent => (
+                &["k", "agent", "t"],
+                &["q", "qd", "qdd", "y", "yd", "u_applied"],
+                &["tau", "missed"],
+            ),
+            Self::Attack => (
+                &["k", "agent"],
+                &["alpha_position", "alpha_velocity", "y", "yd"],
+                &["active"],
+            ),
+            Self::Center => (
+                &["k", "agent"],
+                &["s_hat", "q_hat", "qd_hat", "qdd_hat", "u"],
+                &[
+                    "alarm",
+                    "rejected_input",
+                    "rejected_torque",
+                    "state_reset",
+                    "history_miss",
+                ],
+            ),
+            Self::Latency => (
+                &[
+                    "k",
+                    "agent",
+                    "agent_sent_ns",
+                    "attacker_received_ns",
+                    "attacker_sent_ns",
+                    "center_received_ns",
+                    "center_sent_ns",
+                    "agent_received_ns",
+                ],
+                &[],
+                &[],
+            ),
         };
-        match self {
-            Self::Agent => format!(
-                "k,agent,t,{},{},{},{},{},{},tau,missed",
-                v("q"),
-                v("qd"),
-                v("qdd"),
-                v("y"),
-                v("yd"),
-                v("u_applied")
-            ),
-            Self::Attack => format!(
-                "k,agent,{},{},{},{},active",
-                v("alpha_position"),
-                v("alpha_velocity"),
-                v("y"),
-                v("yd")
-            ),
-            Self::Center => format!(
-                "k,agent,{},{},{},{},{},alarm,rejected_input,rejected_torque,state_reset,history_miss",
-                v("s_hat"),
-                v("q_hat"),
-                v("qd_hat"),
-                v("qdd_hat"),
-                v("u")
-            ),
-            Self::Latency => "k,agent,agent_sent_ns,attacker_received_ns,attacker_sent_ns,center_received_ns,center_sent_ns,agent_received_ns".into(),
-        }
+        let vectors = vectors
+            .iter()
+            .flat_map(|name| (1..=dof).map(move |i| format!("{name}{i}")));
+        head.iter()
+            .map(|h| h.to_string())
+            .chain(vectors)
+            .chain(tail.iter().map(|t| t.to_string()))
+            .collect()
     }
 }
 
@@ -216,7 +248,9 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
             TraceRecord::Center(_) => Kind::Center,
             TraceRecord::Latency { .. } => Kind::Latency,
             TraceRecord::Event { t, message } => {
-                let _ = write!(events.line, "{},{},{}", quote(&stem), t, quote(message));
+                events.row.push(&stem);
+                events.row.push(t);
+                events.row.push(message);
                 events.end()?;
                 continue;
             }
@@ -228,7 +262,7 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
             }
         };
         let at = reader.last_offset();
-        row(&mut csv.line, &rec, dof).with_context(|| {
+        row(&mut csv.row, &rec, dof).with_context(|| {
             format!(
                 "{}: record {n} (byte offset {at}) does not fit the columns",
                 path.display()
@@ -245,24 +279,15 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
     }
 }
 
-/// Quotes a CSV field when it needs it.
-fn quote(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
-fn joints(line: &mut String, j: &Joints, dof: usize) -> Result<()> {
+fn joints(row: &mut Row, j: &Joints, dof: usize) -> Result<()> {
     let v = j.as_slice();
     if v.len() > dof {
         bail!("a vector of {} entries, {dof} columns", v.len());
     }
     for i in 0..dof {
-        line.push(',');
-        if let Some(x) = v.get(i) {
-            let _ = write!(line, "{x}");
+        match v.get(i) {
+            Some(x) => row.push(x),
+            None => row.push_empty(),
         }
     }
     Ok(())
@@ -276,60 +301,69 @@ fn flag(b: bool) -> &'static str {
     }
 }
 
-fn row(line: &mut String, rec: &TraceRecord, dof: usize) -> Result<()> {
+/// Builds the row of `rec` in `row` (emptied first).
+fn row(row: &mut Row, rec: &TraceRecord, dof: usize) -> Result<()> {
+    row.record.clear();
     match rec {
-        TraceRecord::Agent(a) => agent_row(line, a, dof),
-        TraceRecord::Attack(a) => attack_row(line, a, dof),
-        TraceRecord::Center(c) => center_row(line, c, dof),
+        TraceRecord::Agent(a) => agent_row(row, a, dof),
+        TraceRecord::Attack(a) => attack_row(row, a, dof),
+        TraceRecord::Center(c) => center_row(row, c, dof),
         TraceRecord::Latency { k, agent, stamps } => {
-            let _ = write!(
-                line,
-                "{k},{agent},{},{},{},{},{},{}",
+            row.push(k);
+            row.push(agent);
+            for ns in [
                 stamps.agent_sent_ns,
                 stamps.attacker_received_ns,
                 stamps.attacker_sent_ns,
                 stamps.center_received_ns,
                 stamps.center_sent_ns,
-                stamps.agent_received_ns
-            );
+                stamps.agent_received_ns,
+            ] {
+                row.push(ns);
+            }
             Ok(())
         }
         TraceRecord::Event { .. } => Ok(()),
     }
 }
 
-fn agent_row(line: &mut String, a: &AgentRecord, dof: usize) -> Result<()> {
-    let _ = write!(line, "{},{},{}", a.k, a.agent, a.t);
+fn agent_row(row: &mut Row, a: &AgentRecord, dof: usize) -> Result<()> {
+    row.push(a.k);
+    row.push(a.agent);
+    row.push(a.t);
     for j in [&a.q, &a.qd, &a.qdd, &a.y, &a.yd, &a.u_applied] {
-        joints(line, j, dof)?;
+        joints(row, j, dof)?;
     }
-    let _ = write!(line, ",{},{}", a.tau, flag(a.missed));
+    row.push(a.tau);
+    row.push(flag(a.missed));
     Ok(())
 }
 
-fn attack_row(line: &mut String, a: &AttackRecord, dof: usize) -> Result<()> {
-    let _ = write!(line, "{},{}", a.k, a.agent);
+fn attack_row(row: &mut Row, a: &AttackRecord, dof: usize) -> Result<()> {
+    row.push(a.k);
+    row.push(a.agent);
     for j in [&a.alpha_position, &a.alpha_velocity, &a.y, &a.yd] {
-        joints(line, j, dof)?;
+        joints(row, j, dof)?;
     }
-    let _ = write!(line, ",{}", flag(a.active));
+    row.push(flag(a.active));
     Ok(())
 }
 
-fn center_row(line: &mut String, c: &CenterRecord, dof: usize) -> Result<()> {
-    let _ = write!(line, "{},{}", c.k, c.agent);
+fn center_row(row: &mut Row, c: &CenterRecord, dof: usize) -> Result<()> {
+    row.push(c.k);
+    row.push(c.agent);
     for j in [&c.s_hat, &c.q_hat, &c.qd_hat, &c.qdd_hat, &c.u] {
-        joints(line, j, dof)?;
+        joints(row, j, dof)?;
     }
-    let _ = write!(
-        line,
-        ",{},{},{},{},{}",
-        flag(c.alarm),
-        flag(c.rejected_input),
-        flag(c.rejected_torque),
-        flag(c.state_reset),
-        flag(c.history_miss)
-    );
+    for b in [
+        c.alarm,
+        c.rejected_input,
+        c.rejected_torque,
+        c.state_reset,
+        c.history_miss,
+    ] {
+        row.push(flag(b));
+    }
     Ok(())
 }
 
@@ -337,14 +371,24 @@ fn center_row(line: &mut String, c: &CenterRecord, dof: usize) -> Result<()> {
 mod tests {
     use super::*;
 
+    /// The CSV text of `header` and `rows`, as the export writes it.
+    fn csv_text(header: &[String], rows: &[&Row]) -> String {
+        let mut w = csv::Writer::from_writer(Vec::new());
+        w.write_record(header).expect("header");
+        for r in rows {
+            w.write_byte_record(&r.record).expect("row");
+        }
+        String::from_utf8(w.into_inner().expect("flushed")).expect("utf-8")
+    }
+
     #[test]
     fn headers_have_one_column_per_field() {
         let h = Kind::Agent.header(2);
         assert_eq!(
-            h,
+            h.join(","),
             "k,agent,t,q1,q2,qd1,qd2,qdd1,qdd2,y1,y2,yd1,yd2,u_applied1,u_applied2,tau,missed"
         );
-        let mut line = String::new();
+        let mut row = Row::default();
         let a = AgentRecord {
             k: 3,
             agent: 1,
@@ -358,24 +402,69 @@ mod tests {
             tau: 0.003,
             missed: true,
         };
-        agent_row(&mut line, &a, 2).expect("fits");
-        assert_eq!(line.split(',').count(), h.split(',').count());
-        let fields: Vec<f64> = line
-            .split(',')
+        agent_row(&mut row, &a, 2).expect("fits");
+        // Through a CSV reader: the header and the row come back, every float bit for bit.
+        let text = csv_text(&h, &[&row]);
+        let mut reader = csv::Reader::from_reader(text.as_bytes());
+        assert_eq!(reader.headers().expect("header"), h.as_slice());
+        let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.expect("row")).collect();
+        assert_eq!(rows.len(), 1);
+        assert_eq!(rows[0].len(), h.len());
+        let fields: Vec<f64> = rows[0]
+            .iter()
             .map(|x| x.parse::<f64>().expect("number"))
             .collect();
         assert_eq!(fields[5].to_bits(), 1e-300_f64.to_bits());
         assert_eq!(fields[9].to_bits(), (1.0_f64 / 3.0).to_bits());
         assert_eq!(fields[12].to_bits(), (-0.0_f64).to_bits());
-        assert_eq!(Kind::Attack.header(2).split(',').count(), 11);
+        assert_eq!(Kind::Attack.header(2).len(), 11);
         // k, agent, 5 joint pairs, alarm, rejected_input, rejected_torque, state_reset, history_miss
-        assert_eq!(Kind::Center.header(2).split(',').count(), 17);
+        assert_eq!(Kind::Center.header(2).len(), 17);
     }
 
     #[test]
-    fn fields_with_commas_or_quotes_are_quoted() {
-        assert_eq!(quote("plain"), "plain");
-        assert_eq!(quote("a, b"), "\"a, b\"");
-        assert_eq!(quote("say \"hi\""), "\"say \"\"hi\"\"\"");
+    fn short_vectors_leave_empty_cells_and_long_ones_are_refused() {
+        let a = AttackRecord {
+            k: 7,
+            agent: 2,
+            alpha_position: Joints::from_slice(&[0.5]),
+            alpha_velocity: Joints::from_slice(&[1.0, 2.0]),
+            y: Joints::from_slice(&[3.0, 4.0]),
+            yd: Joints::from_slice(&[5.0, 6.0]),
+            active: true,
+        };
+        let mut r = Row::default();
+        row(&mut r, &TraceRecord::Attack(a), 2).expect("fits");
+        assert_eq!(
+            csv_text(&Kind::Attack.header(2), &[&r]),
+            "k,agent,alpha_position1,alpha_position2,alpha_velocity1,alpha_velocity2,y1,y2,yd1,yd2,active\n\
+             7,2,0.5,,1,2,3,4,5,6,1\n"
+        );
+        assert!(row(&mut r, &TraceRecord::Attack(a), 1).is_err());
+    }
+
+    #[test]
+    fn fields_with_commas_quotes_or_line_breaks_are_quoted() {
+        let mut rows = Vec::new();
+        for message in ["plain", "a, b", "say \"hi\"", "two\nlines"] {
+            let mut r = Row::default();
+            r.push("agent-1");
+            r.push(0.5);
+            r.push(message);
+            rows.push(r);
+        }
+        let header = ["process", "t", "message"].map(String::from);
+        let text = csv_text(&header, &rows.iter().collect::<Vec<_>>());
+        assert_eq!(
+            text,
+            "process,t,message\nagent-1,0.5,plain\nagent-1,0.5,\"a, b\"\n\
+             agent-1,0.5,\"say \"\"hi\"\"\"\nagent-1,0.5,\"two\nlines\"\n"
+        );
+        let mut reader = csv::Reader::from_reader(text.as_bytes());
+        let messages: Vec<String> = reader
+            .records()
+            .map(|r| r.expect("row")[2].to_string())
+            .collect();
+        assert_eq!(messages, ["plain", "a, b", "say \"hi\"", "two\nlines"]);
     }
 }

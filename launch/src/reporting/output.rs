@@ -133,9 +133,6 @@ pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
         let _ = writeln!(md, "**{notice}.**\n");
     }
     md.push_str("| robot | RMSE (rad) | max abs error (rad) | false alarms | deadline misses | rejected inputs | rejected torques | state resets | uncontrolled ticks | metrics cover |\n|---|---|---|---|---|---|---|---|---|---|\n");
-    let mut csv = String::from(
-        "robot,rmse_rad,max_abs_error_rad,false_alarms,deadline_misses,rejected_inputs,rejected_torques,state_resets,diverged_at_s,ticks,agent_ticks,uncontrolled_ticks,planned_ticks\n",
-    );
     for (id, m) in &s.metrics {
         let _ = writeln!(
             md,
@@ -150,22 +147,6 @@ pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
             m.uncontrolled_ticks,
             coverage(m.ticks, s.planned_ticks)
         );
-        let _ = writeln!(
-            csv,
-            "{id},{},{},{},{},{},{},{},{},{},{},{},{}",
-            m.rmse_rad,
-            m.max_abs_error_rad,
-            m.false_alarms,
-            m.deadline_misses,
-            m.rejected_inputs,
-            m.rejected_torques,
-            m.state_resets,
-            m.diverged_at_s.map_or(String::new(), |t| t.to_string()),
-            m.ticks,
-            m.agent_ticks,
-            m.uncontrolled_ticks,
-            s.planned_ticks
-        );
     }
     if !s.lost_agents.is_empty() {
         let _ = writeln!(
@@ -174,8 +155,61 @@ pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
         );
     }
     std::fs::write(dir.join("rmse.md"), md).context("writing rmse.md")?;
-    std::fs::write(dir.join("rmse.csv"), csv).context("writing rmse.csv")?;
+    std::fs::write(dir.join("rmse.csv"), rmse_csv(s)?).context("writing rmse.csv")?;
     Ok(())
+}
+
+/// `rmse.csv`: one row per robot.
+fn rmse_csv(s: &RunSummary) -> Result<Vec<u8>> {
+    const HEADER: [&str; 13] = [
+        "robot",
+        "rmse_rad",
+        "max_abs_error_rad",
+        "false_alarms",
+        "deadline_misses",
+        "rejected_inputs",
+        "rejected_torques",
+        "state_resets",
+        "diverged_at_s",
+        "ticks",
+        "agent_ticks",
+        "uncontrolled_ticks",
+        "planned_ticks",
+    ];
+    let rows = s.metrics.iter().map(|(id, m)| {
+        [
+            id.clone(),
+            m.rmse_rad.to_string(),
+            m.max_abs_error_rad.to_string(),
+            m.false_alarms.to_string(),
+            m.deadline_misses.to_string(),
+            m.rejected_inputs.to_string(),
+            m.rejected_torques.to_string(),
+            m.state_resets.to_string(),
+            m.diverged_at_s.map_or(String::new(), |t| t.to_string()),
+            m.ticks.to_string(),
+            m.agent_ticks.to_string(),
+            m.uncontrolled_ticks.to_string(),
+            s.planned_ticks.to_string(),
+        ]
+    });
+    csv_bytes(&HEADER, rows).context("writing rmse.csv")
+}
+
+/// The text of a CSV file: the `header` record, then `rows`, fields quoted where CSV needs it.
+/// Callers format the fields: floats with `{}`, the shortest text that parses back to the same
+/// `f64` (the csv crate's own serializer would write `1.0` and `1e-7` instead).
+pub fn csv_bytes<R, F>(header: &[&str], rows: impl IntoIterator<Item = R>) -> Result<Vec<u8>>
+where
+    R: IntoIterator<Item = F>,
+    F: AsRef<[u8]>,
+{
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(header)?;
+    for row in rows {
+        w.write_record(row)?;
+    }
+    w.into_inner().map_err(|e| e.into_error().into())
 }
 
 /// An error and its causes, joined by `: `, leaving out a cause whose text is already there (an
@@ -197,8 +231,60 @@ pub fn describe_error(e: &anyhow::Error) -> String {
     out
 }
 
+/// A summary of two robots for the tests of its files: robot 1 without attack onsets, robot 2
+/// diverged, with one onset detected and one not.
+#[cfg(test)]
+pub(crate) fn sample_summary() -> RunSummary {
+    let metrics = |rmse: f64, onsets: serde_json::Value, diverged: Option<f64>| {
+        serde_json::json!({
+            "rmse_rad": rmse, "max_abs_error_rad": 0.25, "onsets": onsets, "false_alarms": 2,
+            "alarm_coverage": 0.5, "attacked_ticks": 10, "rejected_inputs": 3,
+            "rejected_torques": 4, "state_resets": 5, "history_misses": 0,
+            "deadline_misses": 6, "agent_ticks": 100, "uncontrolled_ticks": 7,
+            "diverged_at_s": diverged, "ticks": 99
+        })
+    };
+    let onsets = serde_json::json!([
+        { "t_s": 0.001, "time_to_detect_s": 0.061 },
+        { "t_s": 0.05, "time_to_detect_s": null },
+    ]);
+    serde_json::from_value(serde_json::json!({
+        "scenario": "paper", "engine": "inproc", "clock": "lockstep",
+        "controller": "proposed", "attack": "paper", "seed": 1, "agents": 2, "ticks": 99,
+        "planned_ticks": 100, "sim_s": 0.099, "wall_s": 0.01, "rmse_rad": {},
+        "trace_digest": "", "metrics": {
+            "1": metrics(1.0 / 3.0, serde_json::json!([]), None),
+            "2": metrics(1e-7, onsets, Some(0.0625)),
+        }
+    }))
+    .expect("a summary")
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn rmse_csv_has_a_header_and_a_row_per_robot() {
+        let bytes = super::rmse_csv(&super::sample_summary()).expect("csv");
+        let text = std::str::from_utf8(&bytes).expect("utf-8");
+        assert!(
+            text.ends_with("\n2,0.0000001,0.25,2,6,3,4,5,0.0625,99,100,7,100\n"),
+            "{text}"
+        );
+        let mut r = csv::Reader::from_reader(bytes.as_slice());
+        let header = r.headers().expect("header").clone();
+        assert_eq!(header.len(), 13);
+        assert_eq!((&header[0], &header[8]), ("robot", "diverged_at_s"));
+        let rows: Vec<csv::StringRecord> = r.records().map(|x| x.expect("row")).collect();
+        assert_eq!(rows.len(), 2);
+        assert_eq!(&rows[0][0], "1");
+        assert_eq!(
+            rows[0][1].parse::<f64>().expect("rmse").to_bits(),
+            (1.0_f64 / 3.0).to_bits()
+        );
+        assert_eq!((&rows[0][8], &rows[1][8]), ("", "0.0625"));
+        assert_eq!(&rows[1][12], "100");
+    }
+
     #[test]
     fn run_dirs_created_at_once_never_collide() {
         let root = std::env::temp_dir().join(format!("fdi-rundir-{}", std::process::id()));

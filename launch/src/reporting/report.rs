@@ -17,6 +17,7 @@ use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::trajectory::TrajectoryConfig;
 
 use crate::join;
+use crate::output::csv_bytes;
 use crate::plot::{
     self, Band, Envelope, Figure, Guide, Intervals, Line, Panel, PanelKind, PALETTE,
 };
@@ -644,10 +645,12 @@ fn write_into(
     let md_path = dir.join("report.md");
     std::fs::write(&md_path, md).with_context(|| format!("writing {}", md_path.display()))?;
     let det = dir.join("detection.csv");
-    std::fs::write(&det, detection_csv(summary))
+    detection_csv(summary)
+        .and_then(|csv| Ok(std::fs::write(&det, csv)?))
         .with_context(|| format!("writing {}", det.display()))?;
     let seg = dir.join("segments.csv");
-    std::fs::write(&seg, segments_csv(&segments))
+    segments_csv(&segments)
+        .and_then(|csv| Ok(std::fs::write(&seg, csv)?))
         .with_context(|| format!("writing {}", seg.display()))?;
     Ok(())
 }
@@ -955,54 +958,137 @@ fn figure_notes(r: &Resolved, partial: Option<&str>) -> String {
     md
 }
 
-fn detection_csv(s: &RunSummary) -> String {
-    let mut csv = String::from("robot,onset_s,time_to_detect_s,false_alarms,alarm_coverage\n");
+/// `detection.csv`: one row per attack onset of each robot (a robot without onsets: one row with
+/// the onset columns empty).
+fn detection_csv(s: &RunSummary) -> Result<Vec<u8>> {
+    const HEADER: [&str; 5] = [
+        "robot",
+        "onset_s",
+        "time_to_detect_s",
+        "false_alarms",
+        "alarm_coverage",
+    ];
+    let mut rows = Vec::new();
     for (id, m) in &s.metrics {
+        let row = |onset: String, detect: String| {
+            [
+                id.clone(),
+                onset,
+                detect,
+                m.false_alarms.to_string(),
+                m.alarm_coverage.to_string(),
+            ]
+        };
         if m.onsets.is_empty() {
-            let _ = writeln!(csv, "{id},,,{},{}", m.false_alarms, m.alarm_coverage);
+            rows.push(row(String::new(), String::new()));
         }
         for o in &m.onsets {
-            let _ = writeln!(
-                csv,
-                "{id},{},{},{},{}",
-                o.t_s,
+            rows.push(row(
+                o.t_s.to_string(),
                 o.time_to_detect_s.map_or(String::new(), |d| d.to_string()),
-                m.false_alarms,
-                m.alarm_coverage
-            );
+            ));
         }
     }
-    csv
+    csv_bytes(&HEADER, rows)
 }
 
-fn segments_csv(segments: &[(u32, Vec<SegmentStats>)]) -> String {
-    let mut csv = String::from(
-        "robot,from_s,to_s,link,max_abs_pos_err_first_rad,max_abs_pos_err_rest_rad,max_abs_vel_err_first_rad_s,max_abs_vel_err_rest_rad_s,rms_s_err_rad_s\n",
-    );
+/// `segments.csv`: one row per link of each robot's attack segments that hold ticks.
+fn segments_csv(segments: &[(u32, Vec<SegmentStats>)]) -> Result<Vec<u8>> {
+    const HEADER: [&str; 9] = [
+        "robot",
+        "from_s",
+        "to_s",
+        "link",
+        "max_abs_pos_err_first_rad",
+        "max_abs_pos_err_rest_rad",
+        "max_abs_vel_err_first_rad_s",
+        "max_abs_vel_err_rest_rad_s",
+        "rms_s_err_rad_s",
+    ];
+    let mut rows = Vec::new();
     for (id, segs) in segments {
         for sg in segs.iter().filter(|sg| sg.ticks > 0) {
             let rms = (sg.s_err_sq / sg.ticks as f64).sqrt();
             for i in 0..sg.pos_first.len() {
-                let _ = writeln!(
-                    csv,
-                    "{id},{},{},{},{},{},{},{},{rms}",
-                    sg.from_s,
-                    sg.to_s,
-                    i + 1,
-                    sg.pos_first[i],
-                    sg.pos_rest[i],
-                    sg.vel_first[i],
-                    sg.vel_rest[i]
-                );
+                rows.push([
+                    id.to_string(),
+                    sg.from_s.to_string(),
+                    sg.to_s.to_string(),
+                    (i + 1).to_string(),
+                    sg.pos_first[i].to_string(),
+                    sg.pos_rest[i].to_string(),
+                    sg.vel_first[i].to_string(),
+                    sg.vel_rest[i].to_string(),
+                    rms.to_string(),
+                ]);
             }
         }
     }
-    csv
+    csv_bytes(&HEADER, rows)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn detection_csv_has_a_row_per_onset_and_one_for_a_robot_without() {
+        let bytes = detection_csv(&crate::output::sample_summary()).expect("csv");
+        assert_eq!(
+            std::str::from_utf8(&bytes).expect("utf-8"),
+            "robot,onset_s,time_to_detect_s,false_alarms,alarm_coverage\n\
+             1,,,2,0.5\n2,0.001,0.061,2,0.5\n2,0.05,,2,0.5\n"
+        );
+        let mut r = csv::Reader::from_reader(bytes.as_slice());
+        assert_eq!(r.headers().expect("header").len(), 5);
+        let rows: Vec<csv::StringRecord> = r.records().map(|x| x.expect("row")).collect();
+        assert_eq!(rows.len(), 3);
+        assert_eq!((&rows[1][0], &rows[1][2]), ("2", "0.061"));
+    }
+
+    #[test]
+    fn segments_csv_has_a_row_per_link_of_each_segment_with_ticks() {
+        let mut seg = SegmentStats::new(0.0, 2.5, 2);
+        seg.pos_first = vec![0.1, 1e-300];
+        seg.pos_rest = vec![0.2, 0.3];
+        seg.vel_first = vec![0.4, 0.5];
+        seg.vel_rest = vec![0.6, -0.0];
+        seg.s_err_sq = 4.0;
+        seg.ticks = 4;
+        let empty = SegmentStats::new(2.5, 4.0, 2);
+        let bytes = segments_csv(&[(3, vec![seg, empty])]).expect("csv");
+        let mut r = csv::Reader::from_reader(bytes.as_slice());
+        assert_eq!(
+            r.headers().expect("header"),
+            vec![
+                "robot",
+                "from_s",
+                "to_s",
+                "link",
+                "max_abs_pos_err_first_rad",
+                "max_abs_pos_err_rest_rad",
+                "max_abs_vel_err_first_rad_s",
+                "max_abs_vel_err_rest_rad_s",
+                "rms_s_err_rad_s"
+            ]
+        );
+        let rows: Vec<csv::StringRecord> = r.records().map(|x| x.expect("row")).collect();
+        assert_eq!(
+            rows.len(),
+            2,
+            "one row per link, none for the empty segment"
+        );
+        assert_eq!(
+            rows[0].iter().collect::<Vec<_>>(),
+            ["3", "0", "2.5", "1", "0.1", "0.2", "0.4", "0.6", "1"]
+        );
+        assert_eq!(&rows[1][3], "2");
+        assert_eq!(
+            rows[1][4].parse::<f64>().expect("number").to_bits(),
+            1e-300_f64.to_bits()
+        );
+        assert_eq!(&rows[1][7], "-0");
+    }
 
     #[test]
     fn time_axis_ends_with_the_recorded_ticks() {

@@ -10,6 +10,7 @@ use fdi_common::delay::DelayProfile;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 use serde::Serialize;
 
+use crate::output::csv_bytes;
 use crate::plot::{BarChart, PALETTE};
 use crate::run::{execute, Engine};
 use plotters::style::RGBColor;
@@ -142,9 +143,6 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
     let mut md = format!("Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}\n\n", args.engine.as_str());
     md.push_str("| robot | traditional | proposed | ratio | paper traditional | paper proposed | paper ratio |\n");
     md.push_str("|---|---|---|---|---|---|---|\n");
-    let mut csv = String::from(
-        "robot,traditional_rmse_rad,proposed_rmse_rad,paper_traditional_rmse_rad,paper_proposed_rmse_rad\n",
-    );
     for r in &rows {
         let _ = writeln!(
             md,
@@ -156,15 +154,6 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
             r.paper_traditional,
             r.paper_proposed,
             r.paper_traditional / r.paper_proposed
-        );
-        let _ = writeln!(
-            csv,
-            "{},{},{},{},{}",
-            r.robot,
-            r.traditional_rmse_rad,
-            r.proposed_rmse_rad,
-            r.paper_traditional,
-            r.paper_proposed
         );
     }
     let json = serde_json::json!({ "engine": args.engine.as_str(), "rows": rows });
@@ -199,7 +188,7 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
             ),
         ],
     };
-    write_table(&dir, "table1", &md, &csv, &json, &chart)?;
+    write_table(&dir, "table1", &md, &table1_csv(&rows)?, &json, &chart)?;
     if args.json {
         println!("{json}");
     } else {
@@ -207,6 +196,41 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
         println!("\ntable written to {}", dir.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `table1.csv`: one row per robot.
+fn table1_csv(rows: &[Table1Row]) -> Result<Vec<u8>> {
+    const HEADER: [&str; 5] = [
+        "robot",
+        "traditional_rmse_rad",
+        "proposed_rmse_rad",
+        "paper_traditional_rmse_rad",
+        "paper_proposed_rmse_rad",
+    ];
+    let rows = rows.iter().map(|r| {
+        [
+            r.robot.to_string(),
+            r.traditional_rmse_rad.to_string(),
+            r.proposed_rmse_rad.to_string(),
+            r.paper_traditional.to_string(),
+            r.paper_proposed.to_string(),
+        ]
+    });
+    csv_bytes(&HEADER, rows).context("writing table1.csv")
+}
+
+/// `table2.csv`: one row per delay case.
+fn table2_csv(rows: &[Table2Row]) -> Result<Vec<u8>> {
+    const HEADER: [&str; 4] = ["case", "tau_ms", "rmse_rad", "paper_rmse_rad"];
+    let rows = rows.iter().map(|r| {
+        [
+            r.case.to_string(),
+            r.tau_ms.clone(),
+            r.rmse_rad.to_string(),
+            r.paper_rmse_rad.to_string(),
+        ]
+    });
+    csv_bytes(&HEADER, rows).context("writing table2.csv")
 }
 
 /// Lighter shades of the palette's first two colours, for the paper's values.
@@ -217,18 +241,21 @@ fn write_table(
     dir: &Path,
     name: &str,
     md: &str,
-    csv: &str,
+    csv: &[u8],
     json: &serde_json::Value,
     chart: &BarChart,
 ) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let write = |ext: &str, text: String| -> Result<()> {
+    let write = |ext: &str, bytes: &[u8]| -> Result<()> {
         let p = dir.join(format!("{name}.{ext}"));
-        std::fs::write(&p, text).with_context(|| format!("writing {}", p.display()))
+        std::fs::write(&p, bytes).with_context(|| format!("writing {}", p.display()))
     };
-    write("md", format!("# {md}"))?;
-    write("csv", csv.to_string())?;
-    write("json", serde_json::to_string_pretty(json)? + "\n")?;
+    write("md", format!("# {md}").as_bytes())?;
+    write("csv", csv)?;
+    write(
+        "json",
+        (serde_json::to_string_pretty(json)? + "\n").as_bytes(),
+    )?;
     crate::plot::save_bars(chart, &dir.join(name), (900, 520))?;
     Ok(())
 }
@@ -254,16 +281,10 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
     }
     let mut md = format!("Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}\n\n", args.engine.as_str());
     md.push_str("| case | tau(t) (ms) | RMSE | paper RMSE |\n|---|---|---|---|\n");
-    let mut csv = String::from("case,tau_ms,rmse_rad,paper_rmse_rad\n");
     for r in &rows {
         let _ = writeln!(
             md,
             "| {} | {} | {:.4} | {:.4} |",
-            r.case, r.tau_ms, r.rmse_rad, r.paper_rmse_rad
-        );
-        let _ = writeln!(
-            csv,
-            "{},\"{}\",{},{}",
             r.case, r.tau_ms, r.rmse_rad, r.paper_rmse_rad
         );
     }
@@ -289,7 +310,7 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
             ),
         ],
     };
-    write_table(&dir, "table2", &md, &csv, &json, &chart)?;
+    write_table(&dir, "table2", &md, &table2_csv(&rows)?, &json, &chart)?;
     if args.json {
         println!("{json}");
     } else {
@@ -297,4 +318,59 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
         println!("\ntable written to {}", dir.display());
     }
     Ok(ExitCode::SUCCESS)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_csvs_have_a_header_and_a_row_per_entry() {
+        let t1 = table1_csv(&[Table1Row {
+            robot: 2,
+            traditional_rmse_rad: 0.041,
+            proposed_rmse_rad: 1.0 / 3.0,
+            paper_traditional: 0.041,
+            paper_proposed: 0.013,
+        }])
+        .expect("csv");
+        let mut r = csv::Reader::from_reader(t1.as_slice());
+        assert_eq!(
+            r.headers().expect("header"),
+            vec![
+                "robot",
+                "traditional_rmse_rad",
+                "proposed_rmse_rad",
+                "paper_traditional_rmse_rad",
+                "paper_proposed_rmse_rad"
+            ]
+        );
+        let rows: Vec<csv::StringRecord> = r.records().map(|x| x.expect("row")).collect();
+        assert_eq!(rows.len(), 1);
+        assert_eq!(&rows[0][0], "2");
+        assert_eq!(
+            rows[0][2].parse::<f64>().expect("rmse").to_bits(),
+            (1.0_f64 / 3.0).to_bits()
+        );
+
+        let (case, delay, paper) = paper_table2()[1];
+        let t2 = table2_csv(&[Table2Row {
+            case,
+            tau_ms: delay.describe_ms(),
+            rmse_rad: 0.01,
+            paper_rmse_rad: paper,
+        }])
+        .expect("csv");
+        assert_eq!(
+            std::str::from_utf8(&t2).expect("utf-8"),
+            "case,tau_ms,rmse_rad,paper_rmse_rad\nlarge-fast,20 sin(0.5t) + 30,0.01,0.0101\n"
+        );
+        let mut r = csv::Reader::from_reader(t2.as_slice());
+        assert_eq!(
+            r.headers().expect("header"),
+            vec!["case", "tau_ms", "rmse_rad", "paper_rmse_rad"]
+        );
+        let row = r.records().next().expect("a row").expect("row");
+        assert_eq!(&row[1], "20 sin(0.5t) + 30");
+    }
 }

@@ -15,6 +15,7 @@ use fdi_runtime::ipc::{
     self, monotonic_ns, Bell as _, ControlMsg, Inbox as _, Outbox as _, Role, Shm, StatusMsg,
     Stream, Transport, Wake, Waker as _,
 };
+use fdi_runtime::process::procfs;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 
 use crate::supervisor::{Child, Supervisor};
@@ -107,18 +108,15 @@ pub fn new_prefix() -> String {
 /// or some process names the prefix on its command line (a child outliving a killed launcher
 /// for the moment it takes to exit).
 fn run_alive(prefix: &str, pid: u32) -> bool {
-    if Path::new("/proc").join(pid.to_string()).exists() {
+    if procfs::exists(pid) {
         return true;
     }
-    let Ok(entries) = std::fs::read_dir("/proc") else {
+    let Ok(pids) = procfs::pids() else {
         return true; // cannot tell: leave it
     };
     let needle = prefix.as_bytes();
-    entries.flatten().any(|e| {
-        e.file_name().to_string_lossy().parse::<u32>().is_ok()
-            && std::fs::read(e.path().join("cmdline"))
-                .is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle))
-    })
+    pids.into_iter()
+        .any(|p| procfs::cmdline(p).is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle)))
 }
 
 /// Removes the resources of runs whose launcher is dead (a killed launcher cannot clean up),

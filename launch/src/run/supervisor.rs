@@ -10,6 +10,7 @@ use std::process::{Command, ExitStatus, Stdio};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use fdi_runtime::process::procfs;
 
 use crate::relay::StderrRelay;
 use crate::runtime::describe_status;
@@ -121,13 +122,7 @@ impl<M> Supervisor<M> {
             if c.status.is_some() {
                 continue;
             }
-            let stopped = std::fs::read_to_string(format!("/proc/{}/stat", c.child.id()))
-                .ok()
-                .and_then(|st| {
-                    st.rsplit_once(')')
-                        .map(|(_, rest)| rest.trim_start().starts_with(['T', 't']))
-                })
-                .unwrap_or(false);
+            let stopped = procfs::state(c.child.id()).is_ok_and(|s| matches!(s, 'T' | 't'));
             match (stopped, c.stopped_since) {
                 (true, None) => c.stopped_since = Some(now),
                 (true, Some(since)) if now.duration_since(since) > limit => {

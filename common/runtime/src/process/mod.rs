@@ -2,7 +2,8 @@
 //! launcher's arguments ([`ProcessArgs`]), placement on CPUs and scheduling ([`Placement`]),
 //! shutdown on SIGINT/SIGTERM or the launcher's death ([`Shutdown`]), waiting for peers
 //! ([`WaitStrategy`]), the launcher handshake and status reports ([`LauncherLink`]), admission of
-//! received messages ([`admit_measurement`], [`admit_torque`]) and liveness ([`Liveness`]).
+//! received messages ([`admit_measurement`], [`admit_torque`]), liveness ([`Liveness`]) and what
+//! `/proc` says about processes ([`procfs`]).
 
 use std::time::Duration;
 
@@ -13,6 +14,7 @@ mod args;
 mod launcher;
 mod liveness;
 mod placement;
+pub mod procfs;
 mod shutdown;
 mod wait;
 
