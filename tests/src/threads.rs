@@ -34,6 +34,10 @@ pub enum Middle {
     Relay(Box<dyn FnMut(MeasurementMsg) -> Vec<MeasurementMsg> + Send>),
 }
 
+/// What a role thread does: given the run prefix, the scenario, the traces folder and the
+/// shutdown flag, run the role; its error names it.
+type RoleWork = dyn FnOnce(&str, &Resolved, &Path, &Shutdown) -> Result<(), String> + Send;
+
 /// A threaded run of `resolved`.
 pub struct ThreadRun {
     pub resolved: Resolved,
@@ -227,57 +231,45 @@ pub fn run(run: ThreadRun, tag: &str) -> ThreadOutcome {
         .collect();
     let shutdown = Shutdown::manual();
 
-    let mut threads = Vec::new();
-    {
+    let spawn = |work: Box<RoleWork>| {
         let (p, r, d, s) = (
             prefix.clone(),
             resolved.clone(),
             dir.0.clone(),
             shutdown.clone(),
         );
-        threads.push(std::thread::spawn(move || {
-            let ports = fdi_control_center::Ports::<Local>::open(&p, &r).expect("center ports");
-            let mut trace = writer(&d, "control-center", &r);
-            fdi_control_center::run_any(&r, &ports, &s, &mut trace)
+        std::thread::spawn(move || work(&p, &r, &d, &s))
+    };
+    let mut threads = vec![
+        spawn(Box::new(|p, r, d, s| {
+            let ports = fdi_control_center::Ports::<Local>::open(p, r).expect("center ports");
+            let mut trace = writer(d, "control-center", r);
+            fdi_control_center::run_any(r, &ports, s, &mut trace)
                 .map(|_| ())
                 .map_err(|e| format!("control center: {e}"))
-        }));
-    }
-    {
-        let (p, r, d, s) = (
-            prefix.clone(),
-            resolved.clone(),
-            dir.0.clone(),
-            shutdown.clone(),
-        );
-        threads.push(std::thread::spawn(move || match middle {
+        })),
+        spawn(Box::new(move |p, r, d, s| match middle {
             Middle::Attacker => {
-                let ports = fdi_attacker::Ports::<Local>::open(&p, &r).expect("attacker ports");
-                let mut trace = writer(&d, "attacker", &r);
-                fdi_attacker::run_any(&r, &ports, &s, &mut trace)
+                let ports = fdi_attacker::Ports::<Local>::open(p, r).expect("attacker ports");
+                let mut trace = writer(d, "attacker", r);
+                fdi_attacker::run_any(r, &ports, s, &mut trace)
                     .map(|_| ())
                     .map_err(|e| format!("attacker: {e}"))
             }
             Middle::Relay(forward) => {
-                relay(&p, &r, forward, &s);
+                relay(p, r, forward, s);
                 Ok(())
             }
-        }));
-    }
+        })),
+    ];
     for id in ids.clone() {
-        let (p, r, d, s) = (
-            prefix.clone(),
-            resolved.clone(),
-            dir.0.clone(),
-            shutdown.clone(),
-        );
-        threads.push(std::thread::spawn(move || {
-            let ports = fdi_agent::Ports::<Local>::open(&p, id, &r).expect("agent ports");
-            let mut trace = writer(&d, &format!("agent-{id}"), &r);
-            fdi_agent::run_any(id, &r, &ports, &s, &mut trace)
+        threads.push(spawn(Box::new(move |p, r, d, s| {
+            let ports = fdi_agent::Ports::<Local>::open(p, id, r).expect("agent ports");
+            let mut trace = writer(d, &format!("agent-{id}"), r);
+            fdi_agent::run_any(id, r, &ports, s, &mut trace)
                 .map(|_| ())
                 .map_err(|e| format!("agent {id}: {e}"))
-        }));
+        })));
     }
 
     // Ready: every role's ports exist. A role that ends before it reported (it failed) ends
