@@ -5,14 +5,16 @@
 pub mod floor;
 pub mod probe;
 
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use fdi_common::attack::AttackProfile;
+use fdi_common::engine::RunSummary;
 use fdi_common::scenario::{self, ClockMode, Resolved};
-use fdi_common::trace::{TraceReader, TraceRecord};
+use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 
@@ -197,6 +199,32 @@ struct LatencyReport {
 
 /// Measures a realtime run and returns its latency report (written into its run directory).
 fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
+    let r = latency_scenario(a)?;
+    let period_ns = (r.scenario.control_period_s * 1e9) as i64;
+    let run = run_beside_probe(a, &r, period_ns)?;
+    let mut lat = Latencies::new()?;
+    for agent in &r.scenario.agents {
+        let path = crate::runtime::trace_path(&run.dir, &format!("agent-{}", agent.id));
+        lat.read_agent(&path, run.summary.ticks, period_ns)?;
+    }
+    let stalls = lat.stalls(&run.wakeups, period_ns.unsigned_abs())?;
+    let report = latency_report(a, &run, &lat, &stalls);
+    write_latency(&run.dir, &report)?;
+    latency_histogram_png(
+        &run.dir,
+        &[
+            ("end-to-end", &lat.e2e),
+            ("agent -> attacker", &lat.agent_to_attacker),
+            ("attacker -> center", &lat.attacker_to_center),
+            ("center -> agent", &lat.center_to_agent),
+        ],
+    )?;
+    Ok(report)
+}
+
+/// The scenario of `bench latency`: the scaled paper scenario on the realtime clock, at the
+/// asked rate and duration.
+fn latency_scenario(a: &LatencyArgs) -> Result<Resolved> {
     if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
         bail!("--rate-hz must be a positive number, got {}", a.rate_hz);
     }
@@ -211,36 +239,76 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
             problems
         });
     }
+    Ok(r)
+}
+
+/// A whole realtime run and the timer probe's wake-ups beside it.
+struct MeasuredRun {
+    dir: PathBuf,
+    summary: RunSummary,
+    wakeups: crate::probe::Wakeups,
+}
+
+/// Runs `r` over IPC in a run directory of its own, with the timer probe running beside it
+/// under the same placement.
+fn run_beside_probe(a: &LatencyArgs, r: &Resolved, period_ns: i64) -> Result<MeasuredRun> {
     let placement = &a.placement;
-    crate::run::check_placement(&r, Engine::Ipc, placement)?;
-    let dir = output::create_run_dir(&a.out, &r)?;
-    let period_ns = (r.scenario.control_period_s * 1e9) as i64;
+    crate::run::check_placement(r, Engine::Ipc, placement)?;
+    let dir = output::create_run_dir(&a.out, r)?;
     let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
     let summary = output::discard_if_not_started(
         &dir,
-        execute(&r, Engine::Ipc, Some(&dir), !a.json, placement),
+        execute(r, Engine::Ipc, Some(&dir), !a.json, placement),
     );
     let wakeups = probe.finish();
     let (summary, wakeups) = (crate::run::require_whole(summary?)?, wakeups?);
+    Ok(MeasuredRun {
+        dir,
+        summary,
+        wakeups,
+    })
+}
 
-    let (mut e2e, mut h1, mut h2, mut h3, mut att, mut cc, mut jitter) = (
-        histogram()?,
-        histogram()?,
-        histogram()?,
-        histogram()?,
-        histogram()?,
-        histogram()?,
-        histogram()?,
-    );
-    // Every step as a wall-clock window `[ran − τ − 2Δ, ran]`: from when the command due
-    // could have been measured to when the step ran (and missed it, or not).
-    let (mut miss_windows, mut step_windows) = (Vec::new(), Vec::new());
-    for agent in &r.scenario.agents {
-        let path = crate::runtime::trace_path(&dir, &format!("agent-{}", agent.id));
+/// What the agents' traces of a realtime run tell of its latencies (ns) and its steps.
+struct Latencies {
+    /// Sensor → actuation: a measurement sent to its torque received.
+    e2e: Histogram<u64>,
+    agent_to_attacker: Histogram<u64>,
+    attacker_processing: Histogram<u64>,
+    attacker_to_center: Histogram<u64>,
+    center_compute: Histogram<u64>,
+    center_to_agent: Histogram<u64>,
+    /// |actual − nominal| interval between two consecutive measurements of an agent.
+    jitter: Histogram<u64>,
+    /// Every step as a wall-clock window `[ran − τ − 2Δ, ran]`: from when the command due
+    /// could have been measured to when the step ran (and missed it, or not).
+    step_windows: Vec<(u64, u64)>,
+    /// The windows of the steps that missed their deadline.
+    miss_windows: Vec<(u64, u64)>,
+}
+
+impl Latencies {
+    fn new() -> Result<Self> {
+        Ok(Self {
+            e2e: histogram()?,
+            agent_to_attacker: histogram()?,
+            attacker_processing: histogram()?,
+            attacker_to_center: histogram()?,
+            center_compute: histogram()?,
+            center_to_agent: histogram()?,
+            jitter: histogram()?,
+            step_windows: Vec::new(),
+            miss_windows: Vec::new(),
+        })
+    }
+
+    /// Adds the trace of one agent of a run of `ticks` ticks: the hops and the jitter of its
+    /// measurements, and the window of each of its steps.
+    fn read_agent(&mut self, path: &Path, ticks: u64, period_ns: i64) -> Result<()> {
         let mut last_sent: Option<u64> = None;
-        let mut sent_at = std::collections::HashMap::new();
+        let mut sent_at = HashMap::new();
         let mut steps = Vec::new();
-        for rec in TraceReader::open(&path)? {
+        for rec in TraceReader::open(path)? {
             let rec = rec?;
             if let TraceRecord::Agent(a) = &rec {
                 steps.push((a.k, a.tau, a.missed));
@@ -249,103 +317,159 @@ fn measure_latency(a: &LatencyArgs) -> Result<LatencyReport> {
                 sent_at.insert(k, s.agent_sent_ns);
                 // No step uses the last measurement's torque: the agent stamps it whenever it
                 // next looks, which may be in the run's teardown. Not a latency.
-                if k + 1 >= summary.ticks {
+                if k + 1 >= ticks {
                     continue;
                 }
-                let rec_ns = |h: &mut Histogram<u64>, from: u64, to: u64| {
-                    if from > 0 && to >= from {
-                        let _ = h.record((to - from).max(1));
-                    }
-                };
-                rec_ns(&mut e2e, s.agent_sent_ns, s.agent_received_ns);
-                rec_ns(&mut h1, s.agent_sent_ns, s.attacker_received_ns);
-                rec_ns(&mut att, s.attacker_received_ns, s.attacker_sent_ns);
-                rec_ns(&mut h2, s.attacker_sent_ns, s.center_received_ns);
-                rec_ns(&mut cc, s.center_received_ns, s.center_sent_ns);
-                rec_ns(&mut h3, s.center_sent_ns, s.agent_received_ns);
+                self.record_hops(&s);
                 // The first interval includes the realtime start lead (measurement 0 goes out on
                 // the start message, measurement 1 at the epoch): not jitter.
                 if let Some(prev) = last_sent.filter(|_| k > 1) {
                     let dev = (s.agent_sent_ns as i64 - prev as i64 - period_ns).unsigned_abs();
-                    let _ = jitter.record(dev.max(1));
+                    let _ = self.jitter.record(dev.max(1));
                 }
                 last_sent = Some(s.agent_sent_ns);
             }
         }
-        for (k, tau, missed) in steps {
+        self.record_steps(&steps, &sent_at, period_ns.unsigned_abs());
+        Ok(())
+    }
+
+    /// The hops of one measurement, and its end-to-end latency.
+    fn record_hops(&mut self, s: &HopStamps) {
+        let rec_ns = |h: &mut Histogram<u64>, from: u64, to: u64| {
+            if from > 0 && to >= from {
+                let _ = h.record((to - from).max(1));
+            }
+        };
+        rec_ns(&mut self.e2e, s.agent_sent_ns, s.agent_received_ns);
+        rec_ns(
+            &mut self.agent_to_attacker,
+            s.agent_sent_ns,
+            s.attacker_received_ns,
+        );
+        rec_ns(
+            &mut self.attacker_processing,
+            s.attacker_received_ns,
+            s.attacker_sent_ns,
+        );
+        rec_ns(
+            &mut self.attacker_to_center,
+            s.attacker_sent_ns,
+            s.center_received_ns,
+        );
+        rec_ns(
+            &mut self.center_compute,
+            s.center_received_ns,
+            s.center_sent_ns,
+        );
+        rec_ns(
+            &mut self.center_to_agent,
+            s.center_sent_ns,
+            s.agent_received_ns,
+        );
+    }
+
+    /// The window of each step `(k, τ, missed)`, from the times its agent sent measurements.
+    fn record_steps(
+        &mut self,
+        steps: &[(u64, f64, bool)],
+        sent_at: &HashMap<u64, u64>,
+        period_ns: u64,
+    ) {
+        for &(k, tau, missed) in steps {
             // The step from t_k ran just before measurement k + 1 went out.
             let ran = sent_at
                 .get(&(k + 1))
                 .copied()
-                .or_else(|| sent_at.get(&k).map(|s| s + period_ns.unsigned_abs()));
+                .or_else(|| sent_at.get(&k).map(|s| s + period_ns));
             if let Some(ran) = ran {
-                let reach = (tau * 1e9) as u64 + 2 * period_ns.unsigned_abs();
+                let reach = (tau * 1e9) as u64 + 2 * period_ns;
                 let window = (ran.saturating_sub(reach), ran);
-                step_windows.push(window);
+                self.step_windows.push(window);
                 if missed {
-                    miss_windows.push(window);
+                    self.miss_windows.push(window);
                 }
             }
         }
     }
-    // The probe's view of the run itself (its steps), not of start-up or teardown.
-    let run_from = step_windows
-        .iter()
-        .map(|w| w.1)
-        .min()
-        .unwrap_or(0)
-        .saturating_sub(period_ns.unsigned_abs());
-    let run_to = step_windows.iter().map(|w| w.1).max().unwrap_or(u64::MAX);
-    let probe = wakeups.within(run_from, run_to)?;
-    let misses_in_stalls = crate::probe::overlapping(&miss_windows, &probe.stalls) as u64;
-    // What share of all steps a stall touches: the rate at which misses would fall in stalls
-    // by chance alone.
-    let stall_share = if step_windows.is_empty() {
-        0.0
-    } else {
-        crate::probe::overlapping(&step_windows, &probe.stalls) as f64 / step_windows.len() as f64
-    };
+
+    /// What the timer probe saw during the run's steps, and how the steps' windows (the
+    /// missed ones and all) fall in the machine's stalls.
+    fn stalls(&self, wakeups: &crate::probe::Wakeups, period_ns: u64) -> Result<Stalls> {
+        let steps = &self.step_windows;
+        // The probe's view of the run itself (its steps), not of start-up or teardown.
+        let run_from = steps
+            .iter()
+            .map(|w| w.1)
+            .min()
+            .unwrap_or(0)
+            .saturating_sub(period_ns);
+        let run_to = steps.iter().map(|w| w.1).max().unwrap_or(u64::MAX);
+        let probe = wakeups.within(run_from, run_to)?;
+        let misses_in_stalls = crate::probe::overlapping(&self.miss_windows, &probe.stalls) as u64;
+        // What share of all steps a stall touches: the rate at which misses would fall in
+        // stalls by chance alone.
+        let step_share = if steps.is_empty() {
+            0.0
+        } else {
+            crate::probe::overlapping(steps, &probe.stalls) as f64 / steps.len() as f64
+        };
+        Ok(Stalls {
+            probe,
+            misses_in_stalls,
+            step_share,
+        })
+    }
+}
+
+/// The machine's stalls during a realtime run, against the run's steps.
+struct Stalls {
+    probe: crate::probe::ProbeResult,
+    /// Deadline misses whose window overlaps a stall.
+    misses_in_stalls: u64,
+    /// Share of all steps whose window overlaps a stall.
+    step_share: f64,
+}
+
+/// The latency report of a measured run, as printed and written to `latency.json`.
+fn latency_report(
+    a: &LatencyArgs,
+    run: &MeasuredRun,
+    lat: &Latencies,
+    stalls: &Stalls,
+) -> LatencyReport {
+    let summary = &run.summary;
     let misses: u64 = summary.metrics.values().map(|m| m.deadline_misses).sum();
     let agent_ticks = summary.ticks * a.agents as u64;
-    let report = LatencyReport {
+    LatencyReport {
         agents: a.agents,
         rate_hz: a.rate_hz,
         duration_s: a.duration_s,
         ticks: summary.ticks,
-        e2e_us: percentiles(&e2e),
+        e2e_us: percentiles(&lat.e2e),
         hops_us: Hops {
-            agent_to_attacker: percentiles(&h1),
-            attacker_to_center: percentiles(&h2),
-            center_to_agent: percentiles(&h3),
+            agent_to_attacker: percentiles(&lat.agent_to_attacker),
+            attacker_to_center: percentiles(&lat.attacker_to_center),
+            center_to_agent: percentiles(&lat.center_to_agent),
         },
-        attacker_processing_us: percentiles(&att),
-        center_compute_us: percentiles(&cc),
-        period_jitter_us: percentiles(&jitter),
+        attacker_processing_us: percentiles(&lat.attacker_processing),
+        center_compute_us: percentiles(&lat.center_compute),
+        period_jitter_us: percentiles(&lat.jitter),
         deadline_misses: misses,
         deadline_miss_ratio: if agent_ticks > 0 {
             misses as f64 / agent_ticks as f64
         } else {
             0.0
         },
-        lost_ticks: (summary.ticks.saturating_sub(1) * a.agents as u64).saturating_sub(e2e.len()),
-        scheduling: placement.describe(),
-        timer_probe_late_us: percentiles(&probe.late),
-        timer_probe_stalls_over_1ms: probe.stalls_over(1_000_000) as u64,
-        deadline_misses_in_machine_stalls: misses_in_stalls,
-        steps_in_machine_stalls_ratio: stall_share,
-        run_dir: dir.display().to_string(),
-    };
-    write_latency(&dir, &report)?;
-    latency_histogram_png(
-        &dir,
-        &[
-            ("end-to-end", &e2e),
-            ("agent -> attacker", &h1),
-            ("attacker -> center", &h2),
-            ("center -> agent", &h3),
-        ],
-    )?;
-    Ok(report)
+        lost_ticks: (summary.ticks.saturating_sub(1) * a.agents as u64)
+            .saturating_sub(lat.e2e.len()),
+        scheduling: a.placement.describe(),
+        timer_probe_late_us: percentiles(&stalls.probe.late),
+        timer_probe_stalls_over_1ms: stalls.probe.stalls_over(1_000_000) as u64,
+        deadline_misses_in_machine_stalls: stalls.misses_in_stalls,
+        steps_in_machine_stalls_ratio: stalls.step_share,
+        run_dir: run.dir.display().to_string(),
+    }
 }
 
 fn latency(a: &LatencyArgs) -> Result<ExitCode> {
@@ -591,42 +715,7 @@ fn lockstep(a: &LockstepArgs) -> Result<ExitCode> {
         .join(format!("{}-bench-lockstep", output::timestamp()));
     let mut rows = Vec::new();
     for &n in &a.agents {
-        let mut r = scaled_paper(n)?;
-        r.scenario.duration_s = a.duration_s;
-        let dir_in = output::create_run_dir(&root, &named(&r, "inproc"))?;
-        let inproc = execute(
-            &r,
-            Engine::Inproc,
-            Some(&dir_in),
-            false,
-            &Default::default(),
-        )?;
-        let dir_ipc = output::create_run_dir(&root, &named(&r, "ipc"))?;
-        let ipc = execute(
-            &r,
-            Engine::Ipc,
-            Some(&dir_ipc),
-            !a.json,
-            &Default::default(),
-        )
-        .and_then(crate::run::require_whole)?;
-        if !a.keep_traces {
-            for d in [&dir_in, &dir_ipc] {
-                let _ = std::fs::remove_dir_all(d.join("traces"));
-            }
-        }
-        let row = LockstepRow {
-            agents: n,
-            processes: n + 2,
-            sim_s: ipc.sim_s,
-            ticks: ipc.ticks,
-            inproc_wall_s: inproc.wall_s,
-            ipc_wall_s: ipc.wall_s,
-            ipc_over_inproc: ipc.wall_s / inproc.wall_s,
-            ipc_realtime_factor: ipc.sim_s / ipc.wall_s,
-            ipc_ticks_per_s: ipc.ticks as f64 / ipc.wall_s,
-            bit_identical: ipc.trace_digest == inproc.trace_digest,
-        };
+        let row = lockstep_row(a, &root, n)?;
         if !a.json {
             eprintln!(
                 "{n} agents: ipc {:.3} s, inproc {:.3} s",
@@ -646,30 +735,76 @@ fn lockstep(a: &LockstepArgs) -> Result<ExitCode> {
             serde_json::json!({ "duration_s": a.duration_s, "rows": rows, "dir": root.display().to_string() })
         );
     } else {
-        println!(
-            "Lockstep speed, {} s simulated per run (both engines write their traces)",
-            a.duration_s
-        );
-        println!();
-        println!("| agents | processes | in-process wall (s) | IPC wall (s) | IPC / in-process | IPC × real time | IPC ticks/s | bit-identical |");
-        println!("|---|---|---|---|---|---|---|---|");
-        for r in &rows {
-            println!(
-                "| {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.0} | {} |",
-                r.agents,
-                r.processes,
-                r.inproc_wall_s,
-                r.ipc_wall_s,
-                r.ipc_over_inproc,
-                r.ipc_realtime_factor,
-                r.ipc_ticks_per_s,
-                r.bit_identical
-            );
-        }
-        println!();
-        println!("results in {}", root.display());
+        print_lockstep(a.duration_s, &rows, &root);
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// Runs the scaled paper scenario with `n` agents on the in-process engine, then over IPC, each
+/// into a run directory under `root` (without its traces unless `--keep-traces`).
+fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize) -> Result<LockstepRow> {
+    let mut r = scaled_paper(n)?;
+    r.scenario.duration_s = a.duration_s;
+    let dir_in = output::create_run_dir(root, &named(&r, "inproc"))?;
+    let inproc = execute(
+        &r,
+        Engine::Inproc,
+        Some(&dir_in),
+        false,
+        &Default::default(),
+    )?;
+    let dir_ipc = output::create_run_dir(root, &named(&r, "ipc"))?;
+    let ipc = execute(
+        &r,
+        Engine::Ipc,
+        Some(&dir_ipc),
+        !a.json,
+        &Default::default(),
+    )
+    .and_then(crate::run::require_whole)?;
+    if !a.keep_traces {
+        for d in [&dir_in, &dir_ipc] {
+            let _ = std::fs::remove_dir_all(d.join("traces"));
+        }
+    }
+    Ok(LockstepRow {
+        agents: n,
+        processes: n + 2,
+        sim_s: ipc.sim_s,
+        ticks: ipc.ticks,
+        inproc_wall_s: inproc.wall_s,
+        ipc_wall_s: ipc.wall_s,
+        ipc_over_inproc: ipc.wall_s / inproc.wall_s,
+        ipc_realtime_factor: ipc.sim_s / ipc.wall_s,
+        ipc_ticks_per_s: ipc.ticks as f64 / ipc.wall_s,
+        bit_identical: ipc.trace_digest == inproc.trace_digest,
+    })
+}
+
+/// The lockstep table, as markdown on stdout.
+fn print_lockstep(duration_s: f64, rows: &[LockstepRow], root: &Path) {
+    println!(
+        "Lockstep speed, {} s simulated per run (both engines write their traces)",
+        duration_s
+    );
+    println!();
+    println!("| agents | processes | in-process wall (s) | IPC wall (s) | IPC / in-process | IPC × real time | IPC ticks/s | bit-identical |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        println!(
+            "| {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.0} | {} |",
+            r.agents,
+            r.processes,
+            r.inproc_wall_s,
+            r.ipc_wall_s,
+            r.ipc_over_inproc,
+            r.ipc_realtime_factor,
+            r.ipc_ticks_per_s,
+            r.bit_identical
+        );
+    }
+    println!();
+    println!("results in {}", root.display());
 }
 
 fn named(r: &Resolved, engine: &str) -> Resolved {

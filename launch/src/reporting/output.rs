@@ -212,6 +212,15 @@ where
     w.into_inner().map_err(|e| e.into_error().into())
 }
 
+/// The head of a markdown table: the row of `columns` and the separator under it,
+/// `| a | b |\n|---|---|\n`.
+pub fn md_table_head(columns: &[&str]) -> String {
+    let mut head = format!("| {} |\n|", columns.join(" | "));
+    head.push_str(&"---|".repeat(columns.len()));
+    head.push('\n');
+    head
+}
+
 /// An error and its causes, joined by `: `, leaving out a cause whose text is already there (an
 /// I/O error is often both the tail of its context's message and that context's source, and
 /// was printed twice: `No space left on device (os error 28): No space left on device (os
@@ -283,6 +292,14 @@ mod tests {
         );
         assert_eq!((&rows[0][8], &rows[1][8]), ("", "0.0625"));
         assert_eq!(&rows[1][12], "100");
+    }
+
+    #[test]
+    fn md_table_head_has_a_separator_cell_per_column() {
+        assert_eq!(
+            super::md_table_head(&["robot", "RMSE (rad)"]),
+            "| robot | RMSE (rad) |\n|---|---|\n"
+        );
     }
 
     #[test]

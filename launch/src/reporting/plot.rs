@@ -616,6 +616,67 @@ fn figure_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) ->
     Ok(())
 }
 
+/// The chart of one panel: time on x, values (or timeline rows) on y.
+type PanelChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A panel's chart on `plot_area` with its caption, grid and axes over `x` by `y`; `y_ticks`
+/// false (a timeline): no y-axis ticks and no horizontal grid lines.
+fn panel_axes<'a, DB: DrawingBackend + 'a>(
+    plot_area: &'a DrawingArea<DB, Shift>,
+    fig: &Figure,
+    panel: &Panel,
+    (x0, x1): (f64, f64),
+    (y0, y1): (f64, f64),
+    y_ticks: bool,
+) -> Result<PanelChart<'a, DB>> {
+    let mut chart = ChartBuilder::on(plot_area)
+        .caption(&panel.title, (FONT, 16))
+        .margin(8)
+        .margin_right(12)
+        .x_label_area_size(36)
+        .y_label_area_size(72)
+        .build_cartesian_2d(x0..x1, y0..y1)
+        .map_err(plot_err)?;
+    let (xs, ys) = (x1 - x0, y1 - y0);
+    let x_tick = |v: &f64| tick(*v, xs);
+    let y_tick = |v: &f64| tick(*v, ys);
+    {
+        let mut mesh = chart.configure_mesh();
+        mesh.x_desc(&fig.x_label)
+            .y_desc(&panel.y_label)
+            .label_style((FONT, 13))
+            .axis_desc_style((FONT, 14))
+            .light_line_style(RGBColor(238, 238, 238))
+            .bold_line_style(RGBColor(210, 210, 210))
+            .x_label_formatter(&x_tick);
+        if y_ticks {
+            mesh.y_label_formatter(&y_tick);
+        } else {
+            mesh.y_labels(0).disable_y_mesh();
+        }
+        mesh.draw().map_err(plot_err)?;
+    }
+    Ok(chart)
+}
+
+/// The figure's markers (attack switches) inside `(x0, x1)`, as vertical lines from `y0` to `y1`.
+fn draw_markers<'a, DB: DrawingBackend + 'a>(
+    chart: &mut PanelChart<'a, DB>,
+    fig: &Figure,
+    (x0, x1): (f64, f64),
+    (y0, y1): (f64, f64),
+) -> Result<()> {
+    chart
+        .draw_series(
+            fig.markers
+                .iter()
+                .filter(|m| **m > x0 && **m < x1)
+                .map(|&m| PathElement::new(vec![(m, y0), (m, y1)], MARKER)),
+        )
+        .map_err(plot_err)?;
+    Ok(())
+}
+
 fn lines_panel<DB: DrawingBackend>(
     fig: &Figure,
     panel: &Panel,
@@ -629,6 +690,27 @@ fn lines_panel<DB: DrawingBackend>(
         .filter(|l| !l.keep)
         .flat_map(|l| l.points.iter().map(|p| p.1))
         .collect();
+    let YRange {
+        lo: y0,
+        hi: y1,
+        clips,
+    } = robust_y_range(&clippable, &must_show(panel, lines));
+    let mut chart = panel_axes(plot_area, fig, panel, (x0, x1), (y0, y1), true)?;
+    let mut keys = draw_guides(&mut chart, &panel.guides, (x0, x1))?;
+    draw_markers(&mut chart, fig, (x0, x1), (y0, y1))?;
+    let clipped = draw_curves(&mut chart, lines, (y0, y1), clips, &mut keys)?;
+    keys.extend(marker_key(fig, x0, x1));
+    if clipped.points > 0 {
+        keys.extend(clipped.keys(&clippable, y1 - y0, &panel.y_label));
+        let beyond = merge_excursions(clipped.beyond, MERGE_SHARE * (x1 - x0));
+        draw_excursions(&mut chart, &beyond, (y0, y1))?;
+    }
+    let top = chart.plotting_area().get_base_pixel().1 - key_area.get_base_pixel().1 + 10;
+    draw_keys(key_area, &keys, top)
+}
+
+/// The values a line panel's y-range must hold: its kept curves' and its reference bands'.
+fn must_show(panel: &Panel, lines: &[Line]) -> Vec<f64> {
     let mut must: Vec<f64> = lines
         .iter()
         .filter(|l| l.keep)
@@ -637,34 +719,17 @@ fn lines_panel<DB: DrawingBackend>(
     for g in &panel.guides {
         must.extend([g.lo, g.hi]);
     }
-    let YRange {
-        lo: y0,
-        hi: y1,
-        clips,
-    } = robust_y_range(&clippable, &must);
-    let (xs, ys) = (x1 - x0, y1 - y0);
-    let mut chart = ChartBuilder::on(plot_area)
-        .caption(&panel.title, (FONT, 16))
-        .margin(8)
-        .margin_right(12)
-        .x_label_area_size(36)
-        .y_label_area_size(72)
-        .build_cartesian_2d(x0..x1, y0..y1)
-        .map_err(plot_err)?;
-    chart
-        .configure_mesh()
-        .x_desc(&fig.x_label)
-        .y_desc(&panel.y_label)
-        .label_style((FONT, 13))
-        .axis_desc_style((FONT, 14))
-        .light_line_style(RGBColor(238, 238, 238))
-        .bold_line_style(RGBColor(210, 210, 210))
-        .x_label_formatter(&|v| tick(*v, xs))
-        .y_label_formatter(&|v| tick(*v, ys))
-        .draw()
-        .map_err(plot_err)?;
+    must
+}
+
+/// The reference bands across `(x0, x1)`, filled and edged; returns their legend entries.
+fn draw_guides<'a, DB: DrawingBackend + 'a>(
+    chart: &mut PanelChart<'a, DB>,
+    guides: &[Guide],
+    (x0, x1): (f64, f64),
+) -> Result<Vec<Key>> {
     let mut keys = Vec::new();
-    for g in &panel.guides {
+    for g in guides {
         chart
             .draw_series(std::iter::once(Rectangle::new(
                 [(x0, g.lo), (x1, g.hi)],
@@ -678,16 +743,53 @@ fn lines_panel<DB: DrawingBackend>(
             .map_err(plot_err)?;
         keys.push(Key::Guide(g.label.clone()));
     }
-    chart
-        .draw_series(
-            fig.markers
-                .iter()
-                .filter(|m| **m > x0 && **m < x1)
-                .map(|&m| PathElement::new(vec![(m, y0), (m, y1)], MARKER)),
-        )
-        .map_err(plot_err)?;
-    let mut beyond: Vec<(RGBColor, Excursion)> = Vec::new();
-    let (mut clipped, mut total) = (0usize, 0usize);
+    Ok(keys)
+}
+
+/// What a line panel's y-range clipped of its curves.
+struct Clipped {
+    /// The runs of points beyond the range, with their curve's colour.
+    beyond: Vec<(RGBColor, Excursion)>,
+    /// Points clipped, of `total` clippable points.
+    points: usize,
+    total: usize,
+}
+
+impl Clipped {
+    /// The legend entries of the clipping: how many points, and the range of all `values`.
+    fn keys(&self, values: &[f64], ys: f64, y_label: &str) -> [Key; 2] {
+        let (vmin, vmax) = values
+            .iter()
+            .filter(|v| v.is_finite())
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        [
+            Key::Clipped(format!("clipped: {} of {} points", self.points, self.total)),
+            Key::Text(format!(
+                "all values: {} … {} {}",
+                tick(vmin, ys),
+                tick(vmax, ys),
+                y_label
+            )),
+        ]
+    }
+}
+
+/// The curves, clamped to `[y0, y1]`, each with its legend entry in `keys`; returns what was
+/// clipped (with `clips`, of the curves that may be clipped).
+fn draw_curves<'a, DB: DrawingBackend + 'a>(
+    chart: &mut PanelChart<'a, DB>,
+    lines: &[Line],
+    (y0, y1): (f64, f64),
+    clips: bool,
+    keys: &mut Vec<Key>,
+) -> Result<Clipped> {
+    let mut clipped = Clipped {
+        beyond: Vec::new(),
+        points: 0,
+        total: 0,
+    };
     for l in lines {
         let color = l.color;
         chart
@@ -698,65 +800,55 @@ fn lines_panel<DB: DrawingBackend>(
             .map_err(plot_err)?;
         keys.push(Key::Line(color, l.label.clone()));
         if clips && !l.keep {
-            total += l.points.len();
+            clipped.total += l.points.len();
             for e in excursions(&l.points, y0, y1) {
-                clipped += e.points;
-                beyond.push((color, e));
+                clipped.points += e.points;
+                clipped.beyond.push((color, e));
             }
         }
     }
-    keys.extend(marker_key(fig, x0, x1));
-    if clipped > 0 {
-        let (vmin, vmax) = clippable
-            .iter()
-            .filter(|v| v.is_finite())
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-                (a.min(v), b.max(v))
-            });
-        keys.push(Key::Clipped(format!(
-            "clipped: {clipped} of {total} points"
-        )));
-        keys.push(Key::Text(format!(
-            "all values: {} … {} {}",
-            tick(vmin, ys),
-            tick(vmax, ys),
-            panel.y_label
-        )));
-        let beyond = merge_excursions(beyond, MERGE_SHARE * (x1 - x0));
-        // The index of the farthest excursion on each side.
-        let far = |above: bool| {
-            beyond
-                .iter()
-                .enumerate()
-                .filter(|(_, (_, e))| e.above == above)
-                .max_by(|(_, (_, a)), (_, (_, b))| {
-                    if above {
-                        a.v.total_cmp(&b.v)
-                    } else {
-                        b.v.total_cmp(&a.v)
-                    }
-                })
-                .map(|(i, _)| i)
-        };
-        let (far_up, far_down) = (far(true), far(false));
-        let style = (FONT, 12).into_font().color(&BLACK);
-        for (i, (color, e)) in beyond.iter().enumerate() {
-            let edge = if e.above { y1 } else { y0 };
-            let label =
-                beyond.len() <= LABELLED_EXCURSIONS || Some(i) == far_up || Some(i) == far_down;
-            let text = if label { peak(e.v) } else { String::new() };
-            let dy = if e.above { 2 } else { -14 };
-            chart
-                .draw_series(std::iter::once(
-                    EmptyElement::at((e.t, edge))
-                        + Polygon::new(triangle(e.above), color.filled())
-                        + Text::new(text, (7, dy), style.clone()),
-                ))
-                .map_err(plot_err)?;
-        }
+    Ok(clipped)
+}
+
+/// The index in `beyond` of the farthest excursion above the range (or below it).
+fn farthest(beyond: &[(RGBColor, Excursion)], above: bool) -> Option<usize> {
+    beyond
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, e))| e.above == above)
+        .max_by(|(_, (_, a)), (_, (_, b))| {
+            if above {
+                a.v.total_cmp(&b.v)
+            } else {
+                b.v.total_cmp(&a.v)
+            }
+        })
+        .map(|(i, _)| i)
+}
+
+/// A ▲ or ▼ at the edge for every excursion, with its value beside it when there are at most
+/// [`LABELLED_EXCURSIONS`] (else beside the farthest on each side only).
+fn draw_excursions<'a, DB: DrawingBackend + 'a>(
+    chart: &mut PanelChart<'a, DB>,
+    beyond: &[(RGBColor, Excursion)],
+    (y0, y1): (f64, f64),
+) -> Result<()> {
+    let (far_up, far_down) = (farthest(beyond, true), farthest(beyond, false));
+    let style = (FONT, 12).into_font().color(&BLACK);
+    for (i, (color, e)) in beyond.iter().enumerate() {
+        let edge = if e.above { y1 } else { y0 };
+        let label = beyond.len() <= LABELLED_EXCURSIONS || Some(i) == far_up || Some(i) == far_down;
+        let text = if label { peak(e.v) } else { String::new() };
+        let dy = if e.above { 2 } else { -14 };
+        chart
+            .draw_series(std::iter::once(
+                EmptyElement::at((e.t, edge))
+                    + Polygon::new(triangle(e.above), color.filled())
+                    + Text::new(text, (7, dy), style.clone()),
+            ))
+            .map_err(plot_err)?;
     }
-    let top = chart.plotting_area().get_base_pixel().1 - key_area.get_base_pixel().1 + 10;
-    draw_keys(key_area, &keys, top)
+    Ok(())
 }
 
 fn timeline_panel<DB: DrawingBackend>(
@@ -768,35 +860,8 @@ fn timeline_panel<DB: DrawingBackend>(
     (x0, x1): (f64, f64),
 ) -> Result<()> {
     let rows = bands.len().max(1) as f64;
-    let mut chart = ChartBuilder::on(plot_area)
-        .caption(&panel.title, (FONT, 16))
-        .margin(8)
-        .margin_right(12)
-        .x_label_area_size(36)
-        .y_label_area_size(72)
-        .build_cartesian_2d(x0..x1, 0.0..rows)
-        .map_err(plot_err)?;
-    chart
-        .configure_mesh()
-        .x_desc(&fig.x_label)
-        .y_desc(&panel.y_label)
-        .y_labels(0)
-        .disable_y_mesh()
-        .label_style((FONT, 13))
-        .axis_desc_style((FONT, 14))
-        .light_line_style(RGBColor(238, 238, 238))
-        .bold_line_style(RGBColor(210, 210, 210))
-        .x_label_formatter(&|v| tick(*v, x1 - x0))
-        .draw()
-        .map_err(plot_err)?;
-    chart
-        .draw_series(
-            fig.markers
-                .iter()
-                .filter(|m| **m > x0 && **m < x1)
-                .map(|&m| PathElement::new(vec![(m, 0.0), (m, rows)], MARKER)),
-        )
-        .map_err(plot_err)?;
+    let mut chart = panel_axes(plot_area, fig, panel, (x0, x1), (0.0, rows), false)?;
+    draw_markers(&mut chart, fig, (x0, x1), (0.0, rows))?;
     // Every interval is at least two pixels wide, so that short pulses stay visible.
     let px = f64::from(chart.plotting_area().dim_in_pixel().0.max(1));
     let min_w = 2.0 * (x1 - x0) / px;
@@ -811,28 +876,34 @@ fn timeline_panel<DB: DrawingBackend>(
                 Rectangle::new([(a, row + 0.2), (e, row + 0.8)], color.filled())
             }))
             .map_err(plot_err)?;
-        let held: f64 = b
-            .intervals
-            .iter()
-            .map(|&(a, e)| (e.min(x1) - a.max(x0)).max(0.0))
-            .sum();
-        let n = b.intervals.len();
-        let detail = match n {
-            0 => "never".to_string(),
-            1 => format!("1 interval, {:.1} % of the time", 100.0 * held / (x1 - x0)),
-            n => format!(
-                "{n} intervals, {:.1} % of the time",
-                100.0 * held / (x1 - x0)
-            ),
-        };
         let y = chart.backend_coord(&(x0, row + 0.5)).1 - base;
         draw_keys(
             key_area,
-            &[Key::Row(color, b.label.clone()), Key::Text(detail)],
+            &[
+                Key::Row(color, b.label.clone()),
+                Key::Text(band_detail(b, (x0, x1))),
+            ],
             y - 9,
         )?;
     }
     Ok(())
+}
+
+/// How often and how long a timeline row held within `(x0, x1)`, for its legend.
+fn band_detail(b: &Band, (x0, x1): (f64, f64)) -> String {
+    let held: f64 = b
+        .intervals
+        .iter()
+        .map(|&(a, e)| (e.min(x1) - a.max(x0)).max(0.0))
+        .sum();
+    match b.intervals.len() {
+        0 => "never".to_string(),
+        1 => format!("1 interval, {:.1} % of the time", 100.0 * held / (x1 - x0)),
+        n => format!(
+            "{n} intervals, {:.1} % of the time",
+            100.0 * held / (x1 - x0)
+        ),
+    }
 }
 
 /// Decades `[lo, hi]` that hold the positive `values` (for a logarithmic axis), with one decade

@@ -17,7 +17,7 @@ use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::trajectory::TrajectoryConfig;
 
 use crate::join;
-use crate::output::csv_bytes;
+use crate::output::{csv_bytes, md_table_head};
 use crate::plot::{
     self, Band, Envelope, Figure, Guide, Intervals, Line, Panel, PanelKind, PALETTE,
 };
@@ -410,42 +410,121 @@ struct Layout {
 
 /// The figures of one robot.
 fn figures(a: AgentSeries, l: &Layout) -> Vec<Job> {
-    let id = a.id;
-    let beta = l.beta;
+    let f = RobotFigures {
+        id: a.id,
+        layout: l,
+        switches: &a.switches,
+        marker_label: switch_label(&a.switches, l.x_range.1),
+    };
+    let (pos_guide, vel_guide) = paper_guides(a.id);
     // A sample holds until the next tick.
     let end = a.last_t + l.period_s;
-    let marker_label = switch_label(&a.switches, l.x_range.1);
-    let fig = |title: &str, panels: Vec<Panel>| Figure {
-        title: format!("Robot {id}: {title}{}", l.partial),
-        x_label: "t (s)".into(),
-        x_range: l.x_range,
-        markers: a.switches.clone(),
-        marker_label: marker_label.clone(),
-        panels,
-    };
-    let one = |title: &str, y: &str, lines: Vec<Line>| Panel {
-        title: title.into(),
-        y_label: y.into(),
-        kind: PanelKind::Lines(lines),
-        guides: Vec::new(),
-    };
-    let (pos_guide, vel_guide) = paper_guides(id);
-    let with = |mut p: Panel, g: Guide| {
-        if l.paper {
+    let wide = (1000, 440);
+    let tall = (1000, 300 + 260 * a.dof.max(1) as u32);
+    let beta = l.beta;
+    vec![
+        f.job(
+            "position-error",
+            "(a) position error",
+            vec![f.guided(
+                line_panel("q_d − q (true q)", "rad", links("", a.pos)),
+                pos_guide,
+            )],
+            wide,
+        ),
+        f.job(
+            "velocity-error",
+            "(b) angular-velocity error",
+            vec![f.guided(
+                line_panel("dq_d/dt − dq/dt (true velocity)", "rad/s", links("", a.vel)),
+                vel_guide,
+            )],
+            wide,
+        ),
+        f.job(
+            "attack-estimate",
+            &format!("(c) attack estimate Ŝ and true S = S₂ + β S₁ (β = {beta})"),
+            attack_panels(a.s_hat, a.s_true),
+            tall,
+        ),
+        f.job(
+            "acceleration-error",
+            "(d) acceleration-estimate error",
+            vec![line_panel(
+                "true acceleration − observer estimate",
+                "rad/s²",
+                links("", a.acc),
+            )],
+            wide,
+        ),
+        f.job(
+            "torque",
+            "torque sent by the control center",
+            vec![line_panel("u", "N·m", links("", a.u))],
+            wide,
+        ),
+        f.job(
+            "delay-alarm",
+            "delay, attack and detection",
+            delay_alarm_panels(a.tau_ms, timeline_bands(a.active, a.alarm, a.missed, end)),
+            (1000, 560),
+        ),
+    ]
+}
+
+/// What every figure of one robot shares: its title, time axis and attack switches.
+struct RobotFigures<'a> {
+    id: u32,
+    layout: &'a Layout,
+    switches: &'a [f64],
+    marker_label: String,
+}
+
+impl RobotFigures<'_> {
+    /// The figure `robot<id>-<suffix>` of `panels`.
+    fn job(&self, suffix: &str, title: &str, panels: Vec<Panel>, size: (u32, u32)) -> Job {
+        let (id, l) = (self.id, self.layout);
+        Job {
+            stem: format!("robot{id}-{suffix}"),
+            figure: Figure {
+                title: format!("Robot {id}: {title}{}", l.partial),
+                x_label: "t (s)".into(),
+                x_range: l.x_range,
+                markers: self.switches.to_vec(),
+                marker_label: self.marker_label.clone(),
+                panels,
+            },
+            size,
+        }
+    }
+
+    /// `p` with the paper's band `g`, on the paper's scenario.
+    fn guided(&self, mut p: Panel, g: Guide) -> Panel {
+        if self.layout.paper {
             p.guides.push(g);
         }
         p
-    };
-    let stem = |s: &str| format!("robot{id}-{s}");
-    let wide = (1000, 440);
-    let tall = (1000, 300 + 260 * a.dof.max(1) as u32);
-    let attack_panels: Vec<Panel> = a
-        .s_hat
+    }
+}
+
+/// A panel of curves, without reference bands.
+fn line_panel(title: &str, y_label: &str, curves: Vec<Line>) -> Panel {
+    Panel {
+        title: title.into(),
+        y_label: y_label.into(),
+        kind: PanelKind::Lines(curves),
+        guides: Vec::new(),
+    }
+}
+
+/// One panel per link: the true attack S and its estimate Ŝ.
+fn attack_panels(s_hat: Vec<Envelope>, s_true: Vec<Envelope>) -> Vec<Panel> {
+    s_hat
         .into_iter()
-        .zip(a.s_true)
+        .zip(s_true)
         .enumerate()
         .map(|(i, (sh, st))| {
-            one(
+            line_panel(
                 &format!("link {}", i + 1),
                 "rad/s",
                 vec![
@@ -464,20 +543,25 @@ fn figures(a: AgentSeries, l: &Layout) -> Vec<Job> {
                 ],
             )
         })
-        .collect();
+        .collect()
+}
+
+/// The timeline's rows: attack in force, detection alarm and, if any, deadline misses; each
+/// interval still open at `end` closes there.
+fn timeline_bands(active: Intervals, alarm: Intervals, missed: Intervals, end: f64) -> Vec<Band> {
     let mut bands = vec![
         Band {
             label: "attack in force".into(),
             color: PALETTE[1],
-            intervals: a.active.finish(end),
+            intervals: active.finish(end),
         },
         Band {
             label: "detection alarm".into(),
             color: PALETTE[0],
-            intervals: a.alarm.finish(end),
+            intervals: alarm.finish(end),
         },
     ];
-    let missed = a.missed.finish(end);
+    let missed = missed.finish(end);
     if !missed.is_empty() {
         bands.push(Band {
             label: "deadline miss".into(),
@@ -485,86 +569,29 @@ fn figures(a: AgentSeries, l: &Layout) -> Vec<Job> {
             intervals: missed,
         });
     }
-    [
-        (
-            stem("position-error"),
-            fig(
-                "(a) position error",
-                vec![with(
-                    one("q_d − q (true q)", "rad", links("", a.pos)),
-                    pos_guide,
-                )],
-            ),
-            wide,
+    bands
+}
+
+/// The input delay τ(t) above the timeline of `bands`.
+fn delay_alarm_panels(tau_ms: Envelope, bands: Vec<Band>) -> Vec<Panel> {
+    vec![
+        line_panel(
+            "input delay τ(t)",
+            "ms",
+            vec![Line {
+                label: "τ".into(),
+                color: PALETTE[2],
+                points: tau_ms.finish(),
+                keep: true,
+            }],
         ),
-        (
-            stem("velocity-error"),
-            fig(
-                "(b) angular-velocity error",
-                vec![with(
-                    one("dq_d/dt − dq/dt (true velocity)", "rad/s", links("", a.vel)),
-                    vel_guide,
-                )],
-            ),
-            wide,
-        ),
-        (
-            stem("attack-estimate"),
-            fig(
-                &format!("(c) attack estimate Ŝ and true S = S₂ + β S₁ (β = {beta})"),
-                attack_panels,
-            ),
-            tall,
-        ),
-        (
-            stem("acceleration-error"),
-            fig(
-                "(d) acceleration-estimate error",
-                vec![one(
-                    "true acceleration − observer estimate",
-                    "rad/s²",
-                    links("", a.acc),
-                )],
-            ),
-            wide,
-        ),
-        (
-            stem("torque"),
-            fig(
-                "torque sent by the control center",
-                vec![one("u", "N·m", links("", a.u))],
-            ),
-            wide,
-        ),
-        (
-            stem("delay-alarm"),
-            fig(
-                "delay, attack and detection",
-                vec![
-                    one(
-                        "input delay τ(t)",
-                        "ms",
-                        vec![Line {
-                            label: "τ".into(),
-                            color: PALETTE[2],
-                            points: a.tau_ms.finish(),
-                            keep: true,
-                        }],
-                    ),
-                    Panel {
-                        title: "timeline".into(),
-                        y_label: String::new(),
-                        kind: PanelKind::Timeline(bands),
-                        guides: Vec::new(),
-                    },
-                ],
-            ),
-            (1000, 560),
-        ),
+        Panel {
+            title: "timeline".into(),
+            y_label: String::new(),
+            kind: PanelKind::Timeline(bands),
+            guides: Vec::new(),
+        },
     ]
-    .into_iter()
-    .map(|(stem, figure, size)| Job { stem, figure, size })
-    .collect()
 }
 
 /// Writes everything into `run_dir/report/`; returns the path of `report.md`.
@@ -709,6 +736,7 @@ fn fmt_opt_s(v: Option<f64>) -> String {
     v.map_or_else(|| "never".into(), |d| format!("{d:.3}"))
 }
 
+/// `report.md`: one section after the other.
 fn markdown(
     run_dir: &Path,
     r: &Resolved,
@@ -717,8 +745,19 @@ fn markdown(
     warnings: &[String],
     partial: Option<&str>,
 ) -> String {
-    let c = &r.scenario.controller;
     let mut md = String::new();
+    run_section(&mut md, run_dir, r, s);
+    notices(&mut md, s);
+    rmse_section(&mut md, run_dir, s);
+    detection_section(&mut md, s);
+    segments_section(&mut md, segments);
+    figures_section(&mut md, r, partial);
+    warnings_section(&mut md, warnings);
+    md
+}
+
+/// The title, where the run lives, and the table of its parameters.
+fn run_section(md: &mut String, run_dir: &Path, r: &Resolved, s: &RunSummary) {
     let _ = writeln!(md, "# Report of run `{}`\n", s.scenario);
     let _ = writeln!(
         md,
@@ -726,8 +765,19 @@ fn markdown(
         run_dir.display(),
         run_dir.display()
     );
-    md.push_str("| parameter | value |\n|---|---|\n");
-    let rows: [(&str, String); 11] = [
+    md.push_str(&md_table_head(&["parameter", "value"]));
+    for (k, v) in parameters(r, s) {
+        let _ = writeln!(md, "| {k} | {v} |");
+    }
+    if let Some(p) = &s.placement {
+        let _ = writeln!(md, "| processes | {p} |");
+    }
+}
+
+/// The rows of the parameter table: (parameter, value).
+fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 11] {
+    let c = &r.scenario.controller;
+    [
         ("scenario", s.scenario.clone()),
         ("engine", s.engine.clone()),
         ("clock", s.clock.clone()),
@@ -770,14 +820,11 @@ fn markdown(
                  it clipped and marked ▲▼ (see below)"
             ),
         ),
-    ];
-    for (k, v) in rows {
-        let _ = writeln!(md, "| {k} | {v} |");
-    }
-    if let Some(p) = &s.placement {
-        let _ = writeln!(md, "| processes | {p} |");
-    }
+    ]
+}
 
+/// What keeps the metrics from covering a whole run: a partial run, diverged robots, lost ones.
+fn notices(md: &mut String, s: &RunSummary) {
     if let Some(notice) = crate::output::partial_notice(s) {
         let _ = writeln!(md, "\n**{notice}.**");
     }
@@ -803,7 +850,10 @@ fn markdown(
             ),
         };
     }
+}
 
+/// The RMSE table: the run's `rmse.md` when it holds one, else the summary's.
+fn rmse_section(md: &mut String, run_dir: &Path, s: &RunSummary) {
     md.push_str("\n## RMSE\n\n");
     let stored = std::fs::read_to_string(run_dir.join("rmse.md")).ok();
     let table: Vec<&str> = stored
@@ -811,7 +861,11 @@ fn markdown(
         .map(|t| t.lines().filter(|l| l.starts_with('|')).collect())
         .unwrap_or_default();
     if table.is_empty() {
-        md.push_str("| robot | RMSE (rad) | max abs error (rad) |\n|---|---|---|\n");
+        md.push_str(&md_table_head(&[
+            "robot",
+            "RMSE (rad)",
+            "max abs error (rad)",
+        ]));
         for (id, m) in &s.metrics {
             let _ = writeln!(
                 md,
@@ -826,9 +880,16 @@ fn markdown(
         }
         md.push_str("\n(from [`rmse.md`](../rmse.md), also [`rmse.csv`](../rmse.csv))\n");
     }
+}
 
+/// The time to detect every attack onset, then false alarms and the other counts per robot.
+fn detection_section(md: &mut String, s: &RunSummary) {
     md.push_str("\n## Detection\n\n");
-    md.push_str("| robot | attack onset (s) | time to detect (s) |\n|---|---|---|\n");
+    md.push_str(&md_table_head(&[
+        "robot",
+        "attack onset (s)",
+        "time to detect (s)",
+    ]));
     for (id, m) in &s.metrics {
         if m.onsets.is_empty() {
             let _ = writeln!(md, "| {id} | none | |");
@@ -842,7 +903,17 @@ fn markdown(
             );
         }
     }
-    md.push_str("\n| robot | false alarms | alarm coverage of attacked ticks | rejected inputs | rejected torques | deadline misses | uncontrolled ticks | metrics cover |\n|---|---|---|---|---|---|---|---|\n");
+    md.push('\n');
+    md.push_str(&md_table_head(&[
+        "robot",
+        "false alarms",
+        "alarm coverage of attacked ticks",
+        "rejected inputs",
+        "rejected torques",
+        "deadline misses",
+        "uncontrolled ticks",
+        "metrics cover",
+    ]));
     for (id, m) in &s.metrics {
         let _ = writeln!(
             md,
@@ -857,7 +928,10 @@ fn markdown(
         );
     }
     md.push_str("\n(also [`detection.csv`](detection.csv))\n");
+}
 
+/// The error maxima of every attack segment that holds ticks.
+fn segments_section(md: &mut String, segments: &[(u32, Vec<SegmentStats>)]) {
     md.push_str("\n## Tracking error per attack segment\n\n");
     let _ = writeln!(
         md,
@@ -865,7 +939,15 @@ fn markdown(
          segment (the spike after a switch; for the first segment, the start-up) and over the rest of \
          it, and the RMS of ‖Ŝ − S‖ (rad/s), at the full tick rate. Also [`segments.csv`](segments.csv).\n"
     );
-    md.push_str("| robot | segment (s) | max \\|e\\| first 1 s | max \\|e\\| rest | max \\|ė\\| first 1 s | max \\|ė\\| rest | RMS ‖Ŝ − S‖ |\n|---|---|---|---|---|---|---|\n");
+    md.push_str(&md_table_head(&[
+        "robot",
+        "segment (s)",
+        "max \\|e\\| first 1 s",
+        "max \\|e\\| rest",
+        "max \\|ė\\| first 1 s",
+        "max \\|ė\\| rest",
+        "RMS ‖Ŝ − S‖",
+    ]));
     let list = |v: &[f64]| {
         v.iter()
             .map(|x| format!("{x:.4}"))
@@ -887,7 +969,10 @@ fn markdown(
             );
         }
     }
+}
 
+/// How the figures are drawn, then every robot's figures.
+fn figures_section(md: &mut String, r: &Resolved, partial: Option<&str>) {
     md.push_str("\n## Reading the figures\n\n");
     md.push_str(&figure_notes(r, partial));
     for a in &r.scenario.agents {
@@ -901,13 +986,16 @@ fn markdown(
             );
         }
     }
+}
+
+/// The warnings of the join and of the report's reading of the run, if any.
+fn warnings_section(md: &mut String, warnings: &[String]) {
     if !warnings.is_empty() {
         md.push_str("\n## Warnings\n\n");
         for w in warnings {
             let _ = writeln!(md, "* {w}");
         }
     }
-    md
 }
 
 /// How the figures were drawn, for `report.md`.

@@ -7,10 +7,11 @@ use std::process::ExitCode;
 use anyhow::{Context, Result};
 use clap::Args;
 use fdi_common::delay::DelayProfile;
+use fdi_common::engine::RunSummary;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 use serde::Serialize;
 
-use crate::output::csv_bytes;
+use crate::output::{csv_bytes, md_table_head};
 use crate::plot::{BarChart, PALETTE};
 use crate::run::{execute, Engine};
 use plotters::style::RGBColor;
@@ -76,7 +77,7 @@ fn run_case(
     args: &TableArgs,
     dir: &std::path::Path,
     case: &str,
-) -> Result<fdi_common::engine::RunSummary> {
+) -> Result<RunSummary> {
     match args.engine {
         Engine::Inproc => execute(r, args.engine, None, false, &Default::default()),
         Engine::Ipc => {
@@ -111,39 +112,71 @@ fn base(args: &TableArgs) -> Result<Resolved> {
     Ok(r)
 }
 
+/// The folder of one table: `<out>/<timestamp>-<name>`.
+fn table_dir(args: &TableArgs, name: &str) -> PathBuf {
+    args.out
+        .join(format!("{}-{name}", crate::output::timestamp()))
+}
+
+/// The RMSE of `robot` in a run, NaN when the run has none.
+fn robot_rmse(s: &RunSummary, robot: u32) -> f64 {
+    s.rmse_rad
+        .get(&robot.to_string())
+        .copied()
+        .unwrap_or(f64::NAN)
+}
+
 pub fn table1(args: &TableArgs) -> Result<ExitCode> {
     let paper = base(args)?;
-    let dir = args
-        .out
-        .join(format!("{}-table1", crate::output::timestamp()));
-    let mut results = Vec::new();
-    for mode in [ControllerMode::Traditional, ControllerMode::Proposed] {
+    let dir = table_dir(args, "table1");
+    let run_mode = |mode: ControllerMode| {
         let mut r = paper.clone();
         r.scenario.controller.mode = mode;
-        results.push(run_case(&r, args, &dir, mode.as_str())?);
-    }
-    let rows: Vec<Table1Row> = PAPER_TABLE1
+        run_case(&r, args, &dir, mode.as_str())
+    };
+    let traditional = run_mode(ControllerMode::Traditional)?;
+    let proposed = run_mode(ControllerMode::Proposed)?;
+    let rows = table1_rows(&traditional, &proposed);
+    let table = Table {
+        name: "table1",
+        md: table1_markdown(args.engine, &rows),
+        csv: table1_csv(&rows)?,
+        json: serde_json::json!({ "engine": args.engine.as_str(), "rows": rows }),
+        chart: table1_chart(args.engine, &rows),
+    };
+    table.publish(args, &dir)
+}
+
+/// Table I's rows: the paper's robots, their RMSE in the two runs beside the paper's.
+fn table1_rows(traditional: &RunSummary, proposed: &RunSummary) -> Vec<Table1Row> {
+    PAPER_TABLE1
         .iter()
         .map(|&(robot, pt, pp)| Table1Row {
             robot,
-            traditional_rmse_rad: results[0]
-                .rmse_rad
-                .get(&robot.to_string())
-                .copied()
-                .unwrap_or(f64::NAN),
-            proposed_rmse_rad: results[1]
-                .rmse_rad
-                .get(&robot.to_string())
-                .copied()
-                .unwrap_or(f64::NAN),
+            traditional_rmse_rad: robot_rmse(traditional, robot),
+            proposed_rmse_rad: robot_rmse(proposed, robot),
             paper_traditional: pt,
             paper_proposed: pp,
         })
-        .collect();
-    let mut md = format!("Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}\n\n", args.engine.as_str());
-    md.push_str("| robot | traditional | proposed | ratio | paper traditional | paper proposed | paper ratio |\n");
-    md.push_str("|---|---|---|---|---|---|---|\n");
-    for r in &rows {
+        .collect()
+}
+
+/// `table1.md` (without its leading `# `), as printed.
+fn table1_markdown(engine: Engine, rows: &[Table1Row]) -> String {
+    let mut md = format!(
+        "Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}\n\n",
+        engine.as_str()
+    );
+    md.push_str(&md_table_head(&[
+        "robot",
+        "traditional",
+        "proposed",
+        "ratio",
+        "paper traditional",
+        "paper proposed",
+        "paper ratio",
+    ]));
+    for r in rows {
         let _ = writeln!(
             md,
             "| {} | {:.4} | {:.4} | {:.2} | {:.3} | {:.3} | {:.2} |",
@@ -156,46 +189,41 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
             r.paper_traditional / r.paper_proposed
         );
     }
-    let json = serde_json::json!({ "engine": args.engine.as_str(), "rows": rows });
-    let chart = BarChart {
-        title: format!(
+    md
+}
+
+/// Table I's bar chart: per robot, each controller's RMSE beside the paper's.
+fn table1_chart(engine: Engine, rows: &[Table1Row]) -> BarChart {
+    let values = |f: fn(&Table1Row) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
+    rmse_chart(
+        format!(
             "Table I: RMSE per robot, this run ({} engine) beside the paper",
-            args.engine.as_str()
+            engine.as_str()
         ),
-        y_label: "RMSE (rad)".into(),
-        log_y: false,
-        categories: rows.iter().map(|r| format!("robot {}", r.robot)).collect(),
-        series: vec![
+        rows.iter().map(|r| format!("robot {}", r.robot)).collect(),
+        vec![
             (
                 "traditional".into(),
                 PALETTE[1],
-                rows.iter().map(|r| r.traditional_rmse_rad).collect(),
+                values(|r| r.traditional_rmse_rad),
             ),
             (
                 "paper traditional".into(),
                 PAPER_SHADE[1],
-                rows.iter().map(|r| r.paper_traditional).collect(),
+                values(|r| r.paper_traditional),
             ),
             (
                 "proposed".into(),
                 PALETTE[0],
-                rows.iter().map(|r| r.proposed_rmse_rad).collect(),
+                values(|r| r.proposed_rmse_rad),
             ),
             (
                 "paper proposed".into(),
                 PAPER_SHADE[0],
-                rows.iter().map(|r| r.paper_proposed).collect(),
+                values(|r| r.paper_proposed),
             ),
         ],
-    };
-    write_table(&dir, "table1", &md, &table1_csv(&rows)?, &json, &chart)?;
-    if args.json {
-        println!("{json}");
-    } else {
-        print!("{md}");
-        println!("\ntable written to {}", dir.display());
-    }
-    Ok(ExitCode::SUCCESS)
+    )
 }
 
 /// `table1.csv`: one row per robot.
@@ -236,35 +264,67 @@ fn table2_csv(rows: &[Table2Row]) -> Result<Vec<u8>> {
 /// Lighter shades of the palette's first two colours, for the paper's values.
 const PAPER_SHADE: [RGBColor; 2] = [RGBColor(140, 190, 225), RGBColor(240, 175, 135)];
 
-/// Writes `<name>.md`, `.csv`, `.json` and the bar chart (`.png`, `.svg`) into `dir`.
-fn write_table(
-    dir: &Path,
-    name: &str,
-    md: &str,
-    csv: &[u8],
-    json: &serde_json::Value,
-    chart: &BarChart,
-) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let write = |ext: &str, bytes: &[u8]| -> Result<()> {
-        let p = dir.join(format!("{name}.{ext}"));
-        std::fs::write(&p, bytes).with_context(|| format!("writing {}", p.display()))
-    };
-    write("md", format!("# {md}").as_bytes())?;
-    write("csv", csv)?;
-    write(
-        "json",
-        (serde_json::to_string_pretty(json)? + "\n").as_bytes(),
-    )?;
-    crate::plot::save_bars(chart, &dir.join(name), (900, 520))?;
-    Ok(())
+/// A bar chart of RMSE values, one group per category.
+fn rmse_chart(
+    title: String,
+    categories: Vec<String>,
+    series: Vec<(String, RGBColor, Vec<f64>)>,
+) -> BarChart {
+    BarChart {
+        title,
+        y_label: "RMSE (rad)".into(),
+        log_y: false,
+        categories,
+        series,
+    }
+}
+
+/// One table as written and printed.
+struct Table {
+    /// File stem: `table1`, `table2`.
+    name: &'static str,
+    /// The markdown, without the leading `# ` of its file.
+    md: String,
+    csv: Vec<u8>,
+    json: serde_json::Value,
+    chart: BarChart,
+}
+
+impl Table {
+    /// Writes the table into `dir` and prints it: its JSON with `--json`, else its markdown
+    /// and where it was written.
+    fn publish(&self, args: &TableArgs, dir: &Path) -> Result<ExitCode> {
+        self.write(dir)?;
+        if args.json {
+            println!("{}", self.json);
+        } else {
+            print!("{}", self.md);
+            println!("\ntable written to {}", dir.display());
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+
+    /// Writes `<name>.md`, `.csv`, `.json` and the bar chart (`.png`, `.svg`) into `dir`.
+    fn write(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let write = |ext: &str, bytes: &[u8]| -> Result<()> {
+            let p = dir.join(format!("{}.{ext}", self.name));
+            std::fs::write(&p, bytes).with_context(|| format!("writing {}", p.display()))
+        };
+        write("md", format!("# {}", self.md).as_bytes())?;
+        write("csv", &self.csv)?;
+        write(
+            "json",
+            (serde_json::to_string_pretty(&self.json)? + "\n").as_bytes(),
+        )?;
+        crate::plot::save_bars(&self.chart, &dir.join(self.name), (900, 520))?;
+        Ok(())
+    }
 }
 
 pub fn table2(args: &TableArgs) -> Result<ExitCode> {
     let paper = base(args)?;
-    let dir = args
-        .out
-        .join(format!("{}-table2", crate::output::timestamp()));
+    let dir = table_dir(args, "table2");
     let mut rows = Vec::new();
     for (case, delay, paper_rmse) in paper_table2() {
         let mut r = paper.clone().retain_agents(|a| a.id == 1);
@@ -275,29 +335,51 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
         rows.push(Table2Row {
             case,
             tau_ms: delay.describe_ms(),
-            rmse_rad: summary.rmse_rad.get("1").copied().unwrap_or(f64::NAN),
+            rmse_rad: robot_rmse(&summary, 1),
             paper_rmse_rad: paper_rmse,
         });
     }
-    let mut md = format!("Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}\n\n", args.engine.as_str());
-    md.push_str("| case | tau(t) (ms) | RMSE | paper RMSE |\n|---|---|---|---|\n");
-    for r in &rows {
+    let table = Table {
+        name: "table2",
+        md: table2_markdown(args.engine, &rows),
+        csv: table2_csv(&rows)?,
+        json: serde_json::json!({ "engine": args.engine.as_str(), "rows": rows }),
+        chart: table2_chart(args.engine, &rows),
+    };
+    table.publish(args, &dir)
+}
+
+/// `table2.md` (without its leading `# `), as printed.
+fn table2_markdown(engine: Engine, rows: &[Table2Row]) -> String {
+    let mut md = format!(
+        "Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}\n\n",
+        engine.as_str()
+    );
+    md.push_str(&md_table_head(&[
+        "case",
+        "tau(t) (ms)",
+        "RMSE",
+        "paper RMSE",
+    ]));
+    for r in rows {
         let _ = writeln!(
             md,
             "| {} | {} | {:.4} | {:.4} |",
             r.case, r.tau_ms, r.rmse_rad, r.paper_rmse_rad
         );
     }
-    let json = serde_json::json!({ "engine": args.engine.as_str(), "rows": rows });
-    let chart = BarChart {
-        title: format!(
+    md
+}
+
+/// Table II's bar chart: per delay case, this run's RMSE beside the paper's.
+fn table2_chart(engine: Engine, rows: &[Table2Row]) -> BarChart {
+    rmse_chart(
+        format!(
             "Table II: RMSE of robot 1 per delay, this run ({} engine) beside the paper",
-            args.engine.as_str()
+            engine.as_str()
         ),
-        y_label: "RMSE (rad)".into(),
-        log_y: false,
-        categories: rows.iter().map(|r| r.case.to_string()).collect(),
-        series: vec![
+        rows.iter().map(|r| r.case.to_string()).collect(),
+        vec![
             (
                 "this run".into(),
                 PALETTE[0],
@@ -309,15 +391,7 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
                 rows.iter().map(|r| r.paper_rmse_rad).collect(),
             ),
         ],
-    };
-    write_table(&dir, "table2", &md, &table2_csv(&rows)?, &json, &chart)?;
-    if args.json {
-        println!("{json}");
-    } else {
-        print!("{md}");
-        println!("\ntable written to {}", dir.display());
-    }
-    Ok(ExitCode::SUCCESS)
+    )
 }
 
 #[cfg(test)]
