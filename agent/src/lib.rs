@@ -198,20 +198,20 @@ pub fn run<X: Transport, const N: usize>(
     if let Some(k) = stopped_at {
         return Ok(Outcome::Stopped { ticks: k });
     }
-    if inflow.refused > 0 {
+    let note = (inflow.refused > 0).then(|| {
         let message = format!(
             "{} torque messages refused (wrong agent, dof, sequence or stamp)",
             inflow.refused
         );
-        trace.write(&TraceRecord::Event {
-            t: s.duration_s,
-            message,
-        })?;
-    }
-    trace.flush()?;
-    ports
-        .launcher
-        .done_and_hold(ticks, &ports.waker, shutdown)?;
+        (s.duration_s, message)
+    });
+    process::finish(
+        trace,
+        note,
+        ticks,
+        (&ports.launcher, &ports.waker),
+        shutdown,
+    )?;
     Ok(Outcome::Completed {
         ticks,
         deadline_misses: plant.deadline_misses,

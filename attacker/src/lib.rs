@@ -13,11 +13,11 @@ use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
     monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, Transport,
-    Wake, Waker as _,
+    Wake,
 };
 use fdi_runtime::process::{
     self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
-    LIVENESS_CHECK, LOST_AFTER_NS,
+    LOST_AFTER_NS,
 };
 
 /// Errors of the attacker process.
@@ -169,22 +169,21 @@ pub fn run<X: Transport, const N: usize>(
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(refused);
         }
-        if realtime {
-            ports.waker.wait_precise(LIVENESS_CHECK)?;
-        } else {
-            strategy.wait(&ports.waker, &ports.measurement)?;
-        }
+        strategy.wait_for_input(s.clock, &ports.waker, &ports.measurement)?;
     }
-    if refused > 0 {
-        trace.write(&TraceRecord::Event {
-            t: s.duration_s,
-            message: format!("{refused} measurement messages refused"),
-        })?;
-    }
-    trace.flush()?;
-    ports
-        .launcher
-        .done_and_hold(ticks, &ports.waker, shutdown)?;
+    let note = (refused > 0).then(|| {
+        (
+            s.duration_s,
+            format!("{refused} measurement messages refused"),
+        )
+    });
+    process::finish(
+        trace,
+        note,
+        ticks,
+        (&ports.launcher, &ports.waker),
+        shutdown,
+    )?;
     Ok(refused)
 }
 

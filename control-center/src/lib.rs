@@ -13,11 +13,11 @@ use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
     monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, StatusMsg, Stream,
-    TorqueMsg, Transport, Wake, Waker as _,
+    TorqueMsg, Transport, Wake,
 };
 use fdi_runtime::process::{
     self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
-    LIVENESS_CHECK, LOST_AFTER_NS,
+    LOST_AFTER_NS,
 };
 
 /// Errors of the control-center process.
@@ -110,6 +110,51 @@ fn control<X: Transport, const N: usize>(
     Ok(())
 }
 
+/// Records and reports that agent `id`, declared lost, is heard from again at tick `k` after
+/// `silent_ns` of silence.
+fn announce_rejoined<X: Transport>(
+    id: u32,
+    silent_ns: u64,
+    k: u64,
+    dt: f64,
+    ports: &Ports<X>,
+    trace: &mut TraceWriter,
+) -> Result<(), CenterError> {
+    let message = format!(
+        "agent {id} rejoined at tick {k} after {:.1} ms of silence; controlled again",
+        silent_ns as f64 / 1e6
+    );
+    trace.write(&TraceRecord::Event {
+        t: tick_time(k, dt),
+        message,
+    })?;
+    ports.launcher.report_rejoined(id, k)?;
+    Ok(())
+}
+
+/// Reports progress to the launcher, over the agents controlled now, every
+/// [`PROGRESS_EVERY`] ticks and at the end.
+fn report_progress<X: Transport, const N: usize>(
+    slots: &[Slot<N>],
+    liveness: &Liveness,
+    reported: &mut u64,
+    ticks: u64,
+    ports: &Ports<X>,
+) -> Result<(), CenterError> {
+    let done = slots
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| !liveness.is_lost(*i))
+        .map(|(_, x)| x.next)
+        .min()
+        .unwrap_or(0);
+    if done >= *reported + PROGRESS_EVERY || done >= ticks {
+        *reported = done;
+        ports.launcher.report(StatusMsg::PROGRESS, done)?;
+    }
+    Ok(())
+}
+
 /// Realtime: records and reports every agent silent for [`LOST_AFTER_NS`] as lost (the
 /// others stay controlled).
 fn declare_lost<X: Transport, const N: usize>(
@@ -142,12 +187,15 @@ pub fn run<X: Transport, const N: usize>(
     trace: &mut TraceWriter,
 ) -> Result<u64, CenterError> {
     let s = &resolved.scenario;
-    let mut slots = Vec::with_capacity(s.agents.len());
-    for a in &s.agents {
-        let center =
-            CenterAgent::<N>::new(CenterParams::new(a, s)).ok_or(CenterError::Dof(a.id))?;
-        slots.push(Slot { center, next: 0 });
-    }
+    let mut slots = s
+        .agents
+        .iter()
+        .map(|a| {
+            CenterAgent::<N>::new(CenterParams::new(a, s))
+                .map(|center| Slot { center, next: 0 })
+                .ok_or(CenterError::Dof(a.id))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
     let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?
@@ -198,34 +246,15 @@ pub fn run<X: Transport, const N: usize>(
             }
         }
         for (i, silent, k) in rejoined.drain(..) {
-            let id = slots[i].center.agent_id();
-            let message = format!(
-                "agent {id} rejoined at tick {k} after {:.1} ms of silence; controlled again",
-                silent as f64 / 1e6
-            );
-            trace.write(&TraceRecord::Event {
-                t: tick_time(k, dt),
-                message,
-            })?;
-            ports.launcher.report_rejoined(id, k)?;
+            announce_rejoined(slots[i].center.agent_id(), silent, k, dt, ports, trace)?;
         }
         let now = monotonic_ns();
         if realtime {
             declare_lost(&slots, &mut liveness, now, ticks, dt, ports, trace)?;
         }
-        // Progress over the agents controlled now; the end once every agent finished, or is
-        // lost past the run's wall-clock end (until then a lost agent may rejoin).
-        let done = slots
-            .iter()
-            .enumerate()
-            .filter(|(i, _)| !liveness.is_lost(*i))
-            .map(|(_, x)| x.next)
-            .min()
-            .unwrap_or(0);
-        if done >= reported + PROGRESS_EVERY || done >= ticks {
-            reported = done;
-            ports.launcher.report(StatusMsg::PROGRESS, done)?;
-        }
+        report_progress(&slots, &liveness, &mut reported, ticks, ports)?;
+        // The end once every agent finished, or is lost past the run's wall-clock end (until
+        // then a lost agent may rejoin).
         if slots
             .iter()
             .enumerate()
@@ -236,20 +265,22 @@ pub fn run<X: Transport, const N: usize>(
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(refused);
         }
-        if realtime {
-            ports.waker.wait_precise(LIVENESS_CHECK)?;
-        } else {
-            strategy.wait(&ports.waker, &ports.tampered)?;
-        }
+        strategy.wait_for_input(s.clock, &ports.waker, &ports.tampered)?;
     }
     let rejected: u64 = slots.iter().map(|x| x.center.rejected_inputs).sum();
-    if refused > 0 || rejected > 0 {
-        trace.write(&TraceRecord::Event { t: s.duration_s, message: format!("{refused} messages refused, {rejected} measurements rejected as non-finite or absurd") })?;
-    }
-    trace.flush()?;
-    ports
-        .launcher
-        .done_and_hold(ticks, &ports.waker, shutdown)?;
+    let note = (refused > 0 || rejected > 0).then(|| {
+        let message = format!(
+            "{refused} messages refused, {rejected} measurements rejected as non-finite or absurd"
+        );
+        (s.duration_s, message)
+    });
+    process::finish(
+        trace,
+        note,
+        ticks,
+        (&ports.launcher, &ports.waker),
+        shutdown,
+    )?;
     Ok(refused)
 }
 

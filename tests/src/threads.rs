@@ -197,45 +197,125 @@ fn relay(
         .expect("done");
 }
 
-/// Runs `run`: every role on a thread of its own, this thread in the launcher's place.
-pub fn run(run: ThreadRun, tag: &str) -> ThreadOutcome {
-    let ThreadRun {
-        resolved,
-        middle,
-        forged_torques,
-    } = run;
-    let dir = Scratch::new(tag);
-    let prefix = format!("fdithr{}_{tag}_", std::process::id());
-    // This node creates the run's services first, with room for the forger's publishers.
-    let launcher = Local::open(
-        &prefix,
-        "launcher",
-        process::sizing_for(&resolved).with_taps(1),
-    )
-    .expect("launcher node");
-    let control = launcher
-        .publisher::<ControlMsg>(Stream::Control)
-        .expect("control");
-    let status = launcher
-        .subscriber::<StatusMsg>(Stream::Status)
-        .expect("status");
-    let waker = launcher.waker(Wake::Launcher).expect("launcher waker");
-    let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
-    let forgers: Vec<_> = ids
-        .iter()
-        .map(|id| {
-            launcher
-                .publisher::<TorqueMsg>(Stream::Torque(*id))
-                .expect("forger")
-        })
-        .collect();
-    let shutdown = Shutdown::manual();
+type RoleThread = std::thread::JoinHandle<Result<(), String>>;
 
+/// The launcher's side of a threaded run: its node creates the run's services first, with
+/// room for the forger's publishers on the agents' torque channels.
+struct Coordinator {
+    control: <Local as Transport>::Outbox<ControlMsg>,
+    status: <Local as Transport>::Inbox<StatusMsg>,
+    waker: <Local as Transport>::Waker,
+    forgers: Vec<(u32, <Local as Transport>::Outbox<TorqueMsg>)>,
+    bells: Vec<<Local as Transport>::Bell>,
+    node: Local,
+}
+
+impl Coordinator {
+    fn open(prefix: &str, resolved: &Resolved) -> Self {
+        let node = Local::open(
+            prefix,
+            "launcher",
+            process::sizing_for(resolved).with_taps(1),
+        )
+        .expect("launcher node");
+        let forgers = resolved
+            .scenario
+            .agents
+            .iter()
+            .map(|a| {
+                let port = node
+                    .publisher::<TorqueMsg>(Stream::Torque(a.id))
+                    .expect("forger");
+                (a.id, port)
+            })
+            .collect();
+        Self {
+            control: node
+                .publisher::<ControlMsg>(Stream::Control)
+                .expect("control"),
+            status: node
+                .subscriber::<StatusMsg>(Stream::Status)
+                .expect("status"),
+            waker: node.waker(Wake::Launcher).expect("launcher waker"),
+            forgers,
+            bells: Vec::new(),
+            node,
+        }
+    }
+
+    /// Waits until every role of `threads` reported `kind`; false when, waiting for ready, a
+    /// role ended first (it failed: the join shows why).
+    fn wait_for(&self, kind: u32, what: &str, threads: &[RoleThread]) -> bool {
+        let began = Instant::now();
+        let mut got = 0;
+        while got < threads.len() {
+            assert!(
+                began.elapsed() < LIMIT,
+                "{got} of {} roles {what}",
+                threads.len()
+            );
+            if kind == StatusMsg::READY && threads.iter().any(|t| t.is_finished()) {
+                return false;
+            }
+            self.waker
+                .wait(Duration::from_millis(20))
+                .expect("launcher wait");
+            self.status
+                .drain(|m| got += usize::from(m.kind == kind))
+                .expect("status");
+        }
+        true
+    }
+
+    /// Sends `command` to every role and wakes them (the bells are made at the start, once
+    /// every role's waker exists).
+    fn broadcast(&mut self, command: u32, ids: &[u32]) {
+        if self.bells.is_empty() {
+            for wake in [Wake::Center, Wake::Attacker]
+                .into_iter()
+                .chain(ids.iter().map(|id| Wake::Agent(*id)))
+            {
+                self.bells.push(self.node.notifier(wake).expect("bell"));
+            }
+        }
+        self.control
+            .send(ControlMsg {
+                command,
+                reserved: 0,
+                epoch_ns: monotonic_ns(),
+            })
+            .expect("control message");
+        for b in &self.bells {
+            b.ring().expect("ring");
+        }
+    }
+
+    fn forge(&self, forged: &[(u32, TorqueMsg)]) {
+        for (i, (id, m)) in forged.iter().enumerate() {
+            let (_, port) = self
+                .forgers
+                .iter()
+                .find(|(a, _)| a == id)
+                .expect("forged torque for a known agent");
+            port.send(*m)
+                .unwrap_or_else(|e| panic!("forged torque {i}: {e}"));
+        }
+    }
+}
+
+/// Starts every role on a thread of its own (the attacker's place taken by `middle`).
+fn spawn_roles(
+    prefix: &str,
+    resolved: &Resolved,
+    dir: &Path,
+    shutdown: &Shutdown,
+    middle: Middle,
+) -> Vec<RoleThread> {
     let spawn = |work: Box<RoleWork>| {
         let (p, r, d, s) = (
-            prefix.clone(),
+            prefix.to_string(),
             resolved.clone(),
-            dir.0.clone(),
+            dir.to_path_buf(),
             shutdown.clone(),
         );
         std::thread::spawn(move || work(&p, &r, &d, &s))
@@ -262,7 +342,8 @@ pub fn run(run: ThreadRun, tag: &str) -> ThreadOutcome {
             }
         })),
     ];
-    for id in ids.clone() {
+    for a in &resolved.scenario.agents {
+        let id = a.id;
         threads.push(spawn(Box::new(move |p, r, d, s| {
             let ports = fdi_agent::Ports::<Local>::open(p, id, r).expect("agent ports");
             let mut trace = writer(d, &format!("agent-{id}"), r);
@@ -271,77 +352,38 @@ pub fn run(run: ThreadRun, tag: &str) -> ThreadOutcome {
                 .map_err(|e| format!("agent {id}: {e}"))
         })));
     }
+    threads
+}
 
-    // Ready: every role's ports exist. A role that ends before it reported (it failed) ends
-    // the wait, and its error is shown by the join.
-    let roles = threads.len();
-    let wait_for =
-        |kind: u32, what: &str, threads: &[std::thread::JoinHandle<Result<(), String>>]| {
-            let began = Instant::now();
-            let mut got = 0;
-            while got < roles {
-                assert!(began.elapsed() < LIMIT, "{got} of {roles} roles {what}");
-                if kind == StatusMsg::READY && threads.iter().any(|t| t.is_finished()) {
-                    return false;
-                }
-                waker
-                    .wait(Duration::from_millis(20))
-                    .expect("launcher wait");
-                status
-                    .drain(|m| got += usize::from(m.kind == kind))
-                    .expect("status");
-            }
-            true
-        };
-    if !wait_for(StatusMsg::READY, "ready", &threads) {
+/// Runs `run`: every role on a thread of its own, this thread in the launcher's place.
+pub fn run(run: ThreadRun, tag: &str) -> ThreadOutcome {
+    let ThreadRun {
+        resolved,
+        middle,
+        forged_torques,
+    } = run;
+    let dir = Scratch::new(tag);
+    let prefix = format!("fdithr{}_{tag}_", std::process::id());
+    let mut coordinator = Coordinator::open(&prefix, &resolved);
+    let shutdown = Shutdown::manual();
+    let threads = spawn_roles(&prefix, &resolved, &dir.0, &shutdown, middle);
+    if !coordinator.wait_for(StatusMsg::READY, "ready", &threads) {
         shutdown.request();
         join(threads);
         panic!("a role ended before it was ready");
     }
-    for (i, (id, m)) in forged_torques.iter().enumerate() {
-        let slot = ids
-            .iter()
-            .position(|x| x == id)
-            .expect("forged torque for a known agent");
-        forgers[slot]
-            .send(*m)
-            .unwrap_or_else(|e| panic!("forged torque {i}: {e}"));
-    }
-    let mut bells = vec![
-        launcher.notifier(Wake::Center).expect("bell"),
-        launcher.notifier(Wake::Attacker).expect("bell"),
-    ];
-    for id in &ids {
-        bells.push(launcher.notifier(Wake::Agent(*id)).expect("bell"));
-    }
-    control
-        .send(ControlMsg {
-            command: ControlMsg::START,
-            reserved: 0,
-            epoch_ns: monotonic_ns(),
-        })
-        .expect("start");
-    for b in &bells {
-        b.ring().expect("ring");
-    }
-    wait_for(StatusMsg::DONE, "done", &threads);
+    let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
+    coordinator.forge(&forged_torques);
+    coordinator.broadcast(ControlMsg::START, &ids);
+    coordinator.wait_for(StatusMsg::DONE, "done", &threads);
     // As the launcher: the stop that lets the finished roles go.
-    control
-        .send(ControlMsg {
-            command: ControlMsg::STOP,
-            reserved: 0,
-            epoch_ns: 0,
-        })
-        .expect("stop");
-    for b in &bells {
-        b.ring().expect("ring");
-    }
+    coordinator.broadcast(ControlMsg::STOP, &ids);
     join(threads);
     ThreadOutcome { dir }
 }
 
 /// Joins every role thread; fails the test with the first role's error.
-fn join(threads: Vec<std::thread::JoinHandle<Result<(), String>>>) {
+fn join(threads: Vec<RoleThread>) {
     let errors: Vec<String> = threads
         .into_iter()
         .filter_map(|t| match t.join() {

@@ -126,6 +126,24 @@ impl<X: Transport> LauncherLink<X> {
     }
 }
 
+/// The end every role shares: `note` (what it refused, if anything) on record at `t_end`, its
+/// trace flushed, then done reported and its ports held until the launcher's stop
+/// ([`LauncherLink::done_and_hold`]).
+pub fn finish<X: Transport>(
+    trace: &mut fdi_common::trace::TraceWriter,
+    note: Option<(f64, String)>,
+    ticks: u64,
+    conn: (&LauncherLink<X>, &X::Waker),
+    shutdown: &Shutdown,
+) -> Result<(), RoleError> {
+    if let Some((t, message)) = note {
+        trace.write(&fdi_common::trace::TraceRecord::Event { t, message })?;
+    }
+    trace.flush()?;
+    conn.0.done_and_hold(ticks, conn.1, shutdown)?;
+    Ok(())
+}
+
 /// Everything a process opens on the transport at start-up. Fields drop in order: the ports
 /// before the node.
 #[derive(Debug)]

@@ -21,7 +21,7 @@ mod wait;
 pub use admission::{admit_measurement, admit_torque};
 pub use args::ProcessArgs;
 pub use launcher::{
-    connect, node_name, sizing_for, start, trace_header, Connection, LauncherLink, Start,
+    connect, finish, node_name, sizing_for, start, trace_header, Connection, LauncherLink, Start,
     HOLD_LIMIT,
 };
 pub use liveness::{realtime_end_ns, Liveness, LIVENESS_CHECK, LOST_AFTER_NS};

@@ -60,4 +60,21 @@ impl WaitStrategy {
         // this strategy waits exactly as they do.
         waker.wait_precise(WAIT_SLICE)
     }
+
+    /// How a relay of measurements (attacker, control center) waits for its next input: in
+    /// realtime it wakes at each arrival and at least every [`crate::process::LIVENESS_CHECK`]
+    /// (to notice a silent agent); in lockstep as [`Self::wait`].
+    pub fn wait_for_input<T: Payload>(
+        &self,
+        clock: fdi_common::scenario::ClockMode,
+        waker: &impl Waker,
+        inbox: &impl Inbox<T>,
+    ) -> Result<bool, IpcError> {
+        match clock {
+            fdi_common::scenario::ClockMode::Realtime => {
+                waker.wait_precise(crate::process::LIVENESS_CHECK)
+            }
+            fdi_common::scenario::ClockMode::Lockstep => self.wait(waker, inbox),
+        }
+    }
 }
