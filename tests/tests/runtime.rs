@@ -85,6 +85,48 @@ fn three_link_lockstep_ipc_digest_equals_the_in_process_digest() {
     assert_eq!(joints, Some(3));
 }
 
+/// The transforms of the clean signal over the real processes: a profile with a scale, a sign
+/// flip and a freeze in force at once gives the in-process digest over IPC in lockstep.
+#[test]
+fn transform_attacks_over_ipc_equal_the_in_process_digest() {
+    let dir = Scratch::new("transforms");
+    let profile = dir.0.join("transforms.toml");
+    let channel = |signal: &str, link: u32, kind: &str| {
+        format!(
+            "[[channels]]\nagent = {link}\nsignal = \"{signal}\"\nlinks = [{link}]\nunits = \"rad\"\nsegments = [{{ from_s = 0.4, waveform = {kind} }}]\n"
+        )
+    };
+    let text = [
+        channel("position", 1, "{ kind = \"scale\", factor = 0.9 }"),
+        channel("velocity", 2, "{ kind = \"sign-flip\" }"),
+        channel("position", 2, "{ kind = \"freeze\" }"),
+    ]
+    .concat();
+    std::fs::write(&profile, format!("name = \"transforms\"\n{text}")).expect("profile");
+    let profile = profile.to_string_lossy().into_owned();
+    let run = |engine: &str| {
+        let args = [
+            "run",
+            "--attack",
+            &profile,
+            "--duration-s",
+            "1.5",
+            "--json",
+            "--engine",
+            engine,
+        ];
+        json(&launch(&args, dir.0.as_path(), WATCHDOG))
+    };
+    let (ipc, inproc) = (run("ipc"), run("inproc"));
+    assert_eq!(ipc["attack"], "transforms");
+    assert_eq!(ipc["trace_digest"], inproc["trace_digest"]);
+    assert_eq!(ipc["rmse_rad"], inproc["rmse_rad"]);
+    for robot in ["1", "2"] {
+        let onsets = ipc["metrics"][robot]["onsets"].as_array().map(Vec::len);
+        assert_eq!(onsets, Some(1), "robot {robot}: one onset at 0.4 s");
+    }
+}
+
 #[test]
 fn two_runs_at_once_do_not_interfere() {
     let dir = Scratch::new("concurrent");

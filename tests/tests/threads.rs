@@ -1,7 +1,7 @@
 //! The agent, attacker and control-center loops as threads over the in-process transport: the
 //! runtime's own code (lookahead, sequence tracking, admission), no binary spawned.
 
-use fdi_common::attack::AttackProfile;
+use fdi_common::attack::{presets, AttackProfile};
 use fdi_common::scenario::{self, Resolved};
 use fdi_tests::threads::{self, inproc_records, Middle, ThreadRun};
 
@@ -145,4 +145,41 @@ fn the_agent_refuses_forged_torques() {
         "{:?}",
         out.events("agent-2")
     );
+}
+
+/// Each transform of the clean signal (scale, sign flip, freeze), moved to start 0.3 s into a
+/// 1 s run: the threaded roles equal the in-process engine bit for bit, and the attack changes
+/// the run.
+#[test]
+fn each_transform_attack_is_bit_identical_between_threads_and_in_process() {
+    let (_, clean_digest) = inproc_records(&{
+        let mut r = paper(1.0);
+        r.attack = AttackProfile::default();
+        r
+    });
+    for name in ["scale", "sign-flip", "freeze"] {
+        let mut r = paper(1.0);
+        let mut profile = presets::preset(name).expect("shipped preset");
+        for seg in profile
+            .channels
+            .iter_mut()
+            .flat_map(|c| c.segments.iter_mut())
+        {
+            seg.from_s -= 9.7;
+        }
+        r.attack = profile;
+        let (records, expected) = inproc_records(&r);
+        assert_ne!(expected, clean_digest, "{name}: the attack changes the run");
+        let attacked = records.iter().filter(|x| x.attack.active).count();
+        assert!(attacked >= 600, "{name}: {attacked} attacked agent-ticks");
+        let out = threads::run(
+            ThreadRun {
+                resolved: r.clone(),
+                middle: Middle::Attacker,
+                forged_torques: Vec::new(),
+            },
+            name,
+        );
+        assert_eq!(out.digest(&r), expected, "{name}");
+    }
 }

@@ -3,7 +3,9 @@
 //! A profile is a list of channels; a channel targets one agent, one signal (position or
 //! velocity) and one or more links, and holds a time schedule of segments, each a
 //! [`Waveform`]. A segment is in force from its `from_s` until the next segment begins.
-//! Channels that target the same signal and link add up.
+//! Channels that target the same signal and link add up: every waveform, the transforms of the
+//! clean signal (scale, sign flip, freeze) and replay included, is an injection `α` added to the
+//! clean value, and `α` is what the attacker records.
 
 pub mod presets;
 pub mod waveform;
@@ -150,6 +152,8 @@ struct LinkChannel {
     rng: ChaCha12Rng,
     /// Per segment, what a `replay` segment recorded (empty for the other waveforms).
     recordings: Vec<Recording>,
+    /// Per segment, the clean value a `freeze` segment holds, from its first tick on.
+    frozen: Vec<Option<f64>>,
     /// The clean value of this signal and link at the last [`AgentAttack::observe`], rad or
     /// rad/s.
     clean: f64,
@@ -188,16 +192,21 @@ impl LinkChannel {
 pub struct Injection<const N: usize> {
     pub position: Vector<N>,
     pub velocity: Vector<N>,
+    /// A transforming segment (scale, sign flip, freeze) is in force on some link.
+    pub transforming: bool,
 }
 
 impl<const N: usize> Injection<N> {
-    /// The attack is in force: the injected value is non-zero on some link of either signal.
-    /// Every rising edge of this is an attack onset (a pulse train has one per pulse).
+    /// The attack is in force: the injected value is non-zero on some link of either signal, or
+    /// a transforming segment is in force. Every rising edge of this is an attack onset (a
+    /// pulse train has one per pulse).
     pub fn in_force(&self) -> bool {
-        self.position
-            .iter()
-            .chain(self.velocity.iter())
-            .any(|x| *x != 0.0)
+        self.transforming
+            || self
+                .position
+                .iter()
+                .chain(self.velocity.iter())
+                .any(|x| *x != 0.0)
     }
 }
 
@@ -227,6 +236,7 @@ impl AgentAttack {
                     link: (link as usize).saturating_sub(1),
                     scale: ch.units.to_rad(),
                     recordings: vec![Recording::default(); segments.len()],
+                    frozen: vec![None; segments.len()],
                     segments,
                     rng: stream(run_seed, agent_id, Purpose::AttackNoise { channel }),
                     clean: 0.0,
@@ -237,7 +247,9 @@ impl AgentAttack {
     }
 
     /// Shows the attacker the clean measurement of time `t`, before [`Self::injection`] of the
-    /// same tick: `replay` channels record it inside their window and play back against it.
+    /// same tick: `replay` channels record it inside their window and play back against it, a
+    /// `freeze` segment in force keeps the value of its first tick, and the other transforms
+    /// act on it.
     pub fn observe<const N: usize>(&mut self, t: f64, clean: &Measurement<N>) {
         for ch in &mut self.channels {
             if ch.link >= N {
@@ -248,6 +260,11 @@ impl AgentAttack {
                 Signal::Velocity => clean.yd[ch.link],
             };
             ch.clean = v;
+            if let Some(i) = ch.segment_index(t) {
+                if ch.segments[i].waveform == Waveform::Freeze && ch.frozen[i].is_none() {
+                    ch.frozen[i] = Some(v);
+                }
+            }
             for (seg, rec) in ch.segments.iter().zip(&mut ch.recordings) {
                 if let Some((from, to)) = seg.waveform.replay_window() {
                     if from <= t && t < to {
@@ -266,6 +283,7 @@ impl AgentAttack {
         let mut inj = Injection {
             position: Vector::<N>::zeros(),
             velocity: Vector::<N>::zeros(),
+            transforming: false,
         };
         for ch in &mut self.channels {
             let Some(i) = ch.segment_index(t) else {
@@ -275,10 +293,17 @@ impl AgentAttack {
             if ch.link >= N {
                 continue;
             }
+            inj.transforming |= seg.waveform.transforms();
             let v = match seg.waveform {
                 Waveform::Replay { .. } => ch.recordings[i]
                     .played(t - seg.from_s)
                     .map_or(0.0, |r| r - ch.clean),
+                Waveform::Scale { factor } => waveform::transform::scale(ch.clean, factor),
+                Waveform::SignFlip => waveform::transform::sign_flip(ch.clean),
+                // Observed at this tick or before: never missing once the segment is in force.
+                Waveform::Freeze => {
+                    ch.frozen[i].map_or(0.0, |h| waveform::transform::freeze(ch.clean, h))
+                }
                 w => ch.scale * w.value(t, seg.from_s, &mut ch.rng),
             };
             match ch.signal {
@@ -322,6 +347,74 @@ mod tests {
             "sin 0 = 0: not yet in force"
         );
         assert!(a.injection::<2>(0.001).in_force());
+    }
+
+    fn clean(y: [f64; 2], yd: [f64; 2]) -> Measurement<2> {
+        Measurement {
+            y: Vector::<2>::from(y),
+            yd: Vector::<2>::from(yd),
+        }
+    }
+
+    /// The shipped transform presets: scale, sign flip and freeze act on the clean signal of
+    /// their segment only, and are in force for the whole segment (a scaled zero injects zero).
+    #[test]
+    fn transform_presets_act_on_the_clean_signal_during_their_segment() {
+        let tamper = |a: &mut AgentAttack, t: f64, m: &Measurement<2>| {
+            a.observe(t, m);
+            let inj = a.injection::<2>(t);
+            (m.y + inj.position, m.yd + inj.velocity, inj.in_force())
+        };
+        let scale = presets::preset("scale").expect("scale preset");
+        assert!(scale.problems(&dofs()).is_empty());
+        let mut a = AgentAttack::compile(&scale, 1, 1);
+        let m = clean([0.4, -0.2], [0.1, 0.3]);
+        assert_eq!(tamper(&mut a, 9.999, &m), (m.y, m.yd, false));
+        let (y, yd, on) = tamper(&mut a, 15.0, &m);
+        assert!((y[0] - 1.05 * 0.4).abs() < 1e-15 && (y[1] + 1.05 * 0.2).abs() < 1e-15);
+        assert_eq!((yd, on), (m.yd, true));
+        let zero = clean([0.0, 0.0], [0.0, 0.0]);
+        assert_eq!(tamper(&mut a, 15.001, &zero), (zero.y, zero.yd, true));
+        assert_eq!(tamper(&mut a, 20.0, &m), (m.y, m.yd, false));
+
+        let flip = presets::preset("sign-flip").expect("sign-flip preset");
+        let mut a = AgentAttack::compile(&flip, 1, 1);
+        let (y, yd, on) = tamper(&mut a, 11.0, &m);
+        assert_eq!((y, yd[0], yd[1], on), (m.y, -0.1, 0.3, true));
+        assert!(!tamper(&mut a, 12.0, &m).2);
+
+        let freeze = presets::preset("freeze").expect("freeze preset");
+        let mut a = AgentAttack::compile(&freeze, 1, 1);
+        let before = clean([0.9, 0.8], [0.7, 0.6]);
+        assert_eq!(tamper(&mut a, 9.999, &before), (before.y, before.yd, false));
+        let (y, yd, on) = tamper(&mut a, 10.0, &m);
+        assert_eq!(
+            (y, yd, on),
+            (m.y, m.yd, true),
+            "the first tick is the held value"
+        );
+        let later = clean([0.45, -0.25], [0.15, 0.35]);
+        let (y, yd, _) = tamper(&mut a, 14.0, &later);
+        for (got, held) in y.iter().chain(yd.iter()).zip(m.y.iter().chain(m.yd.iter())) {
+            assert!((got - held).abs() < 1e-15, "{got} vs {held}");
+        }
+        assert_eq!(tamper(&mut a, 20.0, &later), (later.y, later.yd, false));
+    }
+
+    #[test]
+    fn a_scale_factor_must_be_finite() {
+        let text = r#"
+            [[channels]]
+            agent = 1
+            signal = "position"
+            links = [1]
+            units = "rad"
+            segments = [{ from_s = 1.0, waveform = { kind = "scale", factor = inf } }]
+        "#;
+        let p: AttackProfile = toml::from_str(text).expect("parses");
+        let problems = p.problems(&dofs());
+        assert_eq!(problems.len(), 1, "{problems:?}");
+        assert_eq!(problems[0].0, "channels[0].segments[0].waveform.factor");
     }
 
     #[test]

@@ -14,6 +14,18 @@ pub const PRESETS: &[(&str, &str)] = &[
         include_str!("../../../scenarios/attacks/paper-linkwise.toml"),
     ),
     ("none", include_str!("../../../scenarios/attacks/none.toml")),
+    (
+        "scale",
+        include_str!("../../../scenarios/attacks/scale.toml"),
+    ),
+    (
+        "sign-flip",
+        include_str!("../../../scenarios/attacks/sign-flip.toml"),
+    ),
+    (
+        "freeze",
+        include_str!("../../../scenarios/attacks/freeze.toml"),
+    ),
 ];
 
 /// Names of the presets, for error messages.

@@ -11,6 +11,7 @@ mod pulse;
 mod ramp;
 pub mod replay;
 mod sine;
+pub mod transform;
 
 use rand_chacha::ChaCha12Rng;
 use serde::{Deserialize, Serialize};
@@ -69,12 +70,20 @@ pub enum Waveform {
         record_from_s: f64,
         record_for_s: f64,
     },
+    /// Multiplicative attack: the center sees `factor ·` the clean signal
+    /// ([`transform::scale`]). Dimensionless: the channel's `units` do not apply.
+    Scale { factor: f64 },
+    /// The center sees the clean signal with its sign flipped ([`transform::sign_flip`]).
+    SignFlip,
+    /// Stuck-at: the center sees the clean value of the segment's first tick for the whole
+    /// segment ([`transform::freeze`]).
+    Freeze,
 }
 
 impl Waveform {
-    /// Value at absolute time `t` in a segment that began at `segment_start`. `replay` depends
-    /// on the recorded signal, not on time alone: the compiled channel evaluates it, and this
-    /// function gives 0 for it.
+    /// Value at absolute time `t` in a segment that began at `segment_start`. `replay` and the
+    /// transforms ([`Self::transforms`]) depend on the clean signal, not on time alone: the
+    /// compiled channel evaluates them, and this function gives 0 for them.
     pub fn value(&self, t: f64, segment_start: f64, rng: &mut ChaCha12Rng) -> f64 {
         match *self {
             Self::None => 0.0,
@@ -94,8 +103,15 @@ impl Waveform {
             Self::Ramp { slope_per_s, start } => ramp::value(t - segment_start, slope_per_s, start),
             Self::Gaussian { std, mean } => noise::value(rng, mean, std),
             Self::Corrupt { value } => corrupt::value(value),
-            Self::Replay { .. } => 0.0,
+            Self::Replay { .. } | Self::Scale { .. } | Self::SignFlip | Self::Freeze => 0.0,
         }
+    }
+
+    /// True for the waveforms that transform the clean signal (scale, sign flip, freeze): they
+    /// are in force for their whole segment, whatever the injection is at a tick (a scaled
+    /// signal crossing zero injects zero there, and is still attacked).
+    pub fn transforms(&self) -> bool {
+        matches!(self, Self::Scale { .. } | Self::SignFlip | Self::Freeze)
     }
 
     /// The recording window `[from, to)` of a `replay`, s.
@@ -115,7 +131,12 @@ impl Waveform {
     /// `validate`.
     pub fn magnitude(&self) -> f64 {
         match *self {
-            Self::None | Self::Corrupt { .. } | Self::Replay { .. } => 0.0,
+            Self::None
+            | Self::Corrupt { .. }
+            | Self::Replay { .. }
+            | Self::Scale { .. }
+            | Self::SignFlip
+            | Self::Freeze => 0.0,
             Self::Constant { value } => value.abs(),
             Self::Sine {
                 amplitude, offset, ..
@@ -137,7 +158,8 @@ impl Waveform {
     pub fn problems(&self) -> Vec<(&'static str, String)> {
         let mut out = Vec::new();
         let params: Vec<(&'static str, f64)> = match *self {
-            Self::None | Self::Corrupt { .. } => vec![],
+            Self::None | Self::Corrupt { .. } | Self::SignFlip | Self::Freeze => vec![],
+            Self::Scale { factor } => vec![("factor", factor)],
             Self::Constant { value } => vec![("value", value)],
             Self::Sine {
                 amplitude,
