@@ -122,10 +122,10 @@ pub struct RunArgs {
     #[arg(long, value_enum)]
     pub controller: Option<Controller>,
     /// Replace the scenario's duration, s.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub duration_s: Option<f64>,
     /// Replace the scenario's seed.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub seed: Option<u64>,
     /// Folder that receives the run directory.
     #[arg(long, default_value = "runs")]
@@ -210,14 +210,7 @@ pub fn apply_overrides(mut r: Resolved, args: &RunArgs) -> Result<Resolved> {
     if r.scenario.clock == ClockMode::Realtime && args.engine == Engine::Inproc {
         bail!("the realtime clock needs the ipc engine (the in-process engine is lockstep only)");
     }
-    let problems = r.scenario.validate();
-    if !problems.is_empty() {
-        bail!(scenario::ScenarioError {
-            source_name: "command-line overrides".into(),
-            problems
-        });
-    }
-    Ok(r)
+    crate::run::check_overrides(r)
 }
 
 fn run(args: &RunArgs) -> Result<ExitCode> {

@@ -241,3 +241,58 @@ fn a_full_disk_is_the_headline_naming_the_trace_and_the_partial_traces_stay_read
         }
     }
 }
+
+/// Bad command-line values are refused before anything is made, saying what is wrong: a
+/// negative duration reaches the scenario's own check (not clap's `-- -5` tip), on `run` and on
+/// `table1` (whose runs used to be refused only by their processes, after the run directories
+/// were made), and an `--out` naming a file says it is not a folder.
+#[test]
+fn bad_command_line_values_are_refused_before_anything_is_made() {
+    let dir = Scratch::new("cli-values");
+    let out = dir.0.join("out");
+    let out_s = out.to_string_lossy().into_owned();
+    for args in [
+        vec!["run", "--duration-s", "-5", "--out", &out_s],
+        vec![
+            "table1",
+            "--engine",
+            "inproc",
+            "--duration-s",
+            "-1",
+            "--out",
+            &out_s,
+        ],
+    ] {
+        let o = launch_plain(&args, WATCHDOG);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            err.contains("command-line overrides")
+                && err.contains("duration_s: must be finite and > 0, got -"),
+            "{args:?}: {err}"
+        );
+        assert!(!err.contains("tip:"), "{args:?}: {err}");
+        assert!(!out.exists(), "{args:?}: nothing is made");
+    }
+    let file = dir.0.join("a-file");
+    std::fs::write(&file, "not a folder").expect("file");
+    let file_s = file.to_string_lossy().into_owned();
+    let o = launch_plain(
+        &[
+            "run",
+            "--engine",
+            "inproc",
+            "--duration-s",
+            "0.1",
+            "--out",
+            &file_s,
+        ],
+        WATCHDOG,
+    );
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains(&format!("--out {file_s} is not a folder")),
+        "{err}"
+    );
+}

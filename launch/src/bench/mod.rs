@@ -36,16 +36,16 @@ pub enum BenchCommand {
 #[derive(Debug, Args)]
 pub struct TransportArgs {
     /// Round trips per transport.
-    #[arg(long, default_value_t = 20_000)]
+    #[arg(long, default_value_t = 20_000, allow_negative_numbers = true)]
     pub iterations: u64,
     /// Spin before blocking, µs. Default 0: the realtime runtime's event-driven strategy, which
     /// the runtime's latency is measured with.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
     pub spin_us: u64,
     /// Agents and seconds of the realtime run measured beside the floor.
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub agents: usize,
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
     pub duration_s: f64,
     #[arg(long)]
     pub json: bool,
@@ -56,13 +56,13 @@ pub struct TransportArgs {
 #[derive(Debug, Args)]
 pub struct LatencyArgs {
     /// Number of agents (the paper's four robots, repeated).
-    #[arg(long, default_value_t = 4)]
+    #[arg(long, default_value_t = 4, allow_negative_numbers = true)]
     pub agents: usize,
     /// Simulated (= wall-clock) duration, s.
-    #[arg(long, default_value_t = 30.0)]
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
     pub duration_s: f64,
     /// Control rate, Hz.
-    #[arg(long, default_value_t = 1000.0)]
+    #[arg(long, default_value_t = 1000.0, allow_negative_numbers = true)]
     pub rate_hz: f64,
     #[arg(long)]
     pub json: bool,
@@ -80,7 +80,7 @@ pub struct LockstepArgs {
     #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16, 64])]
     pub agents: Vec<usize>,
     /// Simulated duration of each run, s (the paper's experiment is 40 s).
-    #[arg(long, default_value_t = 10.0)]
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
     pub duration_s: f64,
     #[arg(long)]
     pub json: bool,

@@ -38,6 +38,13 @@ pub fn create_run_dir(root: &Path, resolved: &Resolved) -> Result<PathBuf> {
         })
         .collect();
     let base = root.join(format!("{}-{name}", timestamp()));
+    if root.exists() && !root.is_dir() {
+        bail!(
+            "--out {} is not a folder: a run directory is made inside the folder --out names \
+             (it is made if it does not exist)",
+            root.display()
+        );
+    }
     std::fs::create_dir_all(root).with_context(|| format!("creating {}", root.display()))?;
     // `create_dir` fails if the folder exists, so two runs started in the same second (even from
     // two launchers) never share a folder.

@@ -24,7 +24,7 @@ pub struct TableArgs {
     #[arg(long)]
     pub json: bool,
     /// Shorten every run to this many seconds (the paper's tables use 40 s).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub duration_s: Option<f64>,
     /// Folder that receives the table's run directories.
     #[arg(long, default_value = "runs")]
@@ -109,7 +109,7 @@ fn base(args: &TableArgs) -> Result<Resolved> {
     if let Some(d) = args.duration_s {
         r.scenario.duration_s = d;
     }
-    Ok(r)
+    crate::run::check_overrides(r)
 }
 
 /// The folder of one table: `<out>/<timestamp>-<name>`.

@@ -176,6 +176,19 @@ pub fn execute(
     }
 }
 
+/// Validates a scenario after command-line overrides (duration, seed, attack, ...) changed
+/// it: every problem with its field path, named as the command line's.
+pub fn check_overrides(r: Resolved) -> Result<Resolved> {
+    let problems = r.scenario.validate();
+    if !problems.is_empty() {
+        bail!(fdi_common::scenario::ScenarioError {
+            source_name: "command-line overrides".into(),
+            problems
+        });
+    }
+    Ok(r)
+}
+
 /// Refuses `--rt-priority` / `--cpus` where they do not apply or are not permitted, before
 /// anything starts (and before a run directory exists).
 pub fn check_placement(r: &Resolved, engine: Engine, placement: &runtime::Placement) -> Result<()> {
