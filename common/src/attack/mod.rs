@@ -86,7 +86,15 @@ impl AttackProfile {
             if dof.is_none() {
                 out.push((
                     at("agent"),
-                    format!("agent {} is not in the scenario", ch.agent),
+                    format!(
+                        "agent {} is not in the scenario (its agents: {})",
+                        ch.agent,
+                        agent_dofs
+                            .keys()
+                            .map(u32::to_string)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
                 ));
             }
             if ch.links.is_empty() {
