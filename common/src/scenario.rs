@@ -322,8 +322,23 @@ impl Scenario {
         self.agents.iter().map(|a| (a.id, a.model.dof())).collect()
     }
 
-    /// Every problem of the scenario's values (parsing has already checked keys and types).
+    /// Every problem of the scenario's values (parsing has already checked keys and types), in
+    /// the order of the checks below: the run's own fields, the controller, the noise, the
+    /// disturbance's values, the agents, the defaults, the disturbance's length, the attack.
     pub fn validate(&self) -> Vec<Problem> {
+        let mut out = self.top_level_problems();
+        out.extend(self.controller_problems());
+        out.extend(self.noise_problems());
+        out.extend(self.disturbance_value_problems());
+        out.extend(self.agents_problems());
+        out.extend(self.defaults_problems());
+        out.extend(self.disturbance_length_problems());
+        out.extend(self.attack_problems());
+        out
+    }
+
+    /// The run's own fields: name, duration, control period, physics sub-steps.
+    fn top_level_problems(&self) -> Vec<Problem> {
         let mut out = Vec::new();
         let mut push = |path: String, message: String| out.push(Problem { path, message });
         if self.name.trim().is_empty() {
@@ -357,6 +372,14 @@ impl Scenario {
                 format!("must be in 1..=1000, got {}", self.physics_substeps),
             );
         }
+        out
+    }
+
+    /// `[controller]`: gains, rates and bounds > 0, ranges and hold time ≥ 0, the update law,
+    /// the number of hidden neurons.
+    fn controller_problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
         let c = &self.controller;
         for (name, v) in [
             ("gain_k", c.gain_k),
@@ -399,6 +422,13 @@ impl Scenario {
                 format!("must be in 1..=64, got {}", c.hidden_neurons),
             );
         }
+        out
+    }
+
+    /// `[noise]`: the sensor's standard deviations.
+    fn noise_problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
         for (name, v) in [
             ("position_std_rad", self.noise.position_std_rad),
             ("velocity_std_rad_s", self.noise.velocity_std_rad_s),
@@ -410,6 +440,14 @@ impl Scenario {
                 );
             }
         }
+        out
+    }
+
+    /// `[disturbance]`: every link's amplitude and frequency finite (its length against the
+    /// agents' links is [`Self::disturbance_length_problems`]).
+    fn disturbance_value_problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
         for (i, l) in self.disturbance.links.iter().enumerate() {
             for (name, v) in [("amplitude", l.amplitude), ("omega_rad_s", l.omega_rad_s)] {
                 if !v.is_finite() {
@@ -420,6 +458,14 @@ impl Scenario {
                 }
             }
         }
+        out
+    }
+
+    /// `[[agents]]`: their number, then each agent in turn (ids unique, all with the first
+    /// agent's number of links).
+    fn agents_problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
         if self.agents.is_empty() {
             push(
                 "agents".into(),
@@ -435,67 +481,27 @@ impl Scenario {
         let mut seen = BTreeMap::new();
         let dof0 = self.agents.first().map(|a| a.model.dof());
         for (i, a) in self.agents.iter().enumerate() {
-            let at = |f: &str| format!("agents[{i}].{f}");
-            if a.id == 0 {
-                push(at("id"), "must be ≥ 1".into());
-            }
-            if let Some(j) = seen.insert(a.id, i) {
-                push(
-                    at("id"),
-                    format!("duplicate agent id {} (also agents[{j}])", a.id),
-                );
-            }
-            let dof = a.model.dof();
-            if dof > MAX_DOF {
-                push(
-                    at("model"),
-                    format!("{dof} links exceed the maximum {MAX_DOF}"),
-                );
-            }
-            if Some(dof) != dof0 {
-                push(
-                    at("model"),
-                    "every agent of a run must have the same number of links".into(),
-                );
-            }
-            for (f, m) in a.model.problems() {
-                push(at(&format!("model.{f}")), m);
-            }
-            if a.trajectory.links.len() != dof {
-                push(
-                    at("trajectory.links"),
-                    format!(
-                        "needs {dof} entries (one per link), found {}",
-                        a.trajectory.links.len()
-                    ),
-                );
-            }
-            if !(a.trajectory.ramp_rate.is_finite() && a.trajectory.ramp_rate >= 0.0) {
-                push(
-                    at("trajectory.ramp_rate"),
-                    format!("must be finite and ≥ 0, got {}", a.trajectory.ramp_rate),
-                );
-            }
-            for (l, link) in a.trajectory.links.iter().enumerate() {
-                for (name, v) in link.parameters() {
-                    if !v.is_finite() {
-                        push(
-                            at(&format!("trajectory.links[{l}].{name}")),
-                            format!("must be finite, got {v}"),
-                        );
-                    }
-                }
-            }
-            for p in delay_problems(&at("delay"), &a.delay) {
-                push(p.path, p.message);
-            }
+            out.extend(agent_id_model_problems(i, a, dof0, &mut seen));
+            out.extend(agent_trajectory_problems(i, a));
+            out.extend(delay_problems(&format!("agents[{i}].delay"), &a.delay));
         }
-        if let Some(delay) = self.defaults.as_ref().and_then(|d| d.delay.as_ref()) {
-            for p in delay_problems("defaults.delay", delay) {
-                push(p.path, p.message);
-            }
+        out
+    }
+
+    /// `[defaults]`: its delay (its model and trajectory are checked in the agents that
+    /// inherit them).
+    fn defaults_problems(&self) -> Vec<Problem> {
+        match self.defaults.as_ref().and_then(|d| d.delay.as_ref()) {
+            Some(delay) => delay_problems("defaults.delay", delay),
+            None => Vec::new(),
         }
-        if let Some(d) = dof0 {
+    }
+
+    /// `[disturbance]`: one entry per link of the first agent.
+    fn disturbance_length_problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
+        if let Some(d) = self.agents.first().map(|a| a.model.dof()) {
             if self.disturbance.links.len() != d {
                 push(
                     "disturbance.links".into(),
@@ -506,6 +512,13 @@ impl Scenario {
                 );
             }
         }
+        out
+    }
+
+    /// `[attack]`: exactly one source, a known preset, an inline profile that fits the agents.
+    fn attack_problems(&self) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
         let sources = [
             self.attack.preset.is_some(),
             self.attack.file.is_some(),
@@ -535,6 +548,80 @@ impl Scenario {
         }
         out
     }
+}
+
+/// Agent `i`'s id (≥ 1, not in `seen` yet, which records it) and model (at most [`MAX_DOF`]
+/// links, as many as the first agent's `dof0`, its own parameters).
+fn agent_id_model_problems(
+    i: usize,
+    a: &AgentConfig,
+    dof0: Option<usize>,
+    seen: &mut BTreeMap<u32, usize>,
+) -> Vec<Problem> {
+    let mut out = Vec::new();
+    let mut push = |path: String, message: String| out.push(Problem { path, message });
+    let at = |f: &str| format!("agents[{i}].{f}");
+    if a.id == 0 {
+        push(at("id"), "must be ≥ 1".into());
+    }
+    if let Some(j) = seen.insert(a.id, i) {
+        push(
+            at("id"),
+            format!("duplicate agent id {} (also agents[{j}])", a.id),
+        );
+    }
+    let dof = a.model.dof();
+    if dof > MAX_DOF {
+        push(
+            at("model"),
+            format!("{dof} links exceed the maximum {MAX_DOF}"),
+        );
+    }
+    if Some(dof) != dof0 {
+        push(
+            at("model"),
+            "every agent of a run must have the same number of links".into(),
+        );
+    }
+    for (f, m) in a.model.problems() {
+        push(at(&format!("model.{f}")), m);
+    }
+    out
+}
+
+/// Agent `i`'s trajectory: one entry per link of its model, a finite ramp rate ≥ 0, finite
+/// link parameters.
+fn agent_trajectory_problems(i: usize, a: &AgentConfig) -> Vec<Problem> {
+    let mut out = Vec::new();
+    let mut push = |path: String, message: String| out.push(Problem { path, message });
+    let at = |f: &str| format!("agents[{i}].{f}");
+    let dof = a.model.dof();
+    if a.trajectory.links.len() != dof {
+        push(
+            at("trajectory.links"),
+            format!(
+                "needs {dof} entries (one per link), found {}",
+                a.trajectory.links.len()
+            ),
+        );
+    }
+    if !(a.trajectory.ramp_rate.is_finite() && a.trajectory.ramp_rate >= 0.0) {
+        push(
+            at("trajectory.ramp_rate"),
+            format!("must be finite and ≥ 0, got {}", a.trajectory.ramp_rate),
+        );
+    }
+    for (l, link) in a.trajectory.links.iter().enumerate() {
+        for (name, v) in link.parameters() {
+            if !v.is_finite() {
+                push(
+                    at(&format!("trajectory.links[{l}].{name}")),
+                    format!("must be finite, got {v}"),
+                );
+            }
+        }
+    }
+    out
 }
 
 /// Reads a TOML file of at most [`MAX_FILE_BYTES`]. Only a regular file is read (a device, a

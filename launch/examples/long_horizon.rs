@@ -28,7 +28,7 @@ use fdi_common::engine::{run_inproc, RunSummary};
 use fdi_common::model::Vector;
 use fdi_common::records::TickRecord;
 use fdi_common::rng::{stream, Purpose};
-use fdi_common::scenario::{self, ControllerMode, ObserverInput, Resolved};
+use fdi_common::scenario::{self, AgentConfig, ControllerMode, ObserverInput, Resolved, Scenario};
 use fdi_common::trajectory::TrajectoryConfig;
 
 #[allow(dead_code)] // only the line figures of the launcher's plotting are used here
@@ -301,6 +301,137 @@ struct Tracker {
     psi2_prev: Vector<N>,
     window: Window,
     rows: Vec<Row>,
+    /// The run's `β`, control period Δ (s) and ticks per window.
+    beta: f64,
+    dt: f64,
+    per_window: u64,
+}
+
+/// The vectors of one tick record that the measurement reads.
+struct TickValues {
+    t: f64,
+    /// True state.
+    q: Vector<N>,
+    qd: Vector<N>,
+    /// Tampered measurement.
+    y: Vector<N>,
+    yd: Vector<N>,
+    s_hat: Vector<N>,
+    /// The observer state after the tick's step.
+    q_hat: Vector<N>,
+    qd_hat: Vector<N>,
+}
+
+impl TickValues {
+    fn of(rec: &TickRecord) -> Self {
+        Self {
+            t: rec.agent.t,
+            q: rec.agent.q.to_vector::<N>(),
+            qd: rec.agent.qd.to_vector::<N>(),
+            y: rec.attack.y.to_vector::<N>(),
+            yd: rec.attack.yd.to_vector::<N>(),
+            s_hat: rec.center.s_hat.to_vector::<N>(),
+            q_hat: rec.center.q_hat.to_vector::<N>(),
+            qd_hat: rec.center.qd_hat.to_vector::<N>(),
+        }
+    }
+}
+
+impl Tracker {
+    /// The tracker of agent `a` of `s`: its shadow estimator (proposed mode) seeded like the
+    /// control center's, windows of `per_window` ticks.
+    fn new(s: &Scenario, a: &AgentConfig, nn_params: NnParams, per_window: u64) -> Self {
+        let c = s.controller;
+        let nn = (c.mode == ControllerMode::Proposed).then(|| {
+            let mut rng = stream(s.seed, a.id, Purpose::NnInit);
+            NnEstimator::<N>::new(nn_params, c.initial_v_range, &mut rng)
+        });
+        let v0 = nn
+            .as_ref()
+            .map_or_else(Vec::new, |n| n.weights_v().to_vec());
+        Tracker {
+            trajectory: a.trajectory.clone(),
+            nn,
+            v0,
+            prev_observer: Observer::default(),
+            psi2_prev: Vector::<N>::zeros(),
+            window: Window::default(),
+            rows: Vec::new(),
+            beta: c.beta,
+            dt: s.control_period_s,
+            per_window,
+        }
+    }
+
+    /// Follows the control center through tick `x`: `Ψ2` and the innovation `r̃` from the
+    /// observer state before the tick's step, the shadow estimator's `Ŝ` and update, then the
+    /// observer state after the step. `(Ψ2, r̃, the shadow Ŝ if it differs from the recorded)`.
+    fn follow(&mut self, x: &TickValues) -> (Vector<N>, Vector<N>, Option<Vector<N>>) {
+        let (beta, dt) = (self.beta, self.dt);
+        // Ψ2 as the center computed it: the observer state before this tick's step.
+        let psi2 = self.prev_observer.psi2(&x.y, &x.yd, beta, &x.s_hat);
+        let r_tilde = (x.yd - self.prev_observer.qd) + (x.y - self.prev_observer.q) * beta;
+        let mut differs = None;
+        if let Some(nn) = self.nn.as_mut() {
+            let shadow = nn.estimate(&self.psi2_prev);
+            if shadow != x.s_hat {
+                differs = Some(shadow);
+            }
+            nn.update(&psi2, dt);
+        }
+        self.psi2_prev = psi2;
+        self.prev_observer.q = x.q_hat;
+        self.prev_observer.qd = x.qd_hat;
+        (psi2, r_tilde, differs)
+    }
+
+    /// Adds tick `x` (after [`Self::follow`]) to the window; a full window becomes a row.
+    fn accumulate(&mut self, x: &TickValues, psi2: &Vector<N>, r_tilde: &Vector<N>) {
+        let beta = self.beta;
+        let reference = self.trajectory.reference::<N>(x.t);
+        let e = reference.q - x.q;
+        let s_true = (x.yd - x.qd) + (x.y - x.q) * beta;
+        let q_tilde = x.q - self.prev_observer.q;
+        let w = &mut self.window;
+        w.n += 1;
+        for l in 0..N {
+            w.e_sum[l] += e[l];
+            w.s_hat_sum[l] += x.s_hat[l];
+            w.s_sum[l] += s_true[l];
+            w.q_tilde_sum[l] += q_tilde[l];
+        }
+        w.e_sq += e.norm_squared();
+        w.s_err_sq += (x.s_hat - s_true).norm_squared();
+        w.r_tilde_sq += r_tilde.norm_squared();
+        w.psi2_sq += psi2.norm_squared();
+        if let Some(nn) = &self.nn {
+            w.note_weights(nn, &self.v0);
+        }
+        if w.n == self.per_window {
+            let row = w.row(x.t + self.dt);
+            self.rows.push(row);
+            self.window = Window::default();
+        }
+    }
+}
+
+impl Window {
+    /// The weights now: `‖Ŵ‖`, the norm of `Ŵ`'s bias row, `‖V̂ − V̂(0)‖` with `V̂(0) = v0`.
+    fn note_weights(&mut self, nn: &NnEstimator<N>, v0: &[f64]) {
+        self.w_norm = nn.norm_w();
+        self.w_bias = nn.weights_w()[..N]
+            .iter()
+            .map(|x| x * x)
+            .sum::<f64>()
+            .sqrt();
+        self.v_moved = nn
+            .weights_v()
+            .iter()
+            .zip(v0)
+            .map(|(a, b)| (a - b) * (a - b))
+            .sum::<f64>()
+            .sqrt();
+    }
 }
 
 struct Measured {
@@ -314,33 +445,12 @@ fn measure(r: &Resolved, window_s: f64) -> Result<Measured> {
         bail!("--window-s must be > 0, got {window_s}");
     }
     let s = &r.scenario;
-    let c = s.controller;
-    let beta = c.beta;
-    let dt = s.control_period_s;
-    let per_window = ((window_s / dt).round() as u64).max(1);
-    let nn_params = NnParams::from_controller(&c);
+    let per_window = ((window_s / s.control_period_s).round() as u64).max(1);
+    let nn_params = NnParams::from_controller(&s.controller);
     let mut trackers: BTreeMap<u32, Tracker> = s
         .agents
         .iter()
-        .map(|a| {
-            let nn = (c.mode == ControllerMode::Proposed).then(|| {
-                let mut rng = stream(s.seed, a.id, Purpose::NnInit);
-                NnEstimator::<N>::new(nn_params, c.initial_v_range, &mut rng)
-            });
-            let v0 = nn
-                .as_ref()
-                .map_or_else(Vec::new, |n| n.weights_v().to_vec());
-            let t = Tracker {
-                trajectory: a.trajectory.clone(),
-                nn,
-                v0,
-                prev_observer: Observer::default(),
-                psi2_prev: Vector::<N>::zeros(),
-                window: Window::default(),
-                rows: Vec::new(),
-            };
-            (a.id, t)
-        })
+        .map(|a| (a.id, Tracker::new(s, a, nn_params, per_window)))
         .collect();
     let mut mismatch: Option<String> = None;
     let summary = run_inproc::<N>(r, |rec: &TickRecord| {
@@ -348,64 +458,15 @@ fn measure(r: &Resolved, window_s: f64) -> Result<Measured> {
         let Some(tr) = trackers.get_mut(&id) else {
             return;
         };
-        let t = rec.agent.t;
-        let q = rec.agent.q.to_vector::<N>();
-        let qd = rec.agent.qd.to_vector::<N>();
-        let y = rec.attack.y.to_vector::<N>();
-        let yd = rec.attack.yd.to_vector::<N>();
-        let s_hat = rec.center.s_hat.to_vector::<N>();
-        let reference = tr.trajectory.reference::<N>(t);
-        // Ψ2 as the center computed it: the observer state before this tick's step.
-        let psi2 = tr.prev_observer.psi2(&y, &yd, beta, &s_hat);
-        let r_tilde = (yd - tr.prev_observer.qd) + (y - tr.prev_observer.q) * beta;
-        if let Some(nn) = tr.nn.as_mut() {
-            let shadow = nn.estimate(&tr.psi2_prev);
-            if shadow != s_hat && mismatch.is_none() {
-                mismatch = Some(format!(
-                    "agent {id}, t = {t}: shadow Ŝ {shadow:?} differs from the recorded {s_hat:?}"
-                ));
-            }
-            nn.update(&psi2, dt);
+        let x = TickValues::of(rec);
+        let (psi2, r_tilde, differs) = tr.follow(&x);
+        if let (Some(shadow), None) = (differs, &mismatch) {
+            let (t, s_hat) = (x.t, x.s_hat);
+            mismatch = Some(format!(
+                "agent {id}, t = {t}: shadow Ŝ {shadow:?} differs from the recorded {s_hat:?}"
+            ));
         }
-        tr.psi2_prev = psi2;
-        tr.prev_observer.q = rec.center.q_hat.to_vector::<N>();
-        tr.prev_observer.qd = rec.center.qd_hat.to_vector::<N>();
-
-        let e = reference.q - q;
-        let s_true = (yd - qd) + (y - q) * beta;
-        let q_tilde = q - tr.prev_observer.q;
-        let w = &mut tr.window;
-        w.n += 1;
-        for l in 0..N {
-            w.e_sum[l] += e[l];
-            w.s_hat_sum[l] += s_hat[l];
-            w.s_sum[l] += s_true[l];
-            w.q_tilde_sum[l] += q_tilde[l];
-        }
-        w.e_sq += e.norm_squared();
-        w.s_err_sq += (s_hat - s_true).norm_squared();
-        w.r_tilde_sq += r_tilde.norm_squared();
-        w.psi2_sq += psi2.norm_squared();
-        if let Some(nn) = &tr.nn {
-            w.w_norm = nn.norm_w();
-            w.w_bias = nn.weights_w()[..N]
-                .iter()
-                .map(|x| x * x)
-                .sum::<f64>()
-                .sqrt();
-            w.v_moved = nn
-                .weights_v()
-                .iter()
-                .zip(&tr.v0)
-                .map(|(a, b)| (a - b) * (a - b))
-                .sum::<f64>()
-                .sqrt();
-        }
-        if w.n == per_window {
-            let row = w.row(t + dt);
-            tr.rows.push(row);
-            tr.window = Window::default();
-        }
+        tr.accumulate(&x, &psi2, &r_tilde);
     })?;
     if let Some(m) = mismatch {
         bail!("the shadow estimator does not follow the control center: {m}");
@@ -543,6 +604,29 @@ fn grid(
         ..long.clone()
     })?;
     let ids: Vec<u32> = traditional.keys().copied().collect();
+    print_grid_head(&ids, &traditional);
+    for input in or_keep(observer_inputs) {
+        for t in or_keep(innovation_ts) {
+            for l in or_keep(leakages_w) {
+                for dz in or_keep(dead_zones) {
+                    let with = |s: &Setup| Setup {
+                        controller: Some("proposed".into()),
+                        observer_input: input.clone().or_else(|| s.observer_input.clone()),
+                        innovation_t: t.or(s.innovation_t),
+                        leakage_w: l.or(s.leakage_w),
+                        dead_zone: dz.or(s.dead_zone),
+                        ..s.clone()
+                    };
+                    print_grid_row(&with(&long), &with(&table1), &ids, &traditional)?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The head of [`grid`]'s CSV and its first row, the traditional reference of the robots `ids`.
+fn print_grid_head(ids: &[u32], traditional: &BTreeMap<u32, (f64, u64)>) {
     let head: Vec<String> = ids
         .iter()
         .map(|id| format!("r{id}_long,r{id}_alarms,r{id}_vs_trad,r{id}_table1,r{id}_vs_paper"))
@@ -556,53 +640,47 @@ fn grid(
         .map(|id| format!("{:.5},{},1.000,,", traditional[id].0, traditional[id].1))
         .collect();
     println!("traditional,,,,{},,", trad.join(","));
-    for input in or_keep(observer_inputs) {
-        for t in or_keep(innovation_ts) {
-            for l in or_keep(leakages_w) {
-                for dz in or_keep(dead_zones) {
-                    let with = |s: &Setup| Setup {
-                        controller: Some("proposed".into()),
-                        observer_input: input.clone().or_else(|| s.observer_input.clone()),
-                        innovation_t: t.or(s.innovation_t),
-                        leakage_w: l.or(s.leakage_w),
-                        dead_zone: dz.or(s.dead_zone),
-                        ..s.clone()
-                    };
-                    let r = with(&long).resolve()?;
-                    let c = r.scenario.controller;
-                    let long_m = rmse_and_alarms(&with(&long))?;
-                    let t1 = rmse_and_alarms(&with(&table1))?;
-                    let (mut worst_trad, mut worst_paper) = (0.0_f64, 0.0_f64);
-                    let mut cells = Vec::new();
-                    for id in &ids {
-                        let (rmse, alarms) = long_m[id];
-                        let vs_trad = rmse / traditional[id].0;
-                        worst_trad = worst_trad.max(vs_trad);
-                        let paper = PAPER_TABLE1_PROPOSED.iter().find(|(i, _)| i == id);
-                        let (t1_rmse, vs_paper) = match (t1.get(id), paper) {
-                            (Some(&(x, _)), Some(&(_, p))) => {
-                                worst_paper = worst_paper.max((x / p - 1.0).abs());
-                                (format!("{x:.5}"), format!("{:.3}", x / p))
-                            }
-                            _ => (String::new(), String::new()),
-                        };
-                        cells.push(format!(
-                            "{rmse:.5},{alarms},{vs_trad:.3},{t1_rmse},{vs_paper}"
-                        ));
-                    }
-                    println!(
-                        "{},{},{},{},{},{worst_trad:.3},{:.3}",
-                        c.observer_input.as_str(),
-                        c.update_law.innovation_time_constant_s,
-                        c.update_law.leakage_w_per_s,
-                        c.update_law.dead_zone_rad_s,
-                        cells.join(","),
-                        1.0 + worst_paper
-                    );
-                }
+}
+
+/// One combination's row of [`grid`]: its long run (`long`) against the traditional one and
+/// its Table I run (`table1`) against the paper, per robot of `ids`, and the worst of each.
+fn print_grid_row(
+    long: &Setup,
+    table1: &Setup,
+    ids: &[u32],
+    traditional: &BTreeMap<u32, (f64, u64)>,
+) -> Result<()> {
+    let r = long.resolve()?;
+    let c = r.scenario.controller;
+    let long_m = rmse_and_alarms(long)?;
+    let t1 = rmse_and_alarms(table1)?;
+    let (mut worst_trad, mut worst_paper) = (0.0_f64, 0.0_f64);
+    let mut cells = Vec::new();
+    for id in ids {
+        let (rmse, alarms) = long_m[id];
+        let vs_trad = rmse / traditional[id].0;
+        worst_trad = worst_trad.max(vs_trad);
+        let paper = PAPER_TABLE1_PROPOSED.iter().find(|(i, _)| i == id);
+        let (t1_rmse, vs_paper) = match (t1.get(id), paper) {
+            (Some(&(x, _)), Some(&(_, p))) => {
+                worst_paper = worst_paper.max((x / p - 1.0).abs());
+                (format!("{x:.5}"), format!("{:.3}", x / p))
             }
-        }
+            _ => (String::new(), String::new()),
+        };
+        cells.push(format!(
+            "{rmse:.5},{alarms},{vs_trad:.3},{t1_rmse},{vs_paper}"
+        ));
     }
+    println!(
+        "{},{},{},{},{},{worst_trad:.3},{:.3}",
+        c.observer_input.as_str(),
+        c.update_law.innovation_time_constant_s,
+        c.update_law.leakage_w_per_s,
+        c.update_law.dead_zone_rad_s,
+        cells.join(","),
+        1.0 + worst_paper
+    );
     Ok(())
 }
 
@@ -612,13 +690,30 @@ fn figure(
     duration_s: f64,
     window_s: f64,
 ) -> Result<()> {
+    let mut lines = FigureLines::default();
+    for (i, (label, setup)) in figure_runs(remedy, duration_s).iter().enumerate() {
+        let m = measure(&setup.resolve()?, window_s)?;
+        let rows = m.rows.get(&1).context("robot 1 not in the run")?;
+        lines.add(i, label, setup, rows);
+    }
+    let fig = lines.figure(duration_s, window_s);
+    let written = plot::save_figure(&fig, stem, (1100, 1600))?;
+    for p in written {
+        println!("{}", p.display());
+    }
+    Ok(())
+}
+
+/// The runs of [`figure`], with their labels: robot 1 without attack for `duration_s`, under
+/// the paper's laws, with the remedy of the scenario `remedy`, and the traditional controller.
+fn figure_runs(remedy: &std::path::Path, duration_s: f64) -> [(&'static str, Setup); 3] {
     let base = Setup {
         duration_s: Some(duration_s),
         attack: Some("none".into()),
         agents: vec![1],
         ..Setup::default()
     };
-    let runs = [
+    [
         ("proposed, paper's laws (37)-(38)", base.clone()),
         (
             "proposed, with the remedy",
@@ -634,15 +729,24 @@ fn figure(
                 ..base
             },
         ),
-    ];
-    let mut e1 = Vec::new();
-    let mut s_err = Vec::new();
-    let mut weights = Vec::new();
-    let mut q_tilde = Vec::new();
-    let mut innovation = Vec::new();
-    for (i, (label, setup)) in runs.iter().enumerate() {
-        let m = measure(&setup.resolve()?, window_s)?;
-        let rows = m.rows.get(&1).context("robot 1 not in the run")?;
+    ]
+}
+
+/// The curves of [`figure`]'s panels, gathered run by run.
+#[derive(Default)]
+struct FigureLines {
+    e1: Vec<plot::Line>,
+    s_err: Vec<plot::Line>,
+    weights: Vec<plot::Line>,
+    q_tilde: Vec<plot::Line>,
+    innovation: Vec<plot::Line>,
+}
+
+impl FigureLines {
+    /// The curves of the `i`-th run (`label`, `setup`) from robot 1's windows `rows`: every run's
+    /// position and observer errors, the first run's innovation and Ψ2, and the proposed runs'
+    /// attack-estimation error and weights.
+    fn add(&mut self, i: usize, label: &str, setup: &Setup, rows: &[Row]) {
         let color = plot::PALETTE[i];
         let line = |f: &dyn Fn(&Row) -> f64, label: String| plot::Line {
             label,
@@ -650,22 +754,24 @@ fn figure(
             points: rows.iter().map(|r| (r.t_end, f(r))).collect(),
             keep: true,
         };
-        e1.push(line(&|r| r.e_mean[0], label.to_string()));
-        q_tilde.push(line(&|r| r.q_tilde_mean[0], label.to_string()));
+        self.e1.push(line(&|r| r.e_mean[0], label.to_string()));
+        self.q_tilde
+            .push(line(&|r| r.q_tilde_mean[0], label.to_string()));
         if i == 0 {
-            innovation.push(line(
+            self.innovation.push(line(
                 &|r| r.r_tilde_rms,
                 "innovation ẏ + βy − (observer's)".into(),
             ));
-            innovation.push(plot::Line {
+            self.innovation.push(plot::Line {
                 color: plot::PALETTE[3],
                 ..line(&|r| r.psi2_rms, "Ψ2 = innovation − Ŝ".into())
             });
         }
         if setup.controller.is_none() {
-            s_err.push(line(&|r| r.s_err_rms, label.to_string()));
-            weights.push(line(&|r| r.w_bias, format!("{label}: bias row of Ŵ")));
-            weights.push(plot::Line {
+            self.s_err.push(line(&|r| r.s_err_rms, label.to_string()));
+            self.weights
+                .push(line(&|r| r.w_bias, format!("{label}: bias row of Ŵ")));
+            self.weights.push(plot::Line {
                 color: plot::PALETTE[i + 3],
                 ..line(
                     &|r| r.v_moved,
@@ -674,41 +780,40 @@ fn figure(
             });
         }
     }
-    let panel = |title: &str, y_label: &str, lines: Vec<plot::Line>| plot::Panel {
-        title: title.into(),
-        y_label: y_label.into(),
-        kind: plot::PanelKind::Lines(lines),
-        guides: Vec::new(),
-    };
-    let fig = plot::Figure {
-        title: format!(
-            "Robot 1, no attack, {duration_s} s: means and RMS over windows of {window_s:.2} s"
-        ),
-        x_label: "t (s)".into(),
-        x_range: (0.0, duration_s),
-        markers: vec![40.0],
-        marker_label: "end of Table I's 40 s".into(),
-        panels: vec![
-            panel("link-1 position error q_d1 − q1 (mean)", "rad", e1),
-            panel("attack-estimation error ‖Ŝ − S‖ (RMS)", "rad/s", s_err),
-            panel(
-                "paper's laws: the innovation and what Ŝ leaves of it, Ψ2 (RMS; Ψ2 stays at the noise floor)",
-                "rad/s",
-                innovation,
+
+    /// The figure of runs of `duration_s` in windows of `window_s`: one panel per curve kind.
+    fn figure(self, duration_s: f64, window_s: f64) -> plot::Figure {
+        let panel = |title: &str, y_label: &str, lines: Vec<plot::Line>| plot::Panel {
+            title: title.into(),
+            y_label: y_label.into(),
+            kind: plot::PanelKind::Lines(lines),
+            guides: Vec::new(),
+        };
+        plot::Figure {
+            title: format!(
+                "Robot 1, no attack, {duration_s} s: means and RMS over windows of {window_s:.2} s"
             ),
-            panel(
-                "output-layer bias and inner-weight change",
-                "rad/s, 1",
-                weights,
-            ),
-            panel("observer error: q1 minus the observer's estimate (mean)", "rad", q_tilde),
-        ],
-    };
-    let written = plot::save_figure(&fig, stem, (1100, 1600))?;
-    for p in written {
-        println!("{}", p.display());
+            x_label: "t (s)".into(),
+            x_range: (0.0, duration_s),
+            markers: vec![40.0],
+            marker_label: "end of Table I's 40 s".into(),
+            panels: vec![
+                panel("link-1 position error q_d1 − q1 (mean)", "rad", self.e1),
+                panel("attack-estimation error ‖Ŝ − S‖ (RMS)", "rad/s", self.s_err),
+                panel(
+                    "paper's laws: the innovation and what Ŝ leaves of it, Ψ2 (RMS; Ψ2 stays at the noise floor)",
+                    "rad/s",
+                    self.innovation,
+                ),
+                panel(
+                    "output-layer bias and inner-weight change",
+                    "rad/s, 1",
+                    self.weights,
+                ),
+                panel("observer error: q1 minus the observer's estimate (mean)", "rad", self.q_tilde),
+            ],
+        }
     }
-    Ok(())
 }
 
 fn main() -> Result<()> {

@@ -146,8 +146,48 @@ impl<const N: usize> CenterAgent<N> {
         yd: &Vector<N>,
         s_override: Option<&Vector<N>>,
     ) -> CenterOutput<N> {
-        let c = self.params.controller;
-        let dt = self.params.control_period_s;
+        let rejected_input = self.accept_measurement(y, yd);
+        let x = self.tick_inputs(t, s_override);
+        let (u, rejected_torque) = self.torque(&x);
+
+        // History of sent torques: u_k is in force from t_k on (the observer's input below
+        // may reach it when τ < Δ).
+        if self.sent.push(t, u).is_ok() {
+            self.last_u = u;
+        }
+
+        let u_tau = self.delayed_input_over_step(&x);
+        self.note_history(&x, u_tau);
+        let psi2 = self.observe(&x, &u_tau);
+        self.learn(&psi2, s_override);
+        let state_reset = self.recover_non_finite_state(&psi2, &x);
+
+        // Drop what no future query reaches: the next tick's query `t' − τ(t')` is later than
+        // this one's (`|τ̇| < 1`), and the line keeps one entry of margin besides.
+        self.sent.prune_before(x.query);
+
+        // 9: detection.
+        let alarm = self.detector.update(t, x.s_hat.norm());
+
+        CenterOutput {
+            u,
+            s_hat: x.s_hat,
+            q_hat: self.observer.q,
+            qd_hat: self.observer.qd,
+            qdd_hat: self.observer.qdd,
+            e_u: x.e_u,
+            u_tau,
+            alarm,
+            rejected_input,
+            rejected_torque,
+            state_reset,
+            history_miss: x.history_miss,
+        }
+    }
+
+    /// Keeps a sane measurement `(y, ẏ)` as the last good one; a non-finite or absurd one is
+    /// rejected and counted, and the last good one stays in use. Whether it was rejected.
+    fn accept_measurement(&mut self, y: &Vector<N>, yd: &Vector<N>) -> bool {
         let sane = |v: &Vector<N>| {
             v.iter()
                 .all(|x| x.is_finite() && x.abs() <= MAX_ABS_MEASUREMENT)
@@ -158,6 +198,11 @@ impl<const N: usize> CenterAgent<N> {
         } else {
             self.last_good = (*y, *yd);
         }
+        rejected_input
+    }
+
+    /// Steps 1–4 at `t` with the measurement in use: the reference, `A`, `e_u` and `Ŝ`.
+    fn tick_inputs(&mut self, t: f64, s_override: Option<&Vector<N>>) -> TickInputs<N> {
         let (y, yd) = self.last_good;
 
         // 1–3: reference, A = M(q_d)⁻¹, e_u over the zero-order-held history of sent u.
@@ -170,28 +215,47 @@ impl<const N: usize> CenterAgent<N> {
         };
 
         // 4: NN estimate from the previous tick's Ψ2 (no algebraic loop).
-        let s_hat = match (s_override, c.mode) {
+        let s_hat = match (s_override, self.params.controller.mode) {
             (Some(s), _) => *s,
             (None, ControllerMode::Proposed) => self.estimator.estimate(&self.psi2_prev),
             (None, ControllerMode::Traditional) => Vector::<N>::zeros(),
         };
 
-        // 5: r̂ = Ψ̇1 + β Ψ1 − A e_u + Ŝ, u = k r̂.
-        let psi1 = reference.q - y;
-        let psi1_dot = reference.qd - yd;
-        let r_hat = psi1_dot + psi1 * c.beta - a * e_u + s_hat;
+        TickInputs {
+            t,
+            y,
+            yd,
+            reference,
+            a,
+            query,
+            e_u,
+            history_miss,
+            s_hat,
+        }
+    }
+
+    /// 5: r̂ = Ψ̇1 + β Ψ1 − A e_u + Ŝ, u = k r̂. A non-finite u is counted and replaced by the
+    /// last one sent. The torque, and whether it was replaced.
+    fn torque(&mut self, x: &TickInputs<N>) -> (Vector<N>, bool) {
+        let c = self.params.controller;
+        let psi1 = x.reference.q - x.y;
+        let psi1_dot = x.reference.qd - x.yd;
+        let r_hat = psi1_dot + psi1 * c.beta - x.a * x.e_u + x.s_hat;
         let mut u = r_hat * c.gain_k;
         let rejected_torque = u.iter().any(|x| !x.is_finite());
         if rejected_torque {
             self.rejected_torques += 1;
             u = self.last_u;
         }
+        (u, rejected_torque)
+    }
 
-        // History of sent torques: u_k is in force from t_k on (the observer's input below
-        // may reach it when τ < Δ).
-        if self.sent.push(t, u).is_ok() {
-            self.last_u = u;
-        }
+    /// The observer's input `u_τ` for its step over [t_k, t_k + Δ] (step 6); the last good one
+    /// when the history does not reach back far enough.
+    fn delayed_input_over_step(&self, x: &TickInputs<N>) -> Vector<N> {
+        let t = x.t;
+        let dt = self.params.control_period_s;
+        let query = x.query;
 
         // 6: observer step over [t_k, t_k + Δ]. Its input u_τ is the mean of the delayed input
         // u(s − τ(s)) over the step: `∫ u` between the queries at both ends, over their span.
@@ -201,76 +265,87 @@ impl<const N: usize> CenterAgent<N> {
         // With `observer_input = "sample"` (SPEC §4.6 as written), u_τ is the command in force
         // at `t − τ(t)`, held over the step.
         let query_next = (t + dt) - self.params.delay.tau(t + dt);
-        let u_tau = match c.observer_input {
+        match self.params.controller.observer_input {
             ObserverInputMode::StepMean => match self.sent.integral(query, query_next) {
-                Ok(sum) if !history_miss && query_next > query => sum / (query_next - query),
+                Ok(sum) if !x.history_miss && query_next > query => sum / (query_next - query),
                 _ => self.last_history.1,
             },
             ObserverInputMode::Sample => match self.sent.value_at(query) {
-                l if !history_miss && !l.pruned => l.value,
+                l if !x.history_miss && !l.pruned => l.value,
                 _ => self.last_history.1,
             },
-        };
-        if !history_miss {
-            self.last_history = (e_u, u_tau);
+        }
+    }
+
+    /// Keeps this tick's `(e_u, u_τ)` as the last good history, or counts the miss.
+    fn note_history(&mut self, x: &TickInputs<N>, u_tau: Vector<N>) {
+        if !x.history_miss {
+            self.last_history = (x.e_u, u_tau);
         } else {
             self.history_misses += 1;
         }
+    }
+
+    /// 6: the observer's step over [t_k, t_k + Δ] with the delayed input `u_tau`; its Ψ2.
+    fn observe(&mut self, x: &TickInputs<N>, u_tau: &Vector<N>) -> Vector<N> {
+        let c = self.params.controller;
         let input = ObserverInput {
-            y: &y,
-            yd: &yd,
-            s_hat: &s_hat,
-            reference: &reference,
-            a: &a,
-            e_u: &e_u,
-            u_tau: &u_tau,
+            y: &x.y,
+            yd: &x.yd,
+            s_hat: &x.s_hat,
+            reference: &x.reference,
+            a: &x.a,
+            e_u: &x.e_u,
+            u_tau,
             beta: c.beta,
             l1: c.observer_gain_l1,
             l2: c.observer_gain_l2,
         };
-        let psi2 = self.observer.step(self.model.as_ref(), &input, dt);
+        self.observer
+            .step(self.model.as_ref(), &input, self.params.control_period_s)
+    }
 
-        // 7: weights.
-        if c.mode == ControllerMode::Proposed && s_override.is_none() {
-            self.estimator.update(&psi2, dt);
+    /// 7: weights (proposed mode, unless `Ŝ` is overridden); `psi2` is the next tick's NN input.
+    fn learn(&mut self, psi2: &Vector<N>, s_override: Option<&Vector<N>>) {
+        if self.params.controller.mode == ControllerMode::Proposed && s_override.is_none() {
+            self.estimator.update(psi2, self.params.control_period_s);
         }
-        self.psi2_prev = psi2;
+        self.psi2_prev = *psi2;
+    }
 
-        // 10: non-finite observer or estimator state never sticks. Recovery policy: the
-        // estimator restarts from its initial weights (Ŵ = 0, V̂ = V̂(0)), the observer from the
-        // measurement in use (q̂ = y, q̂̇ = ẏ), and the next NN input from Ψ2 = 0.
+    /// 10: non-finite observer or estimator state never sticks. Recovery policy: the
+    /// estimator restarts from its initial weights (Ŵ = 0, V̂ = V̂(0)), the observer from the
+    /// measurement in use (q̂ = y, q̂̇ = ẏ), and the next NN input from Ψ2 = 0. Whether it
+    /// reset.
+    fn recover_non_finite_state(&mut self, psi2: &Vector<N>, x: &TickInputs<N>) -> bool {
         let state_reset = !(self.observer.is_finite()
             && self.estimator.is_finite()
             && psi2.iter().all(|x| x.is_finite()));
         if state_reset {
             self.state_resets += 1;
             self.estimator.reset();
-            self.observer = Observer::at(y, yd);
+            self.observer = Observer::at(x.y, x.yd);
             self.psi2_prev = Vector::<N>::zeros();
         }
-
-        // Drop what no future query reaches: the next tick's query `t' − τ(t')` is later than
-        // this one's (`|τ̇| < 1`), and the line keeps one entry of margin besides.
-        self.sent.prune_before(query);
-
-        // 9: detection.
-        let alarm = self.detector.update(t, s_hat.norm());
-
-        CenterOutput {
-            u,
-            s_hat,
-            q_hat: self.observer.q,
-            qd_hat: self.observer.qd,
-            qdd_hat: self.observer.qdd,
-            e_u,
-            u_tau,
-            alarm,
-            rejected_input,
-            rejected_torque,
-            state_reset,
-            history_miss,
-        }
+        state_reset
     }
+}
+
+/// What steps 1–4 of a tick work out, for the steps after them.
+struct TickInputs<const N: usize> {
+    t: f64,
+    /// The measurement in use: this tick's, or the last good one if this tick's was rejected.
+    y: Vector<N>,
+    yd: Vector<N>,
+    reference: Reference<N>,
+    /// `A = M(q_d)⁻¹`.
+    a: Matrix<N>,
+    /// `t − τ(t)`: where `e_u`'s integral starts.
+    query: f64,
+    e_u: Vector<N>,
+    /// The history did not reach back to `query`: `e_u` is the last good one.
+    history_miss: bool,
+    s_hat: Vector<N>,
 }
 
 #[cfg(test)]

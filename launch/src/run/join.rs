@@ -6,6 +6,7 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use fdi_common::engine::{evaluator_for, summarize, RunSummary};
+use fdi_common::metrics::Evaluator;
 use fdi_common::records::{AgentRecord, AttackRecord, CenterRecord, TickRecord, TraceDigest};
 use fdi_common::scenario::Resolved;
 use fdi_common::trace::{TraceReader, TraceRecord};
@@ -192,93 +193,137 @@ pub fn join_run_until(
     mut sink: impl FnMut(&TickRecord),
     stop: impl Fn() -> Result<()>,
 ) -> Result<Joined> {
-    let Traces {
-        mut agents,
-        mut attacker,
-        mut center,
-    } = Traces::open(resolved, run_dir)?;
-    let mut digest = TraceDigest::new();
-    let mut evaluator = evaluator_for(resolved);
-    let mut warnings = Vec::new();
-    let ticks = resolved.ticks();
+    let mut traces = Traces::open(resolved, run_dir)?;
+    let mut join = Join::new(resolved);
     let mut joined = 0;
-    let mut lost = 0u64;
-    // Ticks the agents recorded after the attacker or control-center trace ended: they ran on
-    // without control, and their own records (deadline misses) still count.
-    let mut after_control = 0u64;
-    let mut control_ended = false;
     // An agent whose trace ends early (lost in a realtime run) leaves the join; the others go on.
-    let mut ended = vec![false; agents.len()];
-    'ticks: for k in 0..ticks {
+    let mut ended = vec![false; traces.agents.len()];
+    'ticks: for k in 0..join.ticks {
         if k % 4096 == 4095 {
             stop()?;
         }
-        for (n, (id, src)) in agents.iter_mut().enumerate() {
+        for n in 0..traces.agents.len() {
             if ended[n] {
                 continue;
             }
-            let Ok(Some(a)) = src.take(*id, k) else {
-                warnings.push(format!("agent {id}: its trace ends at tick {k} of {ticks}"));
+            if !join.agent_tick(&mut traces, n, k, &mut sink) {
                 ended[n] = true;
                 if ended.iter().all(|e| *e) {
                     break 'ticks;
                 }
-                continue;
-            };
-            if control_ended {
-                after_control += 1;
-                evaluator.push_uncontrolled(&a);
-                continue;
             }
-            let (x, c) = match (attacker.take(*id, k), center.take(*id, k)) {
-                (Ok(Some(x)), Ok(Some(c))) => (x, c),
-                // The measurement of this tick never reached the control center (realtime
-                // overflow, a stalled process, an agent given up as lost): the agent held its
-                // last command, uncontrolled.
-                (Ok(_), Ok(_)) => {
-                    lost += 1;
-                    evaluator.push_uncontrolled(&a);
-                    continue;
-                }
-                _ => {
-                    warnings.push(format!("the attacker or control-center trace ends at tick {k} of {ticks} (agent {id})"));
-                    control_ended = true;
-                    after_control += 1;
-                    evaluator.push_uncontrolled(&a);
-                    continue;
-                }
-            };
-            let rec = TickRecord {
-                agent: a,
-                attack: x,
-                center: c,
-            };
-            digest.push(&rec);
-            evaluator.push(&rec);
-            sink(&rec);
         }
-        if !control_ended {
+        if !join.control_ended {
             joined = k + 1;
         }
     }
-    if lost > 0 {
-        warnings.push(format!(
-            "{lost} agent-ticks never reached the control center (the robots ran uncontrolled): left out of the metrics but their deadline misses"
-        ));
-    }
-    if after_control > 0 {
-        warnings.push(format!(
-            "{after_control} agent-ticks were recorded after the control stopped (the robots ran uncontrolled): left out of the metrics but their deadline misses"
-        ));
-    }
-    Traces {
-        agents,
-        attacker,
-        center,
-    }
-    .finish(&mut warnings);
+    join.warn_uncontrolled();
+    let Join {
+        digest,
+        evaluator,
+        mut warnings,
+        ..
+    } = join;
+    traces.finish(&mut warnings);
     Ok(Joined {
         summary: summarize(resolved, "ipc", joined, wall_s, digest, evaluator),
         warnings,
     })
+}
+
+/// What a join has gathered while it walks the ticks.
+struct Join {
+    digest: TraceDigest,
+    evaluator: Evaluator,
+    warnings: Vec<String>,
+    /// The run's planned ticks.
+    ticks: u64,
+    /// Agent-ticks whose measurement never reached the control center.
+    lost: u64,
+    /// Ticks the agents recorded after the attacker or control-center trace ended: they ran on
+    /// without control, and their own records (deadline misses) still count.
+    after_control: u64,
+    control_ended: bool,
+}
+
+impl Join {
+    fn new(resolved: &Resolved) -> Self {
+        Self {
+            digest: TraceDigest::new(),
+            evaluator: evaluator_for(resolved),
+            warnings: Vec::new(),
+            ticks: resolved.ticks(),
+            lost: 0,
+            after_control: 0,
+            control_ended: false,
+        }
+    }
+
+    /// Tick `k` of the `n`-th agent: its record joined with the attacker's and the control
+    /// center's into the digest, the metrics and `sink`, or counted uncontrolled when they lack
+    /// it. `false` when the agent's trace has ended (with a warning).
+    fn agent_tick(
+        &mut self,
+        traces: &mut Traces,
+        n: usize,
+        k: u64,
+        sink: &mut impl FnMut(&TickRecord),
+    ) -> bool {
+        let ticks = self.ticks;
+        let (id, src) = &mut traces.agents[n];
+        let Ok(Some(a)) = src.take(*id, k) else {
+            self.warnings
+                .push(format!("agent {id}: its trace ends at tick {k} of {ticks}"));
+            return false;
+        };
+        if self.control_ended {
+            self.after_control += 1;
+            self.evaluator.push_uncontrolled(&a);
+            return true;
+        }
+        let (x, c) = match (traces.attacker.take(*id, k), traces.center.take(*id, k)) {
+            (Ok(Some(x)), Ok(Some(c))) => (x, c),
+            // The measurement of this tick never reached the control center (realtime
+            // overflow, a stalled process, an agent given up as lost): the agent held its
+            // last command, uncontrolled.
+            (Ok(_), Ok(_)) => {
+                self.lost += 1;
+                self.evaluator.push_uncontrolled(&a);
+                return true;
+            }
+            _ => {
+                self.warnings.push(format!(
+                    "the attacker or control-center trace ends at tick {k} of {ticks} (agent {id})"
+                ));
+                self.control_ended = true;
+                self.after_control += 1;
+                self.evaluator.push_uncontrolled(&a);
+                return true;
+            }
+        };
+        let rec = TickRecord {
+            agent: a,
+            attack: x,
+            center: c,
+        };
+        self.digest.push(&rec);
+        self.evaluator.push(&rec);
+        sink(&rec);
+        true
+    }
+
+    /// The warnings of the agent-ticks that ran uncontrolled (lost, or after the control ended).
+    fn warn_uncontrolled(&mut self) {
+        let (lost, after_control) = (self.lost, self.after_control);
+        if lost > 0 {
+            self.warnings.push(format!(
+                "{lost} agent-ticks never reached the control center (the robots ran uncontrolled): left out of the metrics but their deadline misses"
+            ));
+        }
+        if after_control > 0 {
+            self.warnings.push(format!(
+                "{after_control} agent-ticks were recorded after the control stopped (the robots ran uncontrolled): left out of the metrics but their deadline misses"
+            ));
+        }
+    }
 }
