@@ -131,7 +131,8 @@ pub struct CalibrationMetrics {
     pub non_finite: u64,
     /// RMS of each residual entry over the window (`sqrt(diag Σ)`).
     pub residual_rms: Vec<f64>,
-    /// Why the detectors never watched: the calibration failed, or the run ended inside it.
+    /// Why the detectors never watched: the calibration failed, or the record ended before the
+    /// window did.
     pub failed: Option<String>,
 }
 
@@ -689,7 +690,10 @@ mod tests {
             .expect("calibration");
         assert_eq!(cal.attacked_ticks, 10);
         let why = cal.failed.as_deref().expect("never calibrated");
-        assert!(why.contains("ended inside the calibration window"), "{why}");
+        assert!(
+            why.contains("ended before the detectors could watch"),
+            "{why}"
+        );
     }
 
     #[test]

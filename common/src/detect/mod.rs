@@ -189,7 +189,7 @@ impl RobotDetectors {
                 acc.samples(),
                 Vec::new(),
                 Some(format!(
-                    "the record ended inside the calibration window ({} of its {} ticks)",
+                    "the record ended before the detectors could watch ({} ticks recorded, the calibration window is {})",
                     self.prev.map_or(0, |p| p.k + 1),
                     self.calibration_ticks
                 )),

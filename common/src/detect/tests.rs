@@ -318,7 +318,7 @@ fn a_gap_in_the_records_is_a_counted_miss_and_a_short_record_says_it_never_calib
     }
     let failed = d.calibration().failed.expect("not calibrated");
     assert!(
-        failed.contains("ended inside the calibration window (500 of its 20000 ticks)"),
+        failed.contains("ended before the detectors could watch (500 ticks recorded, the calibration window is 20000)"),
         "{failed}"
     );
 }

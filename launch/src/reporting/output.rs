@@ -184,7 +184,8 @@ pub fn detector_tables(s: &RunSummary, level: usize) -> String {
         if m.detectors.is_empty() {
             continue;
         }
-        let _ = writeln!(md, "\n{h_robot} Robot {id}\n");
+        // Not `Robot {id}`: report.md's figure sections are `## Robot {id}`.
+        let _ = writeln!(md, "\n{h_robot} Detectors of robot {id}\n");
         let cols: Vec<Option<&DetectorMetrics>> =
             detect::NAMES.iter().map(|n| m.detectors.get(*n)).collect();
         let mut head = vec![""];
@@ -441,7 +442,7 @@ mod tests {
         let md = super::detector_tables(&s, 2);
         for line in [
             "## Detectors side by side",
-            "### Robot 2",
+            "### Detectors of robot 2",
             "|  | s_hat_norm | chi2 | cusum |",
             "| onset at 0.001 s: time to detect (s) | 0.061 | not watched | absent |",
             "| onset at 0.050 s: time to detect (s) | missed | already on | absent |",
@@ -453,7 +454,7 @@ mod tests {
         ] {
             assert!(md.contains(line), "{line}:\n{md}");
         }
-        assert!(!md.contains("Robot 1"), "robot 1 has no detector metrics");
+        assert!(!md.contains("robot 1"), "robot 1 has no detector metrics");
     }
 
     #[test]
