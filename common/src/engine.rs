@@ -235,15 +235,16 @@ pub fn summarize(
     }
 }
 
-/// An evaluator for the agents of `resolved`.
+/// An evaluator for the agents of `resolved`, with the scenario's detectors beside the paper's
+/// alarm.
 pub fn evaluator_for(resolved: &Resolved) -> Evaluator {
+    let s = &resolved.scenario;
     Evaluator::new(
-        resolved
-            .scenario
-            .agents
+        s.agents
             .iter()
             .map(|a| (a.id, a.trajectory.clone(), a.model)),
     )
+    .with_detectors(&s.detectors, s.control_period_s, &s.controller)
 }
 
 /// Errors of the engine.

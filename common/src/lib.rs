@@ -14,6 +14,7 @@
 pub mod attack;
 pub mod control;
 pub mod delay;
+pub mod detect;
 pub mod engine;
 pub mod metrics;
 pub mod model;

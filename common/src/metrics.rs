@@ -1,10 +1,13 @@
 //! Run metrics from joined tick records: RMSE per robot (SPEC §7), time-to-detect per attack
-//! onset and false alarms (SPEC §4.9).
+//! onset and false alarms (SPEC §4.9), for the paper's alarm and, side by side, for the
+//! classical detectors of [`crate::detect`].
 
 use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+use crate::control::ControllerConfig;
+use crate::detect::{self, DetectorsConfig, RobotDetectors, Verdict};
 use crate::model::{EulerLagrange, ForLinks, ModelConfig};
 use crate::records::TickRecord;
 use crate::trajectory::TrajectoryConfig;
@@ -72,6 +75,178 @@ pub struct AgentMetrics {
     /// Ticks these metrics cover.
     #[serde(default)]
     pub ticks: u64,
+    /// Per detector (`s_hat_norm`, `chi2`, `cusum`, [`detect::NAMES`]): its detection metrics,
+    /// side by side. `onsets`, `false_alarms` and `alarm_coverage` above are those of
+    /// `s_hat_norm`. Empty in summaries written before the detectors existed.
+    #[serde(default)]
+    pub detectors: BTreeMap<String, DetectorMetrics>,
+}
+
+/// Detection metrics of one detector on one robot.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DetectorMetrics {
+    /// Every rising edge of "attack in force", with this detector's time to detect (counted
+    /// from the onset, so an onset during the calibration window waits for its end).
+    pub onsets: Vec<Onset>,
+    /// Per onset: the alarm was already on at the tick before it, so its time to detect is 0
+    /// without a detection of this attack.
+    pub alarm_on_at_onset: Vec<bool>,
+    /// Alarm rising edges while no attack was in force.
+    pub false_alarms: u64,
+    /// `false_alarms` per minute of the attack-free time the detector watched; `None` when it
+    /// watched no attack-free tick.
+    pub false_alarms_per_min: Option<f64>,
+    /// Attack-free time the detector watched, s (its calibration window left out).
+    pub attack_free_watched_s: f64,
+    /// Fraction of the attack-free ticks it watched with the alarm on; `None` as above. A
+    /// detector whose alarm never clears raises few false alarms but a share near 1.
+    pub false_alarm_share: Option<f64>,
+    /// Fraction of all attacked ticks (the calibration window's too) with the alarm on; `None`
+    /// without attacked ticks.
+    pub coverage: Option<f64>,
+    /// First tick time the detector gave a verdict; `None` if it never did.
+    pub watched_from_s: Option<f64>,
+    /// The threshold of its statistic (`‖Ŝ‖`, the χ² window sum, the CUSUM's `h`); `None`
+    /// when it has none (no quantile could be had).
+    pub threshold: Option<f64>,
+    /// Ticks whose residual or statistic was not finite (alarm on for each).
+    pub non_finite: u64,
+    /// Ticks without a residual (no record of the tick before): the alarm kept its state.
+    pub missing: u64,
+    /// The calibration of the residual's covariance (`chi2`, `cusum`; `None` for `s_hat_norm`).
+    pub calibration: Option<CalibrationMetrics>,
+}
+
+/// How a robot's detectors were calibrated.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CalibrationMetrics {
+    /// The window, s from the start of the run.
+    pub window_s: f64,
+    /// Residuals the covariance was estimated from.
+    pub samples: u64,
+    /// Ticks of the window with the attack in force: the covariance includes the attack (the
+    /// paper's attacks on robots 1, 3 and 4 start at t = 0).
+    pub attacked_ticks: u64,
+    /// Ticks of the window whose residual was not finite (left out).
+    pub non_finite: u64,
+    /// RMS of each residual entry over the window (`sqrt(diag Σ)`).
+    pub residual_rms: Vec<f64>,
+    /// Why the detectors never watched: the calibration failed, or the record ended before the
+    /// window did.
+    pub failed: Option<String>,
+}
+
+/// Alarm bookkeeping of one detector: onsets and their detection, false alarms, coverage.
+#[derive(Debug, Clone, Default)]
+struct AlarmTally {
+    onsets: Vec<Onset>,
+    alarm_on_at_onset: Vec<bool>,
+    /// Index in `onsets` of the in-force interval under way.
+    in_force: Option<usize>,
+    prev_alarm: bool,
+    false_alarms: u64,
+    attacked_ticks: u64,
+    attacked_alarm_ticks: u64,
+    free_watched_ticks: u64,
+    free_alarm_ticks: u64,
+    watched_from: Option<f64>,
+    non_finite: u64,
+    missing: u64,
+}
+
+impl AlarmTally {
+    /// One tick at `t`: the attack in force or not, the detector's alarm, and whether it was
+    /// watching.
+    fn push(&mut self, t: f64, active: bool, alarm: bool, watched: bool) {
+        if watched && self.watched_from.is_none() {
+            self.watched_from = Some(t);
+        }
+        if active {
+            self.attacked_ticks += 1;
+            let i = *self.in_force.get_or_insert_with(|| {
+                self.alarm_on_at_onset.push(self.prev_alarm);
+                self.onsets.push(Onset {
+                    t_s: t,
+                    time_to_detect_s: None,
+                    until_s: None,
+                });
+                self.onsets.len() - 1
+            });
+            if alarm {
+                self.attacked_alarm_ticks += 1;
+                let onset = &mut self.onsets[i];
+                if onset.time_to_detect_s.is_none() {
+                    onset.time_to_detect_s = Some(t - onset.t_s);
+                }
+            }
+        } else {
+            if let Some(i) = self.in_force.take() {
+                self.onsets[i].until_s = Some(t);
+            }
+            if alarm && !self.prev_alarm {
+                self.false_alarms += 1;
+            }
+            if watched {
+                self.free_watched_ticks += 1;
+                self.free_alarm_ticks += u64::from(alarm);
+            }
+        }
+        self.prev_alarm = alarm;
+    }
+
+    /// A verdict of the χ² or CUSUM detector.
+    fn push_verdict(&mut self, t: f64, active: bool, v: Verdict) {
+        self.non_finite += u64::from(v == Verdict::NonFinite);
+        self.missing += u64::from(v == Verdict::Missing);
+        self.push(t, active, v.alarm(self.prev_alarm), v.watched());
+    }
+
+    /// Fraction of attacked ticks with the alarm on (0 without attacked ticks: the field
+    /// `alarm_coverage` as it always was).
+    fn coverage_or_zero(&self) -> f64 {
+        self.coverage().unwrap_or(0.0)
+    }
+
+    fn coverage(&self) -> Option<f64> {
+        (self.attacked_ticks > 0)
+            .then(|| self.attacked_alarm_ticks as f64 / self.attacked_ticks as f64)
+    }
+
+    fn metrics(
+        &self,
+        control_period_s: f64,
+        threshold: Option<f64>,
+        calibration: Option<CalibrationMetrics>,
+    ) -> DetectorMetrics {
+        let free_s = self.free_watched_ticks as f64 * control_period_s;
+        let watched_free = self.free_watched_ticks > 0 && free_s > 0.0;
+        DetectorMetrics {
+            onsets: self.onsets.clone(),
+            alarm_on_at_onset: self.alarm_on_at_onset.clone(),
+            false_alarms: self.false_alarms,
+            false_alarms_per_min: watched_free.then(|| self.false_alarms as f64 * 60.0 / free_s),
+            attack_free_watched_s: free_s,
+            false_alarm_share: watched_free
+                .then(|| self.free_alarm_ticks as f64 / self.free_watched_ticks as f64),
+            coverage: self.coverage(),
+            watched_from_s: self.watched_from,
+            threshold,
+            non_finite: self.non_finite,
+            missing: self.missing,
+            calibration,
+        }
+    }
+}
+
+/// The χ² and CUSUM detectors of one robot, with their tallies.
+#[derive(Debug, Clone)]
+struct Detectors {
+    detectors: RobotDetectors,
+    chi2: AlarmTally,
+    cusum: AlarmTally,
+    /// Ticks of the calibration window with the attack in force.
+    calibration_attacked: u64,
+    window_s: f64,
 }
 
 /// Adds one record's squared tracking errors into an [`Acc`], for the model's number of links.
@@ -85,13 +260,11 @@ struct Acc {
     count: u64,
     ticks: u64,
     max_abs: f64,
-    onsets: Vec<Onset>,
-    /// Index in `onsets` of the in-force interval under way.
-    in_force: Option<usize>,
-    prev_alarm: bool,
-    false_alarms: u64,
-    attacked_ticks: u64,
-    attacked_alarm_ticks: u64,
+    /// The paper's alarm (`CenterRecord::alarm`).
+    s_hat_norm: AlarmTally,
+    /// The classical detectors, when the evaluator has their configuration.
+    detectors: Option<Detectors>,
+    links: usize,
     rejected: u64,
     rejected_torques: u64,
     state_resets: u64,
@@ -127,6 +300,10 @@ impl Acc {
 #[derive(Debug, Clone)]
 pub struct Evaluator {
     agents: BTreeMap<u32, Acc>,
+    /// Δ, s, once [`Self::with_detectors`] set it (false alarms per minute).
+    control_period_s: Option<f64>,
+    /// The threshold of the paper's alarm on `‖Ŝ‖`.
+    s_hat_threshold: Option<f64>,
 }
 
 impl Evaluator {
@@ -151,12 +328,9 @@ impl Evaluator {
                         count: 0,
                         ticks: 0,
                         max_abs: 0.0,
-                        onsets: Vec::new(),
-                        in_force: None,
-                        prev_alarm: false,
-                        false_alarms: 0,
-                        attacked_ticks: 0,
-                        attacked_alarm_ticks: 0,
+                        s_hat_norm: AlarmTally::default(),
+                        detectors: None,
+                        links: model.dof(),
                         rejected: 0,
                         rejected_torques: 0,
                         state_resets: 0,
@@ -169,7 +343,35 @@ impl Evaluator {
                 )
             })
             .collect();
-        Self { agents }
+        Self {
+            agents,
+            control_period_s: None,
+            s_hat_threshold: None,
+        }
+    }
+
+    /// Runs the classical detectors of `config` beside the paper's alarm on every agent, and
+    /// reports all three per agent in [`AgentMetrics::detectors`]. `control_period_s`: Δ;
+    /// `controller`: its β (for the `psi2` residual) and the paper's alarm threshold.
+    pub fn with_detectors(
+        mut self,
+        config: &DetectorsConfig,
+        control_period_s: f64,
+        controller: &ControllerConfig,
+    ) -> Self {
+        let beta = controller.beta;
+        self.s_hat_threshold = Some(controller.detection.threshold);
+        for acc in self.agents.values_mut() {
+            acc.detectors = Some(Detectors {
+                detectors: RobotDetectors::new(config, control_period_s, beta, acc.links),
+                chi2: AlarmTally::default(),
+                cusum: AlarmTally::default(),
+                calibration_attacked: 0,
+                window_s: config.calibration_s(),
+            });
+        }
+        self.control_period_s = Some(control_period_s);
+        self
     }
 
     /// Feeds one joined tick record (ticks of one agent in order; other agents' records are
@@ -181,33 +383,16 @@ impl Evaluator {
         let t = r.agent.t;
         (acc.tracking)(acc, r);
         acc.ticks += 1;
-        let alarm = r.center.alarm;
-        if r.attack.active {
-            acc.attacked_ticks += 1;
-            let i = *acc.in_force.get_or_insert_with(|| {
-                acc.onsets.push(Onset {
-                    t_s: t,
-                    time_to_detect_s: None,
-                    until_s: None,
-                });
-                acc.onsets.len() - 1
-            });
-            if alarm {
-                acc.attacked_alarm_ticks += 1;
-                let onset = &mut acc.onsets[i];
-                if onset.time_to_detect_s.is_none() {
-                    onset.time_to_detect_s = Some(t - onset.t_s);
-                }
-            }
-        } else {
-            if let Some(i) = acc.in_force.take() {
-                acc.onsets[i].until_s = Some(t);
-            }
-            if alarm && !acc.prev_alarm {
-                acc.false_alarms += 1;
+        let active = r.attack.active;
+        acc.s_hat_norm.push(t, active, r.center.alarm, true);
+        if let Some(d) = &mut acc.detectors {
+            let v = d.detectors.push(r);
+            d.chi2.push_verdict(t, active, v.chi2);
+            d.cusum.push_verdict(t, active, v.cusum);
+            if active && r.center.k < d.detectors.calibration_ticks() {
+                d.calibration_attacked += 1;
             }
         }
-        acc.prev_alarm = alarm;
         acc.rejected += u64::from(r.center.rejected_input);
         acc.rejected_torques += u64::from(r.center.rejected_torque);
         acc.state_resets += u64::from(r.center.state_reset);
@@ -229,9 +414,14 @@ impl Evaluator {
     }
 
     pub fn finish(self) -> BTreeMap<u32, AgentMetrics> {
+        let (dt, s_hat_threshold) = (self.control_period_s, self.s_hat_threshold);
         self.agents
             .into_iter()
             .map(|(id, a)| {
+                let detectors = match (&a.detectors, dt) {
+                    (Some(d), Some(dt)) => detector_metrics(&a, d, dt, s_hat_threshold),
+                    _ => BTreeMap::new(),
+                };
                 let m = AgentMetrics {
                     rmse_rad: if a.count > 0 {
                         (a.sum_sq / a.count as f64).sqrt()
@@ -239,14 +429,10 @@ impl Evaluator {
                         f64::NAN
                     },
                     max_abs_error_rad: a.max_abs,
-                    onsets: a.onsets,
-                    false_alarms: a.false_alarms,
-                    alarm_coverage: if a.attacked_ticks > 0 {
-                        a.attacked_alarm_ticks as f64 / a.attacked_ticks as f64
-                    } else {
-                        0.0
-                    },
-                    attacked_ticks: a.attacked_ticks,
+                    alarm_coverage: a.s_hat_norm.coverage_or_zero(),
+                    attacked_ticks: a.s_hat_norm.attacked_ticks,
+                    false_alarms: a.s_hat_norm.false_alarms,
+                    onsets: a.s_hat_norm.onsets,
                     rejected_inputs: a.rejected,
                     rejected_torques: a.rejected_torques,
                     state_resets: a.state_resets,
@@ -256,11 +442,52 @@ impl Evaluator {
                     uncontrolled_ticks: a.uncontrolled,
                     diverged_at_s: a.diverged_at,
                     ticks: a.ticks,
+                    detectors,
                 };
                 (id, m)
             })
             .collect()
     }
+}
+
+/// The three detectors' metrics of one agent, by name.
+fn detector_metrics(
+    a: &Acc,
+    d: &Detectors,
+    dt: f64,
+    s_hat_threshold: Option<f64>,
+) -> BTreeMap<String, DetectorMetrics> {
+    let cal = d.detectors.calibration();
+    let calibration = CalibrationMetrics {
+        window_s: d.window_s,
+        samples: cal.samples,
+        attacked_ticks: d.calibration_attacked,
+        non_finite: cal.non_finite,
+        residual_rms: cal.rms,
+        failed: cal.failed,
+    };
+    [
+        (
+            detect::S_HAT_NORM,
+            a.s_hat_norm.metrics(dt, s_hat_threshold, None),
+        ),
+        (
+            detect::CHI2,
+            d.chi2.metrics(
+                dt,
+                d.detectors.chi2_threshold().ok(),
+                Some(calibration.clone()),
+            ),
+        ),
+        (
+            detect::CUSUM,
+            d.cusum
+                .metrics(dt, Some(d.detectors.cusum_threshold()), Some(calibration)),
+        ),
+    ]
+    .into_iter()
+    .map(|(name, m)| (name.to_string(), m))
+    .collect()
 }
 
 #[cfg(test)]
@@ -381,6 +608,92 @@ mod tests {
         assert_eq!(m.uncontrolled_ticks, 300);
         assert_eq!(m.deadline_misses, 100);
         assert!((m.max_abs_error_rad - 0.01).abs() < 1e-12, "{m:?}");
+    }
+
+    fn with_detectors(records: impl IntoIterator<Item = TickRecord>) -> AgentMetrics {
+        let r = crate::scenario::paper().expect("paper");
+        let two_link = ModelConfig::TwoLink(crate::model::TwoLinkParams::PAPER);
+        let mut e = Evaluator::new([(1, at_rest(), two_link)]).with_detectors(
+            &DetectorsConfig::defaults(),
+            1e-3,
+            &r.scenario.controller,
+        );
+        for r in records {
+            e.push(&r);
+        }
+        e.finish().remove(&1).expect("agent 1")
+    }
+
+    /// The paper's alarm as one detector among three: its entry holds the same onsets, false
+    /// alarms and coverage as the fields every reader has, plus the rates per attack-free time.
+    #[test]
+    fn the_s_hat_norm_entry_repeats_the_alarm_fields_and_adds_rates_per_attack_free_minute() {
+        let records = || {
+            (0..5000).map(|k| {
+                let phase = k % 1000;
+                let active = phase < 100;
+                // Detected pulses 0, 2, 4 (30 ticks in); a false alarm of 50 ticks at 500 in
+                // pulses 1 and 3.
+                let alarm = (k / 1000 % 2 == 0 && (30..110).contains(&phase))
+                    || (k / 1000 % 2 == 1 && (500..550).contains(&phase));
+                record(k, 0.0, active, alarm)
+            })
+        };
+        let m = with_detectors(records());
+        assert_eq!(
+            evaluate(records()).detectors,
+            BTreeMap::new(),
+            "no detectors without their configuration"
+        );
+        let s = &m.detectors[detect::S_HAT_NORM];
+        assert_eq!(s.onsets, m.onsets);
+        assert_eq!(s.alarm_on_at_onset, [false; 5]);
+        assert_eq!(s.false_alarms, m.false_alarms);
+        assert_eq!(m.false_alarms, 2);
+        assert_eq!(s.coverage, Some(m.alarm_coverage));
+        assert_eq!(s.threshold, Some(0.6));
+        // 4500 attack-free ticks of 1 ms: 4.5 s, 2 false alarms: 26.67 per minute; the alarm
+        // was on for 10 ticks after each of the three detected pulses and 50 in each false one.
+        assert!((s.attack_free_watched_s - 4.5).abs() < 1e-9);
+        let per_min = s.false_alarms_per_min.expect("watched");
+        assert!((per_min - 2.0 * 60.0 / 4.5).abs() < 1e-9, "{per_min}");
+        let share = s.false_alarm_share.expect("watched");
+        assert!((share - 130.0 / 4500.0).abs() < 1e-12, "{share}");
+        assert_eq!(s.watched_from_s, Some(0.0));
+        assert_eq!(s.calibration, None);
+    }
+
+    /// The helper's records carry a residual of zero after the first ticks: the χ² and CUSUM
+    /// detectors cannot calibrate, and say so instead of reporting rates.
+    #[test]
+    fn detectors_that_cannot_calibrate_report_why_and_no_rate() {
+        let m = with_detectors((0..3000).map(|k| record(k, 0.0, k >= 2500, false)));
+        for name in [detect::CHI2, detect::CUSUM] {
+            let d = &m.detectors[name];
+            let cal = d.calibration.as_ref().expect("calibrated detectors");
+            let why = cal.failed.as_deref().expect("failed");
+            assert!(
+                why.contains("every residual of the calibration window is zero"),
+                "{why}"
+            );
+            assert_eq!((cal.samples, cal.attacked_ticks), (1999, 0));
+            assert_eq!(d.watched_from_s, None);
+            assert_eq!((d.false_alarms_per_min, d.false_alarm_share), (None, None));
+            assert_eq!(d.coverage, Some(0.0));
+            assert_eq!(d.onsets.len(), 1);
+            assert_eq!(d.onsets[0].time_to_detect_s, None);
+        }
+        let short = with_detectors((0..1500).map(|k| record(k, 0.0, k < 10, false)));
+        let cal = short.detectors[detect::CHI2]
+            .calibration
+            .as_ref()
+            .expect("calibration");
+        assert_eq!(cal.attacked_ticks, 10);
+        let why = cal.failed.as_deref().expect("never calibrated");
+        assert!(
+            why.contains("ended before the detectors could watch"),
+            "{why}"
+        );
     }
 
     #[test]

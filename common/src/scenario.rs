@@ -13,6 +13,7 @@ pub use crate::control::{
     ControllerConfig, ControllerMode, DetectionConfig, ObserverInput, UpdateLaw,
 };
 use crate::delay::DelayProfile;
+pub use crate::detect::DetectorsConfig;
 pub use crate::model::ModelConfig;
 pub use crate::plant::{DisturbanceConfig, DisturbanceLink, NoiseConfig};
 use crate::trajectory::TrajectoryConfig;
@@ -165,6 +166,10 @@ pub struct Scenario {
     pub defaults: Option<AgentDefaults>,
     pub agents: Vec<AgentConfig>,
     pub attack: AttackSource,
+    /// `[detectors]`: the classical detectors beside the paper's alarm (optional; absent, they
+    /// run with their defaults).
+    #[serde(default, skip_serializing_if = "DetectorsConfig::is_default")]
+    pub detectors: DetectorsConfig,
 }
 
 /// One problem of a scenario, with the path of the field it concerns.
@@ -546,6 +551,12 @@ impl Scenario {
                 push(format!("attack.profile.{p}"), m);
             }
         }
+        out.extend(self.detectors.problems(
+            "detectors",
+            self.duration_s,
+            self.control_period_s,
+            dof0,
+        ));
         out
     }
 }

@@ -5,8 +5,9 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
+use fdi_common::detect;
 use fdi_common::engine::RunSummary;
-use fdi_common::metrics::AgentMetrics;
+use fdi_common::metrics::{AgentMetrics, DetectorMetrics};
 use fdi_common::scenario::{Resolved, MAX_FILE_BYTES};
 
 /// `YYYYMMDD-HHMMSS` in UTC.
@@ -161,9 +162,120 @@ pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
             "\nDeadline misses count every step the robot itself recorded, the uncontrolled ones too; the other columns cover only the ticks the control center computed."
         );
     }
+    md.push_str(&detector_tables(s, 2));
     std::fs::write(dir.join("rmse.md"), md).context("writing rmse.md")?;
     std::fs::write(dir.join("rmse.csv"), rmse_csv(s)?).context("writing rmse.csv")?;
     Ok(())
+}
+
+/// The detectors side by side (`rmse.md`, `report.md`): per robot a table with a column per
+/// detector ([`detect::NAMES`]), under a heading of `level` (`##` for 2), each robot one level
+/// below. Empty for a summary without detector metrics (written before they existed).
+pub fn detector_tables(s: &RunSummary, level: usize) -> String {
+    let mut md = String::new();
+    if s.metrics.values().all(|m| m.detectors.is_empty()) {
+        return md;
+    }
+    let (h, h_robot) = ("#".repeat(level), "#".repeat(level + 1));
+    let _ = writeln!(md, "\n{h} Detectors side by side\n");
+    md.push_str(
+        "The paper's alarm (`s_hat_norm`: ‖Ŝ‖ above its threshold for its hold time) beside a χ² test \
+         and a CUSUM on the observer's residual, calibrated at the start of the run \
+         (docs/detectors.md). Times to detect in s from each onset; `already on`: the alarm was on at \
+         the tick before the onset (no detection of its own); `missed`: no alarm while that \
+         attack was in force; `not watched`: it ended before the detector started watching. \
+         False alarms count alarm rising edges while no attack was in force, per minute of the \
+         attack-free time the detector watched.\n",
+    );
+    for (id, m) in &s.metrics {
+        if m.detectors.is_empty() {
+            continue;
+        }
+        // Not `Robot {id}`: report.md's figure sections are `## Robot {id}`.
+        let _ = writeln!(md, "\n{h_robot} Detectors of robot {id}\n");
+        let cols: Vec<Option<&DetectorMetrics>> =
+            detect::NAMES.iter().map(|n| m.detectors.get(*n)).collect();
+        let mut head = vec![""];
+        head.extend(detect::NAMES);
+        md.push_str(&md_table_head(&head));
+        let mut row = |label: String, cell: &dyn Fn(&DetectorMetrics) -> String| {
+            let cells: Vec<String> = cols
+                .iter()
+                .map(|d| d.map_or_else(|| "absent".into(), cell))
+                .collect();
+            let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
+        };
+        for (i, o) in m.onsets.iter().enumerate() {
+            row(
+                format!("onset at {:.3} s: time to detect (s)", o.t_s),
+                &|d| time_to_detect_cell(d, i, o.t_s),
+            );
+        }
+        if m.onsets.is_empty() {
+            row("attack onsets".into(), &|_| "none".into());
+        }
+        row("false alarms".into(), &|d| d.false_alarms.to_string());
+        row("false alarms per minute".into(), &|d| {
+            d.false_alarms_per_min.map_or_else(
+                || "no attack-free time watched".into(),
+                |x| format!("{x:.2}"),
+            )
+        });
+        row("alarm share of attack-free time".into(), &|d| {
+            d.false_alarm_share
+                .map_or_else(|| "—".into(), |x| format!("{:.1} %", 100.0 * x))
+        });
+        row("coverage of attacked ticks".into(), &|d| {
+            d.coverage
+                .map_or_else(|| "no attack".into(), |x| format!("{:.1} %", 100.0 * x))
+        });
+        row("watching from (s)".into(), &|d| {
+            d.watched_from_s
+                .map_or_else(|| "never".into(), |t| format!("{t:.3}"))
+        });
+        row("threshold".into(), &|d| {
+            d.threshold
+                .map_or_else(|| "none".into(), |t| format!("{t:.4}"))
+        });
+        row("non-finite / missing ticks".into(), &|d| {
+            format!("{} / {}", d.non_finite, d.missing)
+        });
+        if let Some(c) = cols.iter().flatten().find_map(|d| d.calibration.as_ref()) {
+            let _ = write!(
+                md,
+                "\nCalibration over the first {} s: {} residuals",
+                c.window_s, c.samples
+            );
+            if c.attacked_ticks > 0 {
+                let _ = write!(
+                    md,
+                    ", {} ticks of it with the attack in force (the covariance includes the attack)",
+                    c.attacked_ticks
+                );
+            }
+            match &c.failed {
+                Some(why) => {
+                    let _ = writeln!(md, ". **The χ² and CUSUM detectors never watched: {why}.**");
+                }
+                None => md.push_str(".\n"),
+            }
+        }
+    }
+    md
+}
+
+/// One detector's time to detect onset `i` (at `t_s`) as a cell.
+fn time_to_detect_cell(d: &DetectorMetrics, i: usize, t_s: f64) -> String {
+    let Some(o) = d.onsets.get(i).filter(|o| o.t_s == t_s) else {
+        return "absent".into();
+    };
+    match (o.time_to_detect_s, o.until_s, d.watched_from_s) {
+        (Some(_), _, _) if d.alarm_on_at_onset.get(i) == Some(&true) => "already on".into(),
+        (Some(x), _, _) => format!("{x:.3}"),
+        (None, Some(until), Some(from)) if until <= from => "not watched".into(),
+        (None, _, None) => "not watched".into(),
+        (None, _, _) => "missed".into(),
+    }
 }
 
 /// `rmse.csv`: one row per robot.
@@ -299,6 +411,57 @@ mod tests {
         );
         assert_eq!((&rows[0][8], &rows[1][8]), ("", "0.0625"));
         assert_eq!(&rows[1][12], "100");
+    }
+
+    #[test]
+    fn detector_tables_put_the_three_side_by_side_and_old_summaries_get_none() {
+        let mut s = super::sample_summary();
+        assert_eq!(
+            super::detector_tables(&s, 2),
+            "",
+            "a summary from before the detectors"
+        );
+        let detector = |ttd: [Option<f64>; 2], on: [bool; 2], from: f64| {
+            serde_json::from_value::<fdi_common::metrics::DetectorMetrics>(serde_json::json!({
+                "onsets": [
+                    { "t_s": 0.001, "time_to_detect_s": ttd[0], "until_s": 0.01 },
+                    { "t_s": 0.05, "time_to_detect_s": ttd[1] },
+                ],
+                "alarm_on_at_onset": on, "false_alarms": 3, "false_alarms_per_min": 1.5,
+                "attack_free_watched_s": 120.0, "false_alarm_share": 0.25, "coverage": null,
+                "watched_from_s": from, "threshold": 33.37684, "non_finite": 1, "missing": 2,
+                "calibration": {
+                    "window_s": 2.0, "samples": 1999, "attacked_ticks": 5, "non_finite": 0,
+                    "residual_rms": [1e-4], "failed": null
+                }
+            }))
+            .expect("detector metrics")
+        };
+        let m = s.metrics.get_mut("2").expect("robot 2");
+        m.detectors.insert(
+            "s_hat_norm".into(),
+            detector([Some(0.061), None], [false, false], 0.0),
+        );
+        m.detectors.insert(
+            "chi2".into(),
+            detector([None, Some(0.0)], [false, true], 0.02),
+        );
+        let md = super::detector_tables(&s, 2);
+        for line in [
+            "## Detectors side by side",
+            "### Detectors of robot 2",
+            "|  | s_hat_norm | chi2 | cusum |",
+            "| onset at 0.001 s: time to detect (s) | 0.061 | not watched | absent |",
+            "| onset at 0.050 s: time to detect (s) | missed | already on | absent |",
+            "| false alarms per minute | 1.50 | 1.50 | absent |",
+            "| alarm share of attack-free time | 25.0 % | 25.0 % | absent |",
+            "| coverage of attacked ticks | no attack | no attack | absent |",
+            "| non-finite / missing ticks | 1 / 2 | 1 / 2 | absent |",
+            "Calibration over the first 2 s: 1999 residuals, 5 ticks of it with the attack in force",
+        ] {
+            assert!(md.contains(line), "{line}:\n{md}");
+        }
+        assert!(!md.contains("robot 1"), "robot 1 has no detector metrics");
     }
 
     #[test]

@@ -775,8 +775,9 @@ fn run_section(md: &mut String, run_dir: &Path, r: &Resolved, s: &RunSummary) {
 }
 
 /// The rows of the parameter table: (parameter, value).
-fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 11] {
+fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 12] {
     let c = &r.scenario.controller;
+    let d = &r.scenario.detectors;
     [
         ("scenario", s.scenario.clone()),
         ("engine", s.engine.clone()),
@@ -802,6 +803,21 @@ fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 11] {
             format!(
                 "alarm when ‖Ŝ‖ > {} for {} s",
                 c.detection.threshold, c.detection.hold_s
+            ),
+        ),
+        (
+            "detectors",
+            format!(
+                "χ² over {} tick(s) ({}) and CUSUM (ν = {}, h = {}) on the `{}` residual, calibrated over the first {} s",
+                d.chi2.window_ticks,
+                d.chi2.threshold.map_or_else(
+                    || format!("false-alarm probability {:e} per tick", d.chi2.false_alarm_probability),
+                    |t| format!("threshold {t}")
+                ),
+                d.cusum.drift,
+                d.cusum.threshold,
+                d.residual.as_str(),
+                d.calibration_s()
             ),
         ),
         (
@@ -856,9 +872,15 @@ fn notices(md: &mut String, s: &RunSummary) {
 fn rmse_section(md: &mut String, run_dir: &Path, s: &RunSummary) {
     md.push_str("\n## RMSE\n\n");
     let stored = std::fs::read_to_string(run_dir.join("rmse.md")).ok();
+    // Its first table only: the detector tables that follow it have their own section.
     let table: Vec<&str> = stored
         .as_deref()
-        .map(|t| t.lines().filter(|l| l.starts_with('|')).collect())
+        .map(|t| {
+            t.lines()
+                .skip_while(|l| !l.starts_with('|'))
+                .take_while(|l| l.starts_with('|'))
+                .collect()
+        })
         .unwrap_or_default();
     if table.is_empty() {
         md.push_str(&md_table_head(&[
@@ -928,6 +950,7 @@ fn detection_section(md: &mut String, s: &RunSummary) {
         );
     }
     md.push_str("\n(also [`detection.csv`](detection.csv))\n");
+    md.push_str(&crate::output::detector_tables(s, 3));
 }
 
 /// The error maxima of every attack segment that holds ticks.
