@@ -339,6 +339,12 @@ impl Scenario {
         out.extend(self.defaults_problems());
         out.extend(self.disturbance_length_problems());
         out.extend(self.attack_problems());
+        out.extend(self.detectors.problems(
+            "detectors",
+            self.duration_s,
+            self.control_period_s,
+            self.agents.first().map(|a| a.model.dof()),
+        ));
         out
     }
 
@@ -551,12 +557,6 @@ impl Scenario {
                 push(format!("attack.profile.{p}"), m);
             }
         }
-        out.extend(self.detectors.problems(
-            "detectors",
-            self.duration_s,
-            self.control_period_s,
-            dof0,
-        ));
         out
     }
 }
