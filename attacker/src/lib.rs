@@ -63,6 +63,21 @@ struct Target {
     next: u64,
 }
 
+impl Target {
+    /// Every agent of the run, with its attack compiled from the run's profile.
+    fn all(resolved: &Resolved) -> Vec<Self> {
+        let s = &resolved.scenario;
+        s.agents
+            .iter()
+            .map(|a| Self {
+                id: a.id,
+                attack: AgentAttack::compile(&resolved.attack, a.id, s.seed),
+                next: 0,
+            })
+            .collect()
+    }
+}
+
 /// Tampers the admitted measurement `m` (received at `received`) with `target`'s attack,
 /// relays it to the control center and records what was injected.
 fn relay<X: Transport, const N: usize>(
@@ -104,15 +119,7 @@ pub fn run<X: Transport, const N: usize>(
     trace: &mut TraceWriter,
 ) -> Result<u64, AttackerError> {
     let s = &resolved.scenario;
-    let mut targets: Vec<Target> = s
-        .agents
-        .iter()
-        .map(|a| Target {
-            id: a.id,
-            attack: AgentAttack::compile(&resolved.attack, a.id, s.seed),
-            next: 0,
-        })
-        .collect();
+    let mut targets = Target::all(resolved);
     let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?

@@ -76,6 +76,63 @@ struct Slot<const N: usize> {
     next: u64,
 }
 
+/// What the control center keeps about its input stream: the sequence of each agent, their
+/// liveness (realtime), and what one batch of measurements did.
+struct Intake {
+    sequence: SequenceTracker,
+    /// Realtime: an agent silent for [`LOST_AFTER_NS`] is declared lost; the others stay
+    /// controlled.
+    liveness: Liveness,
+    /// Messages refused so far.
+    refused: u64,
+    /// The first failure of the batch (sending a torque, writing the trace).
+    failure: Option<CenterError>,
+    /// Agents heard from again after being declared lost: (slot, silence in ns, tick).
+    rejoined: Vec<(usize, u64, u64)>,
+    /// Which agents got a torque in this batch: each is woken once per batch.
+    answered: Vec<bool>,
+}
+
+impl Intake {
+    fn new(ids: &[u32], ticks: u64, since_ns: u64) -> Self {
+        Self {
+            sequence: SequenceTracker::new(ids.iter().copied(), ticks),
+            liveness: Liveness::new(ids.len(), since_ns, LOST_AFTER_NS),
+            refused: 0,
+            failure: None,
+            rejoined: Vec::new(),
+            answered: vec![false; ids.len()],
+        }
+    }
+
+    /// Admits measurement `m` (refused ones are counted) and controls its agent.
+    fn take<X: Transport, const N: usize>(
+        &mut self,
+        m: &MeasurementMsg,
+        slots: &mut [Slot<N>],
+        ports: &Ports<X>,
+        dt: f64,
+        trace: &mut TraceWriter,
+    ) {
+        let received = monotonic_ns();
+        let Some(i) = slots.iter().position(|x| x.center.agent_id() == m.agent) else {
+            self.refused += 1;
+            return;
+        };
+        if !process::admit_measurement(m, N, &mut self.sequence, dt, trace) {
+            self.refused += 1;
+            return;
+        }
+        if let Some(silent) = self.liveness.seen(i, received) {
+            self.rejoined.push((i, silent, m.seq));
+        }
+        if let Err(e) = control(&mut slots[i], m, received, &ports.agents[i], dt, trace) {
+            self.failure.get_or_insert(e);
+        }
+        self.answered[i] = true;
+    }
+}
+
 /// Computes agent `slot`'s tick from the admitted measurement `m` (received at `received`),
 /// sends the torque back on `link`, stamped with its tick time, and records it.
 fn control<X: Transport, const N: usize>(
@@ -196,6 +253,7 @@ pub fn run<X: Transport, const N: usize>(
                 .ok_or(CenterError::Dof(a.id))
         })
         .collect::<Result<Vec<_>, _>>()?;
+    let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
     let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?
@@ -205,54 +263,32 @@ pub fn run<X: Transport, const N: usize>(
     };
     let ticks = resolved.ticks();
     let dt = s.control_period_s;
-    let mut refused = 0u64;
-    let mut failure = None;
     let mut reported = 0;
     let strategy = WaitStrategy::for_clock(s.clock);
     let realtime = s.clock == ClockMode::Realtime;
-    // Realtime: an agent silent for LOST_AFTER_NS is declared lost; the others stay controlled.
-    let mut liveness = Liveness::new(slots.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
     let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
-    // Agents heard from again after being declared lost: (slot, silence in ns, tick).
-    let mut rejoined: Vec<(usize, u64, u64)> = Vec::new();
-    let mut sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
-    // Which agents got a torque in this batch: each is woken once per batch.
-    let mut answered = vec![false; slots.len()];
+    let mut intake = Intake::new(&ids, ticks, monotonic_ns().max(epoch_ns));
     loop {
-        ports.tampered.drain(|m| {
-            let received = monotonic_ns();
-            let Some(i) = slots.iter().position(|x| x.center.agent_id() == m.agent) else {
-                refused += 1;
-                return;
-            };
-            if !process::admit_measurement(&m, N, &mut sequence, dt, trace) {
-                refused += 1;
-                return;
-            }
-            if let Some(silent) = liveness.seen(i, received) {
-                rejoined.push((i, silent, m.seq));
-            }
-            if let Err(e) = control(&mut slots[i], &m, received, &ports.agents[i], dt, trace) {
-                failure.get_or_insert(e);
-            }
-            answered[i] = true;
-        })?;
-        if let Some(e) = failure.take() {
+        ports
+            .tampered
+            .drain(|m| intake.take(&m, &mut slots, ports, dt, trace))?;
+        if let Some(e) = intake.failure.take() {
             return Err(e);
         }
-        for (flag, link) in answered.iter_mut().zip(&ports.agents) {
+        for (flag, link) in intake.answered.iter_mut().zip(&ports.agents) {
             if std::mem::take(flag) {
                 link.bell.ring()?;
             }
         }
-        for (i, silent, k) in rejoined.drain(..) {
+        let liveness = &mut intake.liveness;
+        for (i, silent, k) in intake.rejoined.drain(..) {
             announce_rejoined(slots[i].center.agent_id(), silent, k, dt, ports, trace)?;
         }
         let now = monotonic_ns();
         if realtime {
-            declare_lost(&slots, &mut liveness, now, ticks, dt, ports, trace)?;
+            declare_lost(&slots, liveness, now, ticks, dt, ports, trace)?;
         }
-        report_progress(&slots, &liveness, &mut reported, ticks, ports)?;
+        report_progress(&slots, liveness, &mut reported, ticks, ports)?;
         // The end once every agent finished, or is lost past the run's wall-clock end (until
         // then a lost agent may rejoin).
         if slots
@@ -263,11 +299,14 @@ pub fn run<X: Transport, const N: usize>(
             break;
         }
         if shutdown.requested() || ports.launcher.stop_requested()? {
-            return Ok(refused);
+            return Ok(intake.refused);
         }
         strategy.wait_for_input(s.clock, &ports.waker, &ports.tampered)?;
     }
-    let rejected: u64 = slots.iter().map(|x| x.center.rejected_inputs).sum();
+    let (refused, rejected) = (
+        intake.refused,
+        slots.iter().map(|x| x.center.rejected_inputs).sum::<u64>(),
+    );
     let note = (refused > 0 || rejected > 0).then(|| {
         let message = format!(
             "{refused} messages refused, {rejected} measurements rejected as non-finite or absurd"

@@ -195,73 +195,83 @@ pub fn detector_tables(s: &RunSummary, level: usize) -> String {
         let _ = writeln!(md, "\n{h_robot} Detectors of robot {id}\n");
         let cols: Vec<Option<&DetectorMetrics>> =
             detect::NAMES.iter().map(|n| m.detectors.get(*n)).collect();
-        let mut head = vec![""];
-        head.extend(detect::NAMES);
-        md.push_str(&md_table_head(&head));
-        let mut row = |label: String, cell: &dyn Fn(&DetectorMetrics) -> String| {
-            let cells: Vec<String> = cols
-                .iter()
-                .map(|d| d.map_or_else(|| "absent".into(), cell))
-                .collect();
-            let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
-        };
-        for (i, o) in m.onsets.iter().enumerate() {
-            row(
-                format!("onset at {:.3} s: time to detect (s)", o.t_s),
-                &|d| time_to_detect_cell(d, i, o.t_s),
-            );
-        }
-        if m.onsets.is_empty() {
-            row("attack onsets".into(), &|_| "none".into());
-        }
-        row("false alarms".into(), &|d| d.false_alarms.to_string());
-        row("false alarms per minute".into(), &|d| {
-            d.false_alarms_per_min.map_or_else(
-                || "no attack-free time watched".into(),
-                |x| format!("{x:.2}"),
-            )
-        });
-        row("alarm share of attack-free time".into(), &|d| {
-            d.false_alarm_share
-                .map_or_else(|| "—".into(), |x| format!("{:.1} %", 100.0 * x))
-        });
-        row("coverage of attacked ticks".into(), &|d| {
-            d.coverage
-                .map_or_else(|| "no attack".into(), |x| format!("{:.1} %", 100.0 * x))
-        });
-        row("watching from (s)".into(), &|d| {
-            d.watched_from_s
-                .map_or_else(|| "never".into(), |t| format!("{t:.3}"))
-        });
-        row("threshold".into(), &|d| {
-            d.threshold
-                .map_or_else(|| "none".into(), |t| format!("{t:.4}"))
-        });
-        row("non-finite / missing ticks".into(), &|d| {
-            format!("{} / {}", d.non_finite, d.missing)
-        });
-        if let Some(c) = cols.iter().flatten().find_map(|d| d.calibration.as_ref()) {
-            let _ = write!(
-                md,
-                "\nCalibration over the first {} s: {} residuals",
-                c.window_s, c.samples
-            );
-            if c.attacked_ticks > 0 {
-                let _ = write!(
-                    md,
-                    ", {} ticks of it with the attack in force (the covariance includes the attack)",
-                    c.attacked_ticks
-                );
-            }
-            match &c.failed {
-                Some(why) => {
-                    let _ = writeln!(md, ". **The χ² and CUSUM detectors never watched: {why}.**");
-                }
-                None => md.push_str(".\n"),
-            }
-        }
+        detector_rows(&mut md, m, &cols);
+        calibration_line(&mut md, &cols);
     }
     md
+}
+
+/// The rows of one robot's detector table: a column per detector of `cols`.
+fn detector_rows(md: &mut String, m: &AgentMetrics, cols: &[Option<&DetectorMetrics>]) {
+    let mut head = vec![""];
+    head.extend(detect::NAMES);
+    md.push_str(&md_table_head(&head));
+    let mut row = |label: String, cell: &dyn Fn(&DetectorMetrics) -> String| {
+        let cells: Vec<String> = cols
+            .iter()
+            .map(|d| d.map_or_else(|| "absent".into(), cell))
+            .collect();
+        let _ = writeln!(md, "| {label} | {} |", cells.join(" | "));
+    };
+    for (i, o) in m.onsets.iter().enumerate() {
+        row(
+            format!("onset at {:.3} s: time to detect (s)", o.t_s),
+            &|d| time_to_detect_cell(d, i, o.t_s),
+        );
+    }
+    if m.onsets.is_empty() {
+        row("attack onsets".into(), &|_| "none".into());
+    }
+    row("false alarms".into(), &|d| d.false_alarms.to_string());
+    row("false alarms per minute".into(), &|d| {
+        d.false_alarms_per_min.map_or_else(
+            || "no attack-free time watched".into(),
+            |x| format!("{x:.2}"),
+        )
+    });
+    row("alarm share of attack-free time".into(), &|d| {
+        d.false_alarm_share
+            .map_or_else(|| "—".into(), |x| format!("{:.1} %", 100.0 * x))
+    });
+    row("coverage of attacked ticks".into(), &|d| {
+        d.coverage
+            .map_or_else(|| "no attack".into(), |x| format!("{:.1} %", 100.0 * x))
+    });
+    row("watching from (s)".into(), &|d| {
+        d.watched_from_s
+            .map_or_else(|| "never".into(), |t| format!("{t:.3}"))
+    });
+    row("threshold".into(), &|d| {
+        d.threshold
+            .map_or_else(|| "none".into(), |t| format!("{t:.4}"))
+    });
+    row("non-finite / missing ticks".into(), &|d| {
+        format!("{} / {}", d.non_finite, d.missing)
+    });
+}
+
+/// How the residual detectors of `cols` were calibrated, and why they never watched if so.
+fn calibration_line(md: &mut String, cols: &[Option<&DetectorMetrics>]) {
+    if let Some(c) = cols.iter().flatten().find_map(|d| d.calibration.as_ref()) {
+        let _ = write!(
+            md,
+            "\nCalibration over the first {} s: {} residuals",
+            c.window_s, c.samples
+        );
+        if c.attacked_ticks > 0 {
+            let _ = write!(
+                md,
+                ", {} ticks of it with the attack in force (the covariance includes the attack)",
+                c.attacked_ticks
+            );
+        }
+        match &c.failed {
+            Some(why) => {
+                let _ = writeln!(md, ". **The χ² and CUSUM detectors never watched: {why}.**");
+            }
+            None => md.push_str(".\n"),
+        }
+    }
 }
 
 /// One detector's time to detect onset `i` (at `t_s`) as a cell.
