@@ -130,14 +130,10 @@ pub fn inproc_records(resolved: &Resolved) -> (Vec<TickRecord>, String) {
     (recs, summary.trace_digest)
 }
 
-fn header(process: &str, resolved: &Resolved) -> fdi_common::trace::TraceHeader {
-    process::trace_header(process, resolved)
-}
-
 fn writer(dir: &Path, process: &str, resolved: &Resolved) -> TraceWriter {
     TraceWriter::create(
         &dir.join(format!("{process}.trace")),
-        &header(process, resolved),
+        &process::trace_header(process, resolved),
     )
     .expect("trace")
 }

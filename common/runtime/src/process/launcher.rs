@@ -31,35 +31,26 @@ pub struct LauncherLink<X: Transport> {
 }
 
 impl<X: Transport> LauncherLink<X> {
+    /// Reports `kind` (ready, progress, done) for this process at `tick`.
     pub fn report(&self, kind: u32, tick: u64) -> Result<(), IpcError> {
-        self.status.send(StatusMsg {
-            role: self.role.code(),
-            agent: self.agent,
-            kind,
-            reserved: 0,
-            tick,
-        })?;
-        self.bell.ring()
+        self.status_of(self.agent, kind, tick)
     }
 
     /// Tells the launcher that `agent`, declared lost, is heard from again at `tick`.
     pub fn report_rejoined(&self, agent: u32, tick: u64) -> Result<(), IpcError> {
-        self.status.send(StatusMsg {
-            role: self.role.code(),
-            agent,
-            kind: StatusMsg::REJOINED,
-            reserved: 0,
-            tick,
-        })?;
-        self.bell.ring()
+        self.status_of(agent, StatusMsg::REJOINED, tick)
     }
 
     /// Tells the launcher that `agent` was declared lost after `tick`.
     pub fn report_lost(&self, agent: u32, tick: u64) -> Result<(), IpcError> {
+        self.status_of(agent, StatusMsg::LOST, tick)
+    }
+
+    fn status_of(&self, agent: u32, kind: u32, tick: u64) -> Result<(), IpcError> {
         self.status.send(StatusMsg {
             role: self.role.code(),
             agent,
-            kind: StatusMsg::LOST,
+            kind,
             reserved: 0,
             tick,
         })?;
