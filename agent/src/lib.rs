@@ -73,6 +73,7 @@ struct Inflow {
     refused: u64,
     /// The run's tick count: no torque is numbered beyond.
     ticks: u64,
+    dt: f64,
     clock: ClockMode,
 }
 
@@ -85,8 +86,10 @@ struct Published<const N: usize> {
 }
 
 /// Takes every waiting torque into the plant's delay line, in order; a torque for a tick already
-/// passed (duplicate, replay) or malformed is refused and counted. With `stamps`, the per-hop
-/// latency of every torque is recorded (realtime: in lockstep latencies say nothing).
+/// passed (duplicate, replay) or malformed is refused and counted; one that stands for its tick
+/// without a usable command (gap marker, forged stamp) leaves the tick's command missing
+/// ([`Plant::take_command`]). With `stamps`, the per-hop latency of every torque is recorded
+/// (realtime: in lockstep latencies say nothing).
 fn take_torques<X: Transport, const N: usize>(
     plant: &mut Plant<N>,
     ports: &Ports<X>,
@@ -98,13 +101,21 @@ fn take_torques<X: Transport, const N: usize>(
     let mut err = None;
     ports.torque.drain(|m| {
         let received = monotonic_ns();
-        let admitted = process::admit_torque::<N>(&m, id, inflow.next, inflow.ticks, inflow.clock);
-        if !admitted.is_ok_and(|u| plant.receive(m.t_send, u).is_ok()) {
+        let admitted = process::admit_torque::<N>(
+            &m,
+            id,
+            inflow.next,
+            (inflow.ticks, inflow.dt),
+            inflow.clock,
+        );
+        let Ok(command) = admitted else {
             inflow.refused += 1;
             return;
-        }
+        };
+        // A refused value or stamp is counted by the plant, as a missing command.
+        let _ = plant.take_command(command.stamp, command.torque);
         inflow.next = m.seq + 1;
-        if !stamps {
+        if !stamps || command.torque.is_none() {
             return;
         }
         let stamps = HopStamps {
@@ -146,6 +157,8 @@ fn publish<X: Transport, const N: usize>(
         agent_sent_ns: monotonic_ns(),
         attacker_received_ns: 0,
         attacker_sent_ns: 0,
+        flags: 0,
+        reserved: 0,
     })?;
     if ring {
         ports.attacker.ring()?;
@@ -181,6 +194,7 @@ pub fn run<X: Transport, const N: usize>(
         next: 0,
         refused: 0,
         ticks,
+        dt,
         clock: s.clock,
     };
     let stopped_at = match s.clock {
@@ -198,10 +212,12 @@ pub fn run<X: Transport, const N: usize>(
     if let Some(k) = stopped_at {
         return Ok(Outcome::Stopped { ticks: k });
     }
-    let note = (inflow.refused > 0).then(|| {
+    let note = (inflow.refused > 0 || plant.missing_commands > 0).then(|| {
         let message = format!(
-            "{} torque messages refused (wrong agent, dof, sequence or stamp)",
-            inflow.refused
+            "{} torque messages refused (wrong agent, dof, sequence or stamp), {} ticks without \
+             a usable command (dropped, forged, replayed or refused by the delay line; the one \
+             before held)",
+            inflow.refused, plant.missing_commands
         );
         (s.duration_s, message)
     });

@@ -1,19 +1,23 @@
 //! The attacker process: a man in the middle between the agents and the control center.
-//! It relays every measurement in order, adding the profile's `α(t)` ([`fdi_common::engine::tamper`]),
-//! and records what it injected. Purely event-driven in both clocks.
+//! It relays every measurement in order, tampered by the profile
+//! ([`AgentAttack::measurement`]), and, for the agents whose torques the profile attacks,
+//! every torque on its way back ([`AgentAttack::torque`]); it records what it did to each.
+//! A message the attack keeps from its receiver is replaced by a gap marker. Purely
+//! event-driven in both clocks.
 
 use std::process::ExitCode;
 
-use fdi_common::attack::AgentAttack;
-use fdi_common::engine::{attack_record, tamper, tick_time};
-use fdi_common::model::{EulerLagrange, ForLinks};
+use fdi_common::attack::{AgentAttack, Sent};
+use fdi_common::engine::{actuation_record, attack_record, tick_time};
+use fdi_common::model::{EulerLagrange, ForLinks, Vector};
 use fdi_common::plant::Measurement;
+use fdi_common::records::{ActuationRecord, Delivery, Joints};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, Transport,
-    Wake,
+    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, TorqueMsg,
+    Transport, Wake,
 };
 use fdi_runtime::process::{
     self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
@@ -29,6 +33,8 @@ pub struct Ports<X: Transport> {
     pub measurement: X::Inbox<MeasurementMsg>,
     pub tampered: X::Outbox<MeasurementMsg>,
     pub center: X::Bell,
+    /// The actuation path, when the run attacks some agent's torques.
+    pub actuation: Option<Actuation<X>>,
     pub waker: X::Waker,
     pub launcher: LauncherLink<X>,
     /// The node; declared last so that it is dropped after the ports.
@@ -44,10 +50,29 @@ impl<X: Transport> Ports<X> {
             Wake::Attacker,
             process::sizing_for(resolved),
         )?;
+        let mut agents = Vec::new();
+        for a in &resolved.scenario.agents {
+            if resolved.attack.attacks_torque_of(a.id) {
+                agents.push((
+                    a.id,
+                    conn.transport.publisher(Stream::Torque(a.id))?,
+                    conn.transport.notifier(Wake::Agent(a.id))?,
+                ));
+            }
+        }
+        let actuation = if agents.is_empty() {
+            None
+        } else {
+            Some(Actuation {
+                torques: conn.transport.subscriber(Stream::Actuation)?,
+                agents,
+            })
+        };
         Ok(Self {
             measurement: conn.transport.subscriber(Stream::Measurement)?,
             tampered: conn.transport.publisher(Stream::Tampered)?,
             center: conn.transport.notifier(Wake::Center)?,
+            actuation,
             waker: conn.waker,
             launcher: conn.launcher,
             transport: conn.transport,
@@ -55,31 +80,55 @@ impl<X: Transport> Ports<X> {
     }
 }
 
+/// The actuation path through the attacker: the torques of the agents whose torques the run
+/// attacks, from the control center, and each such agent's torque channel and bell.
+#[derive(Debug)]
+pub struct Actuation<X: Transport> {
+    pub torques: X::Inbox<TorqueMsg>,
+    /// `(agent id, its torque channel, its bell)`, in the scenario's agent order.
+    pub agents: Vec<(u32, X::Outbox<TorqueMsg>, X::Bell)>,
+}
+
 /// One attacked agent.
 #[derive(Debug)]
 struct Target {
     id: u32,
     attack: AgentAttack,
+    /// Next measurement due.
     next: u64,
+    /// Its torques go through the attacker: the index of its channel in
+    /// [`Actuation::agents`], and the next torque due.
+    routed: Option<(usize, u64)>,
 }
 
 impl Target {
     /// Every agent of the run, with its attack compiled from the run's profile.
     fn all(resolved: &Resolved) -> Vec<Self> {
         let s = &resolved.scenario;
+        let mut routed = 0;
         s.agents
             .iter()
             .map(|a| Self {
                 id: a.id,
                 attack: AgentAttack::compile(&resolved.attack, a.id, s.seed),
                 next: 0,
+                routed: resolved.attack.attacks_torque_of(a.id).then(|| {
+                    routed += 1;
+                    (routed - 1, 0)
+                }),
             })
             .collect()
+    }
+
+    /// Every message of the agent went through, both ways.
+    fn finished(&self, ticks: u64) -> bool {
+        self.next >= ticks && self.routed.is_none_or(|(_, n)| n >= ticks)
     }
 }
 
 /// Tampers the admitted measurement `m` (received at `received`) with `target`'s attack,
-/// relays it to the control center and records what was injected.
+/// relays what the attack lets through to the control center (a gap marker in place of what
+/// it keeps back) and records what it did.
 fn relay<X: Transport, const N: usize>(
     target: &mut Target,
     m: &MeasurementMsg,
@@ -94,21 +143,147 @@ fn relay<X: Transport, const N: usize>(
         y: to_vector::<N>(&m.y),
         yd: to_vector::<N>(&m.yd),
     };
-    let (out, inj) = tamper(&mut target.attack, t, &clean);
-    let sent = ports.tampered.send(MeasurementMsg {
-        y: from_vector(&out.y),
-        yd: from_vector(&out.yd),
+    let (sent, inj) = target.attack.measurement::<N>(m.seq, t, &clean);
+    let with = |p: &Measurement<N>| MeasurementMsg {
+        y: from_vector(&p.y),
+        yd: from_vector(&p.yd),
         attacker_received_ns: received,
         attacker_sent_ns: monotonic_ns(),
         ..*m
-    });
+    };
+    let gap = MeasurementMsg::gap(m.seq, m.agent, m.dof, m.t);
+    let out = &ports.tampered;
+    let result = match &sent {
+        Sent::Delivered { payload, .. } => out.send(with(payload)),
+        Sent::Missing => out.send(gap),
+        Sent::Forged { payload, shift_s } => out.send(MeasurementMsg {
+            t: m.t + shift_s,
+            ..with(payload)
+        }),
+        Sent::Replayed { k, payload } => out
+            .send(MeasurementMsg {
+                seq: *k,
+                t: tick_time(*k, dt),
+                ..with(payload)
+            })
+            .and_then(|_| out.send(gap)),
+    };
     // The record is written even when the send failed: the trace shows what was injected.
     let written = trace.write(&TraceRecord::Attack(attack_record(
-        m.seq, m.agent, &out, &inj,
+        m.seq, m.agent, &sent, &inj,
     )));
-    sent?;
+    result?;
     written?;
     Ok(())
+}
+
+/// Tampers the torque `m` from the control center (received at `received`) with `target`'s
+/// attack, relays what the attack lets through on the agent's channel (a gap marker in place
+/// of what it keeps back) and records what it did. `command`: the torque, `None` when the
+/// center's message stood for its tick without a usable command (relayed as a gap).
+fn relay_torque<X: Transport, const N: usize>(
+    target: &mut Target,
+    (m, command): (&TorqueMsg, Option<Vector<N>>),
+    received: u64,
+    out: &X::Outbox<TorqueMsg>,
+    dt: f64,
+    trace: &mut TraceWriter,
+) -> Result<(), AttackerError> {
+    let gap = TorqueMsg {
+        flags: TorqueMsg::GAP,
+        ..*m
+    };
+    let Some(u) = command else {
+        let result = out.send(gap);
+        trace.write(&TraceRecord::Actuation(ActuationRecord {
+            k: m.seq,
+            agent: m.agent,
+            alpha_u: Joints::default(),
+            u: Joints::default(),
+            held_s: 0.0,
+            active: false,
+            delivery: Delivery::Missing,
+        }))?;
+        result?;
+        return Ok(());
+    };
+    let t = tick_time(m.seq, dt);
+    let (sent, inj) = target.attack.torque::<N>(m.seq, t, &u);
+    let with = |p: &Vector<N>| TorqueMsg {
+        u: from_vector(p),
+        attacker_received_ns: received,
+        attacker_sent_ns: monotonic_ns(),
+        ..*m
+    };
+    let result = match &sent {
+        Sent::Delivered { payload, held_s } => out.send(TorqueMsg {
+            held_s: *held_s,
+            ..with(payload)
+        }),
+        Sent::Missing => out.send(gap),
+        Sent::Forged { payload, shift_s } => out.send(TorqueMsg {
+            t_send: m.t_send + shift_s,
+            ..with(payload)
+        }),
+        Sent::Replayed { k, payload } => out
+            .send(TorqueMsg {
+                seq: *k,
+                t_send: tick_time(*k, dt),
+                ..with(payload)
+            })
+            .and_then(|_| out.send(gap)),
+    };
+    let written = trace.write(&TraceRecord::Actuation(actuation_record(
+        m.seq, m.agent, &sent, &inj,
+    )));
+    result?;
+    written?;
+    Ok(())
+}
+
+/// Admits and relays every torque waiting on the actuation path; rings each agent that got
+/// one. Returns the messages refused.
+fn relay_torques<X: Transport, const N: usize>(
+    targets: &mut [Target],
+    actuation: &Actuation<X>,
+    (ticks, dt, clock): (u64, f64, ClockMode),
+    trace: &mut TraceWriter,
+) -> Result<u64, AttackerError> {
+    let mut refused = 0;
+    let mut failure = None;
+    let mut answered = vec![false; actuation.agents.len()];
+    actuation.torques.drain(|m| {
+        let received = monotonic_ns();
+        let Some(target) = targets.iter_mut().find(|t| t.id == m.agent) else {
+            refused += 1;
+            return;
+        };
+        let Some((i, next)) = target.routed else {
+            refused += 1;
+            return;
+        };
+        let Ok(command) = process::admit_torque::<N>(&m, target.id, next, (ticks, dt), clock)
+        else {
+            refused += 1;
+            return;
+        };
+        target.routed = Some((i, m.seq + 1));
+        let command = command.torque.map(|(u, _)| u);
+        let out = &actuation.agents[i].1;
+        if let Err(e) = relay_torque::<X, N>(target, (&m, command), received, out, dt, trace) {
+            failure.get_or_insert(e);
+        }
+        answered[i] = true;
+    })?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    for (flag, (_, _, bell)) in answered.iter().zip(&actuation.agents) {
+        if *flag {
+            bell.ring()?;
+        }
+    }
+    Ok(refused)
 }
 
 /// Relays until every agent's last tick went through (or `shutdown`). Returns messages refused.
@@ -145,7 +320,11 @@ pub fn run<X: Transport, const N: usize>(
                 refused += 1;
                 return;
             };
-            if !process::admit_measurement(&m, N, &mut sequence, dt, trace) {
+            // A gap marker or forged stamp from elsewhere is relayed as the tick's message:
+            // the attack acts on what the agent sent, and the center judges it again.
+            if process::admit_measurement(&m, N, &mut sequence, dt, trace)
+                == process::Admission::Refused
+            {
                 refused += 1;
                 return;
             }
@@ -161,6 +340,9 @@ pub fn run<X: Transport, const N: usize>(
         if relayed > 0 {
             ports.center.ring()?;
         }
+        if let Some(actuation) = &ports.actuation {
+            refused += relay_torques::<X, N>(&mut targets, actuation, (ticks, dt, s.clock), trace)?;
+        }
         let now = monotonic_ns();
         if realtime {
             liveness.newly_lost(now, |i| targets[i].next >= ticks);
@@ -169,14 +351,20 @@ pub fn run<X: Transport, const N: usize>(
         if targets
             .iter()
             .enumerate()
-            .all(|(i, t)| liveness.settled(i, t.next >= ticks, now, end_ns))
+            .all(|(i, t)| liveness.settled(i, t.finished(ticks), now, end_ns))
         {
             break;
         }
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(refused);
         }
-        strategy.wait_for_input(s.clock, &ports.waker, &ports.measurement)?;
+        strategy.wait_for_input(s.clock, &ports.waker, || {
+            Ok(ports.measurement.has_messages()?
+                || match &ports.actuation {
+                    Some(a) => a.torques.has_messages()?,
+                    None => false,
+                })
+        })?;
     }
     let note = (refused > 0).then(|| {
         (

@@ -17,7 +17,7 @@ use std::time::{Duration, Instant};
 use criterion::{criterion_group, criterion_main, Criterion};
 use fdi_common::attack::AgentAttack;
 use fdi_common::control::{CenterAgent, CenterParams};
-use fdi_common::engine::{tamper, tick_time};
+use fdi_common::engine::{center_tick, tick_time};
 use fdi_common::model::Vector;
 use fdi_common::plant::{Plant, PlantParams};
 use fdi_common::scenario::{self, AgentConfig, Resolved};
@@ -42,11 +42,13 @@ impl AgentLoop {
     /// Tick `k` at `t`; returns the tampered measurement the center saw and its torque.
     fn tick(&mut self, k: u64, t: f64) -> (Vector<2>, Vector<2>, Vector<2>) {
         let m = self.plant.measure();
-        let (tampered, _) = tamper(&mut self.attack, t, &m);
-        let out = self.center.tick(t, &tampered.y, &tampered.yd);
-        let _ = self.plant.receive(t, out.u);
+        let (sent, _) = self.attack.measurement::<2>(k, t, &m);
+        let tampered = sent.usable().map(|(m, _)| *m);
+        let out = center_tick(&mut self.center, t, tampered.as_ref());
+        let _ = self.plant.take_command(t, Some((out.u, 0.0)));
         self.plant.advance(k);
-        (tampered.y, tampered.yd, out.u)
+        let seen = tampered.unwrap_or(m);
+        (seen.y, seen.yd, out.u)
     }
 }
 

@@ -195,6 +195,8 @@ pub struct DelayLine<const N: usize> {
     entries: VecDeque<(f64, Vector<N>)>,
     /// Some entry was pruned: the history no longer starts at the first command.
     pruned: bool,
+    /// Stamps of commands known to be missing ([`Self::push_missing`]), increasing.
+    holes: VecDeque<f64>,
 }
 
 /// A query of [`DelayLine::integral`] reached before the oldest command kept after pruning.
@@ -227,6 +229,7 @@ impl<const N: usize> DelayLine<N> {
         Self {
             entries: VecDeque::with_capacity(256),
             pruned: false,
+            holes: VecDeque::new(),
         }
     }
 
@@ -258,6 +261,22 @@ impl<const N: usize> DelayLine<N> {
         Ok(())
     }
 
+    /// Notes that the command stamped `stamp` will never come (dropped, refused): the one before
+    /// stays in force, and a lookup that should find this one counts a miss. A stamp not after
+    /// the newest hole is ignored.
+    pub fn push_missing(&mut self, stamp: f64) {
+        if stamp.is_finite() && self.holes.back().is_none_or(|h| stamp > *h) {
+            self.holes.push_back(stamp);
+        }
+    }
+
+    /// Some missing command (a hole) stamped after `after` is in force at `t`.
+    fn hole_between(&self, after: Option<f64>, t: f64) -> bool {
+        self.holes
+            .iter()
+            .any(|&h| after.is_none_or(|a| h > a) && in_force_at(h, t))
+    }
+
     /// Index of the newest entry with `stamp ≤ t`.
     fn index_at(&self, t: f64) -> Option<usize> {
         let n = self.entries.partition_point(|e| in_force_at(e.0, t));
@@ -280,7 +299,8 @@ impl<const N: usize> DelayLine<N> {
             (Some(i), _) => {
                 let (stamp, value) = self.entries[i];
                 let is_newest = i + 1 == self.entries.len();
-                let missed = is_newest && stamp + period * (1.0 + 1e-6) <= t;
+                let missed = (is_newest && stamp + period * (1.0 + 1e-6) <= t)
+                    || self.hole_between(Some(stamp), t);
                 Lookup {
                     value,
                     stamp: Some(stamp),
@@ -297,7 +317,7 @@ impl<const N: usize> DelayLine<N> {
             (None, _) => Lookup {
                 value: Vector::<N>::zeros(),
                 stamp: None,
-                missed: false,
+                missed: self.hole_between(None, t),
                 pruned: false,
             },
         }
@@ -352,6 +372,11 @@ impl<const N: usize> DelayLine<N> {
         while self.entries.len() >= 3 && self.entries[2].0 <= t {
             self.entries.pop_front();
             self.pruned = true;
+        }
+        if let Some(&(oldest, _)) = self.entries.front().filter(|_| self.pruned) {
+            while self.holes.front().is_some_and(|h| *h <= oldest) {
+                self.holes.pop_front();
+            }
         }
     }
 }

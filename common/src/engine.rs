@@ -8,13 +8,15 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::attack::{AgentAttack, Injection};
+use crate::attack::{Injection, Sent, TorqueInjection};
 use crate::control::{CenterAgent, CenterOutput, CenterParams};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::Vector;
 use crate::model::{EulerLagrange, ForLinks};
 use crate::plant::{Measurement, Plant, PlantParams, StepReport};
-use crate::records::{AgentRecord, AttackRecord, CenterRecord, TickRecord, TraceDigest};
+use crate::records::{
+    ActuationRecord, AgentRecord, AttackRecord, CenterRecord, Joints, TickRecord, TraceDigest,
+};
 use crate::scenario::Resolved;
 
 /// `t_k = k · Δ`, computed the same way in every process.
@@ -22,22 +24,17 @@ pub fn tick_time(k: u64, control_period_s: f64) -> f64 {
     k as f64 * control_period_s
 }
 
-/// The attacker's man-in-the-middle step: `y' = y + α_pos`, `ẏ' = ẏ + α_vel`. The attack first
-/// observes the clean measurement (what a replay records and plays back against).
-pub fn tamper<const N: usize>(
-    attack: &mut AgentAttack,
+/// The control center's tick from what reached it: the delivered measurement, or, when the
+/// tick's input is missing, the last good one held ([`CenterAgent::tick_missing`]).
+pub fn center_tick<const N: usize>(
+    center: &mut CenterAgent<N>,
     t: f64,
-    m: &Measurement<N>,
-) -> (Measurement<N>, Injection<N>) {
-    attack.observe(t, m);
-    let inj = attack.injection::<N>(t);
-    (
-        Measurement {
-            y: m.y + inj.position,
-            yd: m.yd + inj.velocity,
-        },
-        inj,
-    )
+    input: Option<&Measurement<N>>,
+) -> CenterOutput<N> {
+    match input {
+        Some(m) => center.tick(t, &m.y, &m.yd),
+        None => center.tick_missing(t),
+    }
 }
 
 /// Builds the agent's record of tick `k` (true state captured before the step).
@@ -64,21 +61,49 @@ pub fn agent_record<const N: usize>(
     }
 }
 
-/// Builds the attacker's record of tick `k` for one agent (`active`: the injection is in force).
+/// Builds the attacker's record of tick `k` for one agent's measurement (`active`: the attack
+/// is in force).
 pub fn attack_record<const N: usize>(
     k: u64,
     agent: u32,
-    out: &Measurement<N>,
+    sent: &Sent<Measurement<N>>,
     inj: &Injection<N>,
 ) -> AttackRecord {
+    let (y, yd) = sent
+        .usable()
+        .map_or((Joints::default(), Joints::default()), |(m, _)| {
+            (m.y.into(), m.yd.into())
+        });
     AttackRecord {
         k,
         agent,
         alpha_position: inj.position.into(),
         alpha_velocity: inj.velocity.into(),
-        y: out.y.into(),
-        yd: out.yd.into(),
+        y,
+        yd,
         active: inj.in_force(),
+        delivery: sent.delivery(),
+    }
+}
+
+/// Builds the attacker's record of the torque of tick `k` for one agent.
+pub fn actuation_record<const N: usize>(
+    k: u64,
+    agent: u32,
+    sent: &Sent<Vector<N>>,
+    inj: &TorqueInjection<N>,
+) -> ActuationRecord {
+    let (u, held_s) = sent
+        .usable()
+        .map_or((Joints::default(), 0.0), |(u, h)| (u.into(), h));
+    ActuationRecord {
+        k,
+        agent,
+        alpha_u: inj.u.into(),
+        u,
+        held_s,
+        active: inj.in_force(),
+        delivery: sent.delivery(),
     }
 }
 
@@ -97,6 +122,7 @@ pub fn center_record<const N: usize>(k: u64, agent: u32, o: &CenterOutput<N>) ->
         rejected_torque: o.rejected_torque,
         state_reset: o.state_reset,
         history_miss: o.history_miss,
+        missing_input: o.missing_input,
     }
 }
 
@@ -294,7 +320,11 @@ pub fn run_inproc<const N: usize>(
                 dof: N,
             })?,
         );
-        attacks.push(AgentAttack::compile(&resolved.attack, a.id, s.seed));
+        attacks.push(crate::attack::AgentAttack::compile(
+            &resolved.attack,
+            a.id,
+            s.seed,
+        ));
         centers.push(CenterAgent::<N>::new(CenterParams::new(a, s)).ok_or(
             EngineError::ModelDof {
                 agent: a.id,
@@ -311,15 +341,23 @@ pub fn run_inproc<const N: usize>(
             let id = plant.agent_id();
             let (q, qd) = (plant.q, plant.qd);
             let m = plant.measure();
-            let (tampered, inj) = tamper(attack, t, &m);
-            let out = center.tick(t, &tampered.y, &tampered.yd);
-            // A refused command is counted by the plant; the run goes on.
-            let _ = plant.receive(t, out.u);
+            let (sent, inj) = attack.measurement::<N>(k, t, &m);
+            let out = center_tick(center, t, sent.usable().map(|(m, _)| m));
+            // A refused or missing command is counted by the plant; the run goes on.
+            let actuation = if resolved.attack.attacks_torque_of(id) {
+                let (sent, tinj) = attack.torque::<N>(k, t, &out.u);
+                let _ = plant.take_command(t, sent.usable().map(|(u, h)| (*u, h)));
+                Some(actuation_record(k, id, &sent, &tinj))
+            } else {
+                let _ = plant.take_command(t, Some((out.u, 0.0)));
+                None
+            };
             let step = plant.advance(k);
             let rec = TickRecord {
                 agent: agent_record(k, id, t, (&q, &qd), &m, &step),
-                attack: attack_record(k, id, &tampered, &inj),
+                attack: attack_record(k, id, &sent, &inj),
                 center: center_record(k, id, &out),
+                actuation,
             };
             digest.push(&rec);
             evaluator.push(&rec);

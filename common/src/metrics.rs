@@ -529,6 +529,7 @@ mod tests {
                 y: j(q),
                 yd: j(0.0),
                 active,
+                delivery: Default::default(),
             },
             center: CenterRecord {
                 k,
@@ -543,7 +544,9 @@ mod tests {
                 rejected_torque: false,
                 state_reset: false,
                 history_miss: false,
+                missing_input: false,
             },
+            actuation: None,
         }
     }
 

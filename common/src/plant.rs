@@ -81,6 +81,8 @@ pub struct Plant<const N: usize> {
     pub deadline_misses: u64,
     /// Commands refused (out of order, duplicate, non-finite).
     pub refused_commands: u64,
+    /// Ticks whose command never came (dropped, forged, replayed) or was refused.
+    pub missing_commands: u64,
 }
 
 impl<const N: usize> Plant<N> {
@@ -100,6 +102,7 @@ impl<const N: usize> Plant<N> {
             noise_rng,
             deadline_misses: 0,
             refused_commands: 0,
+            missing_commands: 0,
         })
     }
 }
@@ -135,6 +138,26 @@ impl<const N: usize> Plant<N> {
             self.refused_commands += 1;
         }
         r
+    }
+
+    /// The command of the tick stamped `t_send`, as it reached the agent: `Some((u, held_s))`
+    /// takes effect `held_s` later than the channel's known delay; `None` (dropped, forged,
+    /// replayed) never came. A missing or refused command is counted and leaves the one before
+    /// in force; a step that needed it counts a deadline miss. The one rule both engines use.
+    pub fn take_command(
+        &mut self,
+        t_send: f64,
+        command: Option<(Vector<N>, f64)>,
+    ) -> Result<(), PushError> {
+        let result = match command {
+            Some((u, held_s)) => self.receive(t_send + held_s, u),
+            None => Ok(()),
+        };
+        if command.is_none() || result.is_err() {
+            self.missing_commands += 1;
+            self.commands.push_missing(t_send);
+        }
+        result
     }
 
     /// Stamp of the newest command received.

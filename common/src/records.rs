@@ -106,7 +106,34 @@ pub struct AgentRecord {
     pub missed: bool,
 }
 
-/// What the attacker process knows about tick `k` of one agent.
+/// What became of the message of one tick on its way through the attacker.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Delivery {
+    /// The receiver took it as the tick's input.
+    #[default]
+    Delivered,
+    /// Nothing arrived for the tick (dropped, or nothing delivered yet under a delay).
+    Missing,
+    /// Sent with a forged stamp and refused: the tick's input is missing.
+    Forged,
+    /// An earlier message re-sent with its original header in its place, refused as stale:
+    /// the tick's input is missing.
+    Replayed,
+}
+
+impl Delivery {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Delivered => "delivered",
+            Self::Missing => "missing",
+            Self::Forged => "forged",
+            Self::Replayed => "replayed",
+        }
+    }
+}
+
+/// What the attacker process knows about tick `k` of one agent's measurement.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AttackRecord {
     pub k: u64,
@@ -114,11 +141,31 @@ pub struct AttackRecord {
     /// Injected `α`, rad and rad/s.
     pub alpha_position: Joints,
     pub alpha_velocity: Joints,
-    /// Tampered measurement relayed to the control center.
+    /// The measurement the control center took as the tick's input (under a delay, an older
+    /// one); empty when the tick's input was missing (`delivery`).
     pub y: Joints,
     pub yd: Joints,
-    /// The attack was in force: the injected value was non-zero on some link of either signal.
+    /// The attack was in force: the injected value was non-zero on some link of either signal,
+    /// or a transform or a message attack was in force.
     pub active: bool,
+    pub delivery: Delivery,
+}
+
+/// What the attacker process knows about the torque of tick `k` of one agent, when the run
+/// routes that agent's torques through it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ActuationRecord {
+    pub k: u64,
+    pub agent: u32,
+    /// Injected `α_u`, N·m.
+    pub alpha_u: Joints,
+    /// The torque the agent took as the tick's command; empty when it was missing.
+    pub u: Joints,
+    /// How much later than the channel's known delay `τ` it took effect (a delay attack), s.
+    pub held_s: f64,
+    /// The attack on the torque path was in force.
+    pub active: bool,
+    pub delivery: Delivery,
 }
 
 /// What the control-center process knows about tick `k` of one agent.
@@ -143,6 +190,9 @@ pub struct CenterRecord {
     pub state_reset: bool,
     /// `e_u`, `u_τ` were held: the torque history did not reach back to `t − τ(t)`.
     pub history_miss: bool,
+    /// The tick's measurement was missing (dropped, forged, replayed, not yet delivered): the
+    /// last good one was used.
+    pub missing_input: bool,
 }
 
 /// One tick of one agent, joined across processes.
@@ -151,6 +201,15 @@ pub struct TickRecord {
     pub agent: AgentRecord,
     pub attack: AttackRecord,
     pub center: CenterRecord,
+    /// The torque's way through the attacker, for an agent whose torques it attacks.
+    pub actuation: Option<ActuationRecord>,
+}
+
+impl TickRecord {
+    /// Ground truth of detection: an attack on either path is in force at this tick.
+    pub fn attack_in_force(&self) -> bool {
+        self.attack.active || self.actuation.is_some_and(|a| a.active)
+    }
 }
 
 /// SHA-256 over every tick's true state, tampered measurement and torque as f64 bit patterns,

@@ -14,6 +14,8 @@ pub enum Purpose {
     NnInit,
     /// Attacker Gaussian-noise waveforms; `channel` distinguishes signal and link.
     AttackNoise { channel: u32 },
+    /// Attacker message attacks (drops, bursts) on one path.
+    AttackMessages { torque: bool },
 }
 
 impl Purpose {
@@ -22,6 +24,7 @@ impl Purpose {
             Self::SensorNoise => 1,
             Self::NnInit => 2,
             Self::AttackNoise { channel } => 0x100 + u64::from(channel),
+            Self::AttackMessages { torque } => 3 + u64::from(torque),
         }
     }
 }

@@ -309,8 +309,11 @@ impl Scenario {
             }
         }
         for (i, ch) in attack.channels.iter().enumerate() {
+            if ch.signal == crate::attack::Signal::Torque {
+                continue;
+            }
             for (j, seg) in ch.segments.iter().enumerate() {
-                let rad = seg.waveform.magnitude() * ch.units.to_rad();
+                let rad = seg.waveform.magnitude() * ch.units.factor();
                 if rad > MAX_PLAUSIBLE_ATTACK_RAD {
                     push(
                         format!("attack.channels[{i}].segments[{j}].waveform"),

@@ -21,12 +21,12 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::records::{AgentRecord, AttackRecord, CenterRecord};
+use crate::records::{ActuationRecord, AgentRecord, AttackRecord, CenterRecord};
 
 /// First bytes of every trace file.
 pub const MAGIC: &[u8; 8] = b"FDITRACE";
 /// Format version written by this build; readers refuse any other.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 /// Largest header frame written or read: the scenario as used (at most
 /// [`crate::scenario::MAX_FILE_BYTES`]) and a few names.
 pub const MAX_HEADER_BYTES: u32 = (crate::scenario::MAX_FILE_BYTES as u32) + (1 << 16);
@@ -75,6 +75,8 @@ pub enum TraceRecord {
         t: f64,
         message: String,
     },
+    /// The attacker's record of a torque it relayed (a run that attacks the torque path).
+    Actuation(ActuationRecord),
 }
 
 /// What a trace was being used for when an I/O error happened.
@@ -600,6 +602,7 @@ mod tests {
             y: Joints::from_slice(&[1.0, 2.0]),
             yd: Joints::from_slice(&[3.0, f64::MIN_POSITIVE]),
             active: k.is_multiple_of(2),
+            delivery: Default::default(),
         })
     }
 

@@ -1,13 +1,15 @@
 //! The control-center process: one [`CenterAgent`] per agent, fed by the attacker's (tampered)
-//! measurements; each torque goes back to its agent stamped with its tick time. Purely
+//! measurements; each torque goes back to its agent stamped with its tick time, straight or,
+//! for an agent whose torques the run attacks, through the attacker. Purely
 //! event-driven: every agent's tick is computed as soon as its measurement arrives (agents are
 //! independent, so the result does not depend on the order in which agents arrive).
 
 use std::process::ExitCode;
 
 use fdi_common::control::{CenterAgent, CenterParams};
-use fdi_common::engine::{center_record, tick_time};
+use fdi_common::engine::{center_record, center_tick, tick_time};
 use fdi_common::model::{EulerLagrange, ForLinks};
+use fdi_common::plant::Measurement;
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
@@ -34,8 +36,11 @@ pub struct AgentLink<X: Transport> {
 #[derive(Debug)]
 pub struct Ports<X: Transport> {
     pub tampered: X::Inbox<MeasurementMsg>,
-    /// In the scenario's agent order.
-    pub agents: Vec<AgentLink<X>>,
+    /// Where torques go: each direct agent's own channel, and the actuation path to the
+    /// attacker when the run attacks some agent's torques.
+    pub links: Vec<AgentLink<X>>,
+    /// Per agent in the scenario's order, the index of its link in `links`.
+    pub route: Vec<usize>,
     pub waker: X::Waker,
     pub launcher: LauncherLink<X>,
     /// The node; declared last so that it is dropped after the ports.
@@ -51,20 +56,47 @@ impl<X: Transport> Ports<X> {
             Wake::Center,
             process::sizing_for(resolved),
         )?;
-        let mut agents = Vec::with_capacity(resolved.agent_count());
+        let mut links = Vec::with_capacity(resolved.agent_count());
+        let mut route = Vec::with_capacity(resolved.agent_count());
+        let mut actuation = None;
         for a in &resolved.scenario.agents {
-            agents.push(AgentLink {
-                torque: conn.transport.publisher(Stream::Torque(a.id))?,
-                bell: conn.transport.notifier(Wake::Agent(a.id))?,
-            });
+            if !resolved.attack.attacks_torque_of(a.id) {
+                route.push(links.len());
+                links.push(AgentLink {
+                    torque: conn.transport.publisher(Stream::Torque(a.id))?,
+                    bell: conn.transport.notifier(Wake::Agent(a.id))?,
+                });
+                continue;
+            }
+            if actuation.is_none() {
+                actuation = Some(links.len());
+                links.push(AgentLink {
+                    torque: conn.transport.publisher(Stream::Actuation)?,
+                    bell: conn.transport.notifier(Wake::Attacker)?,
+                });
+            }
+            route.extend(actuation);
         }
         Ok(Self {
             tampered: conn.transport.subscriber(Stream::Tampered)?,
-            agents,
+            links,
+            route,
             waker: conn.waker,
             launcher: conn.launcher,
             transport: conn.transport,
         })
+    }
+
+    /// Wakes every receiver of this batch's torques once (the attacker once for all the
+    /// agents routed through it): `answered` is per agent in scenario order. Clears it.
+    fn ring(&self, answered: &mut [bool]) -> Result<(), CenterError> {
+        let mut rung = vec![false; self.links.len()];
+        for (flag, &l) in answered.iter_mut().zip(&self.route) {
+            if std::mem::take(flag) && !std::mem::replace(&mut rung[l], true) {
+                self.links[l].bell.ring()?;
+            }
+        }
+        Ok(())
     }
 }
 
@@ -119,25 +151,41 @@ impl Intake {
             self.refused += 1;
             return;
         };
-        if !process::admit_measurement(m, N, &mut self.sequence, dt, trace) {
-            self.refused += 1;
-            return;
-        }
+        let input = match process::admit_measurement(m, N, &mut self.sequence, dt, trace) {
+            process::Admission::Use(()) => Some(Measurement {
+                y: to_vector::<N>(&m.y),
+                yd: to_vector::<N>(&m.yd),
+            }),
+            process::Admission::Missing => None,
+            process::Admission::Refused => {
+                self.refused += 1;
+                return;
+            }
+        };
         if let Some(silent) = self.liveness.seen(i, received) {
             self.rejoined.push((i, silent, m.seq));
         }
-        if let Err(e) = control(&mut slots[i], m, received, &ports.agents[i], dt, trace) {
+        let link = &ports.links[ports.route[i]];
+        if let Err(e) = control(
+            &mut slots[i],
+            (m, input.as_ref()),
+            received,
+            link,
+            dt,
+            trace,
+        ) {
             self.failure.get_or_insert(e);
         }
         self.answered[i] = true;
     }
 }
 
-/// Computes agent `slot`'s tick from the admitted measurement `m` (received at `received`),
-/// sends the torque back on `link`, stamped with its tick time, and records it.
+/// Computes agent `slot`'s tick from the admitted message `m` (received at `received`) and
+/// its measurement (`None`: the tick's input is missing), sends the torque on `link`, stamped
+/// with its tick time, and records it.
 fn control<X: Transport, const N: usize>(
     slot: &mut Slot<N>,
-    m: &MeasurementMsg,
+    (m, input): (&MeasurementMsg, Option<&Measurement<N>>),
     received: u64,
     link: &AgentLink<X>,
     dt: f64,
@@ -145,9 +193,7 @@ fn control<X: Transport, const N: usize>(
 ) -> Result<(), CenterError> {
     slot.next = m.seq + 1;
     let t = tick_time(m.seq, dt);
-    let out = slot
-        .center
-        .tick(t, &to_vector::<N>(&m.y), &to_vector::<N>(&m.yd));
+    let out = center_tick(&mut slot.center, t, input);
     let sent = link.torque.send(TorqueMsg {
         seq: m.seq,
         agent: m.agent,
@@ -159,6 +205,9 @@ fn control<X: Transport, const N: usize>(
         attacker_sent_ns: m.attacker_sent_ns,
         center_received_ns: received,
         center_sent_ns: monotonic_ns(),
+        held_s: 0.0,
+        flags: 0,
+        reserved: 0,
     });
     // The record is written even when the send failed: the trace shows what was computed.
     let written = trace.write(&TraceRecord::Center(center_record(m.seq, m.agent, &out)));
@@ -275,11 +324,7 @@ pub fn run<X: Transport, const N: usize>(
         if let Some(e) = intake.failure.take() {
             return Err(e);
         }
-        for (flag, link) in intake.answered.iter_mut().zip(&ports.agents) {
-            if std::mem::take(flag) {
-                link.bell.ring()?;
-            }
-        }
+        ports.ring(&mut intake.answered)?;
         let liveness = &mut intake.liveness;
         for (i, silent, k) in intake.rejoined.drain(..) {
             announce_rejoined(slots[i].center.agent_id(), silent, k, dt, ports, trace)?;
@@ -301,15 +346,18 @@ pub fn run<X: Transport, const N: usize>(
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(intake.refused);
         }
-        strategy.wait_for_input(s.clock, &ports.waker, &ports.tampered)?;
+        strategy.wait_for_input(s.clock, &ports.waker, || ports.tampered.has_messages())?;
     }
-    let (refused, rejected) = (
+    let (refused, rejected, missing) = (
         intake.refused,
         slots.iter().map(|x| x.center.rejected_inputs).sum::<u64>(),
+        slots.iter().map(|x| x.center.missing_inputs).sum::<u64>(),
     );
-    let note = (refused > 0 || rejected > 0).then(|| {
+    let note = (refused > 0 || rejected > 0 || missing > 0).then(|| {
         let message = format!(
-            "{refused} messages refused, {rejected} measurements rejected as non-finite or absurd"
+            "{refused} messages refused, {rejected} measurements rejected as non-finite or \
+             absurd, {missing} ticks without a measurement (gap markers, forged stamps; the last \
+             good one held)"
         );
         (s.duration_s, message)
     });

@@ -106,6 +106,8 @@ impl ThreadOutcome {
                 agent,
                 attack: attack.expect("the attacker's records"),
                 center,
+                // Not in the digest.
+                actuation: None,
             });
         }
         digest.finish()
@@ -404,5 +406,8 @@ pub fn torque(agent: u32, dof: u32, seq: u64, dt: f64) -> TorqueMsg {
         attacker_sent_ns: 0,
         center_received_ns: 0,
         center_sent_ns: 0,
+        held_s: 0.0,
+        flags: 0,
+        reserved: 0,
     }
 }

@@ -3,7 +3,7 @@
 
 use fdi_common::attack::{presets, AgentAttack};
 use fdi_common::control::{CenterAgent, CenterParams};
-use fdi_common::engine::{run_inproc, tamper, tick_time};
+use fdi_common::engine::{run_inproc, tick_time};
 use fdi_common::model::Vector;
 use fdi_common::plant::{Plant, PlantParams};
 use fdi_common::records::TickRecord;
@@ -86,7 +86,8 @@ fn run_with_oracle(r: &Resolved, oracle: impl Fn(&mut AgentAttack, f64) -> Vecto
         let e = center.reference(t).q - plant.q;
         sum_sq += e.norm_squared();
         let m = plant.measure();
-        let (tampered, _) = tamper(&mut attack, t, &m);
+        let (sent, _) = attack.measurement::<2>(k, t, &m);
+        let tampered = *sent.usable().expect("only value channels: delivered").0;
         let s_true = oracle(&mut oracle_attack, t);
         let out = center.tick_with_estimate(t, &tampered.y, &tampered.yd, Some(&s_true));
         plant.receive(t, out.u).expect("increasing stamps");

@@ -236,6 +236,16 @@ fn assert_row_is_record(row: &BTreeMap<&str, &str>, rec: &TraceRecord) {
                 same_joints(row, name, j);
             }
             assert_eq!(flag(row, "active"), a.active);
+            assert_eq!(row.get("delivery").copied(), Some(a.delivery.as_str()));
+        }
+        TraceRecord::Actuation(a) => {
+            assert_eq!(int(row, "k"), a.k);
+            assert_eq!(int(row, "agent"), u64::from(a.agent));
+            same_joints(row, "alpha_u", &a.alpha_u);
+            same_joints(row, "u", &a.u);
+            assert_eq!(f64_bits(row, "held_s"), a.held_s.to_bits());
+            assert_eq!(flag(row, "active"), a.active);
+            assert_eq!(row.get("delivery").copied(), Some(a.delivery.as_str()));
         }
         TraceRecord::Center(c) => {
             assert_eq!(int(row, "k"), c.k);
@@ -251,6 +261,7 @@ fn assert_row_is_record(row: &BTreeMap<&str, &str>, rec: &TraceRecord) {
             }
             assert_eq!(flag(row, "alarm"), c.alarm);
             assert_eq!(flag(row, "rejected_input"), c.rejected_input);
+            assert_eq!(flag(row, "missing_input"), c.missing_input);
         }
         TraceRecord::Latency { k, agent, stamps } => {
             assert_eq!(int(row, "k"), *k);

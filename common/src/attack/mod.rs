@@ -6,7 +6,14 @@
 //! Channels that target the same signal and link add up: every waveform, the transforms of the
 //! clean signal (scale, sign flip, freeze) and replay included, is an injection `α` added to the
 //! clean value, and `α` is what the attacker records.
+//!
+//! A channel on the `torque` signal tampers with the commands on their way from the control
+//! center to the agent: a run whose profile attacks an agent's torques routes that agent's
+//! commands through the attacker ([`AttackProfile::attacks_torque_of`]); the others keep the
+//! direct path. Whole-message attacks (denial of service, delay, stamp forgery, replay with the
+//! original header) are the profile's `[[messages]]` ([`message`]).
 
+pub mod message;
 pub mod presets;
 pub mod waveform;
 
@@ -17,10 +24,14 @@ use serde::{Deserialize, Serialize};
 
 use crate::model::Vector;
 use crate::plant::Measurement;
+use crate::records::Joints;
 use crate::rng::{stream, Purpose};
 use crate::units::AngleUnit;
 
+pub use message::{Effect, MessageAttack, MessageSegment, Path, Sent};
 pub use waveform::Waveform;
+
+use message::MessageLine;
 
 /// Which measured signal a channel tampers with.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
@@ -30,6 +41,48 @@ pub enum Signal {
     Position,
     /// `ẏ = q̇ + S2`.
     Velocity,
+    /// The torque command `u` on its way to the agent (actuator FDI), N·m.
+    Torque,
+}
+
+impl Signal {
+    /// The path the signal travels on.
+    pub fn path(self) -> Path {
+        match self {
+            Self::Position | Self::Velocity => Path::Measurement,
+            Self::Torque => Path::Torque,
+        }
+    }
+}
+
+/// Units of a channel's values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ValueUnit {
+    /// deg, deg/s (positions and velocities).
+    #[serde(rename = "deg")]
+    Deg,
+    /// rad, rad/s (positions and velocities).
+    #[serde(rename = "rad")]
+    Rad,
+    /// N·m (torques).
+    #[serde(rename = "N·m", alias = "Nm", alias = "N*m")]
+    NewtonMetre,
+}
+
+impl ValueUnit {
+    /// Factor that converts a value in these units to the runtime's (rad, rad/s, N·m).
+    pub fn factor(self) -> f64 {
+        match self {
+            Self::Deg => AngleUnit::Deg.to_rad(),
+            Self::Rad => AngleUnit::Rad.to_rad(),
+            Self::NewtonMetre => 1.0,
+        }
+    }
+
+    /// Whether values of `signal` can be in these units.
+    fn fits(self, signal: Signal) -> bool {
+        (signal == Signal::Torque) == (self == Self::NewtonMetre)
+    }
 }
 
 /// One segment of a schedule.
@@ -50,8 +103,9 @@ pub struct Channel {
     pub signal: Signal,
     /// 1-based link numbers this schedule is added to.
     pub links: Vec<u32>,
-    /// Units of the waveform values: `deg` (deg, deg/s) or `rad` (rad, rad/s).
-    pub units: AngleUnit,
+    /// Units of the waveform values: `deg` (deg, deg/s) or `rad` (rad, rad/s) for positions
+    /// and velocities, `N·m` for torques.
+    pub units: ValueUnit,
     /// Segments in increasing `from_s`; before the first one nothing is injected.
     pub segments: Vec<Segment>,
 }
@@ -66,6 +120,9 @@ pub struct AttackProfile {
     pub description: String,
     #[serde(default)]
     pub channels: Vec<Channel>,
+    /// Whole-message attacks, at most one per agent and path.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub messages: Vec<MessageAttack>,
 }
 
 impl AttackProfile {
@@ -73,28 +130,71 @@ impl AttackProfile {
     /// are written for the paper's four robots, in scenarios with fewer agents).
     pub fn for_agents(mut self, agent_dofs: &BTreeMap<u32, usize>) -> Self {
         self.channels.retain(|c| agent_dofs.contains_key(&c.agent));
+        self.messages.retain(|m| agent_dofs.contains_key(&m.agent));
         self
+    }
+
+    /// Whether the profile attacks agent `agent`'s torque commands: then they travel control
+    /// center → attacker → agent; otherwise straight to the agent.
+    pub fn attacks_torque_of(&self, agent: u32) -> bool {
+        self.channels
+            .iter()
+            .any(|c| c.agent == agent && c.signal == Signal::Torque)
+            || self
+                .messages
+                .iter()
+                .any(|m| m.agent == agent && m.path == Path::Torque)
     }
 
     /// Every problem of the profile, as `(field path relative to the profile, message)`.
     /// `agent_dofs` maps each agent id of the scenario to its number of links.
     pub fn problems(&self, agent_dofs: &BTreeMap<u32, usize>) -> Vec<(String, String)> {
         let mut out = Vec::new();
+        let unknown = |agent: u32| {
+            format!(
+                "agent {agent} is not in the scenario (its agents: {})",
+                agent_dofs
+                    .keys()
+                    .map(u32::to_string)
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        };
+        for (m, msg) in self.messages.iter().enumerate() {
+            if !agent_dofs.contains_key(&msg.agent) {
+                out.push((format!("messages[{m}].agent"), unknown(msg.agent)));
+            }
+            if let Some(first) = self.messages[..m]
+                .iter()
+                .position(|o| o.agent == msg.agent && o.path == msg.path)
+            {
+                out.push((
+                    format!("messages[{m}].path"),
+                    format!(
+                        "agent {}'s {:?} path is already attacked by messages[{first}]: put \
+                         both schedules' segments in one entry",
+                        msg.agent, msg.path
+                    ),
+                ));
+            }
+            for (field, problem) in msg.problems() {
+                out.push((format!("messages[{m}].{field}"), problem));
+            }
+        }
         for (c, ch) in self.channels.iter().enumerate() {
             let at = |f: &str| format!("channels[{c}].{f}");
             let dof = agent_dofs.get(&ch.agent).copied();
             if dof.is_none() {
+                out.push((at("agent"), unknown(ch.agent)));
+            }
+            if !ch.units.fits(ch.signal) {
                 out.push((
-                    at("agent"),
-                    format!(
-                        "agent {} is not in the scenario (its agents: {})",
-                        ch.agent,
-                        agent_dofs
-                            .keys()
-                            .map(u32::to_string)
-                            .collect::<Vec<_>>()
-                            .join(", ")
-                    ),
+                    at("units"),
+                    match ch.signal {
+                        Signal::Torque => "a torque channel's units are \"N·m\"".to_string(),
+                        _ => "a position or velocity channel's units are \"deg\" or \"rad\""
+                            .to_string(),
+                    },
                 ));
             }
             if ch.links.is_empty() {
@@ -150,7 +250,7 @@ impl AttackProfile {
     }
 }
 
-/// A channel ready to evaluate: one link, one signal, values scaled to rad.
+/// A channel ready to evaluate: one link, one signal, values scaled to rad, rad/s or N·m.
 #[derive(Debug, Clone)]
 struct LinkChannel {
     signal: Signal,
@@ -162,8 +262,7 @@ struct LinkChannel {
     recordings: Vec<Recording>,
     /// Per segment, the clean value a `freeze` segment holds, from its first tick on.
     frozen: Vec<Option<f64>>,
-    /// The clean value of this signal and link at the last [`AgentAttack::observe`], rad or
-    /// rad/s.
+    /// The clean value of this signal and link at the last observation.
     clean: f64,
 }
 
@@ -193,6 +292,44 @@ impl LinkChannel {
     fn segment_at(&self, t: f64) -> Option<&Segment> {
         self.segment_index(t).map(|i| &self.segments[i])
     }
+
+    /// Shows the channel the clean value `v` of time `t`.
+    fn observe(&mut self, t: f64, v: f64) {
+        self.clean = v;
+        if let Some(i) = self.segment_index(t) {
+            if self.segments[i].waveform == Waveform::Freeze && self.frozen[i].is_none() {
+                self.frozen[i] = Some(v);
+            }
+        }
+        for (seg, rec) in self.segments.iter().zip(&mut self.recordings) {
+            if let Some((from, to)) = seg.waveform.replay_window() {
+                if from <= t && t < to {
+                    rec.times.push(t);
+                    rec.values.push(v);
+                }
+            }
+        }
+    }
+
+    /// The injection at `t` against the last observed clean value, and whether a transforming
+    /// segment is in force; `None` before the first segment.
+    fn injection(&mut self, t: f64) -> Option<(f64, bool)> {
+        let i = self.segment_index(t)?;
+        let seg = self.segments[i];
+        let v = match seg.waveform {
+            Waveform::Replay { .. } => self.recordings[i]
+                .played(t - seg.from_s)
+                .map_or(0.0, |r| r - self.clean),
+            Waveform::Scale { factor } => waveform::transform::scale(self.clean, factor),
+            Waveform::SignFlip => waveform::transform::sign_flip(self.clean),
+            // Observed at this tick or before: never missing once the segment is in force.
+            Waveform::Freeze => {
+                self.frozen[i].map_or(0.0, |h| waveform::transform::freeze(self.clean, h))
+            }
+            w => self.scale * w.value(t, seg.from_s, &mut self.rng),
+        };
+        Some((v, seg.waveform.transforms()))
+    }
 }
 
 /// Injected values `α` at one tick, in rad and rad/s.
@@ -202,14 +339,17 @@ pub struct Injection<const N: usize> {
     pub velocity: Vector<N>,
     /// A transforming segment (scale, sign flip, freeze) is in force on some link.
     pub transforming: bool,
+    /// A whole-message attack other than `pass` is in force on the path.
+    pub message: bool,
 }
 
 impl<const N: usize> Injection<N> {
     /// The attack is in force: the injected value is non-zero on some link of either signal, or
-    /// a transforming segment is in force. Every rising edge of this is an attack onset (a
-    /// pulse train has one per pulse).
+    /// a transforming segment or a message attack is in force. Every rising edge of this is an
+    /// attack onset (a pulse train has one per pulse).
     pub fn in_force(&self) -> bool {
         self.transforming
+            || self.message
             || self
                 .position
                 .iter()
@@ -218,15 +358,35 @@ impl<const N: usize> Injection<N> {
     }
 }
 
+/// Injected torque `α_u` at one tick, N·m.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TorqueInjection<const N: usize> {
+    pub u: Vector<N>,
+    /// A transforming segment (scale, sign flip, freeze) is in force on some link.
+    pub transforming: bool,
+    /// A whole-message attack other than `pass` is in force on the torque path.
+    pub message: bool,
+}
+
+impl<const N: usize> TorqueInjection<N> {
+    /// The attack on the torque path is in force (as [`Injection::in_force`]).
+    pub fn in_force(&self) -> bool {
+        self.transforming || self.message || self.u.iter().any(|x| *x != 0.0)
+    }
+}
+
 /// The attack on one agent, compiled from a profile: what the attacker process evaluates.
 #[derive(Debug, Clone)]
 pub struct AgentAttack {
     channels: Vec<LinkChannel>,
+    measurements: Option<MessageLine<(Joints, Joints)>>,
+    torques: Option<MessageLine<Joints>>,
 }
 
 impl AgentAttack {
-    /// Compiles every channel of `profile` that targets `agent_id`; Gaussian waveforms draw from
-    /// the stream `(run_seed, agent, AttackNoise { channel index })`.
+    /// Compiles every channel and message attack of `profile` that targets `agent_id`;
+    /// Gaussian waveforms draw from the stream `(run_seed, agent, AttackNoise { channel
+    /// index })`, message attacks from `(run_seed, agent, AttackMessages { path })`.
     pub fn compile(profile: &AttackProfile, agent_id: u32, run_seed: u64) -> Self {
         let mut channels = Vec::new();
         for (c, ch) in profile
@@ -242,7 +402,7 @@ impl AgentAttack {
                 channels.push(LinkChannel {
                     signal: ch.signal,
                     link: (link as usize).saturating_sub(1),
-                    scale: ch.units.to_rad(),
+                    scale: ch.units.factor(),
                     recordings: vec![Recording::default(); segments.len()],
                     frozen: vec![None; segments.len()],
                     segments,
@@ -251,7 +411,11 @@ impl AgentAttack {
                 });
             }
         }
-        Self { channels }
+        Self {
+            channels,
+            measurements: message_line(profile, agent_id, run_seed, Path::Measurement),
+            torques: message_line(profile, agent_id, run_seed, Path::Torque),
+        }
     }
 
     /// Shows the attacker the clean measurement of time `t`, before [`Self::injection`] of the
@@ -260,27 +424,12 @@ impl AgentAttack {
     /// act on it.
     pub fn observe<const N: usize>(&mut self, t: f64, clean: &Measurement<N>) {
         for ch in &mut self.channels {
-            if ch.link >= N {
-                continue;
-            }
             let v = match ch.signal {
-                Signal::Position => clean.y[ch.link],
-                Signal::Velocity => clean.yd[ch.link],
+                Signal::Position if ch.link < N => clean.y[ch.link],
+                Signal::Velocity if ch.link < N => clean.yd[ch.link],
+                _ => continue,
             };
-            ch.clean = v;
-            if let Some(i) = ch.segment_index(t) {
-                if ch.segments[i].waveform == Waveform::Freeze && ch.frozen[i].is_none() {
-                    ch.frozen[i] = Some(v);
-                }
-            }
-            for (seg, rec) in ch.segments.iter().zip(&mut ch.recordings) {
-                if let Some((from, to)) = seg.waveform.replay_window() {
-                    if from <= t && t < to {
-                        rec.times.push(t);
-                        rec.values.push(v);
-                    }
-                }
-            }
+            ch.observe(t, v);
         }
     }
 
@@ -292,41 +441,143 @@ impl AgentAttack {
             position: Vector::<N>::zeros(),
             velocity: Vector::<N>::zeros(),
             transforming: false,
+            message: self.measurements.as_ref().is_some_and(|l| l.in_force(t)),
         };
         for ch in &mut self.channels {
-            let Some(i) = ch.segment_index(t) else {
-                continue;
-            };
-            let seg = ch.segments[i];
-            if ch.link >= N {
+            if ch.link >= N || ch.signal == Signal::Torque {
                 continue;
             }
-            inj.transforming |= seg.waveform.transforms();
-            let v = match seg.waveform {
-                Waveform::Replay { .. } => ch.recordings[i]
-                    .played(t - seg.from_s)
-                    .map_or(0.0, |r| r - ch.clean),
-                Waveform::Scale { factor } => waveform::transform::scale(ch.clean, factor),
-                Waveform::SignFlip => waveform::transform::sign_flip(ch.clean),
-                // Observed at this tick or before: never missing once the segment is in force.
-                Waveform::Freeze => {
-                    ch.frozen[i].map_or(0.0, |h| waveform::transform::freeze(ch.clean, h))
-                }
-                w => ch.scale * w.value(t, seg.from_s, &mut ch.rng),
+            let Some((v, transforming)) = ch.injection(t) else {
+                continue;
             };
+            inj.transforming |= transforming;
             match ch.signal {
                 Signal::Position => inj.position[ch.link] += v,
                 Signal::Velocity => inj.velocity[ch.link] += v,
+                Signal::Torque => {}
             }
         }
         inj
     }
 
-    /// True when some channel has a non-`none` segment in force at `t`.
+    /// The attacker's step on the measurement of tick `k` (time `t`): the value channels add
+    /// `α` to the clean measurement, then the message attack decides what the center gets.
+    pub fn measurement<const N: usize>(
+        &mut self,
+        k: u64,
+        t: f64,
+        clean: &Measurement<N>,
+    ) -> (Sent<Measurement<N>>, Injection<N>) {
+        self.observe(t, clean);
+        let inj = self.injection::<N>(t);
+        let out = Measurement {
+            y: clean.y + inj.position,
+            yd: clean.yd + inj.velocity,
+        };
+        let Some(line) = &mut self.measurements else {
+            return (
+                Sent::Delivered {
+                    payload: out,
+                    held_s: 0.0,
+                },
+                inj,
+            );
+        };
+        let sent = line.send(k, t, (Joints::from(&out.y), Joints::from(&out.yd)));
+        (
+            map_sent(sent, |(y, yd)| Measurement {
+                y: y.to_vector::<N>(),
+                yd: yd.to_vector::<N>(),
+            }),
+            inj,
+        )
+    }
+
+    /// The attacker's step on the torque `u` of tick `k` (stamped `t`), when the run routes
+    /// this agent's torques through it: the torque channels add `α_u` (transforms act on the
+    /// clean `u`), then the message attack decides what the agent gets.
+    pub fn torque<const N: usize>(
+        &mut self,
+        k: u64,
+        t: f64,
+        u: &Vector<N>,
+    ) -> (Sent<Vector<N>>, TorqueInjection<N>) {
+        let mut inj = TorqueInjection {
+            u: Vector::<N>::zeros(),
+            transforming: false,
+            message: self.torques.as_ref().is_some_and(|l| l.in_force(t)),
+        };
+        for ch in &mut self.channels {
+            if ch.link >= N || ch.signal != Signal::Torque {
+                continue;
+            }
+            ch.observe(t, u[ch.link]);
+            if let Some((v, transforming)) = ch.injection(t) {
+                inj.u[ch.link] += v;
+                inj.transforming |= transforming;
+            }
+        }
+        let out = u + inj.u;
+        let Some(line) = &mut self.torques else {
+            return (
+                Sent::Delivered {
+                    payload: out,
+                    held_s: 0.0,
+                },
+                inj,
+            );
+        };
+        let sent = line.send(k, t, Joints::from(&out));
+        (map_sent(sent, |u| u.to_vector::<N>()), inj)
+    }
+
+    /// True when some channel has a non-`none` segment, or a message attack a non-`pass`
+    /// effect, in force at `t`.
     pub fn is_active(&self, t: f64) -> bool {
         self.channels
             .iter()
             .any(|ch| ch.segment_at(t).is_some_and(|s| !s.waveform.is_none()))
+            || self.measurements.as_ref().is_some_and(|l| l.in_force(t))
+            || self.torques.as_ref().is_some_and(|l| l.in_force(t))
+    }
+}
+
+/// The compiled message attack of `profile` on agent `agent_id`'s `path`, if any.
+fn message_line<P: Copy>(
+    profile: &AttackProfile,
+    agent_id: u32,
+    run_seed: u64,
+    path: Path,
+) -> Option<MessageLine<P>> {
+    let torque = path == Path::Torque;
+    profile
+        .messages
+        .iter()
+        .find(|m| m.agent == agent_id && m.path == path)
+        .map(|m| {
+            MessageLine::compile(
+                m,
+                stream(run_seed, agent_id, Purpose::AttackMessages { torque }),
+            )
+        })
+}
+
+/// `sent` with its payload converted by `f`.
+fn map_sent<P, Q>(sent: Sent<P>, f: impl Fn(P) -> Q) -> Sent<Q> {
+    match sent {
+        Sent::Delivered { payload, held_s } => Sent::Delivered {
+            payload: f(payload),
+            held_s,
+        },
+        Sent::Missing => Sent::Missing,
+        Sent::Forged { payload, shift_s } => Sent::Forged {
+            payload: f(payload),
+            shift_s,
+        },
+        Sent::Replayed { k, payload } => Sent::Replayed {
+            k,
+            payload: f(payload),
+        },
     }
 }
 
@@ -452,7 +703,7 @@ mod tests {
                 agent: 9,
                 signal: Signal::Position,
                 links: vec![0, 3],
-                units: AngleUnit::Rad,
+                units: ValueUnit::Rad,
                 segments: vec![
                     Segment {
                         from_s: 1.0,
@@ -488,7 +739,7 @@ mod tests {
                 agent: 1,
                 signal: Signal::Velocity,
                 links: vec![2],
-                units: AngleUnit::Deg,
+                units: ValueUnit::Deg,
                 segments: vec![Segment {
                     from_s,
                     waveform: Waveform::Replay {
@@ -515,7 +766,8 @@ mod tests {
         for k in 0..4000u64 {
             let t = k as f64 * dt;
             let m = clean(k);
-            let (out, inj) = crate::engine::tamper(&mut a, t, &m);
+            let (sent, inj) = a.measurement::<2>(k, t, &m);
+            let out = *sent.usable().expect("delivered").0;
             assert_eq!(out.y, m.y, "positions untouched");
             assert_eq!(out.yd[0], m.yd[0], "link 1 untouched");
             if k < 2000 {

@@ -26,6 +26,38 @@ pub const PRESETS: &[(&str, &str)] = &[
         "freeze",
         include_str!("../../../scenarios/attacks/freeze.toml"),
     ),
+    (
+        "actuator-bias",
+        include_str!("../../../scenarios/attacks/actuator-bias.toml"),
+    ),
+    (
+        "torque-delay",
+        include_str!("../../../scenarios/attacks/torque-delay.toml"),
+    ),
+    (
+        "dos-drop",
+        include_str!("../../../scenarios/attacks/dos-drop.toml"),
+    ),
+    (
+        "dos-burst",
+        include_str!("../../../scenarios/attacks/dos-burst.toml"),
+    ),
+    (
+        "dos-window",
+        include_str!("../../../scenarios/attacks/dos-window.toml"),
+    ),
+    (
+        "measurement-delay",
+        include_str!("../../../scenarios/attacks/measurement-delay.toml"),
+    ),
+    (
+        "forge-stamp",
+        include_str!("../../../scenarios/attacks/forge-stamp.toml"),
+    ),
+    (
+        "replay-original",
+        include_str!("../../../scenarios/attacks/replay-original.toml"),
+    ),
 ];
 
 /// Names of the presets, for error messages.

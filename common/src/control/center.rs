@@ -69,6 +69,8 @@ pub struct CenterOutput<const N: usize> {
     /// The history of sent torques did not reach back to `t − τ(t)`: `e_u` and `u_τ` of the
     /// previous tick were held (a counted miss; cannot happen with `|τ̇| < 1`).
     pub history_miss: bool,
+    /// The tick had no measurement ([`CenterAgent::tick_missing`]): the last good one was used.
+    pub missing_input: bool,
 }
 
 /// Per-agent state of the control center.
@@ -93,6 +95,8 @@ pub struct CenterAgent<const N: usize> {
     pub state_resets: u64,
     /// Number of ticks whose `e_u`, `u_τ` were held because the history was pruned too far.
     pub history_misses: u64,
+    /// Number of ticks without a measurement ([`CenterAgent::tick_missing`]).
+    pub missing_inputs: u64,
 }
 
 impl<const N: usize> CenterAgent<N> {
@@ -118,6 +122,7 @@ impl<const N: usize> CenterAgent<N> {
             rejected_torques: 0,
             state_resets: 0,
             history_misses: 0,
+            missing_inputs: 0,
         })
     }
 }
@@ -146,7 +151,25 @@ impl<const N: usize> CenterAgent<N> {
         yd: &Vector<N>,
         s_override: Option<&Vector<N>>,
     ) -> CenterOutput<N> {
-        let rejected_input = self.accept_measurement(y, yd);
+        self.tick_on(t, Some((y, yd)), s_override)
+    }
+
+    /// The tick at `t` when its measurement is missing (dropped, forged, replayed, not yet
+    /// delivered): the documented rule is to hold the last good measurement, as for a rejected
+    /// one, and count the tick.
+    pub fn tick_missing(&mut self, t: f64) -> CenterOutput<N> {
+        self.missing_inputs += 1;
+        self.tick_on(t, None, None)
+    }
+
+    /// One tick from the measurement `input` (`None`: missing).
+    fn tick_on(
+        &mut self,
+        t: f64,
+        input: Option<(&Vector<N>, &Vector<N>)>,
+        s_override: Option<&Vector<N>>,
+    ) -> CenterOutput<N> {
+        let rejected_input = input.is_some_and(|(y, yd)| self.accept_measurement(y, yd));
         let x = self.tick_inputs(t, s_override);
         let (u, rejected_torque) = self.torque(&x);
 
@@ -182,6 +205,7 @@ impl<const N: usize> CenterAgent<N> {
             rejected_torque,
             state_reset,
             history_miss: x.history_miss,
+            missing_input: input.is_none(),
         }
     }
 

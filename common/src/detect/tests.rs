@@ -51,6 +51,7 @@ fn record(k: u64, r: Vector4<f64>) -> TickRecord {
             y: j(&[r[0], r[1]]),
             yd: j(&[r[2], r[3]]),
             active: false,
+            delivery: Default::default(),
         },
         center: CenterRecord {
             k,
@@ -65,7 +66,9 @@ fn record(k: u64, r: Vector4<f64>) -> TickRecord {
             rejected_torque: false,
             state_reset: false,
             history_miss: false,
+            missing_input: false,
         },
+        actuation: None,
     }
 }
 

@@ -335,6 +335,8 @@ fn payload(seq: u64) -> MeasurementMsg {
         agent_sent_ns: monotonic_ns(),
         attacker_received_ns: 0,
         attacker_sent_ns: 0,
+        flags: 0,
+        reserved: 0,
     }
 }
 

@@ -112,6 +112,7 @@ pub fn scaled_paper(n: usize) -> Result<Resolved> {
         name: paper.attack.name.clone(),
         description: paper.attack.description.clone(),
         channels: Vec::new(),
+        messages: Vec::new(),
     };
     for i in 1..=n {
         let src = &paper.scenario.agents[(i - 1) % paper.scenario.agents.len()];

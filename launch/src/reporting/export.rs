@@ -132,6 +132,7 @@ enum Kind {
     Attack,
     Center,
     Latency,
+    Actuation,
 }
 
 impl Kind {
@@ -141,6 +142,7 @@ impl Kind {
             Self::Attack => "attacker",
             Self::Center => "control-center",
             Self::Latency => "latency",
+            Self::Actuation => "actuation",
         }
     }
 
@@ -155,7 +157,12 @@ impl Kind {
             Self::Attack => (
                 &["k", "agent"],
                 &["alpha_position", "alpha_velocity", "y", "yd"],
-                &["active"],
+                &["active", "delivery"],
+            ),
+            Self::Actuation => (
+                &["k", "agent"],
+                &["alpha_u", "u"],
+                &["held_s", "active", "delivery"],
             ),
             Self::Center => (
                 &["k", "agent"],
@@ -166,6 +173,7 @@ impl Kind {
                     "rejected_torque",
                     "state_reset",
                     "history_miss",
+                    "missing_input",
                 ],
             ),
             Self::Latency => (
@@ -247,6 +255,7 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
             TraceRecord::Attack(_) => Kind::Attack,
             TraceRecord::Center(_) => Kind::Center,
             TraceRecord::Latency { .. } => Kind::Latency,
+            TraceRecord::Actuation(_) => Kind::Actuation,
             TraceRecord::Event { t, message } => {
                 events.row.push(&stem);
                 events.row.push(t);
@@ -324,6 +333,16 @@ fn row(row: &mut Row, rec: &TraceRecord, dof: usize) -> Result<()> {
             Ok(())
         }
         TraceRecord::Event { .. } => Ok(()),
+        TraceRecord::Actuation(a) => {
+            row.push(a.k);
+            row.push(a.agent);
+            joints(row, &a.alpha_u, dof)?;
+            joints(row, &a.u, dof)?;
+            row.push(a.held_s);
+            row.push(flag(a.active));
+            row.push(a.delivery.as_str());
+            Ok(())
+        }
     }
 }
 
@@ -346,6 +365,7 @@ fn attack_row(row: &mut Row, a: &AttackRecord, dof: usize) -> Result<()> {
         joints(row, j, dof)?;
     }
     row.push(flag(a.active));
+    row.push(a.delivery.as_str());
     Ok(())
 }
 
@@ -361,6 +381,7 @@ fn center_row(row: &mut Row, c: &CenterRecord, dof: usize) -> Result<()> {
         c.rejected_torque,
         c.state_reset,
         c.history_miss,
+        c.missing_input,
     ] {
         row.push(flag(b));
     }
@@ -432,6 +453,7 @@ mod tests {
             y: Joints::from_slice(&[3.0, 4.0]),
             yd: Joints::from_slice(&[5.0, 6.0]),
             active: true,
+            delivery: Default::default(),
         };
         let mut r = Row::default();
         row(&mut r, &TraceRecord::Attack(a), 2).expect("fits");

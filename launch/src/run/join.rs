@@ -7,7 +7,9 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use fdi_common::engine::{evaluator_for, summarize, RunSummary};
 use fdi_common::metrics::Evaluator;
-use fdi_common::records::{AgentRecord, AttackRecord, CenterRecord, TickRecord, TraceDigest};
+use fdi_common::records::{
+    ActuationRecord, AgentRecord, AttackRecord, CenterRecord, TickRecord, TraceDigest,
+};
 use fdi_common::scenario::Resolved;
 use fdi_common::trace::{TraceReader, TraceRecord};
 
@@ -28,6 +30,11 @@ impl Tick for AttackRecord {
     }
 }
 impl Tick for CenterRecord {
+    fn tick(&self) -> u64 {
+        self.k
+    }
+}
+impl Tick for ActuationRecord {
     fn tick(&self) -> u64 {
         self.k
     }
@@ -111,6 +118,12 @@ fn pick_attack(r: TraceRecord) -> Option<(u32, AttackRecord)> {
         _ => None,
     }
 }
+fn pick_actuation(r: TraceRecord) -> Option<(u32, ActuationRecord)> {
+    match r {
+        TraceRecord::Actuation(a) => Some((a.agent, a)),
+        _ => None,
+    }
+}
 fn pick_center(r: TraceRecord) -> Option<(u32, CenterRecord)> {
     match r {
         TraceRecord::Center(c) => Some((c.agent, c)),
@@ -140,6 +153,9 @@ pub fn join_run(
 struct Traces {
     agents: Vec<(u32, Source<AgentRecord>)>,
     attacker: Source<AttackRecord>,
+    /// The attacker's torque records (a second reader of its trace), when the run attacks
+    /// some agent's torques.
+    actuation: Option<Source<ActuationRecord>>,
     center: Source<CenterRecord>,
 }
 
@@ -154,10 +170,23 @@ impl Traces {
                     .with_context(|| format!("opening the trace of agent {}", a.id))?,
             ));
         }
+        let attacker = trace_path(run_dir, "attacker");
+        let routed = resolved
+            .scenario
+            .agents
+            .iter()
+            .any(|a| resolved.attack.attacks_torque_of(a.id));
         Ok(Self {
             agents,
-            attacker: Source::open(&trace_path(run_dir, "attacker"), pick_attack)
-                .context("opening the attacker trace")?,
+            actuation: if routed {
+                Some(
+                    Source::open(&attacker, pick_actuation)
+                        .context("opening the attacker trace")?,
+                )
+            } else {
+                None
+            },
+            attacker: Source::open(&attacker, pick_attack).context("opening the attacker trace")?,
             center: Source::open(&trace_path(run_dir, "control-center"), pick_center)
                 .context("opening the control-center trace")?,
         })
@@ -170,11 +199,15 @@ impl Traces {
         }
         self.attacker.finish();
         self.center.finish();
+        if let Some(a) = &mut self.actuation {
+            a.finish();
+        }
         for (id, src) in &self.agents {
             if let Some(d) = &src.damage {
                 warnings.push(format!("agent {id}: {d}"));
             }
         }
+        // The second reader of the attacker trace sees the same damage: reported once.
         for d in [&self.attacker.damage, &self.center.damage]
             .into_iter()
             .flatten()
@@ -240,6 +273,10 @@ struct Join {
     ticks: u64,
     /// Agent-ticks whose measurement never reached the control center.
     lost: u64,
+    /// Per agent (scenario order): its torques go through the attacker.
+    routed: Vec<bool>,
+    /// Agent-ticks of such agents without the attacker's torque record.
+    actuation_lost: u64,
     /// Ticks the agents recorded after the attacker or control-center trace ended: they ran on
     /// without control, and their own records (deadline misses) still count.
     after_control: u64,
@@ -254,6 +291,13 @@ impl Join {
             warnings: Vec::new(),
             ticks: resolved.ticks(),
             lost: 0,
+            routed: resolved
+                .scenario
+                .agents
+                .iter()
+                .map(|a| resolved.attack.attacks_torque_of(a.id))
+                .collect(),
+            actuation_lost: 0,
             after_control: 0,
             control_ended: false,
         }
@@ -301,10 +345,19 @@ impl Join {
                 return true;
             }
         };
+        let actuation = match (&mut traces.actuation, self.routed[n]) {
+            (Some(src), true) => {
+                let r = src.take(*id, k).ok().flatten();
+                self.actuation_lost += u64::from(r.is_none());
+                r
+            }
+            _ => None,
+        };
         let rec = TickRecord {
             agent: a,
             attack: x,
             center: c,
+            actuation,
         };
         self.digest.push(&rec);
         self.evaluator.push(&rec);
@@ -315,6 +368,12 @@ impl Join {
     /// The warnings of the agent-ticks that ran uncontrolled (lost, or after the control ended).
     fn warn_uncontrolled(&mut self) {
         let (lost, after_control) = (self.lost, self.after_control);
+        if self.actuation_lost > 0 {
+            self.warnings.push(format!(
+                "{} agent-ticks of robots whose torques go through the attacker have no record of the torque's way (it never reached the attacker)",
+                self.actuation_lost
+            ));
+        }
         if lost > 0 {
             self.warnings.push(format!(
                 "{lost} agent-ticks never reached the control center (the robots ran uncontrolled): left out of the metrics but their deadline misses"

@@ -10,7 +10,7 @@ use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
 use fdi_common::engine::tick_time;
-use fdi_common::records::AttackRecord;
+use fdi_common::records::{AttackRecord, Delivery};
 use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::trace::{TraceReader, TraceRecord};
 use fdi_runtime::ipc::{
@@ -28,6 +28,15 @@ const POLL: Duration = Duration::from_micros(100);
 /// order; any other content (damage, a missing or extra tick) is refused, naming the file.
 pub fn load_recording(resolved: &Resolved, path: &Path) -> Result<Vec<Vec<AttackRecord>>> {
     let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
+    if let Some(id) = ids
+        .iter()
+        .find(|id| resolved.attack.attacks_torque_of(**id))
+    {
+        bail!(
+            "{}: the recorded run attacks agent {id}'s torques; a replay stands in for the agents and the attacker on the measurement path only, so it cannot reproduce that run",
+            path.display()
+        );
+    }
     let ticks = resolved.ticks();
     let mut per_agent: Vec<Vec<AttackRecord>> = vec![Vec::new(); ids.len()];
     let mut reader = TraceReader::open(path).context("the recording cannot be replayed")?;
@@ -109,16 +118,25 @@ fn run(args: &ProcessArgs) -> Result<()> {
         for (i, recs) in recording.iter().enumerate() {
             while sent[i] < ticks && sent[i] < answered[i] + AHEAD {
                 let r = &recs[sent[i] as usize];
-                tampered.send(MeasurementMsg {
-                    seq: r.k,
-                    agent: r.agent,
-                    dof: r.y.as_slice().len() as u32,
-                    t: tick_time(r.k, dt),
-                    y: payload(&r.y),
-                    yd: payload(&r.yd),
-                    agent_sent_ns: 0,
-                    attacker_received_ns: 0,
-                    attacker_sent_ns: 0,
+                let t = tick_time(r.k, dt);
+                // A tick whose input was missing is a gap marker, as the attacker sent it.
+                let dof = resolved.scenario.agents[i].model.dof() as u32;
+                tampered.send(if r.delivery == Delivery::Delivered {
+                    MeasurementMsg {
+                        seq: r.k,
+                        agent: r.agent,
+                        dof: r.y.as_slice().len() as u32,
+                        t,
+                        y: payload(&r.y),
+                        yd: payload(&r.yd),
+                        agent_sent_ns: 0,
+                        attacker_received_ns: 0,
+                        attacker_sent_ns: 0,
+                        flags: 0,
+                        reserved: 0,
+                    }
+                } else {
+                    MeasurementMsg::gap(r.k, r.agent, dof, t)
                 })?;
                 sent[i] += 1;
                 published = true;

@@ -99,6 +99,8 @@ pub enum Stream {
     Measurement,
     Tampered,
     Torque(u32),
+    /// Control center → attacker: the torques of the agents whose torques a run attacks.
+    Actuation,
     Control,
     Status,
 }
@@ -110,6 +112,7 @@ impl Stream {
             Self::Measurement => "fdi/measurement".into(),
             Self::Tampered => "fdi/tampered".into(),
             Self::Torque(id) => format!("fdi/torque/{id}"),
+            Self::Actuation => "fdi/actuation".into(),
             Self::Control => "fdi/control".into(),
             Self::Status => "fdi/status".into(),
         }
@@ -177,6 +180,7 @@ impl Sizing {
             Stream::Measurement => (n, 2, burst),
             Stream::Tampered => (1, 2, n * burst),
             Stream::Torque(_) => (1, 2, burst),
+            Stream::Actuation => (1, 2, n * burst),
             Stream::Control => (1, n + 4, 8),
             Stream::Status => (n + 4, 2, 256),
         };

@@ -45,6 +45,37 @@ pub struct MeasurementMsg {
     pub attacker_received_ns: u64,
     /// CLOCK_MONOTONIC when the attacker relayed, ns (0 on the clean hop).
     pub attacker_sent_ns: u64,
+    /// [`MeasurementMsg::GAP`] or 0.
+    pub flags: u32,
+    pub reserved: u32,
+}
+
+impl MeasurementMsg {
+    /// Flag of a gap marker: the attacker's word that nothing arrives for tick `seq` (dropped,
+    /// not yet delivered under a delay, or replaced by a replayed message). It carries no data;
+    /// the receiver's stand-in for the deadline at which it knows nothing came.
+    pub const GAP: u32 = 1;
+
+    /// A gap marker for tick `seq` of `agent`, stamped `t`.
+    pub fn gap(seq: u64, agent: u32, dof: u32, t: f64) -> Self {
+        Self {
+            seq,
+            agent,
+            dof,
+            t,
+            y: [0.0; MAX_DOF],
+            yd: [0.0; MAX_DOF],
+            agent_sent_ns: 0,
+            attacker_received_ns: 0,
+            attacker_sent_ns: 0,
+            flags: Self::GAP,
+            reserved: 0,
+        }
+    }
+
+    pub fn is_gap(&self) -> bool {
+        self.flags & Self::GAP != 0
+    }
 }
 
 /// A torque command: control center → agent, stamped with its send time `t_k`.
@@ -65,6 +96,21 @@ pub struct TorqueMsg {
     pub attacker_sent_ns: u64,
     pub center_received_ns: u64,
     pub center_sent_ns: u64,
+    /// How much later than the channel's known delay the command takes effect (a delay
+    /// attack on the torque path), s; 0 otherwise.
+    pub held_s: f64,
+    /// [`TorqueMsg::GAP`] or 0.
+    pub flags: u32,
+    pub reserved: u32,
+}
+
+impl TorqueMsg {
+    /// Flag of a gap marker: nothing arrives for tick `seq` (see [`MeasurementMsg::GAP`]).
+    pub const GAP: u32 = 1;
+
+    pub fn is_gap(&self) -> bool {
+        self.flags & Self::GAP != 0
+    }
 }
 
 /// Launcher → every process.
@@ -654,6 +700,8 @@ mod tests {
                     agent_sent_ns: f.ns.0,
                     attacker_received_ns: f.ns.1,
                     attacker_sent_ns: f.ns.1,
+                    flags: 0,
+                    reserved: 0,
                 };
                 let header = check_header(m.agent, m.dof, m.seq, 2, |a| a == 1, expected);
                 let structurally_good =
@@ -710,6 +758,9 @@ mod tests {
                     attacker_sent_ns: f.ns.1,
                     center_received_ns: f.ns.0,
                     center_sent_ns: f.ns.1,
+                    held_s: 0.0,
+                    flags: 0,
+                    reserved: 0,
                 };
                 let good = m.agent == 1 && m.dof == 2 && m.seq == expected && m.t_send.is_finite();
                 match validate_torque(&m, 2, 1, expected) {
@@ -765,6 +816,8 @@ mod tests {
             agent_sent_ns: 0,
             attacker_received_ns: 0,
             attacker_sent_ns: 0,
+            flags: 0,
+            reserved: 0,
         };
         // Even a receiver configured for more links than a payload holds never slices past it.
         assert_eq!(
@@ -818,6 +871,9 @@ mod tests {
             attacker_sent_ns: 0,
             center_received_ns: 0,
             center_sent_ns: 0,
+            held_s: 0.0,
+            flags: 0,
+            reserved: 0,
         };
         assert_eq!(validate_torque(&torque, 2, 2, 3).map(<[f64]>::len), Ok(2));
         assert_eq!(

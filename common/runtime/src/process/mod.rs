@@ -18,7 +18,7 @@ pub mod procfs;
 mod shutdown;
 mod wait;
 
-pub use admission::{admit_measurement, admit_torque};
+pub use admission::{admit_measurement, admit_torque, Admission, Command};
 pub use args::ProcessArgs;
 pub use launcher::{
     connect, finish, node_name, sizing_for, start, trace_header, Connection, LauncherLink, Start,

@@ -46,10 +46,19 @@ impl WaitStrategy {
         waker: &impl Waker,
         inbox: &impl Inbox<T>,
     ) -> Result<bool, IpcError> {
+        self.wait_until(waker, || inbox.has_messages())
+    }
+
+    /// [`Self::wait`] for a process with several inboxes: the spin polls `has_input`.
+    pub fn wait_until(
+        &self,
+        waker: &impl Waker,
+        has_input: impl Fn() -> Result<bool, IpcError>,
+    ) -> Result<bool, IpcError> {
         if !self.spin.is_zero() {
             let began = Instant::now();
             while began.elapsed() < self.spin {
-                if inbox.has_messages()? {
+                if has_input()? {
                     waker.wait(Duration::ZERO)?;
                     return Ok(true);
                 }
@@ -63,18 +72,18 @@ impl WaitStrategy {
 
     /// How a relay of measurements (attacker, control center) waits for its next input: in
     /// realtime it wakes at each arrival and at least every [`crate::process::LIVENESS_CHECK`]
-    /// (to notice a silent agent); in lockstep as [`Self::wait`].
-    pub fn wait_for_input<T: Payload>(
+    /// (to notice a silent agent); in lockstep as [`Self::wait_until`].
+    pub fn wait_for_input(
         &self,
         clock: fdi_common::scenario::ClockMode,
         waker: &impl Waker,
-        inbox: &impl Inbox<T>,
+        has_input: impl Fn() -> Result<bool, IpcError>,
     ) -> Result<bool, IpcError> {
         match clock {
             fdi_common::scenario::ClockMode::Realtime => {
                 waker.wait_precise(crate::process::LIVENESS_CHECK)
             }
-            fdi_common::scenario::ClockMode::Lockstep => self.wait(waker, inbox),
+            fdi_common::scenario::ClockMode::Lockstep => self.wait_until(waker, has_input),
         }
     }
 }
