@@ -26,6 +26,10 @@ pub const PRESETS: &[(&str, &str)] = &[
         "freeze",
         include_str!("../../../scenarios/attacks/freeze.toml"),
     ),
+    (
+        "stealthy-bias",
+        include_str!("../../../scenarios/attacks/stealthy-bias.toml"),
+    ),
 ];
 
 /// Names of the presets, for error messages.
