@@ -11,6 +11,7 @@ mod pulse;
 mod ramp;
 pub mod replay;
 mod sine;
+pub mod stealthy;
 pub mod transform;
 
 use rand_chacha::ChaCha12Rng;
@@ -78,6 +79,25 @@ pub enum Waveform {
     /// Stuck-at: the center sees the clean value of the segment's first tick for the whole
     /// segment ([`transform::freeze`]).
     Freeze,
+    /// Stealthy bias (docs/stealthy.md): from zero at the segment's start it grows at the
+    /// fastest slope that keeps a χ² test on the observer's residual under its threshold,
+    /// `slope = residual_std · (√threshold − √noise_peak) / (sensitivity · √(window_ticks ·
+    /// shifted_entries))` ([`stealthy::slope`]), until it reaches `bias`, then holds.
+    /// `threshold`, `window_ticks`: the χ² detector's (white-box attacker); `noise_peak`: the
+    /// level its attack-free statistic stays under; `shifted_entries`: the residual entries the
+    /// bias moves (the channel's links); `residual_std`: the residual's attack-free standard
+    /// deviation per entry; `sensitivity`: its steady offset per unit slope of the bias
+    /// (residual units per channel unit per s); `bias`: the level held, channel units.
+    StealthyBias {
+        threshold: f64,
+        noise_peak: f64,
+        #[serde(default = "stealthy::one_tick")]
+        window_ticks: u32,
+        shifted_entries: u32,
+        residual_std: f64,
+        sensitivity: f64,
+        bias: f64,
+    },
 }
 
 impl Waveform {
@@ -103,6 +123,26 @@ impl Waveform {
             Self::Ramp { slope_per_s, start } => ramp::value(t - segment_start, slope_per_s, start),
             Self::Gaussian { std, mean } => noise::value(rng, mean, std),
             Self::Corrupt { value } => corrupt::value(value),
+            Self::StealthyBias {
+                threshold,
+                noise_peak,
+                window_ticks,
+                shifted_entries,
+                residual_std,
+                sensitivity,
+                bias,
+            } => stealthy::value(
+                t - segment_start,
+                stealthy::slope(
+                    threshold,
+                    noise_peak,
+                    window_ticks,
+                    shifted_entries,
+                    residual_std,
+                    sensitivity,
+                ),
+                bias,
+            ),
             Self::Replay { .. } | Self::Scale { .. } | Self::SignFlip | Self::Freeze => 0.0,
         }
     }
@@ -126,7 +166,8 @@ impl Waveform {
     }
 
     /// The size of what the waveform injects at its start or at its peak, in its channel's units
-    /// (a ramp: its start; noise: mean plus four standard deviations; corrupt and replay:
+    /// (a ramp: its start; noise: mean plus four standard deviations; a stealthy bias: the level
+    /// it grows to; corrupt and replay:
     /// zero, they have no magnitude of their own). For the implausibility warnings of
     /// `validate`.
     pub fn magnitude(&self) -> f64 {
@@ -144,6 +185,7 @@ impl Waveform {
             Self::Pulse { amplitude, .. } => amplitude.abs(),
             Self::Ramp { start, .. } => start.abs(),
             Self::Gaussian { std, mean } => mean.abs() + 4.0 * std.abs(),
+            Self::StealthyBias { bias, .. } => bias.abs(),
         }
     }
 
@@ -210,6 +252,55 @@ impl Waveform {
                 vec![
                     ("record_from_s", record_from_s),
                     ("record_for_s", record_for_s),
+                ]
+            }
+            Self::StealthyBias {
+                threshold,
+                noise_peak,
+                window_ticks,
+                shifted_entries,
+                residual_std,
+                sensitivity,
+                bias,
+            } => {
+                if threshold <= 0.0 {
+                    out.push(("threshold", format!("must be > 0, got {threshold}")));
+                }
+                if noise_peak < 0.0 {
+                    out.push(("noise_peak", format!("must be ≥ 0, got {noise_peak}")));
+                } else if noise_peak >= threshold && threshold.is_finite() {
+                    out.push((
+                        "noise_peak",
+                        format!(
+                            "must be below threshold ({threshold}), got {noise_peak}: the \
+                             attack-free statistic leaves no room under the threshold"
+                        ),
+                    ));
+                }
+                if window_ticks == 0 {
+                    out.push(("window_ticks", "must be ≥ 1, got 0".into()));
+                }
+                if shifted_entries == 0 {
+                    out.push(("shifted_entries", "must be ≥ 1, got 0".into()));
+                }
+                if residual_std <= 0.0 {
+                    out.push(("residual_std", format!("must be > 0, got {residual_std}")));
+                }
+                if sensitivity <= 0.0 {
+                    out.push(("sensitivity", format!("must be > 0, got {sensitivity}")));
+                }
+                if bias == 0.0 {
+                    out.push((
+                        "bias",
+                        "must be non-zero: a zero bias injects nothing".into(),
+                    ));
+                }
+                vec![
+                    ("threshold", threshold),
+                    ("noise_peak", noise_peak),
+                    ("residual_std", residual_std),
+                    ("sensitivity", sensitivity),
+                    ("bias", bias),
                 ]
             }
             Self::Gaussian { std, mean } => {
