@@ -383,7 +383,7 @@ impl Evaluator {
         let t = r.agent.t;
         (acc.tracking)(acc, r);
         acc.ticks += 1;
-        let active = r.attack.active;
+        let active = detect::in_force(r);
         acc.s_hat_norm.push(t, active, r.center.alarm, true);
         if let Some(d) = &mut acc.detectors {
             let v = d.detectors.push(r);

@@ -42,6 +42,10 @@ pub enum Command {
         /// A run directory (`runs/<timestamp>-<name>`).
         run_dir: PathBuf,
     },
+    /// ROC and detection delay: sweep every detector's threshold over one recorded run (the
+    /// detectors replay its records, nothing is simulated again) and write `roc.csv`, `roc.svg`/`.png`
+    /// and `delay.svg`/`.png`.
+    Detect(DetectArgs),
     /// Work with the binary traces of a run.
     #[command(subcommand)]
     Trace(TraceCommand),
@@ -142,12 +146,85 @@ pub struct RunArgs {
     pub replay: Option<PathBuf>,
 }
 
+#[derive(Debug, Args)]
+pub struct DetectArgs {
+    /// A run directory (its recorded traces are replayed) or a scenario TOML file (run once as
+    /// `run` does, then its run directory is swept).
+    pub target: PathBuf,
+    /// Folder that receives the outputs; default: `<run dir>/detect`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Log-spaced thresholds per detector over the range of its statistic in the run (0 and the
+    /// configured threshold are added).
+    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=100_000))]
+    pub points: u32,
+    /// A scenario TARGET: the engine of its run (as `run --engine`; default ipc).
+    #[arg(long, value_enum)]
+    pub engine: Option<Engine>,
+    /// A scenario TARGET: replace its clock (as `run --clock`).
+    #[arg(long, value_enum)]
+    pub clock: Option<Clock>,
+    /// A scenario TARGET: replace its attack (as `run --attack`).
+    #[arg(long)]
+    pub attack: Option<String>,
+    /// A scenario TARGET: replace its controller mode (as `run --controller`).
+    #[arg(long, value_enum)]
+    pub controller: Option<Controller>,
+    /// A scenario TARGET: replace its duration, s (as `run --duration-s`).
+    #[arg(long, allow_negative_numbers = true)]
+    pub duration_s: Option<f64>,
+    /// A scenario TARGET: replace its seed (as `run --seed`).
+    #[arg(long, allow_negative_numbers = true)]
+    pub seed: Option<u64>,
+    /// A scenario TARGET: the folder that receives its run directory (as `run --out`).
+    #[arg(long, default_value = "runs")]
+    pub runs: PathBuf,
+}
+
+impl DetectArgs {
+    /// The flags that only a scenario TARGET takes, by name, when given.
+    pub fn run_flags(&self) -> Vec<&'static str> {
+        [
+            ("--engine", self.engine.is_some()),
+            ("--clock", self.clock.is_some()),
+            ("--attack", self.attack.is_some()),
+            ("--controller", self.controller.is_some()),
+            ("--duration-s", self.duration_s.is_some()),
+            ("--seed", self.seed.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(name, given)| given.then_some(name))
+        .collect()
+    }
+
+    /// The `run` of a scenario TARGET, with these flags.
+    pub fn run_args(&self) -> RunArgs {
+        RunArgs {
+            scenario: Some(self.target.clone()),
+            engine: self.engine.unwrap_or(Engine::Ipc),
+            clock: self.clock,
+            attack: self.attack.clone(),
+            controller: self.controller,
+            duration_s: self.duration_s,
+            seed: self.seed,
+            out: self.runs.clone(),
+            json: false,
+            placement: runtime::Placement::default(),
+            replay: None,
+        }
+    }
+}
+
 pub fn dispatch(cli: Cli) -> Result<ExitCode> {
     // Commands that run or report handle SIGINT/SIGTERM from the first moment: every phase
     // checks the flag, so an interrupt stops at once, keeps what is done and says so.
     if matches!(
         cli.command,
-        Command::Run(_) | Command::Report { .. } | Command::Table1(_) | Command::Table2(_)
+        Command::Run(_)
+            | Command::Report { .. }
+            | Command::Detect(_)
+            | Command::Table1(_)
+            | Command::Table2(_)
     ) {
         crate::interrupt::install();
     }
@@ -164,6 +241,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Table1(args) => tables::table1(&args),
         Command::Table2(args) => tables::table2(&args),
         Command::Report { run_dir } => report::report(&run_dir).map(|()| ExitCode::SUCCESS),
+        Command::Detect(args) => crate::detect::detect(&args),
         Command::Trace(TraceCommand::Export { run_dir, format }) => {
             export::export(&run_dir, format).map(|()| ExitCode::SUCCESS)
         }
@@ -217,6 +295,21 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
     if let Some(recorded) = &args.replay {
         return crate::replayer::replay_run(recorded, &args.out, args.json);
     }
+    run_scenario(args).map(|done| done.code)
+}
+
+/// What [`run_scenario`] left: the run directory, and the exit status of the run.
+#[derive(Debug)]
+pub struct RunDone {
+    pub dir: PathBuf,
+    pub code: ExitCode,
+    /// The run was a clean success (exit status 0).
+    pub clean: bool,
+}
+
+/// `run` of a scenario (not `--replay`): runs it, writes the run directory and its report,
+/// prints the summary.
+pub fn run_scenario(args: &RunArgs) -> Result<RunDone> {
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
     check_placement(&r, args.engine, &args.placement)?;
     crate::interrupt::check(runtime::BEFORE_THE_START)?;
@@ -276,13 +369,18 @@ fn run(args: &RunArgs) -> Result<ExitCode> {
             describe_error(&e),
             dir.display()
         );
-        return Ok(ExitCode::FAILURE);
+        return Ok(RunDone {
+            dir,
+            code: ExitCode::FAILURE,
+            clean: false,
+        });
     }
     let code = exit_code(&summary);
     if let Some(verdict) = verdict(&summary) {
         eprintln!("fdi-launch: {verdict}");
     }
-    Ok(code)
+    let clean = code == ExitCode::SUCCESS;
+    Ok(RunDone { dir, code, clean })
 }
 
 /// What a run that is not a clean success amounts to, in words (printed last), for the exit

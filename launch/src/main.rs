@@ -2,6 +2,7 @@
 
 mod bench;
 mod cli;
+mod detect;
 mod reporting;
 mod run;
 

@@ -6,7 +6,8 @@
 //! every table uses:
 //!
 //! * `s_hat_norm`: the paper's alarm, `‖Ŝ‖` above a threshold for a hold time
-//!   ([`crate::control::Detector`], read from `CenterRecord::alarm`, unchanged);
+//!   ([`crate::control::Detector`], read from `CenterRecord::alarm`, unchanged; [`s_hat`]
+//!   replays it from the records as a statistic for the threshold sweeps);
 //! * `chi2`: `Σ over w ticks of rᵀ Σ⁻¹ r` above a threshold ([`chi2`]);
 //! * `cusum`: a two-sided CUSUM on each entry of the whitened residual ([`cusum`]).
 //!
@@ -22,6 +23,8 @@ pub mod config;
 pub mod cusum;
 pub mod gamma;
 pub mod residual;
+pub mod s_hat;
+pub mod sweep;
 
 use nalgebra::DVector;
 
@@ -42,13 +45,26 @@ pub const CUSUM: &str = "cusum";
 /// The detectors in the order of every table.
 pub const NAMES: [&str; 3] = [S_HAT_NORM, CHI2, CUSUM];
 
+/// Whether the attack is in force at this tick: the ground truth of every detection metric
+/// (onsets, coverage, false alarms) and of the threshold sweeps. The one place that says it.
+pub fn in_force(r: &TickRecord) -> bool {
+    r.attack.active
+}
+
+/// Whether a detector's per-tick `statistic` raises the alarm at `threshold`: the alarm of
+/// every detector for every threshold, in the metrics and in the sweeps alike.
+pub fn exceeds(statistic: f64, threshold: f64) -> bool {
+    statistic > threshold
+}
+
 /// What one detector says about one tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Verdict {
     /// Inside the calibration window, or the χ² window still filling: no verdict, no alarm.
     Calibrating,
-    /// The statistic, and whether it exceeds the threshold.
-    Watched { statistic: f64, alarm: bool },
+    /// The statistic of the tick, and the detector's configured threshold. The alarm at any
+    /// threshold is a function of the statistic alone ([`Verdict::alarm_at`]).
+    Watched { statistic: f64, threshold: f64 },
     /// The residual or the statistic was not finite: counted, alarm on for this tick.
     NonFinite,
     /// No residual could be formed (no record of the tick before, or a record of the wrong
@@ -59,10 +75,21 @@ pub enum Verdict {
 }
 
 impl Verdict {
-    /// Whether the alarm is on at this tick, given whether it was on at the tick before.
+    /// Whether the alarm is on at this tick at the configured threshold, given whether it was
+    /// on at the tick before.
     pub fn alarm(self, before: bool) -> bool {
+        let threshold = match self {
+            Self::Watched { threshold, .. } => threshold,
+            _ => f64::NAN,
+        };
+        self.alarm_at(threshold, before)
+    }
+
+    /// Whether the alarm would be on at this tick with `threshold` instead of the configured
+    /// one, given whether it was on at the tick before (at the same threshold).
+    pub fn alarm_at(self, threshold: f64, before: bool) -> bool {
         match self {
-            Self::Watched { alarm, .. } => alarm,
+            Self::Watched { statistic, .. } => exceeds(statistic, threshold),
             Self::NonFinite => true,
             Self::Missing => before,
             Self::Calibrating | Self::Uncalibrated => false,
@@ -245,13 +272,12 @@ impl RobotDetectors {
             (Ok(_), Some(sum)) if !sum.is_finite() => Verdict::NonFinite,
             (Ok(t), Some(sum)) => Verdict::Watched {
                 statistic: sum,
-                alarm: sum > *t,
+                threshold: *t,
             },
         };
-        let s = self.cusum.push(&z);
         let cusum = Verdict::Watched {
-            statistic: s,
-            alarm: s > self.cusum.threshold(),
+            statistic: self.cusum.push(&z),
+            threshold: self.cusum.threshold(),
         };
         Verdicts { chi2, cusum }
     }
