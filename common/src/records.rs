@@ -205,13 +205,6 @@ pub struct TickRecord {
     pub actuation: Option<ActuationRecord>,
 }
 
-impl TickRecord {
-    /// Ground truth of detection: an attack on either path is in force at this tick.
-    pub fn attack_in_force(&self) -> bool {
-        self.attack.active || self.actuation.is_some_and(|a| a.active)
-    }
-}
-
 /// SHA-256 over every tick's true state, tampered measurement and torque as f64 bit patterns,
 /// in tick order and, within a tick, in the scenario's agent order.
 #[derive(Debug, Clone, Default)]

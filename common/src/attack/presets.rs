@@ -57,6 +57,8 @@ pub const PRESETS: &[(&str, &str)] = &[
     (
         "replay-original",
         include_str!("../../../scenarios/attacks/replay-original.toml"),
+    ),
+    (
         "stealthy-bias",
         include_str!("../../../scenarios/attacks/stealthy-bias.toml"),
     ),

@@ -45,10 +45,12 @@ pub const CUSUM: &str = "cusum";
 /// The detectors in the order of every table.
 pub const NAMES: [&str; 3] = [S_HAT_NORM, CHI2, CUSUM];
 
-/// Whether the attack is in force at this tick: the ground truth of every detection metric
-/// (onsets, coverage, false alarms) and of the threshold sweeps. The one place that says it.
+/// Whether an attack is in force at this tick, on either path (the measurement, or the torque
+/// when the run routes the agent's torques through the attacker): the ground truth of every
+/// detection metric (onsets, coverage, false alarms) and of the threshold sweeps. The one place
+/// that says it.
 pub fn in_force(r: &TickRecord) -> bool {
-    r.attack.active
+    r.attack.active || r.actuation.is_some_and(|a| a.active)
 }
 
 /// Whether a detector's per-tick `statistic` raises the alarm at `threshold`: the alarm of

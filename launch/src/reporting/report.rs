@@ -342,7 +342,7 @@ impl RunSeries {
             s.ticks += 1;
         }
         a.tau_ms.push(t, r.agent.tau * 1e3);
-        a.active.push(t, r.attack.active);
+        a.active.push(t, fdi_common::detect::in_force(r));
         a.alarm.push(t, r.center.alarm);
         a.missed.push(t, r.agent.missed);
     }
