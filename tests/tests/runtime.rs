@@ -127,6 +127,85 @@ fn transform_attacks_over_ipc_equal_the_in_process_digest() {
     }
 }
 
+/// A shipped attack class over the real processes in lockstep: the digest and the RMSEs equal
+/// the in-process engine's, and the attack changes the run. `duration_s` reaches into the
+/// class's attack window.
+fn class_over_ipc_equals_in_process(preset: &str, duration_s: &str) {
+    let dir = Scratch::new(preset);
+    let run = |engine: &str, attack: &str| {
+        let args = [
+            "run",
+            "--attack",
+            attack,
+            "--duration-s",
+            duration_s,
+            "--json",
+            "--engine",
+            engine,
+        ];
+        json(&launch(&args, dir.0.as_path(), WATCHDOG))
+    };
+    let (ipc, inproc) = (run("ipc", preset), run("inproc", preset));
+    assert_eq!(ipc["attack"], preset);
+    assert_eq!(ipc["trace_digest"], inproc["trace_digest"], "{preset}");
+    assert_eq!(ipc["rmse_rad"], inproc["rmse_rad"], "{preset}");
+    assert_eq!(ipc["metrics"], inproc["metrics"], "{preset}");
+    let clean = run("inproc", "none");
+    assert_ne!(
+        clean["trace_digest"], inproc["trace_digest"],
+        "{preset}: the attack changes the run"
+    );
+}
+
+/// One test per attack class on the torque path or on whole messages (the transforms and the
+/// additive waveforms have theirs above and in `threads.rs`).
+macro_rules! class_test {
+    ($name:ident, $preset:literal, $duration:literal) => {
+        #[test]
+        fn $name() {
+            class_over_ipc_equals_in_process($preset, $duration);
+        }
+    };
+}
+
+class_test!(
+    actuator_fdi_over_ipc_equals_in_process,
+    "actuator-bias",
+    "10.5"
+);
+class_test!(
+    torque_delay_over_ipc_equals_in_process,
+    "torque-delay",
+    "10.5"
+);
+class_test!(random_drops_over_ipc_equal_in_process, "dos-drop", "10.5");
+class_test!(drop_bursts_over_ipc_equal_in_process, "dos-burst", "11.5");
+class_test!(
+    torque_dos_window_over_ipc_equals_in_process,
+    "dos-window",
+    "10.5"
+);
+class_test!(
+    measurement_delay_over_ipc_equals_in_process,
+    "measurement-delay",
+    "10.5"
+);
+class_test!(
+    forged_stamps_over_ipc_equal_in_process,
+    "forge-stamp",
+    "10.5"
+);
+class_test!(
+    replay_with_original_headers_over_ipc_equals_in_process,
+    "replay-original",
+    "10.5"
+);
+class_test!(
+    stealthy_bias_over_ipc_equals_in_process,
+    "stealthy-bias",
+    "6"
+);
+
 #[test]
 fn two_runs_at_once_do_not_interfere() {
     let dir = Scratch::new("concurrent");
