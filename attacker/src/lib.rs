@@ -110,7 +110,7 @@ impl Target {
             .iter()
             .map(|a| Self {
                 id: a.id,
-                attack: AgentAttack::compile(&resolved.attack, a.id, s.seed),
+                attack: AgentAttack::for_run(resolved, a.id),
                 next: 0,
                 routed: resolved.attack.attacks_torque_of(a.id).then(|| {
                     routed += 1;

@@ -34,7 +34,7 @@ impl AgentLoop {
         let s = &r.scenario;
         Self {
             plant: Plant::<2>::new(PlantParams::new(a, s)).expect("two-link plant"),
-            attack: AgentAttack::compile(&r.attack, a.id, s.seed),
+            attack: AgentAttack::for_run(r, a.id),
             center: CenterAgent::<2>::new(center_params(r, a)).expect("two-link center"),
         }
     }

@@ -1,5 +1,5 @@
 //! The in-process lockstep engine: the whole run on one thread, with the same per-process
-//! pieces ([`Plant`], [`AgentAttack`] via [`tamper`], [`CenterAgent`]) and the same order of
+//! pieces ([`Plant`], [`crate::attack::AgentAttack`], [`CenterAgent`]) and the same order of
 //! floating-point operations as the multi-process runtime. It is the oracle for tests and the
 //! floor for the IPC overhead benchmark.
 
@@ -320,11 +320,7 @@ pub fn run_inproc<const N: usize>(
                 dof: N,
             })?,
         );
-        attacks.push(crate::attack::AgentAttack::compile(
-            &resolved.attack,
-            a.id,
-            s.seed,
-        ));
+        attacks.push(crate::attack::AgentAttack::for_run(resolved, a.id));
         centers.push(CenterAgent::<N>::new(CenterParams::new(a, s)).ok_or(
             EngineError::ModelDof {
                 agent: a.id,

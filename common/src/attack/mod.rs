@@ -13,6 +13,7 @@
 //! direct path. Whole-message attacks (denial of service, delay, stamp forgery, replay with the
 //! original header) are the profile's `[[messages]]` ([`message`]).
 
+pub mod covert;
 pub mod message;
 pub mod presets;
 pub mod waveform;
@@ -26,8 +27,10 @@ use crate::model::Vector;
 use crate::plant::Measurement;
 use crate::records::Joints;
 use crate::rng::{stream, Purpose};
+use crate::scenario::Resolved;
 use crate::units::AngleUnit;
 
+pub use covert::CovertEntry;
 pub use message::{Effect, MessageAttack, MessageSegment, Path, Sent};
 pub use waveform::Waveform;
 
@@ -123,6 +126,10 @@ pub struct AttackProfile {
     /// Whole-message attacks, at most one per agent and path.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub messages: Vec<MessageAttack>,
+    /// Covert attacks: the effect of an agent's torque channels hidden from its measurements
+    /// ([`covert`]), at most one per agent.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub covert: Vec<CovertEntry>,
 }
 
 impl AttackProfile {
@@ -131,6 +138,7 @@ impl AttackProfile {
     pub fn for_agents(mut self, agent_dofs: &BTreeMap<u32, usize>) -> Self {
         self.channels.retain(|c| agent_dofs.contains_key(&c.agent));
         self.messages.retain(|m| agent_dofs.contains_key(&m.agent));
+        self.covert.retain(|c| agent_dofs.contains_key(&c.agent));
         self
     }
 
@@ -160,6 +168,34 @@ impl AttackProfile {
                     .join(", ")
             )
         };
+        for (i, c) in self.covert.iter().enumerate() {
+            let at = |f: &str| format!("covert[{i}].{f}");
+            if !agent_dofs.contains_key(&c.agent) {
+                out.push((at("agent"), unknown(c.agent)));
+            } else if !self
+                .channels
+                .iter()
+                .any(|ch| ch.agent == c.agent && ch.signal == Signal::Torque)
+            {
+                out.push((
+                    at("agent"),
+                    format!(
+                        "a covert attack hides a torque injection, and agent {} has no torque \
+                         channel",
+                        c.agent
+                    ),
+                ));
+            }
+            if self.covert[..i].iter().any(|o| o.agent == c.agent) {
+                out.push((at("agent"), format!("agent {} is covered twice", c.agent)));
+            }
+            if !c.from_s.is_finite() || c.from_s < 0.0 {
+                out.push((
+                    at("from_s"),
+                    format!("must be finite and ≥ 0, got {}", c.from_s),
+                ));
+            }
+        }
         for (m, msg) in self.messages.iter().enumerate() {
             if !agent_dofs.contains_key(&msg.agent) {
                 out.push((format!("messages[{m}].agent"), unknown(msg.agent)));
@@ -376,11 +412,13 @@ impl<const N: usize> TorqueInjection<N> {
 }
 
 /// The attack on one agent, compiled from a profile: what the attacker process evaluates.
-#[derive(Debug, Clone)]
+#[derive(Debug)]
 pub struct AgentAttack {
     channels: Vec<LinkChannel>,
     measurements: Option<MessageLine<(Joints, Joints)>>,
     torques: Option<MessageLine<Joints>>,
+    /// The twins of a covert attack ([`Self::for_run`]).
+    covert: Option<Box<dyn covert::Twins>>,
 }
 
 impl AgentAttack {
@@ -415,7 +453,22 @@ impl AgentAttack {
             channels,
             measurements: message_line(profile, agent_id, run_seed, Path::Measurement),
             torques: message_line(profile, agent_id, run_seed, Path::Torque),
+            covert: None,
         }
+    }
+
+    /// The attack on agent `agent_id` of the run `resolved`: [`Self::compile`] of its profile,
+    /// with the twins of a covert attack on the agent (which need the scenario: its model,
+    /// delay and disturbance). What the attacker and the in-process engine evaluate.
+    pub fn for_run(resolved: &Resolved, agent_id: u32) -> Self {
+        let mut attack = Self::compile(&resolved.attack, agent_id, resolved.scenario.seed);
+        attack.covert = resolved
+            .attack
+            .covert
+            .iter()
+            .find(|c| c.agent == agent_id)
+            .and_then(|c| covert::twins(resolved, agent_id, c));
+        attack
     }
 
     /// Shows the attacker the clean measurement of time `t`, before [`Self::injection`] of the
@@ -469,7 +522,12 @@ impl AgentAttack {
         clean: &Measurement<N>,
     ) -> (Sent<Measurement<N>>, Injection<N>) {
         self.observe(t, clean);
-        let inj = self.injection::<N>(t);
+        let mut inj = self.injection::<N>(t);
+        if let Some(twins) = &mut self.covert {
+            let (dq, dqd) = covert::correct::<N>(twins.as_mut(), t, clean);
+            inj.position += dq;
+            inj.velocity += dqd;
+        }
         let out = Measurement {
             y: clean.y + inj.position,
             yd: clean.yd + inj.velocity,
@@ -518,6 +576,9 @@ impl AgentAttack {
             }
         }
         let out = u + inj.u;
+        if let Some(twins) = &mut self.covert {
+            twins.step(k, t, u.as_slice(), out.as_slice());
+        }
         let Some(line) = &mut self.torques else {
             return (
                 Sent::Delivered {

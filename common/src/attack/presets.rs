@@ -59,6 +59,10 @@ pub const PRESETS: &[(&str, &str)] = &[
         include_str!("../../../scenarios/attacks/replay-original.toml"),
     ),
     (
+        "covert",
+        include_str!("../../../scenarios/attacks/covert.toml"),
+    ),
+    (
         "stealthy-bias",
         include_str!("../../../scenarios/attacks/stealthy-bias.toml"),
     ),

@@ -11,7 +11,7 @@ use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use fdi_common::attack::AttackProfile;
+use fdi_common::attack::{AttackProfile, Channel, CovertEntry, MessageAttack};
 use fdi_common::engine::RunSummary;
 use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
@@ -89,6 +89,11 @@ pub struct LockstepArgs {
     pub keep_traces: bool,
     #[arg(long, default_value = "runs")]
     pub out: PathBuf,
+    /// Attack of the runs instead of the paper's: a preset name or a profile file for the
+    /// paper's four robots (every copy of a robot gets its attack), e.g. `actuator-bias`, whose
+    /// torques go through the attacker (the extra hop).
+    #[arg(long)]
+    pub attack: Option<String>,
 }
 
 pub fn bench(b: &BenchCommand) -> Result<ExitCode> {
@@ -100,19 +105,23 @@ pub fn bench(b: &BenchCommand) -> Result<ExitCode> {
 }
 
 /// The paper scenario with `n` agents: agent `i` is a copy of paper robot `(i − 1) % 4 + 1`,
-/// trajectory, delay and attack included.
-pub fn scaled_paper(n: usize) -> Result<Resolved> {
+/// trajectory, delay and attack included (the paper's attack, or `attack`, a preset name or
+/// profile file written for the paper's robots).
+pub fn scaled_paper(n: usize, attack: Option<&str>) -> Result<Resolved> {
     if n == 0 || n > scenario::MAX_AGENTS {
         bail!("--agents must be in 1..={}", scenario::MAX_AGENTS);
     }
     let paper = scenario::paper()?;
+    let profile = match attack {
+        Some(arg) => scenario::attack_from_arg(arg, &paper.scenario)?,
+        None => paper.attack.clone(),
+    };
     let mut r = paper.clone();
     r.scenario.agents.clear();
     r.attack = AttackProfile {
-        name: paper.attack.name.clone(),
-        description: paper.attack.description.clone(),
-        channels: Vec::new(),
-        messages: Vec::new(),
+        name: profile.name.clone(),
+        description: profile.description.clone(),
+        ..AttackProfile::default()
     };
     for i in 1..=n {
         let src = &paper.scenario.agents[(i - 1) % paper.scenario.agents.len()];
@@ -120,10 +129,21 @@ pub fn scaled_paper(n: usize) -> Result<Resolved> {
         let mut a = src.clone();
         a.id = id;
         r.scenario.agents.push(a);
-        for ch in paper.attack.channels.iter().filter(|c| c.agent == src.id) {
-            let mut c = ch.clone();
-            c.agent = id;
-            r.attack.channels.push(c);
+        let of = |agent: u32| agent == src.id;
+        for ch in profile.channels.iter().filter(|c| of(c.agent)) {
+            r.attack.channels.push(Channel {
+                agent: id,
+                ..ch.clone()
+            });
+        }
+        for m in profile.messages.iter().filter(|m| of(m.agent)) {
+            r.attack.messages.push(MessageAttack {
+                agent: id,
+                ..m.clone()
+            });
+        }
+        for c in profile.covert.iter().filter(|c| of(c.agent)) {
+            r.attack.covert.push(CovertEntry { agent: id, ..*c });
         }
     }
     r.scenario.name = format!("paper-x{n}");
@@ -229,7 +249,7 @@ fn latency_scenario(a: &LatencyArgs) -> Result<Resolved> {
     if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
         bail!("--rate-hz must be a positive number, got {}", a.rate_hz);
     }
-    let mut r = scaled_paper(a.agents)?;
+    let mut r = scaled_paper(a.agents, None)?;
     r.scenario.clock = ClockMode::Realtime;
     r.scenario.duration_s = a.duration_s;
     r.scenario.control_period_s = 1.0 / a.rate_hz;
@@ -744,7 +764,7 @@ fn lockstep(a: &LockstepArgs) -> Result<ExitCode> {
 /// Runs the scaled paper scenario with `n` agents on the in-process engine, then over IPC, each
 /// into a run directory under `root` (without its traces unless `--keep-traces`).
 fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize) -> Result<LockstepRow> {
-    let mut r = scaled_paper(n)?;
+    let mut r = scaled_paper(n, a.attack.as_deref())?;
     r.scenario.duration_s = a.duration_s;
     let dir_in = output::create_run_dir(root, &named(&r, "inproc"))?;
     let inproc = execute(
@@ -820,7 +840,7 @@ mod tests {
 
     #[test]
     fn scaled_paper_repeats_the_four_robots_with_their_attacks() {
-        let r = scaled_paper(9).expect("valid");
+        let r = scaled_paper(9, None).expect("valid");
         assert_eq!(r.agent_count(), 9);
         assert_eq!(
             r.scenario.agents[4].trajectory,
@@ -840,7 +860,18 @@ mod tests {
         }
         assert!(r.scenario.validate().is_empty());
         assert!(r.attack.problems(&r.scenario.agent_dofs()).is_empty());
-        assert!(scaled_paper(0).is_err());
+        assert!(scaled_paper(0, None).is_err());
+        let covert = scaled_paper(5, Some("covert")).expect("valid");
+        assert_eq!(covert.attack.name, "covert");
+        for id in [1, 5] {
+            assert!(covert.attack.attacks_torque_of(id), "copies of robot 1");
+            assert!(covert.attack.covert.iter().any(|c| c.agent == id));
+        }
+        assert!(!covert.attack.attacks_torque_of(2));
+        assert!(covert
+            .attack
+            .problems(&covert.scenario.agent_dofs())
+            .is_empty());
     }
 
     #[test]
