@@ -205,6 +205,7 @@ class_test!(
     "stealthy-bias",
     "6"
 );
+class_test!(covert_attack_over_ipc_equals_in_process, "covert", "10.5");
 
 #[test]
 fn two_runs_at_once_do_not_interfere() {

@@ -30,23 +30,44 @@ pub(super) trait Twins: std::fmt::Debug {
     /// The correction to add to the measurement of tick `k` at `t` (position then velocity,
     /// `2N` entries into `out`), given the clean measurement `y`, `ẏ` (`2N` entries): zero
     /// before `from_s`; at the first tick from then on the twins start at the measurement.
-    fn correction(&mut self, t: f64, clean: &[f64], out: &mut [f64]);
+    /// The twins first integrate every step before `k` whose commands they have, by the
+    /// robot's own lookahead rule: exactly the steps the robot had integrated when it measured
+    /// tick `k` (it publishes a measurement only after the step before), so the twins run the
+    /// same whether their torques come before or after the measurement.
+    fn correction(&mut self, k: u64, t: f64, clean: &[f64], out: &mut [f64]);
     /// The torque of tick `k` stamped `t`: `sent` as the center sent it, `delivered` with the
-    /// injection. Both twins take their command and integrate step `k`.
-    fn step(&mut self, k: u64, t: f64, sent: &[f64], delivered: &[f64]);
+    /// injection. Each twin takes its command.
+    fn receive(&mut self, k: u64, t: f64, sent: &[f64], delivered: &[f64]);
 }
 
 #[derive(Debug)]
 struct Twin<const N: usize> {
     from_s: f64,
+    control_period_s: f64,
     engaged: bool,
     attacked: Plant<N>,
     nominal: Plant<N>,
+    /// Steps integrated, commands received.
+    advanced: u64,
+    received: u64,
+}
+
+impl<const N: usize> Twin<N> {
+    /// Integrates the steps before `k` that the commands received so far determine.
+    fn catch_up(&mut self, k: u64) {
+        let next = crate::engine::tick_time(self.received, self.control_period_s);
+        while self.advanced < k && self.attacked.can_advance_without(self.advanced, next) {
+            self.attacked.advance(self.advanced);
+            self.nominal.advance(self.advanced);
+            self.advanced += 1;
+        }
+    }
 }
 
 impl<const N: usize> Twins for Twin<N> {
-    fn correction(&mut self, t: f64, clean: &[f64], out: &mut [f64]) {
+    fn correction(&mut self, k: u64, t: f64, clean: &[f64], out: &mut [f64]) {
         out.iter_mut().for_each(|x| *x = 0.0);
+        self.catch_up(k);
         if t < self.from_s || clean.len() < 2 * N || out.len() < 2 * N {
             return;
         }
@@ -63,7 +84,7 @@ impl<const N: usize> Twins for Twin<N> {
         out[N..2 * N].copy_from_slice(dqd.as_slice());
     }
 
-    fn step(&mut self, k: u64, t: f64, sent: &[f64], delivered: &[f64]) {
+    fn receive(&mut self, k: u64, t: f64, sent: &[f64], delivered: &[f64]) {
         if sent.len() < N || delivered.len() < N {
             return;
         }
@@ -72,8 +93,7 @@ impl<const N: usize> Twins for Twin<N> {
         // as on the robot.
         let _ = self.attacked.take_command(t, Some((u(delivered), 0.0)));
         let _ = self.nominal.take_command(t, Some((u(sent), 0.0)));
-        self.attacked.advance(k);
-        self.nominal.advance(k);
+        self.received = k + 1;
     }
 }
 
@@ -93,9 +113,12 @@ pub(super) fn twins(
         fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
             let twin = Twin::<N> {
                 from_s: self.entry.from_s,
+                control_period_s: self.params.control_period_s,
                 engaged: false,
                 attacked: Plant::<N>::new(self.params.clone())?,
                 nominal: Plant::<N>::new(self.params)?,
+                advanced: 0,
+                received: 0,
             };
             Some(Box::new(twin))
         }
@@ -113,14 +136,14 @@ pub(super) fn twins(
 /// The correction for a measurement of `N` links, as vectors.
 pub(super) fn correct<const N: usize>(
     twins: &mut dyn Twins,
-    t: f64,
+    (k, t): (u64, f64),
     clean: &Measurement<N>,
 ) -> (Vector<N>, Vector<N>) {
     let mut input = vec![0.0; 2 * N];
     input[..N].copy_from_slice(clean.y.as_slice());
     input[N..].copy_from_slice(clean.yd.as_slice());
     let mut out = vec![0.0; 2 * N];
-    twins.correction(t, &input, &mut out);
+    twins.correction(k, t, &input, &mut out);
     (
         Vector::<N>::from_column_slice(&out[..N]),
         Vector::<N>::from_column_slice(&out[N..]),

@@ -524,7 +524,7 @@ impl AgentAttack {
         self.observe(t, clean);
         let mut inj = self.injection::<N>(t);
         if let Some(twins) = &mut self.covert {
-            let (dq, dqd) = covert::correct::<N>(twins.as_mut(), t, clean);
+            let (dq, dqd) = covert::correct::<N>(twins.as_mut(), (k, t), clean);
             inj.position += dq;
             inj.velocity += dqd;
         }
@@ -577,7 +577,7 @@ impl AgentAttack {
         }
         let out = u + inj.u;
         if let Some(twins) = &mut self.covert {
-            twins.step(k, t, u.as_slice(), out.as_slice());
+            twins.receive(k, t, u.as_slice(), out.as_slice());
         }
         let Some(line) = &mut self.torques else {
             return (
