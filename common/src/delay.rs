@@ -385,6 +385,7 @@ impl<const N: usize> DelayLine<N> {
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
+    use proptest::prelude::*;
 
     fn v(x: f64) -> Vector<2> {
         Vector::<2>::new(x, -2.0 * x)
@@ -572,5 +573,202 @@ mod tests {
         assert_relative_eq!(p.max(), 0.05);
         assert_relative_eq!(p.max_rate(), 0.001);
         assert_eq!(p.describe_ms(), "20 sin(0.05t) + 30");
+    }
+
+    /// Commands `v(k + 1)` stamped `k·Δ` for `k < n` except the `missing` ones, each of which
+    /// is a hole when `holes` (the line as the plant builds it) and simply absent otherwise.
+    fn line_without(n: usize, dt: f64, missing: &[bool], holes: bool) -> DelayLine<2> {
+        let mut d = DelayLine::new();
+        for k in 0..n {
+            let stamp = k as f64 * dt;
+            if missing.get(k).copied().unwrap_or(false) {
+                if holes {
+                    d.push_missing(stamp);
+                }
+            } else {
+                d.push(stamp, v(k as f64 + 1.0)).expect("increasing stamps");
+            }
+        }
+        d
+    }
+
+    fn mask(n: usize, missing: &[usize]) -> Vec<bool> {
+        (0..n).map(|k| missing.contains(&k)).collect()
+    }
+
+    #[test]
+    fn a_hole_is_a_miss_only_where_the_missing_command_would_be_in_force() {
+        let dt = 0.001;
+        let n = 20;
+        let missing = mask(n, &[5, 12, 13]);
+        let with = line_without(n, dt, &missing, true);
+        let without = line_without(n, dt, &missing, false);
+        for i in -5..215i32 {
+            let t = f64::from(i) * 1e-4;
+            for q in [t, f64::from_bits(t.to_bits().wrapping_sub(1))] {
+                let (a, b) = (with.lookup(q, dt), without.lookup(q, dt));
+                assert_eq!(
+                    (a.value, a.stamp, a.pruned),
+                    (b.value, b.stamp, b.pruned),
+                    "{q}"
+                );
+                let in_hole = (in_force_at(5.0 * dt, q) && !in_force_at(6.0 * dt, q))
+                    || (in_force_at(12.0 * dt, q) && !in_force_at(14.0 * dt, q));
+                assert_eq!(a.missed, b.missed || in_hole, "query {q}");
+                if in_hole {
+                    assert!(a.missed, "query {q}");
+                }
+            }
+        }
+        // Where the command stamped 5 Δ should be in force, the one before it is held.
+        let l = with.lookup(5.5 * dt, dt);
+        assert_eq!((l.value, l.stamp, l.missed), (v(5.0), Some(4.0 * dt), true));
+        let l = with.lookup(6.0 * dt, dt);
+        assert_eq!((l.value, l.missed), (v(7.0), false));
+        assert!(!with.lookup(4.9 * dt, dt).missed);
+        // Two holes in a row: the command stamped 11 Δ is held over both.
+        let l = with.lookup(13.9 * dt, dt);
+        assert_eq!((l.value, l.missed), (v(12.0), true));
+        assert!(!without.lookup(13.9 * dt, dt).missed);
+    }
+
+    #[test]
+    fn a_hole_does_not_change_switches_or_integrals() {
+        let dt = 0.001;
+        let n = 20;
+        let missing = mask(n, &[0, 5, 12, 13, 19]);
+        let with = line_without(n, dt, &missing, true);
+        let without = line_without(n, dt, &missing, false);
+        for i in -3..230i32 {
+            for j in i..i + 40 {
+                let (a, b) = (f64::from(i) * 1e-4, f64::from(j) * 1e-4);
+                assert_eq!(
+                    with.next_switch(a, b),
+                    without.next_switch(a, b),
+                    "{a} .. {b}"
+                );
+                assert_eq!(with.integral(a, b), without.integral(a, b), "{a} .. {b}");
+            }
+        }
+    }
+
+    #[test]
+    fn holes_before_the_first_and_after_the_newest_command() {
+        let dt = 0.001;
+        // The first command never came: zero until the second one, and a miss meanwhile.
+        let first = line_without(5, dt, &mask(5, &[0]), true);
+        let l = first.lookup(0.5 * dt, dt);
+        assert_eq!(
+            (l.value, l.stamp, l.missed),
+            (Vector::<2>::zeros(), None, true)
+        );
+        assert!(!first.lookup(-0.5 * dt, dt).missed, "not yet due");
+        assert!(
+            !line_without(5, dt, &mask(5, &[0]), false)
+                .lookup(0.5 * dt, dt)
+                .missed
+        );
+        // The newest command never came: a miss even without a deadline (`value_at`).
+        let last = line_without(10, dt, &mask(10, &[9]), true);
+        let l = last.value_at(9.5 * dt);
+        assert_eq!((l.value, l.missed), (v(9.0), true));
+        assert!(!last.value_at(8.5 * dt).missed);
+        assert!(
+            !line_without(10, dt, &mask(10, &[9]), false)
+                .value_at(9.5 * dt)
+                .missed
+        );
+    }
+
+    #[test]
+    fn holes_that_do_not_increase_or_are_not_finite_are_ignored() {
+        let mut d = line(3, 0.001);
+        d.push_missing(0.005);
+        d.push_missing(0.004);
+        d.push_missing(0.005);
+        d.push_missing(f64::NAN);
+        d.push_missing(f64::INFINITY);
+        assert_eq!(d.holes, [0.005]);
+        assert_eq!(d.len(), 3, "a hole is not a command");
+    }
+
+    #[test]
+    fn holes_are_pruned_with_the_entries() {
+        let dt = 0.001;
+        let n = 20;
+        let missing = mask(n, &[5, 12]);
+        let mut d = line_without(n, dt, &missing, true);
+        let before: Vec<_> = (135..200)
+            .map(|i| d.lookup(f64::from(i) * 1e-4, dt))
+            .collect();
+        d.prune_before(13.5 * dt);
+        // Kept: the command in force (13 Δ) and the one before it (11 Δ; 12 Δ is missing).
+        assert_eq!(d.entries.front().map(|e| e.0), Some(11.0 * dt));
+        assert_eq!(
+            d.holes,
+            [12.0 * dt],
+            "the hole at 5 Δ went with its entries"
+        );
+        let after: Vec<_> = (135..200)
+            .map(|i| d.lookup(f64::from(i) * 1e-4, dt))
+            .collect();
+        assert_eq!(before, after);
+        // The kept hole still counts in the kept history.
+        assert!(d.lookup(12.5 * dt, dt).missed);
+        // Pruning past every entry but two drops every hole at or before the oldest kept one.
+        d.prune_before(30.0 * dt);
+        assert_eq!(d.entries.front().map(|e| e.0), Some(18.0 * dt));
+        assert!(d.holes.is_empty());
+    }
+
+    proptest! {
+        /// For any pattern of missing commands: the line with holes answers every query as the
+        /// line without them (value, stamp, switches, integrals), with a miss added exactly where
+        /// the full line would have a missing command in force; after any pruning, queries at or
+        /// after the pruning instant are answered as before and no hole is left at or before the
+        /// oldest kept entry.
+        #[test]
+        fn holes_only_add_misses_where_a_missing_command_is_due(
+            missing in prop::collection::vec(prop::bool::weighted(0.3), 2..60),
+            queries in prop::collection::vec(-30i32..650, 1..40),
+            prune_at in 0i32..650,
+        ) {
+            let dt = 0.001;
+            let n = missing.len();
+            let full = line(n, dt);
+            let mut with = line_without(n, dt, &missing, true);
+            let mut without = line_without(n, dt, &missing, false);
+            let is_missing = |stamp: Option<f64>| {
+                stamp.is_some_and(|s| missing[(s / dt).round() as usize])
+            };
+            let at = |i: i32| f64::from(i) * 1e-4;
+            for &i in &queries {
+                // Anywhere, an ulp short of that, and exactly on a stamp `k·Δ`.
+                let on_stamp = f64::from(i.div_euclid(10)) * dt;
+                for q in [at(i), f64::from_bits(at(i).to_bits().wrapping_sub(1)), on_stamp] {
+                    let (a, b) = (with.lookup(q, dt), without.lookup(q, dt));
+                    prop_assert_eq!((a.value, a.stamp, a.pruned), (b.value, b.stamp, b.pruned));
+                    let due = is_missing(full.value_at(q).stamp);
+                    prop_assert_eq!(a.missed, b.missed || due, "query {}", q);
+                    prop_assert_eq!(with.value_at(q).missed, due, "query {}", q);
+                    for &j in &queries {
+                        prop_assert_eq!(with.next_switch(q, at(j)), without.next_switch(q, at(j)));
+                        prop_assert_eq!(with.integral(q, at(j)), without.integral(q, at(j)));
+                    }
+                }
+            }
+            let p = at(prune_at);
+            let later: Vec<f64> = queries.iter().map(|&i| p + at(i.abs())).collect();
+            let before: Vec<_> = later.iter().map(|&q| with.lookup(q, dt)).collect();
+            with.prune_before(p);
+            without.prune_before(p);
+            let after: Vec<_> = later.iter().map(|&q| with.lookup(q, dt)).collect();
+            prop_assert_eq!(before, after);
+            prop_assert_eq!(with.len(), without.len());
+            if with.pruned {
+                let oldest = with.entries.front().map_or(f64::INFINITY, |e| e.0);
+                prop_assert!(with.holes.iter().all(|h| *h > oldest), "{:?} vs {}", with.holes, oldest);
+            }
+        }
     }
 }

@@ -865,4 +865,454 @@ mod tests {
             );
         }
     }
+
+    fn torque_channel(links: Vec<u32>, segments: Vec<Segment>) -> Channel {
+        Channel {
+            agent: 1,
+            signal: Signal::Torque,
+            links,
+            units: ValueUnit::NewtonMetre,
+            segments,
+        }
+    }
+
+    fn seg(from_s: f64, waveform: Waveform) -> Segment {
+        Segment { from_s, waveform }
+    }
+
+    fn with_channels(channels: Vec<Channel>) -> AttackProfile {
+        AttackProfile {
+            channels,
+            ..AttackProfile::default()
+        }
+    }
+
+    const DT: f64 = 1e-3;
+
+    fn tick(k: u64) -> f64 {
+        k as f64 * DT
+    }
+
+    /// A clean torque that differs from tick to tick and link to link.
+    fn clean_u(k: u64) -> Vector<2> {
+        let t = tick(k);
+        Vector::<2>::new(0.3 * (3.0 * t).sin() + 0.1, -0.2 * (5.0 * t).cos())
+    }
+
+    /// The torque the agent gets at tick `k` (no message attack on the path: delivered now).
+    fn tampered(a: &mut AgentAttack, k: u64, u: &Vector<2>) -> (Vector<2>, TorqueInjection<2>) {
+        let (sent, inj) = a.torque::<2>(k, tick(k), u);
+        let (out, held) = sent.usable().expect("delivered");
+        assert_eq!(held, 0.0);
+        assert_eq!(*out, u + inj.u, "what is sent is u + α_u");
+        (*out, inj)
+    }
+
+    /// Whatever the profile does to torques, it leaves the measurement of tick `k` untouched.
+    fn measurement_untouched(a: &mut AgentAttack, k: u64) {
+        let m = clean([0.1 + tick(k), -0.3], [0.02, tick(k)]);
+        let (sent, inj) = a.measurement::<2>(k, tick(k), &m);
+        assert_eq!(
+            sent,
+            Sent::Delivered {
+                payload: m,
+                held_s: 0.0
+            }
+        );
+        assert!(!inj.in_force(), "tick {k}: {inj:?}");
+    }
+
+    #[test]
+    fn torque_channels_tamper_the_commands_with_every_waveform_and_leave_measurements_alone() {
+        let win = |w: Waveform| vec![seg(tick(100), w), seg(tick(200), Waveform::None)];
+        let kinds: Vec<(&str, Waveform)> = vec![
+            ("constant", Waveform::Constant { value: 0.05 }),
+            (
+                "sine",
+                Waveform::Sine {
+                    amplitude: 0.1,
+                    omega_rad_s: 20.0,
+                    phase_rad: 0.3,
+                    offset: 0.01,
+                },
+            ),
+            ("scale", Waveform::Scale { factor: 1.5 }),
+            ("sign-flip", Waveform::SignFlip),
+            ("freeze", Waveform::Freeze),
+        ];
+        for (name, w) in kinds {
+            // Link 2 only: link 1 goes through untouched.
+            let p = with_channels(vec![torque_channel(vec![2], win(w))]);
+            assert!(
+                p.problems(&dofs()).is_empty(),
+                "{name}: {:?}",
+                p.problems(&dofs())
+            );
+            assert!(p.attacks_torque_of(1) && !p.attacks_torque_of(2));
+            let mut a = AgentAttack::compile(&p, 1, 1);
+            for k in 0..300u64 {
+                measurement_untouched(&mut a, k);
+                let u = clean_u(k);
+                let (out, inj) = tampered(&mut a, k, &u);
+                assert_eq!(out[0], u[0], "{name}, tick {k}: link 1");
+                let t = tick(k);
+                if !(100..200).contains(&k) {
+                    assert_eq!(out, u, "{name}, tick {k}: outside the segment");
+                    assert!(!inj.in_force(), "{name}, tick {k}");
+                    continue;
+                }
+                let want = match w {
+                    Waveform::Constant { value } => u[1] + value,
+                    Waveform::Sine { .. } => u[1] + 0.1 * (20.0 * t + 0.3).sin() + 0.01,
+                    Waveform::Scale { factor } => factor * u[1],
+                    Waveform::SignFlip => -u[1],
+                    Waveform::Freeze => clean_u(100)[1],
+                    _ => unreachable!(),
+                };
+                assert!(
+                    (out[1] - want).abs() <= 4.0 * f64::EPSILON * want.abs().max(u[1].abs()),
+                    "{name}, tick {k}: {} vs {want}",
+                    out[1]
+                );
+                assert!(inj.in_force(), "{name}, tick {k}");
+                assert_eq!(inj.transforming, w.transforms(), "{name}");
+                assert!(!inj.message);
+                assert!(a.is_active(t));
+            }
+        }
+    }
+
+    #[test]
+    fn a_torque_replay_plays_back_the_recorded_commands_in_a_loop() {
+        let p = with_channels(vec![torque_channel(
+            vec![1, 2],
+            vec![seg(
+                tick(300),
+                Waveform::Replay {
+                    record_from_s: tick(100),
+                    record_for_s: 0.05,
+                },
+            )],
+        )]);
+        assert!(p.problems(&dofs()).is_empty(), "{:?}", p.problems(&dofs()));
+        let mut a = AgentAttack::compile(&p, 1, 1);
+        let recorded: Vec<u64> = (0..300)
+            .filter(|&j| tick(100) <= tick(j) && tick(j) < tick(100) + 0.05)
+            .collect();
+        let n = recorded.len() as u64;
+        assert!((50..=51).contains(&n), "{n}");
+        for k in 0..500u64 {
+            measurement_untouched(&mut a, k);
+            let u = clean_u(k);
+            let (out, inj) = tampered(&mut a, k, &u);
+            if k < 300 {
+                assert_eq!(out, u, "tick {k}");
+                continue;
+            }
+            let want = clean_u(recorded[((k - 300) % n) as usize]);
+            assert!((out - want).norm() < 1e-15, "tick {k}: {out:?} vs {want:?}");
+            assert!(inj.in_force());
+        }
+    }
+
+    #[test]
+    fn position_and_velocity_channels_leave_the_torques_alone() {
+        let mk = |signal, w| Channel {
+            agent: 1,
+            signal,
+            links: vec![1, 2],
+            units: ValueUnit::Rad,
+            segments: vec![seg(0.0, w)],
+        };
+        let p = with_channels(vec![
+            mk(Signal::Position, Waveform::Constant { value: 0.1 }),
+            mk(Signal::Velocity, Waveform::SignFlip),
+            mk(Signal::Position, Waveform::Scale { factor: 3.0 }),
+        ]);
+        assert!(p.problems(&dofs()).is_empty(), "{:?}", p.problems(&dofs()));
+        assert!(!p.attacks_torque_of(1));
+        let mut a = AgentAttack::compile(&p, 1, 1);
+        for k in 0..100u64 {
+            let m = clean([0.2, -0.1], [0.3, 0.4]);
+            let (sent, inj) = a.measurement::<2>(k, tick(k), &m);
+            assert!(inj.in_force() && inj.transforming);
+            let got = sent.usable().expect("delivered").0;
+            assert!((got.yd + m.yd).norm() == 0.0, "the velocity is flipped");
+            assert!((got.y - (m.y * 3.0 + Vector::<2>::repeat(0.1))).norm() < 1e-15);
+            let u = clean_u(k);
+            let (out, inj) = tampered(&mut a, k, &u);
+            assert_eq!(out, u, "tick {k}");
+            assert_eq!(inj.u, Vector::<2>::zeros());
+            assert!(!inj.in_force());
+        }
+    }
+
+    #[test]
+    fn value_channels_act_before_the_message_line_on_both_paths() {
+        let text = r#"
+            [[channels]]
+            agent = 1
+            signal = "position"
+            links = [1]
+            units = "rad"
+            segments = [{ from_s = 0.0, waveform = { kind = "constant", value = 0.25 } }]
+
+            [[channels]]
+            agent = 1
+            signal = "torque"
+            links = [2]
+            units = "Nm"
+            segments = [{ from_s = 0.0, waveform = { kind = "constant", value = -0.5 } }]
+
+            [[messages]]
+            agent = 1
+            path = "measurement"
+            segments = [{ from_s = 0.01, effect = { kind = "forge-stamp", shift_s = 0.004 } }]
+
+            [[messages]]
+            agent = 1
+            path = "torque"
+            segments = [{ from_s = 0.01, effect = { kind = "delay", by_s = 0.002 } }]
+        "#;
+        let p: AttackProfile = toml::from_str(text).expect("parses");
+        assert!(p.problems(&dofs()).is_empty(), "{:?}", p.problems(&dofs()));
+        let mut a = AgentAttack::compile(&p, 1, 1);
+        let m = clean([0.5, 0.6], [0.7, 0.8]);
+        let u = Vector::<2>::new(1.0, 2.0);
+        let (m_want, u_want) = (clean([0.75, 0.6], [0.7, 0.8]), Vector::<2>::new(1.0, 1.5));
+        for k in [0u64, 9, 10, 11, 50] {
+            let t = tick(k);
+            let late = t >= 0.01;
+            let (sent, inj) = a.measurement::<2>(k, t, &m);
+            let want = if late {
+                Sent::Forged {
+                    payload: m_want,
+                    shift_s: 0.004,
+                }
+            } else {
+                Sent::Delivered {
+                    payload: m_want,
+                    held_s: 0.0,
+                }
+            };
+            assert_eq!(sent, want, "tick {k}");
+            assert_eq!(inj.message, late, "tick {k}");
+            let (sent, inj) = a.torque::<2>(k, t, &u);
+            let held_s = if late { 0.002 } else { 0.0 };
+            assert_eq!(
+                sent,
+                Sent::Delivered {
+                    payload: u_want,
+                    held_s
+                },
+                "tick {k}"
+            );
+            assert_eq!(inj.message, late, "tick {k}");
+            assert!(inj.in_force());
+        }
+    }
+
+    #[test]
+    fn units_that_do_not_fit_the_signal_are_reported_with_their_field_path() {
+        let mk = |signal, units| Channel {
+            agent: 1,
+            signal,
+            links: vec![1],
+            units,
+            segments: vec![seg(0.0, Waveform::Constant { value: 0.1 })],
+        };
+        let cases = [
+            (Signal::Torque, ValueUnit::NewtonMetre, true),
+            (Signal::Torque, ValueUnit::Rad, false),
+            (Signal::Torque, ValueUnit::Deg, false),
+            (Signal::Position, ValueUnit::Rad, true),
+            (Signal::Position, ValueUnit::Deg, true),
+            (Signal::Position, ValueUnit::NewtonMetre, false),
+            (Signal::Velocity, ValueUnit::NewtonMetre, false),
+            (Signal::Velocity, ValueUnit::Deg, true),
+        ];
+        for (signal, units, fits) in cases {
+            // Second in the list, so the index in the path is checked too.
+            let p = with_channels(vec![
+                mk(Signal::Position, ValueUnit::Rad),
+                mk(signal, units),
+            ]);
+            let problems = p.problems(&dofs());
+            let paths: Vec<&str> = problems.iter().map(|p| p.0.as_str()).collect();
+            if fits {
+                assert!(paths.is_empty(), "{signal:?} in {units:?}: {problems:?}");
+            } else {
+                assert_eq!(paths, ["channels[1].units"], "{signal:?} in {units:?}");
+            }
+        }
+        // The spellings of N·m.
+        for spelling in ["N·m", "Nm", "N*m"] {
+            let text = format!(
+                "[[channels]]\nagent = 1\nsignal = \"torque\"\nlinks = [1]\nunits = \"{spelling}\"\n\
+                 segments = [{{ from_s = 0.0, waveform = {{ kind = \"constant\", value = 1.0 }} }}]\n"
+            );
+            let p: AttackProfile = toml::from_str(&text).expect(spelling);
+            assert_eq!(p.channels[0].units, ValueUnit::NewtonMetre);
+            assert!(p.problems(&dofs()).is_empty());
+        }
+    }
+
+    fn messages(entries: &[(u32, Path, Effect)]) -> AttackProfile {
+        AttackProfile {
+            messages: entries
+                .iter()
+                .map(|&(agent, path, effect)| MessageAttack {
+                    agent,
+                    path,
+                    segments: vec![MessageSegment {
+                        from_s: 1.0,
+                        effect,
+                    }],
+                })
+                .collect(),
+            ..AttackProfile::default()
+        }
+    }
+
+    #[test]
+    fn message_entry_problems_are_reported_with_their_field_paths() {
+        let drop = Effect::Drop { probability: 0.5 };
+        let paths = |p: AttackProfile| -> Vec<String> {
+            p.problems(&dofs()).into_iter().map(|p| p.0).collect()
+        };
+        // One entry per agent and path: fine.
+        assert!(paths(messages(&[
+            (1, Path::Measurement, drop),
+            (1, Path::Torque, drop),
+            (2, Path::Measurement, drop),
+        ]))
+        .is_empty());
+        // The same agent and path twice: the second entry is reported, once per earlier entry.
+        assert_eq!(
+            paths(messages(&[
+                (1, Path::Measurement, drop),
+                (2, Path::Torque, drop),
+                (1, Path::Measurement, Effect::Pass),
+            ])),
+            ["messages[2].path"]
+        );
+        let p = messages(&[(1, Path::Torque, drop), (1, Path::Torque, drop)]);
+        let problems = p.problems(&dofs());
+        assert!(problems[0].1.contains("messages[0]"), "{problems:?}");
+        // An agent not in the scenario, and a bad value inside an entry.
+        assert_eq!(
+            paths(messages(&[
+                (7, Path::Measurement, drop),
+                (3, Path::Torque, Effect::Drop { probability: 1.5 }),
+            ])),
+            [
+                "messages[0].agent",
+                "messages[1].segments[0].effect.probability"
+            ]
+        );
+        // `for_agents` keeps only the entries of the scenario's agents.
+        let p = messages(&[(7, Path::Measurement, drop), (3, Path::Torque, drop)]);
+        let kept = p.for_agents(&dofs());
+        assert_eq!(kept.messages.len(), 1);
+        assert!(paths(kept).is_empty());
+    }
+
+    #[test]
+    fn torques_are_routed_through_the_attacker_exactly_for_the_agents_it_attacks_there() {
+        let mut p = messages(&[
+            (2, Path::Torque, Effect::Pass),
+            (3, Path::Measurement, Effect::Drop { probability: 1.0 }),
+        ]);
+        p.channels = vec![
+            torque_channel(vec![1], vec![seg(0.0, Waveform::Constant { value: 1.0 })]),
+            Channel {
+                agent: 4,
+                signal: Signal::Velocity,
+                links: vec![1],
+                units: ValueUnit::Rad,
+                segments: vec![seg(0.0, Waveform::Constant { value: 1.0 })],
+            },
+        ];
+        for (agent, routed) in [(1, true), (2, true), (3, false), (4, false), (5, false)] {
+            assert_eq!(p.attacks_torque_of(agent), routed, "agent {agent}");
+        }
+        assert!(!AttackProfile::default().attacks_torque_of(1));
+    }
+
+    #[test]
+    fn every_shipped_preset_parses_and_has_no_problems_for_the_papers_four_robots() {
+        // The presets that act on the torque path, and so route robot 1's commands through the
+        // attacker.
+        let torque_path = ["actuator-bias", "torque-delay", "dos-window", "forge-stamp"];
+        for (name, _) in presets::PRESETS {
+            let p = presets::preset(name).unwrap_or_else(|| panic!("preset {name} parses"));
+            let problems = p.problems(&dofs());
+            assert!(problems.is_empty(), "preset {name}: {problems:?}");
+            assert_eq!(
+                p.clone().for_agents(&dofs()),
+                p,
+                "preset {name} only names the four robots"
+            );
+            for agent in 1..=4 {
+                assert_eq!(
+                    p.attacks_torque_of(agent),
+                    agent == 1 && torque_path.contains(name),
+                    "preset {name}, agent {agent}"
+                );
+            }
+        }
+        for name in [
+            "actuator-bias",
+            "torque-delay",
+            "dos-drop",
+            "dos-burst",
+            "dos-window",
+            "measurement-delay",
+            "forge-stamp",
+            "replay-original",
+        ] {
+            assert!(presets::names().contains(&name), "{name} is shipped");
+            let p = presets::preset(name).expect("parses");
+            let a = AgentAttack::compile(&p, 1, 1);
+            assert!(
+                !a.is_active(9.999) && a.is_active(10.0),
+                "{name} starts at 10 s"
+            );
+            // Robot 2 is not attacked by any of them.
+            let mut b = AgentAttack::compile(&p, 2, 1);
+            for k in [10_000u64, 10_100] {
+                measurement_untouched(&mut b, k);
+                let u = clean_u(k);
+                assert_eq!(tampered(&mut b, k, &u).0, u, "{name}: robot 2's torques");
+            }
+        }
+    }
+
+    #[test]
+    fn the_message_flag_of_the_injections_follows_the_schedule() {
+        let p = presets::preset("dos-window").expect("parses");
+        let mut a = AgentAttack::compile(&p, 1, 1);
+        let u = clean_u(0);
+        for (t, on) in [(9.999, false), (10.0, true), (10.1, true), (10.2, false)] {
+            let (sent, inj) = a.torque::<2>(0, t, &u);
+            assert_eq!(inj.message, on, "t = {t}");
+            assert_eq!(inj.in_force(), on, "t = {t}");
+            assert_eq!(sent.usable().is_none(), on, "t = {t}");
+            assert!(
+                !a.injection::<2>(t).message,
+                "the measurement path is not attacked"
+            );
+        }
+        let p = presets::preset("dos-drop").expect("parses");
+        let mut a = AgentAttack::compile(&p, 1, 1);
+        for (t, on) in [(9.999, false), (10.0, true), (19.999, true), (20.0, false)] {
+            let inj = a.injection::<2>(t);
+            assert_eq!((inj.message, inj.in_force()), (on, on), "t = {t}");
+            let (_, tinj) = a.torque::<2>(0, t, &u);
+            assert!(
+                !tinj.message && !tinj.in_force(),
+                "the torque path is not attacked"
+            );
+        }
+    }
 }

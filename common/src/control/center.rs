@@ -554,4 +554,94 @@ mod tests {
         assert_eq!(c.rejected_torques, 19);
         assert_eq!(c.rejected_inputs, 0);
     }
+
+    /// A measurement that changes every tick.
+    fn measured(k: u32) -> (Vector<2>, Vector<2>) {
+        let t = f64::from(k) * 1e-3;
+        (
+            Vector::<2>::new(0.02 * (7.0 * t).sin(), -0.01 * t),
+            Vector::<2>::new(0.14 * (7.0 * t).cos(), -0.01),
+        )
+    }
+
+    #[test]
+    fn a_missing_measurement_holds_the_last_good_one_bit_for_bit() {
+        let dt = 1e-3;
+        // `gaps` gets nothing in the gaps; `held` gets the last measurement `gaps` got again.
+        let (mut gaps, mut held) = (agent1(), agent1());
+        let missing = |k: u32| (100..130).contains(&k) || k == 200 || k == 201 || k == 350;
+        let mut last = measured(0);
+        let mut count = 0;
+        for k in 0..400u32 {
+            let t = f64::from(k) * dt;
+            let gap = missing(k);
+            if !gap {
+                last = measured(k);
+            }
+            let want = held.tick(t, &last.0, &last.1);
+            let got = if gap {
+                count += 1;
+                gaps.tick_missing(t)
+            } else {
+                gaps.tick(t, &last.0, &last.1)
+            };
+            assert_eq!(got.missing_input, gap, "tick {k}");
+            assert!(!want.missing_input && !got.rejected_input);
+            assert_eq!(
+                CenterOutput {
+                    missing_input: false,
+                    ..got
+                },
+                want,
+                "tick {k}"
+            );
+            assert_eq!(gaps.missing_inputs, count);
+        }
+        assert_eq!(count, 33);
+        assert_eq!((held.missing_inputs, gaps.rejected_inputs), (0, 0));
+    }
+
+    #[test]
+    fn a_missing_measurement_after_a_rejected_one_holds_the_last_good_one() {
+        let dt = 1e-3;
+        let (mut gaps, mut held) = (agent1(), agent1());
+        let nan = Vector::<2>::new(f64::NAN, 0.0);
+        for k in 0..60u32 {
+            let t = f64::from(k) * dt;
+            let (y, yd) = measured(k.min(39));
+            let want = held.tick(t, &y, &yd);
+            let got = match k {
+                40 => gaps.tick(t, &nan, &yd),
+                41.. => gaps.tick_missing(t),
+                _ => gaps.tick(t, &y, &yd),
+            };
+            assert_eq!((got.rejected_input, got.missing_input), (k == 40, k > 40));
+            assert_eq!(
+                CenterOutput {
+                    rejected_input: false,
+                    missing_input: false,
+                    ..got
+                },
+                want,
+                "tick {k}"
+            );
+        }
+        assert_eq!((gaps.rejected_inputs, gaps.missing_inputs), (1, 19));
+    }
+
+    #[test]
+    fn a_missing_first_measurement_holds_the_initial_zero() {
+        let (mut gaps, mut held) = (agent1(), agent1());
+        let zero = Vector::<2>::zeros();
+        let got = gaps.tick_missing(0.0);
+        assert!(got.missing_input);
+        assert_eq!(
+            CenterOutput {
+                missing_input: false,
+                ..got
+            },
+            held.tick(0.0, &zero, &zero)
+        );
+        assert_eq!(gaps.missing_inputs, 1);
+    }
 }
