@@ -10,6 +10,7 @@ use fdi_common::metrics::Onset;
 use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
 use fdi_runtime::process::ProcessArgs;
 
+use crate::reporting::attacks::AttacksArgs;
 pub use crate::reporting::output::describe_error;
 use crate::reporting::tables::TableArgs;
 pub use crate::run::{check_placement, execute, Engine};
@@ -36,6 +37,9 @@ pub enum Command {
     Table1(TableArgs),
     /// Reproduce the paper's Table II (robot 1 under four time-varying delays).
     Table2(TableArgs),
+    /// The attack-class table of docs/attacks.md: every shipped attack class under the
+    /// traditional and the proposed controller (in-process), RMSE and detection per detector.
+    Attacks(AttacksArgs),
     /// Make the report of a run directory: figures (PNG, SVG), RMSE table, detection metrics,
     /// `report.md`. `run` does this by itself at the end of every run.
     Report {
@@ -225,6 +229,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
             | Command::Detect(_)
             | Command::Table1(_)
             | Command::Table2(_)
+            | Command::Attacks(_)
     ) {
         crate::interrupt::install();
     }
@@ -240,6 +245,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Validate { scenario } => validate(&scenario),
         Command::Table1(args) => tables::table1(&args),
         Command::Table2(args) => tables::table2(&args),
+        Command::Attacks(args) => crate::reporting::attacks::attacks(&args),
         Command::Report { run_dir } => report::report(&run_dir).map(|()| ExitCode::SUCCESS),
         Command::Detect(args) => crate::detect::detect(&args),
         Command::Trace(TraceCommand::Export { run_dir, format }) => {

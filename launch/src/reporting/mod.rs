@@ -1,6 +1,7 @@
 //! Reporting: run directories and summaries ([`output`]), figures ([`plot`]) and the run report
-//! ([`report`]), the paper's tables ([`tables`]), trace export ([`export`]).
+//! ([`report`]), the paper's tables ([`tables`]), the attack-class table ([`attacks`]), trace export ([`export`]).
 
+pub mod attacks;
 pub mod export;
 pub mod output;
 pub mod plot;

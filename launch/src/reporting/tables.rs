@@ -144,7 +144,7 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
         json: serde_json::json!({ "engine": args.engine.as_str(), "rows": rows }),
         chart: table1_chart(args.engine, &rows),
     };
-    table.publish(args, &dir)
+    table.publish(args.json, &dir)
 }
 
 /// Table I's rows: the paper's robots, their RMSE in the two runs beside the paper's.
@@ -265,7 +265,7 @@ fn table2_csv(rows: &[Table2Row]) -> Result<Vec<u8>> {
 const PAPER_SHADE: [RGBColor; 2] = [RGBColor(140, 190, 225), RGBColor(240, 175, 135)];
 
 /// A bar chart of RMSE values, one group per category.
-fn rmse_chart(
+pub(crate) fn rmse_chart(
     title: String,
     categories: Vec<String>,
     series: Vec<(String, RGBColor, Vec<f64>)>,
@@ -280,22 +280,22 @@ fn rmse_chart(
 }
 
 /// One table as written and printed.
-struct Table {
-    /// File stem: `table1`, `table2`.
-    name: &'static str,
+pub(crate) struct Table {
+    /// File stem: `table1`, `table2`, `attacks`.
+    pub name: &'static str,
     /// The markdown, without the leading `# ` of its file.
-    md: String,
-    csv: Vec<u8>,
-    json: serde_json::Value,
-    chart: BarChart,
+    pub md: String,
+    pub csv: Vec<u8>,
+    pub json: serde_json::Value,
+    pub chart: BarChart,
 }
 
 impl Table {
     /// Writes the table into `dir` and prints it: its JSON with `--json`, else its markdown
     /// and where it was written.
-    fn publish(&self, args: &TableArgs, dir: &Path) -> Result<ExitCode> {
+    pub fn publish(&self, json: bool, dir: &Path) -> Result<ExitCode> {
         self.write(dir)?;
-        if args.json {
+        if json {
             println!("{}", self.json);
         } else {
             print!("{}", self.md);
@@ -317,7 +317,10 @@ impl Table {
             "json",
             (serde_json::to_string_pretty(&self.json)? + "\n").as_bytes(),
         )?;
-        crate::plot::save_bars(&self.chart, &dir.join(self.name), (900, 520))?;
+        // Wider for many categories, so that their labels stay apart.
+        let width =
+            900.max(90 * u32::try_from(self.chart.categories.len()).unwrap_or(u32::MAX / 90));
+        crate::plot::save_bars(&self.chart, &dir.join(self.name), (width, 520))?;
         Ok(())
     }
 }
@@ -346,7 +349,7 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
         json: serde_json::json!({ "engine": args.engine.as_str(), "rows": rows }),
         chart: table2_chart(args.engine, &rows),
     };
-    table.publish(args, &dir)
+    table.publish(args.json, &dir)
 }
 
 /// `table2.md` (without its leading `# `), as printed.
