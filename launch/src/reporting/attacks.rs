@@ -192,6 +192,12 @@ pub const CLASSES: &[Class] = &[
         what: "measurements of 5-6 s re-sent with their original headers over 10-12 s",
     },
     Class {
+        name: "covert",
+        source: Source::Preset("covert"),
+        robots: &[1],
+        what: "actuator-bias hidden from the sensors by a twin-model correction from 10 s",
+    },
+    Class {
         name: "stealthy-bias",
         source: Source::Scenario {
             path: "scenarios/stealthy-bias.toml",
