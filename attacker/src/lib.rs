@@ -16,7 +16,7 @@ use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, TorqueMsg,
+    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox, Role, Shm, Stream, TorqueMsg,
     Transport, Wake,
 };
 use fdi_runtime::process::{
@@ -126,6 +126,83 @@ impl Target {
     }
 }
 
+/// A message of either path, as the attacker sends on what the attack made of it.
+trait Wire: fdi_runtime::ipc::Payload + Copy {
+    /// The gap marker standing for this message's tick.
+    fn gap(&self) -> Self;
+    /// Its stamp: `t` of a measurement, `t_send` of a torque.
+    fn stamp(&mut self) -> &mut f64;
+    fn renumber(&mut self, seq: u64);
+    /// Takes effect `held_s` later than the known delay (the torque path; 0 elsewhere).
+    fn hold(&mut self, held_s: f64);
+}
+
+impl Wire for MeasurementMsg {
+    fn gap(&self) -> Self {
+        MeasurementMsg::gap(self.seq, self.agent, self.dof, self.t)
+    }
+    fn stamp(&mut self) -> &mut f64 {
+        &mut self.t
+    }
+    fn renumber(&mut self, seq: u64) {
+        self.seq = seq;
+    }
+    fn hold(&mut self, _: f64) {}
+}
+
+impl Wire for TorqueMsg {
+    fn gap(&self) -> Self {
+        TorqueMsg {
+            flags: TorqueMsg::GAP,
+            ..*self
+        }
+    }
+    fn stamp(&mut self) -> &mut f64 {
+        &mut self.t_send
+    }
+    fn renumber(&mut self, seq: u64) {
+        self.seq = seq;
+    }
+    fn hold(&mut self, held_s: f64) {
+        self.held_s = held_s;
+    }
+}
+
+/// Sends on `out` what the attack made of the message `m` (`sent`; `with` puts a payload into
+/// a copy of `m`): the message, a gap marker in place of what it keeps back, a forged stamp,
+/// or the recorded message under its original header followed by the tick's gap marker.
+fn forward<M: Wire, P>(
+    out: &impl Outbox<M>,
+    sent: &Sent<P>,
+    m: &M,
+    with: impl Fn(&P) -> M,
+    dt: f64,
+) -> Result<(), fdi_runtime::ipc::IpcError> {
+    match sent {
+        Sent::Delivered { payload, held_s } => {
+            let mut msg = with(payload);
+            msg.hold(*held_s);
+            out.send(msg)?;
+        }
+        Sent::Missing => {
+            out.send(m.gap())?;
+        }
+        Sent::Forged { payload, shift_s } => {
+            let mut msg = with(payload);
+            *msg.stamp() += shift_s;
+            out.send(msg)?;
+        }
+        Sent::Replayed { k, payload } => {
+            let mut msg = with(payload);
+            msg.renumber(*k);
+            *msg.stamp() = tick_time(*k, dt);
+            out.send(msg)?;
+            out.send(m.gap())?;
+        }
+    }
+    Ok(())
+}
+
 /// Tampers the admitted measurement `m` (received at `received`) with `target`'s attack,
 /// relays what the attack lets through to the control center (a gap marker in place of what
 /// it keeps back) and records what it did.
@@ -151,23 +228,7 @@ fn relay<X: Transport, const N: usize>(
         attacker_sent_ns: monotonic_ns(),
         ..*m
     };
-    let gap = MeasurementMsg::gap(m.seq, m.agent, m.dof, m.t);
-    let out = &ports.tampered;
-    let result = match &sent {
-        Sent::Delivered { payload, .. } => out.send(with(payload)),
-        Sent::Missing => out.send(gap),
-        Sent::Forged { payload, shift_s } => out.send(MeasurementMsg {
-            t: m.t + shift_s,
-            ..with(payload)
-        }),
-        Sent::Replayed { k, payload } => out
-            .send(MeasurementMsg {
-                seq: *k,
-                t: tick_time(*k, dt),
-                ..with(payload)
-            })
-            .and_then(|_| out.send(gap)),
-    };
+    let result = forward(&ports.tampered, &sent, m, with, dt);
     // The record is written even when the send failed: the trace shows what was injected.
     let written = trace.write(&TraceRecord::Attack(attack_record(
         m.seq, m.agent, &sent, &inj,
@@ -189,12 +250,8 @@ fn relay_torque<X: Transport, const N: usize>(
     dt: f64,
     trace: &mut TraceWriter,
 ) -> Result<(), AttackerError> {
-    let gap = TorqueMsg {
-        flags: TorqueMsg::GAP,
-        ..*m
-    };
     let Some(u) = command else {
-        let result = out.send(gap);
+        let result = out.send(m.gap());
         trace.write(&TraceRecord::Actuation(ActuationRecord {
             k: m.seq,
             agent: m.agent,
@@ -215,24 +272,7 @@ fn relay_torque<X: Transport, const N: usize>(
         attacker_sent_ns: monotonic_ns(),
         ..*m
     };
-    let result = match &sent {
-        Sent::Delivered { payload, held_s } => out.send(TorqueMsg {
-            held_s: *held_s,
-            ..with(payload)
-        }),
-        Sent::Missing => out.send(gap),
-        Sent::Forged { payload, shift_s } => out.send(TorqueMsg {
-            t_send: m.t_send + shift_s,
-            ..with(payload)
-        }),
-        Sent::Replayed { k, payload } => out
-            .send(TorqueMsg {
-                seq: *k,
-                t_send: tick_time(*k, dt),
-                ..with(payload)
-            })
-            .and_then(|_| out.send(gap)),
-    };
+    let result = forward(out, &sent, m, with, dt);
     let written = trace.write(&TraceRecord::Actuation(actuation_record(
         m.seq, m.agent, &sent, &inj,
     )));

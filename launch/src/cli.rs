@@ -123,7 +123,8 @@ pub struct RunArgs {
     /// Replace the scenario's clock (realtime needs the ipc engine).
     #[arg(long, value_enum)]
     pub clock: Option<Clock>,
-    /// Replace the scenario's attack: a preset (paper, paper-linkwise, none) or a profile file.
+    /// Replace the scenario's attack: a preset (the profiles in scenarios/attacks/, see
+    /// docs/attacks.md; an unknown name lists them) or a profile file.
     #[arg(long)]
     pub attack: Option<String>,
     /// Replace the scenario's controller mode.

@@ -1243,7 +1243,13 @@ mod tests {
     fn every_shipped_preset_parses_and_has_no_problems_for_the_papers_four_robots() {
         // The presets that act on the torque path, and so route robot 1's commands through the
         // attacker.
-        let torque_path = ["actuator-bias", "torque-delay", "dos-window", "forge-stamp"];
+        let torque_path = [
+            "actuator-bias",
+            "torque-delay",
+            "dos-window",
+            "forge-stamp",
+            "covert",
+        ];
         for (name, _) in presets::PRESETS {
             let p = presets::preset(name).unwrap_or_else(|| panic!("preset {name} parses"));
             let problems = p.problems(&dofs());
