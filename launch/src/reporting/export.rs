@@ -438,9 +438,16 @@ mod tests {
         assert_eq!(fields[5].to_bits(), 1e-300_f64.to_bits());
         assert_eq!(fields[9].to_bits(), (1.0_f64 / 3.0).to_bits());
         assert_eq!(fields[12].to_bits(), (-0.0_f64).to_bits());
-        assert_eq!(Kind::Attack.header(2).len(), 11);
-        // k, agent, 5 joint pairs, alarm, rejected_input, rejected_torque, state_reset, history_miss
-        assert_eq!(Kind::Center.header(2).len(), 17);
+        // k, agent, 4 joint pairs, active, delivery
+        assert_eq!(Kind::Attack.header(2).len(), 12);
+        // k, agent, 5 joint pairs, alarm, rejected_input, rejected_torque, state_reset,
+        // history_miss, missing_input
+        assert_eq!(Kind::Center.header(2).len(), 18);
+        // k, agent, alpha_u and u pairs, held_s, active, delivery
+        assert_eq!(
+            Kind::Actuation.header(2).join(","),
+            "k,agent,alpha_u1,alpha_u2,u1,u2,held_s,active,delivery"
+        );
     }
 
     #[test]
@@ -459,8 +466,8 @@ mod tests {
         row(&mut r, &TraceRecord::Attack(a), 2).expect("fits");
         assert_eq!(
             csv_text(&Kind::Attack.header(2), &[&r]),
-            "k,agent,alpha_position1,alpha_position2,alpha_velocity1,alpha_velocity2,y1,y2,yd1,yd2,active\n\
-             7,2,0.5,,1,2,3,4,5,6,1\n"
+            "k,agent,alpha_position1,alpha_position2,alpha_velocity1,alpha_velocity2,y1,y2,yd1,yd2,active,delivery\n\
+             7,2,0.5,,1,2,3,4,5,6,1,delivered\n"
         );
         assert!(row(&mut r, &TraceRecord::Attack(a), 1).is_err());
     }
