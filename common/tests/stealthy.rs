@@ -260,25 +260,12 @@ fn stealthy_bias_shifts_psi2_by_the_offset_the_design_assumes() {
     let r = shipped();
     let (agent, from_s, w) = design(&r);
     let Waveform::StealthyBias {
-        threshold,
-        noise_peak,
-        window_ticks,
-        shifted_entries,
-        residual_std,
-        sensitivity,
-        bias,
+        sensitivity, bias, ..
     } = w
     else {
         unreachable!()
     };
-    let slope = fdi_common::attack::waveform::stealthy::slope(
-        threshold,
-        noise_peak,
-        window_ticks,
-        shifted_entries,
-        residual_std,
-        sensitivity,
-    );
+    let slope = w.stealthy_slope().expect("a stealthy bias");
     let offset = slope * sensitivity;
     let hold_from = from_s + bias.abs() / slope;
     let i = r

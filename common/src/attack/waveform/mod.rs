@@ -123,6 +123,19 @@ impl Waveform {
             Self::Ramp { slope_per_s, start } => ramp::value(t - segment_start, slope_per_s, start),
             Self::Gaussian { std, mean } => noise::value(rng, mean, std),
             Self::Corrupt { value } => corrupt::value(value),
+            Self::StealthyBias { bias, .. } => stealthy::value(
+                t - segment_start,
+                self.stealthy_slope().unwrap_or(0.0),
+                bias,
+            ),
+            Self::Replay { .. } | Self::Scale { .. } | Self::SignFlip | Self::Freeze => 0.0,
+        }
+    }
+
+    /// The slope of a `stealthy-bias`, derived from its design ([`stealthy::slope`]); `None`
+    /// for the other waveforms.
+    pub fn stealthy_slope(&self) -> Option<f64> {
+        match *self {
             Self::StealthyBias {
                 threshold,
                 noise_peak,
@@ -130,20 +143,16 @@ impl Waveform {
                 shifted_entries,
                 residual_std,
                 sensitivity,
-                bias,
-            } => stealthy::value(
-                t - segment_start,
-                stealthy::slope(
-                    threshold,
-                    noise_peak,
-                    window_ticks,
-                    shifted_entries,
-                    residual_std,
-                    sensitivity,
-                ),
-                bias,
-            ),
-            Self::Replay { .. } | Self::Scale { .. } | Self::SignFlip | Self::Freeze => 0.0,
+                ..
+            } => Some(stealthy::slope(
+                threshold,
+                noise_peak,
+                window_ticks,
+                shifted_entries,
+                residual_std,
+                sensitivity,
+            )),
+            _ => None,
         }
     }
 
