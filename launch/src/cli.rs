@@ -13,7 +13,7 @@ use fdi_runtime::process::ProcessArgs;
 use crate::reporting::attacks::AttacksArgs;
 pub use crate::reporting::output::describe_error;
 use crate::reporting::tables::TableArgs;
-pub use crate::run::{check_placement, execute, Engine};
+pub use crate::run::{check_placement, execute, Engine, Traces};
 use crate::{bench, export, output, report, runtime, tables};
 
 /// Testbed for false-data-injection attacks on a multi-agent robot system (Sargolzaei et al.).
@@ -142,6 +142,10 @@ pub struct RunArgs {
     /// Print one JSON object instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// What the run directory keeps of the traces: `full`, `decimate=K` (every K-th tick) or
+    /// `none`; the summary's metrics and digest cover every tick either way.
+    #[arg(long, default_value_t = Traces::Full)]
+    pub traces: Traces,
     #[command(flatten)]
     pub placement: runtime::Placement,
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
@@ -214,6 +218,7 @@ impl DetectArgs {
             seed: self.seed,
             out: self.runs.clone(),
             json: false,
+            traces: Traces::Full,
             placement: runtime::Placement::default(),
             replay: None,
         }
@@ -323,7 +328,14 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunDone> {
     let dir = output::create_run_dir(&args.out, &r)?;
     let summary = output::discard_if_not_started(
         &dir,
-        execute(&r, args.engine, Some(&dir), !args.json, &args.placement),
+        execute(
+            &r,
+            args.engine,
+            Some(&dir),
+            !args.json,
+            &args.placement,
+            args.traces,
+        ),
     )?;
     for lost in &summary.lost_agents {
         let when = lost

@@ -279,7 +279,14 @@ fn run_beside_probe(a: &LatencyArgs, r: &Resolved, period_ns: i64) -> Result<Mea
     let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
     let summary = output::discard_if_not_started(
         &dir,
-        execute(r, Engine::Ipc, Some(&dir), !a.json, placement),
+        execute(
+            r,
+            Engine::Ipc,
+            Some(&dir),
+            !a.json,
+            placement,
+            crate::run::Traces::Full,
+        ),
     );
     let wakeups = probe.finish();
     let (summary, wakeups) = (crate::run::require_whole(summary?)?, wakeups?);
@@ -773,6 +780,7 @@ fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize) -> Result<LockstepRow> 
         Some(&dir_in),
         false,
         &Default::default(),
+        crate::run::Traces::Full,
     )?;
     let dir_ipc = output::create_run_dir(root, &named(&r, "ipc"))?;
     let ipc = execute(
@@ -781,6 +789,7 @@ fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize) -> Result<LockstepRow> 
         Some(&dir_ipc),
         !a.json,
         &Default::default(),
+        crate::run::Traces::Full,
     )
     .and_then(crate::run::require_whole)?;
     if !a.keep_traces {

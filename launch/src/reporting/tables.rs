@@ -79,14 +79,28 @@ fn run_case(
     case: &str,
 ) -> Result<RunSummary> {
     match args.engine {
-        Engine::Inproc => execute(r, args.engine, None, false, &Default::default()),
+        Engine::Inproc => execute(
+            r,
+            args.engine,
+            None,
+            false,
+            &Default::default(),
+            crate::run::Traces::Full,
+        ),
         Engine::Ipc => {
             let mut named = r.clone();
             named.scenario.name = case.into();
             let d = crate::output::create_run_dir(dir, &named)?;
             let summary = crate::output::discard_if_not_started(
                 &d,
-                execute(r, args.engine, Some(&d), !args.json, &Default::default()),
+                execute(
+                    r,
+                    args.engine,
+                    Some(&d),
+                    !args.json,
+                    &Default::default(),
+                    crate::run::Traces::Full,
+                ),
             )
             .and_then(crate::run::require_whole)?;
             if let Err(e) = crate::report::write_report(&d, r, &summary) {

@@ -9,6 +9,7 @@ pub mod relay;
 pub mod replayer;
 pub mod runtime;
 pub mod supervisor;
+pub mod traces;
 
 use std::path::Path;
 
@@ -20,6 +21,7 @@ use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 
 use crate::reporting::output;
+pub use traces::Traces;
 
 /// Which engine runs the scenario.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -95,14 +97,19 @@ impl InprocTraces {
 }
 
 /// Runs a resolved scenario on an engine. With `run_dir`, traces and the summary go there; an
-/// ipc run without one uses a scratch folder under the system's temporary directory.
+/// ipc run without one uses a scratch folder under the system's temporary directory. `traces`
+/// says what of the traces the run directory keeps.
 pub fn execute(
     r: &Resolved,
     engine: Engine,
     run_dir: Option<&Path>,
     progress: bool,
     placement: &runtime::Placement,
+    traces: Traces,
 ) -> Result<RunSummary> {
+    if traces != Traces::Full && run_dir.is_some() {
+        bail!("--traces {traces} is not available yet: only full");
+    }
     match (engine, run_dir) {
         (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
         (Engine::Inproc, Some(dir)) => {
