@@ -928,9 +928,12 @@ fn aggregate_markdown(plan: &Plan, aggregate: &[Aggregate], families: &[String])
 }
 
 /// Four significant digits.
-fn sig(x: f64) -> String {
+pub(crate) fn sig(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
         return format!("{x}");
+    }
+    if x.abs() < 1e-3 {
+        return format!("{x:.3e}");
     }
     let digits = (3 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
     format!("{x:.digits$}")
