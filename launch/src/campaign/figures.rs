@@ -10,10 +10,13 @@ use plotters::prelude::*;
 use super::{robots, show, toml_cell, Aggregate, Plan};
 use crate::plot::{FONT, PALETTE};
 
-/// One line of a figure: (x, mean, confidence interval) per point.
+/// One point of a line: x, the mean, and its confidence interval when there is one.
+type Mark = (f64, f64, Option<(f64, f64)>);
+
+/// One line of a figure.
 struct Series {
     label: String,
-    points: Vec<(f64, f64, Option<(f64, f64)>)>,
+    points: Vec<Mark>,
 }
 
 struct Chart {

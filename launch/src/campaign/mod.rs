@@ -396,11 +396,11 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
         .iter()
         .map(|(k, v)| Ok((FieldPath::parse(k).context("[set]")?, v.clone())))
         .collect::<Result<_>>()?;
-    let touches_attack = set.iter().any(|(p, _)| p.into_attack_profile())
+    let touches_attack = set.iter().any(|(p, _)| p.is_in_attack_profile())
         || axes
             .iter()
             .flat_map(|a| &a.paths)
-            .any(FieldPath::into_attack_profile);
+            .any(FieldPath::is_in_attack_profile);
     if touches_attack {
         // Paths into the attack edit its profile, written inline.
         let mut attack = toml::Table::new();

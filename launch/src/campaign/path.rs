@@ -86,7 +86,7 @@ impl FieldPath {
     }
 
     /// True for a path into the attack profile (`attack.channels…`, not `attack.preset`).
-    pub fn into_attack_profile(&self) -> bool {
+    pub fn is_in_attack_profile(&self) -> bool {
         matches!(self.segs.as_slice(), [Seg::Key(a), Seg::Key(k), ..]
             if a == "attack" && !ATTACK_SOURCE_KEYS.contains(&k.as_str()))
     }
@@ -113,7 +113,7 @@ impl FieldPath {
 
     /// The value at this path in `doc`, for editing.
     fn locate<'a>(&self, doc: &'a mut toml::Table) -> Result<&'a mut toml::Value> {
-        let redirect = self.into_attack_profile();
+        let redirect = self.is_in_attack_profile();
         let Some(Seg::Key(first)) = self.segs.first() else {
             bail!("field path {:?}: it must start with a key", self.text);
         };
@@ -324,7 +324,7 @@ mod tests {
             .expect("set");
         assert_eq!(at(&d, &["seed"]), toml::Value::Integer(7));
         let attack = FieldPath::parse("attack.channels[0].segments[1].waveform.value").expect("p");
-        assert!(attack.into_attack_profile());
+        assert!(attack.is_in_attack_profile());
         assert_eq!(attack.number(&mut d).expect("number"), 1.0);
         attack.set(&mut d, &toml::Value::Float(2.5)).expect("set");
         assert_eq!(
@@ -336,7 +336,7 @@ mod tests {
         );
         assert!(!FieldPath::parse("attack.profile.name")
             .expect("p")
-            .into_attack_profile());
+            .is_in_attack_profile());
     }
 
     #[test]
