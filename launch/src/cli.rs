@@ -33,6 +33,9 @@ pub enum Command {
         /// Scenario TOML file.
         scenario: PathBuf,
     },
+    /// Run a campaign: a base scenario and axes of values for its fields (a parameter sweep,
+    /// Monte Carlo over seeds), in parallel and resumably, with statistics and figures.
+    Sweep(crate::campaign::SweepArgs),
     /// Reproduce the paper's Table I (RMSE, traditional vs proposed controller).
     Table1(TableArgs),
     /// Reproduce the paper's Table II (robot 1 under four time-varying delays).
@@ -231,6 +234,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
     if matches!(
         cli.command,
         Command::Run(_)
+            | Command::Sweep(_)
             | Command::Report { .. }
             | Command::Detect(_)
             | Command::Table1(_)
@@ -249,6 +253,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Command::Run(args) => run(&args),
         Command::Validate { scenario } => validate(&scenario),
+        Command::Sweep(args) => crate::campaign::sweep(&args),
         Command::Table1(args) => tables::table1(&args),
         Command::Table2(args) => tables::table2(&args),
         Command::Attacks(args) => crate::reporting::attacks::attacks(&args),

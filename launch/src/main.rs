@@ -1,6 +1,7 @@
 //! `fdi-launch`: the one user-facing command of fdi-mas.
 
 mod bench;
+mod campaign;
 mod cli;
 mod detect;
 mod reporting;

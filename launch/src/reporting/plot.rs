@@ -15,7 +15,7 @@ use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 use plotters::style::{register_font, FontStyle};
 
-const FONT: &str = "sans-serif";
+pub(crate) const FONT: &str = "sans-serif";
 static FONT_BYTES: &[u8] = include_bytes!("fonts/DejaVuSans.ttf");
 
 /// Colours of successive series (a colour-blind-safe palette).
@@ -29,7 +29,7 @@ pub const PALETTE: [RGBColor; 6] = [
 ];
 const MARKER: RGBColor = RGBColor(150, 150, 150);
 
-fn fonts() -> Result<()> {
+pub(crate) fn fonts() -> Result<()> {
     static DONE: OnceLock<bool> = OnceLock::new();
     let ok = *DONE.get_or_init(|| register_font(FONT, FontStyle::Normal, FONT_BYTES).is_ok());
     if ok {
@@ -395,7 +395,7 @@ fn save(
     Ok([png_path, svg_path])
 }
 
-fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<()> {
+pub(crate) fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<()> {
     let file =
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
     let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w, h);

@@ -29,6 +29,13 @@ pub struct TableArgs {
     /// Folder that receives the table's run directories.
     #[arg(long, default_value = "runs")]
     pub out: PathBuf,
+    /// Run every entry with N seeds (the scenario's seed, seed + 1, …, seed + N − 1) and give
+    /// each cell as mean ± 95 % confidence interval (Student t) over them.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub seeds: Option<u32>,
+    /// With --seeds: runs at a time (default: the number of CPUs).
+    #[arg(long, requires = "seeds")]
+    pub jobs: Option<std::num::NonZeroUsize>,
 }
 
 /// Table I of the paper: (robot, traditional, proposed) RMSE in rad.
@@ -77,6 +84,7 @@ fn run_case(
     args: &TableArgs,
     dir: &std::path::Path,
     case: &str,
+    progress: bool,
 ) -> Result<RunSummary> {
     match args.engine {
         Engine::Inproc => execute(
@@ -97,7 +105,7 @@ fn run_case(
                     r,
                     args.engine,
                     Some(&d),
-                    !args.json,
+                    progress,
                     &Default::default(),
                     crate::run::Traces::Full,
                 ),
@@ -143,10 +151,13 @@ fn robot_rmse(s: &RunSummary, robot: u32) -> f64 {
 pub fn table1(args: &TableArgs) -> Result<ExitCode> {
     let paper = base(args)?;
     let dir = table_dir(args, "table1");
+    if let Some(n) = args.seeds {
+        return seeded::table1(args, &paper, &dir, n);
+    }
     let run_mode = |mode: ControllerMode| {
         let mut r = paper.clone();
         r.scenario.controller.mode = mode;
-        run_case(&r, args, &dir, mode.as_str())
+        run_case(&r, args, &dir, mode.as_str(), !args.json)
     };
     let traditional = run_mode(ControllerMode::Traditional)?;
     let proposed = run_mode(ControllerMode::Proposed)?;
@@ -342,13 +353,13 @@ impl Table {
 pub fn table2(args: &TableArgs) -> Result<ExitCode> {
     let paper = base(args)?;
     let dir = table_dir(args, "table2");
+    if let Some(n) = args.seeds {
+        return seeded::table2(args, &paper, &dir, n);
+    }
     let mut rows = Vec::new();
     for (case, delay, paper_rmse) in paper_table2() {
-        let mut r = paper.clone().retain_agents(|a| a.id == 1);
-        for a in &mut r.scenario.agents {
-            a.delay = delay;
-        }
-        let summary = run_case(&r, args, &dir, case)?;
+        let r = table2_case(&paper, delay);
+        let summary = run_case(&r, args, &dir, case, !args.json)?;
         rows.push(Table2Row {
             case,
             tau_ms: delay.describe_ms(),
@@ -364,6 +375,15 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
         chart: table2_chart(args.engine, &rows),
     };
     table.publish(args.json, &dir)
+}
+
+/// The scenario of one Table II case: robot 1 alone under `delay`.
+fn table2_case(paper: &Resolved, delay: DelayProfile) -> Resolved {
+    let mut r = paper.clone().retain_agents(|a| a.id == 1);
+    for a in &mut r.scenario.agents {
+        a.delay = delay;
+    }
+    r
 }
 
 /// `table2.md` (without its leading `# `), as printed.
@@ -409,6 +429,348 @@ fn table2_chart(engine: Engine, rows: &[Table2Row]) -> BarChart {
             ),
         ],
     )
+}
+
+/// Tables I and II over seeds (`--seeds N`): each cell the mean ± 95 % confidence interval
+/// over N runs, on the campaigns' parallel runner.
+mod seeded {
+    use super::*;
+    use crate::campaign::runner;
+    use crate::campaign::stats::{self, Stats};
+
+    /// A cell of a seeded table, as its JSON holds it.
+    #[derive(Debug, Serialize)]
+    struct CellStats {
+        mean: f64,
+        sd: Option<f64>,
+        ci_low: Option<f64>,
+        ci_high: Option<f64>,
+        n: usize,
+    }
+
+    impl CellStats {
+        fn of(values: &[f64], what: &str) -> Result<Self> {
+            let Some(Stats {
+                n,
+                mean,
+                sd,
+                ci_low,
+                ci_high,
+            }) = stats::describe(values)
+            else {
+                anyhow::bail!("{what}: no run gave a finite RMSE");
+            };
+            if n != values.len() {
+                anyhow::bail!(
+                    "{what}: {} of {} runs gave no finite RMSE (a robot diverged?)",
+                    values.len() - n,
+                    values.len()
+                );
+            }
+            Ok(Self {
+                mean,
+                sd,
+                ci_low,
+                ci_high,
+                n,
+            })
+        }
+
+        /// `0.0084 ± 0.0001`, or the mean alone for one seed.
+        fn md(&self) -> String {
+            match (self.ci_low, self.ci_high) {
+                (Some(lo), Some(hi)) => format!(
+                    "{:.4} ± {}",
+                    self.mean,
+                    crate::campaign::sig((hi - lo) / 2.0)
+                ),
+                _ => format!("{:.4}", self.mean),
+            }
+        }
+
+        fn csv(&self) -> [String; 5] {
+            let o = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
+            [
+                self.mean.to_string(),
+                o(self.sd),
+                o(self.ci_low),
+                o(self.ci_high),
+                self.n.to_string(),
+            ]
+        }
+    }
+
+    const STAT_COLUMNS: [&str; 5] = ["mean", "sd", "ci_low", "ci_high", "n"];
+
+    /// Runs every (scenario, case name) in parallel; every run must be whole.
+    fn run_all(
+        args: &TableArgs,
+        dir: &Path,
+        cases: &[(Resolved, String)],
+    ) -> Result<Vec<RunSummary>> {
+        let workers = args.jobs.unwrap_or_else(runner::default_jobs);
+        let mut out: Vec<Option<RunSummary>> = cases.iter().map(|_| None).collect();
+        let mut first_error = None;
+        let outcome = runner::run_parallel(
+            cases,
+            workers,
+            "runs",
+            |(r, case)| {
+                run_case(r, args, dir, case, false).with_context(|| format!("the run {case}"))
+            },
+            |i, result| {
+                match result {
+                    Ok(s) => out[i] = Some(s),
+                    Err(e) => {
+                        first_error.get_or_insert(e);
+                    }
+                }
+                Ok(())
+            },
+        )?;
+        if let Some(e) = first_error {
+            return Err(e);
+        }
+        if let Some(signal) = outcome.interrupted {
+            return Err(crate::runtime::Interrupted {
+                signal,
+                phase: crate::runtime::DURING_THE_RUN,
+            }
+            .into());
+        }
+        out.into_iter()
+            .zip(cases)
+            .map(|(s, (_, case))| s.ok_or_else(|| anyhow::anyhow!("the run {case} did not run")))
+            .collect()
+    }
+
+    fn seeds(base: u64, n: u32) -> Result<Vec<u64>> {
+        (0..u64::from(n))
+            .map(|i| {
+                base.checked_add(i)
+                    .ok_or_else(|| anyhow::anyhow!("--seeds {n}: the seed {base} + {i} overflows"))
+            })
+            .collect()
+    }
+
+    fn describe_seeds(seeds: &[u64]) -> String {
+        match seeds {
+            [one] => format!("seed {one}"),
+            [first, .., last] => format!("seeds {first}–{last}"),
+            [] => "no seed".into(),
+        }
+    }
+
+    fn with_seed(r: &Resolved, seed: u64) -> Resolved {
+        let mut r = r.clone();
+        r.scenario.seed = seed;
+        r
+    }
+
+    #[derive(Debug, Serialize)]
+    struct Row1 {
+        robot: u32,
+        traditional_rmse_rad: CellStats,
+        proposed_rmse_rad: CellStats,
+        paper_traditional: f64,
+        paper_proposed: f64,
+    }
+
+    pub fn table1(args: &TableArgs, paper: &Resolved, dir: &Path, n: u32) -> Result<ExitCode> {
+        let seeds = seeds(paper.scenario.seed, n)?;
+        let modes = [ControllerMode::Traditional, ControllerMode::Proposed];
+        let mut cases = Vec::new();
+        for mode in modes {
+            for &seed in &seeds {
+                let mut r = with_seed(paper, seed);
+                r.scenario.controller.mode = mode;
+                cases.push((r, format!("{}-seed{seed}", mode.as_str())));
+            }
+        }
+        let summaries = run_all(args, dir, &cases)?;
+        let (trad, prop) = summaries.split_at(seeds.len());
+        let mut rows = Vec::new();
+        for &(robot, pt, pp) in &PAPER_TABLE1 {
+            let rmse = |runs: &[RunSummary]| -> Vec<f64> {
+                runs.iter().map(|s| robot_rmse(s, robot)).collect()
+            };
+            rows.push(Row1 {
+                robot,
+                traditional_rmse_rad: CellStats::of(
+                    &rmse(trad),
+                    &format!("robot {robot}, traditional"),
+                )?,
+                proposed_rmse_rad: CellStats::of(&rmse(prop), &format!("robot {robot}, proposed"))?,
+                paper_traditional: pt,
+                paper_proposed: pp,
+            });
+        }
+        let over = describe_seeds(&seeds);
+        let mut md = format!(
+            "Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n",
+            args.engine.as_str()
+        );
+        md.push_str(&md_table_head(&[
+            "robot",
+            "traditional",
+            "proposed",
+            "ratio of means",
+            "paper traditional",
+            "paper proposed",
+            "paper ratio",
+        ]));
+        for r in &rows {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.2} | {:.3} | {:.3} | {:.2} |",
+                r.robot,
+                r.traditional_rmse_rad.md(),
+                r.proposed_rmse_rad.md(),
+                r.traditional_rmse_rad.mean / r.proposed_rmse_rad.mean,
+                r.paper_traditional,
+                r.paper_proposed,
+                r.paper_traditional / r.paper_proposed
+            );
+        }
+        let mut header = vec!["robot".to_string()];
+        for what in ["traditional_rmse_rad", "proposed_rmse_rad"] {
+            header.extend(STAT_COLUMNS.iter().map(|c| format!("{what}_{c}")));
+        }
+        header.extend([
+            "paper_traditional_rmse_rad".into(),
+            "paper_proposed_rmse_rad".into(),
+        ]);
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
+        let csv = csv_bytes(
+            &header,
+            rows.iter().map(|r| {
+                let mut rec = vec![r.robot.to_string()];
+                rec.extend(r.traditional_rmse_rad.csv());
+                rec.extend(r.proposed_rmse_rad.csv());
+                rec.push(r.paper_traditional.to_string());
+                rec.push(r.paper_proposed.to_string());
+                rec
+            }),
+        )
+        .context("writing table1.csv")?;
+        let plain: Vec<Table1Row> = rows
+            .iter()
+            .map(|r| Table1Row {
+                robot: r.robot,
+                traditional_rmse_rad: r.traditional_rmse_rad.mean,
+                proposed_rmse_rad: r.proposed_rmse_rad.mean,
+                paper_traditional: r.paper_traditional,
+                paper_proposed: r.paper_proposed,
+            })
+            .collect();
+        let mut chart = table1_chart(args.engine, &plain);
+        chart.title = format!("{} (mean over {over})", chart.title);
+        let table = Table {
+            name: "table1",
+            md,
+            csv,
+            json: serde_json::json!({
+                "engine": args.engine.as_str(),
+                "seeds": seeds,
+                "confidence": stats::LEVEL,
+                "rows": rows
+            }),
+            chart,
+        };
+        table.publish(args.json, dir)
+    }
+
+    #[derive(Debug, Serialize)]
+    struct Row2 {
+        case: &'static str,
+        tau_ms: String,
+        rmse_rad: CellStats,
+        paper_rmse_rad: f64,
+    }
+
+    pub fn table2(args: &TableArgs, paper: &Resolved, dir: &Path, n: u32) -> Result<ExitCode> {
+        let seeds = seeds(paper.scenario.seed, n)?;
+        let mut cases = Vec::new();
+        for (case, delay, _) in paper_table2() {
+            let r = table2_case(paper, delay);
+            for &seed in &seeds {
+                cases.push((with_seed(&r, seed), format!("{case}-seed{seed}")));
+            }
+        }
+        let summaries = run_all(args, dir, &cases)?;
+        let mut rows = Vec::new();
+        for ((case, delay, paper_rmse), runs) in paper_table2()
+            .into_iter()
+            .zip(summaries.chunks(seeds.len()))
+        {
+            let rmse: Vec<f64> = runs.iter().map(|s| robot_rmse(s, 1)).collect();
+            rows.push(Row2 {
+                case,
+                tau_ms: delay.describe_ms(),
+                rmse_rad: CellStats::of(&rmse, case)?,
+                paper_rmse_rad: paper_rmse,
+            });
+        }
+        let over = describe_seeds(&seeds);
+        let mut md = format!(
+            "Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n",
+            args.engine.as_str()
+        );
+        md.push_str(&md_table_head(&[
+            "case",
+            "tau(t) (ms)",
+            "RMSE",
+            "paper RMSE",
+        ]));
+        for r in &rows {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.4} |",
+                r.case,
+                r.tau_ms,
+                r.rmse_rad.md(),
+                r.paper_rmse_rad
+            );
+        }
+        let mut header = vec!["case".to_string(), "tau_ms".into()];
+        header.extend(STAT_COLUMNS.iter().map(|c| format!("rmse_rad_{c}")));
+        header.push("paper_rmse_rad".into());
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
+        let csv = csv_bytes(
+            &header,
+            rows.iter().map(|r| {
+                let mut rec = vec![r.case.to_string(), r.tau_ms.clone()];
+                rec.extend(r.rmse_rad.csv());
+                rec.push(r.paper_rmse_rad.to_string());
+                rec
+            }),
+        )
+        .context("writing table2.csv")?;
+        let plain: Vec<Table2Row> = rows
+            .iter()
+            .map(|r| Table2Row {
+                case: r.case,
+                tau_ms: r.tau_ms.clone(),
+                rmse_rad: r.rmse_rad.mean,
+                paper_rmse_rad: r.paper_rmse_rad,
+            })
+            .collect();
+        let mut chart = table2_chart(args.engine, &plain);
+        chart.title = format!("{} (mean over {over})", chart.title);
+        let table = Table {
+            name: "table2",
+            md,
+            csv,
+            json: serde_json::json!({
+                "engine": args.engine.as_str(),
+                "seeds": seeds,
+                "confidence": stats::LEVEL,
+                "rows": rows
+            }),
+            chart,
+        };
+        table.publish(args.json, dir)
+    }
 }
 
 #[cfg(test)]
