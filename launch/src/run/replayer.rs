@@ -228,6 +228,7 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool) -> Result<ExitCode> {
                     progress: !json,
                     replay: true,
                     placement: crate::runtime::Placement::default(),
+                    pipes: false,
                 },
             )
         }),
