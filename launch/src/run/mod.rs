@@ -219,9 +219,7 @@ pub fn execute(
             }
             output::write_run_summary(dir, &joined.summary, traces)?;
             if let Some(e) = write_error {
-                bail!(
-                    "a trace could not be kept: {e}; summary.json covers every tick of the run"
-                );
+                bail!("a trace could not be kept: {e}; summary.json covers every tick of the run");
             }
             Ok(joined.summary)
         }

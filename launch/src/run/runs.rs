@@ -58,7 +58,11 @@ fn status(p: &Path) -> String {
         .get("traces")
         .and_then(|t| t.as_str())
         .map_or(String::new(), |t| format!(", traces {t}"));
-    match v.get("partial").and_then(|x| x.get("reason")).and_then(|r| r.as_str()) {
+    match v
+        .get("partial")
+        .and_then(|x| x.get("reason"))
+        .and_then(|r| r.as_str())
+    {
         Some(reason) => format!("partial ({reason}){traces}"),
         None => format!("done{traces}"),
     }
@@ -198,9 +202,13 @@ mod tests {
         let root = tempfile::tempdir().expect("tmp");
         let r = root.path();
         let mut made = Vec::new();
-        for (i, name) in ["20240101-000000-a", "20240102-000000-b", "20240103-000000-c"]
-            .iter()
-            .enumerate()
+        for (i, name) in [
+            "20240101-000000-a",
+            "20240102-000000-b",
+            "20240103-000000-c",
+        ]
+        .iter()
+        .enumerate()
         {
             let d = run_dir(r, name, i != 1);
             made.push(d);
