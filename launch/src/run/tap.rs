@@ -7,10 +7,12 @@
 //! Every read blocks on its pipe. The launcher holds a write end of every pipe until every
 //! process has exited, so that a process that dies before it opened its trace, or after, ends
 //! its pipe only once the run is over; a reader never closes its read end early (a damaged
-//! stream is drained to its end), so no process is killed by SIGPIPE. In lockstep the queues
-//! between the readers and the join are bounded (the processes cannot run further apart than
-//! their lookahead, well within the bound: memory stays bounded); in realtime they are not, so
-//! that a process is never slowed by the launcher.
+//! stream is drained to its end), so no process is killed by SIGPIPE. The queues between the
+//! readers and the join never block a reader (a bounded queue deadlocked: a process blocked on
+//! its full pipe while the join waited for a record its peer still held in its write buffer);
+//! in lockstep what they hold is bounded by how far the processes can run apart (their
+//! lookahead plus what a trace writer buffers); in realtime a process is never slowed by the
+//! launcher.
 
 use std::fs::{File, OpenOptions};
 use std::os::unix::fs::OpenOptionsExt;
@@ -18,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 
 use anyhow::{Context, Result};
-use fdi_common::scenario::{ClockMode, Resolved};
+use fdi_common::scenario::Resolved;
 use fdi_common::trace::{Kept, TraceReader, TraceRecord, TraceWriter};
 
 use super::join::{Feed, Sources, Walked};
@@ -33,7 +35,6 @@ pub fn pipe_path(run_dir: &Path, process: &str) -> PathBuf {
 /// Where a reader thread sends the records of one kind.
 #[derive(Clone)]
 enum Tx {
-    Bounded(mpsc::SyncSender<Result<TraceRecord, String>>),
     Unbounded(mpsc::Sender<Result<TraceRecord, String>>),
 }
 
@@ -41,7 +42,6 @@ impl Tx {
     /// False once the join is gone (it ended: what follows is not needed).
     fn send(&self, r: Result<TraceRecord, String>) -> bool {
         match self {
-            Self::Bounded(t) => t.send(r).is_ok(),
             Self::Unbounded(t) => t.send(r).is_ok(),
         }
     }
@@ -124,7 +124,6 @@ impl Pipe {
 pub struct Tap {
     pipes: Vec<Pipe>,
     kept: Option<Kept>,
-    realtime: bool,
     routed: bool,
     run_dir: PathBuf,
 }
@@ -147,7 +146,6 @@ impl Tap {
         let mut tap = Self {
             pipes: Vec::new(),
             kept,
-            realtime: r.scenario.clock == ClockMode::Realtime,
             routed: r
                 .scenario
                 .agents
@@ -184,19 +182,14 @@ impl Tap {
     /// Runs `run` (the processes, writing into the pipes) while the readers and the join go on;
     /// returns its result once every pipe ended, with what the join gathered.
     pub fn run<T>(self, r: &Resolved, run: impl FnOnce() -> T) -> (T, Tapped) {
-        // Queues of the lockstep join: far more records than the processes can run apart.
-        let bound = {
-            let s = fdi_runtime::process::sizing_for(r);
-            (s.in_flight + 256) * 2 * r.agent_count().max(1) + 4096
-        };
+        // The queues never push back on a process: a process blocked on its trace would stall
+        // its peers, and a record it still buffers (a writer flushes every 100 ms or 64 KiB)
+        // could be the one the join waits for. What they hold stays bounded in lockstep all the
+        // same: the processes cannot run further apart than their lookahead plus what a
+        // writer buffers.
         let channel = || -> (Tx, Feed) {
-            if self.realtime {
-                let (tx, rx) = mpsc::channel();
-                (Tx::Unbounded(tx), Box::new(rx.into_iter()))
-            } else {
-                let (tx, rx) = mpsc::sync_channel(bound);
-                (Tx::Bounded(tx), Box::new(rx.into_iter()))
-            }
+            let (tx, rx) = mpsc::channel();
+            (Tx::Unbounded(tx), Box::new(rx.into_iter()))
         };
         let Self {
             pipes,
