@@ -94,7 +94,11 @@ fn every_traces_value_on_both_engines_gives_the_digest_and_metrics_of_full() {
                     assert_eq!(kept, Kept::Decimate { every: 7 }, "{tag} {f}");
                     assert_eq!(ticks, want, "{tag} {f}: exactly the ticks 0, 7, 14, …");
                     let per_tick = if f.starts_with("agent") { 1 } else { 4 };
-                    assert_eq!(n, want.len() * per_tick, "{tag} {f}: every record of those ticks");
+                    assert_eq!(
+                        n,
+                        want.len() * per_tick,
+                        "{tag} {f}: every record of those ticks"
+                    );
                 }
                 // The report draws its figures from them, and says so.
                 let md = std::fs::read_to_string(dir.join("report/report.md")).expect("report");
@@ -143,11 +147,7 @@ fn detect_and_replay_refuse_decimated_or_missing_traces_and_export_exports_what_
         );
         if traces == "decimate=10" {
             let o = fdi_tests::launch_plain(&["trace", "export", &d], WATCHDOG);
-            assert!(
-                o.status.success(),
-                "{}",
-                String::from_utf8_lossy(&o.stderr)
-            );
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
         }
     }
 }
