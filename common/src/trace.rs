@@ -25,8 +25,9 @@ use crate::records::{ActuationRecord, AgentRecord, AttackRecord, CenterRecord};
 
 /// First bytes of every trace file.
 pub const MAGIC: &[u8; 8] = b"FDITRACE";
-/// Format version written by this build; readers refuse any other.
-pub const FORMAT_VERSION: u32 = 3;
+/// Format version written by this build; readers refuse any other. Version 4 added
+/// [`TraceHeader::kept`].
+pub const FORMAT_VERSION: u32 = 4;
 /// Largest header frame written or read: the scenario as used (at most
 /// [`crate::scenario::MAX_FILE_BYTES`]) and a few names.
 pub const MAX_HEADER_BYTES: u32 = (crate::scenario::MAX_FILE_BYTES as u32) + (1 << 16);
@@ -45,6 +46,37 @@ pub struct TraceHeader {
     pub seed: u64,
     /// `lockstep` or `realtime`.
     pub clock: String,
+    /// What of the process's records the file holds: every one, or those of every K-th tick.
+    pub kept: Kept,
+}
+
+/// What a trace file keeps of its process's records (`fdi-launch run --traces`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub enum Kept {
+    /// Every record.
+    #[default]
+    Full,
+    /// The records of ticks 0, `every`, 2 `every`, … and every event.
+    Decimate { every: u32 },
+}
+
+impl Kept {
+    /// True when a file that keeps `self` holds `record`.
+    pub fn keeps(self, record: &TraceRecord) -> bool {
+        match (self, record.tick()) {
+            (Self::Full, _) | (_, None) => true,
+            (Self::Decimate { every }, Some(k)) => k % u64::from(every.max(1)) == 0,
+        }
+    }
+}
+
+impl std::fmt::Display for Kept {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Full => f.write_str("full"),
+            Self::Decimate { every } => write!(f, "decimate={every}"),
+        }
+    }
 }
 
 /// Per-hop monotonic-clock stamps of one message, ns (0 = not stamped).
@@ -77,6 +109,33 @@ pub enum TraceRecord {
     },
     /// The attacker's record of a torque it relayed (a run that attacks the torque path).
     Actuation(ActuationRecord),
+}
+
+impl TraceRecord {
+    /// The tick the record belongs to; `None` for an event.
+    pub fn tick(&self) -> Option<u64> {
+        match self {
+            Self::Agent(a) => Some(a.k),
+            Self::Attack(a) => Some(a.k),
+            Self::Center(c) => Some(c.k),
+            Self::Latency { k, .. } => Some(*k),
+            Self::Actuation(a) => Some(a.k),
+            Self::Event { .. } => None,
+        }
+    }
+}
+
+/// Bytes a trace file spends on `record`: its frame length and its bincode encoding, as
+/// [`TraceWriter::write`] writes it.
+pub fn record_frame_bytes(record: &TraceRecord) -> Result<u64, bincode::error::EncodeError> {
+    let body = bincode::serde::encode_to_vec(record, config())?;
+    Ok(4 + body.len() as u64)
+}
+
+/// Bytes a trace file spends before its first record: magic, version and the header frame.
+pub fn header_bytes(header: &TraceHeader) -> Result<u64, bincode::error::EncodeError> {
+    let body = bincode::serde::encode_to_vec(header, config())?;
+    Ok(12 + 4 + body.len() as u64)
 }
 
 /// What a trace was being used for when an I/O error happened.
@@ -397,6 +456,23 @@ impl TraceReader {
                 kind: file_kind(meta.file_type()),
             });
         }
+        Self::start(file, path, meta.len())
+    }
+
+    /// Reads a trace as it is written, from the read end of a pipe (`file`) that `path` names:
+    /// every read blocks until its writer wrote the frame or closed the pipe (the end of the
+    /// trace). Frame lengths are still bounded by the limits of a frame; the file's length is
+    /// unknown.
+    pub fn from_pipe(file: File, path: &Path) -> Result<Self, TraceError> {
+        Self::start(file, path, u64::MAX)
+    }
+
+    fn start(file: File, path: &Path, file_len: u64) -> Result<Self, TraceError> {
+        let io = |op, cause| TraceError::Io {
+            op,
+            path: path.to_path_buf(),
+            cause,
+        };
         let mut input = BufReader::with_capacity(1 << 16, file);
         let mut magic = [0u8; 8];
         if read_full(&mut input, &mut magic).map_err(|e| io(TraceOp::Reading, e))? < 8
@@ -426,13 +502,14 @@ impl TraceReader {
             input,
             offset: 12,
             last: 12,
-            file_len: meta.len(),
+            file_len,
             header: TraceHeader {
                 format_version: found,
                 process: String::new(),
                 scenario_toml: String::new(),
                 seed: 0,
                 clock: String::new(),
+                kept: Kept::Full,
             },
             buf: Vec::new(),
             done: false,
@@ -590,6 +667,7 @@ mod tests {
             scenario_toml: "name = \"x\"".into(),
             seed: 9,
             clock: "lockstep".into(),
+            kept: Kept::Decimate { every: 7 },
         }
     }
 
@@ -619,6 +697,62 @@ mod tests {
         assert_eq!(r.header(), &header());
         let got: Vec<TraceRecord> = r.map(|x| x.expect("record")).collect();
         assert_eq!(got, (0..100).map(record).collect::<Vec<_>>());
+        let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn decimation_keeps_the_records_of_every_kth_tick_and_every_event() {
+        let every = Kept::Decimate { every: 5 };
+        let kept: Vec<u64> = (0..23).filter(|k| every.keeps(&record(*k))).collect();
+        assert_eq!(kept, vec![0, 5, 10, 15, 20]);
+        let event = TraceRecord::Event {
+            t: 0.3,
+            message: "x".into(),
+        };
+        assert!(every.keeps(&event));
+        assert!((0..23).all(|k| Kept::Full.keeps(&record(k))));
+        assert_eq!(every.to_string(), "decimate=5");
+    }
+
+    #[test]
+    fn a_trace_reads_from_a_pipe_as_it_is_written_and_ends_when_the_writer_closes() {
+        let (rx, tx) = std::io::pipe().expect("pipe");
+        let p = tmp("pipe");
+        let writer = std::thread::spawn(move || {
+            // A writer of a regular file, its bytes copied into the pipe: the same frames.
+            let mut w = TraceWriter::create(&p, &header()).expect("create");
+            for k in 0..50 {
+                w.write(&record(k)).expect("write");
+            }
+            w.flush().expect("flush");
+            let bytes = std::fs::read(&p).expect("read");
+            let _ = std::fs::remove_file(&p);
+            let mut tx = tx;
+            tx.write_all(&bytes).expect("pipe write");
+            // Dropping `tx` closes the pipe: the end of the trace.
+        });
+        let file = File::from(std::os::fd::OwnedFd::from(rx));
+        let r = TraceReader::from_pipe(file, Path::new("agent-1.pipe")).expect("header");
+        assert_eq!(r.header(), &header());
+        let got: Vec<TraceRecord> = r.map(|x| x.expect("record")).collect();
+        assert_eq!(got, (0..50).map(record).collect::<Vec<_>>());
+        writer.join().expect("writer");
+    }
+
+    #[test]
+    fn frame_sizes_are_those_the_writer_writes() {
+        let p = tmp("sizes-estimate");
+        {
+            let mut w = TraceWriter::create(&p, &header()).expect("create");
+            for k in 0..10 {
+                w.write(&record(k)).expect("write");
+            }
+        }
+        let want = header_bytes(&header()).expect("header")
+            + (0..10)
+                .map(|k| record_frame_bytes(&record(k)).expect("record"))
+                .sum::<u64>();
+        assert_eq!(std::fs::metadata(&p).expect("meta").len(), want);
         let _ = std::fs::remove_file(&p);
     }
 

@@ -56,6 +56,9 @@ pub enum Command {
     /// Work with the binary traces of a run.
     #[command(subcommand)]
     Trace(TraceCommand),
+    /// The run directories of a folder: list them, remove the older ones.
+    #[command(subcommand)]
+    Runs(RunsCommand),
     /// Measurements: latency of the realtime runtime, the transport floor, lockstep speed.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
@@ -83,6 +86,29 @@ pub enum TraceCommand {
         run_dir: PathBuf,
         #[arg(long, value_enum, default_value_t = export::Format::Csv)]
         format: export::Format,
+    },
+}
+
+#[derive(Debug, Subcommand)]
+pub enum RunsCommand {
+    /// Every run directory of the folder, newest first: name, date, size, status.
+    List {
+        /// Folder of the run directories.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+    },
+    /// Keep the N newest run directories of the folder and remove the others (only folders
+    /// that are run directories: `scenario.toml` with `summary.json` or `traces/`).
+    Prune {
+        /// How many of the newest run directories stay.
+        #[arg(long)]
+        keep: usize,
+        /// Folder of the run directories.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Say what would be removed, remove nothing.
+        #[arg(long)]
+        dry_run: bool,
     },
 }
 
@@ -149,6 +175,10 @@ pub struct RunArgs {
     /// `none`; the summary's metrics and digest cover every tick either way.
     #[arg(long, default_value_t = Traces::Full)]
     pub traces: Traces,
+    /// Largest trace size a run may write (what `--traces` keeps, estimated before the start):
+    /// `500MB`, `2GiB`, ...; a run over it, or over the free space of `--out`, is refused.
+    #[arg(long, default_value = "10GB")]
+    pub max_trace_size: bytesize::ByteSize,
     #[command(flatten)]
     pub placement: runtime::Placement,
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
@@ -222,6 +252,7 @@ impl DetectArgs {
             out: self.runs.clone(),
             json: false,
             traces: Traces::Full,
+            max_trace_size: bytesize::ByteSize::gb(10),
             placement: runtime::Placement::default(),
             replay: None,
         }
@@ -261,6 +292,12 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Detect(args) => crate::detect::detect(&args),
         Command::Trace(TraceCommand::Export { run_dir, format }) => {
             export::export(&run_dir, format).map(|()| ExitCode::SUCCESS)
+        }
+        Command::Runs(RunsCommand::List { out }) => {
+            crate::run::runs::print_list(&out).map(|()| ExitCode::SUCCESS)
+        }
+        Command::Runs(RunsCommand::Prune { keep, out, dry_run }) => {
+            crate::run::runs::print_prune(&out, keep, dry_run).map(|()| ExitCode::SUCCESS)
         }
         Command::Bench(b) => bench::bench(&b),
         Command::BenchPeer { args } => crate::floor::peer_main(&args).map(|()| ExitCode::SUCCESS),
@@ -329,6 +366,13 @@ pub struct RunDone {
 pub fn run_scenario(args: &RunArgs) -> Result<RunDone> {
     let r = apply_overrides(load(args.scenario.as_deref())?, args)?;
     check_placement(&r, args.engine, &args.placement)?;
+    crate::run::traces::check_volume(
+        &r,
+        args.engine == Engine::Ipc,
+        args.traces,
+        &args.out,
+        args.max_trace_size,
+    )?;
     crate::interrupt::check(runtime::BEFORE_THE_START)?;
     let dir = output::create_run_dir(&args.out, &r)?;
     let summary = output::discard_if_not_started(

@@ -114,6 +114,7 @@ fn record(run_dir: &Path) -> Result<(Resolved, Recorded, RunSummary)> {
     }
     let resolved = scenario::load_file(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
+    crate::run::traces::require_every_tick(run_dir, "detect")?;
     let traces = run_dir.join("traces");
     if !traces.is_dir() {
         bail!(

@@ -128,11 +128,28 @@ pub fn coverage(ticks: u64, planned: u64) -> String {
 
 /// Writes `summary.json`, `rmse.md` and `rmse.csv`.
 pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
+    write_summary_json(dir, serde_json::to_value(s)?)?;
+    write_tables(dir, s)
+}
+
+/// [`write_summary`] of a run that kept `traces` of its traces: `summary.json` says so in its
+/// `traces` field (`full`, `decimate=K`, `none`); its metrics and digest cover every tick.
+pub fn write_run_summary(dir: &Path, s: &RunSummary, traces: crate::run::Traces) -> Result<()> {
+    let mut v = serde_json::to_value(s)?;
+    v["traces"] = serde_json::Value::String(traces.to_string());
+    write_summary_json(dir, v)?;
+    write_tables(dir, s)
+}
+
+fn write_summary_json(dir: &Path, v: serde_json::Value) -> Result<()> {
     std::fs::write(
         dir.join("summary.json"),
-        serde_json::to_string_pretty(s)? + "\n",
+        serde_json::to_string_pretty(&v)? + "\n",
     )
-    .context("writing summary.json")?;
+    .context("writing summary.json")
+}
+
+fn write_tables(dir: &Path, s: &RunSummary) -> Result<()> {
     let mut md = format!(
         "# RMSE of run `{}` ({} engine, {} clock, {} controller, attack `{}`)\n\n",
         s.scenario, s.engine, s.clock, s.controller, s.attack

@@ -10,7 +10,8 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use crate::run::traces::Recorded;
+use anyhow::{bail, Context, Result};
 use fdi_common::engine::RunSummary;
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, Resolved, MAX_DOF};
@@ -125,6 +126,26 @@ pub fn report(run_dir: &Path) -> Result<()> {
             None
         }
     };
+    let kept = crate::run::traces::recorded(run_dir)?;
+    if kept != Recorded::Full {
+        // Decimated or no traces: only the run's summary covers every tick.
+        let Some(s) = stored else {
+            bail!(
+                "{}: needed: the traces of run {} do not hold every tick ({}), so only its summary has the run's metrics",
+                summary_path.display(),
+                run_dir.display(),
+                kept_words(kept)
+            );
+        };
+        let (series, joined) = gather(run_dir, &resolved, kept, s.wall_s)?;
+        warnings.extend(joined);
+        for w in &warnings {
+            eprintln!("fdi-launch: warning: {w}");
+        }
+        let md = write(run_dir, &resolved, &s, series, &warnings, kept)?;
+        println!("report {}", md.display());
+        return Ok(());
+    }
     let mut series = RunSeries::new(&resolved);
     let joined = join::join_run_until(
         &resolved,
@@ -154,22 +175,55 @@ pub fn report(run_dir: &Path) -> Result<()> {
     for w in &warnings {
         eprintln!("fdi-launch: warning: {w}");
     }
-    let md = write(run_dir, &resolved, &summary, series, &warnings)?;
+    let md = write(run_dir, &resolved, &summary, series, &warnings, kept)?;
     println!("report {}", md.display());
     Ok(())
 }
 
+/// `decimate=K` / `none`, in words.
+fn kept_words(kept: Recorded) -> String {
+    match kept {
+        Recorded::Full => "every tick".into(),
+        Recorded::Decimated(k) => format!("`--traces decimate={k}`: every {k}-th tick"),
+        Recorded::None => "`--traces none`: no trace".into(),
+    }
+}
+
+/// The figures' series of a run whose traces keep every K-th tick (or none), and the join's
+/// warnings.
+fn gather(
+    run_dir: &Path,
+    resolved: &Resolved,
+    kept: Recorded,
+    _wall_s: f64,
+) -> Result<(RunSeries, Vec<String>)> {
+    let mut series = RunSeries::new(resolved);
+    match kept {
+        Recorded::Decimated(k) => {
+            series.every = u64::from(k.max(1));
+            let joined =
+                join::join_decimated(resolved, run_dir, k, |r| series.push(r), report_interrupted)?;
+            Ok((series, joined.warnings))
+        }
+        Recorded::None => Ok((series, Vec::new())),
+        Recorded::Full => {
+            let joined = join::join_run_until(
+                resolved,
+                run_dir,
+                f64::NAN,
+                |r| series.push(r),
+                report_interrupted,
+            )?;
+            Ok((series, joined.warnings))
+        }
+    }
+}
+
 /// Called at the end of every `run`, with the run's summary.
 pub fn write_report(run_dir: &Path, resolved: &Resolved, summary: &RunSummary) -> Result<()> {
-    let mut series = RunSeries::new(resolved);
-    let joined = join::join_run_until(
-        resolved,
-        run_dir,
-        summary.wall_s,
-        |r| series.push(r),
-        report_interrupted,
-    )?;
-    write(run_dir, resolved, summary, series, &joined.warnings)?;
+    let kept = crate::run::traces::recorded(run_dir)?;
+    let (series, warnings) = gather(run_dir, resolved, kept, summary.wall_s)?;
+    write(run_dir, resolved, summary, series, &warnings, kept)?;
     Ok(())
 }
 
@@ -235,6 +289,8 @@ struct AgentSeries {
 struct RunSeries {
     beta: f64,
     period_s: f64,
+    /// Ticks between two recorded ticks: 1, or K of `--traces decimate=K`.
+    every: u64,
     duration_s: f64,
     agents: Vec<AgentSeries>,
 }
@@ -281,6 +337,7 @@ impl RunSeries {
         Self {
             beta: s.controller.beta,
             period_s: s.control_period_s,
+            every: 1,
             duration_s: s.duration_s,
             agents,
         }
@@ -604,10 +661,11 @@ fn write(
     summary: &RunSummary,
     series: RunSeries,
     warnings: &[String],
+    kept: Recorded,
 ) -> Result<PathBuf> {
     let staging = run_dir.join(format!(".report-partial-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&staging);
-    let written = write_into(&staging, run_dir, resolved, summary, series, warnings)
+    let written = write_into(&staging, run_dir, resolved, summary, series, warnings, kept)
         .and_then(|()| report_interrupted());
     if let Err(e) = written {
         let _ = std::fs::remove_dir_all(&staging);
@@ -636,15 +694,21 @@ fn write_into(
     summary: &RunSummary,
     series: RunSeries,
     warnings: &[String],
+    kept: Recorded,
 ) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    // A decimated trace records a tick every K: its last recorded tick stands for K ticks.
     let recorded = series
         .agents
         .iter()
         .filter(|a| a.ticks > 0)
-        .map(|a| a.last_t + series.period_s)
+        .map(|a| a.last_t + series.period_s * series.every as f64)
         .fold(0.0, f64::max);
-    let (x_end, partial) = recorded_span(recorded, series.period_s, series.duration_s);
+    let (x_end, partial) = match kept {
+        // No trace: the summary says how much of the run there is.
+        Recorded::None => (series.duration_s, None),
+        _ => recorded_span(recorded, series.period_s, series.duration_s),
+    };
     let layout = Layout {
         beta: series.beta,
         x_range: (0.0, x_end),
@@ -656,11 +720,13 @@ fn write_into(
     };
     let mut segments = Vec::new();
     let mut jobs = Vec::new();
-    for a in series.agents {
-        segments.push((a.id, a.segments.clone()));
-        jobs.extend(figures(a, &layout));
+    if kept != Recorded::None {
+        for a in series.agents {
+            segments.push((a.id, a.segments.clone()));
+            jobs.extend(figures(a, &layout));
+        }
+        render_all(dir, jobs)?;
     }
-    render_all(dir, jobs)?;
     let md = markdown(
         run_dir,
         resolved,
@@ -668,6 +734,7 @@ fn write_into(
         &segments,
         warnings,
         partial.as_deref(),
+        kept,
     );
     let md_path = dir.join("report.md");
     std::fs::write(&md_path, md).with_context(|| format!("writing {}", md_path.display()))?;
@@ -744,14 +811,30 @@ fn markdown(
     segments: &[(u32, Vec<SegmentStats>)],
     warnings: &[String],
     partial: Option<&str>,
+    kept: Recorded,
 ) -> String {
     let mut md = String::new();
     run_section(&mut md, run_dir, r, s);
     notices(&mut md, s);
     rmse_section(&mut md, run_dir, s);
     detection_section(&mut md, s);
-    segments_section(&mut md, segments);
-    figures_section(&mut md, r, partial);
+    match kept {
+        Recorded::None => {
+            md.push_str("\n## Figures\n\nNo figures: the run kept no traces (`--traces none`). The tables above come from its summary, which covers every tick; run it again with `--traces full` or `--traces decimate=K` for figures.\n");
+        }
+        Recorded::Decimated(k) => {
+            let _ = writeln!(
+                md,
+                "\n**The figures and the segment table are drawn from decimated traces (`--traces decimate={k}`): every {k}-th tick, so a spike between two kept ticks may not show. The tables of metrics come from the run's summary and cover every tick.**"
+            );
+            segments_section(&mut md, segments);
+            figures_section(&mut md, r, partial);
+        }
+        Recorded::Full => {
+            segments_section(&mut md, segments);
+            figures_section(&mut md, r, partial);
+        }
+    }
     warnings_section(&mut md, warnings);
     md
 }

@@ -40,22 +40,36 @@ impl Tick for ActuationRecord {
     }
 }
 
+/// The records of one trace, as they are read: from its file, or streamed from the process
+/// that writes it ([`super::tap`]). An error is the damage that ends the trace.
+pub type Feed = Box<dyn Iterator<Item = Result<TraceRecord, String>> + Send>;
+
+/// The records of a trace file.
+fn file_feed(path: &Path) -> Result<Feed> {
+    let reader = TraceReader::open(path)?;
+    Ok(Box::new(reader.map(|r| r.map_err(|e| e.to_string()))))
+}
+
 /// One trace and the records read ahead of the join, per agent.
 struct Source<T> {
-    reader: TraceReader,
+    reader: Feed,
     pending: BTreeMap<u32, VecDeque<T>>,
     pick: fn(TraceRecord) -> Option<(u32, T)>,
     damage: Option<String>,
 }
 
 impl<T: Tick> Source<T> {
-    fn open(path: &Path, pick: fn(TraceRecord) -> Option<(u32, T)>) -> Result<Self> {
-        Ok(Self {
-            reader: TraceReader::open(path)?,
+    fn new(reader: Feed, pick: fn(TraceRecord) -> Option<(u32, T)>) -> Self {
+        Self {
+            reader,
             pending: BTreeMap::new(),
             pick,
             damage: None,
-        })
+        }
+    }
+
+    fn open(path: &Path, pick: fn(TraceRecord) -> Option<(u32, T)>) -> Result<Self> {
+        Ok(Self::new(file_feed(path)?, pick))
     }
 
     /// The record of `agent` for tick `k`: older records are skipped, a newer one stays for
@@ -82,7 +96,7 @@ impl<T: Tick> Source<T> {
                     }
                 }
                 Err(e) => {
-                    self.damage = Some(e.to_string());
+                    self.damage = Some(e);
                     return Err(());
                 }
             }
@@ -99,7 +113,7 @@ impl<T> Source<T> {
         }
         for rec in self.reader.by_ref() {
             if let Err(e) = rec {
-                self.damage = Some(e.to_string());
+                self.damage = Some(e);
                 return;
             }
         }
@@ -150,7 +164,7 @@ pub fn join_run(
 }
 
 /// The traces of a run's processes, each read ahead as the join needs.
-struct Traces {
+pub struct Sources {
     agents: Vec<(u32, Source<AgentRecord>)>,
     attacker: Source<AttackRecord>,
     /// The attacker's torque records (a second reader of its trace), when the run attacks
@@ -159,7 +173,7 @@ struct Traces {
     center: Source<CenterRecord>,
 }
 
-impl Traces {
+impl Sources {
     fn open(resolved: &Resolved, run_dir: &Path) -> Result<Self> {
         let mut agents = Vec::with_capacity(resolved.scenario.agents.len());
         for a in &resolved.scenario.agents {
@@ -190,6 +204,26 @@ impl Traces {
             center: Source::open(&trace_path(run_dir, "control-center"), pick_center)
                 .context("opening the control-center trace")?,
         })
+    }
+
+    /// The sources of streamed traces: per agent (scenario order) its feed, the attacker's
+    /// measurement records, its torque records (when the run attacks some agent's torques) and
+    /// the control center's.
+    pub fn from_feeds(
+        agents: Vec<(u32, Feed)>,
+        attacker: Feed,
+        actuation: Option<Feed>,
+        center: Feed,
+    ) -> Self {
+        Self {
+            agents: agents
+                .into_iter()
+                .map(|(id, f)| (id, Source::new(f, pick_agent)))
+                .collect(),
+            attacker: Source::new(attacker, pick_attack),
+            actuation: actuation.map(|f| Source::new(f, pick_actuation)),
+            center: Source::new(center, pick_center),
+        }
     }
 
     /// Reads every trace to its end and adds what damage they showed to `warnings`.
@@ -223,16 +257,68 @@ pub fn join_run_until(
     resolved: &Resolved,
     run_dir: &Path,
     wall_s: f64,
-    mut sink: impl FnMut(&TickRecord),
+    sink: impl FnMut(&TickRecord),
     stop: impl Fn() -> Result<()>,
 ) -> Result<Joined> {
-    let mut traces = Traces::open(resolved, run_dir)?;
+    let sources = Sources::open(resolved, run_dir)?;
+    Ok(walk(resolved, sources, 1, sink, stop)?.summarize(resolved, wall_s))
+}
+
+/// The join of traces that keep every `every`-th tick (`--traces decimate=K`): the kept ticks
+/// into `sink`. Its metrics and digest cover those ticks only (the run's summary covers them
+/// all).
+pub fn join_decimated(
+    resolved: &Resolved,
+    run_dir: &Path,
+    every: u32,
+    sink: impl FnMut(&TickRecord),
+    stop: impl Fn() -> Result<()>,
+) -> Result<Joined> {
+    let sources = Sources::open(resolved, run_dir)?;
+    Ok(walk(resolved, sources, u64::from(every.max(1)), sink, stop)?.summarize(resolved, f64::NAN))
+}
+
+/// What a walk over a run's ticks gathered: the digest and the metrics of every tick joined.
+pub struct Walked {
+    joined: u64,
+    digest: TraceDigest,
+    evaluator: Evaluator,
+    warnings: Vec<String>,
+}
+
+impl Walked {
+    /// The run's summary (engine `ipc`), and the warnings of the join.
+    pub fn summarize(self, resolved: &Resolved, wall_s: f64) -> Joined {
+        Joined {
+            summary: summarize(
+                resolved,
+                "ipc",
+                self.joined,
+                wall_s,
+                self.digest,
+                self.evaluator,
+            ),
+            warnings: self.warnings,
+        }
+    }
+}
+
+/// Walks the ticks of a run over its sources, in the in-process engine's order, feeding the
+/// digest, the metrics and `sink`; `stop` is called every few thousand ticks. `stride` 1 walks
+/// every tick; K the ticks 0, K, 2K, … of decimated traces.
+pub fn walk(
+    resolved: &Resolved,
+    mut traces: Sources,
+    stride: u64,
+    mut sink: impl FnMut(&TickRecord),
+    stop: impl Fn() -> Result<()>,
+) -> Result<Walked> {
     let mut join = Join::new(resolved);
     let mut joined = 0;
     // An agent whose trace ends early (lost in a realtime run) leaves the join; the others go on.
     let mut ended = vec![false; traces.agents.len()];
-    'ticks: for k in 0..join.ticks {
-        if k % 4096 == 4095 {
+    'ticks: for (i, k) in (0..join.ticks).step_by(stride.max(1) as usize).enumerate() {
+        if i % 4096 == 4095 {
             stop()?;
         }
         for n in 0..traces.agents.len() {
@@ -258,8 +344,10 @@ pub fn join_run_until(
         ..
     } = join;
     traces.finish(&mut warnings);
-    Ok(Joined {
-        summary: summarize(resolved, "ipc", joined, wall_s, digest, evaluator),
+    Ok(Walked {
+        joined,
+        digest,
+        evaluator,
         warnings,
     })
 }
@@ -308,7 +396,7 @@ impl Join {
     /// it. `false` when the agent's trace has ended (with a warning).
     fn agent_tick(
         &mut self,
-        traces: &mut Traces,
+        traces: &mut Sources,
         n: usize,
         k: u64,
         sink: &mut impl FnMut(&TickRecord),

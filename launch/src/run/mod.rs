@@ -7,8 +7,10 @@ pub mod interrupt;
 pub mod join;
 pub mod relay;
 pub mod replayer;
+pub mod runs;
 pub mod runtime;
 pub mod supervisor;
+pub mod tap;
 pub mod traces;
 
 use std::path::Path;
@@ -18,7 +20,7 @@ use clap::ValueEnum;
 use fdi_common::engine::{run_inproc_any, Partial, RunSummary};
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{ClockMode, Resolved};
-use fdi_common::trace::{TraceRecord, TraceWriter};
+use fdi_common::trace::{Kept, TraceRecord, TraceWriter};
 
 use crate::reporting::output;
 pub use traces::Traces;
@@ -42,16 +44,22 @@ impl Engine {
 }
 
 /// Writes the records of an in-process run as the per-process traces a multi-process run
-/// leaves, so that reports and exports read both alike.
+/// leaves, so that reports and exports read both alike; with `--traces decimate=K` only the
+/// ticks 0, K, 2K, … (said in each header).
 struct InprocTraces {
     agents: Vec<(u32, TraceWriter)>,
     attacker: TraceWriter,
     center: TraceWriter,
+    kept: Kept,
 }
 
 impl InprocTraces {
-    fn create(dir: &Path, r: &Resolved) -> Result<Self> {
-        let header = |p: &str| fdi_runtime::process::trace_header(p, r);
+    fn create(dir: &Path, r: &Resolved, kept: Kept) -> Result<Self> {
+        let header = |p: &str| {
+            let mut h = fdi_runtime::process::trace_header(p, r);
+            h.kept = kept;
+            h
+        };
         let mut agents = Vec::new();
         for a in &r.scenario.agents {
             let name = format!("agent-{}", a.id);
@@ -70,16 +78,21 @@ impl InprocTraces {
                 &runtime::trace_path(dir, "control-center"),
                 &header("control-center"),
             )?,
+            kept,
         })
     }
 
     fn write(&mut self, rec: &TickRecord) -> Result<()> {
+        let agent = TraceRecord::Agent(rec.agent);
+        if !self.kept.keeps(&agent) {
+            return Ok(());
+        }
         if let Some((_, w)) = self
             .agents
             .iter_mut()
             .find(|(id, _)| *id == rec.agent.agent)
         {
-            w.write(&TraceRecord::Agent(rec.agent))?;
+            w.write(&agent)?;
         }
         self.attacker.write(&TraceRecord::Attack(rec.attack))?;
         self.center.write(&TraceRecord::Center(rec.center))?;
@@ -107,25 +120,36 @@ pub fn execute(
     placement: &runtime::Placement,
     traces: Traces,
 ) -> Result<RunSummary> {
-    if traces != Traces::Full && run_dir.is_some() {
-        bail!("--traces {traces} is not available yet: only full");
-    }
     match (engine, run_dir) {
         (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
         (Engine::Inproc, Some(dir)) => {
-            let mut traces = InprocTraces::create(dir, r).context(runtime::DidNotStart)?;
+            let kept = match traces {
+                Traces::Full => Some(Kept::Full),
+                Traces::Decimate(k) => Some(Kept::Decimate { every: k.get() }),
+                Traces::None => None,
+            };
+            let mut writers = match kept {
+                Some(kept) => {
+                    Some(InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?)
+                }
+                None => None,
+            };
             let mut failure = None;
             let summary = run_inproc_any(r, |rec| {
-                if let Err(e) = traces.write(rec) {
-                    failure.get_or_insert(e);
+                if let Some(w) = &mut writers {
+                    if let Err(e) = w.write(rec) {
+                        failure.get_or_insert(e);
+                    }
                 }
             })
             .context("in-process engine")?;
             if let Some(e) = failure {
                 return Err(e);
             }
-            traces.flush()?;
-            output::write_summary(dir, &summary)?;
+            if let Some(w) = writers {
+                w.flush()?;
+            }
+            output::write_run_summary(dir, &summary, traces)?;
             Ok(summary)
         }
         (Engine::Ipc, dir) => {
@@ -138,16 +162,32 @@ pub fn execute(
                     &scratch
                 }
             };
-            let outcome = runtime::run_ipc(
-                r,
-                &runtime::IpcOptions {
-                    run_dir: dir.to_path_buf(),
-                    progress,
-                    replay: false,
-                    placement: placement.clone(),
-                },
-            )?;
-            let mut joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
+            let opts = runtime::IpcOptions {
+                run_dir: dir.to_path_buf(),
+                progress,
+                replay: false,
+                placement: placement.clone(),
+                pipes: traces != Traces::Full,
+            };
+            let (outcome, mut joined, write_error) = if traces == Traces::Full {
+                let outcome = runtime::run_ipc(r, &opts)?;
+                let joined = join::join_run(r, dir, outcome.wall_s, |_| {})?;
+                (outcome, joined, None)
+            } else {
+                // Joined online: the processes write into pipes, the launcher keeps what
+                // `traces` says.
+                std::fs::create_dir_all(dir.join("traces"))
+                    .context("creating the traces folder")
+                    .context(runtime::DidNotStart)?;
+                let tap = tap::Tap::create(r, dir, traces).context(runtime::DidNotStart)?;
+                let (outcome, tapped) = tap.run(r, || runtime::run_ipc(r, &opts));
+                let outcome = outcome?;
+                let joined = tapped
+                    .walked
+                    .context("joining the processes' records")?
+                    .summarize(r, outcome.wall_s);
+                (outcome, joined, tapped.write_error)
+            };
             joined.summary.lost_agents = outcome.lost;
             if let Some(signal) = outcome.interrupted {
                 let s = &mut joined.summary;
@@ -177,7 +217,10 @@ pub fn execute(
                     outcome.prefix
                 );
             }
-            output::write_summary(dir, &joined.summary)?;
+            output::write_run_summary(dir, &joined.summary, traces)?;
+            if let Some(e) = write_error {
+                bail!("a trace could not be kept: {e}; summary.json covers every tick of the run");
+            }
             Ok(joined.summary)
         }
     }

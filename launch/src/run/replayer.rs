@@ -183,6 +183,7 @@ fn check_trace(path: &Path) -> Result<()> {
 /// Checks the traces of the recorded run `recorded` that a replay reads (the attacker's, played
 /// back, and the agents', copied): every one must read to its end. Returns their paths.
 pub fn check_recording(r: &Resolved, recorded: &Path) -> Result<Vec<std::path::PathBuf>> {
+    crate::run::traces::require_every_tick(recorded, "run --replay")?;
     let attacker = crate::runtime::trace_path(recorded, "attacker");
     load_recording(r, &attacker)?;
     let mut copies = vec![attacker];
@@ -228,6 +229,7 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool) -> Result<ExitCode> {
                     progress: !json,
                     replay: true,
                     placement: crate::runtime::Placement::default(),
+                    pipes: false,
                 },
             )
         }),

@@ -178,6 +178,9 @@ pub struct IpcOptions {
     pub replay: bool,
     /// Where and how the run's processes are scheduled.
     pub placement: Placement,
+    /// The processes write their traces into the named pipes of [`crate::run::tap`]
+    /// (`traces/<process>.pipe`) instead of the trace files.
+    pub pipes: bool,
 }
 
 pub use fdi_runtime::process::{Placement, ProcessArgs};
@@ -506,7 +509,11 @@ fn spawn_roles<X: Transport>(
         let args = ProcessArgs {
             prefix: prefix.to_string(),
             scenario: scenario_path.to_path_buf(),
-            trace: trace_path(&opts.run_dir, &name),
+            trace: if opts.pipes {
+                crate::run::tap::pipe_path(&opts.run_dir, &name)
+            } else {
+                trace_path(&opts.run_dir, &name)
+            },
             agent,
             launcher_pid: Some(std::process::id()),
             placement: opts.placement.clone(),

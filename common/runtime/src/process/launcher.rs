@@ -211,5 +211,8 @@ pub fn trace_header(
         scenario_toml: resolved.to_toml(),
         seed: resolved.scenario.seed,
         clock: resolved.scenario.clock.as_str().into(),
+        // A process writes every record; the launcher decimates what it keeps
+        // (`fdi-launch run --traces`) and says so in the header of the file it writes.
+        kept: fdi_common::trace::Kept::Full,
     }
 }
