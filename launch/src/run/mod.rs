@@ -110,8 +110,9 @@ impl InprocTraces {
 }
 
 /// Runs a resolved scenario on an engine. With `run_dir`, traces and the summary go there; an
-/// ipc run without one uses a scratch folder under the system's temporary directory. `traces`
-/// says what of the traces the run directory keeps.
+/// ipc run without one uses a scratch folder under the system's temporary directory that keeps
+/// no traces and is removed at the end. `traces` says what of the traces the run directory
+/// keeps.
 pub fn execute(
     r: &Resolved,
     engine: Engine,
@@ -152,16 +153,20 @@ pub fn execute(
             output::write_run_summary(dir, &summary, traces)?;
             Ok(summary)
         }
-        (Engine::Ipc, dir) => {
-            let scratch;
-            let dir = match dir {
-                Some(d) => d,
-                None => {
-                    scratch =
-                        output::create_run_dir(&std::env::temp_dir().join("fdi-mas-runs"), r)?;
-                    &scratch
-                }
-            };
+        (Engine::Ipc, None) => {
+            // The processes need a folder of their own (the scenario as used, their pipes):
+            // a scratch run directory that keeps no traces, removed after the run.
+            let scratch = output::create_run_dir(&std::env::temp_dir().join("fdi-mas-runs"), r)?;
+            let summary = execute(r, engine, Some(&scratch), progress, placement, Traces::None);
+            if let Err(e) = std::fs::remove_dir_all(&scratch) {
+                eprintln!(
+                    "fdi-launch: warning: the scratch run directory {} could not be removed: {e}",
+                    scratch.display()
+                );
+            }
+            summary
+        }
+        (Engine::Ipc, Some(dir)) => {
             let opts = runtime::IpcOptions {
                 run_dir: dir.to_path_buf(),
                 progress,
