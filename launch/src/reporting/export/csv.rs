@@ -25,6 +25,8 @@ use anyhow::{bail, Context, Result};
 use fdi_common::records::{
     true_s, ActuationRecord, AgentRecord, AttackRecord, CenterRecord, Joints,
 };
+#[cfg(test)]
+use fdi_common::scenario::MAX_DOF;
 use fdi_common::trace::{HopStamps, TraceError, TraceReader, TraceRecord};
 
 use super::REORDER_TICKS;
@@ -496,4 +498,123 @@ fn center_row(
         row.push(flag(b));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use fdi_common::engine::tick_time;
+
+    use super::*;
+
+    fn fixture_copy() -> tempfile::TempDir {
+        let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("testdata/short-run");
+        let tmp = tempfile::tempdir().expect("a scratch folder");
+        std::fs::create_dir(tmp.path().join("traces")).expect("traces/");
+        for e in std::fs::read_dir(from.join("traces")).expect("the fixture's traces") {
+            let p = e.expect("an entry").path();
+            std::fs::copy(
+                &p,
+                tmp.path().join("traces").join(p.file_name().expect("name")),
+            )
+            .expect("copy");
+        }
+        tmp
+    }
+
+    fn read(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+        let mut r = csv::Reader::from_path(path).expect("a CSV");
+        let header = r
+            .headers()
+            .expect("a header")
+            .iter()
+            .map(String::from)
+            .collect();
+        let rows = r
+            .records()
+            .map(|x| x.expect("a row").iter().map(String::from).collect())
+            .collect();
+        (header, rows)
+    }
+
+    #[test]
+    fn column_names_carry_their_units() {
+        assert_eq!(
+            Kind::Agent.header(2).join(","),
+            "k,agent,t_s,q1_rad,q2_rad,q1_dot_rad_s,q2_dot_rad_s,q1_ddot_rad_s2,q2_ddot_rad_s2,\
+             y1_clean_rad,y2_clean_rad,y1_dot_clean_rad_s,y2_dot_clean_rad_s,\
+             u1_applied_nm,u2_applied_nm,tau_s,missed"
+        );
+        assert_eq!(
+            Kind::Attack.header(1).join(","),
+            "k,agent,t_s,alpha1_pos_rad,alpha1_vel_rad_s,y1_tampered_rad,y1_dot_tampered_rad_s,active,delivery"
+        );
+        assert_eq!(
+            Kind::Actuation.header(1).join(","),
+            "k,agent,t_s,alpha1_u_nm,u1_tampered_nm,held_s,active,delivery"
+        );
+        assert_eq!(
+            Kind::Center.header(1).join(","),
+            "k,agent,t_s,q1_des_rad,q1_dot_des_rad_s,q1_ddot_des_rad_s2,s1_true_rad_s,s1_hat_rad_s,\
+             q1_hat_rad,q1_dot_hat_rad_s,q1_ddot_hat_rad_s2,u1_sent_nm,alarm,rejected_input,\
+             rejected_torque,state_reset,history_miss,missing_input"
+        );
+    }
+
+    #[test]
+    fn short_vectors_leave_empty_cells_and_long_ones_are_refused() {
+        let mut r = Row::default();
+        joints(&mut r, &Joints::from_slice(&[0.5]), 2).expect("fits");
+        assert_eq!(r.record.iter().collect::<Vec<_>>(), [&b"0.5"[..], b""]);
+        assert!(joints(&mut r, &Joints::from_slice(&[1.0, 2.0]), 1).is_err());
+    }
+
+    /// The fixture's center rows: sorted, timed by `tick_time`, with the scenario's desired
+    /// trajectory and the attacker's `S` of the same tick, bit for bit.
+    #[test]
+    fn the_center_file_holds_time_desired_trajectory_and_true_s_in_tick_agent_order() {
+        let dir = fixture_copy();
+        export(dir.path()).expect("exported");
+        let trace = dir.path().join("traces/control-center.trace");
+        let reader = TraceReader::open(&trace).expect("opens");
+        let info = RunInfo::from_header(&trace, reader.header()).expect("its scenario");
+        let attacks: BTreeMap<(u64, u32), AttackRecord> =
+            TraceReader::open(&dir.path().join("traces/attacker.trace"))
+                .expect("opens")
+                .filter_map(|r| match r.expect("whole") {
+                    TraceRecord::Attack(a) => Some(((a.k, a.agent), a)),
+                    _ => None,
+                })
+                .collect();
+        let (header, rows) = read(&dir.path().join("export/control-center.csv"));
+        assert_eq!(rows.len(), attacks.len(), "one row per center record");
+        let col = |name: &str| header.iter().position(|h| h == name).expect(name);
+        let bits = |row: &[String], name: &str| -> u64 {
+            row[col(name)].parse::<f64>().expect(name).to_bits()
+        };
+        let mut before = None;
+        for row in &rows {
+            let k: u64 = row[col("k")].parse().expect("k");
+            let agent: u32 = row[col("agent")].parse().expect("agent");
+            assert!(before < Some((k, agent)), "rows out of (tick, agent) order");
+            before = Some((k, agent));
+            assert_eq!(bits(row, "t_s"), tick_time(k, info.dt).to_bits());
+            let a = info.agents.get(&agent).expect("a scenario agent");
+            let r = a.trajectory.reference::<MAX_DOF>(tick_time(k, info.dt));
+            let x = &attacks[&(k, agent)];
+            for i in 0..a.dof {
+                let l = i + 1;
+                assert_eq!(bits(row, &format!("q{l}_des_rad")), r.q[i].to_bits());
+                assert_eq!(bits(row, &format!("q{l}_dot_des_rad_s")), r.qd[i].to_bits());
+                let s = true_s(
+                    x.alpha_position.as_slice()[i],
+                    x.alpha_velocity.as_slice()[i],
+                    info.beta,
+                );
+                assert_eq!(bits(row, &format!("s{l}_true_rad_s")), s.to_bits());
+            }
+        }
+        // Some tick of the fixture has a non-zero desired angle and attack term.
+        assert!(rows.iter().any(|r| r[col("q1_des_rad")] != "0"));
+        assert!(rows.iter().any(|r| r[col("s1_true_rad_s")] != "0"));
+    }
 }

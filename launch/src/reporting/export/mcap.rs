@@ -752,3 +752,160 @@ fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
     }
     Ok(n)
 }
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeSet;
+
+    use fdi_common::engine::tick_time;
+
+    use super::*;
+
+    fn fixture_copy() -> tempfile::TempDir {
+        let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("testdata/short-run");
+        let tmp = tempfile::tempdir().expect("a scratch folder");
+        std::fs::create_dir(tmp.path().join("traces")).expect("traces/");
+        std::fs::copy(from.join("scenario.toml"), tmp.path().join("scenario.toml")).expect("copy");
+        for e in std::fs::read_dir(from.join("traces")).expect("the fixture's traces") {
+            let p = e.expect("an entry").path();
+            std::fs::copy(
+                &p,
+                tmp.path().join("traces").join(p.file_name().expect("name")),
+            )
+            .expect("copy");
+        }
+        tmp
+    }
+
+    /// The messages each topic must have: counted from the traces themselves and their join.
+    fn expected(dir: &Path) -> BTreeMap<String, u64> {
+        let mut want: BTreeMap<String, u64> = BTreeMap::new();
+        let mut add = |agent: u32, names: &[&str]| {
+            for n in names {
+                *want.entry(topic(agent, n)).or_default() += 1;
+            }
+        };
+        let mut events = 0;
+        let mut scenario = None;
+        for f in trace_files(dir).expect("traces") {
+            let reader = TraceReader::open(&f).expect("the fixture reads");
+            scenario.get_or_insert_with(|| {
+                RunInfo::from_header(&f, reader.header()).expect("its scenario")
+            });
+            for r in reader {
+                match r.expect("the fixture reads whole") {
+                    TraceRecord::Agent(a) => add(
+                        a.agent,
+                        &[
+                            "state",
+                            "desired",
+                            "tracking_error",
+                            "measurement/clean",
+                            "torque/applied",
+                            "delay",
+                        ],
+                    ),
+                    TraceRecord::Attack(a) => add(a.agent, &["attack", "measurement/tampered"]),
+                    TraceRecord::Center(c) => add(c.agent, &["estimate", "torque/sent", "alarm"]),
+                    TraceRecord::Latency { agent, .. } => add(agent, &["latency"]),
+                    TraceRecord::Actuation(a) => add(a.agent, &["actuation"]),
+                    TraceRecord::Event { .. } => events += 1,
+                }
+            }
+        }
+        let info = scenario.expect("a trace");
+        join::join_run(&info.resolved, dir, 0.0, |r| {
+            add(r.agent.agent, &["detectors"])
+        })
+        .expect("joined");
+        if events > 0 {
+            want.insert("/events".into(), events);
+        }
+        want
+    }
+
+    #[test]
+    fn every_topic_reads_back_with_the_run_s_message_count_schema_fields_and_tick_times() {
+        let dir = fixture_copy();
+        export(dir.path()).expect("exported");
+        let bytes = std::fs::read(dir.path().join("export/run.mcap")).expect("run.mcap");
+        let want = expected(dir.path());
+        let dt = fdi_common::scenario::load_file(&dir.path().join("scenario.toml"))
+            .expect("the fixture's scenario")
+            .scenario
+            .control_period_s;
+        assert!(want.len() >= 4 * 12, "{want:?}");
+
+        let schemas: BTreeMap<&str, &Schema> = TOPICS.iter().map(|(n, s)| (*n, *s)).collect();
+        let mut got: BTreeMap<String, u64> = BTreeMap::new();
+        let mut last: BTreeMap<String, u64> = BTreeMap::new();
+        for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+            let m = m.expect("a whole message");
+            let topic = m.channel.topic.clone();
+            let schema = m.channel.schema.as_ref().expect("a schema");
+            assert_eq!(schema.encoding, "jsonschema");
+            assert_eq!(m.channel.message_encoding, "json");
+            let fields: BTreeSet<String> = serde_json::from_slice::<Value>(&schema.data)
+                .expect("a JSON schema")["properties"]
+                .as_object()
+                .expect("properties")
+                .keys()
+                .cloned()
+                .collect();
+            let name = topic.splitn(3, '/').nth(2).unwrap_or(&topic);
+            let declared = if topic == "/events" {
+                &EVENT
+            } else {
+                schemas
+                    .get(name)
+                    .unwrap_or_else(|| panic!("{topic}: not a listed topic"))
+            };
+            assert_eq!(schema.name, declared.name, "{topic}");
+            let body: Value = serde_json::from_slice(&m.data).expect("a JSON message");
+            let keys: BTreeSet<String> = body
+                .as_object()
+                .expect("an object")
+                .keys()
+                .cloned()
+                .collect();
+            assert_eq!(keys, fields, "{topic}");
+            assert_eq!(m.log_time, m.publish_time, "{topic}");
+            if let Some(k) = body.get("k").and_then(Value::as_u64) {
+                let t = tick_time(k, dt);
+                assert_eq!(
+                    body["t_s"].as_f64().map(f64::to_bits),
+                    Some(t.to_bits()),
+                    "{topic}"
+                );
+                assert_eq!(m.log_time, ns(t).expect("a time"), "{topic}");
+            }
+            let before = last.insert(topic.clone(), m.log_time).unwrap_or(0);
+            assert!(before <= m.log_time, "{topic}: log times out of order");
+            *got.entry(topic).or_default() += 1;
+        }
+        assert_eq!(got, want);
+        let summary = mcap::Summary::read(&bytes)
+            .expect("a summary")
+            .expect("a summary");
+        assert_eq!(summary.channels.len(), want.len());
+        assert_eq!(summary.metadata_indexes.len(), 1, "the fdi-mas metadata");
+    }
+
+    #[test]
+    fn every_schema_lists_each_field_once_and_requires_it() {
+        for (name, s) in TOPICS.iter().chain([&("events", &EVENT)]) {
+            let v = json_schema(s);
+            let props = v["properties"].as_object().expect("properties");
+            assert_eq!(props.len(), s.fields.len(), "{name}: a field named twice");
+            assert_eq!(
+                v["required"].as_array().map(Vec::len),
+                Some(s.fields.len()),
+                "{name}"
+            );
+            assert!(
+                props.values().all(|p| p["description"].is_string()),
+                "{name}"
+            );
+        }
+    }
+}
