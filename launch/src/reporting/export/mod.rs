@@ -82,6 +82,9 @@ fn failed(failures: Vec<String>) -> Result<()> {
     }
 }
 
+/// `(q_d, q̇_d, q̈_d)` of one tick, rad, rad/s, rad/s², and how many of their entries are links.
+type Desired = ([f64; MAX_DOF], [f64; MAX_DOF], [f64; MAX_DOF], usize);
+
 /// One agent as the scenario of a trace describes it.
 #[derive(Debug, Clone)]
 struct AgentInfo {
@@ -153,12 +156,7 @@ impl RunInfo {
     }
 
     /// `(q_d, q̇_d, q̈_d)` of agent `id` at tick `k`, rad, rad/s, rad/s².
-    fn desired(
-        &self,
-        path: &Path,
-        id: u32,
-        k: u64,
-    ) -> Result<([f64; MAX_DOF], [f64; MAX_DOF], [f64; MAX_DOF], usize)> {
+    fn desired(&self, path: &Path, id: u32, k: u64) -> Result<Desired> {
         let a = self.agent(path, id)?;
         let r = a.trajectory.reference::<MAX_DOF>(self.t(k));
         let arr = |v: &fdi_common::model::Vector<MAX_DOF>| {
