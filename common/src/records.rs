@@ -133,6 +133,13 @@ impl Delivery {
     }
 }
 
+/// The true attack term of one link that the estimate `Ŝ` tracks, rad/s: `S = S₂ + β S₁`, with
+/// `S₁` the injected position (`alpha_position`, rad) and `S₂` the injected velocity
+/// (`alpha_velocity`, rad/s). The one place that says it (the report's figures, the exports).
+pub fn true_s(alpha_position: f64, alpha_velocity: f64, beta: f64) -> f64 {
+    alpha_velocity + beta * alpha_position
+}
+
 /// What the attacker process knows about tick `k` of one agent's measurement.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AttackRecord {

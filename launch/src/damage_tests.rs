@@ -1,7 +1,7 @@
 //! Property test: damaged copies of a real short run's traces (`testdata/short-run`, see its
 //! README) — truncated, with bits flipped, bytes set to the markers of long lengths, bytes
 //! inserted or deleted, anywhere, at the start of the header or at a frame's length. The readers
-//! of `report` (the join), `trace export` and `run --replay` (its recording check) never panic,
+//! of `report` (the join), `trace export` (CSV and MCAP) and `run --replay` (its recording check) never panic,
 //! never allocate more than a bound, and for every damaged file give an error (or, for the join,
 //! a warning) that names the file and the byte offset.
 //!
@@ -273,6 +273,7 @@ fn the_short_run_fixture_reads_whole_and_joins_every_tick() {
     assert_eq!(joined.summary.ticks, 20, "{:?}", joined.warnings);
     assert!(joined.warnings.is_empty(), "{:?}", joined.warnings);
     export::export(dir.path(), export::Format::Csv).expect("exported");
+    export::export(dir.path(), export::Format::Mcap).expect("exported");
     replayer::check_recording(&resolved(), dir.path()).expect("replayable");
 }
 
@@ -309,11 +310,13 @@ proptest! {
             prop_assert!(names_file_and_offset(&text, &path), "report's join: {text}");
         }
 
-        let (exported, big, grew) = measured(|| export::export(dir.path(), export::Format::Csv));
-        prop_assert!(big <= MAX_ONE_ALLOCATION && grew <= MAX_LIVE_GROWTH, "export: {big} / {grew} bytes");
-        if damage.is_some() {
-            let text = exported.as_ref().err().map(|e| format!("{e:#}")).unwrap_or_default();
-            prop_assert!(names_file_and_offset(&text, &path), "export: {text}");
+        for format in [export::Format::Csv, export::Format::Mcap] {
+            let (exported, big, grew) = measured(|| export::export(dir.path(), format));
+            prop_assert!(big <= MAX_ONE_ALLOCATION && grew <= MAX_LIVE_GROWTH, "export {format:?}: {big} / {grew} bytes");
+            if damage.is_some() {
+                let text = exported.as_ref().err().map(|e| format!("{e:#}")).unwrap_or_default();
+                prop_assert!(names_file_and_offset(&text, &path), "export {format:?}: {text}");
+            }
         }
 
         // The replay reads the attacker trace and checks the agents'; the center's is re-made.

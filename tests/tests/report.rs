@@ -197,9 +197,10 @@ fn flag(row: &BTreeMap<&str, &str>, col: &str) -> bool {
     }
 }
 
-fn same_joints(row: &BTreeMap<&str, &str>, name: &str, j: &Joints) {
+/// The columns `<stem><link><suffix>` of a vector (links from 1): `("q", "_dot_rad_s")`.
+fn same_joints(row: &BTreeMap<&str, &str>, (stem, suffix): (&str, &str), j: &Joints) {
     for (i, x) in j.as_slice().iter().enumerate() {
-        let col = format!("{name}{}", i + 1);
+        let col = format!("{stem}{}{suffix}", i + 1);
         assert_eq!(f64_bits(row, &col), x.to_bits(), "{col}");
     }
 }
@@ -210,28 +211,28 @@ fn assert_row_is_record(row: &BTreeMap<&str, &str>, rec: &TraceRecord) {
         TraceRecord::Agent(a) => {
             assert_eq!(int(row, "k"), a.k);
             assert_eq!(int(row, "agent"), u64::from(a.agent));
-            assert_eq!(f64_bits(row, "t"), a.t.to_bits());
+            assert_eq!(f64_bits(row, "t_s"), a.t.to_bits());
             for (name, j) in [
-                ("q", &a.q),
-                ("qd", &a.qd),
-                ("qdd", &a.qdd),
-                ("y", &a.y),
-                ("yd", &a.yd),
-                ("u_applied", &a.u_applied),
+                (("q", "_rad"), &a.q),
+                (("q", "_dot_rad_s"), &a.qd),
+                (("q", "_ddot_rad_s2"), &a.qdd),
+                (("y", "_clean_rad"), &a.y),
+                (("y", "_dot_clean_rad_s"), &a.yd),
+                (("u", "_applied_nm"), &a.u_applied),
             ] {
                 same_joints(row, name, j);
             }
-            assert_eq!(f64_bits(row, "tau"), a.tau.to_bits());
+            assert_eq!(f64_bits(row, "tau_s"), a.tau.to_bits());
             assert_eq!(flag(row, "missed"), a.missed);
         }
         TraceRecord::Attack(a) => {
             assert_eq!(int(row, "k"), a.k);
             assert_eq!(int(row, "agent"), u64::from(a.agent));
             for (name, j) in [
-                ("alpha_position", &a.alpha_position),
-                ("alpha_velocity", &a.alpha_velocity),
-                ("y", &a.y),
-                ("yd", &a.yd),
+                (("alpha", "_pos_rad"), &a.alpha_position),
+                (("alpha", "_vel_rad_s"), &a.alpha_velocity),
+                (("y", "_tampered_rad"), &a.y),
+                (("y", "_dot_tampered_rad_s"), &a.yd),
             ] {
                 same_joints(row, name, j);
             }
@@ -241,8 +242,8 @@ fn assert_row_is_record(row: &BTreeMap<&str, &str>, rec: &TraceRecord) {
         TraceRecord::Actuation(a) => {
             assert_eq!(int(row, "k"), a.k);
             assert_eq!(int(row, "agent"), u64::from(a.agent));
-            same_joints(row, "alpha_u", &a.alpha_u);
-            same_joints(row, "u", &a.u);
+            same_joints(row, ("alpha", "_u_nm"), &a.alpha_u);
+            same_joints(row, ("u", "_tampered_nm"), &a.u);
             assert_eq!(f64_bits(row, "held_s"), a.held_s.to_bits());
             assert_eq!(flag(row, "active"), a.active);
             assert_eq!(row.get("delivery").copied(), Some(a.delivery.as_str()));
@@ -251,11 +252,11 @@ fn assert_row_is_record(row: &BTreeMap<&str, &str>, rec: &TraceRecord) {
             assert_eq!(int(row, "k"), c.k);
             assert_eq!(int(row, "agent"), u64::from(c.agent));
             for (name, j) in [
-                ("s_hat", &c.s_hat),
-                ("q_hat", &c.q_hat),
-                ("qd_hat", &c.qd_hat),
-                ("qdd_hat", &c.qdd_hat),
-                ("u", &c.u),
+                (("s", "_hat_rad_s"), &c.s_hat),
+                (("q", "_hat_rad"), &c.q_hat),
+                (("q", "_dot_hat_rad_s"), &c.qd_hat),
+                (("q", "_ddot_hat_rad_s2"), &c.qdd_hat),
+                (("u", "_sent_nm"), &c.u),
             ] {
                 same_joints(row, name, j);
             }
@@ -310,9 +311,22 @@ fn export(run_dir: &Path) -> std::process::Output {
     )
 }
 
-/// Checks `<stem>.csv` (and `<stem>-latency.csv`) against the records of `trace`.
+/// The (tick, agent) of a per-tick record: the order of the CSV rows.
+fn tick_agent(r: &TraceRecord) -> (u64, u32) {
+    match r {
+        TraceRecord::Agent(a) => (a.k, a.agent),
+        TraceRecord::Attack(a) => (a.k, a.agent),
+        TraceRecord::Center(c) => (c.k, c.agent),
+        TraceRecord::Actuation(a) => (a.k, a.agent),
+        TraceRecord::Latency { k, agent, .. } => (*k, *agent),
+        TraceRecord::Event { .. } => (u64::MAX, u32::MAX),
+    }
+}
+
+/// Checks `<stem>.csv` (and `<stem>-latency.csv`) against the records of `trace`, in (tick,
+/// agent) order.
 fn assert_csv_matches(run_dir: &Path, stem: &str, recs: &[TraceRecord]) {
-    let main: Vec<&TraceRecord> = recs
+    let mut main: Vec<&TraceRecord> = recs
         .iter()
         .filter(|r| {
             matches!(
@@ -321,15 +335,17 @@ fn assert_csv_matches(run_dir: &Path, stem: &str, recs: &[TraceRecord]) {
             )
         })
         .collect();
+    main.sort_by_key(|r| tick_agent(r));
     let (header, rows) = read_csv(&export_dir(run_dir).join(format!("{stem}.csv")));
     assert_eq!(rows.len(), main.len(), "{stem}.csv rows");
     for (row, rec) in rows.iter().zip(&main) {
         assert_row_is_record(&fields(&header, row), rec);
     }
-    let latency: Vec<&TraceRecord> = recs
+    let mut latency: Vec<&TraceRecord> = recs
         .iter()
         .filter(|r| matches!(r, TraceRecord::Latency { .. }))
         .collect();
+    latency.sort_by_key(|r| tick_agent(r));
     let path = export_dir(run_dir).join(format!("{stem}-latency.csv"));
     if latency.is_empty() {
         assert!(!path.exists(), "{} without latency records", path.display());
@@ -371,7 +387,7 @@ fn csv_export_round_trips_every_trace_value_bit_for_bit() {
             .count();
     }
     let text = std::fs::read_to_string(export_dir(&run_dir).join("events.csv")).expect("events");
-    assert!(text.starts_with("process,t,message\n"), "{text}");
+    assert!(text.starts_with("process,t_s,message\n"), "{text}");
     // Messages may hold quoted commas but no newlines: one line per event.
     assert_eq!(text.lines().count() - 1, events, "{text}");
 }

@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use crate::run::traces::Recorded;
 use anyhow::{bail, Context, Result};
 use fdi_common::engine::RunSummary;
-use fdi_common::records::TickRecord;
+use fdi_common::records::{true_s, TickRecord};
 use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::trajectory::TrajectoryConfig;
 
@@ -375,7 +375,7 @@ impl RunSeries {
         for i in 0..a.dof {
             let e_pos = reference.q[i] - get(q, i);
             let e_vel = reference.qd[i] - get(qd, i);
-            let s_true = get(av, i) + beta * get(ap, i);
+            let s_true = true_s(get(ap, i), get(av, i), beta);
             let sh = get(s_hat, i);
             a.pos[i].push(t, e_pos);
             a.vel[i].push(t, e_vel);

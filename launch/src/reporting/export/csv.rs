@@ -1,0 +1,620 @@
+//! CSV export: every `RUN_DIR/traces/<process>.trace` becomes `RUN_DIR/export/<process>.csv`, a
+//! header row and one row per record, in (tick, agent) order. Latency records go to
+//! `<process>-latency.csv`, the attacker's torque records to `attacker-actuation.csv`, events of
+//! every trace to `events.csv`; records of a kind the process does not usually write (say,
+//! center records in an agent trace) to `<process>-<kind>.csv`. Every column is listed in
+//! docs/traces.md.
+//!
+//! Every column name carries its unit (`q1_rad`, `q1_dot_rad_s`, `u1_applied_nm`, `t_s`); `t_s`
+//! is [`fdi_common::engine::tick_time`] of the tick `k`. The control center's file also holds
+//! the desired trajectory of the scenario in its header and the true attack term
+//! `S = S₂ + β S₁` ([`true_s`]) from the attacker's record of the same tick.
+//!
+//! Floats are written with Rust's `{}` (shortest text that parses back to the same `f64`, bit for
+//! bit), flags as `0`/`1`, vectors as one column per link (a record with fewer links than the
+//! trace's scenario leaves the extra cells empty). Fields are quoted where CSV needs it (a comma,
+//! a quote or a line break in an event message). A damaged trace is exported up to its last
+//! whole record, then the export fails naming the file and the byte offset.
+
+use std::collections::BTreeMap;
+use std::fmt::{Display, Write as _};
+use std::fs::File;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use fdi_common::records::{
+    true_s, ActuationRecord, AgentRecord, AttackRecord, CenterRecord, Joints,
+};
+#[cfg(test)]
+use fdi_common::scenario::MAX_DOF;
+use fdi_common::trace::{HopStamps, TraceError, TraceReader, TraceRecord};
+
+use super::REORDER_TICKS;
+use super::{failed, out_dir, read_sorted, stem, trace_files, Kind, Reorder, RunInfo};
+
+pub(super) fn export(run_dir: &Path) -> Result<()> {
+    let files = trace_files(run_dir)?;
+    let out = out_dir(run_dir)?;
+    let events_path = out.join("events.csv");
+    let mut events = Csv::create(&events_path, &["process", "t_s", "message"])?;
+    let mut failures = Vec::new();
+    for f in &files {
+        let mut n = 0;
+        match export_file(f, &out, &mut events, &mut n) {
+            Ok(()) => println!("{} -> {}: {n} records", f.display(), out.display()),
+            Err(e) if n > 0 => failures.push(format!(
+                "{e:#} (the {n} records before it are exported to {})",
+                out.display()
+            )),
+            Err(e) => failures.push(format!("{e:#}")),
+        }
+    }
+    events.finish()?;
+    failed(failures)
+}
+
+/// One row being built: its fields, each formatted with `{}`.
+#[derive(Default)]
+struct Row {
+    record: csv::ByteRecord,
+    field: String,
+}
+
+impl Row {
+    fn push(&mut self, value: impl Display) {
+        self.field.clear();
+        let _ = write!(self.field, "{value}");
+        self.record.push_field(self.field.as_bytes());
+    }
+
+    fn push_empty(&mut self) {
+        self.record.push_field(b"");
+    }
+}
+
+/// A CSV file being written. A row reaches the file whole or not at all.
+struct Csv {
+    path: PathBuf,
+    out: csv::Writer<File>,
+    row: Row,
+}
+
+impl Csv {
+    fn create<H: AsRef<[u8]>>(path: &Path, header: &[H]) -> Result<Self> {
+        let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut c = Self {
+            path: path.to_path_buf(),
+            out: csv::WriterBuilder::new()
+                .buffer_capacity(1 << 16)
+                .from_writer(file),
+            row: Row::default(),
+        };
+        c.out
+            .write_record(header)
+            .with_context(|| format!("writing {}", c.path.display()))?;
+        Ok(c)
+    }
+
+    /// Writes the row built so far and starts the next.
+    fn end(&mut self) -> Result<()> {
+        let written = self.out.write_byte_record(&self.row.record);
+        self.row.record.clear();
+        written.with_context(|| format!("writing {}", self.path.display()))
+    }
+
+    fn finish(mut self) -> Result<()> {
+        self.out
+            .flush()
+            .with_context(|| format!("writing {}", self.path.display()))
+    }
+}
+
+/// A group of columns: one, or one per link named `<stem><link><suffix>` (links from 1).
+#[derive(Debug, Clone, Copy)]
+enum Col {
+    One(&'static str),
+    Links(&'static str, &'static str),
+}
+
+use Col::{Links, One};
+
+const AGENT: &[Col] = &[
+    One("k"),
+    One("agent"),
+    One("t_s"),
+    Links("q", "_rad"),
+    Links("q", "_dot_rad_s"),
+    Links("q", "_ddot_rad_s2"),
+    Links("y", "_clean_rad"),
+    Links("y", "_dot_clean_rad_s"),
+    Links("u", "_applied_nm"),
+    One("tau_s"),
+    One("missed"),
+];
+
+const ATTACK: &[Col] = &[
+    One("k"),
+    One("agent"),
+    One("t_s"),
+    Links("alpha", "_pos_rad"),
+    Links("alpha", "_vel_rad_s"),
+    Links("y", "_tampered_rad"),
+    Links("y", "_dot_tampered_rad_s"),
+    One("active"),
+    One("delivery"),
+];
+
+const ACTUATION: &[Col] = &[
+    One("k"),
+    One("agent"),
+    One("t_s"),
+    Links("alpha", "_u_nm"),
+    Links("u", "_tampered_nm"),
+    One("held_s"),
+    One("active"),
+    One("delivery"),
+];
+
+const CENTER: &[Col] = &[
+    One("k"),
+    One("agent"),
+    One("t_s"),
+    Links("q", "_des_rad"),
+    Links("q", "_dot_des_rad_s"),
+    Links("q", "_ddot_des_rad_s2"),
+    Links("s", "_true_rad_s"),
+    Links("s", "_hat_rad_s"),
+    Links("q", "_hat_rad"),
+    Links("q", "_dot_hat_rad_s"),
+    Links("q", "_ddot_hat_rad_s2"),
+    Links("u", "_sent_nm"),
+    One("alarm"),
+    One("rejected_input"),
+    One("rejected_torque"),
+    One("state_reset"),
+    One("history_miss"),
+    One("missing_input"),
+];
+
+const LATENCY: &[Col] = &[
+    One("k"),
+    One("agent"),
+    One("t_s"),
+    One("agent_sent_ns"),
+    One("attacker_received_ns"),
+    One("attacker_sent_ns"),
+    One("center_received_ns"),
+    One("center_sent_ns"),
+    One("agent_received_ns"),
+];
+
+impl Kind {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Agent => "agent",
+            Self::Attack => "attacker",
+            Self::Center => "control-center",
+            Self::Latency => "latency",
+            Self::Actuation => "actuation",
+        }
+    }
+
+    fn columns(self) -> &'static [Col] {
+        match self {
+            Self::Agent => AGENT,
+            Self::Attack => ATTACK,
+            Self::Center => CENTER,
+            Self::Latency => LATENCY,
+            Self::Actuation => ACTUATION,
+        }
+    }
+
+    /// The column names for vectors of `dof` links.
+    fn header(self, dof: usize) -> Vec<String> {
+        self.columns()
+            .iter()
+            .flat_map(|c| match *c {
+                One(name) => vec![name.to_string()],
+                Links(stem, suffix) => (1..=dof).map(|i| format!("{stem}{i}{suffix}")).collect(),
+            })
+            .collect()
+    }
+}
+
+/// The row kind a process writes as its main CSV.
+fn main_kind(process: &str) -> Option<Kind> {
+    if process.starts_with("agent") {
+        Some(Kind::Agent)
+    } else if process == "attacker" {
+        Some(Kind::Attack)
+    } else if process == "control-center" {
+        Some(Kind::Center)
+    } else {
+        None
+    }
+}
+
+/// The attacker's records of a run, looked up in (tick, agent) order: the injected values of
+/// the ticks the control center's rows need for `S`.
+struct AttackLookup {
+    reader: TraceReader,
+    held: Reorder<AttackRecord>,
+    ended: bool,
+    /// Why the lookup ended before the end of the attacker trace.
+    problem: Option<String>,
+}
+
+impl AttackLookup {
+    fn open(path: &Path) -> Result<Self, TraceError> {
+        Ok(Self {
+            reader: TraceReader::open(path)?,
+            held: Reorder::default(),
+            ended: false,
+            problem: None,
+        })
+    }
+
+    /// The attacker's record of tick `k` of `agent`; calls come in (tick, agent) order.
+    fn get(&mut self, k: u64, agent: u32) -> Option<AttackRecord> {
+        while !self.ended && self.held.newest <= k.saturating_add(REORDER_TICKS) {
+            match self.reader.next() {
+                None => self.ended = true,
+                Some(Err(e)) => {
+                    self.ended = true;
+                    self.problem = Some(e.to_string());
+                }
+                Some(Ok(TraceRecord::Attack(a))) => {
+                    if let Err(e) = self.held.push(a.k, a.agent, a) {
+                        self.ended = true;
+                        self.problem = Some(format!("{}: {e:#}", self.reader.path().display()));
+                    }
+                }
+                Some(Ok(_)) => {}
+            }
+        }
+        while self.held.first().is_some_and(|key| key < (k, agent)) {
+            self.held.pop();
+        }
+        if self.held.first() == Some((k, agent)) {
+            self.held.pop()
+        } else {
+            None
+        }
+    }
+}
+
+/// Exports one trace, counting its records in `n`. Records before a damage are written.
+fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result<()> {
+    let mut reader = TraceReader::open(path)?;
+    let stem = stem(path);
+    let header = reader.header().clone();
+    let info = RunInfo::from_header(path, &header)?;
+    let dof = info.dof;
+    let main = main_kind(&header.process).or_else(|| main_kind(&stem));
+    let mut files: BTreeMap<Kind, Csv> = BTreeMap::new();
+    let file_for = |kind: Kind| -> PathBuf {
+        if Some(kind) == main {
+            out.join(format!("{stem}.csv"))
+        } else {
+            out.join(format!("{stem}-{}.csv", kind.name()))
+        }
+    };
+    if let Some(k) = main {
+        files.insert(k, Csv::create(&file_for(k), &k.header(dof))?);
+    }
+    // The attacker trace beside this one, for S in the control center's rows.
+    let attacker = path.with_file_name("attacker.trace");
+    let mut lookup: Option<Result<AttackLookup, String>> = None;
+    let read = read_sorted(path, &mut reader, n, |rec, at| {
+        let Some((kind, _, _)) = Kind::of(rec) else {
+            if let TraceRecord::Event { t, message } = rec {
+                events.row.push(&stem);
+                events.row.push(t);
+                events.row.push(message);
+                events.end()?;
+            }
+            return Ok(());
+        };
+        let csv = match files.entry(kind) {
+            std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
+            std::collections::btree_map::Entry::Vacant(e) => {
+                e.insert(Csv::create(&file_for(kind), &kind.header(dof))?)
+            }
+        };
+        let attack = match rec {
+            TraceRecord::Center(c) => lookup
+                .get_or_insert_with(|| AttackLookup::open(&attacker).map_err(|e| e.to_string()))
+                .as_mut()
+                .ok()
+                .and_then(|l| l.get(c.k, c.agent)),
+            _ => None,
+        };
+        csv.row.record.clear();
+        row(&mut csv.row, rec, &info, path, attack.as_ref())
+            .with_context(|| format!("{}: record at byte offset {at}", path.display()))?;
+        csv.end()
+    });
+    for (_, c) in files {
+        c.finish()?;
+    }
+    read?;
+    match lookup {
+        Some(Err(e)) => bail!(
+            "{}: the s_true columns of its CSV are empty: the attacker trace could not be read: {e}",
+            path.display()
+        ),
+        Some(Ok(AttackLookup {
+            problem: Some(p), ..
+        })) => bail!(
+            "{}: the s_true columns of its CSV are empty from where the attacker trace could no longer be read: {p}",
+            path.display()
+        ),
+        _ => Ok(()),
+    }
+}
+
+/// `dof` cells of a vector; an error when it has more entries.
+fn joints(row: &mut Row, j: &Joints, dof: usize) -> Result<()> {
+    let v = j.as_slice();
+    if v.len() > dof {
+        bail!("a vector of {} entries, {dof} columns", v.len());
+    }
+    for i in 0..dof {
+        match v.get(i) {
+            Some(x) => row.push(x),
+            None => row.push_empty(),
+        }
+    }
+    Ok(())
+}
+
+/// `dof` cells, the first `n` of `v`.
+fn first_of(row: &mut Row, v: &[f64], n: usize, dof: usize) {
+    for i in 0..dof {
+        match v.get(i).filter(|_| i < n) {
+            Some(x) => row.push(x),
+            None => row.push_empty(),
+        }
+    }
+}
+
+fn flag(b: bool) -> &'static str {
+    if b {
+        "1"
+    } else {
+        "0"
+    }
+}
+
+/// Builds the row of `rec` in `row` (emptied by the caller). `attack`: the attacker's record
+/// of the same tick and agent, for a center record.
+fn row(
+    row: &mut Row,
+    rec: &TraceRecord,
+    info: &RunInfo,
+    path: &Path,
+    attack: Option<&AttackRecord>,
+) -> Result<()> {
+    let dof = info.dof;
+    match rec {
+        TraceRecord::Agent(a) => agent_row(row, a, info),
+        TraceRecord::Attack(a) => attack_row(row, a, info),
+        TraceRecord::Center(c) => center_row(row, c, info, path, attack),
+        TraceRecord::Latency { k, agent, stamps } => {
+            latency_row(row, *k, *agent, stamps, info);
+            Ok(())
+        }
+        TraceRecord::Event { .. } => Ok(()),
+        TraceRecord::Actuation(a) => actuation_row(row, a, info, dof),
+    }
+}
+
+fn head(row: &mut Row, k: u64, agent: u32, info: &RunInfo) {
+    row.push(k);
+    row.push(agent);
+    row.push(info.t(k));
+}
+
+fn latency_row(row: &mut Row, k: u64, agent: u32, stamps: &HopStamps, info: &RunInfo) {
+    head(row, k, agent, info);
+    for ns in [
+        stamps.agent_sent_ns,
+        stamps.attacker_received_ns,
+        stamps.attacker_sent_ns,
+        stamps.center_received_ns,
+        stamps.center_sent_ns,
+        stamps.agent_received_ns,
+    ] {
+        row.push(ns);
+    }
+}
+
+fn actuation_row(row: &mut Row, a: &ActuationRecord, info: &RunInfo, dof: usize) -> Result<()> {
+    head(row, a.k, a.agent, info);
+    joints(row, &a.alpha_u, dof)?;
+    joints(row, &a.u, dof)?;
+    row.push(a.held_s);
+    row.push(flag(a.active));
+    row.push(a.delivery.as_str());
+    Ok(())
+}
+
+fn agent_row(row: &mut Row, a: &AgentRecord, info: &RunInfo) -> Result<()> {
+    let dof = info.dof;
+    head(row, a.k, a.agent, info);
+    for j in [&a.q, &a.qd, &a.qdd, &a.y, &a.yd, &a.u_applied] {
+        joints(row, j, dof)?;
+    }
+    row.push(a.tau);
+    row.push(flag(a.missed));
+    Ok(())
+}
+
+fn attack_row(row: &mut Row, a: &AttackRecord, info: &RunInfo) -> Result<()> {
+    let dof = info.dof;
+    head(row, a.k, a.agent, info);
+    for j in [&a.alpha_position, &a.alpha_velocity, &a.y, &a.yd] {
+        joints(row, j, dof)?;
+    }
+    row.push(flag(a.active));
+    row.push(a.delivery.as_str());
+    Ok(())
+}
+
+fn center_row(
+    row: &mut Row,
+    c: &CenterRecord,
+    info: &RunInfo,
+    path: &Path,
+    attack: Option<&AttackRecord>,
+) -> Result<()> {
+    let dof = info.dof;
+    head(row, c.k, c.agent, info);
+    let (q, qd, qdd, n) = info.desired(path, c.agent, c.k)?;
+    for v in [&q, &qd, &qdd] {
+        first_of(row, v, n, dof);
+    }
+    // S of the links both injected vectors have; empty without the attacker's record.
+    let s: Vec<f64> = attack.map_or_else(Vec::new, |a| {
+        a.alpha_position
+            .as_slice()
+            .iter()
+            .zip(a.alpha_velocity.as_slice())
+            .map(|(p, v)| true_s(*p, *v, info.beta))
+            .collect()
+    });
+    first_of(row, &s, n, dof);
+    for j in [&c.s_hat, &c.q_hat, &c.qd_hat, &c.qdd_hat, &c.u] {
+        joints(row, j, dof)?;
+    }
+    for b in [
+        c.alarm,
+        c.rejected_input,
+        c.rejected_torque,
+        c.state_reset,
+        c.history_miss,
+        c.missing_input,
+    ] {
+        row.push(flag(b));
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use fdi_common::engine::tick_time;
+
+    use super::*;
+
+    fn fixture_copy() -> tempfile::TempDir {
+        let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("testdata/short-run");
+        let tmp = tempfile::tempdir().expect("a scratch folder");
+        std::fs::create_dir(tmp.path().join("traces")).expect("traces/");
+        for e in std::fs::read_dir(from.join("traces")).expect("the fixture's traces") {
+            let p = e.expect("an entry").path();
+            std::fs::copy(
+                &p,
+                tmp.path().join("traces").join(p.file_name().expect("name")),
+            )
+            .expect("copy");
+        }
+        tmp
+    }
+
+    fn read(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
+        let mut r = csv::Reader::from_path(path).expect("a CSV");
+        let header = r
+            .headers()
+            .expect("a header")
+            .iter()
+            .map(String::from)
+            .collect();
+        let rows = r
+            .records()
+            .map(|x| x.expect("a row").iter().map(String::from).collect())
+            .collect();
+        (header, rows)
+    }
+
+    #[test]
+    fn column_names_carry_their_units() {
+        assert_eq!(
+            Kind::Agent.header(2).join(","),
+            "k,agent,t_s,q1_rad,q2_rad,q1_dot_rad_s,q2_dot_rad_s,q1_ddot_rad_s2,q2_ddot_rad_s2,\
+             y1_clean_rad,y2_clean_rad,y1_dot_clean_rad_s,y2_dot_clean_rad_s,\
+             u1_applied_nm,u2_applied_nm,tau_s,missed"
+        );
+        assert_eq!(
+            Kind::Attack.header(1).join(","),
+            "k,agent,t_s,alpha1_pos_rad,alpha1_vel_rad_s,y1_tampered_rad,y1_dot_tampered_rad_s,active,delivery"
+        );
+        assert_eq!(
+            Kind::Actuation.header(1).join(","),
+            "k,agent,t_s,alpha1_u_nm,u1_tampered_nm,held_s,active,delivery"
+        );
+        assert_eq!(
+            Kind::Center.header(1).join(","),
+            "k,agent,t_s,q1_des_rad,q1_dot_des_rad_s,q1_ddot_des_rad_s2,s1_true_rad_s,s1_hat_rad_s,\
+             q1_hat_rad,q1_dot_hat_rad_s,q1_ddot_hat_rad_s2,u1_sent_nm,alarm,rejected_input,\
+             rejected_torque,state_reset,history_miss,missing_input"
+        );
+    }
+
+    #[test]
+    fn short_vectors_leave_empty_cells_and_long_ones_are_refused() {
+        let mut r = Row::default();
+        joints(&mut r, &Joints::from_slice(&[0.5]), 2).expect("fits");
+        assert_eq!(r.record.iter().collect::<Vec<_>>(), [&b"0.5"[..], b""]);
+        assert!(joints(&mut r, &Joints::from_slice(&[1.0, 2.0]), 1).is_err());
+    }
+
+    /// The fixture's center rows: sorted, timed by `tick_time`, with the scenario's desired
+    /// trajectory and the attacker's `S` of the same tick, bit for bit.
+    #[test]
+    fn the_center_file_holds_time_desired_trajectory_and_true_s_in_tick_agent_order() {
+        let dir = fixture_copy();
+        export(dir.path()).expect("exported");
+        let trace = dir.path().join("traces/control-center.trace");
+        let reader = TraceReader::open(&trace).expect("opens");
+        let info = RunInfo::from_header(&trace, reader.header()).expect("its scenario");
+        let attacks: BTreeMap<(u64, u32), AttackRecord> =
+            TraceReader::open(&dir.path().join("traces/attacker.trace"))
+                .expect("opens")
+                .filter_map(|r| match r.expect("whole") {
+                    TraceRecord::Attack(a) => Some(((a.k, a.agent), a)),
+                    _ => None,
+                })
+                .collect();
+        let (header, rows) = read(&dir.path().join("export/control-center.csv"));
+        assert_eq!(rows.len(), attacks.len(), "one row per center record");
+        let col = |name: &str| header.iter().position(|h| h == name).expect(name);
+        let bits = |row: &[String], name: &str| -> u64 {
+            row[col(name)].parse::<f64>().expect(name).to_bits()
+        };
+        let mut before = None;
+        for row in &rows {
+            let k: u64 = row[col("k")].parse().expect("k");
+            let agent: u32 = row[col("agent")].parse().expect("agent");
+            assert!(before < Some((k, agent)), "rows out of (tick, agent) order");
+            before = Some((k, agent));
+            assert_eq!(bits(row, "t_s"), tick_time(k, info.dt).to_bits());
+            let a = info.agents.get(&agent).expect("a scenario agent");
+            let r = a.trajectory.reference::<MAX_DOF>(tick_time(k, info.dt));
+            let x = &attacks[&(k, agent)];
+            for i in 0..a.dof {
+                let l = i + 1;
+                assert_eq!(bits(row, &format!("q{l}_des_rad")), r.q[i].to_bits());
+                assert_eq!(bits(row, &format!("q{l}_dot_des_rad_s")), r.qd[i].to_bits());
+                let s = true_s(
+                    x.alpha_position.as_slice()[i],
+                    x.alpha_velocity.as_slice()[i],
+                    info.beta,
+                );
+                assert_eq!(bits(row, &format!("s{l}_true_rad_s")), s.to_bits());
+            }
+        }
+        // Some tick of the fixture has a non-zero desired angle and attack term.
+        assert!(rows.iter().any(|r| r[col("q1_des_rad")] != "0"));
+        assert!(rows.iter().any(|r| r[col("s1_true_rad_s")] != "0"));
+    }
+}

@@ -1,0 +1,912 @@
+//! MCAP export: the whole run as `RUN_DIR/export/run.mcap`, for Foxglove and PlotJuggler.
+//!
+//! One topic per agent and stream (`/agent<id>/state`, `/agent<id>/attack`, …, listed in
+//! [`TOPICS`] and docs/traces.md), JSON messages (`json` encoding) with a `jsonschema` schema
+//! record per message type, log time = publish time = the simulated time of the tick in ns
+//! (from [`fdi_common::engine::tick_time`]). Each message also carries its tick `k` and `t_s`.
+//! The records of each trace are written per kind in (tick, agent) order; a metadata record
+//! `fdi-mas` holds the scenario, its agents and the planned ticks. JSON has no NaN or infinity:
+//! a non-finite number (a corrupt attack, a diverged robot) is written as `null`.
+//!
+//! The detector statistics (`/agent<id>/detectors`) are those of `fdi-launch detect`: the
+//! run's traces joined and fed to [`Recorder`]. The file is uncompressed (the compressions of
+//! the `mcap` crate are C libraries); a damaged trace is exported up to its last whole record,
+//! the file is closed whole, then the export fails naming the file and the byte offset.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use fdi_common::detect::sweep::Recorder;
+use fdi_common::detect::Verdict;
+use fdi_common::records::{true_s, TickRecord};
+use fdi_common::trace::{TraceReader, TraceRecord};
+use serde_json::{json, Map, Value};
+
+use super::{failed, out_dir, read_sorted, stem, trace_files, RunInfo};
+use crate::join;
+
+/// The type of a message field, as its JSON schema says.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Ty {
+    /// An unsigned integer (a tick, an agent, a time stamp in ns).
+    Int,
+    /// A number (`null` when it is not finite).
+    Num,
+    /// An array of numbers, one per link.
+    Nums,
+    Bool,
+    Str,
+}
+
+/// One field of a message: name, type, meaning with its unit.
+pub(crate) type Field = (&'static str, Ty, &'static str);
+
+/// One message type: its schema name and fields (every field is always present).
+#[derive(Debug)]
+pub(crate) struct Schema {
+    pub name: &'static str,
+    pub description: &'static str,
+    pub fields: &'static [Field],
+}
+
+const K: Field = ("k", Ty::Int, "control tick k");
+const T: Field = (
+    "t_s",
+    Ty::Num,
+    "tick time t_k = k·Δ, s (the log and publish time, in ns)",
+);
+
+macro_rules! schema {
+    ($id:ident, $name:literal, $desc:literal, [$($f:expr),* $(,)?]) => {
+        pub(crate) const $id: Schema = Schema { name: $name, description: $desc, fields: &[$($f),*] };
+    };
+}
+
+schema!(
+    STATE,
+    "fdi_mas.State",
+    "True joint state of the robot at t_k (agent trace).",
+    [
+        K,
+        T,
+        ("q_rad", Ty::Nums, "true joint angles q, rad"),
+        ("q_dot_rad_s", Ty::Nums, "true joint velocities q̇, rad/s"),
+        (
+            "q_ddot_rad_s2",
+            Ty::Nums,
+            "joint accelerations q̈ of the step from t_k, rad/s²"
+        ),
+    ]
+);
+schema!(
+    DESIRED,
+    "fdi_mas.Desired",
+    "Desired trajectory of the scenario at t_k (the paper's q_d).",
+    [
+        K,
+        T,
+        ("q_des_rad", Ty::Nums, "desired joint angles q_d, rad"),
+        (
+            "q_dot_des_rad_s",
+            Ty::Nums,
+            "desired joint velocities q̇_d, rad/s"
+        ),
+        (
+            "q_ddot_des_rad_s2",
+            Ty::Nums,
+            "desired joint accelerations q̈_d, rad/s²"
+        ),
+    ]
+);
+schema!(
+    TRACKING,
+    "fdi_mas.TrackingError",
+    "Tracking error e = q_d − q with the true state (the paper's Figs. 3 and 4).",
+    [
+        K,
+        T,
+        ("e_rad", Ty::Nums, "position error q_d − q, rad"),
+        ("e_dot_rad_s", Ty::Nums, "velocity error q̇_d − q̇, rad/s"),
+    ]
+);
+schema!(
+    CLEAN,
+    "fdi_mas.CleanMeasurement",
+    "Measurement the agent published: with sensor noise, before any attack (agent trace).",
+    [
+        K,
+        T,
+        ("y_rad", Ty::Nums, "measured joint angles, rad"),
+        ("y_dot_rad_s", Ty::Nums, "measured joint velocities, rad/s"),
+    ]
+);
+schema!(TAMPERED, "fdi_mas.TamperedMeasurement", "Measurement the control center took as the tick's input, after the attack (attacker trace); empty arrays when the input was missing.", [
+    K, T,
+    ("y_rad", Ty::Nums, "joint angles as received, rad"),
+    ("y_dot_rad_s", Ty::Nums, "joint velocities as received, rad/s"),
+    ("delivery", Ty::Str, "delivered, missing, forged or replayed"),
+]);
+schema!(ATTACK, "fdi_mas.Attack", "Injected false data of the tick (attacker trace) and the true attack term S the estimate Ŝ tracks.", [
+    K, T,
+    ("alpha_pos_rad", Ty::Nums, "injected position α₁ (S₁), rad"),
+    ("alpha_vel_rad_s", Ty::Nums, "injected velocity α₂ (S₂), rad/s"),
+    ("s_true_rad_s", Ty::Nums, "true S = S₂ + β S₁, rad/s"),
+    ("active", Ty::Bool, "the attack on the measurement was in force"),
+    ("delivery", Ty::Str, "delivered, missing, forged or replayed"),
+]);
+schema!(
+    ESTIMATE,
+    "fdi_mas.Estimate",
+    "Control center's estimates after the tick (control-center trace).",
+    [
+        K,
+        T,
+        (
+            "s_hat_rad_s",
+            Ty::Nums,
+            "attack estimate Ŝ used in the tick, rad/s"
+        ),
+        ("q_hat_rad", Ty::Nums, "observer's joint angles q̂, rad"),
+        (
+            "q_dot_hat_rad_s",
+            Ty::Nums,
+            "observer's joint velocities, rad/s"
+        ),
+        (
+            "q_ddot_hat_rad_s2",
+            Ty::Nums,
+            "observer's joint accelerations, rad/s²"
+        ),
+    ]
+);
+schema!(
+    SENT,
+    "fdi_mas.TorqueSent",
+    "Torque the control center sent, stamped t_k (control-center trace).",
+    [K, T, ("u_nm", Ty::Nums, "joint torques, N·m"),]
+);
+schema!(
+    APPLIED,
+    "fdi_mas.TorqueApplied",
+    "Torque the robot applied at t_k: u(t_k − τ(t_k)) (agent trace).",
+    [
+        K,
+        T,
+        ("u_nm", Ty::Nums, "joint torques, N·m"),
+        (
+            "missed",
+            Ty::Bool,
+            "the due command was missing: the last one was held"
+        ),
+    ]
+);
+schema!(
+    DELAY,
+    "fdi_mas.Delay",
+    "Known input delay of the torque channel at t_k (agent trace).",
+    [K, T, ("tau_s", Ty::Num, "delay τ(t_k), s"),]
+);
+schema!(
+    ALARM,
+    "fdi_mas.Alarm",
+    "Control center's alarm and input flags of the tick (control-center trace).",
+    [
+        K,
+        T,
+        ("alarm", Ty::Bool, "the ‖Ŝ‖ detection alarm"),
+        (
+            "rejected_input",
+            Ty::Bool,
+            "the measurement was rejected (non-finite or absurd)"
+        ),
+        (
+            "rejected_torque",
+            Ty::Bool,
+            "the computed torque was non-finite; the last good one was sent"
+        ),
+        (
+            "state_reset",
+            Ty::Bool,
+            "non-finite observer or estimator state was reset"
+        ),
+        (
+            "history_miss",
+            Ty::Bool,
+            "the torque history did not reach back to t − τ(t)"
+        ),
+        (
+            "missing_input",
+            Ty::Bool,
+            "the tick's measurement was missing: the last good one was used"
+        ),
+    ]
+);
+schema!(DETECTORS, "fdi_mas.Detectors", "Per-tick statistic of each detector, as `fdi-launch detect` computes it from the joined traces (docs/detectors.md).", [
+    K, T,
+    ("in_force", Ty::Bool, "an attack was in force on the measurement or the torque"),
+    ("s_hat_norm", Ty::Num, "‖Ŝ‖ held over the hold time, rad/s (null without a verdict)"),
+    ("s_hat_norm_threshold", Ty::Num, "its configured threshold, rad/s"),
+    ("s_hat_norm_verdict", Ty::Str, "watched, calibrating, non-finite, missing or uncalibrated"),
+    ("s_hat_norm_alarm", Ty::Bool, "its alarm at the configured threshold"),
+    ("chi2", Ty::Num, "windowed χ² sum of the whitened residual (null without a verdict)"),
+    ("chi2_threshold", Ty::Num, "its configured threshold (null when none could be had)"),
+    ("chi2_verdict", Ty::Str, "watched, calibrating, non-finite, missing or uncalibrated"),
+    ("chi2_alarm", Ty::Bool, "its alarm at the configured threshold"),
+    ("cusum", Ty::Num, "CUSUM statistic of the whitened residual (null without a verdict)"),
+    ("cusum_threshold", Ty::Num, "its configured threshold"),
+    ("cusum_verdict", Ty::Str, "watched, calibrating, non-finite, missing or uncalibrated"),
+    ("cusum_alarm", Ty::Bool, "its alarm at the configured threshold"),
+]);
+schema!(LATENCY, "fdi_mas.Latency", "Monotonic-clock stamps of the torque message of the tick, ns (0 = not stamped; realtime runs).", [
+    K, T,
+    ("agent_sent_ns", Ty::Int, "agent sent the measurement"),
+    ("attacker_received_ns", Ty::Int, "attacker received it"),
+    ("attacker_sent_ns", Ty::Int, "attacker sent it on"),
+    ("center_received_ns", Ty::Int, "control center received it"),
+    ("center_sent_ns", Ty::Int, "control center sent the torque"),
+    ("agent_received_ns", Ty::Int, "agent received the torque"),
+]);
+schema!(
+    ACTUATION,
+    "fdi_mas.Actuation",
+    "The torque's way through the attacker (attacker trace; runs that attack the torque path).",
+    [
+        K,
+        T,
+        ("alpha_u_nm", Ty::Nums, "injected torque α_u, N·m"),
+        (
+            "u_nm",
+            Ty::Nums,
+            "torque the agent took as the tick's command (empty when missing), N·m"
+        ),
+        (
+            "held_s",
+            Ty::Num,
+            "how much later than τ it took effect (a delay attack), s"
+        ),
+        (
+            "active",
+            Ty::Bool,
+            "the attack on the torque path was in force"
+        ),
+        (
+            "delivery",
+            Ty::Str,
+            "delivered, missing, forged or replayed"
+        ),
+    ]
+);
+schema!(
+    EVENT,
+    "fdi_mas.Event",
+    "Something a process put on record (a lost peer, a rejected message, the shutdown reason).",
+    [
+        (
+            "t_s",
+            Ty::Num,
+            "the process's time of the event, s (the log time, in ns)"
+        ),
+        ("process", Ty::Str, "the trace it comes from"),
+        ("message", Ty::Str, "what happened"),
+    ]
+);
+
+/// Every per-agent topic (`/agent<id>/<name>`) and its message type; `/events` is the one
+/// topic of the whole run ([`EVENT`]).
+#[cfg(test)]
+pub(crate) const TOPICS: [(&str, &Schema); 14] = [
+    ("state", &STATE),
+    ("desired", &DESIRED),
+    ("tracking_error", &TRACKING),
+    ("measurement/clean", &CLEAN),
+    ("measurement/tampered", &TAMPERED),
+    ("attack", &ATTACK),
+    ("estimate", &ESTIMATE),
+    ("torque/sent", &SENT),
+    ("torque/applied", &APPLIED),
+    ("delay", &DELAY),
+    ("alarm", &ALARM),
+    ("detectors", &DETECTORS),
+    ("latency", &LATENCY),
+    ("actuation", &ACTUATION),
+];
+
+/// The topic name of `name` for agent `agent`.
+pub(crate) fn topic(agent: u32, name: &str) -> String {
+    format!("/agent{agent}/{name}")
+}
+
+/// The JSON schema of a message type.
+pub(crate) fn json_schema(s: &Schema) -> Value {
+    let mut props = Map::new();
+    for (name, ty, desc) in s.fields {
+        let number = json!({"type": "number"});
+        let t = match ty {
+            Ty::Int => json!({"type": "integer", "minimum": 0}),
+            Ty::Num => number,
+            Ty::Nums => json!({"type": "array", "items": number}),
+            Ty::Bool => json!({"type": "boolean"}),
+            Ty::Str => json!({"type": "string"}),
+        };
+        let mut t = t;
+        t["description"] = Value::from(*desc);
+        props.insert((*name).to_string(), t);
+    }
+    json!({
+        "$schema": "http://json-schema.org/draft-07/schema#",
+        "title": s.name,
+        "description": format!("{} Non-finite numbers are null (JSON has no NaN).", s.description),
+        "type": "object",
+        "properties": props,
+        "required": s.fields.iter().map(|f| f.0).collect::<Vec<_>>(),
+        "additionalProperties": false,
+    })
+}
+
+/// The MCAP file being written: its channels made as their first message comes.
+struct Mcap {
+    path: PathBuf,
+    w: mcap::Writer<BufWriter<File>>,
+    channels: BTreeMap<(u32, &'static str), u16>,
+    sequence: u32,
+    buf: Vec<u8>,
+}
+
+/// Nanoseconds of a time in seconds; an error for a time no log time can hold.
+fn ns(t: f64) -> Result<u64> {
+    let x = (t * 1e9).round();
+    if !(x.is_finite() && x >= 0.0 && x < u64::MAX as f64) {
+        bail!("time {t} s is not a log time (finite, ≥ 0)");
+    }
+    Ok(x as u64)
+}
+
+impl Mcap {
+    fn create(path: &Path) -> Result<Self> {
+        let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let w = mcap::WriteOptions::new()
+            .compression(None)
+            .chunk_size(Some(256 << 10))
+            .profile("")
+            .library(concat!("fdi-launch ", env!("CARGO_PKG_VERSION")))
+            .create(BufWriter::with_capacity(1 << 16, file))
+            .with_context(|| format!("creating {}", path.display()))?;
+        Ok(Self {
+            path: path.to_path_buf(),
+            w,
+            channels: BTreeMap::new(),
+            sequence: 0,
+            buf: Vec::with_capacity(1 << 10),
+        })
+    }
+
+    /// Writes `msg` on topic `name` of `agent` (agent 0 with `name` a whole topic: `/events`).
+    fn write(
+        &mut self,
+        agent: u32,
+        name: &'static str,
+        schema: &Schema,
+        t: f64,
+        msg: &Value,
+    ) -> Result<()> {
+        let path = &self.path;
+        let channel = match self.channels.get(&(agent, name)) {
+            Some(c) => *c,
+            None => {
+                let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
+                let s = self
+                    .w
+                    .add_schema(schema.name, "jsonschema", &text)
+                    .with_context(|| format!("writing {}", path.display()))?;
+                let topic = if agent == 0 {
+                    name.to_string()
+                } else {
+                    topic(agent, name)
+                };
+                let c = self
+                    .w
+                    .add_channel(s, &topic, "json", &BTreeMap::new())
+                    .with_context(|| format!("writing {}", path.display()))?;
+                self.channels.insert((agent, name), c);
+                c
+            }
+        };
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, msg).context("a message")?;
+        let time = ns(t)?;
+        self.sequence = self.sequence.wrapping_add(1);
+        self.w
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: self.sequence,
+                    log_time: time,
+                    publish_time: time,
+                },
+                &self.buf,
+            )
+            .with_context(|| format!("writing {}", self.path.display()))
+    }
+
+    fn metadata(&mut self, info: &RunInfo) -> Result<()> {
+        let s = &info.resolved.scenario;
+        let agents: Vec<String> = info.agents.keys().map(u32::to_string).collect();
+        let mut m = BTreeMap::new();
+        m.insert("scenario".to_string(), s.name.clone());
+        m.insert("seed".to_string(), s.seed.to_string());
+        m.insert("clock".to_string(), s.clock.as_str().to_string());
+        m.insert("control_period_s".to_string(), info.dt.to_string());
+        m.insert("beta".to_string(), info.beta.to_string());
+        m.insert("agents".to_string(), agents.join(","));
+        m.insert("ticks".to_string(), info.resolved.ticks().to_string());
+        m.insert("scenario_toml".to_string(), info.resolved.to_toml());
+        self.w
+            .write_metadata(&mcap::records::Metadata {
+                name: "fdi-mas".into(),
+                metadata: m,
+            })
+            .with_context(|| format!("writing {}", self.path.display()))
+    }
+}
+
+pub(super) fn export(run_dir: &Path) -> Result<()> {
+    let files = trace_files(run_dir)?;
+    let out = out_dir(run_dir)?.join("run.mcap");
+    let mut w = Mcap::create(&out)?;
+    let mut failures = Vec::new();
+    let mut run: Option<RunInfo> = None;
+    for f in &files {
+        let mut n = 0;
+        match export_file(f, &mut w, &mut run, &mut n) {
+            Ok(()) => println!("{} -> {}: {n} records", f.display(), out.display()),
+            Err(e) if n > 0 => failures.push(format!(
+                "{e:#} (the {n} records before it are exported to {})",
+                out.display()
+            )),
+            Err(e) => failures.push(format!("{e:#}")),
+        }
+    }
+    if let Some(info) = &run {
+        match detectors(run_dir, info, &mut w) {
+            Ok(n) => println!("detector statistics -> {}: {n} ticks", out.display()),
+            Err(e) => failures.push(format!("{e:#}")),
+        }
+        w.metadata(info)?;
+    }
+    let summary =
+        w.w.finish()
+            .with_context(|| format!("writing {}", out.display()))?;
+    let messages = summary.stats.as_ref().map_or(0, |s| s.message_count);
+    println!(
+        "{}: {messages} messages on {} topics",
+        out.display(),
+        summary.channels.len()
+    );
+    failed(failures)
+}
+
+fn nums(v: &[f64]) -> Value {
+    Value::from(v)
+}
+
+/// Exports one trace into `w`, counting its records in `n`. `run`: the scenario of the first
+/// trace; every later trace must hold the same.
+fn export_file(path: &Path, w: &mut Mcap, run: &mut Option<RunInfo>, n: &mut u64) -> Result<()> {
+    let mut reader = TraceReader::open(path)?;
+    let info = RunInfo::from_header(path, reader.header())?;
+    if let Some(first) = run.as_ref() {
+        if first.resolved != info.resolved {
+            bail!(
+                "{}: the scenario in its header differs from that of the run's other traces",
+                path.display()
+            );
+        }
+    }
+    let stem = stem(path);
+    read_sorted(path, &mut reader, n, |rec, at| {
+        record(w, &info, path, &stem, rec)
+            .with_context(|| format!("{}: record at byte offset {at}", path.display()))
+    })?;
+    if run.is_none() {
+        *run = Some(info);
+    }
+    Ok(())
+}
+
+/// The messages of one record.
+fn record(w: &mut Mcap, info: &RunInfo, path: &Path, stem: &str, rec: &TraceRecord) -> Result<()> {
+    match rec {
+        TraceRecord::Agent(a) => {
+            let t = info.t(a.k);
+            let (q, qd, qdd, dof) = info.desired(path, a.agent, a.k)?;
+            let (q, qd, qdd) = (&q[..dof], &qd[..dof], &qdd[..dof]);
+            let diff = |d: &[f64], x: &[f64]| -> Vec<f64> {
+                d.iter().zip(x).map(|(d, x)| d - x).collect()
+            };
+            let id = a.agent;
+            w.write(
+                id,
+                "state",
+                &STATE,
+                t,
+                &json!({"k": a.k, "t_s": t,
+                "q_rad": nums(a.q.as_slice()), "q_dot_rad_s": nums(a.qd.as_slice()),
+                "q_ddot_rad_s2": nums(a.qdd.as_slice())}),
+            )?;
+            w.write(
+                id,
+                "desired",
+                &DESIRED,
+                t,
+                &json!({"k": a.k, "t_s": t,
+                "q_des_rad": nums(q), "q_dot_des_rad_s": nums(qd), "q_ddot_des_rad_s2": nums(qdd)}),
+            )?;
+            w.write(
+                id,
+                "tracking_error",
+                &TRACKING,
+                t,
+                &json!({"k": a.k, "t_s": t,
+                "e_rad": diff(q, a.q.as_slice()), "e_dot_rad_s": diff(qd, a.qd.as_slice())}),
+            )?;
+            w.write(
+                id,
+                "measurement/clean",
+                &CLEAN,
+                t,
+                &json!({"k": a.k, "t_s": t,
+                "y_rad": nums(a.y.as_slice()), "y_dot_rad_s": nums(a.yd.as_slice())}),
+            )?;
+            w.write(
+                id,
+                "torque/applied",
+                &APPLIED,
+                t,
+                &json!({"k": a.k, "t_s": t,
+                "u_nm": nums(a.u_applied.as_slice()), "missed": a.missed}),
+            )?;
+            w.write(
+                id,
+                "delay",
+                &DELAY,
+                t,
+                &json!({"k": a.k, "t_s": t, "tau_s": a.tau}),
+            )
+        }
+        TraceRecord::Attack(a) => {
+            let t = info.t(a.k);
+            info.agent(path, a.agent)?;
+            let s: Vec<f64> = a
+                .alpha_position
+                .as_slice()
+                .iter()
+                .zip(a.alpha_velocity.as_slice())
+                .map(|(p, v)| true_s(*p, *v, info.beta))
+                .collect();
+            let delivery = a.delivery.as_str();
+            w.write(
+                a.agent,
+                "attack",
+                &ATTACK,
+                t,
+                &json!({"k": a.k, "t_s": t,
+                "alpha_pos_rad": nums(a.alpha_position.as_slice()),
+                "alpha_vel_rad_s": nums(a.alpha_velocity.as_slice()),
+                "s_true_rad_s": s, "active": a.active, "delivery": delivery}),
+            )?;
+            w.write(
+                a.agent,
+                "measurement/tampered",
+                &TAMPERED,
+                t,
+                &json!({"k": a.k, "t_s": t,
+                "y_rad": nums(a.y.as_slice()), "y_dot_rad_s": nums(a.yd.as_slice()),
+                "delivery": delivery}),
+            )
+        }
+        TraceRecord::Center(c) => {
+            let t = info.t(c.k);
+            info.agent(path, c.agent)?;
+            w.write(
+                c.agent,
+                "estimate",
+                &ESTIMATE,
+                t,
+                &json!({"k": c.k, "t_s": t,
+                "s_hat_rad_s": nums(c.s_hat.as_slice()), "q_hat_rad": nums(c.q_hat.as_slice()),
+                "q_dot_hat_rad_s": nums(c.qd_hat.as_slice()),
+                "q_ddot_hat_rad_s2": nums(c.qdd_hat.as_slice())}),
+            )?;
+            w.write(
+                c.agent,
+                "torque/sent",
+                &SENT,
+                t,
+                &json!({"k": c.k, "t_s": t,
+                "u_nm": nums(c.u.as_slice())}),
+            )?;
+            w.write(
+                c.agent,
+                "alarm",
+                &ALARM,
+                t,
+                &json!({"k": c.k, "t_s": t,
+                "alarm": c.alarm, "rejected_input": c.rejected_input,
+                "rejected_torque": c.rejected_torque, "state_reset": c.state_reset,
+                "history_miss": c.history_miss, "missing_input": c.missing_input}),
+            )
+        }
+        TraceRecord::Latency { k, agent, stamps } => {
+            let t = info.t(*k);
+            info.agent(path, *agent)?;
+            w.write(
+                *agent,
+                "latency",
+                &LATENCY,
+                t,
+                &json!({"k": k, "t_s": t,
+                "agent_sent_ns": stamps.agent_sent_ns,
+                "attacker_received_ns": stamps.attacker_received_ns,
+                "attacker_sent_ns": stamps.attacker_sent_ns,
+                "center_received_ns": stamps.center_received_ns,
+                "center_sent_ns": stamps.center_sent_ns,
+                "agent_received_ns": stamps.agent_received_ns}),
+            )
+        }
+        TraceRecord::Actuation(a) => {
+            let t = info.t(a.k);
+            info.agent(path, a.agent)?;
+            w.write(
+                a.agent,
+                "actuation",
+                &ACTUATION,
+                t,
+                &json!({"k": a.k, "t_s": t,
+                "alpha_u_nm": nums(a.alpha_u.as_slice()), "u_nm": nums(a.u.as_slice()),
+                "held_s": a.held_s, "active": a.active, "delivery": a.delivery.as_str()}),
+            )
+        }
+        TraceRecord::Event { t, message } => w.write(
+            0,
+            "/events",
+            &EVENT,
+            *t,
+            &json!({
+            "t_s": t, "process": stem, "message": message}),
+        ),
+    }
+}
+
+/// What a verdict says, as message fields: statistic (when watched), name.
+fn verdict(v: Verdict) -> (Option<f64>, &'static str) {
+    match v {
+        Verdict::Watched { statistic, .. } => (Some(statistic), "watched"),
+        Verdict::Calibrating => (None, "calibrating"),
+        Verdict::NonFinite => (None, "non-finite"),
+        Verdict::Missing => (None, "missing"),
+        Verdict::Uncalibrated => (None, "uncalibrated"),
+    }
+}
+
+/// The `/agent<id>/detectors` topics: the traces of `run_dir` joined (as `detect` joins them)
+/// and every detector's per-tick statistic recorded by [`Recorder`]. The number of joined
+/// ticks; the join's warnings go to stderr (a damaged trace is named by its own export).
+fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
+    let mut recorder = Recorder::for_scenario(&info.resolved);
+    let mut ticks: BTreeMap<u32, Vec<u64>> = BTreeMap::new();
+    let joined = join::join_run(&info.resolved, run_dir, f64::NAN, |r: &TickRecord| {
+        ticks.entry(r.agent.agent).or_default().push(r.center.k);
+        recorder.push(r);
+    })
+    .with_context(|| {
+        format!(
+            "joining the traces in {} for the detector statistics",
+            run_dir.join("traces").display()
+        )
+    })?;
+    for warning in &joined.warnings {
+        eprintln!("fdi-launch: warning: detector statistics: {warning}");
+    }
+    let recorded = recorder.finish();
+    let mut n = 0;
+    for (id, ks) in &ticks {
+        let series: Vec<_> = recorded
+            .detectors
+            .iter()
+            .map(|d| {
+                d.robots
+                    .get(id)
+                    .map(|s| (d.name, d.configured, s.as_slice()))
+                    .with_context(|| format!("the {} series of robot {id}", d.name))
+            })
+            .collect::<Result<_>>()?;
+        let mut alarms = vec![false; series.len()];
+        for (i, k) in ks.iter().enumerate() {
+            let t = info.t(*k);
+            let mut msg = Map::new();
+            msg.insert("k".into(), Value::from(*k));
+            msg.insert("t_s".into(), Value::from(t));
+            let mut in_force = false;
+            for ((name, configured, samples), alarm) in series.iter().zip(&mut alarms) {
+                let sample = samples.get(i).with_context(|| {
+                    format!("robot {id}: no {name} statistic for joined tick {k}")
+                })?;
+                in_force = sample.in_force;
+                let (statistic, state) = verdict(sample.verdict);
+                *alarm = sample.verdict.alarm(*alarm);
+                msg.insert((*name).into(), statistic.map_or(Value::Null, Value::from));
+                msg.insert(
+                    format!("{name}_threshold"),
+                    configured.map_or(Value::Null, Value::from),
+                );
+                msg.insert(format!("{name}_verdict"), Value::from(state));
+                msg.insert(format!("{name}_alarm"), Value::from(*alarm));
+            }
+            msg.insert("in_force".into(), Value::from(in_force));
+            w.write(*id, "detectors", &DETECTORS, t, &Value::Object(msg))?;
+            n += 1;
+        }
+    }
+    Ok(n)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeSet;
+
+    use fdi_common::engine::tick_time;
+
+    use super::*;
+
+    fn fixture_copy() -> tempfile::TempDir {
+        let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("testdata/short-run");
+        let tmp = tempfile::tempdir().expect("a scratch folder");
+        std::fs::create_dir(tmp.path().join("traces")).expect("traces/");
+        std::fs::copy(from.join("scenario.toml"), tmp.path().join("scenario.toml")).expect("copy");
+        for e in std::fs::read_dir(from.join("traces")).expect("the fixture's traces") {
+            let p = e.expect("an entry").path();
+            std::fs::copy(
+                &p,
+                tmp.path().join("traces").join(p.file_name().expect("name")),
+            )
+            .expect("copy");
+        }
+        tmp
+    }
+
+    /// The messages each topic must have: counted from the traces themselves and their join.
+    fn expected(dir: &Path) -> BTreeMap<String, u64> {
+        let mut want: BTreeMap<String, u64> = BTreeMap::new();
+        let mut add = |agent: u32, names: &[&str]| {
+            for n in names {
+                *want.entry(topic(agent, n)).or_default() += 1;
+            }
+        };
+        let mut events = 0;
+        let mut scenario = None;
+        for f in trace_files(dir).expect("traces") {
+            let reader = TraceReader::open(&f).expect("the fixture reads");
+            scenario.get_or_insert_with(|| {
+                RunInfo::from_header(&f, reader.header()).expect("its scenario")
+            });
+            for r in reader {
+                match r.expect("the fixture reads whole") {
+                    TraceRecord::Agent(a) => add(
+                        a.agent,
+                        &[
+                            "state",
+                            "desired",
+                            "tracking_error",
+                            "measurement/clean",
+                            "torque/applied",
+                            "delay",
+                        ],
+                    ),
+                    TraceRecord::Attack(a) => add(a.agent, &["attack", "measurement/tampered"]),
+                    TraceRecord::Center(c) => add(c.agent, &["estimate", "torque/sent", "alarm"]),
+                    TraceRecord::Latency { agent, .. } => add(agent, &["latency"]),
+                    TraceRecord::Actuation(a) => add(a.agent, &["actuation"]),
+                    TraceRecord::Event { .. } => events += 1,
+                }
+            }
+        }
+        let info = scenario.expect("a trace");
+        join::join_run(&info.resolved, dir, 0.0, |r| {
+            add(r.agent.agent, &["detectors"])
+        })
+        .expect("joined");
+        if events > 0 {
+            want.insert("/events".into(), events);
+        }
+        want
+    }
+
+    #[test]
+    fn every_topic_reads_back_with_the_run_s_message_count_schema_fields_and_tick_times() {
+        let dir = fixture_copy();
+        export(dir.path()).expect("exported");
+        let bytes = std::fs::read(dir.path().join("export/run.mcap")).expect("run.mcap");
+        let want = expected(dir.path());
+        let dt = fdi_common::scenario::load_file(&dir.path().join("scenario.toml"))
+            .expect("the fixture's scenario")
+            .scenario
+            .control_period_s;
+        assert!(want.len() >= 4 * 12, "{want:?}");
+
+        let schemas: BTreeMap<&str, &Schema> = TOPICS.iter().map(|(n, s)| (*n, *s)).collect();
+        let mut got: BTreeMap<String, u64> = BTreeMap::new();
+        let mut last: BTreeMap<String, u64> = BTreeMap::new();
+        for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+            let m = m.expect("a whole message");
+            let topic = m.channel.topic.clone();
+            let schema = m.channel.schema.as_ref().expect("a schema");
+            assert_eq!(schema.encoding, "jsonschema");
+            assert_eq!(m.channel.message_encoding, "json");
+            let fields: BTreeSet<String> = serde_json::from_slice::<Value>(&schema.data)
+                .expect("a JSON schema")["properties"]
+                .as_object()
+                .expect("properties")
+                .keys()
+                .cloned()
+                .collect();
+            let name = topic.splitn(3, '/').nth(2).unwrap_or(&topic);
+            let declared = if topic == "/events" {
+                &EVENT
+            } else {
+                schemas
+                    .get(name)
+                    .unwrap_or_else(|| panic!("{topic}: not a listed topic"))
+            };
+            assert_eq!(schema.name, declared.name, "{topic}");
+            let body: Value = serde_json::from_slice(&m.data).expect("a JSON message");
+            let keys: BTreeSet<String> = body
+                .as_object()
+                .expect("an object")
+                .keys()
+                .cloned()
+                .collect();
+            assert_eq!(keys, fields, "{topic}");
+            assert_eq!(m.log_time, m.publish_time, "{topic}");
+            if let Some(k) = body.get("k").and_then(Value::as_u64) {
+                let t = tick_time(k, dt);
+                // Read from the text (serde_json's own parsing may miss the last bit).
+                let text = std::str::from_utf8(&m.data).expect("utf-8");
+                let at = text.find("\"t_s\":").expect("t_s") + 6;
+                let end = text[at..].find([',', '}']).expect("its end") + at;
+                let t_s: f64 = text[at..end].parse().expect("a number");
+                assert_eq!(t_s.to_bits(), t.to_bits(), "{topic}");
+                assert_eq!(m.log_time, ns(t).expect("a time"), "{topic}");
+            }
+            let before = last.insert(topic.clone(), m.log_time).unwrap_or(0);
+            assert!(before <= m.log_time, "{topic}: log times out of order");
+            *got.entry(topic).or_default() += 1;
+        }
+        assert_eq!(got, want);
+        let summary = mcap::Summary::read(&bytes)
+            .expect("a summary")
+            .expect("a summary");
+        assert_eq!(summary.channels.len(), want.len());
+        assert_eq!(summary.metadata_indexes.len(), 1, "the fdi-mas metadata");
+    }
+
+    #[test]
+    fn every_schema_lists_each_field_once_and_requires_it() {
+        for (name, s) in TOPICS.iter().chain([&("events", &EVENT)]) {
+            let v = json_schema(s);
+            let props = v["properties"].as_object().expect("properties");
+            assert_eq!(props.len(), s.fields.len(), "{name}: a field named twice");
+            assert_eq!(
+                v["required"].as_array().map(Vec::len),
+                Some(s.fields.len()),
+                "{name}"
+            );
+            assert!(
+                props.values().all(|p| p["description"].is_string()),
+                "{name}"
+            );
+        }
+    }
+}
