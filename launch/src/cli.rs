@@ -374,7 +374,7 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunDone> {
         args.max_trace_size,
     )?;
     crate::interrupt::check(runtime::BEFORE_THE_START)?;
-    let dir = output::create_run_dir(&args.out, &r)?;
+    let dir = output::create_named_run_dir(&args.out, &r, &run_name(&r, args))?;
     let summary = output::discard_if_not_started(
         &dir,
         execute(
@@ -449,6 +449,39 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunDone> {
     }
     let clean = code == ExitCode::SUCCESS;
     Ok(RunDone { dir, code, clean })
+}
+
+/// The name of a run's directory: the scenario's, then what the command line changed —
+/// `attack-<preset or file stem>`, the controller, the engine (in-process), the clock, the seed,
+/// the duration — so that runs of one scenario tell apart in `runs/`.
+fn run_name(r: &Resolved, args: &RunArgs) -> String {
+    let mut parts = vec![r.scenario.name.clone()];
+    if let Some(a) = &args.attack {
+        let path = Path::new(a);
+        let stem = if path.extension().is_some_and(|x| x == "toml") {
+            path.file_stem()
+                .map_or(a.clone(), |s| s.to_string_lossy().into_owned())
+        } else {
+            a.clone()
+        };
+        parts.push(format!("attack-{stem}"));
+    }
+    if let Some(c) = args.controller {
+        parts.push(ControllerMode::from(c).as_str().into());
+    }
+    if args.engine == Engine::Inproc {
+        parts.push("inproc".into());
+    }
+    if args.clock.is_some() {
+        parts.push(r.scenario.clock.as_str().into());
+    }
+    if let Some(seed) = args.seed {
+        parts.push(format!("seed{seed}"));
+    }
+    if let Some(d) = args.duration_s {
+        parts.push(format!("{d}s"));
+    }
+    parts.join("-")
 }
 
 /// What a run that is not a clean success amounts to, in words (printed last), for the exit
@@ -612,5 +645,46 @@ mod tests {
         );
         let plain = anyhow::anyhow!("a").context("b");
         assert_eq!(super::describe_error(&plain), "b: a");
+    }
+
+    /// The run directory says what the command line changed, in a fixed order.
+    #[test]
+    fn a_run_is_named_after_its_scenario_and_what_the_command_line_changed() {
+        use clap::Parser;
+        let name = |argv: &[&str]| {
+            let cli = super::Cli::try_parse_from(argv).expect("parses");
+            let super::Command::Run(args) = cli.command else {
+                panic!("not a run")
+            };
+            let r = super::apply_overrides(super::load(None).expect("paper"), &args)
+                .expect("valid overrides");
+            super::run_name(&r, &args)
+        };
+        assert_eq!(name(&["fdi-launch", "run"]), "paper");
+        assert_eq!(
+            name(&[
+                "fdi-launch",
+                "run",
+                "--attack",
+                "freeze",
+                "--controller",
+                "traditional",
+                "--engine",
+                "inproc",
+                "--seed",
+                "3",
+                "--duration-s",
+                "2.5",
+            ]),
+            "paper-attack-freeze-traditional-inproc-seed3-2.5s"
+        );
+        let file = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../scenarios/attacks/sign-flip.toml"
+        );
+        assert_eq!(
+            name(&["fdi-launch", "run", "--attack", file, "--clock", "lockstep"]),
+            "paper-attack-sign-flip-lockstep"
+        );
     }
 }

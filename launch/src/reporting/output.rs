@@ -19,6 +19,12 @@ pub fn timestamp() -> String {
 /// scenario whose text as used (attack inlined) is over the size limit of scenario files is
 /// refused before anything is created: the processes read it back from the run directory.
 pub fn create_run_dir(root: &Path, resolved: &Resolved) -> Result<PathBuf> {
+    create_named_run_dir(root, resolved, &resolved.scenario.name)
+}
+
+/// [`create_run_dir`] named `<timestamp>-<name>` (characters other than ASCII letters, digits,
+/// `-` and `_` become `_`).
+pub fn create_named_run_dir(root: &Path, resolved: &Resolved, name: &str) -> Result<PathBuf> {
     let toml = resolved.to_toml();
     if toml.len() as u64 > MAX_FILE_BYTES {
         bail!(
@@ -26,9 +32,7 @@ pub fn create_run_dir(root: &Path, resolved: &Resolved) -> Result<PathBuf> {
             toml.len()
         );
     }
-    let name: String = resolved
-        .scenario
-        .name
+    let name: String = name
         .chars()
         .map(|c| {
             if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
