@@ -35,7 +35,9 @@ pub const MAX_PLAUSIBLE_ATTACK_RAD: f64 = 10.0;
 pub const PAPER_SCENARIO: &str = include_str!("../../scenarios/paper.toml");
 
 /// How processes are clocked (SPEC §6).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema, Default,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum ClockMode {
     /// Deterministic, as fast as the machine allows.
@@ -54,25 +56,142 @@ impl ClockMode {
     }
 }
 
-/// One agent.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// One agent (`[[agents]]`). `model`, `trajectory` and `delay` may be left out when
+/// `[defaults]` sets them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = agent_keys_from_defaults)]
 pub struct AgentConfig {
     /// Unique id ≥ 1; attack channels refer to it.
+    #[schemars(range(min = 1))]
     pub id: u32,
+    /// The robot: `{ kind = "two-link" | "three-link", … }`.
     pub model: ModelConfig,
+    /// The desired trajectory `q_d(t)`.
     pub trajectory: TrajectoryConfig,
+    /// The known time-varying delay `τ(t)` of the torque channel.
     pub delay: DelayProfile,
 }
 
-/// Values every agent inherits unless it sets its own (handy for many identical agents).
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+/// The keys of an agent that `[defaults]` can supply.
+const DEFAULTABLE_AGENT_KEYS: [&str; 3] = ["model", "trajectory", "delay"];
+
+/// Schema of `[[agents]]` as a file holds it: only `id` is required of every agent; the
+/// scenario's schema requires the others of each agent when `[defaults]` lacks them
+/// ([`agents_need_what_defaults_lack`]).
+fn agent_keys_from_defaults(schema: &mut schemars::Schema) {
+    if let Some(serde_json::Value::Array(required)) = schema.get_mut("required") {
+        required.retain(|k| !DEFAULTABLE_AGENT_KEYS.iter().any(|d| k == d));
+    }
+}
+
+/// `[defaults]` supplies a key to every agent that lacks it, so each agent needs the key only
+/// when `[defaults]` does not set it: one `if`/`else` per key.
+fn agents_need_what_defaults_lack(schema: &mut schemars::Schema) {
+    let rules: Vec<serde_json::Value> = DEFAULTABLE_AGENT_KEYS
+        .iter()
+        .map(|key| {
+            serde_json::json!({
+                "if": {
+                    "required": ["defaults"],
+                    "properties": { "defaults": { "type": "object", "required": [key] } }
+                },
+                "else": {
+                    "properties": { "agents": { "items": { "required": [key] } } }
+                }
+            })
+        })
+        .collect();
+    schema.insert("allOf".into(), serde_json::Value::Array(rules));
+}
+
+/// Bounds every integer of a schema by the range of its Rust type (schemars names the type in
+/// `format` only, which validators take as an annotation): a value out of range is refused by
+/// the schema as the loader refuses it.
+fn bound_integers(schema: &mut schemars::Schema) {
+    let max = match schema.get("format").and_then(serde_json::Value::as_str) {
+        Some("uint8") => Some(u64::from(u8::MAX)),
+        Some("uint16") => Some(u64::from(u16::MAX)),
+        Some("uint32") => Some(u64::from(u32::MAX)),
+        Some("uint64" | "uint") => Some(u64::MAX),
+        _ => None,
+    };
+    if let Some(max) = max {
+        schema.insert("maximum".into(), max.into());
+    }
+    schemars::transform::transform_subschemas(&mut bound_integers, schema);
+}
+
+/// Takes `null` out of the types an optional key accepts: TOML has no null (a key left out is
+/// absent, which `required` already allows).
+fn no_null(schema: &mut schemars::Schema) {
+    use serde_json::Value;
+    if let Some(Value::Array(types)) = schema.get_mut("type") {
+        types.retain(|t| t != "null");
+        if let [only] = types.as_slice() {
+            let only = only.clone();
+            schema.insert("type".into(), only);
+        }
+    }
+    let is_null = |v: &Value| v.get("type").is_some_and(|t| t == "null");
+    if let Some(Value::Array(any)) = schema.get_mut("anyOf") {
+        any.retain(|v| !is_null(v));
+        if any.len() == 1 {
+            let only = any.clone();
+            schema.remove("anyOf");
+            schema.insert("allOf".into(), Value::Array(only));
+        }
+    }
+    schemars::transform::transform_subschemas(&mut no_null, schema);
+}
+
+/// `attack.preset`: one of the shipped presets.
+fn preset_names(schema: &mut schemars::Schema) {
+    if let Some(preset) = schema
+        .get_mut("properties")
+        .and_then(|p| p.get_mut("preset"))
+        .and_then(serde_json::Value::as_object_mut)
+    {
+        preset.insert("enum".into(), presets::names().into());
+    }
+}
+
+/// A draft-7 schema (what TOML editors read) of `T`.
+fn file_schema<T: schemars::JsonSchema>() -> serde_json::Value {
+    let schema = schemars::generate::SchemaSettings::draft07()
+        .with_transform(bound_integers)
+        .with_transform(no_null)
+        .into_generator()
+        .into_root_schema_for::<T>();
+    serde_json::Value::from(schema)
+}
+
+/// The JSON Schema (draft 7) of scenario files, from the types above and their doc comments
+/// (`fdi-launch schema scenario`; shipped as `scenarios/schema/scenario.schema.json`). It
+/// checks keys and types; the values' ranges and their consistency `validate` checks.
+pub fn scenario_schema() -> serde_json::Value {
+    file_schema::<Scenario>()
+}
+
+/// The JSON Schema (draft 7) of attack-profile files (`fdi-launch schema attack`; shipped as
+/// `scenarios/schema/attack.schema.json`). It checks keys, types and the units' spellings; what
+/// needs a scenario (that the agents and links exist) only `validate` checks.
+pub fn attack_schema() -> serde_json::Value {
+    file_schema::<AttackProfile>()
+}
+
+/// `[defaults]`: values every agent inherits unless it sets its own (handy for many identical
+/// agents).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AgentDefaults {
+    /// The model of every agent without its own `model`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelConfig>,
+    /// The trajectory of every agent without its own `trajectory`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trajectory: Option<TrajectoryConfig>,
+    /// The delay of every agent without its own `delay`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub delay: Option<DelayProfile>,
 }
@@ -128,25 +247,30 @@ fn delay_problems(at: &str, delay: &DelayProfile) -> Vec<Problem> {
     out
 }
 
-/// Where the attack comes from: exactly one of a preset name, a file, or inline channels.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+/// `[attack]`: where the attack comes from: exactly one of a preset name, a file, or an inline
+/// profile.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(extend("minProperties" = 1, "maxProperties" = 1), transform = preset_names)]
 pub struct AttackSource {
-    /// A shipped preset: `paper`, `paper-linkwise`, `none`.
+    /// A shipped preset, by name (`scenarios/attacks/NAME.toml`, embedded in the binary).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preset: Option<String>,
     /// An attack-profile TOML file, relative to the scenario file's folder.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file: Option<PathBuf>,
-    /// Inline profile.
+    /// An inline profile, in the format of an attack-profile file (`[attack.profile]`,
+    /// `[[attack.profile.channels]]`, …).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub profile: Option<AttackProfile>,
 }
 
-/// A whole run.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// A scenario file of fdi-mas: everything a run needs (docs/scenarios.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(title = "fdi-mas scenario", transform = agents_need_what_defaults_lack)]
 pub struct Scenario {
+    /// Name of the run (non-empty); the run directory is named after it.
     pub name: String,
     /// Run seed: sensor noise, V̂(0), attack noise all derive from it.
     pub seed: u64,
@@ -156,15 +280,22 @@ pub struct Scenario {
     pub control_period_s: f64,
     /// RK4 sub-steps of the plant per control period; typical 1.
     pub physics_substeps: u32,
+    /// `"lockstep"` (default: deterministic, as fast as the machine allows) or `"realtime"`
+    /// (physics paced by the wall clock).
     #[serde(default)]
     pub clock: ClockMode,
+    /// `[controller]`: the gains and choices of the control center.
     pub controller: ControllerConfig,
+    /// `[noise]`: the Gaussian sensor noise.
     pub noise: NoiseConfig,
+    /// `[disturbance]`: the additive disturbance `d(t)`, one entry per link.
     pub disturbance: DisturbanceConfig,
     /// Inherited by every agent that does not set the key itself.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub defaults: Option<AgentDefaults>,
+    /// `[[agents]]`: the robots, 1 to 256 of them, all with the same number of links.
     pub agents: Vec<AgentConfig>,
+    /// `[attack]`: the attack of the run.
     pub attack: AttackSource,
     /// `[detectors]`: the classical detectors beside the paper's alarm (optional; absent, they
     /// run with their defaults).

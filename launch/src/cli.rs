@@ -33,6 +33,12 @@ pub enum Command {
         /// Scenario TOML file.
         scenario: PathBuf,
     },
+    /// Print the JSON Schema (draft 7) of a file format: `scenario` or `attack` (a profile).
+    /// The shipped copies are `scenarios/schema/*.schema.json`; docs/scenarios.md is the reference.
+    Schema {
+        #[arg(value_enum)]
+        format: SchemaFormat,
+    },
     /// Reproduce the paper's Table I (RMSE, traditional vs proposed controller).
     Table1(TableArgs),
     /// Reproduce the paper's Table II (robot 1 under four time-varying delays).
@@ -81,6 +87,15 @@ pub enum TraceCommand {
         #[arg(long, value_enum, default_value_t = export::Format::Csv)]
         format: export::Format,
     },
+}
+
+/// A file format that `schema` describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SchemaFormat {
+    /// A scenario file (`scenarios/*.toml`).
+    Scenario,
+    /// An attack-profile file (`scenarios/attacks/*.toml`).
+    Attack,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -249,6 +264,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
     match cli.command {
         Command::Run(args) => run(&args),
         Command::Validate { scenario } => validate(&scenario),
+        Command::Schema { format } => schema(format),
         Command::Table1(args) => tables::table1(&args),
         Command::Table2(args) => tables::table2(&args),
         Command::Attacks(args) => crate::reporting::attacks::attacks(&args),
@@ -519,6 +535,16 @@ pub fn describe_onsets(onsets: &[Onset]) -> String {
         one(&onsets[0]),
         detected.len()
     )
+}
+
+/// `schema`: the JSON Schema of `format`, pretty-printed, on stdout.
+fn schema(format: SchemaFormat) -> Result<ExitCode> {
+    let schema = match format {
+        SchemaFormat::Scenario => scenario::scenario_schema(),
+        SchemaFormat::Attack => scenario::attack_schema(),
+    };
+    println!("{}", serde_json::to_string_pretty(&schema)?);
+    Ok(ExitCode::SUCCESS)
 }
 
 fn validate(path: &Path) -> Result<ExitCode> {
