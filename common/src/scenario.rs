@@ -439,6 +439,36 @@ impl Scenario {
                 }
             }
         }
+        let end = self.duration_s;
+        let late = |from_s: f64| end.is_finite() && from_s >= end;
+        let never = |from_s: f64| {
+            format!("starts at {from_s} s, at or after the end of the run (duration_s = {end} s): it never acts")
+        };
+        for (i, ch) in attack.channels.iter().enumerate() {
+            for (j, seg) in ch.segments.iter().enumerate() {
+                if late(seg.from_s) {
+                    push(
+                        format!("attack.channels[{i}].segments[{j}].from_s"),
+                        never(seg.from_s),
+                    );
+                }
+            }
+        }
+        for (i, m) in attack.messages.iter().enumerate() {
+            for (j, seg) in m.segments.iter().enumerate() {
+                if late(seg.from_s) {
+                    push(
+                        format!("attack.messages[{i}].segments[{j}].from_s"),
+                        never(seg.from_s),
+                    );
+                }
+            }
+        }
+        for (i, c) in attack.covert.iter().enumerate() {
+            if late(c.from_s) {
+                push(format!("attack.covert[{i}].from_s"), never(c.from_s));
+            }
+        }
         for (i, ch) in attack.channels.iter().enumerate() {
             if ch.signal == crate::attack::Signal::Torque {
                 continue;
@@ -916,14 +946,15 @@ pub fn load_str(
     source_name: &str,
     base_dir: Option<&Path>,
 ) -> Result<Resolved, ScenarioError> {
-    let (scenario, mut problems) = parse_collecting::<Scenario>(text, source_name)?;
+    let (scenario, problems) = parse_collecting::<Scenario>(text, source_name)?;
+    let mut problems = with_locations(problems, text, None);
     let Some(scenario) = scenario else {
         return Err(ScenarioError {
             source_name: source_name.into(),
             problems,
         });
     };
-    problems.extend(scenario.validate());
+    problems.extend(with_locations(scenario.validate(), text, None));
     let mut attack = AttackProfile::default();
     if let Some(name) = &scenario.attack.preset {
         attack = presets::preset(name)
@@ -933,20 +964,28 @@ pub fn load_str(
         attack = p.clone();
     } else if let Some(file) = &scenario.attack.file {
         let path = base_dir.map_or_else(|| file.clone(), |b| b.join(file));
-        match load_attack_file(&path) {
-            Ok(p) => {
-                for (path, m) in p.problems(&scenario.agent_dofs()) {
-                    problems.push(Problem {
-                        path: format!("attack.file({}).{path}", file.display()),
-                        message: m,
-                    });
-                }
-                attack = p;
-            }
-            Err(e) => problems.extend(e.problems.into_iter().map(|p| Problem {
-                path: format!("attack.file({}).{}", file.display(), p.path),
-                message: p.message,
+        let prefixed = |p: Problem| Problem {
+            path: format!("attack.file({}).{}", file.display(), p.path),
+            message: p.message,
+        };
+        let shown = file.display().to_string();
+        match read_limited(&path) {
+            Err(e) => problems.push(prefixed(Problem {
+                path: "<file>".into(),
+                message: e,
             })),
+            Ok(text) => match parse_attack(&text, &shown, Some(&shown)) {
+                Ok(p) => {
+                    let found = attack_problems(&p.problems(&scenario.agent_dofs()));
+                    problems.extend(
+                        with_locations(found, &text, Some(&shown))
+                            .into_iter()
+                            .map(prefixed),
+                    );
+                    attack = p;
+                }
+                Err(e) => problems.extend(e.problems.into_iter().map(prefixed)),
+            },
         }
     }
     if problems.is_empty() {
@@ -976,13 +1015,89 @@ pub fn paper() -> Result<Resolved, ScenarioError> {
 pub fn load_attack_file(path: &Path) -> Result<AttackProfile, ScenarioError> {
     let name = path.display().to_string();
     let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
-    let (profile, problems) = parse_collecting::<AttackProfile>(&text, &name)?;
+    load_attack_text(&text, &name)
+}
+
+/// Parses attack-profile text (keys and types), its problems located in it.
+pub fn load_attack_text(text: &str, name: &str) -> Result<AttackProfile, ScenarioError> {
+    parse_attack(text, name, None)
+}
+
+/// [`load_attack_text`], the locations said to be `of` a file when given (an attack file that
+/// a scenario names).
+fn parse_attack(text: &str, name: &str, of: Option<&str>) -> Result<AttackProfile, ScenarioError> {
+    let (profile, problems) = parse_collecting::<AttackProfile>(text, name)?;
     match profile {
         Some(p) if problems.is_empty() => Ok(p),
         _ => Err(ScenarioError {
+            source_name: name.into(),
+            problems: with_locations(problems, text, of),
+        }),
+    }
+}
+
+/// `(path, message)` pairs of [`AttackProfile::problems`] as problems.
+fn attack_problems(found: &[(String, String)]) -> Vec<Problem> {
+    found
+        .iter()
+        .map(|(path, message)| Problem {
+            path: path.clone(),
+            message: message.clone(),
+        })
+        .collect()
+}
+
+/// What a file holds, told apart by its top-level keys.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileKind {
+    Scenario,
+    AttackProfile,
+}
+
+/// Whether `text` is an attack profile (it has `channels`, `messages` or `covert` and none of a
+/// scenario's own keys) or else a scenario (whose loader then says what is wrong with it).
+pub fn file_kind(text: &str) -> FileKind {
+    let Ok(table) = toml::from_str::<toml::Table>(text) else {
+        return FileKind::Scenario;
+    };
+    let scenario_keys = [
+        "seed",
+        "duration_s",
+        "control_period_s",
+        "physics_substeps",
+        "clock",
+        "controller",
+        "noise",
+        "disturbance",
+        "defaults",
+        "agents",
+        "attack",
+        "detectors",
+    ];
+    let profile_keys = ["channels", "messages", "covert"];
+    if profile_keys.iter().any(|k| table.contains_key(*k))
+        && !scenario_keys.iter().any(|k| table.contains_key(*k))
+    {
+        FileKind::AttackProfile
+    } else {
+        FileKind::Scenario
+    }
+}
+
+/// Validates an attack profile without a scenario: keys, types and every value that needs no
+/// scenario (the agents it names are taken to exist, with as many links as it names).
+pub fn validate_attack_alone(path: &Path) -> Result<AttackProfile, ScenarioError> {
+    let name = path.display().to_string();
+    let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
+    let profile = load_attack_text(&text, &name)?;
+    let problems = with_locations(attack_problems(&profile.problems_alone()), &text, None);
+    if problems.is_empty() {
+        Ok(profile)
+    } else {
+        Err(ScenarioError {
             source_name: name,
             problems,
-        }),
+        })
     }
 }
 
@@ -997,7 +1112,20 @@ pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, 
     // `Path::exists` is false for any error (a symlink loop, no permission): only a name that
     // is truly absent is "neither"; any other failure is said as the system says it.
     match std::fs::metadata(path) {
-        Ok(_) => load_attack_file(path),
+        Ok(_) => {
+            let name = path.display().to_string();
+            let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
+            let profile = load_attack_text(&text, &name)?;
+            let found = attack_problems(&profile.problems(&scenario.agent_dofs()));
+            if found.is_empty() {
+                Ok(profile)
+            } else {
+                Err(ScenarioError {
+                    source_name: name.clone(),
+                    problems: with_locations(found, &text, None),
+                })
+            }
+        }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             let message = if std::fs::symlink_metadata(path).is_ok() {
                 "a symbolic link whose target does not exist".to_string()
@@ -1015,6 +1143,64 @@ pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, 
             format!("cannot be read as an attack file: {e}"),
         )),
     }
+}
+
+/// Where in `text` the field at `path` (`a.b[2].c`, as [`Problem::path`] names it) is written:
+/// the byte offset of its key (of its value, for an array element). A field the text does not
+/// hold (a missing key, one inherited from `[defaults]`) gives the place of the nearest table
+/// above it that the text holds; `None` when the text does not parse or nothing of the path is
+/// in it.
+fn locate(text: &str, path: &str) -> Option<usize> {
+    use toml::de::{DeTable, DeValue};
+    let root = DeTable::parse(text).ok()?;
+    let mut segments: Vec<Result<&str, usize>> = Vec::new();
+    for part in path.split('.').filter(|p| !p.is_empty()) {
+        let (key, mut rest) = part.split_at(part.find('[').unwrap_or(part.len()));
+        if !key.is_empty() {
+            segments.push(Ok(key));
+        }
+        while let Some(inner) = rest.strip_prefix('[') {
+            let end = inner.find(']')?;
+            segments.push(Err(inner[..end].parse().ok()?));
+            rest = &inner[end + 1..];
+        }
+    }
+    let mut found = None;
+    let mut table = Some(root.get_ref());
+    let mut array: Option<&toml::de::DeArray<'_>> = None;
+    for seg in segments {
+        let value = match (seg, table, array) {
+            (Ok(key), Some(t), _) => t.iter().find(|(k, _)| k.get_ref() == key).map(|(k, v)| {
+                found = Some(k.span().start);
+                v
+            }),
+            (Err(i), _, Some(a)) => a.get(i).inspect(|v| found = Some(v.span().start)),
+            _ => None,
+        };
+        let Some(value) = value else { break };
+        (table, array) = match value.get_ref() {
+            DeValue::Table(t) => (Some(t), None),
+            DeValue::Array(a) => (None, Some(a)),
+            _ => (None, None),
+        };
+    }
+    found
+}
+
+/// The problems with the place of each in `text` appended: `line L, column C of NAME`, or
+/// without `of NAME` when `name` is `None` (the file the error is headed with).
+fn with_locations(problems: Vec<Problem>, text: &str, name: Option<&str>) -> Vec<Problem> {
+    problems
+        .into_iter()
+        .map(|mut p| {
+            if let Some(offset) = locate(text, &p.path) {
+                let (line, column) = line_column(text, offset);
+                let of = name.map_or(String::new(), |n| format!(" of {n}"));
+                p.message = format!("{} (line {line}, column {column}{of})", p.message);
+            }
+            p
+        })
+        .collect()
 }
 
 /// `line L, column C` (1-based, columns in characters) of byte `offset` of `text`.
@@ -1115,6 +1301,102 @@ mod tests {
             "{e}"
         );
         let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn a_field_is_located_by_its_path_and_a_missing_one_by_its_nearest_table() {
+        let text = "name = \"x\"\n[[channels]]\nagent = 9\nlinks = [1, 0]\n\n[[channels]]\n  signal = \"velocity\"\n";
+        let at = |path: &str| locate(text, path).map(|o| line_column(text, o));
+        assert_eq!(at("name"), Some((1, 1)));
+        assert_eq!(at("channels[0].agent"), Some((3, 1)));
+        assert_eq!(at("channels[0].links[1]"), Some((4, 13)));
+        assert_eq!(at("channels[1].signal"), Some((7, 3)));
+        // Absent: the nearest table the text holds.
+        assert_eq!(at("channels[1].units"), at("channels[1]"));
+        assert!(at("channels[1]").is_some());
+        assert_eq!(at("nothing.here"), None);
+        assert_eq!(locate("not = [toml", "not"), None);
+    }
+
+    #[test]
+    fn attack_segments_that_start_at_or_after_the_run_s_end_are_warnings() {
+        let r = paper().expect("paper");
+        assert!(
+            r.scenario.warnings(&r.attack).is_empty(),
+            "{:?}",
+            r.scenario.warnings(&r.attack)
+        );
+        let mut attack = r.attack.clone();
+        let last = attack.channels[0].segments.len() - 1;
+        attack.channels[0].segments[last].from_s = 40.0;
+        attack.messages = vec![crate::attack::MessageAttack {
+            agent: 1,
+            path: crate::attack::Path::Torque,
+            segments: vec![
+                crate::attack::MessageSegment {
+                    from_s: 39.0,
+                    effect: crate::attack::Effect::Pass,
+                },
+                crate::attack::MessageSegment {
+                    from_s: 50.0,
+                    effect: crate::attack::Effect::Pass,
+                },
+            ],
+        }];
+        let w = r.scenario.warnings(&attack);
+        let paths: Vec<String> = w.iter().map(|p| p.path.clone()).collect();
+        assert_eq!(
+            paths,
+            [
+                format!("attack.channels[0].segments[{last}].from_s"),
+                "attack.messages[0].segments[1].from_s".to_string()
+            ]
+        );
+        assert!(
+            w[0].message.contains(
+                "starts at 40 s, at or after the end of the run (duration_s = 40 s): it never acts"
+            ),
+            "{w:?}"
+        );
+        // A warning, not a problem: the scenario stays valid.
+        let problems = r.clone().with_attack(attack).err();
+        assert!(problems.is_none(), "{problems:?}");
+    }
+
+    #[test]
+    fn an_attack_file_is_told_apart_from_a_scenario_by_its_keys() {
+        assert_eq!(file_kind(PAPER_SCENARIO), FileKind::Scenario);
+        for (_, text) in presets::PRESETS {
+            let kind = file_kind(text);
+            // `none` has no channels: it is read as a scenario only if it has none of the
+            // profile's lists.
+            if text.contains("[[channels]]") || text.contains("[[messages]]") {
+                assert_eq!(kind, FileKind::AttackProfile, "{text}");
+            }
+        }
+        assert_eq!(file_kind("channels = []\nseed = 1\n"), FileKind::Scenario);
+        assert_eq!(file_kind("not toml ["), FileKind::Scenario);
+    }
+
+    #[test]
+    fn an_attack_argument_naming_a_missing_agent_names_the_file_its_line_and_the_agents() {
+        let dir = std::env::temp_dir().join(format!("fdi-attack-agent-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let f = dir.join("agent-7.toml");
+        std::fs::write(
+            &f,
+            "name = \"x\"\n[[channels]]\nagent = 7\nsignal = \"position\"\nlinks = [1]\nunits = \"rad\"\nsegments = [{ from_s = 0.0, waveform = { kind = \"none\" } }]\n",
+        )
+        .expect("write");
+        let scenario = paper().expect("paper").scenario;
+        let e = attack_from_arg(f.to_str().expect("utf-8"), &scenario).expect_err("agent 7");
+        let msg = e.to_string();
+        assert!(
+            msg.starts_with(&format!("{}: 1 problem(s)", f.display()))
+                && msg.contains("channels[0].agent: agent 7 is not in the scenario (its agents: 1, 2, 3, 4) (line 3, column 1)"),
+            "{msg}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

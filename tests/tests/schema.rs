@@ -175,9 +175,21 @@ fn a_wrong_type_or_an_unknown_key_is_refused_by_the_schema_as_by_the_loader() {
         ("duration_s = 40.0", "duration_s = \"forty\"", "/duration_s"),
         ("seed = 1\n", "seed = 1\nfrobnicate = true\n", ""),
         ("seed = 1\n", "seed = -1\n", "/seed"),
-        ("gain_k = 21.0", "gain_k = 21.0\ngain_q = 1.0", "/controller"),
-        ("mode = \"proposed\"", "mode = \"clever\"", "/controller/mode"),
-        ("preset = \"paper\"", "preset = \"papers\"", "/attack/preset"),
+        (
+            "gain_k = 21.0",
+            "gain_k = 21.0\ngain_q = 1.0",
+            "/controller",
+        ),
+        (
+            "mode = \"proposed\"",
+            "mode = \"clever\"",
+            "/controller/mode",
+        ),
+        (
+            "preset = \"paper\"",
+            "preset = \"papers\"",
+            "/attack/preset",
+        ),
         (
             "preset = \"paper\"",
             "preset = \"paper\"\nfile = \"x.toml\"",
@@ -220,10 +232,22 @@ fn a_wrong_type_or_an_unknown_key_is_refused_by_the_schema_as_by_the_loader() {
     );
 
     let attack_cases = [
-        ("units = \"deg\"", "units = \"furlong\"", "/channels/0/units"),
+        (
+            "units = \"deg\"",
+            "units = \"furlong\"",
+            "/channels/0/units",
+        ),
         ("agent = 1", "agent = \"one\"", "/channels/0/agent"),
-        ("links = [1, 2]", "links = [1, 2]\nstrength = 3", "/channels/0"),
-        ("kind = \"sine\"", "kind = \"sawtooth\"", "/channels/0/segments/0/waveform"),
+        (
+            "links = [1, 2]",
+            "links = [1, 2]\nstrength = 3",
+            "/channels/0",
+        ),
+        (
+            "kind = \"sine\"",
+            "kind = \"sawtooth\"",
+            "/channels/0/segments/0/waveform",
+        ),
         ("name = \"paper\"", "name = \"paper\"\nchanels = []", ""),
     ];
     let dir = std::env::temp_dir().join(format!("fdi-schema-cases-{}", std::process::id()));

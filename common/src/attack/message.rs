@@ -77,6 +77,16 @@ pub enum Effect {
     },
 }
 
+impl Path {
+    /// The path as a file names it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Measurement => "measurement",
+            Self::Torque => "torque",
+        }
+    }
+}
+
 impl Effect {
     /// Every problem of the effect's parameters, as `(field, message)`.
     pub fn problems(&self) -> Vec<(String, String)> {

@@ -203,6 +203,33 @@ impl AttackProfile {
                 .any(|m| m.agent == agent && m.path == Path::Torque)
     }
 
+    /// Every problem [`Self::problems`] finds without a scenario: each agent the profile names
+    /// is taken to exist with as many links as the profile names (what needs a scenario, that
+    /// the agents and links exist, is left unchecked; link 0 is still refused).
+    pub fn problems_alone(&self) -> Vec<(String, String)> {
+        let agents = self
+            .channels
+            .iter()
+            .map(|c| c.agent)
+            .chain(self.messages.iter().map(|m| m.agent))
+            .chain(self.covert.iter().map(|c| c.agent));
+        self.problems(&agents.map(|a| (a, usize::MAX)).collect())
+    }
+
+    /// The agents the profile names, in increasing order, each once.
+    pub fn agents(&self) -> Vec<u32> {
+        let mut out: Vec<u32> = self
+            .channels
+            .iter()
+            .map(|c| c.agent)
+            .chain(self.messages.iter().map(|m| m.agent))
+            .chain(self.covert.iter().map(|c| c.agent))
+            .collect();
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+
     /// Every problem of the profile, as `(field path relative to the profile, message)`.
     /// `agent_dofs` maps each agent id of the scenario to its number of links.
     pub fn problems(&self, agent_dofs: &BTreeMap<u32, usize>) -> Vec<(String, String)> {
@@ -256,9 +283,10 @@ impl AttackProfile {
                 out.push((
                     format!("messages[{m}].path"),
                     format!(
-                        "agent {}'s {:?} path is already attacked by messages[{first}]: put \
+                        "agent {}'s {} path is already attacked by messages[{first}]: put \
                          both schedules' segments in one entry",
-                        msg.agent, msg.path
+                        msg.agent,
+                        msg.path.as_str()
                     ),
                 ));
             }
