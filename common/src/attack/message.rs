@@ -43,7 +43,12 @@ pub enum Effect {
     /// Denial of service in bursts: a two-state (Gilbert) channel, sampled at each message.
     /// Bursts of drops last `mean_length_s` on average and come `mean_gap_s` apart on average
     /// (both exponentially distributed); the channel starts the segment in its good state.
-    Burst { mean_gap_s: f64, mean_length_s: f64 },
+    Burst {
+        /// Mean time between bursts, s (> 0).
+        mean_gap_s: f64,
+        /// Mean length of a burst, s (> 0).
+        mean_length_s: f64,
+    },
     /// Hold messages back by `d(t) = by_s + amplitude_s · sin(rate_rad_s · t)` (≥ 0). On the
     /// torque path the command takes effect `d` later than the channel's known delay `τ`; on
     /// the measurement path the center gets, at each tick, the newest measurement delivered by
@@ -637,9 +642,7 @@ mod tests {
         // so the channel cannot have left its good state.
         for seed in 0..50 {
             let fast = Effect::Burst {
-                /// Mean time between bursts, s (> 0).
                 mean_gap_s: 1e-6,
-                /// Mean length of a burst, s (> 0).
                 mean_length_s: 1e-6,
             };
             let mut l = line(Path::Torque, &[(0.0, fast)], seed);
