@@ -9,17 +9,23 @@ use serde::{Deserialize, Serialize};
 use crate::model::Vector;
 
 /// Known time-varying delay of the torque channel (SPEC §5), in seconds.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum DelayProfile {
     /// `τ(t) = amplitude · sin(rate · t) + offset`. Paper: 2 ms · sin(t/2) + 3 ms.
     Sine {
+        /// s.
         amplitude_s: f64,
+        /// s.
         offset_s: f64,
+        /// rad/s.
         rate_rad_s: f64,
     },
     /// `τ(t) = value`.
-    Constant { value_s: f64 },
+    Constant {
+        /// s.
+        value_s: f64,
+    },
 }
 
 impl DelayProfile {

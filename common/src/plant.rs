@@ -276,7 +276,7 @@ impl<const N: usize> Plant<N> {
 // `[noise]` and `[disturbance]` of a scenario: read by the plant only.
 
 /// Gaussian sensor noise θ (SPEC §2).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseConfig {
     /// Standard deviation of θ1, rad; typical 1e-4.
@@ -286,20 +286,24 @@ pub struct NoiseConfig {
 }
 
 /// One link's additive disturbance `amplitude · sin(omega t)`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DisturbanceLink {
+    /// Amplitude: N·m under `units = "rad"`; under `units = "deg"` it is multiplied by π/180
+    /// (the paper's reading).
     pub amplitude: f64,
+    /// Angular frequency, rad/s.
     pub omega_rad_s: f64,
 }
 
 /// Exogenous disturbance `d(t)` of (1), N·m.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DisturbanceConfig {
     /// `deg` multiplies the amplitudes by π/180, the paper's reading ("0.2 sin(0.1t) deg");
     /// `rad` takes them as N·m.
     pub units: AngleUnit,
+    /// One entry per link.
     pub links: Vec<DisturbanceLink>,
 }
 

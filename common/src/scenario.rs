@@ -35,7 +35,9 @@ pub const MAX_PLAUSIBLE_ATTACK_RAD: f64 = 10.0;
 pub const PAPER_SCENARIO: &str = include_str!("../../scenarios/paper.toml");
 
 /// How processes are clocked (SPEC §6).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema, Default,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum ClockMode {
     /// Deterministic, as fast as the machine allows.
@@ -54,25 +56,142 @@ impl ClockMode {
     }
 }
 
-/// One agent.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// One agent (`[[agents]]`). `model`, `trajectory` and `delay` may be left out when
+/// `[defaults]` sets them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = agent_keys_from_defaults)]
 pub struct AgentConfig {
     /// Unique id ≥ 1; attack channels refer to it.
+    #[schemars(range(min = 1))]
     pub id: u32,
+    /// The robot: `{ kind = "two-link" | "three-link", … }`.
     pub model: ModelConfig,
+    /// The desired trajectory `q_d(t)`.
     pub trajectory: TrajectoryConfig,
+    /// The known time-varying delay `τ(t)` of the torque channel.
     pub delay: DelayProfile,
 }
 
-/// Values every agent inherits unless it sets its own (handy for many identical agents).
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+/// The keys of an agent that `[defaults]` can supply.
+const DEFAULTABLE_AGENT_KEYS: [&str; 3] = ["model", "trajectory", "delay"];
+
+/// Schema of `[[agents]]` as a file holds it: only `id` is required of every agent; the
+/// scenario's schema requires the others of each agent when `[defaults]` lacks them
+/// ([`agents_need_what_defaults_lack`]).
+fn agent_keys_from_defaults(schema: &mut schemars::Schema) {
+    if let Some(serde_json::Value::Array(required)) = schema.get_mut("required") {
+        required.retain(|k| !DEFAULTABLE_AGENT_KEYS.iter().any(|d| k == d));
+    }
+}
+
+/// `[defaults]` supplies a key to every agent that lacks it, so each agent needs the key only
+/// when `[defaults]` does not set it: one `if`/`else` per key.
+fn agents_need_what_defaults_lack(schema: &mut schemars::Schema) {
+    let rules: Vec<serde_json::Value> = DEFAULTABLE_AGENT_KEYS
+        .iter()
+        .map(|key| {
+            serde_json::json!({
+                "if": {
+                    "required": ["defaults"],
+                    "properties": { "defaults": { "type": "object", "required": [key] } }
+                },
+                "else": {
+                    "properties": { "agents": { "items": { "required": [key] } } }
+                }
+            })
+        })
+        .collect();
+    schema.insert("allOf".into(), serde_json::Value::Array(rules));
+}
+
+/// Bounds every integer of a schema by the range of its Rust type (schemars names the type in
+/// `format` only, which validators take as an annotation): a value out of range is refused by
+/// the schema as the loader refuses it.
+fn bound_integers(schema: &mut schemars::Schema) {
+    let max = match schema.get("format").and_then(serde_json::Value::as_str) {
+        Some("uint8") => Some(u64::from(u8::MAX)),
+        Some("uint16") => Some(u64::from(u16::MAX)),
+        Some("uint32") => Some(u64::from(u32::MAX)),
+        Some("uint64" | "uint") => Some(u64::MAX),
+        _ => None,
+    };
+    if let Some(max) = max {
+        schema.insert("maximum".into(), max.into());
+    }
+    schemars::transform::transform_subschemas(&mut bound_integers, schema);
+}
+
+/// Takes `null` out of the types an optional key accepts: TOML has no null (a key left out is
+/// absent, which `required` already allows).
+fn no_null(schema: &mut schemars::Schema) {
+    use serde_json::Value;
+    if let Some(Value::Array(types)) = schema.get_mut("type") {
+        types.retain(|t| t != "null");
+        if let [only] = types.as_slice() {
+            let only = only.clone();
+            schema.insert("type".into(), only);
+        }
+    }
+    let is_null = |v: &Value| v.get("type").is_some_and(|t| t == "null");
+    if let Some(Value::Array(any)) = schema.get_mut("anyOf") {
+        any.retain(|v| !is_null(v));
+        if any.len() == 1 {
+            let only = any.clone();
+            schema.remove("anyOf");
+            schema.insert("allOf".into(), Value::Array(only));
+        }
+    }
+    schemars::transform::transform_subschemas(&mut no_null, schema);
+}
+
+/// `attack.preset`: one of the shipped presets.
+fn preset_names(schema: &mut schemars::Schema) {
+    if let Some(preset) = schema
+        .get_mut("properties")
+        .and_then(|p| p.get_mut("preset"))
+        .and_then(serde_json::Value::as_object_mut)
+    {
+        preset.insert("enum".into(), presets::names().into());
+    }
+}
+
+/// A draft-7 schema (what TOML editors read) of `T`.
+fn file_schema<T: schemars::JsonSchema>() -> serde_json::Value {
+    let schema = schemars::generate::SchemaSettings::draft07()
+        .with_transform(bound_integers)
+        .with_transform(no_null)
+        .into_generator()
+        .into_root_schema_for::<T>();
+    serde_json::Value::from(schema)
+}
+
+/// The JSON Schema (draft 7) of scenario files, from the types above and their doc comments
+/// (`fdi-launch schema scenario`; shipped as `scenarios/schema/scenario.schema.json`). It
+/// checks keys and types; the values' ranges and their consistency `validate` checks.
+pub fn scenario_schema() -> serde_json::Value {
+    file_schema::<Scenario>()
+}
+
+/// The JSON Schema (draft 7) of attack-profile files (`fdi-launch schema attack`; shipped as
+/// `scenarios/schema/attack.schema.json`). It checks keys, types and the units' spellings; what
+/// needs a scenario (that the agents and links exist) only `validate` checks.
+pub fn attack_schema() -> serde_json::Value {
+    file_schema::<AttackProfile>()
+}
+
+/// `[defaults]`: values every agent inherits unless it sets its own (handy for many identical
+/// agents).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AgentDefaults {
+    /// The model of every agent without its own `model`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub model: Option<ModelConfig>,
+    /// The trajectory of every agent without its own `trajectory`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub trajectory: Option<TrajectoryConfig>,
+    /// The delay of every agent without its own `delay`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub delay: Option<DelayProfile>,
 }
@@ -128,25 +247,30 @@ fn delay_problems(at: &str, delay: &DelayProfile) -> Vec<Problem> {
     out
 }
 
-/// Where the attack comes from: exactly one of a preset name, a file, or inline channels.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+/// `[attack]`: where the attack comes from: exactly one of a preset name, a file, or an inline
+/// profile.
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(extend("minProperties" = 1, "maxProperties" = 1), transform = preset_names)]
 pub struct AttackSource {
-    /// A shipped preset: `paper`, `paper-linkwise`, `none`.
+    /// A shipped preset, by name (`scenarios/attacks/NAME.toml`, embedded in the binary).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub preset: Option<String>,
     /// An attack-profile TOML file, relative to the scenario file's folder.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file: Option<PathBuf>,
-    /// Inline profile.
+    /// An inline profile, in the format of an attack-profile file (`[attack.profile]`,
+    /// `[[attack.profile.channels]]`, …).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub profile: Option<AttackProfile>,
 }
 
-/// A whole run.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// A scenario file of fdi-mas: everything a run needs (docs/scenarios.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(title = "fdi-mas scenario", transform = agents_need_what_defaults_lack)]
 pub struct Scenario {
+    /// Name of the run (non-empty); the run directory is named after it.
     pub name: String,
     /// Run seed: sensor noise, V̂(0), attack noise all derive from it.
     pub seed: u64,
@@ -156,15 +280,22 @@ pub struct Scenario {
     pub control_period_s: f64,
     /// RK4 sub-steps of the plant per control period; typical 1.
     pub physics_substeps: u32,
+    /// `"lockstep"` (default: deterministic, as fast as the machine allows) or `"realtime"`
+    /// (physics paced by the wall clock).
     #[serde(default)]
     pub clock: ClockMode,
+    /// `[controller]`: the gains and choices of the control center.
     pub controller: ControllerConfig,
+    /// `[noise]`: the Gaussian sensor noise.
     pub noise: NoiseConfig,
+    /// `[disturbance]`: the additive disturbance `d(t)`, one entry per link.
     pub disturbance: DisturbanceConfig,
     /// Inherited by every agent that does not set the key itself.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub defaults: Option<AgentDefaults>,
+    /// `[[agents]]`: the robots, 1 to 256 of them, all with the same number of links.
     pub agents: Vec<AgentConfig>,
+    /// `[attack]`: the attack of the run.
     pub attack: AttackSource,
     /// `[detectors]`: the classical detectors beside the paper's alarm (optional; absent, they
     /// run with their defaults).
@@ -306,6 +437,36 @@ impl Scenario {
                         );
                     }
                 }
+            }
+        }
+        let end = self.duration_s;
+        let late = |from_s: f64| end.is_finite() && from_s >= end;
+        let never = |from_s: f64| {
+            format!("starts at {from_s} s, at or after the end of the run (duration_s = {end} s): it never acts")
+        };
+        for (i, ch) in attack.channels.iter().enumerate() {
+            for (j, seg) in ch.segments.iter().enumerate() {
+                if late(seg.from_s) {
+                    push(
+                        format!("attack.channels[{i}].segments[{j}].from_s"),
+                        never(seg.from_s),
+                    );
+                }
+            }
+        }
+        for (i, m) in attack.messages.iter().enumerate() {
+            for (j, seg) in m.segments.iter().enumerate() {
+                if late(seg.from_s) {
+                    push(
+                        format!("attack.messages[{i}].segments[{j}].from_s"),
+                        never(seg.from_s),
+                    );
+                }
+            }
+        }
+        for (i, c) in attack.covert.iter().enumerate() {
+            if late(c.from_s) {
+                push(format!("attack.covert[{i}].from_s"), never(c.from_s));
             }
         }
         for (i, ch) in attack.channels.iter().enumerate() {
@@ -785,14 +946,15 @@ pub fn load_str(
     source_name: &str,
     base_dir: Option<&Path>,
 ) -> Result<Resolved, ScenarioError> {
-    let (scenario, mut problems) = parse_collecting::<Scenario>(text, source_name)?;
+    let (scenario, problems) = parse_collecting::<Scenario>(text, source_name)?;
+    let mut problems = with_locations(problems, text, None);
     let Some(scenario) = scenario else {
         return Err(ScenarioError {
             source_name: source_name.into(),
             problems,
         });
     };
-    problems.extend(scenario.validate());
+    problems.extend(with_locations(scenario.validate(), text, None));
     let mut attack = AttackProfile::default();
     if let Some(name) = &scenario.attack.preset {
         attack = presets::preset(name)
@@ -802,20 +964,28 @@ pub fn load_str(
         attack = p.clone();
     } else if let Some(file) = &scenario.attack.file {
         let path = base_dir.map_or_else(|| file.clone(), |b| b.join(file));
-        match load_attack_file(&path) {
-            Ok(p) => {
-                for (path, m) in p.problems(&scenario.agent_dofs()) {
-                    problems.push(Problem {
-                        path: format!("attack.file({}).{path}", file.display()),
-                        message: m,
-                    });
-                }
-                attack = p;
-            }
-            Err(e) => problems.extend(e.problems.into_iter().map(|p| Problem {
-                path: format!("attack.file({}).{}", file.display(), p.path),
-                message: p.message,
+        let prefixed = |p: Problem| Problem {
+            path: format!("attack.file({}).{}", file.display(), p.path),
+            message: p.message,
+        };
+        let shown = file.display().to_string();
+        match read_limited(&path) {
+            Err(e) => problems.push(prefixed(Problem {
+                path: "<file>".into(),
+                message: e,
             })),
+            Ok(text) => match parse_attack(&text, &shown, Some(&shown)) {
+                Ok(p) => {
+                    let found = attack_problems(&p.problems(&scenario.agent_dofs()));
+                    problems.extend(
+                        with_locations(found, &text, Some(&shown))
+                            .into_iter()
+                            .map(prefixed),
+                    );
+                    attack = p;
+                }
+                Err(e) => problems.extend(e.problems.into_iter().map(prefixed)),
+            },
         }
     }
     if problems.is_empty() {
@@ -845,13 +1015,89 @@ pub fn paper() -> Result<Resolved, ScenarioError> {
 pub fn load_attack_file(path: &Path) -> Result<AttackProfile, ScenarioError> {
     let name = path.display().to_string();
     let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
-    let (profile, problems) = parse_collecting::<AttackProfile>(&text, &name)?;
+    load_attack_text(&text, &name)
+}
+
+/// Parses attack-profile text (keys and types), its problems located in it.
+pub fn load_attack_text(text: &str, name: &str) -> Result<AttackProfile, ScenarioError> {
+    parse_attack(text, name, None)
+}
+
+/// [`load_attack_text`], the locations said to be `of` a file when given (an attack file that
+/// a scenario names).
+fn parse_attack(text: &str, name: &str, of: Option<&str>) -> Result<AttackProfile, ScenarioError> {
+    let (profile, problems) = parse_collecting::<AttackProfile>(text, name)?;
     match profile {
         Some(p) if problems.is_empty() => Ok(p),
         _ => Err(ScenarioError {
+            source_name: name.into(),
+            problems: with_locations(problems, text, of),
+        }),
+    }
+}
+
+/// `(path, message)` pairs of [`AttackProfile::problems`] as problems.
+fn attack_problems(found: &[(String, String)]) -> Vec<Problem> {
+    found
+        .iter()
+        .map(|(path, message)| Problem {
+            path: path.clone(),
+            message: message.clone(),
+        })
+        .collect()
+}
+
+/// What a file holds, told apart by its top-level keys.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FileKind {
+    Scenario,
+    AttackProfile,
+}
+
+/// Whether `text` is an attack profile (it has `channels`, `messages` or `covert` and none of a
+/// scenario's own keys) or else a scenario (whose loader then says what is wrong with it).
+pub fn file_kind(text: &str) -> FileKind {
+    let Ok(table) = toml::from_str::<toml::Table>(text) else {
+        return FileKind::Scenario;
+    };
+    let scenario_keys = [
+        "seed",
+        "duration_s",
+        "control_period_s",
+        "physics_substeps",
+        "clock",
+        "controller",
+        "noise",
+        "disturbance",
+        "defaults",
+        "agents",
+        "attack",
+        "detectors",
+    ];
+    let profile_keys = ["channels", "messages", "covert"];
+    if profile_keys.iter().any(|k| table.contains_key(*k))
+        && !scenario_keys.iter().any(|k| table.contains_key(*k))
+    {
+        FileKind::AttackProfile
+    } else {
+        FileKind::Scenario
+    }
+}
+
+/// Validates an attack profile without a scenario: keys, types and every value that needs no
+/// scenario (the agents it names are taken to exist, with as many links as it names).
+pub fn validate_attack_alone(path: &Path) -> Result<AttackProfile, ScenarioError> {
+    let name = path.display().to_string();
+    let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
+    let profile = load_attack_text(&text, &name)?;
+    let problems = with_locations(attack_problems(&profile.problems_alone()), &text, None);
+    if problems.is_empty() {
+        Ok(profile)
+    } else {
+        Err(ScenarioError {
             source_name: name,
             problems,
-        }),
+        })
     }
 }
 
@@ -866,7 +1112,20 @@ pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, 
     // `Path::exists` is false for any error (a symlink loop, no permission): only a name that
     // is truly absent is "neither"; any other failure is said as the system says it.
     match std::fs::metadata(path) {
-        Ok(_) => load_attack_file(path),
+        Ok(_) => {
+            let name = path.display().to_string();
+            let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
+            let profile = load_attack_text(&text, &name)?;
+            let found = attack_problems(&profile.problems(&scenario.agent_dofs()));
+            if found.is_empty() {
+                Ok(profile)
+            } else {
+                Err(ScenarioError {
+                    source_name: name.clone(),
+                    problems: with_locations(found, &text, None),
+                })
+            }
+        }
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
             let message = if std::fs::symlink_metadata(path).is_ok() {
                 "a symbolic link whose target does not exist".to_string()
@@ -884,6 +1143,64 @@ pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, 
             format!("cannot be read as an attack file: {e}"),
         )),
     }
+}
+
+/// Where in `text` the field at `path` (`a.b[2].c`, as [`Problem::path`] names it) is written:
+/// the byte offset of its key (of its value, for an array element). A field the text does not
+/// hold (a missing key, one inherited from `[defaults]`) gives the place of the nearest table
+/// above it that the text holds; `None` when the text does not parse or nothing of the path is
+/// in it.
+fn locate(text: &str, path: &str) -> Option<usize> {
+    use toml::de::{DeTable, DeValue};
+    let root = DeTable::parse(text).ok()?;
+    let mut segments: Vec<Result<&str, usize>> = Vec::new();
+    for part in path.split('.').filter(|p| !p.is_empty()) {
+        let (key, mut rest) = part.split_at(part.find('[').unwrap_or(part.len()));
+        if !key.is_empty() {
+            segments.push(Ok(key));
+        }
+        while let Some(inner) = rest.strip_prefix('[') {
+            let end = inner.find(']')?;
+            segments.push(Err(inner[..end].parse().ok()?));
+            rest = &inner[end + 1..];
+        }
+    }
+    let mut found = None;
+    let mut table = Some(root.get_ref());
+    let mut array: Option<&toml::de::DeArray<'_>> = None;
+    for seg in segments {
+        let value = match (seg, table, array) {
+            (Ok(key), Some(t), _) => t.iter().find(|(k, _)| k.get_ref() == key).map(|(k, v)| {
+                found = Some(k.span().start);
+                v
+            }),
+            (Err(i), _, Some(a)) => a.get(i).inspect(|v| found = Some(v.span().start)),
+            _ => None,
+        };
+        let Some(value) = value else { break };
+        (table, array) = match value.get_ref() {
+            DeValue::Table(t) => (Some(t), None),
+            DeValue::Array(a) => (None, Some(a)),
+            _ => (None, None),
+        };
+    }
+    found
+}
+
+/// The problems with the place of each in `text` appended: `line L, column C of NAME`, or
+/// without `of NAME` when `name` is `None` (the file the error is headed with).
+fn with_locations(problems: Vec<Problem>, text: &str, name: Option<&str>) -> Vec<Problem> {
+    problems
+        .into_iter()
+        .map(|mut p| {
+            if let Some(offset) = locate(text, &p.path) {
+                let (line, column) = line_column(text, offset);
+                let of = name.map_or(String::new(), |n| format!(" of {n}"));
+                p.message = format!("{} (line {line}, column {column}{of})", p.message);
+            }
+            p
+        })
+        .collect()
 }
 
 /// `line L, column C` (1-based, columns in characters) of byte `offset` of `text`.
@@ -984,6 +1301,102 @@ mod tests {
             "{e}"
         );
         let _ = std::fs::remove_file(&p);
+    }
+
+    #[test]
+    fn a_field_is_located_by_its_path_and_a_missing_one_by_its_nearest_table() {
+        let text = "name = \"x\"\n[[channels]]\nagent = 9\nlinks = [1, 0]\n\n[[channels]]\n  signal = \"velocity\"\n";
+        let at = |path: &str| locate(text, path).map(|o| line_column(text, o));
+        assert_eq!(at("name"), Some((1, 1)));
+        assert_eq!(at("channels[0].agent"), Some((3, 1)));
+        assert_eq!(at("channels[0].links[1]"), Some((4, 13)));
+        assert_eq!(at("channels[1].signal"), Some((7, 3)));
+        // Absent: the nearest table the text holds.
+        assert_eq!(at("channels[1].units"), at("channels[1]"));
+        assert!(at("channels[1]").is_some());
+        assert_eq!(at("nothing.here"), None);
+        assert_eq!(locate("not = [toml", "not"), None);
+    }
+
+    #[test]
+    fn attack_segments_that_start_at_or_after_the_run_s_end_are_warnings() {
+        let r = paper().expect("paper");
+        assert!(
+            r.scenario.warnings(&r.attack).is_empty(),
+            "{:?}",
+            r.scenario.warnings(&r.attack)
+        );
+        let mut attack = r.attack.clone();
+        let last = attack.channels[0].segments.len() - 1;
+        attack.channels[0].segments[last].from_s = 40.0;
+        attack.messages = vec![crate::attack::MessageAttack {
+            agent: 1,
+            path: crate::attack::Path::Torque,
+            segments: vec![
+                crate::attack::MessageSegment {
+                    from_s: 39.0,
+                    effect: crate::attack::Effect::Pass,
+                },
+                crate::attack::MessageSegment {
+                    from_s: 50.0,
+                    effect: crate::attack::Effect::Pass,
+                },
+            ],
+        }];
+        let w = r.scenario.warnings(&attack);
+        let paths: Vec<String> = w.iter().map(|p| p.path.clone()).collect();
+        assert_eq!(
+            paths,
+            [
+                format!("attack.channels[0].segments[{last}].from_s"),
+                "attack.messages[0].segments[1].from_s".to_string()
+            ]
+        );
+        assert!(
+            w[0].message.contains(
+                "starts at 40 s, at or after the end of the run (duration_s = 40 s): it never acts"
+            ),
+            "{w:?}"
+        );
+        // A warning, not a problem: the scenario stays valid.
+        let problems = r.clone().with_attack(attack).err();
+        assert!(problems.is_none(), "{problems:?}");
+    }
+
+    #[test]
+    fn an_attack_file_is_told_apart_from_a_scenario_by_its_keys() {
+        assert_eq!(file_kind(PAPER_SCENARIO), FileKind::Scenario);
+        for (_, text) in presets::PRESETS {
+            let kind = file_kind(text);
+            // `none` has no channels: it is read as a scenario only if it has none of the
+            // profile's lists.
+            if text.contains("[[channels]]") || text.contains("[[messages]]") {
+                assert_eq!(kind, FileKind::AttackProfile, "{text}");
+            }
+        }
+        assert_eq!(file_kind("channels = []\nseed = 1\n"), FileKind::Scenario);
+        assert_eq!(file_kind("not toml ["), FileKind::Scenario);
+    }
+
+    #[test]
+    fn an_attack_argument_naming_a_missing_agent_names_the_file_its_line_and_the_agents() {
+        let dir = std::env::temp_dir().join(format!("fdi-attack-agent-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let f = dir.join("agent-7.toml");
+        std::fs::write(
+            &f,
+            "name = \"x\"\n[[channels]]\nagent = 7\nsignal = \"position\"\nlinks = [1]\nunits = \"rad\"\nsegments = [{ from_s = 0.0, waveform = { kind = \"none\" } }]\n",
+        )
+        .expect("write");
+        let scenario = paper().expect("paper").scenario;
+        let e = attack_from_arg(f.to_str().expect("utf-8"), &scenario).expect_err("agent 7");
+        let msg = e.to_string();
+        assert!(
+            msg.starts_with(&format!("{}: 1 problem(s)", f.display()))
+                && msg.contains("channels[0].agent: agent 7 is not in the scenario (its agents: 1, 2, 3, 4) (line 3, column 1)"),
+            "{msg}"
+        );
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -10,29 +10,40 @@ use crate::model::Vector;
 use crate::units::AngleUnit;
 
 /// One link's base waveform `f(t)`, in the trajectory's units.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "shape", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum LinkTrajectory {
     /// `amplitude · cos(omega t + phase) + offset`.
     Cosine {
+        /// Trajectory units.
         amplitude: f64,
+        /// Angular frequency, rad/s.
         omega_rad_s: f64,
+        /// Phase, rad (default 0).
         #[serde(default)]
         phase_rad: f64,
+        /// Trajectory units (default 0).
         #[serde(default)]
         offset: f64,
     },
     /// `amplitude · sin(omega t + phase) + offset`.
     Sine {
+        /// Trajectory units.
         amplitude: f64,
+        /// Angular frequency, rad/s.
         omega_rad_s: f64,
+        /// Phase, rad (default 0).
         #[serde(default)]
         phase_rad: f64,
+        /// Trajectory units (default 0).
         #[serde(default)]
         offset: f64,
     },
     /// A set point.
-    Constant { value: f64 },
+    Constant {
+        /// Trajectory units.
+        value: f64,
+    },
 }
 
 impl LinkTrajectory {
@@ -95,7 +106,7 @@ impl LinkTrajectory {
 }
 
 /// Scenario form of a desired trajectory.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct TrajectoryConfig {
     /// Units of every amplitude, offset and value below (`deg` or `rad`).

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 /// Units of angles (and, for rates, of angles per second) in a scenario section.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum AngleUnit {
     Deg,

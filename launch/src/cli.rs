@@ -28,14 +28,21 @@ pub struct Cli {
 pub enum Command {
     /// Run a scenario (default: the embedded paper experiment) and write a run directory.
     Run(RunArgs),
-    /// Parse and validate a scenario file; lists every problem with its field path.
+    /// Parse and validate a scenario or an attack-profile file (told apart by their keys);
+    /// lists every problem with its field path and, in a file, its line and column.
     Validate {
-        /// Scenario TOML file.
+        /// Scenario or attack-profile TOML file.
         scenario: PathBuf,
     },
     /// Run a campaign: a base scenario and axes of values for its fields (a parameter sweep,
     /// Monte Carlo over seeds), in parallel and resumably, with statistics and figures.
     Sweep(crate::campaign::SweepArgs),
+    /// Print the JSON Schema (draft 7) of a file format: `scenario` or `attack` (a profile).
+    /// The shipped copies are `scenarios/schema/*.schema.json`; docs/scenarios.md is the reference.
+    Schema {
+        #[arg(value_enum)]
+        format: SchemaFormat,
+    },
     /// Reproduce the paper's Table I (RMSE, traditional vs proposed controller).
     Table1(TableArgs),
     /// Reproduce the paper's Table II (robot 1 under four time-varying delays).
@@ -110,6 +117,15 @@ pub enum RunsCommand {
         #[arg(long)]
         dry_run: bool,
     },
+}
+
+/// A file format that `schema` describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SchemaFormat {
+    /// A scenario file (`scenarios/*.toml`).
+    Scenario,
+    /// An attack-profile file (`scenarios/attacks/*.toml`).
+    Attack,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -285,6 +301,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
         Command::Run(args) => run(&args),
         Command::Validate { scenario } => validate(&scenario),
         Command::Sweep(args) => crate::campaign::sweep(&args),
+        Command::Schema { format } => schema(format),
         Command::Table1(args) => tables::table1(&args),
         Command::Table2(args) => tables::table2(&args),
         Command::Attacks(args) => crate::reporting::attacks::attacks(&args),
@@ -603,11 +620,28 @@ pub fn describe_onsets(onsets: &[Onset]) -> String {
     )
 }
 
+/// `schema`: the JSON Schema of `format`, pretty-printed, on stdout.
+fn schema(format: SchemaFormat) -> Result<ExitCode> {
+    let schema = match format {
+        SchemaFormat::Scenario => scenario::scenario_schema(),
+        SchemaFormat::Attack => scenario::attack_schema(),
+    };
+    println!("{}", serde_json::to_string_pretty(&schema)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `validate`: a scenario, or an attack profile on its own (what it holds decides).
 fn validate(path: &Path) -> Result<ExitCode> {
+    // A file that cannot be read is the scenario loader's to refuse (it says why).
+    let kind = scenario::read_limited(path)
+        .map_or(scenario::FileKind::Scenario, |t| scenario::file_kind(&t));
+    if kind == scenario::FileKind::AttackProfile {
+        return validate_attack(path);
+    }
     match scenario::load_file(path) {
         Ok(r) => {
             println!(
-                "{}: valid ({} agents, {} ticks, attack `{}`)",
+                "{}: valid scenario ({} agents, {} ticks, attack `{}`)",
                 path.display(),
                 r.agent_count(),
                 r.ticks(),
@@ -620,6 +654,38 @@ fn validate(path: &Path) -> Result<ExitCode> {
         }
         Err(e) => {
             eprintln!("{e}");
+            Ok(ExitCode::from(2))
+        }
+    }
+}
+
+/// `validate` of an attack profile without a scenario: what it checks, and what it cannot.
+fn validate_attack(path: &Path) -> Result<ExitCode> {
+    match scenario::validate_attack_alone(path) {
+        Ok(p) => {
+            let agents: Vec<String> = p.agents().iter().map(u32::to_string).collect();
+            println!(
+                "{}: valid attack profile `{}` ({} channels, {} message attacks, {} covert)",
+                path.display(),
+                p.name,
+                p.channels.len(),
+                p.messages.len(),
+                p.covert.len()
+            );
+            println!(
+                "  not checked without a scenario: that {} and the links named exist, and the segments' start times against the run's duration (validate a scenario that names this file, or `run --attack {}`)",
+                if agents.is_empty() {
+                    "the agents".to_string()
+                } else {
+                    format!("agent(s) {}", agents.join(", "))
+                },
+                path.display()
+            );
+            Ok(ExitCode::SUCCESS)
+        }
+        Err(e) => {
+            eprintln!("{e}");
+            eprintln!("(validated as an attack profile: it has `channels`, `messages` or `covert` and no scenario key)");
             Ok(ExitCode::from(2))
         }
     }

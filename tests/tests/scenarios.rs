@@ -292,3 +292,109 @@ fn oversized_scenario_and_attack_files_are_refused_with_the_limit() {
     assert!(msg.contains("attack.file(huge-attack.toml)"), "{msg}");
     assert!(msg.contains(&limit_text), "{msg}");
 }
+
+/// `fdi-launch validate FILE`, its exit status, stdout and stderr.
+fn validate(file: &Path) -> (Option<i32>, String, String) {
+    let out = fdi_tests::launch_plain(
+        &["validate", file.to_str().expect("UTF-8 path")],
+        std::time::Duration::from_secs(120),
+    );
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+#[test]
+fn validate_takes_an_attack_profile_on_its_own_and_says_what_it_cannot_check() {
+    let file = scenarios_dir().join("attacks/paper.toml");
+    let (code, out, err) = validate(&file);
+    assert_eq!(code, Some(0), "{out}{err}");
+    assert!(
+        out.contains("valid attack profile `paper` (8 channels, 0 message attacks, 0 covert)")
+            && out.contains("not checked without a scenario: that agent(s) 1, 2, 3, 4 and the links named exist"),
+        "{out}"
+    );
+    // A scenario is still validated as one.
+    let (code, out, _) = validate(&scenarios_dir().join("paper.toml"));
+    assert_eq!(code, Some(0));
+    assert!(out.contains("valid scenario (4 agents"), "{out}");
+
+    // An attack profile with problems that need no scenario: each with its path and place.
+    let tmp = TempDir::new("validate-attack");
+    let bad = tmp.0.join("bad.toml");
+    fs::write(
+        &bad,
+        "name = \"bad\"\n[[channels]]\nagent = 12\nsignal = \"position\"\nlinks = [0]\nunits = \"deg/s\"\nsegments = [{ from_s = -1.0, waveform = { kind = \"none\" } }]\n",
+    )
+    .expect("write");
+    let (code, out, err) = validate(&bad);
+    assert_eq!(code, Some(2), "{out}{err}");
+    for fragment in [
+        "channels[0].links[0]: link 0 does not exist (links are 1-based) (line 5, column 10)",
+        "channels[0].units: a position channel's units are \"deg\" or \"rad\", got \"deg/s\" (line 6, column 1)",
+        "channels[0].segments[0].from_s: must be finite and ≥ 0, got -1 (line 7, column 15)",
+        "validated as an attack profile",
+    ] {
+        assert!(err.contains(fragment), "lacks `{fragment}`:\n{err}");
+    }
+    // Agent 12 is not refused: that needs a scenario.
+    assert!(!err.contains("agent 12"), "{err}");
+}
+
+#[test]
+fn an_included_attack_file_s_problems_name_the_file_line_and_column_and_the_valid_agents() {
+    let tmp = TempDir::new("included-attack");
+    fs::create_dir_all(tmp.0.join("attacks")).expect("attacks/");
+    fs::write(
+        tmp.0.join("attacks/a.toml"),
+        "name = \"a\"\n\n[[channels]]\nagent = 1\nsignal = \"velocity\"\nlinks = [1, 3]\nunits = \"deg/s\"\nsegments = [{ from_s = 0.0, waveform = { kind = \"constant\", value = 1.0 } }]\n\n[[messages]]\nagent = 5\npath = \"torque\"\nsegments = [{ from_s = 0.0, effect = { kind = \"drop\", probability = 2.0 } }]\n",
+    )
+    .expect("write");
+    let scenario = tmp.0.join("s.toml");
+    fs::write(
+        &scenario,
+        PAPER_SCENARIO.replace("preset = \"paper\"", "file = \"attacks/a.toml\""),
+    )
+    .expect("write");
+    let (code, out, err) = validate(&scenario);
+    assert_eq!(code, Some(2), "{out}{err}");
+    for fragment in [
+        "attack.file(attacks/a.toml).messages[0].agent: agent 5 is not in the scenario (its agents: 1, 2, 3, 4) (line 11, column 1 of attacks/a.toml)",
+        "attack.file(attacks/a.toml).messages[0].segments[0].effect.probability: must be a probability in [0, 1], got 2 (line 13, column",
+        "attack.file(attacks/a.toml).channels[0].links[1]: link 3 does not exist (links are 1-based, agent 1 has 2 links) (line 6, column 13 of attacks/a.toml)",
+    ] {
+        assert!(err.contains(fragment), "lacks `{fragment}`:\n{err}");
+    }
+    // A wrong type in the included file: named, with its place.
+    fs::write(
+        tmp.0.join("attacks/a.toml"),
+        "name = \"a\"\n[[channels]]\nagent = \"one\"\nsignal = \"position\"\nlinks = [1]\nunits = \"rad\"\nsegments = []\n",
+    )
+    .expect("write");
+    let (code, _, err) = validate(&scenario);
+    assert_eq!(code, Some(2));
+    assert!(
+        err.contains("attack.file(attacks/a.toml).channels[0].agent: invalid type: string \"one\", expected u32 (line 3, column 1 of attacks/a.toml)"),
+        "{err}"
+    );
+}
+
+#[test]
+fn validate_warns_about_attack_segments_after_the_run_s_end_and_still_accepts() {
+    let tmp = TempDir::new("late-segment");
+    let scenario = tmp.0.join("short.toml");
+    fs::write(
+        &scenario,
+        PAPER_SCENARIO.replace("duration_s = 40.0", "duration_s = 8.0"),
+    )
+    .expect("write");
+    let (code, out, err) = validate(&scenario);
+    assert_eq!(code, Some(0), "{out}{err}");
+    // The paper's attack switches at 10, 25 and 30 s: after an 8 s run.
+    assert!(
+        out.contains("warning: attack.channels[0].segments[1].from_s: starts at 10 s, at or after the end of the run (duration_s = 8 s): it never acts"),
+        "{out}"
+    );
+}

@@ -17,9 +17,10 @@ use crate::scenario::Resolved;
 
 /// `[[covert]]` of a profile: from `from_s` on, hide the effect of agent `agent`'s torque
 /// channels from its measurements.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CovertEntry {
+    /// Agent id (as in the scenario's `[[agents]] id`); it needs a torque channel.
     pub agent: u32,
     /// When the sensor correction starts (the twins are put at the measured state), s.
     pub from_s: f64,

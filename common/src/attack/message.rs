@@ -17,7 +17,9 @@ use serde::{Deserialize, Serialize};
 use crate::records::Delivery;
 
 /// Which path a message attack acts on.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Path {
     /// Agent → control center: the measurements.
@@ -27,41 +29,67 @@ pub enum Path {
 }
 
 /// What happens to each message of a segment.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Effect {
     /// Every message goes through.
     Pass,
     /// Denial of service: each message is dropped with `probability` (drawn from the
     /// attacker's seeded stream); `probability = 1` drops the whole segment (a window).
-    Drop { probability: f64 },
+    Drop {
+        /// Probability that a message is dropped, in [0, 1].
+        probability: f64,
+    },
     /// Denial of service in bursts: a two-state (Gilbert) channel, sampled at each message.
     /// Bursts of drops last `mean_length_s` on average and come `mean_gap_s` apart on average
     /// (both exponentially distributed); the channel starts the segment in its good state.
-    Burst { mean_gap_s: f64, mean_length_s: f64 },
+    Burst {
+        /// Mean time between bursts, s (> 0).
+        mean_gap_s: f64,
+        /// Mean length of a burst, s (> 0).
+        mean_length_s: f64,
+    },
     /// Hold messages back by `d(t) = by_s + amplitude_s · sin(rate_rad_s · t)` (≥ 0). On the
     /// torque path the command takes effect `d` later than the channel's known delay `τ`; on
     /// the measurement path the center gets, at each tick, the newest measurement delivered by
     /// then (sent `d` or more ago), under the tick's header.
     Delay {
+        /// Mean hold-back, s (≥ |amplitude_s|).
         by_s: f64,
+        /// Amplitude of its variation, s (default 0).
         #[serde(default)]
         amplitude_s: f64,
+        /// Angular rate of its variation, rad/s (default 0).
         #[serde(default)]
         rate_rad_s: f64,
     },
     /// Timestamp forgery: the message's stamp (`t` of a measurement, `t_send` of a torque) is
     /// moved by `shift_s` (≠ 0). Receivers check the stamp against the sequence number and
     /// refuse the message: the tick's input is missing.
-    ForgeStamp { shift_s: f64 },
+    ForgeStamp {
+        /// Shift of the stamp, s (≠ 0).
+        shift_s: f64,
+    },
     /// Replay with the original header: the messages sent over
     /// `[record_from_s, record_from_s + record_for_s)` are re-sent in a loop, with their own
     /// sequence numbers and stamps, in place of the live ones from the segment's start.
     /// Receivers refuse them as stale: the tick's input is missing.
     ReplayOriginal {
+        /// Start of the recording window, s (≥ 0).
         record_from_s: f64,
+        /// Length of the recording window, s (> 0).
         record_for_s: f64,
     },
+}
+
+impl Path {
+    /// The path as a file names it.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Measurement => "measurement",
+            Self::Torque => "torque",
+        }
+    }
 }
 
 impl Effect {
@@ -156,20 +184,22 @@ impl Effect {
 }
 
 /// One segment of a message schedule.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MessageSegment {
     /// Start time of the segment, s.
     pub from_s: f64,
+    /// What happens to the messages: `{ kind = "…", … }`.
     pub effect: Effect,
 }
 
 /// One agent's messages on one path, attacked.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct MessageAttack {
     /// Agent id (as in the scenario's `[[agents]] id`).
     pub agent: u32,
+    /// `"measurement"` (agent → center) or `"torque"` (center → agent).
     pub path: Path,
     /// Segments in increasing `from_s`; before the first one every message goes through.
     pub segments: Vec<MessageSegment>,

@@ -37,7 +37,9 @@ pub use waveform::Waveform;
 use message::MessageLine;
 
 /// Which measured signal a channel tampers with.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum Signal {
     /// `y = q + S1`.
@@ -59,68 +61,115 @@ impl Signal {
 }
 
 /// Units of a channel's values.
+///
+/// A position channel takes `deg` or `rad`, a velocity channel `deg/s` or `rad/s` (or, as the
+/// shipped profiles long wrote them, `deg` and `rad` standing for deg/s and rad/s), a torque
+/// channel `N·m` (also spelled `Nm` or `N*m`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ValueUnit {
-    /// deg, deg/s (positions and velocities).
+    /// deg (positions; on a velocity channel it stands for deg/s).
     #[serde(rename = "deg")]
     Deg,
-    /// rad, rad/s (positions and velocities).
+    /// rad (positions; on a velocity channel it stands for rad/s).
     #[serde(rename = "rad")]
     Rad,
+    /// deg/s (velocities).
+    #[serde(rename = "deg/s")]
+    DegPerS,
+    /// rad/s (velocities).
+    #[serde(rename = "rad/s")]
+    RadPerS,
     /// N·m (torques).
     #[serde(rename = "N·m", alias = "Nm", alias = "N*m")]
     NewtonMetre,
+}
+
+/// Every spelling `Deserialize` accepts (the derive would leave out the aliases of N·m).
+impl schemars::JsonSchema for ValueUnit {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "ValueUnit".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "Units of the channel's values: \"deg\" or \"rad\" for a position channel; \"deg/s\" or \"rad/s\" for a velocity channel (\"deg\" and \"rad\" are accepted there too and mean deg/s and rad/s); \"N·m\" (or \"Nm\", \"N*m\") for a torque channel.",
+            "type": "string",
+            "enum": ["deg", "rad", "deg/s", "rad/s", "N·m", "Nm", "N*m"]
+        })
+    }
 }
 
 impl ValueUnit {
     /// Factor that converts a value in these units to the runtime's (rad, rad/s, N·m).
     pub fn factor(self) -> f64 {
         match self {
-            Self::Deg => AngleUnit::Deg.to_rad(),
-            Self::Rad => AngleUnit::Rad.to_rad(),
+            Self::Deg | Self::DegPerS => AngleUnit::Deg.to_rad(),
+            Self::Rad | Self::RadPerS => AngleUnit::Rad.to_rad(),
             Self::NewtonMetre => 1.0,
         }
     }
 
     /// Whether values of `signal` can be in these units.
     fn fits(self, signal: Signal) -> bool {
-        (signal == Signal::Torque) == (self == Self::NewtonMetre)
+        match signal {
+            Signal::Position => matches!(self, Self::Deg | Self::Rad),
+            Signal::Velocity => {
+                matches!(self, Self::Deg | Self::Rad | Self::DegPerS | Self::RadPerS)
+            }
+            Signal::Torque => self == Self::NewtonMetre,
+        }
+    }
+
+    /// The units as a file spells them.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Deg => "deg",
+            Self::Rad => "rad",
+            Self::DegPerS => "deg/s",
+            Self::RadPerS => "rad/s",
+            Self::NewtonMetre => "N·m",
+        }
     }
 }
 
 /// One segment of a schedule.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Segment {
     /// Start time of the segment, s.
     pub from_s: f64,
+    /// What is injected: `{ kind = "…", … }`.
     pub waveform: Waveform,
 }
 
 /// One attacked channel.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Channel {
     /// Agent id (as in the scenario's `[[agents]] id`).
     pub agent: u32,
+    /// `"position"`, `"velocity"` or `"torque"`.
     pub signal: Signal,
     /// 1-based link numbers this schedule is added to.
     pub links: Vec<u32>,
-    /// Units of the waveform values: `deg` (deg, deg/s) or `rad` (rad, rad/s) for positions
-    /// and velocities, `N·m` for torques.
+    /// Units of the waveform values: `deg` or `rad` for positions, `deg/s` or `rad/s` for
+    /// velocities (`deg` and `rad` mean deg/s and rad/s there), `N·m` for torques.
     pub units: ValueUnit,
     /// Segments in increasing `from_s`; before the first one nothing is injected.
     pub segments: Vec<Segment>,
 }
 
 /// A whole attack profile: what a `--attack FILE` holds, or a scenario's `[attack]` inline.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AttackProfile {
+    /// Name of the profile (shown in summaries and reports).
     #[serde(default)]
     pub name: String,
+    /// Free text.
     #[serde(default)]
     pub description: String,
+    /// `[[channels]]`: value attacks, each on one agent, signal and set of links.
     #[serde(default)]
     pub channels: Vec<Channel>,
     /// Whole-message attacks, at most one per agent and path.
@@ -152,6 +201,33 @@ impl AttackProfile {
                 .messages
                 .iter()
                 .any(|m| m.agent == agent && m.path == Path::Torque)
+    }
+
+    /// Every problem [`Self::problems`] finds without a scenario: each agent the profile names
+    /// is taken to exist with as many links as the profile names (what needs a scenario, that
+    /// the agents and links exist, is left unchecked; link 0 is still refused).
+    pub fn problems_alone(&self) -> Vec<(String, String)> {
+        let agents = self
+            .channels
+            .iter()
+            .map(|c| c.agent)
+            .chain(self.messages.iter().map(|m| m.agent))
+            .chain(self.covert.iter().map(|c| c.agent));
+        self.problems(&agents.map(|a| (a, usize::MAX)).collect())
+    }
+
+    /// The agents the profile names, in increasing order, each once.
+    pub fn agents(&self) -> Vec<u32> {
+        let mut out: Vec<u32> = self
+            .channels
+            .iter()
+            .map(|c| c.agent)
+            .chain(self.messages.iter().map(|m| m.agent))
+            .chain(self.covert.iter().map(|c| c.agent))
+            .collect();
+        out.sort_unstable();
+        out.dedup();
+        out
     }
 
     /// Every problem of the profile, as `(field path relative to the profile, message)`.
@@ -207,9 +283,10 @@ impl AttackProfile {
                 out.push((
                     format!("messages[{m}].path"),
                     format!(
-                        "agent {}'s {:?} path is already attacked by messages[{first}]: put \
+                        "agent {}'s {} path is already attacked by messages[{first}]: put \
                          both schedules' segments in one entry",
-                        msg.agent, msg.path
+                        msg.agent,
+                        msg.path.as_str()
                     ),
                 ));
             }
@@ -227,9 +304,19 @@ impl AttackProfile {
                 out.push((
                     at("units"),
                     match ch.signal {
-                        Signal::Torque => "a torque channel's units are \"N·m\"".to_string(),
-                        _ => "a position or velocity channel's units are \"deg\" or \"rad\""
-                            .to_string(),
+                        Signal::Torque => format!(
+                            "a torque channel's units are \"N·m\", got \"{}\"",
+                            ch.units.as_str()
+                        ),
+                        Signal::Position => format!(
+                            "a position channel's units are \"deg\" or \"rad\", got \"{}\"",
+                            ch.units.as_str()
+                        ),
+                        Signal::Velocity => format!(
+                            "a velocity channel's units are \"deg/s\" or \"rad/s\" (\"deg\" \
+                             and \"rad\" also mean deg/s and rad/s there), got \"{}\"",
+                            ch.units.as_str()
+                        ),
                     },
                 ));
             }
@@ -237,14 +324,16 @@ impl AttackProfile {
                 out.push((at("links"), "must name at least one link".into()));
             }
             for (l, &link) in ch.links.iter().enumerate() {
-                if link == 0 || dof.is_some_and(|d| link as usize > d) {
-                    out.push((
-                        at(&format!("links[{l}]")),
-                        format!(
-                            "link {link} does not exist (links are 1-based, agent has {} links)",
-                            dof.unwrap_or(0)
-                        ),
-                    ));
+                let message = match dof {
+                    _ if link == 0 => Some("link 0 does not exist (links are 1-based)".to_string()),
+                    Some(d) if link as usize > d => Some(format!(
+                        "link {link} does not exist (links are 1-based, agent {} has {d} links)",
+                        ch.agent
+                    )),
+                    _ => None,
+                };
+                if let Some(message) = message {
+                    out.push((at(&format!("links[{l}]")), message));
                 }
             }
             if ch.segments.is_empty() {
@@ -1130,6 +1219,12 @@ mod tests {
             (Signal::Position, ValueUnit::NewtonMetre, false),
             (Signal::Velocity, ValueUnit::NewtonMetre, false),
             (Signal::Velocity, ValueUnit::Deg, true),
+            (Signal::Velocity, ValueUnit::Rad, true),
+            (Signal::Velocity, ValueUnit::DegPerS, true),
+            (Signal::Velocity, ValueUnit::RadPerS, true),
+            (Signal::Position, ValueUnit::DegPerS, false),
+            (Signal::Position, ValueUnit::RadPerS, false),
+            (Signal::Torque, ValueUnit::RadPerS, false),
         ];
         for (signal, units, fits) in cases {
             // Second in the list, so the index in the path is checked too.
@@ -1144,6 +1239,35 @@ mod tests {
             } else {
                 assert_eq!(paths, ["channels[1].units"], "{signal:?} in {units:?}");
             }
+        }
+        // The refusal says which units the signal takes and what the file said.
+        let p = with_channels(vec![mk(Signal::Position, ValueUnit::DegPerS)]);
+        let problems = p.problems(&dofs());
+        assert!(
+            problems[0]
+                .1
+                .contains("a position channel's units are \"deg\" or \"rad\", got \"deg/s\""),
+            "{problems:?}"
+        );
+        let p = with_channels(vec![mk(Signal::Velocity, ValueUnit::NewtonMetre)]);
+        let problems = p.problems(&dofs());
+        assert!(
+            problems[0].1.contains("\"deg/s\" or \"rad/s\"")
+                && problems[0].1.contains("got \"N·m\""),
+            "{problems:?}"
+        );
+        // `deg/s` and `deg` on a velocity channel are one factor, π/180; `rad/s` and `rad` 1.
+        assert_eq!(ValueUnit::DegPerS.factor(), ValueUnit::Deg.factor());
+        assert_eq!(ValueUnit::RadPerS.factor(), ValueUnit::Rad.factor());
+        for (spelling, units) in [("deg/s", ValueUnit::DegPerS), ("rad/s", ValueUnit::RadPerS)] {
+            let text = format!(
+                "[[channels]]\nagent = 1\nsignal = \"velocity\"\nlinks = [1]\nunits = \"{spelling}\"\n\
+                 segments = [{{ from_s = 0.0, waveform = {{ kind = \"constant\", value = 1.0 }} }}]\n"
+            );
+            let p: AttackProfile = toml::from_str(&text).expect(spelling);
+            assert_eq!(p.channels[0].units, units);
+            assert!(p.problems(&dofs()).is_empty());
+            assert_eq!(units.as_str(), spelling);
         }
         // The spellings of N·m.
         for spelling in ["N·m", "Nm", "N*m"] {

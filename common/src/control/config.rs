@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::UpdateLaw;
 
 /// Controller variant (SPEC §4.8).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum ControllerMode {
     /// Observer + NN attack estimate `Ŝ` in (12) and (23).
@@ -25,7 +25,9 @@ impl ControllerMode {
 
 /// What the observer (22) takes as its input `u_τ` over its Euler step `[t_k, t_k + Δ]`
 /// (docs/model.md, "Numerics of the delayed input").
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum ObserverInput {
     /// The mean of the delayed input `u(s − τ(s))` over the step: the input the plant
@@ -51,7 +53,7 @@ impl ObserverInput {
 }
 
 /// Alarm when `‖Ŝ‖` stays above a threshold for a hold time (beyond the paper, SPEC §4.9).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DetectionConfig {
     /// Threshold on `‖Ŝ‖` (rad/s, the units of `S = S2 + β S1`).
@@ -61,9 +63,10 @@ pub struct DetectionConfig {
 }
 
 /// Gains of the control center (SPEC §4, calibration there).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ControllerConfig {
+    /// `"proposed"` (observer and NN attack estimate) or `"traditional"` (the baseline).
     pub mode: ControllerMode,
     /// `k` of `u = k r̂` (14), typical 21.
     pub gain_k: f64,
@@ -85,6 +88,7 @@ pub struct ControllerConfig {
     pub weight_bound_v: f64,
     /// `V̂(0) ~ U(−a, a)` elementwise, typical 1.
     pub initial_v_range: f64,
+    /// The alarm on `‖Ŝ‖`: `{ threshold, hold_s }`.
     pub detection: DetectionConfig,
     /// `[controller.update_law]`: robust modifications of (37), (38) for long horizons (a slow
     /// innovation baseline, leakage of `Ŵ`; units and typical values at [`UpdateLaw`]). Absent

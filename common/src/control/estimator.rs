@@ -27,7 +27,7 @@ use crate::scenario::{ControllerConfig, Problem};
 /// `V̂̇ = Γ2 L1 δ ((Ψ2 − b)ᵀ Ŵᵀ σ')` ((38)).
 /// `T > 0` makes `Ŝ` forget a persistent innovation over `T` instead of absorbing it for ever
 /// (docs/model.md, "Long horizons"); `λ > 0` bounds `Ŵ` under a persistent bias.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct UpdateLaw {
     /// `T`, s: time over which a persistent innovation is attributed to model mismatch rather

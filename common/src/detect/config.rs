@@ -13,7 +13,9 @@ pub const MIN_SAMPLES_PER_DIMENSION: u64 = 10;
 pub const MAX_WINDOW_TICKS: usize = 1000;
 
 /// Which residual the χ² and CUSUM detectors test.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum ResidualKind {
     /// The observer's innovation, `2N` entries: `[y_k − q̂_k⁻, ẏ_k − q̂̇_k⁻]`, the tampered
@@ -45,7 +47,7 @@ impl ResidualKind {
 
 /// `[detectors.chi2]`: `χ²_k = Σ over the last w ticks of rᵀ Σ⁻¹ r`, alarm while it exceeds the
 /// threshold.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct Chi2Config {
     /// `w`, ticks summed (1: the per-tick test).
@@ -72,7 +74,7 @@ impl Default for Chi2Config {
 /// `[detectors.cusum]`: a two-sided CUSUM on each entry `z_i` of the whitened residual
 /// `z = L⁻¹ r` (`L Lᵀ = Σ`): `S⁺ = max(0, S⁺ + z_i − drift)`, `S⁻ = max(0, S⁻ − z_i − drift)`,
 /// each capped at `2 h`; alarm while any `S > h`.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct CusumConfig {
     /// `drift` (ν), in standard deviations of the whitened residual: half the smallest shift
@@ -92,7 +94,7 @@ impl Default for CusumConfig {
 }
 
 /// The detectors of a run (`[detectors]`, optional).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct DetectorsConfig {
     /// Length of the calibration window at the start of the run, s: the residual's covariance
@@ -107,7 +109,9 @@ pub struct DetectorsConfig {
     /// (default 1e-6). Keeps a singular `Σ` (a channel without noise) invertible; 0 turns it
     /// off, and a singular `Σ` then fails the calibration.
     pub regularization: f64,
+    /// `[detectors.chi2]`: the χ² test.
     pub chi2: Chi2Config,
+    /// `[detectors.cusum]`: the CUSUM.
     pub cusum: CusumConfig,
 }
 

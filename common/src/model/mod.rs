@@ -15,7 +15,7 @@ pub use two_link::{TwoLink, TwoLinkParams};
 
 /// The robot of one agent (`model = { kind = "…", … }` in a scenario): one variant per model
 /// file, its parameters defaulting field by field.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum ModelConfig {
     /// Two-link planar manipulator (eq. 67); parameters default to the paper's.

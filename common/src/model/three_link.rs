@@ -15,7 +15,7 @@ use serde::{Deserialize, Serialize};
 use super::{EulerLagrange, Matrix, Vector};
 
 /// Mass, geometry and friction of [`ThreeLink`]; each array is indexed by link, base first.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct ThreeLinkParams {
     /// Link masses, kg.

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use super::{EulerLagrange, Matrix, Vector};
 
 /// Inertia and friction parameters of [`TwoLink`].
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(default, deny_unknown_fields)]
 pub struct TwoLinkParams {
     /// kg·m², typical 3.473 (paper).

@@ -44,6 +44,24 @@ impl CorruptValue {
     }
 }
 
+/// What the hand-written `Deserialize` below accepts: any number, or one of the strings of
+/// [`CorruptValue::FORMS`] in any case, surrounded by white space or not.
+impl schemars::JsonSchema for CorruptValue {
+    fn schema_name() -> std::borrow::Cow<'static, str> {
+        "CorruptValue".into()
+    }
+
+    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
+        schemars::json_schema!({
+            "description": "The value injected: a number of any size, or \"nan\", \"inf\", \"+inf\", \"-inf\" (any case; TOML's own nan and inf literals are accepted too).",
+            "anyOf": [
+                { "type": "number" },
+                { "type": "string", "pattern": "^\\s*([nN][aA][nN]|[+-]?[iI][nN][fF])\\s*$" }
+            ]
+        })
+    }
+}
+
 impl PartialEq for CorruptValue {
     fn eq(&self, other: &Self) -> bool {
         self.0.to_bits() == other.0.to_bits()

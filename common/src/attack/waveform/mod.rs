@@ -21,59 +21,82 @@ pub use corrupt::CorruptValue;
 
 /// One segment's waveform. Values are in the channel's units (rad or deg for positions, rad/s
 /// or deg/s for velocities).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum Waveform {
     /// Pure relay: nothing injected.
     None,
     /// `value`.
-    Constant { value: f64 },
+    Constant {
+        /// The injected value, channel units.
+        value: f64,
+    },
     /// `amplitude · sin(omega t + phase) + offset`.
     Sine {
+        /// Channel units.
         amplitude: f64,
+        /// Angular frequency, rad/s.
         omega_rad_s: f64,
+        /// Phase, rad (default 0).
         #[serde(default)]
         phase_rad: f64,
+        /// Added constant, channel units (default 0).
         #[serde(default)]
         offset: f64,
     },
     /// `amplitude` during the first `width_percent` % of every `period_s`, zero otherwise,
     /// starting at `delay_s` (the paper's `pulse(a, b, c)`).
     Pulse {
+        /// Height of the pulses, channel units.
         amplitude: f64,
+        /// Period, s (> 0).
         period_s: f64,
+        /// Share of every period the pulse is on, % (0–100).
         width_percent: f64,
+        /// Time of the first pulse, s (default 0).
         #[serde(default)]
         delay_s: f64,
     },
     /// `start + slope · (t − segment start)`.
     Ramp {
+        /// Channel units per second.
         slope_per_s: f64,
+        /// Value at the segment's start, channel units (default 0).
         #[serde(default)]
         start: f64,
     },
     /// Gaussian noise `N(mean, std²)`, one draw per tick from the attacker's seeded stream.
     Gaussian {
+        /// Standard deviation, channel units (≥ 0).
         std: f64,
+        /// Mean, channel units (default 0).
         #[serde(default)]
         mean: f64,
     },
     /// Fault injection: `value` as is, NaN, ±∞ or absurdly large (`{ kind = "corrupt", value =
     /// "nan" }`, `"inf"`, `"-inf"` or a number such as `1e300`). The only waveform exempt from the
     /// finiteness check; the control center must reject what it produces (SPEC §4.10).
-    Corrupt { value: CorruptValue },
+    Corrupt {
+        /// A number, or "nan", "inf", "+inf", "-inf".
+        value: CorruptValue,
+    },
     /// Replay attack: the clean signal recorded over `[record_from_s, record_from_s +
     /// record_for_s)` is played back in a loop from the segment's start, in place of the live
     /// one. Evaluated by the compiled channel, which holds the recording
     /// ([`crate::attack::AgentAttack::observe`]); the segment must start at or after the end of
     /// the recording window.
     Replay {
+        /// Start of the recording window, s.
         record_from_s: f64,
+        /// Length of the recording window, s (> 0).
         record_for_s: f64,
     },
     /// Multiplicative attack: the center sees `factor ·` the clean signal
     /// ([`transform::scale`]). Dimensionless: the channel's `units` do not apply.
-    Scale { factor: f64 },
+    Scale {
+        /// The multiplier of the clean signal (dimensionless).
+        factor: f64,
+    },
     /// The center sees the clean signal with its sign flipped ([`transform::sign_flip`]).
     SignFlip,
     /// Stuck-at: the center sees the clean value of the segment's first tick for the whole
@@ -89,13 +112,20 @@ pub enum Waveform {
     /// deviation per entry; `sensitivity`: its steady offset per unit slope of the bias
     /// (residual units per channel unit per s); `bias`: the level held, channel units.
     StealthyBias {
+        /// The χ² detector's threshold.
         threshold: f64,
+        /// The level the attack-free χ² statistic stays under.
         noise_peak: f64,
+        /// The χ² detector's window, ticks (default 1).
         #[serde(default = "stealthy::one_tick")]
         window_ticks: u32,
+        /// Residual entries the bias moves (the channel's links).
         shifted_entries: u32,
+        /// The residual's attack-free standard deviation per entry.
         residual_std: f64,
+        /// The residual's steady offset per unit slope of the bias (residual units per channel unit per s).
         sensitivity: f64,
+        /// The level held, channel units.
         bias: f64,
     },
 }
