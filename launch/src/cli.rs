@@ -195,6 +195,11 @@ pub struct RunArgs {
     /// `500MB`, `2GiB`, ...; a run over it, or over the free space of `--out`, is refused.
     #[arg(long, default_value = "10GB")]
     pub max_trace_size: bytesize::ByteSize,
+    /// Start even when the estimated traces exceed the free space of `--out` (space that will
+    /// be freed meanwhile; a full disk then stops the run naming the trace). The
+    /// `--max-trace-size` limit still holds.
+    #[arg(long)]
+    pub no_space_check: bool,
     #[command(flatten)]
     pub placement: runtime::Placement,
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
@@ -269,6 +274,7 @@ impl DetectArgs {
             json: false,
             traces: Traces::Full,
             max_trace_size: bytesize::ByteSize::gb(10),
+            no_space_check: false,
             placement: runtime::Placement::default(),
             replay: None,
         }
@@ -389,6 +395,7 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunDone> {
         args.traces,
         &args.out,
         args.max_trace_size,
+        !args.no_space_check,
     )?;
     crate::interrupt::check(runtime::BEFORE_THE_START)?;
     let dir = output::create_named_run_dir(&args.out, &r, &run_name(&r, args))?;

@@ -214,7 +214,20 @@ fn a_full_disk_is_the_headline_naming_the_trace_and_the_partial_traces_stay_read
     };
     let out = fs_.0 .0.join("runs");
     let o = out.to_string_lossy().into_owned();
-    let r = launch_plain(&["run", "--duration-s", "2", "--out", &o], WATCHDOG);
+    // The estimate refuses the run before its start, naming the free space ...
+    let refused = launch_plain(&["run", "--duration-s", "2", "--out", &o], WATCHDOG);
+    let err = stderr_of(&refused);
+    assert_eq!(refused.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("refused before the start") && err.contains("free in"),
+        "{err}"
+    );
+    assert!(entries(&out).is_empty(), "left behind: {:?}", entries(&out));
+    // ... started anyway, the disk fills.
+    let r = launch_plain(
+        &["run", "--duration-s", "2", "--out", &o, "--no-space-check"],
+        WATCHDOG,
+    );
     let err = stderr_of(&r);
     assert_eq!(r.status.code(), Some(1), "{err}");
     assert!(!err.contains("panicked"), "{err}");

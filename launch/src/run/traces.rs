@@ -246,13 +246,15 @@ pub fn free_space(folder: &Path) -> Result<u64> {
 }
 
 /// Refuses, before anything of the run exists, a run whose traces would not fit: over `limit`
-/// (`--max-trace-size`) or over the free space of `out`.
+/// (`--max-trace-size`) or, unless `free_space_check` is off (`--no-space-check`), over the
+/// free space of `out`.
 pub fn check_volume(
     r: &Resolved,
     ipc: bool,
     traces: Traces,
     out: &Path,
     limit: bytesize::ByteSize,
+    free_space_check: bool,
 ) -> Result<Estimate> {
     let e = estimate(r, ipc, traces)?;
     if traces == Traces::None {
@@ -267,9 +269,9 @@ pub fn check_volume(
         e.bytes_per_tick
     );
     let ways = "`--traces decimate=K` keeps every K-th tick, `--traces none` no trace (the summary still covers every tick), a shorter `--duration-s`";
-    if e.bytes > free {
+    if free_space_check && e.bytes > free {
         bail!(
-            "refused before the start: {what}, more than the {} free in {}; {ways}, or another `--out`",
+            "refused before the start: {what}, more than the {} free in {}; {ways}, another `--out`, or `--no-space-check` (start anyway)",
             bytesize::ByteSize::b(free),
             out.display()
         );
@@ -322,7 +324,7 @@ mod tests {
         let mut r = fdi_common::scenario::paper().expect("paper");
         r.scenario.duration_s = 1e6;
         let limit: bytesize::ByteSize = "10GB".parse().expect("size");
-        let e = check_volume(&r, true, Traces::Full, Path::new("."), limit)
+        let e = check_volume(&r, true, Traces::Full, Path::new("."), limit, true)
             .expect_err("1e6 s is over 10 GB");
         let text = e.to_string();
         for frag in [
@@ -333,7 +335,8 @@ mod tests {
         ] {
             assert!(text.contains(frag), "{frag}: {text}");
         }
-        check_volume(&r, true, Traces::None, Path::new("."), limit).expect("none keeps nothing");
+        check_volume(&r, true, Traces::None, Path::new("."), limit, true)
+            .expect("none keeps nothing");
     }
 
     #[test]
