@@ -27,10 +27,9 @@ use fdi_common::records::{
 };
 #[cfg(test)]
 use fdi_common::scenario::MAX_DOF;
-use fdi_common::trace::{HopStamps, TraceError, TraceReader, TraceRecord};
+use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
 
-use super::REORDER_TICKS;
-use super::{failed, out_dir, read_sorted, stem, trace_files, Kind, Reorder, RunInfo};
+use super::{failed, out_dir, read_sorted, scan, stem, trace_files, Kind, RunInfo, Sorted};
 
 pub(super) fn export(run_dir: &Path) -> Result<()> {
     let files = trace_files(run_dir)?;
@@ -237,48 +236,41 @@ fn main_kind(process: &str) -> Option<Kind> {
 /// The attacker's records of a run, looked up in (tick, agent) order: the injected values of
 /// the ticks the control center's rows need for `S`.
 struct AttackLookup {
-    reader: TraceReader,
-    held: Reorder<AttackRecord>,
-    ended: bool,
-    /// Why the lookup ended before the end of the attacker trace.
+    sorted: Sorted,
+    /// Why the attacker trace ended early (a damage), if it did.
     problem: Option<String>,
 }
 
 impl AttackLookup {
-    fn open(path: &Path) -> Result<Self, TraceError> {
+    fn open(path: &Path) -> Result<Self> {
+        let mut reader = TraceReader::open(path)?;
+        let mut n = 0;
+        let (keys, damage) = scan(path, &mut reader, &mut n, |_, _| Ok(()))?;
+        let keys = keys
+            .into_iter()
+            .filter(|(kind, _)| *kind == Kind::Attack)
+            .collect();
         Ok(Self {
-            reader: TraceReader::open(path)?,
-            held: Reorder::default(),
-            ended: false,
-            problem: None,
+            sorted: Sorted::open(path, &keys)?,
+            problem: damage.map(|e| format!("{e:#}")),
         })
     }
 
     /// The attacker's record of tick `k` of `agent`; calls come in (tick, agent) order.
     fn get(&mut self, k: u64, agent: u32) -> Option<AttackRecord> {
-        while !self.ended && self.held.newest <= k.saturating_add(REORDER_TICKS) {
-            match self.reader.next() {
-                None => self.ended = true,
-                Some(Err(e)) => {
-                    self.ended = true;
-                    self.problem = Some(e.to_string());
-                }
-                Some(Ok(TraceRecord::Attack(a))) => {
-                    if let Err(e) = self.held.push(a.k, a.agent, a) {
-                        self.ended = true;
-                        self.problem = Some(format!("{}: {e:#}", self.reader.path().display()));
-                    }
-                }
-                Some(Ok(_)) => {}
-            }
+        while self
+            .sorted
+            .peek()
+            .is_some_and(|(hk, ha, _)| (hk, ha) < (k, agent))
+        {
+            self.sorted.pop();
         }
-        while self.held.first().is_some_and(|key| key < (k, agent)) {
-            self.held.pop();
-        }
-        if self.held.first() == Some((k, agent)) {
-            self.held.pop()
-        } else {
-            None
+        match self.sorted.peek() {
+            Some((hk, ha, _)) if (hk, ha) == (k, agent) => match self.sorted.pop() {
+                Some((TraceRecord::Attack(a), _)) => Some(a),
+                _ => None,
+            },
+            _ => None,
         }
     }
 }
@@ -323,7 +315,7 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
         };
         let attack = match rec {
             TraceRecord::Center(c) => lookup
-                .get_or_insert_with(|| AttackLookup::open(&attacker).map_err(|e| e.to_string()))
+                .get_or_insert_with(|| AttackLookup::open(&attacker).map_err(|e| format!("{e:#}")))
                 .as_mut()
                 .ok()
                 .and_then(|l| l.get(c.k, c.agent)),

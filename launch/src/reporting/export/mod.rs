@@ -17,13 +17,13 @@
 mod csv;
 mod mcap;
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use fdi_common::engine::tick_time;
 use fdi_common::scenario::{self, Resolved, MAX_DOF};
-use fdi_common::trace::{TraceHeader, TraceReader, TraceRecord};
+use fdi_common::trace::{TraceError, TraceHeader, TraceReader, TraceRecord};
 use fdi_common::trajectory::TrajectoryConfig;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -192,105 +192,126 @@ impl Kind {
     }
 }
 
-/// How far (in ticks) the records of one kind may stray from (tick, agent) order in a trace
-/// and still be put back in order: a record of tick `k` is written once a record of tick
-/// `k + REORDER_TICKS` has been read, or at the end of the trace.
-const REORDER_TICKS: u64 = 4096;
+/// The (kind, agent) streams of a trace.
+type Streams = BTreeSet<(Kind, u32)>;
 
-/// Puts records back in (tick, agent) order within a window of [`REORDER_TICKS`]; records of
-/// the same tick and agent keep their order in the file. A record that arrives after a later
-/// one has been released is an error, never a silent misorder.
-#[derive(Debug)]
-struct Reorder<T> {
-    buf: BTreeMap<(u64, u32, u64), T>,
-    seq: u64,
-    newest: u64,
-    released: Option<(u64, u32)>,
+/// One (kind, agent) stream of a trace: a reader of its own over the file, handing out only
+/// that stream's records.
+struct Stream {
+    reader: TraceReader,
+    kind: Kind,
+    agent: u32,
 }
 
-impl<T> Default for Reorder<T> {
-    fn default() -> Self {
-        Self {
-            buf: BTreeMap::new(),
-            seq: 0,
-            newest: 0,
-            released: None,
-        }
-    }
-}
-
-impl<T> Reorder<T> {
-    fn push(&mut self, k: u64, agent: u32, v: T) -> Result<()> {
-        if let Some((rk, ra)) = self.released {
-            if (k, agent) < (rk, ra) {
-                bail!(
-                    "the record of tick {k} of agent {agent} comes after that of tick {rk} of agent {ra} was written: more than {REORDER_TICKS} ticks out of order"
-                );
+impl Stream {
+    /// The stream's next record and its byte offset; `None` at the end of the file, or at a
+    /// damage (the first pass over the file reports it).
+    fn next(&mut self) -> Option<(u64, TraceRecord, u64)> {
+        loop {
+            let rec = self.reader.next()?.ok()?;
+            if let Some((kind, k, agent)) = Kind::of(&rec) {
+                if kind == self.kind && agent == self.agent {
+                    return Some((k, rec, self.reader.last_offset()));
+                }
             }
         }
-        self.buf.insert((k, agent, self.seq), v);
-        self.seq += 1;
-        self.newest = self.newest.max(k);
-        Ok(())
-    }
-
-    /// The (tick, agent) of the first record held.
-    fn first(&self) -> Option<(u64, u32)> {
-        self.buf.first_key_value().map(|((k, a, _), _)| (*k, *a))
-    }
-
-    /// The first record, if no record read later can come before it.
-    fn pop_ready(&mut self) -> Option<T> {
-        let (k, _) = self.first()?;
-        (self.newest - k > REORDER_TICKS)
-            .then(|| self.pop())
-            .flatten()
-    }
-
-    /// The first record held (at the end of the trace).
-    fn pop(&mut self) -> Option<T> {
-        let ((k, a, _), v) = self.buf.pop_first()?;
-        self.released = Some((k, a));
-        Some(v)
     }
 }
 
-/// Reads the trace `reader` of `path` to its end, handing the records of each kind to `out` in
-/// (tick, agent) order and the events in file order, each with its byte offset; `n` counts the
-/// records read. The records before a damage are handed out, then the damage is the error.
+/// The per-tick records of a trace in (tick, agent) order (records of one tick and agent in
+/// kind order, then in file order), merged from one [`Stream`] per (kind, agent) found in the
+/// trace. Every agent's pipeline runs on its own, so one agent's records can be written
+/// seconds of ticks after another's; merging streams keeps memory at one record per stream
+/// however far apart they were written (the file is read once per stream).
+struct Sorted {
+    streams: Vec<Stream>,
+    heads: BTreeMap<(u64, u32, Kind, usize), (TraceRecord, u64)>,
+}
+
+impl Sorted {
+    fn open(path: &Path, keys: &Streams) -> Result<Self, TraceError> {
+        let mut sorted = Self {
+            streams: Vec::new(),
+            heads: BTreeMap::new(),
+        };
+        for &(kind, agent) in keys {
+            let mut stream = Stream {
+                reader: TraceReader::open(path)?,
+                kind,
+                agent,
+            };
+            let i = sorted.streams.len();
+            if let Some((k, rec, at)) = stream.next() {
+                sorted.heads.insert((k, agent, kind, i), (rec, at));
+            }
+            sorted.streams.push(stream);
+        }
+        Ok(sorted)
+    }
+
+    /// The (tick, agent, kind) of the next record.
+    fn peek(&self) -> Option<(u64, u32, Kind)> {
+        self.heads
+            .first_key_value()
+            .map(|(&(k, agent, kind, _), _)| (k, agent, kind))
+    }
+
+    /// The next record and its byte offset.
+    fn pop(&mut self) -> Option<(TraceRecord, u64)> {
+        let ((_, agent, kind, i), head) = self.heads.pop_first()?;
+        if let Some((k, rec, at)) = self.streams[i].next() {
+            self.heads.insert((k, agent, kind, i), (rec, at));
+        }
+        Some(head)
+    }
+}
+
+/// The first pass over a trace: the (kind, agent) streams it holds, each checked to be in
+/// tick order; events go to `event` in file order; `n` counts the records read. Returns the
+/// streams and the damage that ended the file early, if any.
+fn scan(
+    path: &Path,
+    reader: &mut TraceReader,
+    n: &mut u64,
+    mut event: impl FnMut(&TraceRecord, u64) -> Result<()>,
+) -> Result<(Streams, Option<anyhow::Error>)> {
+    let mut last: BTreeMap<(Kind, u32), u64> = BTreeMap::new();
+    while let Some(rec) = reader.next() {
+        let rec = match rec {
+            Ok(r) => r,
+            Err(e) => return Ok((last.into_keys().collect(), Some(e.into()))),
+        };
+        *n += 1;
+        let at = reader.last_offset();
+        let Some((kind, k, agent)) = Kind::of(&rec) else {
+            event(&rec, at)?;
+            continue;
+        };
+        let prev = last.insert((kind, agent), k);
+        if let Some(prev) = prev.filter(|&prev| k < prev) {
+            bail!(
+                "{}: record {n} (byte offset {at}): tick {k} of agent {agent} comes after tick {prev} of the same agent: the trace is not in tick order",
+                path.display()
+            );
+        }
+    }
+    Ok((last.into_keys().collect(), None))
+}
+
+/// Reads the trace `reader` of `path` to its end, handing the events to `out` in file order,
+/// then the per-tick records in (tick, agent) order ([`Sorted`]), each with its byte offset;
+/// `n` counts the records read. The records before a damage are handed out, then the damage
+/// is the error.
 fn read_sorted(
     path: &Path,
     reader: &mut TraceReader,
     n: &mut u64,
     mut out: impl FnMut(&TraceRecord, u64) -> Result<()>,
 ) -> Result<()> {
-    let mut held: BTreeMap<Kind, Reorder<(TraceRecord, u64)>> = BTreeMap::new();
-    let mut failure = None;
-    while let Some(rec) = reader.next() {
-        let rec = match rec {
-            Ok(r) => r,
-            Err(e) => {
-                failure = Some(anyhow::Error::from(e));
-                break;
-            }
-        };
-        *n += 1;
-        let at = reader.last_offset();
-        let Some((kind, k, agent)) = Kind::of(&rec) else {
-            out(&rec, at)?;
-            continue;
-        };
-        let r = held.entry(kind).or_default();
-        r.push(k, agent, (rec, at))
-            .with_context(|| format!("{}: record {n} (byte offset {at})", path.display()))?;
-        while let Some((rec, at)) = r.pop_ready() {
-            out(&rec, at)?;
-        }
-    }
-    for r in held.values_mut() {
-        while let Some((rec, at)) = r.pop() {
-            out(&rec, at)?;
-        }
+    let (keys, failure) = scan(path, reader, n, &mut out)?;
+    let mut sorted = Sorted::open(path, &keys)?;
+    while let Some((rec, at)) = sorted.pop() {
+        out(&rec, at)?;
     }
     match failure {
         Some(e) => Err(e),
@@ -300,45 +321,94 @@ fn read_sorted(
 
 #[cfg(test)]
 mod tests {
+    use fdi_common::records::AttackRecord;
+    use fdi_common::trace::{TraceHeader, TraceWriter, FORMAT_VERSION};
+
     use super::*;
 
+    fn attack(k: u64, agent: u32, tag: f64) -> TraceRecord {
+        TraceRecord::Attack(AttackRecord {
+            k,
+            agent,
+            alpha_position: Default::default(),
+            alpha_velocity: Default::default(),
+            y: fdi_common::records::Joints::from_slice(&[tag]),
+            yd: Default::default(),
+            active: false,
+            delivery: Default::default(),
+        })
+    }
+
+    fn tag(rec: &TraceRecord) -> f64 {
+        match rec {
+            TraceRecord::Attack(a) => a.y.as_slice()[0],
+            other => panic!("not an attack record: {other:?}"),
+        }
+    }
+
+    fn write(records: &[TraceRecord]) -> (tempfile::TempDir, PathBuf) {
+        let dir = tempfile::tempdir().expect("scratch");
+        let path = dir.path().join("attacker.trace");
+        let header = TraceHeader {
+            format_version: FORMAT_VERSION,
+            process: "attacker".into(),
+            scenario_toml: String::new(),
+            seed: 1,
+            clock: "lockstep".into(),
+            kept: Default::default(),
+        };
+        let mut w = TraceWriter::create(&path, &header).expect("writer");
+        for r in records {
+            w.write(r).expect("write");
+        }
+        w.flush().expect("flush");
+        (dir, path)
+    }
+
+    /// Agent 2's records written 10 000 ticks after agent 1's (each pipeline runs on its
+    /// own) come out in (tick, agent) order; duplicates keep their file order.
     #[test]
-    fn reorder_sorts_by_tick_then_agent_keeping_duplicates_in_file_order() {
-        let mut r = Reorder::default();
-        for (k, a, v) in [
-            (1, 2, "a"),
-            (0, 3, "b"),
-            (1, 1, "c"),
-            (0, 1, "d"),
-            (1, 1, "e"),
-        ] {
-            r.push(k, a, v).expect("in the window");
-        }
+    fn records_come_out_in_tick_then_agent_order_however_far_apart_they_were_written() {
+        let mut recs: Vec<TraceRecord> = (0..10_000).map(|k| attack(k, 1, k as f64)).collect();
+        recs.extend((0..3).map(|k| attack(k, 2, -(k as f64))));
+        recs.push(attack(2, 2, -2.5));
+        let (_dir, path) = write(&recs);
+        let mut reader = TraceReader::open(&path).expect("reader");
+        let mut n = 0;
+        let mut got = Vec::new();
+        read_sorted(&path, &mut reader, &mut n, |rec, _| {
+            got.push(Kind::of(rec).map(|(_, k, a)| (k, a, tag(rec))));
+            Ok(())
+        })
+        .expect("sorted");
+        assert_eq!(n, 10_004);
+        let head: Vec<_> = got.iter().take(7).flatten().copied().collect();
         assert_eq!(
-            r.pop_ready(),
-            None,
-            "nothing is final before the window has passed"
+            head,
+            [
+                (0, 1, 0.0),
+                (0, 2, -0.0),
+                (1, 1, 1.0),
+                (1, 2, -1.0),
+                (2, 1, 2.0),
+                (2, 2, -2.0),
+                (2, 2, -2.5)
+            ]
         );
-        let mut out = Vec::new();
-        while let Some(v) = r.pop() {
-            out.push(v);
-        }
-        assert_eq!(out, ["d", "b", "c", "e", "a"]);
+        assert_eq!(got.len(), 10_004);
+        assert_eq!(got.last(), Some(&Some((9_999, 1, 9_999.0))));
     }
 
     #[test]
-    fn reorder_releases_records_past_the_window_and_refuses_one_behind_them() {
-        let mut r = Reorder::default();
-        r.push(0, 1, 0).expect("first");
-        r.push(REORDER_TICKS, 1, 1).expect("second");
-        assert_eq!(r.pop_ready(), None);
-        r.push(REORDER_TICKS + 1, 1, 2).expect("third");
-        assert_eq!(r.pop_ready(), Some(0));
-        assert_eq!(r.pop_ready(), None);
-        // Tick 0 of agent 0 would now have to come before what was written.
-        r.push(0, 1, 3)
-            .expect("a duplicate of the last written key keeps the order");
-        let e = r.push(0, 0, 4).expect_err("behind the written records");
-        assert!(e.to_string().contains("tick 0 of agent 0"), "{e}");
+    fn a_stream_out_of_tick_order_is_refused_naming_the_record() {
+        let (_dir, path) = write(&[attack(5, 1, 0.0), attack(4, 1, 0.0)]);
+        let mut reader = TraceReader::open(&path).expect("reader");
+        let mut n = 0;
+        let e = read_sorted(&path, &mut reader, &mut n, |_, _| Ok(())).expect_err("out of order");
+        let text = format!("{e:#}");
+        assert!(
+            text.contains("record 2") && text.contains("tick 4 of agent 1 comes after tick 5"),
+            "{text}"
+        );
     }
 }
