@@ -663,21 +663,8 @@ mod seeded {
                 paper_proposed: r.paper_proposed,
             })
             .collect();
-        let mut chart = table1_chart(args.engine, &plain);
-        chart.title = format!("{} (mean over {over})", chart.title);
-        let table = Table {
-            name: "table1",
-            md,
-            csv,
-            json: serde_json::json!({
-                "engine": args.engine.as_str(),
-                "seeds": seeds,
-                "confidence": stats::LEVEL,
-                "rows": rows
-            }),
-            chart,
-        };
-        table.publish(args.json, dir)
+        let chart = table1_chart(args.engine, &plain);
+        publish(args, dir, "table1", md, csv, chart, (&over, &seeds), &rows)
     }
 
     #[derive(Debug, Serialize)]
@@ -755,10 +742,26 @@ mod seeded {
                 paper_rmse_rad: r.paper_rmse_rad,
             })
             .collect();
-        let mut chart = table2_chart(args.engine, &plain);
+        let chart = table2_chart(args.engine, &plain);
+        publish(args, dir, "table2", md, csv, chart, (&over, &seeds), &rows)
+    }
+
+    /// Writes and prints a seeded table: its chart titled with the seeds (`over`, as words),
+    /// its JSON with the engine, the seeds, the confidence level and the rows.
+    #[allow(clippy::too_many_arguments)]
+    fn publish<R: Serialize>(
+        args: &TableArgs,
+        dir: &Path,
+        name: &'static str,
+        md: String,
+        csv: Vec<u8>,
+        mut chart: BarChart,
+        (over, seeds): (&str, &[u64]),
+        rows: &R,
+    ) -> Result<ExitCode> {
         chart.title = format!("{} (mean over {over})", chart.title);
         let table = Table {
-            name: "table2",
+            name,
             md,
             csv,
             json: serde_json::json!({

@@ -32,18 +32,14 @@ pub fn pipe_path(run_dir: &Path, process: &str) -> PathBuf {
     run_dir.join("traces").join(format!("{process}.pipe"))
 }
 
-/// Where a reader thread sends the records of one kind.
+/// Where a reader thread sends the records of one kind (unbounded: see the module's notes).
 #[derive(Clone)]
-enum Tx {
-    Unbounded(mpsc::Sender<Result<TraceRecord, String>>),
-}
+struct Tx(mpsc::Sender<Result<TraceRecord, String>>);
 
 impl Tx {
     /// False once the join is gone (it ended: what follows is not needed).
     fn send(&self, r: Result<TraceRecord, String>) -> bool {
-        match self {
-            Self::Unbounded(t) => t.send(r).is_ok(),
-        }
+        self.0.send(r).is_ok()
     }
 }
 
@@ -189,7 +185,7 @@ impl Tap {
         // writer buffers.
         let channel = || -> (Tx, Feed) {
             let (tx, rx) = mpsc::channel();
-            (Tx::Unbounded(tx), Box::new(rx.into_iter()))
+            (Tx(tx), Box::new(rx.into_iter()))
         };
         let Self {
             pipes,
