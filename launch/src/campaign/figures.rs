@@ -7,7 +7,7 @@ use std::path::Path;
 use anyhow::{anyhow, Context, Result};
 use plotters::prelude::*;
 
-use super::{robots, show, toml_cell, Aggregate, Plan};
+use super::{labels_and_robots, show, toml_cell, Aggregate, Plan};
 use crate::plot::{FONT, PALETTE};
 
 /// One point of a line: x, the mean, and its confidence interval when there is one.
@@ -46,18 +46,7 @@ pub(super) fn write_all(
     dir: &Path,
 ) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let labels: Vec<&str> = plan
-        .axes
-        .iter()
-        .filter(|a| !a.is_seed())
-        .map(|a| a.label.as_str())
-        .collect();
-    let all: Vec<String> = aggregate
-        .iter()
-        .flat_map(|a| a.metrics.keys().cloned())
-        .collect();
-    let refs: Vec<&String> = all.iter().collect();
-    let ids = robots(&refs);
+    let (labels, ids) = labels_and_robots(plan, aggregate);
     let seeds = plan.seeds;
     for (ai, axis) in labels.iter().enumerate() {
         // Only an axis of numbers has an x-axis.
@@ -224,13 +213,5 @@ where
             )
             .map_err(err)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font((FONT, 13))
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(160, 160, 160))
-        .draw()
-        .map_err(err)?;
-    Ok(())
+    crate::plot::draw_legend(&mut chart)
 }

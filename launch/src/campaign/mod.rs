@@ -827,6 +827,23 @@ pub(crate) struct Aggregate {
 }
 
 /// The robots of a set of columns (`robot<id>.…`), in id order.
+/// The labels of a plan's axes other than the seed, and the robots an aggregate has metrics
+/// of.
+fn labels_and_robots<'p>(plan: &'p Plan, aggregate: &[Aggregate]) -> (Vec<&'p str>, Vec<String>) {
+    let labels = plan
+        .axes
+        .iter()
+        .filter(|a| !a.is_seed())
+        .map(|a| a.label.as_str())
+        .collect();
+    let all: Vec<String> = aggregate
+        .iter()
+        .flat_map(|a| a.metrics.keys().cloned())
+        .collect();
+    let refs: Vec<&String> = all.iter().collect();
+    (labels, robots(&refs))
+}
+
 fn robots(columns: &[&String]) -> Vec<String> {
     let mut ids: Vec<(u64, String)> = columns
         .iter()
@@ -886,18 +903,7 @@ fn plot_families(asked: Option<&[String]>, numeric: &[&String]) -> Result<Vec<St
 
 /// `aggregate.md`: per metric, a table of its mean ± CI half-width (n) per point and robot.
 fn aggregate_markdown(plan: &Plan, aggregate: &[Aggregate], families: &[String]) -> String {
-    let labels: Vec<&str> = plan
-        .axes
-        .iter()
-        .filter(|a| !a.is_seed())
-        .map(|a| a.label.as_str())
-        .collect();
-    let all: Vec<String> = aggregate
-        .iter()
-        .flat_map(|a| a.metrics.keys().cloned())
-        .collect();
-    let refs: Vec<&String> = all.iter().collect();
-    let ids = robots(&refs);
+    let (labels, ids) = labels_and_robots(plan, aggregate);
     let mut md = format!(
         "# Campaign `{}`\n\nMean ± half-width of the {:.0} % confidence interval (Student t) over the seeds of each point, (n) the runs with a value.\n",
         plan.name,

@@ -498,20 +498,7 @@ mod tests {
 
     use super::*;
 
-    fn fixture_copy() -> tempfile::TempDir {
-        let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("testdata/short-run");
-        let tmp = tempfile::tempdir().expect("a scratch folder");
-        std::fs::create_dir(tmp.path().join("traces")).expect("traces/");
-        for e in std::fs::read_dir(from.join("traces")).expect("the fixture's traces") {
-            let p = e.expect("an entry").path();
-            std::fs::copy(
-                &p,
-                tmp.path().join("traces").join(p.file_name().expect("name")),
-            )
-            .expect("copy");
-        }
-        tmp
-    }
+    use super::super::tests::fixture_copy;
 
     fn read(path: &Path) -> (Vec<String>, Vec<Vec<String>>) {
         let mut r = csv::Reader::from_path(path).expect("a CSV");

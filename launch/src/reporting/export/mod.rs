@@ -326,6 +326,23 @@ mod tests {
 
     use super::*;
 
+    /// A scratch run directory holding the fixture `testdata/short-run` (scenario and traces).
+    pub(super) fn fixture_copy() -> tempfile::TempDir {
+        let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("testdata/short-run");
+        let tmp = tempfile::tempdir().expect("a scratch folder");
+        std::fs::create_dir(tmp.path().join("traces")).expect("traces/");
+        std::fs::copy(from.join("scenario.toml"), tmp.path().join("scenario.toml")).expect("copy");
+        for e in std::fs::read_dir(from.join("traces")).expect("the fixture's traces") {
+            let p = e.expect("an entry").path();
+            std::fs::copy(
+                &p,
+                tmp.path().join("traces").join(p.file_name().expect("name")),
+            )
+            .expect("copy");
+        }
+        tmp
+    }
+
     fn attack(k: u64, agent: u32, tag: f64) -> TraceRecord {
         TraceRecord::Attack(AttackRecord {
             k,
