@@ -354,6 +354,7 @@ pub fn run_inproc<const N: usize>(
                 attack: attack_record(k, id, &sent, &inj),
                 center: center_record(k, id, &out),
                 actuation,
+                monitor: None,
             };
             digest.push(&rec);
             evaluator.push(&rec);

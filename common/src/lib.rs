@@ -21,6 +21,7 @@ pub mod model;
 pub mod plant;
 pub mod records;
 pub mod rng;
+pub mod roles;
 pub mod scenario;
 pub mod trace;
 pub mod trajectory;

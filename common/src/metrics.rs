@@ -547,6 +547,7 @@ mod tests {
                 missing_input: false,
             },
             actuation: None,
+            monitor: None,
         }
     }
 

@@ -202,6 +202,21 @@ pub struct CenterRecord {
     pub missing_input: bool,
 }
 
+/// A monitor program's verdict on tick `k` of one agent (`[roles.monitor]`), as the control
+/// center received it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct MonitorRecord {
+    pub k: u64,
+    pub agent: u32,
+    /// The monitor's alarm at this tick.
+    pub alarm: bool,
+    /// Its statistic (any unit; NaN when it gave none).
+    pub statistic: f64,
+    /// Realtime: it arrived later than the monitor's deadline after the tick's time (the
+    /// verdict still counts). Always false in lockstep.
+    pub late: bool,
+}
+
 /// One tick of one agent, joined across processes.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct TickRecord {
@@ -210,6 +225,10 @@ pub struct TickRecord {
     pub center: CenterRecord,
     /// The torque's way through the attacker, for an agent whose torques it attacks.
     pub actuation: Option<ActuationRecord>,
+    /// The monitor program's verdict on the tick (`[roles.monitor]`); `None` without a
+    /// monitor, or when it gave none for the tick (counted as missing).
+    #[serde(default)]
+    pub monitor: Option<MonitorRecord>,
 }
 
 /// SHA-256 over every tick's true state, tampered measurement and torque as f64 bit patterns,

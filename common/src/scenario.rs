@@ -301,6 +301,10 @@ pub struct Scenario {
     /// run with their defaults).
     #[serde(default, skip_serializing_if = "DetectorsConfig::is_default")]
     pub detectors: DetectorsConfig,
+    /// `[roles]`: roles taken by external programs (docs/protocol.md; optional: without it the
+    /// run's own processes take every role).
+    #[serde(default, skip_serializing_if = "crate::roles::RolesConfig::is_default")]
+    pub roles: crate::roles::RolesConfig,
 }
 
 /// One problem of a scenario, with the path of the field it concerns.
@@ -399,7 +403,39 @@ impl Resolved {
             });
         }
         self.attack = attack;
+        let problems = self.roles_problems();
+        if !problems.is_empty() {
+            return Err(ScenarioError {
+                source_name: "attack".into(),
+                problems,
+            });
+        }
         Ok(self)
+    }
+
+    /// What the roles taken by external programs need of the rest: an external attacker
+    /// decides every message itself, so the run's attack profile must be empty (the preset
+    /// `none`); it would otherwise be silently unused.
+    pub fn roles_problems(&self) -> Vec<Problem> {
+        let attacker = self.scenario.roles.attacker.is_some();
+        if attacker && self.attack.agents().first().is_some() {
+            return vec![Problem {
+                path: "roles.attacker".into(),
+                message: format!(
+                    "an external program takes the attacker role, so the attack profile `{}` \
+                     (agents {:?}) would not be used: set `[attack] preset = \"none\"`",
+                    self.attack.name,
+                    self.attack.agents()
+                ),
+            }];
+        }
+        Vec::new()
+    }
+
+    /// Whether a program outside the project takes a role: only the multi-process engine can
+    /// run it.
+    pub fn has_external_roles(&self) -> bool {
+        !self.scenario.roles.is_default()
     }
 }
 
@@ -509,6 +545,7 @@ impl Scenario {
             self.control_period_s,
             self.agents.first().map(|a| a.model.dof()),
         ));
+        out.extend(self.roles.problems("roles"));
         out
     }
 
@@ -988,8 +1025,10 @@ pub fn load_str(
             },
         }
     }
+    let resolved = Resolved { scenario, attack };
+    problems.extend(with_locations(resolved.roles_problems(), text, None));
     if problems.is_empty() {
-        Ok(Resolved { scenario, attack })
+        Ok(resolved)
     } else {
         Err(ScenarioError {
             source_name: source_name.into(),

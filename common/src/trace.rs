@@ -21,7 +21,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::records::{ActuationRecord, AgentRecord, AttackRecord, CenterRecord};
+use crate::records::{ActuationRecord, AgentRecord, AttackRecord, CenterRecord, MonitorRecord};
 
 /// First bytes of every trace file.
 pub const MAGIC: &[u8; 8] = b"FDITRACE";
@@ -109,6 +109,8 @@ pub enum TraceRecord {
     },
     /// The attacker's record of a torque it relayed (a run that attacks the torque path).
     Actuation(ActuationRecord),
+    /// The control center's record of a monitor program's verdict (`[roles.monitor]`).
+    Monitor(MonitorRecord),
 }
 
 impl TraceRecord {
@@ -120,6 +122,7 @@ impl TraceRecord {
             Self::Center(c) => Some(c.k),
             Self::Latency { k, .. } => Some(*k),
             Self::Actuation(a) => Some(a.k),
+            Self::Monitor(m) => Some(m.k),
             Self::Event { .. } => None,
         }
     }

@@ -108,6 +108,7 @@ impl ThreadOutcome {
                 center,
                 // Not in the digest.
                 actuation: None,
+                monitor: None,
             });
         }
         digest.finish()

@@ -278,6 +278,7 @@ fn assert_row_is_record(row: &BTreeMap<&str, &str>, rec: &TraceRecord) {
             assert_eq!(int(row, "agent_received_ns"), stamps.agent_received_ns);
         }
         TraceRecord::Event { .. } => unreachable!("events are compared apart"),
+        TraceRecord::Monitor(_) => unreachable!("no monitor in these runs"),
     }
 }
 
@@ -318,6 +319,7 @@ fn tick_agent(r: &TraceRecord) -> (u64, u32) {
         TraceRecord::Attack(a) => (a.k, a.agent),
         TraceRecord::Center(c) => (c.k, c.agent),
         TraceRecord::Actuation(a) => (a.k, a.agent),
+        TraceRecord::Monitor(m) => (m.k, m.agent),
         TraceRecord::Latency { k, agent, .. } => (*k, *agent),
         TraceRecord::Event { .. } => (u64::MAX, u32::MAX),
     }

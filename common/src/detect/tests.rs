@@ -69,6 +69,7 @@ fn record(k: u64, r: Vector4<f64>) -> TickRecord {
             missing_input: false,
         },
         actuation: None,
+        monitor: None,
     }
 }
 

@@ -446,6 +446,7 @@ impl Join {
             attack: x,
             center: c,
             actuation,
+            monitor: None,
         };
         self.digest.push(&rec);
         self.evaluator.push(&rec);

@@ -60,7 +60,9 @@ impl Route {
                 self.main.send(Ok(rec))
             }
             // Neither latency stamps nor events are part of the join.
-            TraceRecord::Latency { .. } | TraceRecord::Event { .. } => true,
+            TraceRecord::Latency { .. } | TraceRecord::Event { .. } | TraceRecord::Monitor(_) => {
+                true
+            }
         }
     }
 

@@ -105,7 +105,7 @@ impl<S: Variant> Iceoryx<S> {
         self.node
             .service_builder(&name)
             .event()
-            .max_notifiers(self.sizing.agents + 4)
+            .max_notifiers(self.sizing.agents + 6)
             .max_listeners(2)
             .max_nodes(self.sizing.agents + 8)
             .open_or_create()

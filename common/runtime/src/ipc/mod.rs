@@ -19,6 +19,13 @@
 //! | `fdi/torque/<id>` | [`TorqueMsg`] | control center → agent `id` |
 //! | `fdi/control` | [`ControlMsg`] | launcher → every process |
 //! | `fdi/status` | [`StatusMsg`] | every process → launcher |
+//! | `fdi/actuation` | [`TorqueMsg`] | control center → attacker (torques the run attacks) |
+//! | `fdi/external/attacker/in` | [`MeasurementMsg`] | attacker → external attacker program |
+//! | `fdi/external/attacker/out` | [`MeasurementMsg`] | external attacker program → attacker |
+//! | `fdi/alarm` | [`AlarmMsg`] | monitor program → control center |
+//!
+//! docs/protocol.md is the contract external programs implement (layouts, handshake, rules);
+//! `tests/tests/protocol.rs` checks it against these types.
 //!
 //! Each process has one wake-up event service (`fdi/wake/...`) that its peers notify after
 //! publishing; it blocks on it with a timeout, never spinning.
@@ -37,7 +44,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 pub use iceoryx::{Local, Shm};
-pub use msg::{ControlMsg, MeasurementMsg, Role, StatusMsg, TorqueMsg};
+pub use msg::{AlarmMsg, ControlMsg, MeasurementMsg, Role, StatusMsg, TorqueMsg};
 pub use prefix::RunPrefix;
 
 /// Longest run prefix: iceoryx2 puts it into Unix socket paths (108 bytes in all).
@@ -103,6 +110,12 @@ pub enum Stream {
     Actuation,
     Control,
     Status,
+    /// Attacker → the external program that takes the attacker role: the clean measurements.
+    ExternalIn,
+    /// The external attacker program → attacker: what the control center is to receive.
+    ExternalOut,
+    /// The monitor program → control center: one verdict per agent and tick.
+    Alarm,
 }
 
 impl Stream {
@@ -115,6 +128,9 @@ impl Stream {
             Self::Actuation => "fdi/actuation".into(),
             Self::Control => "fdi/control".into(),
             Self::Status => "fdi/status".into(),
+            Self::ExternalIn => "fdi/external/attacker/in".into(),
+            Self::ExternalOut => "fdi/external/attacker/out".into(),
+            Self::Alarm => "fdi/alarm".into(),
         }
     }
 }
@@ -126,6 +142,10 @@ pub enum Wake {
     Attacker,
     Center,
     Launcher,
+    /// The external program that takes the attacker role (the attacker process relays for it).
+    ExternalAttacker,
+    /// The monitor program (detectors outside the project).
+    Monitor,
 }
 
 impl Wake {
@@ -135,6 +155,8 @@ impl Wake {
             Self::Attacker => "fdi/wake/attacker".into(),
             Self::Center => "fdi/wake/center".into(),
             Self::Launcher => "fdi/wake/launcher".into(),
+            Self::ExternalAttacker => "fdi/wake/external/attacker".into(),
+            Self::Monitor => "fdi/wake/monitor".into(),
         }
     }
 }
@@ -181,8 +203,9 @@ impl Sizing {
             Stream::Tampered => (1, 2, n * burst),
             Stream::Torque(_) => (1, 2, burst),
             Stream::Actuation => (1, 2, n * burst),
-            Stream::Control => (1, n + 4, 8),
-            Stream::Status => (n + 4, 2, 256),
+            Stream::Control => (1, n + 6, 8),
+            Stream::Status => (n + 6, 2, 256),
+            Stream::ExternalIn | Stream::ExternalOut | Stream::Alarm => (1, 2, n * burst),
         };
         (pubs + self.taps, subs + self.taps, buffer)
     }

@@ -158,30 +158,57 @@ impl StatusMsg {
     pub const REJOINED: u32 = 5;
 }
 
+/// A monitor's verdict on one tick of one agent: monitor program → control center, one per
+/// agent and tick, in tick order (docs/protocol.md).
+#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[repr(C)]
+#[type_name("fdi_mas::AlarmMsg")]
+pub struct AlarmMsg {
+    /// Tick `k` judged.
+    pub seq: u64,
+    pub agent: u32,
+    /// 1: the alarm is on at this tick; 0: off.
+    pub alarm: u32,
+    /// The monitor's statistic at this tick (any unit; NaN when it has none).
+    pub statistic: f64,
+    /// CLOCK_MONOTONIC when the monitor published, ns (0 if it does not say).
+    pub monitor_sent_ns: u64,
+}
+
 /// Which process a status message comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Role {
     Agent,
     Attacker,
     Center,
+    /// The monitor program: detectors outside the project.
+    Monitor,
+    /// The external program that takes the attacker role.
+    ExternalAttacker,
 }
 
 impl Role {
+    /// Every role, for tables and checks.
+    pub const ALL: [Self; 5] = [
+        Self::Agent,
+        Self::Attacker,
+        Self::Center,
+        Self::Monitor,
+        Self::ExternalAttacker,
+    ];
+
     pub fn code(self) -> u32 {
         match self {
             Self::Agent => 1,
             Self::Attacker => 2,
             Self::Center => 3,
+            Self::Monitor => 4,
+            Self::ExternalAttacker => 5,
         }
     }
 
     pub fn from_code(c: u32) -> Option<Self> {
-        match c {
-            1 => Some(Self::Agent),
-            2 => Some(Self::Attacker),
-            3 => Some(Self::Center),
-            _ => None,
-        }
+        Self::ALL.into_iter().find(|r| r.code() == c)
     }
 }
 

@@ -152,6 +152,8 @@ pub fn node_name(wake: Wake) -> String {
         Wake::Attacker => "attacker".into(),
         Wake::Center => "control-center".into(),
         Wake::Launcher => "launcher".into(),
+        Wake::ExternalAttacker => "external-attacker".into(),
+        Wake::Monitor => "monitor".into(),
     }
 }
 

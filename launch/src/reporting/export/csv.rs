@@ -396,7 +396,7 @@ fn row(
             latency_row(row, *k, *agent, stamps, info);
             Ok(())
         }
-        TraceRecord::Event { .. } => Ok(()),
+        TraceRecord::Event { .. } | TraceRecord::Monitor(_) => Ok(()),
         TraceRecord::Actuation(a) => actuation_row(row, a, info, dof),
     }
 }

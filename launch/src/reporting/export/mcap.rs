@@ -677,6 +677,7 @@ fn record(w: &mut Mcap, info: &RunInfo, path: &Path, stem: &str, rec: &TraceReco
             &json!({
             "t_s": t, "process": stem, "message": message}),
         ),
+        TraceRecord::Monitor(_) => Ok(()),
     }
 }
 
@@ -796,6 +797,7 @@ mod tests {
                     TraceRecord::Latency { agent, .. } => add(agent, &["latency"]),
                     TraceRecord::Actuation(a) => add(a.agent, &["actuation"]),
                     TraceRecord::Event { .. } => events += 1,
+                    TraceRecord::Monitor(_) => {}
                 }
             }
         }

@@ -187,7 +187,7 @@ impl Kind {
             TraceRecord::Center(c) => (Self::Center, c.k, c.agent),
             TraceRecord::Latency { k, agent, .. } => (Self::Latency, *k, *agent),
             TraceRecord::Actuation(a) => (Self::Actuation, a.k, a.agent),
-            TraceRecord::Event { .. } => return None,
+            TraceRecord::Event { .. } | TraceRecord::Monitor(_) => return None,
         })
     }
 }
