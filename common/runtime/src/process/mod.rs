@@ -11,6 +11,7 @@ use crate::ipc::IpcError;
 
 mod admission;
 mod args;
+pub mod external;
 mod launcher;
 mod liveness;
 mod placement;

@@ -1,0 +1,94 @@
+//! What the launcher gives a program that takes a role (`[roles]` of the scenario): its
+//! environment, the one place its variables are named (docs/protocol.md lists them; the
+//! protocol test checks the list).
+
+use fdi_common::scenario::Resolved;
+
+/// How far (ticks) the control center may run ahead of a monitor's verdicts in lockstep: it
+/// computes tick `k` of an agent once it holds the monitor's verdict on tick `k − MONITOR_LAG`.
+pub const MONITOR_LAG: u64 = 64;
+
+/// The environment variables of an external role, in the order docs/protocol.md lists them.
+pub const ENV_VARS: [&str; 11] = [
+    "FDI_PREFIX",
+    "FDI_ROLE",
+    "FDI_SCENARIO",
+    "FDI_RUN_DIR",
+    "FDI_AGENTS",
+    "FDI_DOF",
+    "FDI_TICKS",
+    "FDI_CONTROL_PERIOD_S",
+    "FDI_CLOCK",
+    "FDI_MONITOR_LAG",
+    "FDI_LAUNCHER_PID",
+];
+
+/// Which role an external program takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ExternalKind {
+    Attacker,
+    Monitor,
+}
+
+impl ExternalKind {
+    /// `FDI_ROLE`.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Attacker => "attacker",
+            Self::Monitor => "monitor",
+        }
+    }
+}
+
+/// The environment of the program taking `kind` in the run `prefix` (its resolved scenario at
+/// `scenario`, its directory `run_dir`), one value per entry of [`ENV_VARS`], in that order.
+pub fn environment(
+    kind: ExternalKind,
+    prefix: &str,
+    resolved: &Resolved,
+    scenario: &std::path::Path,
+    run_dir: &std::path::Path,
+) -> Vec<(&'static str, String)> {
+    let s = &resolved.scenario;
+    let agents: Vec<String> = s.agents.iter().map(|a| a.id.to_string()).collect();
+    let dof = s.agents.first().map_or(0, |a| a.model.dof());
+    let values = [
+        prefix.to_string(),
+        kind.as_str().to_string(),
+        scenario.display().to_string(),
+        run_dir.display().to_string(),
+        agents.join(","),
+        dof.to_string(),
+        resolved.ticks().to_string(),
+        // Rust's shortest round-trip form: a reader's float parser gets the very f64.
+        format!("{:?}", s.control_period_s),
+        s.clock.as_str().to_string(),
+        MONITOR_LAG.to_string(),
+        std::process::id().to_string(),
+    ];
+    ENV_VARS.into_iter().zip(values).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_variable_gets_a_value() {
+        let r = fdi_common::scenario::paper().expect("paper");
+        let env = environment(
+            ExternalKind::Monitor,
+            "fdi1_x",
+            &r,
+            "run/scenario.toml".as_ref(),
+            "run".as_ref(),
+        );
+        let names: Vec<&str> = env.iter().map(|(n, _)| *n).collect();
+        assert_eq!(names, ENV_VARS);
+        let get = |n: &str| env.iter().find(|(k, _)| *k == n).map(|(_, v)| v.as_str());
+        assert_eq!(get("FDI_AGENTS"), Some("1,2,3,4"));
+        assert_eq!(get("FDI_ROLE"), Some("monitor"));
+        assert_eq!(get("FDI_TICKS"), Some("40000"));
+        assert_eq!(get("FDI_CONTROL_PERIOD_S"), Some("0.001"));
+    }
+}
