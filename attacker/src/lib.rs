@@ -7,6 +7,10 @@
 
 use std::process::ExitCode;
 
+pub mod external;
+
+use external::{External, ExternalPorts};
+
 use fdi_common::attack::{AgentAttack, Sent};
 use fdi_common::engine::{actuation_record, attack_record, tick_time};
 use fdi_common::model::{EulerLagrange, ForLinks, Vector};
@@ -17,7 +21,7 @@ use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
     monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox, Role, Shm, Stream, TorqueMsg,
-    Transport, Wake,
+    Transport, Wake, Waker as _,
 };
 use fdi_runtime::process::{
     self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
@@ -35,6 +39,8 @@ pub struct Ports<X: Transport> {
     pub center: X::Bell,
     /// The actuation path, when the run attacks some agent's torques.
     pub actuation: Option<Actuation<X>>,
+    /// The program that takes the attacker role (`[roles.attacker]`), when there is one.
+    pub external: Option<ExternalPorts<X>>,
     pub waker: X::Waker,
     pub launcher: LauncherLink<X>,
     /// The node; declared last so that it is dropped after the ports.
@@ -68,11 +74,16 @@ impl<X: Transport> Ports<X> {
                 agents,
             })
         };
+        let external = match resolved.scenario.roles.attacker {
+            Some(_) => Some(ExternalPorts::open(&conn.transport)?),
+            None => None,
+        };
         Ok(Self {
             measurement: conn.transport.subscriber(Stream::Measurement)?,
             tampered: conn.transport.publisher(Stream::Tampered)?,
             center: conn.transport.notifier(Wake::Center)?,
             actuation,
+            external,
             waker: conn.waker,
             launcher: conn.launcher,
             transport: conn.transport,
@@ -352,8 +363,14 @@ pub fn run<X: Transport, const N: usize>(
     let mut liveness = Liveness::new(targets.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
     let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
     let mut sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
+    let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
+    let mut external = match (&s.roles.attacker, &ports.external) {
+        (Some(role), Some(_)) => Some(External::<X>::new(role, &ids, N, dt, realtime)),
+        _ => None,
+    };
     loop {
         let mut relayed = 0;
+        let mut forwarded = 0;
         ports.measurement.drain(|m| {
             let received = monotonic_ns();
             let Some(i) = targets.iter().position(|t| t.id == m.agent) else {
@@ -369,13 +386,30 @@ pub fn run<X: Transport, const N: usize>(
                 return;
             }
             liveness.seen(i, received);
-            if let Err(e) = relay::<X, N>(&mut targets[i], &m, received, ports, dt, trace) {
+            let result = match (&mut external, &ports.external) {
+                (Some(x), Some(p)) => {
+                    targets[i].next = m.seq + 1;
+                    forwarded += 1;
+                    x.forward(i, &m, received, p)
+                }
+                _ => {
+                    relayed += 1;
+                    relay::<X, N>(&mut targets[i], &m, received, ports, dt, trace)
+                }
+            };
+            if let Err(e) = result {
                 failure.get_or_insert(e);
             }
-            relayed += 1;
         })?;
         if let Some(e) = failure.take() {
             return Err(e);
+        }
+        if let (Some(x), Some(p)) = (&mut external, &ports.external) {
+            if forwarded > 0 {
+                x.ring(&ports.transport)?;
+            }
+            relayed += x.take_answers(p, &ports.tampered, trace)?;
+            relayed += x.enforce(monotonic_ns(), &ports.tampered, trace)?;
         }
         if relayed > 0 {
             ports.center.ring()?;
@@ -388,30 +422,48 @@ pub fn run<X: Transport, const N: usize>(
             liveness.newly_lost(now, |i| targets[i].next >= ticks);
         }
         // A lost agent may rejoin until the run's wall-clock end: relaying goes on till then.
+        let answered = |i: usize| external.as_ref().is_none_or(|x| x.finished(i, ticks));
         if targets
             .iter()
             .enumerate()
-            .all(|(i, t)| liveness.settled(i, t.finished(ticks), now, end_ns))
+            .all(|(i, t)| liveness.settled(i, t.finished(ticks) && answered(i), now, end_ns))
         {
             break;
         }
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(refused);
         }
-        strategy.wait_for_input(s.clock, &ports.waker, || {
+        let has_input = || {
             Ok(ports.measurement.has_messages()?
                 || match &ports.actuation {
                     Some(a) => a.torques.has_messages()?,
                     None => false,
+                }
+                || match &ports.external {
+                    Some(p) => p.from.has_messages()?,
+                    None => false,
                 })
-        })?;
+        };
+        match external.as_ref().and_then(|x| x.next_deadline_in(monotonic_ns())) {
+            // Realtime with answers due: wake at the earliest deadline at the latest.
+            Some(due) if realtime => {
+                ports
+                    .waker
+                    .wait_precise(due.min(fdi_runtime::process::LIVENESS_CHECK))?;
+            }
+            _ => {
+                strategy.wait_for_input(s.clock, &ports.waker, has_input)?;
+            }
+        }
     }
-    let note = (refused > 0).then(|| {
-        (
-            s.duration_s,
-            format!("{refused} measurement messages refused"),
-        )
-    });
+    let mut notes = Vec::new();
+    if refused > 0 {
+        notes.push(format!("{refused} measurement messages refused"));
+    }
+    if let Some(x) = &external {
+        notes.push(x.summary());
+    }
+    let note = (!notes.is_empty()).then(|| (s.duration_s, notes.join("; ")));
     process::finish(
         trace,
         note,

@@ -265,12 +265,16 @@ pub fn summarize(
 /// alarm.
 pub fn evaluator_for(resolved: &Resolved) -> Evaluator {
     let s = &resolved.scenario;
-    Evaluator::new(
+    let evaluator = Evaluator::new(
         s.agents
             .iter()
             .map(|a| (a.id, a.trajectory.clone(), a.model)),
     )
-    .with_detectors(&s.detectors, s.control_period_s, &s.controller)
+    .with_detectors(&s.detectors, s.control_period_s, &s.controller);
+    match s.roles.monitor_name() {
+        Some(name) => evaluator.with_monitor(name),
+        None => evaluator,
+    }
 }
 
 /// Errors of the engine.

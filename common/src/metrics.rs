@@ -264,6 +264,8 @@ struct Acc {
     s_hat_norm: AlarmTally,
     /// The classical detectors, when the evaluator has their configuration.
     detectors: Option<Detectors>,
+    /// A monitor program's verdicts (`[roles.monitor]`), when the run has one.
+    monitor: Option<AlarmTally>,
     links: usize,
     rejected: u64,
     rejected_torques: u64,
@@ -304,6 +306,8 @@ pub struct Evaluator {
     control_period_s: Option<f64>,
     /// The threshold of the paper's alarm on `‖Ŝ‖`.
     s_hat_threshold: Option<f64>,
+    /// The monitor's name among the detectors ([`Self::with_monitor`]).
+    monitor_name: Option<String>,
 }
 
 impl Evaluator {
@@ -330,6 +334,7 @@ impl Evaluator {
                         max_abs: 0.0,
                         s_hat_norm: AlarmTally::default(),
                         detectors: None,
+                        monitor: None,
                         links: model.dof(),
                         rejected: 0,
                         rejected_torques: 0,
@@ -347,7 +352,18 @@ impl Evaluator {
             agents,
             control_period_s: None,
             s_hat_threshold: None,
+            monitor_name: None,
         }
+    }
+
+    /// Reports a monitor program's verdicts (`TickRecord::monitor`) beside the detectors, as
+    /// detector `name`: a tick without a verdict counts as missing (the alarm keeps its state).
+    pub fn with_monitor(mut self, name: &str) -> Self {
+        for acc in self.agents.values_mut() {
+            acc.monitor = Some(AlarmTally::default());
+        }
+        self.monitor_name = Some(name.to_string());
+        self
     }
 
     /// Runs the classical detectors of `config` beside the paper's alarm on every agent, and
@@ -393,6 +409,12 @@ impl Evaluator {
                 d.calibration_attacked += 1;
             }
         }
+        if let Some(m) = &mut acc.monitor {
+            match r.monitor {
+                Some(v) => m.push(t, active, v.alarm, true),
+                None => m.push_verdict(t, active, Verdict::Missing),
+            }
+        }
         acc.rejected += u64::from(r.center.rejected_input);
         acc.rejected_torques += u64::from(r.center.rejected_torque);
         acc.state_resets += u64::from(r.center.state_reset);
@@ -415,13 +437,17 @@ impl Evaluator {
 
     pub fn finish(self) -> BTreeMap<u32, AgentMetrics> {
         let (dt, s_hat_threshold) = (self.control_period_s, self.s_hat_threshold);
+        let monitor_name = self.monitor_name;
         self.agents
             .into_iter()
             .map(|(id, a)| {
-                let detectors = match (&a.detectors, dt) {
+                let mut detectors = match (&a.detectors, dt) {
                     (Some(d), Some(dt)) => detector_metrics(&a, d, dt, s_hat_threshold),
                     _ => BTreeMap::new(),
                 };
+                if let (Some(m), Some(name), Some(dt)) = (&a.monitor, &monitor_name, dt) {
+                    detectors.insert(name.clone(), m.metrics(dt, None, None));
+                }
                 let m = AgentMetrics {
                     rmse_rad: if a.count > 0 {
                         (a.sum_sq / a.count as f64).sqrt()

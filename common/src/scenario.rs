@@ -418,7 +418,7 @@ impl Resolved {
     /// `none`); it would otherwise be silently unused.
     pub fn roles_problems(&self) -> Vec<Problem> {
         let attacker = self.scenario.roles.attacker.is_some();
-        if attacker && self.attack.agents().first().is_some() {
+        if attacker && !self.attack.agents().is_empty() {
             return vec![Problem {
                 path: "roles.attacker".into(),
                 message: format!(

@@ -6,6 +6,10 @@
 
 use std::process::ExitCode;
 
+pub mod monitor;
+
+use monitor::{Monitor, MonitorPorts};
+
 use fdi_common::control::{CenterAgent, CenterParams};
 use fdi_common::engine::{center_record, center_tick, tick_time};
 use fdi_common::model::{EulerLagrange, ForLinks};
@@ -41,6 +45,8 @@ pub struct Ports<X: Transport> {
     pub links: Vec<AgentLink<X>>,
     /// Per agent in the scenario's order, the index of its link in `links`.
     pub route: Vec<usize>,
+    /// The monitor program (`[roles.monitor]`), when the run has one.
+    pub monitor: Option<MonitorPorts<X>>,
     pub waker: X::Waker,
     pub launcher: LauncherLink<X>,
     /// The node; declared last so that it is dropped after the ports.
@@ -77,10 +83,15 @@ impl<X: Transport> Ports<X> {
             }
             route.extend(actuation);
         }
+        let monitor = match resolved.scenario.roles.monitor {
+            Some(_) => Some(MonitorPorts::open(&conn.transport)?),
+            None => None,
+        };
         Ok(Self {
             tampered: conn.transport.subscriber(Stream::Tampered)?,
             links,
             route,
+            monitor,
             waker: conn.waker,
             launcher: conn.launcher,
             transport: conn.transport,
@@ -317,14 +328,41 @@ pub fn run<X: Transport, const N: usize>(
     let realtime = s.clock == ClockMode::Realtime;
     let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
     let mut intake = Intake::new(&ids, ticks, monotonic_ns().max(epoch_ns));
+    let mut monitor = match (&s.roles.monitor, &ports.monitor) {
+        (Some(role), Some(_)) => Some(Monitor::<X>::new(role, &ids, dt, !realtime, epoch_ns)),
+        _ => None,
+    };
+    // Realtime: once every agent is done, the monitor's last verdicts are awaited this long.
+    let mut verdicts_until: Option<std::time::Instant> = None;
+    let mut ready = Vec::new();
     loop {
-        ports
-            .tampered
-            .drain(|m| intake.take(&m, &mut slots, ports, dt, trace))?;
+        // With a monitor, it is rung whenever measurements came: it taps them too, and in
+        // lockstep the center may be waiting for its verdicts on them.
+        let mut arrived = 0;
+        match (&mut monitor, &ports.monitor) {
+            (Some(mon), Some(mp)) => {
+                arrived = ports.tampered.drain(|m| mon.admit(m, &mut ready))?;
+                mon.take_verdicts(mp, trace, &mut ready)?;
+                for m in ready.drain(..) {
+                    intake.take(&m, &mut slots, ports, dt, trace);
+                }
+            }
+            _ => {
+                ports
+                    .tampered
+                    .drain(|m| intake.take(&m, &mut slots, ports, dt, trace))?;
+            }
+        }
         if let Some(e) = intake.failure.take() {
             return Err(e);
         }
+        let computed = intake.answered.iter().any(|a| *a);
         ports.ring(&mut intake.answered)?;
+        if let Some(mon) = &mut monitor {
+            if computed || arrived > 0 {
+                mon.ring(&ports.transport)?;
+            }
+        }
         let liveness = &mut intake.liveness;
         for (i, silent, k) in intake.rejoined.drain(..) {
             announce_rejoined(slots[i].center.agent_id(), silent, k, dt, ports, trace)?;
@@ -336,31 +374,61 @@ pub fn run<X: Transport, const N: usize>(
         report_progress(&slots, liveness, &mut reported, ticks, ports)?;
         // The end once every agent finished, or is lost past the run's wall-clock end (until
         // then a lost agent may rejoin).
-        if slots
+        let controlled = slots
             .iter()
             .enumerate()
-            .all(|(i, x)| liveness.settled(i, x.next >= ticks, now, end_ns))
-        {
+            .all(|(i, x)| liveness.settled(i, x.next >= ticks, now, end_ns));
+        // With a monitor, the end waits for its last verdicts too: in lockstep all of them
+        // (within its timeout), in realtime for its deadline and a little more.
+        let judged = match &monitor {
+            None => true,
+            Some(mon) if mon.complete(ticks) => true,
+            Some(mon) if realtime => {
+                let grace = std::time::Duration::from_nanos(
+                    s.roles.monitor.as_ref().map_or(0, |r| r.deadline_ns()),
+                ) + std::time::Duration::from_millis(200);
+                let until = *verdicts_until.get_or_insert_with(|| std::time::Instant::now() + grace);
+                controlled && std::time::Instant::now() >= until
+            }
+            Some(mon) => {
+                mon.check_timeout(controlled)?;
+                false
+            }
+        };
+        if controlled && judged {
             break;
+        }
+        if let Some(mon) = &monitor {
+            mon.check_timeout(false)?;
         }
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(intake.refused);
         }
-        strategy.wait_for_input(s.clock, &ports.waker, || ports.tampered.has_messages())?;
+        strategy.wait_for_input(s.clock, &ports.waker, || {
+            Ok(ports.tampered.has_messages()?
+                || match &ports.monitor {
+                    Some(m) => m.alarms.has_messages()?,
+                    None => false,
+                })
+        })?;
     }
     let (refused, rejected, missing) = (
         intake.refused,
         slots.iter().map(|x| x.center.rejected_inputs).sum::<u64>(),
         slots.iter().map(|x| x.center.missing_inputs).sum::<u64>(),
     );
-    let note = (refused > 0 || rejected > 0 || missing > 0).then(|| {
-        let message = format!(
+    let mut notes = Vec::new();
+    if refused > 0 || rejected > 0 || missing > 0 {
+        notes.push(format!(
             "{refused} messages refused, {rejected} measurements rejected as non-finite or \
              absurd, {missing} ticks without a measurement (gap markers, forged stamps; the last \
              good one held)"
-        );
-        (s.duration_s, message)
-    });
+        ));
+    }
+    if let Some(mon) = &monitor {
+        notes.push(mon.summary(ticks));
+    }
+    let note = (!notes.is_empty()).then(|| (s.duration_s, notes.join("; ")));
     process::finish(
         trace,
         note,

@@ -189,8 +189,21 @@ fn write_tables(dir: &Path, s: &RunSummary) -> Result<()> {
     Ok(())
 }
 
+/// The detectors of a robot's metrics in table order: the built-in ones ([`detect::NAMES`]),
+/// then a monitor program's (`[roles.monitor]`, under its own name).
+pub fn detector_names(m: &AgentMetrics) -> Vec<&str> {
+    let mut names: Vec<&str> = detect::NAMES.to_vec();
+    names.extend(
+        m.detectors
+            .keys()
+            .map(String::as_str)
+            .filter(|n| !detect::NAMES.contains(n)),
+    );
+    names
+}
+
 /// The detectors side by side (`rmse.md`, `report.md`): per robot a table with a column per
-/// detector ([`detect::NAMES`]), under a heading of `level` (`##` for 2), each robot one level
+/// detector ([`detector_names`]), under a heading of `level` (`##` for 2), each robot one level
 /// below. Empty for a summary without detector metrics (written before they existed).
 pub fn detector_tables(s: &RunSummary, level: usize) -> String {
     let mut md = String::new();
@@ -208,24 +221,43 @@ pub fn detector_tables(s: &RunSummary, level: usize) -> String {
          False alarms count alarm rising edges while no attack was in force, per minute of the \
          attack-free time the detector watched.\n",
     );
+    let monitors: std::collections::BTreeSet<&str> = s
+        .metrics
+        .values()
+        .flat_map(|m| m.detectors.keys().map(String::as_str))
+        .filter(|n| !detect::NAMES.contains(n))
+        .collect();
+    for n in &monitors {
+        let _ = writeln!(
+            md,
+            "\n`{n}`: the verdicts of the monitor program (`[roles.monitor]`, docs/protocol.md), \
+             as it published them; `missing` counts the ticks it gave no verdict on."
+        );
+    }
     for (id, m) in &s.metrics {
         if m.detectors.is_empty() {
             continue;
         }
         // Not `Robot {id}`: report.md's figure sections are `## Robot {id}`.
         let _ = writeln!(md, "\n{h_robot} Detectors of robot {id}\n");
+        let names = detector_names(m);
         let cols: Vec<Option<&DetectorMetrics>> =
-            detect::NAMES.iter().map(|n| m.detectors.get(*n)).collect();
-        detector_rows(&mut md, m, &cols);
+            names.iter().map(|n| m.detectors.get(*n)).collect();
+        detector_rows(&mut md, m, &names, &cols);
         calibration_line(&mut md, &cols);
     }
     md
 }
 
 /// The rows of one robot's detector table: a column per detector of `cols`.
-fn detector_rows(md: &mut String, m: &AgentMetrics, cols: &[Option<&DetectorMetrics>]) {
+fn detector_rows(
+    md: &mut String,
+    m: &AgentMetrics,
+    names: &[&str],
+    cols: &[Option<&DetectorMetrics>],
+) {
     let mut head = vec![""];
-    head.extend(detect::NAMES);
+    head.extend(names);
     md.push_str(&md_table_head(&head));
     let mut row = |label: String, cell: &dyn Fn(&DetectorMetrics) -> String| {
         let cells: Vec<String> = cols

@@ -8,7 +8,8 @@ use anyhow::{Context, Result};
 use fdi_common::engine::{evaluator_for, summarize, RunSummary};
 use fdi_common::metrics::Evaluator;
 use fdi_common::records::{
-    ActuationRecord, AgentRecord, AttackRecord, CenterRecord, TickRecord, TraceDigest,
+    ActuationRecord, AgentRecord, AttackRecord, CenterRecord, MonitorRecord, TickRecord,
+    TraceDigest,
 };
 use fdi_common::scenario::Resolved;
 use fdi_common::trace::{TraceReader, TraceRecord};
@@ -35,6 +36,11 @@ impl Tick for CenterRecord {
     }
 }
 impl Tick for ActuationRecord {
+    fn tick(&self) -> u64 {
+        self.k
+    }
+}
+impl Tick for MonitorRecord {
     fn tick(&self) -> u64 {
         self.k
     }
@@ -138,6 +144,12 @@ fn pick_actuation(r: TraceRecord) -> Option<(u32, ActuationRecord)> {
         _ => None,
     }
 }
+fn pick_monitor(r: TraceRecord) -> Option<(u32, MonitorRecord)> {
+    match r {
+        TraceRecord::Monitor(m) => Some((m.agent, m)),
+        _ => None,
+    }
+}
 fn pick_center(r: TraceRecord) -> Option<(u32, CenterRecord)> {
     match r {
         TraceRecord::Center(c) => Some((c.agent, c)),
@@ -171,6 +183,9 @@ pub struct Sources {
     /// some agent's torques.
     actuation: Option<Source<ActuationRecord>>,
     center: Source<CenterRecord>,
+    /// The monitor's verdicts as the control center recorded them (a second reader of its
+    /// trace), when the run has a monitor (`[roles.monitor]`).
+    monitor: Option<Source<MonitorRecord>>,
 }
 
 impl Sources {
@@ -190,8 +205,16 @@ impl Sources {
             .agents
             .iter()
             .any(|a| resolved.attack.attacks_torque_of(a.id));
+        let center = trace_path(run_dir, "control-center");
         Ok(Self {
             agents,
+            monitor: match resolved.scenario.roles.monitor {
+                Some(_) => Some(
+                    Source::open(&center, pick_monitor)
+                        .context("opening the control-center trace")?,
+                ),
+                None => None,
+            },
             actuation: if routed {
                 Some(
                     Source::open(&attacker, pick_actuation)
@@ -201,19 +224,20 @@ impl Sources {
                 None
             },
             attacker: Source::open(&attacker, pick_attack).context("opening the attacker trace")?,
-            center: Source::open(&trace_path(run_dir, "control-center"), pick_center)
+            center: Source::open(&center, pick_center)
                 .context("opening the control-center trace")?,
         })
     }
 
     /// The sources of streamed traces: per agent (scenario order) its feed, the attacker's
-    /// measurement records, its torque records (when the run attacks some agent's torques) and
-    /// the control center's.
+    /// measurement records, its torque records (when the run attacks some agent's torques), the
+    /// control center's, and its record of the monitor's verdicts (when the run has a monitor).
     pub fn from_feeds(
         agents: Vec<(u32, Feed)>,
         attacker: Feed,
         actuation: Option<Feed>,
         center: Feed,
+        monitor: Option<Feed>,
     ) -> Self {
         Self {
             agents: agents
@@ -223,6 +247,7 @@ impl Sources {
             attacker: Source::new(attacker, pick_attack),
             actuation: actuation.map(|f| Source::new(f, pick_actuation)),
             center: Source::new(center, pick_center),
+            monitor: monitor.map(|f| Source::new(f, pick_monitor)),
         }
     }
 
@@ -235,6 +260,9 @@ impl Sources {
         self.center.finish();
         if let Some(a) = &mut self.actuation {
             a.finish();
+        }
+        if let Some(m) = &mut self.monitor {
+            m.finish();
         }
         for (id, src) in &self.agents {
             if let Some(d) = &src.damage {
@@ -441,12 +469,17 @@ impl Join {
             }
             _ => None,
         };
+        // A tick the monitor gave no verdict on has none: the metrics count it as missing.
+        let monitor = traces
+            .monitor
+            .as_mut()
+            .and_then(|src| src.take(*id, k).ok().flatten());
         let rec = TickRecord {
             agent: a,
             attack: x,
             center: c,
             actuation,
-            monitor: None,
+            monitor,
         };
         self.digest.push(&rec);
         self.evaluator.push(&rec);

@@ -121,6 +121,12 @@ pub fn execute(
     placement: &runtime::Placement,
     traces: Traces,
 ) -> Result<RunSummary> {
+    if engine == Engine::Inproc && r.has_external_roles() {
+        anyhow::bail!(
+            "the in-process engine cannot run a program that takes a role (`[roles]` of the \
+             scenario): run it with --engine ipc"
+        );
+    }
     match (engine, run_dir) {
         (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
         (Engine::Inproc, Some(dir)) => {

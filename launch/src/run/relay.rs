@@ -18,9 +18,19 @@ pub struct StderrRelay {
 impl StderrRelay {
     /// Starts relaying `stderr` (the read end of a child's stderr pipe) to this process's.
     pub fn start(stderr: impl Read + Send + 'static, label: &str) -> Self {
+        Self::start_prefixed(stderr, label, None)
+    }
+
+    /// [`Self::start`] for a program outside the project (`[roles]`): each line it prints is
+    /// relayed after `prefix: ` (its own lines do not say who printed them).
+    pub fn start_prefixed(
+        stderr: impl Read + Send + 'static,
+        label: &str,
+        prefix: Option<String>,
+    ) -> Self {
         let thread = std::thread::Builder::new()
             .name(format!("stderr of {label}"))
-            .spawn(move || relay(stderr))
+            .spawn(move || relay(stderr, prefix.as_deref()))
             .ok();
         Self { thread, last: None }
     }
@@ -51,7 +61,7 @@ impl StderrRelay {
     }
 }
 
-fn relay(stderr: impl Read) -> Option<String> {
+fn relay(stderr: impl Read, prefix: Option<&str>) -> Option<String> {
     let mut input = BufReader::new(stderr);
     let mut line = Vec::new();
     let mut last = None;
@@ -61,7 +71,15 @@ fn relay(stderr: impl Read) -> Option<String> {
             Ok(0) | Err(_) => return last,
             Ok(_) => {
                 // Ours may be closed or full: a lost line must not stop the child.
-                let _ = std::io::stderr().write_all(&line);
+                let mut err = std::io::stderr().lock();
+                if let Some(p) = prefix {
+                    let _ = write!(err, "{p}: ");
+                }
+                let _ = err.write_all(&line);
+                if !line.ends_with(b"\n") {
+                    let _ = err.write_all(b"\n");
+                }
+                drop(err);
                 let text = String::from_utf8_lossy(&line);
                 let text = text.trim_end();
                 if !text.trim().is_empty() {

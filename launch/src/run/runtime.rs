@@ -34,6 +34,9 @@ const REALTIME_LEAD: Duration = Duration::from_millis(50);
 struct Slot {
     wake: Wake,
     ready: bool,
+    /// A program outside the project (`[roles]`): how long it may take to be ready, and to be
+    /// done once the run's own processes are.
+    external: Option<Duration>,
 }
 
 type Proc = Child<Slot>;
@@ -450,6 +453,8 @@ fn spawn_and_supervise<X: Transport>(
 ) -> Result<Supervised> {
     spawn_roles(resolved, opts, prefix, scenario_path, l)?;
     await_ready(l)?;
+    spawn_externals(resolved, opts, prefix, scenario_path, l)?;
+    await_ready(l)?;
     let bar = progress_bar(resolved.ticks(), opts.progress);
     let started = start_run(resolved, transport, l)?;
     let (wall_s, interrupted) = supervise(resolved, l, &bar, started)?;
@@ -523,9 +528,58 @@ fn spawn_roles<X: Transport>(
             Some(id) => format!("agent {id}"),
             None => role.clone(),
         };
-        l.procs.spawn(label, Slot { wake, ready: false }, cmd)?;
+        l.procs.spawn(
+            label,
+            Slot {
+                wake,
+                ready: false,
+                external: None,
+            },
+            cmd,
+        )?;
     }
 
+    Ok(())
+}
+
+/// Spawns the programs that take a role (`[roles]`), once the run's own processes are ready:
+/// every service they open exists by then. Each gets the run's prefix and parameters in its
+/// environment (docs/protocol.md). In replay mode only the monitor runs (the replayer stands in
+/// for the attacker).
+fn spawn_externals<X: Transport>(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    scenario_path: &Path,
+    l: &mut Launcher<X>,
+) -> Result<()> {
+    use fdi_runtime::process::external::{environment, ExternalKind};
+    let roles = &resolved.scenario.roles;
+    let attacker = roles.attacker.as_ref().filter(|_| !opts.replay);
+    for (kind, role, wake, what) in [
+        (
+            ExternalKind::Attacker,
+            attacker,
+            Wake::ExternalAttacker,
+            "external attacker",
+        ),
+        (ExternalKind::Monitor, roles.monitor.as_ref(), Wake::Monitor, "monitor"),
+    ] {
+        let Some(role) = role else { continue };
+        let label = format!("{what} `{}`", role.label());
+        let Some((program, args)) = role.command.split_first() else {
+            bail!("{label}: `command` names no program");
+        };
+        let mut cmd = Command::new(program);
+        cmd.args(args)
+            .envs(environment(kind, prefix, resolved, scenario_path, &opts.run_dir));
+        let slot = Slot {
+            wake,
+            ready: false,
+            external: Some(role.timeout()),
+        };
+        l.procs.spawn_external(label, slot, cmd)?;
+    }
     Ok(())
 }
 
@@ -569,14 +623,27 @@ fn await_ready<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
         if let Some(stall) = l.stalled() {
             bail!("{stall} (before the start)");
         }
-        if began.elapsed() > READY_TIMEOUT {
-            let missing: Vec<&str> = l
-                .procs
-                .iter()
-                .filter(|p| !p.meta.ready)
-                .map(|p| p.label.as_str())
-                .collect();
-            bail!("not ready after {READY_TIMEOUT:?}: {}", missing.join(", "));
+        // The run's own processes get READY_TIMEOUT; a program outside the project its
+        // role's timeout.
+        let late: Vec<&str> = l
+            .procs
+            .iter()
+            .filter(|p| !p.meta.ready && began.elapsed() > p.meta.external.unwrap_or(READY_TIMEOUT))
+            .map(|p| p.label.as_str())
+            .collect();
+        if !late.is_empty() {
+            let external = l.procs.iter().any(|p| !p.meta.ready && p.meta.external.is_some());
+            let hint = if external {
+                " (a program that takes a role reports ready on `fdi/status` once its ports are \
+                 open: docs/protocol.md)"
+            } else {
+                ""
+            };
+            bail!(
+                "not ready after {:.1} s: {}{hint}",
+                began.elapsed().as_secs_f64(),
+                late.join(", ")
+            );
         }
         l.waker.wait(Duration::from_millis(20))?;
         let procs = &mut l.procs;
@@ -628,6 +695,9 @@ fn supervise<X: Transport>(
 ) -> Result<(f64, Option<i32>)> {
     let dt = resolved.scenario.control_period_s;
     let mut done = vec![false; l.procs.len()];
+    // When the run's own processes were all done: the programs taking roles must be done
+    // within their timeout after it.
+    let mut own_done: Option<Instant> = None;
     let interrupted = |l: &mut Launcher<X>| {
         l.interrupt().map(|signal| {
             bar.abandon();
@@ -663,6 +733,24 @@ fn supervise<X: Transport>(
         {
             return Ok((started.elapsed().as_secs_f64(), None));
         }
+        let own = |(i, p): (usize, &Proc)| p.meta.external.is_some() || finished(i, p);
+        if l.procs.iter().enumerate().all(own) {
+            let since = *own_done.get_or_insert_with(Instant::now);
+            if let Some(p) = l.procs.iter().enumerate().find(|(i, p)| {
+                !finished(*i, p) && p.meta.external.is_some_and(|t| since.elapsed() > t)
+            }) {
+                let p = p.1;
+                bar.abandon();
+                bail!(
+                    "run stopped: {} (pid {}) did not report done within {:.1} s after the \
+                     run's other processes (a program that takes a role reports done on \
+                     `fdi/status` after its last message: docs/protocol.md)",
+                    p.label,
+                    p.pid(),
+                    since.elapsed().as_secs_f64()
+                );
+            }
+        }
         if let Some(stall) = l.stalled() {
             bar.abandon();
             l.teardown();
@@ -693,7 +781,10 @@ fn release_and_reap<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
 fn matches_status(wake: Wake, m: &StatusMsg) -> bool {
     match (wake, Role::from_code(m.role)) {
         (Wake::Agent(id), Some(Role::Agent)) => id == m.agent,
-        (Wake::Attacker, Some(Role::Attacker)) | (Wake::Center, Some(Role::Center)) => true,
+        (Wake::Attacker, Some(Role::Attacker))
+        | (Wake::Center, Some(Role::Center))
+        | (Wake::ExternalAttacker, Some(Role::ExternalAttacker))
+        | (Wake::Monitor, Some(Role::Monitor)) => true,
         _ => false,
     }
 }

@@ -101,6 +101,40 @@ impl<M> Supervisor<M> {
         Ok(())
     }
 
+    /// Spawns a program outside the project (`[roles]`) as `label`: no stdin, its stdout and
+    /// stderr both relayed to our stderr, each line after `label: `, in a process group of its
+    /// own.
+    pub fn spawn_external(&mut self, label: String, meta: M, mut cmd: Command) -> Result<()> {
+        let (reader, writer) = std::io::pipe().context("making a pipe for its output")?;
+        cmd.stdin(Stdio::null())
+            .stdout(writer.try_clone().context("making a pipe for its output")?)
+            .stderr(writer)
+            .process_group(0);
+        let child = cmd.spawn().with_context(|| {
+            format!(
+                "spawning {label} ({:?}: is the program installed and on PATH?)",
+                cmd.get_program()
+            )
+        })?;
+        // Our copies of the write end went into the command: dropped with it, so the relay
+        // sees the end of the stream when the child exits.
+        drop(cmd);
+        let stderr = Some(StderrRelay::start_prefixed(
+            reader,
+            &label,
+            Some(label.clone()),
+        ));
+        self.children.push(Child {
+            label,
+            meta,
+            status: None,
+            child,
+            stopped_since: None,
+            stderr,
+        });
+        Ok(())
+    }
+
     /// Reaps the children that exited since the last call; returns their indices.
     pub fn reap(&mut self) -> Vec<usize> {
         let mut out = Vec::new();

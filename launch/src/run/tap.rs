@@ -48,26 +48,27 @@ impl Tx {
 struct Route {
     /// Agent, attack or center records (by process).
     main: Tx,
-    /// The attacker's torque records, when the run attacks some agent's torques.
-    actuation: Option<Tx>,
+    /// The second stream of a process's records: the attacker's torque records, when the run
+    /// attacks some agent's torques; the control center's record of a monitor's verdicts.
+    side: Option<Tx>,
 }
 
 impl Route {
     fn send(&self, rec: TraceRecord) -> bool {
         match rec {
-            TraceRecord::Actuation(_) => self.actuation.as_ref().is_none_or(|t| t.send(Ok(rec))),
+            TraceRecord::Actuation(_) | TraceRecord::Monitor(_) => {
+                self.side.as_ref().is_none_or(|t| t.send(Ok(rec)))
+            }
             TraceRecord::Agent(_) | TraceRecord::Attack(_) | TraceRecord::Center(_) => {
                 self.main.send(Ok(rec))
             }
             // Neither latency stamps nor events are part of the join.
-            TraceRecord::Latency { .. } | TraceRecord::Event { .. } | TraceRecord::Monitor(_) => {
-                true
-            }
+            TraceRecord::Latency { .. } | TraceRecord::Event { .. } => true,
         }
     }
 
     fn damage(&self, e: String) {
-        if let Some(t) = &self.actuation {
+        if let Some(t) = &self.side {
             t.send(Err(e.clone()));
         }
         self.main.send(Err(e));
@@ -198,22 +199,27 @@ impl Tap {
         } = self;
         let mut agents = Vec::new();
         let mut routes = Vec::new();
-        let (mut attacker, mut actuation, mut center) = (None, None, None);
+        let (mut attacker, mut actuation, mut center, mut monitor) = (None, None, None, None);
         for p in &pipes {
             let (tx, feed) = channel();
             let mut route = Route {
                 main: tx,
-                actuation: None,
+                side: None,
             };
             if p.process == "attacker" {
                 attacker = Some(feed);
                 if routed {
                     let (tx, feed) = channel();
-                    route.actuation = Some(tx);
+                    route.side = Some(tx);
                     actuation = Some(feed);
                 }
             } else if p.process == "control-center" {
                 center = Some(feed);
+                if r.scenario.roles.monitor.is_some() {
+                    let (tx, feed) = channel();
+                    route.side = Some(tx);
+                    monitor = Some(feed);
+                }
             } else {
                 let id = r
                     .scenario
@@ -230,7 +236,7 @@ impl Tap {
         let (Some(attacker), Some(center)) = (attacker, center) else {
             unreachable!("the tap makes an attacker and a control-center pipe");
         };
-        let sources = Sources::from_feeds(agents, attacker, actuation, center);
+        let sources = Sources::from_feeds(agents, attacker, actuation, center, monitor);
         let mut holds = Vec::new();
         let mut readers = Vec::new();
         for (p, route) in pipes.into_iter().zip(routes) {

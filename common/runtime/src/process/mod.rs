@@ -62,6 +62,10 @@ pub enum RoleError {
     Dof(u32),
     #[error("{0}")]
     Scheduling(String),
+    /// A program that takes a role (`[roles]`) broke the protocol (docs/protocol.md); the
+    /// message names it.
+    #[error("{0}")]
+    External(String),
 }
 
 /// Prints a child process's failure on its stderr, which the launcher relays. A write error
