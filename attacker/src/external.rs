@@ -12,8 +12,8 @@ use fdi_common::records::{AttackRecord, Delivery, Joints};
 use fdi_common::roles::ExternalRole;
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell as _, Inbox as _, IpcError, MeasurementMsg, Outbox as _, Stream,
-    Transport, Wake,
+    monotonic_ns, Bell as _, Inbox as _, IpcError, MeasurementMsg, Outbox as _, Stream, Transport,
+    Wake,
 };
 use fdi_runtime::process::RoleError;
 
@@ -206,7 +206,11 @@ impl<X: Transport> External<X> {
             return Ok(true);
         }
         let due = agent.answered;
-        let Some((clean, _)) = agent.waiting.front().copied().filter(|(c, _)| c.seq == a.seq)
+        let Some((clean, _)) = agent
+            .waiting
+            .front()
+            .copied()
+            .filter(|(c, _)| c.seq == a.seq)
         else {
             let what = match agent.waiting.back() {
                 Some((last, _)) if a.seq <= last.seq => format!(

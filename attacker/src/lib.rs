@@ -444,7 +444,10 @@ pub fn run<X: Transport, const N: usize>(
                     None => false,
                 })
         };
-        match external.as_ref().and_then(|x| x.next_deadline_in(monotonic_ns())) {
+        match external
+            .as_ref()
+            .and_then(|x| x.next_deadline_in(monotonic_ns()))
+        {
             // Realtime with answers due: wake at the earliest deadline at the latest.
             Some(due) if realtime => {
                 ports

@@ -387,7 +387,8 @@ pub fn run<X: Transport, const N: usize>(
                 let grace = std::time::Duration::from_nanos(
                     s.roles.monitor.as_ref().map_or(0, |r| r.deadline_ns()),
                 ) + std::time::Duration::from_millis(200);
-                let until = *verdicts_until.get_or_insert_with(|| std::time::Instant::now() + grace);
+                let until =
+                    *verdicts_until.get_or_insert_with(|| std::time::Instant::now() + grace);
                 controlled && std::time::Instant::now() >= until
             }
             Some(mon) => {

@@ -142,8 +142,7 @@ impl<X: Transport> Monitor<X> {
             self.verdicts += 1;
             self.progress = Instant::now();
             let t = fdi_common::engine::tick_time(a.seq, self.dt);
-            let late = !self.lockstep
-                && now > self.epoch_ns + (t * 1e9) as u64 + self.deadline_ns;
+            let late = !self.lockstep && now > self.epoch_ns + (t * 1e9) as u64 + self.deadline_ns;
             self.late += u64::from(late);
             trace.write(&TraceRecord::Monitor(MonitorRecord {
                 k: a.seq,

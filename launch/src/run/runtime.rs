@@ -563,7 +563,12 @@ fn spawn_externals<X: Transport>(
             Wake::ExternalAttacker,
             "external attacker",
         ),
-        (ExternalKind::Monitor, roles.monitor.as_ref(), Wake::Monitor, "monitor"),
+        (
+            ExternalKind::Monitor,
+            roles.monitor.as_ref(),
+            Wake::Monitor,
+            "monitor",
+        ),
     ] {
         let Some(role) = role else { continue };
         let label = format!("{what} `{}`", role.label());
@@ -571,8 +576,13 @@ fn spawn_externals<X: Transport>(
             bail!("{label}: `command` names no program");
         };
         let mut cmd = Command::new(program);
-        cmd.args(args)
-            .envs(environment(kind, prefix, resolved, scenario_path, &opts.run_dir));
+        cmd.args(args).envs(environment(
+            kind,
+            prefix,
+            resolved,
+            scenario_path,
+            &opts.run_dir,
+        ));
         let slot = Slot {
             wake,
             ready: false,
@@ -632,7 +642,10 @@ fn await_ready<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
             .map(|p| p.label.as_str())
             .collect();
         if !late.is_empty() {
-            let external = l.procs.iter().any(|p| !p.meta.ready && p.meta.external.is_some());
+            let external = l
+                .procs
+                .iter()
+                .any(|p| !p.meta.ready && p.meta.external.is_some());
             let hint = if external {
                 " (a program that takes a role reports ready on `fdi/status` once its ports are \
                  open: docs/protocol.md)"

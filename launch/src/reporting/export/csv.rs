@@ -1,6 +1,7 @@
 //! CSV export: every `RUN_DIR/traces/<process>.trace` becomes `RUN_DIR/export/<process>.csv`, a
 //! header row and one row per record, in (tick, agent) order. Latency records go to
-//! `<process>-latency.csv`, the attacker's torque records to `attacker-actuation.csv`, events of
+//! `<process>-latency.csv`, the attacker's torque records to `attacker-actuation.csv`, a monitor
+//! program's verdicts to `control-center-monitor.csv`, events of
 //! every trace to `events.csv`; records of a kind the process does not usually write (say,
 //! center records in an agent trace) to `<process>-<kind>.csv`. Every column is listed in
 //! docs/traces.md.
@@ -175,6 +176,15 @@ const CENTER: &[Col] = &[
     One("missing_input"),
 ];
 
+const MONITOR: &[Col] = &[
+    One("k"),
+    One("agent"),
+    One("t_s"),
+    One("alarm"),
+    One("statistic"),
+    One("late"),
+];
+
 const LATENCY: &[Col] = &[
     One("k"),
     One("agent"),
@@ -195,6 +205,7 @@ impl Kind {
             Self::Center => "control-center",
             Self::Latency => "latency",
             Self::Actuation => "actuation",
+            Self::Monitor => "monitor",
         }
     }
 
@@ -205,6 +216,7 @@ impl Kind {
             Self::Center => CENTER,
             Self::Latency => LATENCY,
             Self::Actuation => ACTUATION,
+            Self::Monitor => MONITOR,
         }
     }
 
@@ -396,7 +408,14 @@ fn row(
             latency_row(row, *k, *agent, stamps, info);
             Ok(())
         }
-        TraceRecord::Event { .. } | TraceRecord::Monitor(_) => Ok(()),
+        TraceRecord::Event { .. } => Ok(()),
+        TraceRecord::Monitor(m) => {
+            head(row, m.k, m.agent, info);
+            row.push(flag(m.alarm));
+            row.push(m.statistic);
+            row.push(flag(m.late));
+            Ok(())
+        }
         TraceRecord::Actuation(a) => actuation_row(row, a, info, dof),
     }
 }

@@ -280,6 +280,22 @@ schema!(
     ]
 );
 schema!(
+    MONITOR,
+    "fdi_mas.Monitor",
+    "A monitor program's verdict on the tick (`[roles.monitor]`, control-center trace).",
+    [
+        K,
+        T,
+        ("alarm", Ty::Bool, "the monitor's alarm at this tick"),
+        ("statistic", Ty::Num, "its statistic, in its own unit (null when it gave none)"),
+        (
+            "late",
+            Ty::Bool,
+            "realtime: it came later than the monitor's deadline after the tick's time"
+        ),
+    ]
+);
+schema!(
     EVENT,
     "fdi_mas.Event",
     "Something a process put on record (a lost peer, a rejected message, the shutdown reason).",
@@ -297,7 +313,7 @@ schema!(
 /// Every per-agent topic (`/agent<id>/<name>`) and its message type; `/events` is the one
 /// topic of the whole run ([`EVENT`]).
 #[cfg(test)]
-pub(crate) const TOPICS: [(&str, &Schema); 14] = [
+pub(crate) const TOPICS: [(&str, &Schema); 15] = [
     ("state", &STATE),
     ("desired", &DESIRED),
     ("tracking_error", &TRACKING),
@@ -312,6 +328,7 @@ pub(crate) const TOPICS: [(&str, &Schema); 14] = [
     ("detectors", &DETECTORS),
     ("latency", &LATENCY),
     ("actuation", &ACTUATION),
+    ("monitor", &MONITOR),
 ];
 
 /// The topic name of `name` for agent `agent`.
@@ -677,7 +694,18 @@ fn record(w: &mut Mcap, info: &RunInfo, path: &Path, stem: &str, rec: &TraceReco
             &json!({
             "t_s": t, "process": stem, "message": message}),
         ),
-        TraceRecord::Monitor(_) => Ok(()),
+        TraceRecord::Monitor(m) => {
+            let t = info.t(m.k);
+            info.agent(path, m.agent)?;
+            w.write(
+                m.agent,
+                "monitor",
+                &MONITOR,
+                t,
+                &json!({"k": m.k, "t_s": t, "alarm": m.alarm,
+                "statistic": m.statistic, "late": m.late}),
+            )
+        }
     }
 }
 
@@ -797,7 +825,7 @@ mod tests {
                     TraceRecord::Latency { agent, .. } => add(agent, &["latency"]),
                     TraceRecord::Actuation(a) => add(a.agent, &["actuation"]),
                     TraceRecord::Event { .. } => events += 1,
-                    TraceRecord::Monitor(_) => {}
+                    TraceRecord::Monitor(m) => add(m.agent, &["monitor"]),
                 }
             }
         }

@@ -176,6 +176,7 @@ enum Kind {
     Center,
     Latency,
     Actuation,
+    Monitor,
 }
 
 impl Kind {
@@ -187,7 +188,8 @@ impl Kind {
             TraceRecord::Center(c) => (Self::Center, c.k, c.agent),
             TraceRecord::Latency { k, agent, .. } => (Self::Latency, *k, *agent),
             TraceRecord::Actuation(a) => (Self::Actuation, a.k, a.agent),
-            TraceRecord::Event { .. } | TraceRecord::Monitor(_) => return None,
+            TraceRecord::Monitor(m) => (Self::Monitor, m.k, m.agent),
+            TraceRecord::Event { .. } => return None,
         })
     }
 }

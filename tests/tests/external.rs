@@ -1,0 +1,429 @@
+//! Roles taken by programs outside the project (`[roles]`, docs/protocol.md), through the real
+//! `fdi-launch` and the Python examples of `examples/python/` on the pinned iceoryx2 binding:
+//!
+//! * the Python attacker's bias and replay give the very run the Rust attacker gives under the
+//!   equivalent profile (`examples/python/bias-replay.toml`): same digest, same RMSEs;
+//! * a Python monitor's verdicts reach the report beside the built-in detectors, and a monitor
+//!   changes nothing of the run (same digest as without it);
+//! * a program that never says ready, dies, answers out of order, sends malformed messages, or
+//!   is too slow stops the run (or, in realtime, is counted) with a message naming it, and
+//!   leaves nothing behind.
+//!
+//! Python comes from `FDI_PYTHON` (`cargo test-all` sets up `target/py-venv` with
+//! `examples/python/requirements.txt`). Without it the tests say they are skipped, unless
+//! `FDI_REQUIRE_PYTHON` is set (CI), where they fail.
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::time::Duration;
+
+use fdi_common::records::Delivery;
+use fdi_common::trace::TraceRecord;
+use fdi_tests::{json, launch, repo_path, run_dir_of, trace_records, Scratch};
+
+const WATCHDOG: Duration = Duration::from_secs(300);
+
+/// The Python interpreter with the iceoryx2 binding, or `None` (after saying so) when the
+/// tests are to be skipped.
+fn python() -> Option<PathBuf> {
+    let found = std::env::var_os("FDI_PYTHON")
+        .map(PathBuf::from)
+        .or_else(|| Some(repo_path("target/py-venv/bin/python")).filter(|p| p.exists()));
+    if found.is_none() {
+        assert!(
+            std::env::var_os("FDI_REQUIRE_PYTHON").is_none(),
+            "FDI_REQUIRE_PYTHON is set but there is no Python: set FDI_PYTHON or run `cargo test-all`"
+        );
+        eprintln!(
+            "skipped: no Python with the iceoryx2 binding (FDI_PYTHON unset, no target/py-venv): \
+             `cargo test-all` sets one up"
+        );
+    }
+    found
+}
+
+/// `scenario` (a repo file) with `[roles.<role>] command` run by `python` (paths made
+/// absolute), the other changes of `edit` applied, written into `dir`.
+fn with_python(
+    scenario: &str,
+    python: &Path,
+    dir: &Path,
+    edit: impl FnOnce(&mut toml::Table),
+) -> PathBuf {
+    let text = std::fs::read_to_string(repo_path(scenario)).expect("the scenario");
+    let mut doc: toml::Table = toml::from_str(&text).expect("TOML");
+    if let Some(roles) = doc.get_mut("roles").and_then(|r| r.as_table_mut()) {
+        for (_, role) in roles.iter_mut() {
+            let Some(cmd) = role.get_mut("command").and_then(|c| c.as_array_mut()) else {
+                continue;
+            };
+            // `python3 examples/python/x.py ARGS…`: the venv's interpreter, the script by its
+            // absolute path (the tests do not run in the repo root).
+            cmd[0] = toml::Value::String(python.display().to_string());
+            if let Some(script) = cmd.get_mut(1) {
+                let rel = script.as_str().unwrap_or_default().to_string();
+                *script = toml::Value::String(repo_path(&rel).display().to_string());
+            }
+        }
+    }
+    edit(&mut doc);
+    let path = dir.join("scenario.toml");
+    std::fs::write(&path, toml::to_string(&doc).expect("TOML out")).expect("writing");
+    path
+}
+
+/// A role table running `script` (written into `dir`, next to nothing: it imports the
+/// examples' `fdi_protocol` by path) under `python`.
+fn script_role(python: &Path, dir: &Path, name: &str, script: &str) -> toml::Value {
+    let path = dir.join(format!("{name}.py"));
+    let head = format!(
+        "import sys\nsys.path.insert(0, {:?})\nimport fdi_protocol as fdi\n",
+        repo_path("examples/python").display().to_string()
+    );
+    std::fs::write(&path, head + script).expect("writing the script");
+    let mut role = toml::Table::new();
+    role.insert(
+        "command".into(),
+        toml::Value::Array(vec![
+            python.display().to_string().into(),
+            path.display().to_string().into(),
+        ]),
+    );
+    role.insert("name".into(), name.into());
+    role.insert("timeout_s".into(), 2.0.into());
+    toml::Value::Table(role)
+}
+
+/// Sets `[roles.<role>]`, and the run's `duration_s`.
+fn set_role(doc: &mut toml::Table, role: &str, value: toml::Value, duration_s: f64) {
+    doc.insert("duration_s".into(), duration_s.into());
+    let roles = doc
+        .entry("roles")
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    if let Some(t) = roles.as_table_mut() {
+        t.insert(role.into(), value);
+    }
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn rmse(summary: &serde_json::Value) -> Vec<f64> {
+    (1..=4)
+        .map(|id| {
+            summary["metrics"][id.to_string()]["rmse_rad"]
+                .as_f64()
+                .expect("an RMSE per robot")
+        })
+        .collect()
+}
+
+#[test]
+fn the_python_attacker_gives_the_run_the_rust_attacker_gives() {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-attacker");
+    let scenario = with_python(
+        "examples/python/paper-python-attacker.toml",
+        &python,
+        &s.0,
+        |_| {},
+    );
+    let scenario = scenario.display().to_string();
+    let py = json(&launch(
+        &["run", &scenario, "--engine", "ipc", "--json"],
+        &s.0.join("py"),
+        WATCHDOG,
+    ));
+    let profile = repo_path("examples/python/bias-replay.toml")
+        .display()
+        .to_string();
+    let rust = json(&launch(
+        &["run", "--engine", "ipc", "--attack", &profile, "--json"],
+        &s.0.join("rust"),
+        WATCHDOG,
+    ));
+    assert_eq!(
+        py["digest"], rust["digest"],
+        "the Python attacker's run differs from the Rust attacker's"
+    );
+    assert_eq!(rmse(&py), rmse(&rust));
+    // The attack did something, and the attacker's records say what: biased ticks delivered
+    // with the injection, and no message went missing.
+    let none = json(&launch(
+        &["run", "--engine", "inproc", "--attack", "none", "--json"],
+        &s.0.join("none"),
+        WATCHDOG,
+    ));
+    assert_ne!(py["digest"], none["digest"]);
+    let recs = trace_records(&run_dir_of(&py).join("traces/attacker.trace"));
+    let attacked = recs
+        .iter()
+        .filter(|r| matches!(r, TraceRecord::Attack(a) if a.active))
+        .count();
+    assert!(attacked > 10_000, "only {attacked} attacked ticks recorded");
+    assert!(recs.iter().all(|r| match r {
+        TraceRecord::Attack(a) => a.delivery == Delivery::Delivered,
+        _ => true,
+    }));
+    let note = recs.iter().find_map(|r| match r {
+        TraceRecord::Event { message, .. } if message.contains("external attacker") => {
+            Some(message.clone())
+        }
+        _ => None,
+    });
+    assert!(
+        note.as_deref()
+            .is_some_and(|n| n.contains("160000 answers")),
+        "the attacker's closing note: {note:?}"
+    );
+}
+
+#[test]
+fn a_python_monitor_is_reported_beside_the_detectors_and_changes_nothing() {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-monitor");
+    let scenario = with_python(
+        "examples/python/paper-python-monitor.toml",
+        &python,
+        &s.0,
+        |doc| {
+            doc.insert("duration_s".into(), 10.0.into());
+        },
+    );
+    let scenario = scenario.display().to_string();
+    let with = json(&launch(
+        &["run", &scenario, "--json"],
+        &s.0.join("with"),
+        WATCHDOG,
+    ));
+    let without = json(&launch(
+        &["run", "--duration-s", "10", "--json"],
+        &s.0.join("without"),
+        WATCHDOG,
+    ));
+    assert_eq!(with["digest"], without["digest"]);
+    for id in 1..=4 {
+        let d = &with["metrics"][id.to_string()]["detectors"];
+        for name in ["s_hat_norm", "chi2", "cusum", "kinematic"] {
+            assert!(d[name].is_object(), "robot {id} lacks detector {name}: {d}");
+        }
+        assert_eq!(
+            d["kinematic"]["missing"], 0,
+            "robot {id}: {}",
+            d["kinematic"]
+        );
+    }
+    // The paper attack on robot 4 is detected by the monitor too.
+    let onsets = with["metrics"]["4"]["detectors"]["kinematic"]["onsets"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    assert!(
+        onsets.iter().any(|o| o["time_to_detect_s"].is_f64()),
+        "the monitor detected nothing on robot 4: {onsets:?}"
+    );
+    let report =
+        std::fs::read_to_string(run_dir_of(&with).join("report/report.md")).expect("report.md");
+    assert!(
+        report.contains("| s_hat_norm | chi2 | cusum | kinematic |"),
+        "report.md has no monitor column"
+    );
+}
+
+/// Runs the paper scenario for `duration_s` with `[roles.<role>]` running `script`; returns
+/// the output and the launcher's pid (for the leftover check).
+fn run_with_script(role: &str, name: &str, script: &str, duration_s: f64, clock: &str) -> Output {
+    let python = python().expect("checked by the caller");
+    let s = Scratch::new(&format!("ext-{name}"));
+    let value = script_role(&python, &s.0, name, script);
+    let scenario = with_python("scenarios/paper.toml", &python, &s.0, |doc| {
+        set_role(doc, role, value, duration_s);
+        doc.insert("clock".into(), clock.into());
+        if role == "attacker" {
+            let mut attack = toml::Table::new();
+            attack.insert("preset".into(), "none".into());
+            doc.insert("attack".into(), toml::Value::Table(attack));
+        }
+    });
+    let scenario = scenario.display().to_string();
+    launch(&["run", &scenario, "--json"], &s.0.join("runs"), WATCHDOG)
+}
+
+/// The run failed, naming `name` and saying `what`; nothing of it is left behind.
+fn assert_failed_naming(out: &Output, name: &str, what: &str) {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains(&format!("`{name}`")), "not named: {err}");
+    assert!(err.contains(what), "no `{what}` in: {err}");
+    eprintln!("{err}");
+}
+
+#[test]
+fn an_external_role_that_never_says_ready_is_named() {
+    if python().is_none() {
+        return;
+    }
+    let out = run_with_script(
+        "attacker",
+        "never-ready",
+        "import time\ntime.sleep(60)\n",
+        1.0,
+        "lockstep",
+    );
+    assert_failed_naming(&out, "never-ready", "not ready after");
+    assert!(stderr(&out).contains("docs/protocol.md"));
+}
+
+#[test]
+fn an_external_role_that_dies_is_named_with_what_it_printed() {
+    if python().is_none() {
+        return;
+    }
+    let script = "with fdi.Run('monitor') as run:\n    run.ready_and_wait_for_start()\n    \
+                  raise SystemExit('the model file is missing')\n";
+    let out = run_with_script("monitor", "dies", script, 2.0, "lockstep");
+    assert_failed_naming(&out, "dies", "the model file is missing");
+}
+
+/// An attacker program answering each message with `answer` (Python: a function of the
+/// message returning the list of messages to send).
+fn attacker_script(answer: &str) -> String {
+    format!(
+        "{answer}\nwith fdi.Run('attacker') as run:\n    \
+         inbox = run.subscriber('fdi/external/attacker/in', fdi.MeasurementMsg)\n    \
+         outbox = run.publisher('fdi/external/attacker/out', fdi.MeasurementMsg)\n    \
+         relay = run.notifier('fdi/wake/attacker')\n    \
+         run.ready_and_wait_for_start()\n    \
+         while True:\n        \
+         batch = run.drain(inbox)\n        \
+         if not batch:\n            run.wait()\n            continue\n        \
+         for m in batch:\n            for a in answer(m):\n                outbox.send_copy(a)\n        \
+         relay.notify()\n"
+    )
+}
+
+#[test]
+fn an_attacker_that_answers_out_of_order_is_named() {
+    if python().is_none() {
+        return;
+    }
+    // Tick 100 of agent 2 is answered as tick 101.
+    let answer = "def answer(m):\n    if m.agent == 2 and m.seq == 100:\n        m.seq = 101\n    \
+                  return [m]\n";
+    let out = run_with_script(
+        "attacker",
+        "skips",
+        &attacker_script(answer),
+        1.0,
+        "lockstep",
+    );
+    assert_failed_naming(&out, "skips", "agent 2: answered tick 101");
+}
+
+#[test]
+fn an_attacker_that_sends_malformed_messages_is_named() {
+    if python().is_none() {
+        return;
+    }
+    let answer = "def answer(m):\n    if m.seq == 7:\n        m.dof = 3\n    return [m]\n";
+    let out = run_with_script(
+        "attacker",
+        "malformed",
+        &attacker_script(answer),
+        1.0,
+        "lockstep",
+    );
+    assert_failed_naming(&out, "malformed", "dof 3 where the run's agents have 2");
+}
+
+#[test]
+fn an_attacker_that_stops_answering_is_named_after_its_timeout() {
+    if python().is_none() {
+        return;
+    }
+    let answer = "import time\ndef answer(m):\n    if m.seq >= 300:\n        time.sleep(30)\n    \
+                  return [m]\n";
+    let out = run_with_script(
+        "attacker",
+        "hangs",
+        &attacker_script(answer),
+        1.0,
+        "lockstep",
+    );
+    assert_failed_naming(&out, "hangs", "no answer to tick 300");
+}
+
+#[test]
+fn a_monitor_that_judges_out_of_order_is_named() {
+    if python().is_none() {
+        return;
+    }
+    let script = "with fdi.Run('monitor') as run:\n    \
+                  alarms = run.publisher('fdi/alarm', fdi.AlarmMsg)\n    \
+                  center = run.notifier('fdi/wake/center')\n    \
+                  run.ready_and_wait_for_start()\n    \
+                  a = fdi.AlarmMsg(seq=5, agent=run.env.agents[0], alarm=0, statistic=0.0)\n    \
+                  alarms.send_copy(a)\n    center.notify()\n    run.wait(5.0)\n";
+    let out = run_with_script("monitor", "early", script, 1.0, "lockstep");
+    assert_failed_naming(&out, "early", "verdict on tick 5 where tick 0 was due");
+}
+
+#[test]
+fn realtime_an_attacker_too_slow_for_its_deadline_is_counted_and_the_run_goes_on() {
+    if python().is_none() {
+        return;
+    }
+    // Every 100th tick of agent 1 is answered 20 ms late (the deadline is 5 ms).
+    let answer =
+        "import time\ndef answer(m):\n    if m.agent == 1 and m.seq % 100 == 50:\n        \
+                  time.sleep(0.02)\n    return [m]\n";
+    let python = python().expect("checked");
+    let s = Scratch::new("ext-slow");
+    let value = script_role(&python, &s.0, "slow", &attacker_script(answer));
+    let scenario = with_python("scenarios/paper.toml", &python, &s.0, |doc| {
+        set_role(doc, "attacker", value, 2.0);
+        doc.insert("clock".into(), "realtime".into());
+        let mut attack = toml::Table::new();
+        attack.insert("preset".into(), "none".into());
+        doc.insert("attack".into(), toml::Value::Table(attack));
+    });
+    let scenario = scenario.display().to_string();
+    let out = launch(&["run", &scenario, "--json"], &s.0.join("runs"), WATCHDOG);
+    let summary = fdi_tests::json_realtime(&out);
+    let recs = trace_records(&run_dir_of(&summary).join("traces/attacker.trace"));
+    let note = recs
+        .iter()
+        .find_map(|r| match r {
+            TraceRecord::Event { message, .. } if message.contains("external attacker `slow`") => {
+                Some(message.clone())
+            }
+            _ => None,
+        })
+        .expect("the attacker's closing note");
+    eprintln!("{note}");
+    let late: u64 = note
+        .split("; ")
+        .find(|p| p.contains("ticks past the"))
+        .and_then(|p| p.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .expect("a count of late ticks in the note");
+    assert!(late >= 1, "{note}");
+    // Each late tick went to the control center as a gap marker: recorded missing.
+    let missing = recs
+        .iter()
+        .filter(|r| matches!(r, TraceRecord::Attack(a) if a.delivery == Delivery::Missing))
+        .count() as u64;
+    assert_eq!(missing, late, "{note}");
+}
+
+#[test]
+fn the_in_process_engine_refuses_external_roles() {
+    let s = Scratch::new("ext-inproc");
+    let scenario = repo_path("examples/python/paper-python-monitor.toml")
+        .display()
+        .to_string();
+    let out = launch(&["run", &scenario, "--engine", "inproc"], &s.0, WATCHDOG);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("--engine ipc"), "{}", stderr(&out));
+}
