@@ -287,7 +287,11 @@ schema!(
         K,
         T,
         ("alarm", Ty::Bool, "the monitor's alarm at this tick"),
-        ("statistic", Ty::Num, "its statistic, in its own unit (null when it gave none)"),
+        (
+            "statistic",
+            Ty::Num,
+            "its statistic, in its own unit (null when it gave none)"
+        ),
         (
             "late",
             Ty::Bool,
