@@ -383,14 +383,16 @@ pub fn run<X: Transport, const N: usize>(
         let judged = match &monitor {
             None => true,
             Some(mon) if mon.complete(ticks) => true,
-            Some(mon) if realtime => {
+            Some(_) if realtime && controlled => {
+                // The grace counts from the moment every agent is done.
                 let grace = std::time::Duration::from_nanos(
                     s.roles.monitor.as_ref().map_or(0, |r| r.deadline_ns()),
                 ) + std::time::Duration::from_millis(200);
                 let until =
                     *verdicts_until.get_or_insert_with(|| std::time::Instant::now() + grace);
-                controlled && std::time::Instant::now() >= until
+                std::time::Instant::now() >= until
             }
+            Some(_) if realtime => false,
             Some(mon) => {
                 mon.check_timeout(controlled)?;
                 false

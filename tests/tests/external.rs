@@ -441,3 +441,69 @@ fn the_in_process_engine_refuses_external_roles() {
     assert!(!out.status.success());
     assert!(stderr(&out).contains("--engine ipc"), "{}", stderr(&out));
 }
+
+#[test]
+fn realtime_the_monitors_verdicts_are_counted_received_late_and_missing() {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-monitor-rt");
+    let scenario = with_python(
+        "examples/python/paper-python-monitor.toml",
+        &python,
+        &s.0,
+        |doc| {
+            doc.insert("duration_s".into(), 3.0.into());
+            doc.insert("clock".into(), "realtime".into());
+        },
+    );
+    let scenario = scenario.display().to_string();
+    let summary = fdi_tests::json_realtime(&launch(
+        &["run", &scenario, "--json"],
+        &s.0.join("runs"),
+        WATCHDOG,
+    ));
+    let recs = trace_records(&run_dir_of(&summary).join("traces/control-center.trace"));
+    let verdicts = recs
+        .iter()
+        .filter(|r| matches!(r, TraceRecord::Monitor(_)))
+        .count() as u64;
+    let late = recs
+        .iter()
+        .filter(|r| matches!(r, TraceRecord::Monitor(m) if m.late))
+        .count() as u64;
+    let note = recs
+        .iter()
+        .find_map(|r| match r {
+            TraceRecord::Event { message, .. } if message.starts_with("monitor `kinematic`") => {
+                Some(message.clone())
+            }
+            _ => None,
+        })
+        .expect("the control center's note on the monitor");
+    eprintln!("{note}");
+    assert!(
+        note.contains(&format!("{verdicts} of 12000 verdicts, {late} later than")),
+        "{note}"
+    );
+    assert!(verdicts > 0);
+    // What did not come is missing in the metrics, robot by robot.
+    let missing: u64 = (1..=4)
+        .map(|id| {
+            summary["metrics"][id.to_string()]["detectors"]["kinematic"]["missing"]
+                .as_u64()
+                .expect("the monitor's metrics")
+        })
+        .sum();
+    let controlled: u64 = (1..=4)
+        .map(|id| {
+            summary["metrics"][id.to_string()]["ticks"]
+                .as_u64()
+                .unwrap_or(0)
+        })
+        .sum();
+    let lost = summary["lost_agents"].as_array().map_or(0, Vec::len);
+    if lost == 0 {
+        assert_eq!(missing, controlled - verdicts.min(controlled), "{note}");
+    } else {
+        eprintln!("{lost} agents were lost for a while: the missing count is not compared");
+    }
+}

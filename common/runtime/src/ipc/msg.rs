@@ -139,7 +139,8 @@ pub struct StatusMsg {
     pub role: u32,
     /// Agent id for agents, 0 otherwise.
     pub agent: u32,
-    /// [`StatusMsg::READY`], [`StatusMsg::PROGRESS`] or [`StatusMsg::DONE`].
+    /// [`StatusMsg::READY`], [`StatusMsg::PROGRESS`], [`StatusMsg::DONE`], [`StatusMsg::LOST`]
+    /// or [`StatusMsg::REJOINED`].
     pub kind: u32,
     pub reserved: u32,
     /// Ticks completed.
