@@ -12,9 +12,9 @@ use fdi_common::records::{AttackRecord, Delivery, Joints};
 use fdi_common::roles::ExternalRole;
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell as _, Inbox as _, IpcError, MeasurementMsg, Outbox as _, Stream, Transport,
-    Wake,
+    monotonic_ns, Inbox as _, IpcError, MeasurementMsg, Outbox as _, Stream, Transport, Wake,
 };
+use fdi_runtime::process::external::LateBell;
 use fdi_runtime::process::RoleError;
 
 /// The ports towards the external program.
@@ -24,9 +24,8 @@ pub struct ExternalPorts<X: Transport> {
     pub to: X::Outbox<MeasurementMsg>,
     /// Its answers.
     pub from: X::Inbox<MeasurementMsg>,
-    /// Holds the program's wake-up service open until it has a listener on it (a bell made
-    /// before the listener may not reach it: [`External::bell`] is made after the start).
-    pub keep: X::Bell,
+    /// Its wake-up event.
+    pub bell: LateBell<X>,
 }
 
 impl<X: Transport> ExternalPorts<X> {
@@ -34,8 +33,13 @@ impl<X: Transport> ExternalPorts<X> {
         Ok(Self {
             to: transport.publisher(Stream::ExternalIn)?,
             from: transport.subscriber(Stream::ExternalOut)?,
-            keep: transport.notifier(Wake::ExternalAttacker)?,
+            bell: LateBell::open(transport, Wake::ExternalAttacker)?,
         })
+    }
+
+    /// Rings the program once after a batch was forwarded.
+    pub fn ring(&self, transport: &X) -> Result<(), IpcError> {
+        self.bell.ring(transport)
     }
 }
 
@@ -69,7 +73,7 @@ pub struct Tally {
 
 /// The relay's state for an external program.
 #[derive(Debug)]
-pub struct External<X: Transport> {
+pub struct External {
     label: String,
     agents: Vec<Agent>,
     dof: usize,
@@ -79,12 +83,10 @@ pub struct External<X: Transport> {
     realtime: bool,
     /// The last time an answer came (or the start): the lockstep timeout counts from it.
     progress: Instant,
-    /// The bell of the program's wake-up event, made after the start.
-    bell: Option<X::Bell>,
     pub tally: Tally,
 }
 
-impl<X: Transport> External<X> {
+impl External {
     pub fn new(role: &ExternalRole, ids: &[u32], dof: usize, dt: f64, realtime: bool) -> Self {
         Self {
             label: role.label(),
@@ -101,7 +103,6 @@ impl<X: Transport> External<X> {
             deadline_ns: role.deadline_ns(),
             realtime,
             progress: Instant::now(),
-            bell: None,
             tally: Tally::default(),
         }
     }
@@ -112,7 +113,7 @@ impl<X: Transport> External<X> {
 
     /// Hands the admitted clean measurement `m` (received at `received`) of scenario agent `i`
     /// to the program.
-    pub fn forward(
+    pub fn forward<X: Transport>(
         &mut self,
         i: usize,
         m: &MeasurementMsg,
@@ -132,17 +133,6 @@ impl<X: Transport> External<X> {
         Ok(())
     }
 
-    /// Rings the program once after a batch was forwarded.
-    pub fn ring(&mut self, transport: &X) -> Result<(), RoleError> {
-        if self.bell.is_none() {
-            self.bell = Some(transport.notifier(Wake::ExternalAttacker)?);
-        }
-        if let Some(b) = &self.bell {
-            b.ring()?;
-        }
-        Ok(())
-    }
-
     /// Whether every tick of agent `i` was answered (or given up).
     pub fn finished(&self, i: usize, ticks: u64) -> bool {
         self.agents[i].answered >= ticks
@@ -155,7 +145,7 @@ impl<X: Transport> External<X> {
 
     /// Takes every answer waiting: checks it, records it and relays it to the control center on
     /// `out`. Returns how many messages went to the center.
-    pub fn take_answers(
+    pub fn take_answers<X: Transport>(
         &mut self,
         ports: &ExternalPorts<X>,
         out: &impl fdi_runtime::ipc::Outbox<MeasurementMsg>,

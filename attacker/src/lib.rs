@@ -365,7 +365,7 @@ pub fn run<X: Transport, const N: usize>(
     let mut sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
     let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
     let mut external = match (&s.roles.attacker, &ports.external) {
-        (Some(role), Some(_)) => Some(External::<X>::new(role, &ids, N, dt, realtime)),
+        (Some(role), Some(_)) => Some(External::new(role, &ids, N, dt, realtime)),
         _ => None,
     };
     loop {
@@ -406,7 +406,7 @@ pub fn run<X: Transport, const N: usize>(
         }
         if let (Some(x), Some(p)) = (&mut external, &ports.external) {
             if forwarded > 0 {
-                x.ring(&ports.transport)?;
+                p.ring(&ports.transport)?;
             }
             relayed += x.take_answers(p, &ports.tampered, trace)?;
             relayed += x.enforce(monotonic_ns(), &ports.tampered, trace)?;

@@ -329,7 +329,7 @@ pub fn run<X: Transport, const N: usize>(
     let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
     let mut intake = Intake::new(&ids, ticks, monotonic_ns().max(epoch_ns));
     let mut monitor = match (&s.roles.monitor, &ports.monitor) {
-        (Some(role), Some(_)) => Some(Monitor::<X>::new(role, &ids, dt, !realtime, epoch_ns)),
+        (Some(role), Some(_)) => Some(Monitor::new(role, &ids, dt, !realtime, epoch_ns)),
         _ => None,
     };
     // Realtime: once every agent is done, the monitor's last verdicts are awaited this long.
@@ -358,9 +358,9 @@ pub fn run<X: Transport, const N: usize>(
         }
         let computed = intake.answered.iter().any(|a| *a);
         ports.ring(&mut intake.answered)?;
-        if let Some(mon) = &mut monitor {
+        if let Some(mp) = &ports.monitor {
             if computed || arrived > 0 {
-                mon.ring(&ports.transport)?;
+                mp.ring(&ports.transport)?;
             }
         }
         let liveness = &mut intake.liveness;

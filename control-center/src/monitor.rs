@@ -10,33 +10,36 @@ use fdi_common::records::MonitorRecord;
 use fdi_common::roles::ExternalRole;
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::{
-    monotonic_ns, AlarmMsg, Bell as _, Inbox as _, IpcError, MeasurementMsg, Stream, Transport,
-    Wake,
+    monotonic_ns, AlarmMsg, Inbox as _, IpcError, MeasurementMsg, Stream, Transport, Wake,
 };
-use fdi_runtime::process::external::MONITOR_LAG;
+use fdi_runtime::process::external::{LateBell, MONITOR_LAG};
 use fdi_runtime::process::RoleError;
 
 /// The ports towards the monitor program.
 #[derive(Debug)]
 pub struct MonitorPorts<X: Transport> {
     pub alarms: X::Inbox<AlarmMsg>,
-    /// Holds the monitor's wake-up service open until it has a listener on it (the bell that
-    /// rings it is made after the start: one made before its listener may not reach it).
-    pub keep: X::Bell,
+    /// The monitor's wake-up event.
+    pub bell: LateBell<X>,
 }
 
 impl<X: Transport> MonitorPorts<X> {
     pub fn open(transport: &X) -> Result<Self, IpcError> {
         Ok(Self {
             alarms: transport.subscriber(Stream::Alarm)?,
-            keep: transport.notifier(Wake::Monitor)?,
+            bell: LateBell::open(transport, Wake::Monitor)?,
         })
+    }
+
+    /// Rings the monitor after a batch of measurements came or ticks were computed.
+    pub fn ring(&self, transport: &X) -> Result<(), IpcError> {
+        self.bell.ring(transport)
     }
 }
 
 /// What the control center keeps about the monitor.
 #[derive(Debug)]
-pub struct Monitor<X: Transport> {
+pub struct Monitor {
     label: String,
     ids: Vec<u32>,
     /// Per agent (scenario order): the next tick whose verdict is due.
@@ -50,13 +53,12 @@ pub struct Monitor<X: Transport> {
     epoch_ns: u64,
     /// The last verdict (or the start): the lockstep timeout counts from it.
     progress: Instant,
-    bell: Option<X::Bell>,
     /// Realtime: verdicts later than the deadline after their tick's time.
     pub late: u64,
     pub verdicts: u64,
 }
 
-impl<X: Transport> Monitor<X> {
+impl Monitor {
     pub fn new(role: &ExternalRole, ids: &[u32], dt: f64, lockstep: bool, epoch_ns: u64) -> Self {
         Self {
             label: role.label(),
@@ -69,7 +71,6 @@ impl<X: Transport> Monitor<X> {
             dt,
             epoch_ns,
             progress: Instant::now(),
-            bell: None,
             late: 0,
             verdicts: 0,
         }
@@ -109,7 +110,7 @@ impl<X: Transport> Monitor<X> {
 
     /// Takes every verdict waiting: checks it, records it, and passes on to `ready` what it
     /// releases.
-    pub fn take_verdicts(
+    pub fn take_verdicts<X: Transport>(
         &mut self,
         ports: &MonitorPorts<X>,
         trace: &mut TraceWriter,
@@ -154,17 +155,6 @@ impl<X: Transport> Monitor<X> {
         }
         for i in 0..self.ids.len() {
             self.release(i, ready);
-        }
-        Ok(())
-    }
-
-    /// Rings the monitor after a batch of ticks was computed.
-    pub fn ring(&mut self, transport: &X) -> Result<(), RoleError> {
-        if self.bell.is_none() {
-            self.bell = Some(transport.notifier(Wake::Monitor)?);
-        }
-        if let Some(b) = &self.bell {
-            b.ring()?;
         }
         Ok(())
     }

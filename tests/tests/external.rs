@@ -238,6 +238,11 @@ fn a_python_monitor_is_reported_beside_the_detectors_and_changes_nothing() {
         report.contains("| s_hat_norm | chi2 | cusum | kinematic |"),
         "report.md has no monitor column"
     );
+    // The control center's account of the monitor, in the report: every verdict came.
+    assert!(
+        report.contains("* monitor `kinematic`: 40000 of 40000 verdicts"),
+        "report.md lacks the monitor's account"
+    );
 }
 
 /// Runs the paper scenario for `duration_s` with `[roles.<role>]` running `script`; returns

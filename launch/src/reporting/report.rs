@@ -818,6 +818,7 @@ fn markdown(
     notices(&mut md, s);
     rmse_section(&mut md, run_dir, s);
     detection_section(&mut md, s);
+    external_section(&mut md, run_dir, r);
     match kept {
         Recorded::None => {
             md.push_str("\n## Figures\n\nNo figures: the run kept no traces (`--traces none`). The tables above come from its summary, which covers every tick; run it again with `--traces full` or `--traces decimate=K` for figures.\n");
@@ -837,6 +838,67 @@ fn markdown(
     }
     warnings_section(&mut md, warnings);
     md
+}
+
+/// The programs that took a role (`[roles]`): what each was, and what the run's processes said
+/// of it at the end (answers, replays, late ones; verdicts received, late), from their traces.
+fn external_section(md: &mut String, run_dir: &Path, r: &Resolved) {
+    let roles = &r.scenario.roles;
+    if !r.has_external_roles() {
+        return;
+    }
+    md.push_str(
+        "
+## Roles taken by external programs
+
+",
+    );
+    for (what, role) in [("attacker", &roles.attacker), ("monitor", &roles.monitor)] {
+        if let Some(role) = role {
+            let _ = writeln!(
+                md,
+                "* {what} `{}`: `{}`",
+                role.label(),
+                role.command.join(" ")
+            );
+        }
+    }
+    let mut notes = Vec::new();
+    for process in ["attacker", "control-center"] {
+        let path = crate::runtime::trace_path(run_dir, process);
+        let Ok(reader) = fdi_common::trace::TraceReader::open(&path) else {
+            continue;
+        };
+        for rec in reader.flatten() {
+            if let fdi_common::trace::TraceRecord::Event { message, .. } = rec {
+                for part in message.split("; ") {
+                    if part.starts_with("external attacker `") || part.starts_with("monitor `") {
+                        notes.push(part.to_string());
+                    }
+                }
+            }
+        }
+    }
+    if notes.is_empty() {
+        md.push_str(
+            "
+No closing note of the run's processes on them (the traces were not kept, or the \
+             run ended early).
+",
+        );
+    } else {
+        md.push('\n');
+        for n in notes {
+            let _ = writeln!(md, "* {n}");
+        }
+    }
+    md.push_str(
+        "
+Their contract is docs/protocol.md; what the attacker program sent is the attacker's \
+         record (`traces/attacker.trace`), the monitor's verdicts are in the control center's \
+         (`fdi-launch trace export` writes them to `control-center-monitor.csv`).
+",
+    );
 }
 
 /// The title, where the run lives, and the table of its parameters.

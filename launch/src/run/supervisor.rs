@@ -90,6 +90,17 @@ impl<M> Supervisor<M> {
             .process_group(0);
         let mut child = cmd.spawn().with_context(|| format!("spawning {label}"))?;
         let stderr = child.stderr.take().map(|e| StderrRelay::start(e, &label));
+        self.push(label, meta, child, stderr);
+        Ok(())
+    }
+
+    fn push(
+        &mut self,
+        label: String,
+        meta: M,
+        child: std::process::Child,
+        stderr: Option<StderrRelay>,
+    ) {
         self.children.push(Child {
             label,
             meta,
@@ -98,7 +109,6 @@ impl<M> Supervisor<M> {
             stopped_since: None,
             stderr,
         });
-        Ok(())
     }
 
     /// Spawns a program outside the project (`[roles]`) as `label`: no stdin, its stdout and
@@ -119,19 +129,8 @@ impl<M> Supervisor<M> {
         // Our copies of the write end went into the command: dropped with it, so the relay
         // sees the end of the stream when the child exits.
         drop(cmd);
-        let stderr = Some(StderrRelay::start_prefixed(
-            reader,
-            &label,
-            Some(label.clone()),
-        ));
-        self.children.push(Child {
-            label,
-            meta,
-            status: None,
-            child,
-            stopped_since: None,
-            stderr,
-        });
+        let stderr = StderrRelay::start_prefixed(reader, &label, Some(label.clone()));
+        self.push(label, meta, child, Some(stderr));
         Ok(())
     }
 

@@ -4,6 +4,8 @@
 
 use fdi_common::scenario::Resolved;
 
+use crate::ipc::{Bell as _, IpcError, Transport, Wake};
+
 /// How far (ticks) the control center may run ahead of a monitor's verdicts in lockstep: it
 /// computes tick `k` of an agent once it holds the monitor's verdict on tick `k − MONITOR_LAG`.
 pub const MONITOR_LAG: u64 = 64;
@@ -22,6 +24,36 @@ pub const ENV_VARS: [&str; 11] = [
     "FDI_MONITOR_LAG",
     "FDI_LAUNCHER_PID",
 ];
+
+/// The bell of a program's wake-up event, made at its first ring: the program opens its
+/// listener after the run's processes are ready, and a bell made before the listener may not
+/// reach it. `keep` holds the event service open until then (the program only opens services).
+#[derive(Debug)]
+pub struct LateBell<X: Transport> {
+    wake: Wake,
+    keep: X::Bell,
+    bell: std::cell::OnceCell<X::Bell>,
+}
+
+impl<X: Transport> LateBell<X> {
+    /// Opens the event service of `wake` (through a first bell that only holds it open).
+    /// Before the process reports ready: the program opens the service after that.
+    pub fn open(transport: &X, wake: Wake) -> Result<Self, IpcError> {
+        Ok(Self {
+            wake,
+            keep: transport.notifier(wake)?,
+            bell: std::cell::OnceCell::new(),
+        })
+    }
+
+    /// Rings the program (after the start: its listener exists by then).
+    pub fn ring(&self, transport: &X) -> Result<(), IpcError> {
+        if self.bell.get().is_none() {
+            let _ = self.bell.set(transport.notifier(self.wake)?);
+        }
+        self.bell.get().unwrap_or(&self.keep).ring()
+    }
+}
 
 /// Which role an external program takes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
