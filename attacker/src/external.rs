@@ -296,7 +296,7 @@ impl External {
         );
         if self.realtime {
             s.push_str(&format!(
-                "; {} ticks past the {:.3} ms deadline (gap markers sent instead), {} late answers \
+                ", {} ticks past the {:.3} ms deadline (gap markers sent instead), {} late answers \
                  dropped",
                 t.late,
                 self.deadline_ns as f64 / 1e6,

@@ -105,6 +105,18 @@ fn set_role(doc: &mut toml::Table, role: &str, value: toml::Value, duration_s: f
     }
 }
 
+/// The part of a closing note (an event of `recs`) that starts with `about`, e.g.
+/// ``monitor `kinematic` ``.
+fn closing_note(recs: &[TraceRecord], about: &str) -> Option<String> {
+    recs.iter().find_map(|r| match r {
+        TraceRecord::Event { message, .. } => message
+            .split("; ")
+            .find(|part| part.starts_with(about))
+            .map(str::to_string),
+        _ => None,
+    })
+}
+
 fn stderr(out: &Output) -> String {
     String::from_utf8_lossy(&out.stderr).into_owned()
 }
@@ -175,12 +187,7 @@ fn the_python_attacker_gives_the_run_the_rust_attacker_gives() {
         TraceRecord::Attack(a) => a.delivery == Delivery::Delivered,
         _ => true,
     }));
-    let note = recs.iter().find_map(|r| match r {
-        TraceRecord::Event { message, .. } if message.contains("external attacker") => {
-            Some(message.clone())
-        }
-        _ => None,
-    });
+    let note = closing_note(&recs, "external attacker `");
     assert!(
         note.as_deref()
             .is_some_and(|n| n.contains("160000 answers")),
@@ -418,18 +425,11 @@ fn realtime_an_attacker_too_slow_for_its_deadline_is_counted_and_the_run_goes_on
     let out = launch(&["run", &scenario, "--json"], &s.0.join("runs"), WATCHDOG);
     let summary = fdi_tests::json_realtime(&out);
     let recs = trace_records(&run_dir_of(&summary).join("traces/attacker.trace"));
-    let note = recs
-        .iter()
-        .find_map(|r| match r {
-            TraceRecord::Event { message, .. } if message.contains("external attacker `slow`") => {
-                Some(message.clone())
-            }
-            _ => None,
-        })
-        .expect("the attacker's closing note");
+    let note =
+        closing_note(&recs, "external attacker `slow`").expect("the attacker's closing note");
     eprintln!("{note}");
     let late: u64 = note
-        .split("; ")
+        .split(", ")
         .find(|p| p.contains("ticks past the"))
         .and_then(|p| p.split(' ').next())
         .and_then(|n| n.parse().ok())
@@ -482,14 +482,7 @@ fn realtime_the_monitors_verdicts_are_counted_received_late_and_missing() {
         .iter()
         .filter(|r| matches!(r, TraceRecord::Monitor(m) if m.late))
         .count() as u64;
-    let note = recs
-        .iter()
-        .find_map(|r| match r {
-            TraceRecord::Event { message, .. } if message.starts_with("monitor `kinematic`") => {
-                Some(message.clone())
-            }
-            _ => None,
-        })
+    let note = closing_note(&recs, "monitor `kinematic`")
         .expect("the control center's note on the monitor");
     eprintln!("{note}");
     assert!(
