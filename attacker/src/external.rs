@@ -83,7 +83,7 @@ pub struct External {
     realtime: bool,
     /// The last time an answer came (or the start): the lockstep timeout counts from it.
     progress: Instant,
-    pub tally: Tally,
+    tally: Tally,
 }
 
 impl External {
@@ -305,10 +305,6 @@ impl External {
         }
         s
     }
-
-    pub fn label(&self) -> &str {
-        &self.label
-    }
 }
 
 /// The message as relayed: the attacker's send stamp is the relay's.
@@ -378,17 +374,9 @@ mod tests {
         y[0] = 0.5;
         y[1] = -0.25;
         MeasurementMsg {
-            seq,
-            agent: 2,
-            dof: 2,
-            t: tick_time(seq, 1e-3),
             y,
-            yd: [0.0; MAX_DOF],
-            agent_sent_ns: 0,
-            attacker_received_ns: 0,
-            attacker_sent_ns: 0,
             flags: 0,
-            reserved: 0,
+            ..MeasurementMsg::gap(seq, 2, 2, tick_time(seq, 1e-3))
         }
     }
 

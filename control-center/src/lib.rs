@@ -332,8 +332,6 @@ pub fn run<X: Transport, const N: usize>(
         (Some(role), Some(_)) => Some(Monitor::new(role, &ids, dt, !realtime, epoch_ns)),
         _ => None,
     };
-    // Realtime: once every agent is done, the monitor's last verdicts are awaited this long.
-    let mut verdicts_until: Option<std::time::Instant> = None;
     let mut ready = Vec::new();
     loop {
         // With a monitor, it is rung whenever measurements came: it taps them too, and in
@@ -380,29 +378,12 @@ pub fn run<X: Transport, const N: usize>(
             .all(|(i, x)| liveness.settled(i, x.next >= ticks, now, end_ns));
         // With a monitor, the end waits for its last verdicts too: in lockstep all of them
         // (within its timeout), in realtime for its deadline and a little more.
-        let judged = match &monitor {
+        let judged = match &mut monitor {
             None => true,
-            Some(mon) if mon.complete(ticks) => true,
-            Some(_) if realtime && controlled => {
-                // The grace counts from the moment every agent is done.
-                let grace = std::time::Duration::from_nanos(
-                    s.roles.monitor.as_ref().map_or(0, |r| r.deadline_ns()),
-                ) + std::time::Duration::from_millis(200);
-                let until =
-                    *verdicts_until.get_or_insert_with(|| std::time::Instant::now() + grace);
-                std::time::Instant::now() >= until
-            }
-            Some(_) if realtime => false,
-            Some(mon) => {
-                mon.check_timeout(controlled)?;
-                false
-            }
+            Some(mon) => mon.judged(ticks, controlled)?,
         };
         if controlled && judged {
             break;
-        }
-        if let Some(mon) = &monitor {
-            mon.check_timeout(false)?;
         }
         if shutdown.requested() || ports.launcher.stop_requested()? {
             return Ok(intake.refused);

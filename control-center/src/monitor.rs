@@ -53,9 +53,11 @@ pub struct Monitor {
     epoch_ns: u64,
     /// The last verdict (or the start): the lockstep timeout counts from it.
     progress: Instant,
+    /// Realtime: when the wait for the last verdicts ends (set once every agent is done).
+    verdicts_until: Option<Instant>,
     /// Realtime: verdicts later than the deadline after their tick's time.
-    pub late: u64,
-    pub verdicts: u64,
+    late: u64,
+    verdicts: u64,
 }
 
 impl Monitor {
@@ -71,6 +73,7 @@ impl Monitor {
             dt,
             epoch_ns,
             progress: Instant::now(),
+            verdicts_until: None,
             late: 0,
             verdicts: 0,
         }
@@ -159,16 +162,32 @@ impl Monitor {
         Ok(())
     }
 
-    /// Whether every verdict of the run's `ticks` came.
-    pub fn complete(&self, ticks: u64) -> bool {
-        self.next.iter().all(|&n| n >= ticks)
+    /// Whether the run may end as far as the monitor goes, once `controlled` (every agent
+    /// done): every verdict of the run's `ticks` came, or, in realtime, the grace of its
+    /// deadline + 200 ms after the control's end passed. In lockstep it fails once the run has
+    /// waited for the monitor for its timeout (held measurements, or the last verdicts).
+    pub fn judged(&mut self, ticks: u64, controlled: bool) -> Result<bool, RoleError> {
+        if self.next.iter().all(|&n| n >= ticks) {
+            return Ok(true);
+        }
+        if self.lockstep {
+            self.check_timeout(controlled)?;
+            return Ok(false);
+        }
+        if !controlled {
+            return Ok(false);
+        }
+        let grace = Duration::from_nanos(self.deadline_ns) + Duration::from_millis(200);
+        let until = *self
+            .verdicts_until
+            .get_or_insert_with(|| Instant::now() + grace);
+        Ok(Instant::now() >= until)
     }
 
     /// Lockstep: fails once the run has waited for the monitor's verdicts for the timeout
     /// (measurements held back, or the last verdicts at the end: `waiting`).
-    pub fn check_timeout(&self, waiting: bool) -> Result<(), RoleError> {
-        let held = self.held.iter().any(|h| !h.is_empty());
-        if self.lockstep && (held || waiting) && self.progress.elapsed() > self.timeout {
+    fn check_timeout(&self, waiting: bool) -> Result<(), RoleError> {
+        if self.lockstep && (self.holding() || waiting) && self.progress.elapsed() > self.timeout {
             let (i, n) = self
                 .next
                 .iter()
@@ -186,7 +205,7 @@ impl Monitor {
     }
 
     /// Whether measurements are held back for the monitor.
-    pub fn holding(&self) -> bool {
+    fn holding(&self) -> bool {
         self.held.iter().any(|h| !h.is_empty())
     }
 
@@ -205,9 +224,5 @@ impl Monitor {
             ));
         }
         s
-    }
-
-    pub fn label(&self) -> &str {
-        &self.label
     }
 }
