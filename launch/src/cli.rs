@@ -13,7 +13,7 @@ use fdi_runtime::process::ProcessArgs;
 use crate::reporting::attacks::AttacksArgs;
 pub use crate::reporting::output::describe_error;
 use crate::reporting::tables::TableArgs;
-pub use crate::run::{check_placement, execute, Engine, Traces};
+pub use crate::run::{check_placement, Engine, Traces};
 use crate::{bench, export, output, report, runtime, tables};
 
 /// Testbed for false-data-injection attacks on a multi-agent robot system (Sargolzaei et al.).
@@ -69,6 +69,10 @@ pub enum Command {
     /// Measurements: latency of the realtime runtime, the transport floor, lockstep speed.
     #[command(subcommand)]
     Bench(bench::BenchCommand),
+    /// Run a share of split runs on this host: wait for a coordinating `fdi-launch run
+    /// --hosts FILE`, run the processes it places here, bridge them over Zenoh, hand it their
+    /// traces (docs/multi-host.md).
+    Serve(crate::run::serve::ServeArgs),
     /// Internal: a peer process of `bench transport`.
     #[command(hide = true)]
     BenchPeer {
@@ -202,10 +206,14 @@ pub struct RunArgs {
     pub no_space_check: bool,
     #[command(flatten)]
     pub placement: runtime::Placement,
+    /// Split the run over hosts: a deployment file naming each host, its Zenoh endpoint and
+    /// the processes it runs (docs/multi-host.md). Each other host runs `fdi-launch serve`.
+    #[arg(long, value_name = "FILE")]
+    pub hosts: Option<PathBuf>,
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
     /// tampered measurements and compare the trace digest with the recording's (exit status 1
     /// when they differ). The scenario comes from RUN_DIR.
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts"])]
     pub replay: Option<PathBuf>,
 }
 
@@ -275,6 +283,7 @@ impl DetectArgs {
             traces: Traces::Full,
             max_trace_size: bytesize::ByteSize::gb(10),
             no_space_check: false,
+            hosts: None,
             placement: runtime::Placement::default(),
             replay: None,
         }
@@ -293,6 +302,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
             | Command::Table1(_)
             | Command::Table2(_)
             | Command::Attacks(_)
+            | Command::Serve(_)
     ) {
         crate::interrupt::install();
     }
@@ -305,6 +315,7 @@ pub fn dispatch(cli: Cli) -> Result<ExitCode> {
     }
     match cli.command {
         Command::Run(args) => run(&args),
+        Command::Serve(args) => crate::run::serve::serve(&args),
         Command::Validate { scenario } => validate(&scenario),
         Command::Sweep(args) => crate::campaign::sweep(&args),
         Command::Schema { format } => schema(format),
@@ -398,16 +409,21 @@ pub fn run_scenario(args: &RunArgs) -> Result<RunDone> {
         !args.no_space_check,
     )?;
     crate::interrupt::check(runtime::BEFORE_THE_START)?;
+    let deployment = match &args.hosts {
+        Some(path) => Some(crate::hosts::Deployment::load(path, &r)?),
+        None => None,
+    };
     let dir = output::create_named_run_dir(&args.out, &r, &run_name(&r, args))?;
     let summary = output::discard_if_not_started(
         &dir,
-        execute(
+        crate::run::execute_on(
             &r,
             args.engine,
             Some(&dir),
             !args.json,
             &args.placement,
             args.traces,
+            deployment.as_ref(),
         ),
     )?;
     for lost in &summary.lost_agents {

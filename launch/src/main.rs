@@ -10,7 +10,7 @@ mod run;
 // Short paths for the modules the jobs share.
 use bench::{floor, probe};
 use reporting::{export, output, plot, report, tables};
-use run::{interrupt, join, relay, replayer, runtime, supervisor};
+use run::{hosts, interrupt, join, relay, remote, replayer, runtime, supervisor};
 
 #[cfg(test)]
 mod damage_tests;

@@ -193,11 +193,19 @@ impl Sources {
         let mut agents = Vec::with_capacity(resolved.scenario.agents.len());
         for a in &resolved.scenario.agents {
             let p = trace_path(run_dir, &format!("agent-{}", a.id));
-            agents.push((
-                a.id,
-                Source::open(&p, pick_agent)
+            // A split run whose host became unreachable keeps a note instead of the trace: the
+            // agent's ticks count as missing, and the note is the join's warning.
+            let lost = p.with_extension("lost");
+            let source = match std::fs::read_to_string(&lost) {
+                Ok(note) if !p.exists() => {
+                    let mut s = Source::new(Box::new(std::iter::empty()), pick_agent);
+                    s.damage = Some(format!("{note}: its ticks count as missing"));
+                    s
+                }
+                _ => Source::open(&p, pick_agent)
                     .with_context(|| format!("opening the trace of agent {}", a.id))?,
-            ));
+            };
+            agents.push((a.id, source));
         }
         let attacker = trace_path(run_dir, "attacker");
         let routed = resolved

@@ -3,12 +3,15 @@
 //! relay of the children's stderr ([`relay`]), interrupts ([`interrupt`]) and the replay of a
 //! recorded attacker ([`replayer`]); the in-process engine is `fdi_common::engine`.
 
+pub mod hosts;
 pub mod interrupt;
 pub mod join;
 pub mod relay;
+pub mod remote;
 pub mod replayer;
 pub mod runs;
 pub mod runtime;
+pub mod serve;
 pub mod supervisor;
 pub mod tap;
 pub mod traces;
@@ -121,6 +124,28 @@ pub fn execute(
     placement: &runtime::Placement,
     traces: Traces,
 ) -> Result<RunSummary> {
+    execute_on(r, engine, run_dir, progress, placement, traces, None)
+}
+
+/// [`execute`], the run split over the hosts of `deployment` (`--hosts FILE`, the ipc engine
+/// with full traces only).
+pub fn execute_on(
+    r: &Resolved,
+    engine: Engine,
+    run_dir: Option<&Path>,
+    progress: bool,
+    placement: &runtime::Placement,
+    traces: Traces,
+    deployment: Option<&hosts::Deployment>,
+) -> Result<RunSummary> {
+    if deployment.is_some()
+        && (engine != Engine::Ipc || run_dir.is_none() || traces != Traces::Full)
+    {
+        anyhow::bail!(
+            "a run split over hosts (--hosts) needs the ipc engine and full traces (the remote \
+             traces are fetched whole at the end)"
+        );
+    }
     if engine == Engine::Inproc && r.has_external_roles() {
         anyhow::bail!(
             "the in-process engine cannot run a program that takes a role (`[roles]` of the \
@@ -179,6 +204,7 @@ pub fn execute(
                 replay: false,
                 placement: placement.clone(),
                 pipes: traces != Traces::Full,
+                deployment: deployment.cloned(),
             };
             let (outcome, mut joined, write_error) = if traces == Traces::Full {
                 let outcome = runtime::run_ipc(r, &opts)?;

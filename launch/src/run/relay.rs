@@ -17,6 +17,7 @@ pub struct StderrRelay {
 
 impl StderrRelay {
     /// Starts relaying `stderr` (the read end of a child's stderr pipe) to this process's.
+    #[cfg(test)]
     pub fn start(stderr: impl Read + Send + 'static, label: &str) -> Self {
         Self::start_prefixed(stderr, label, None)
     }
@@ -28,9 +29,20 @@ impl StderrRelay {
         label: &str,
         prefix: Option<String>,
     ) -> Self {
+        Self::start_teed(stderr, label, prefix, None)
+    }
+
+    /// [`Self::start_prefixed`], each line also handed to `tee` (`fdi-launch serve` sends
+    /// them to the coordinating host).
+    pub fn start_teed(
+        stderr: impl Read + Send + 'static,
+        label: &str,
+        prefix: Option<String>,
+        tee: Option<Tee>,
+    ) -> Self {
         let thread = std::thread::Builder::new()
             .name(format!("stderr of {label}"))
-            .spawn(move || relay(stderr, prefix.as_deref()))
+            .spawn(move || relay(stderr, prefix.as_deref(), tee.as_ref()))
             .ok();
         Self { thread, last: None }
     }
@@ -61,7 +73,10 @@ impl StderrRelay {
     }
 }
 
-fn relay(stderr: impl Read, prefix: Option<&str>) -> Option<String> {
+/// Where a relay also hands each line it relays.
+pub type Tee = std::sync::Arc<dyn Fn(&str) + Send + Sync>;
+
+fn relay(stderr: impl Read, prefix: Option<&str>, tee: Option<&Tee>) -> Option<String> {
     let mut input = BufReader::new(stderr);
     let mut line = Vec::new();
     let mut last = None;
@@ -82,6 +97,12 @@ fn relay(stderr: impl Read, prefix: Option<&str>) -> Option<String> {
                 drop(err);
                 let text = String::from_utf8_lossy(&line);
                 let text = text.trim_end();
+                if let Some(tee) = tee {
+                    match prefix {
+                        Some(p) => tee(&format!("{p}: {text}")),
+                        None => tee(text),
+                    }
+                }
                 if !text.trim().is_empty() {
                     let mut end = text.len().min(MAX_CAUSE);
                     while !text.is_char_boundary(end) {

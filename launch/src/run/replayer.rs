@@ -230,6 +230,7 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool) -> Result<ExitCode> {
                     replay: true,
                     placement: crate::runtime::Placement::default(),
                     pipes: false,
+                    deployment: None,
                 },
             )
         }),

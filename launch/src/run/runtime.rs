@@ -44,7 +44,7 @@ type Proc = Child<Slot>;
 /// The role binaries: the sibling `fdi-agent` etc. when they are at least as new as this
 /// executable, else this executable in the hidden multi-call mode (`fdi-launch process ROLE`),
 /// which is always consistent with the launcher.
-fn role_command(role: &str) -> Result<Command> {
+pub(crate) fn role_command(role: &str) -> Result<Command> {
     let me = std::env::current_exe().context("locating fdi-launch")?;
     let sibling = me.with_file_name(format!("fdi-{role}"));
     let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
@@ -184,6 +184,8 @@ pub struct IpcOptions {
     /// The processes write their traces into the named pipes of [`crate::run::tap`]
     /// (`traces/<process>.pipe`) instead of the trace files.
     pub pipes: bool,
+    /// The run is split over hosts (`--hosts FILE`): where each process runs.
+    pub deployment: Option<crate::hosts::Deployment>,
 }
 
 pub use fdi_runtime::process::{Placement, ProcessArgs};
@@ -205,6 +207,8 @@ struct Launcher<X: Transport> {
     interrupted: Arc<AtomicUsize>,
     /// The start was broadcast: from then on the run records.
     started: bool,
+    /// The other hosts of a split run.
+    remote: Option<crate::remote::Remote>,
 }
 
 impl<X: Transport> Launcher<X> {
@@ -214,6 +218,45 @@ impl<X: Transport> Launcher<X> {
             0 => None,
             sig => i32::try_from(sig).ok(),
         }
+    }
+
+    /// A host of a split run that is gone: before the start or in lockstep it ends the run
+    /// (its message); in a started realtime run its agents are lost and the run goes on.
+    fn host_lost(&mut self, done: &mut [bool], bar: &ProgressBar) -> Option<String> {
+        let lost = self.remote.as_mut()?.lost_host()?;
+        let ran_only_agents = self
+            .procs
+            .iter()
+            .filter(|p| p.host() == Some(lost.host.name.as_str()))
+            .all(|p| matches!(p.meta.wake, Wake::Agent(_)));
+        if !(self.realtime && self.started && ran_only_agents) {
+            return Some(lost.message());
+        }
+        let reason = format!(
+            "host `{}` ({}) unreachable",
+            lost.host.name, lost.host.endpoint
+        );
+        for (i, p) in self.procs.iter().enumerate() {
+            if p.host() == Some(lost.host.name.as_str()) {
+                done[i] = true;
+            }
+        }
+        for &agent in &lost.agents {
+            match self.lost.iter_mut().find(|x| x.agent == agent) {
+                Some(x) => x.reason = reason.clone(),
+                None => self.lost.push(LostAgent {
+                    agent,
+                    t_s: None,
+                    reason: reason.clone(),
+                    rejoined_t_s: None,
+                }),
+            }
+        }
+        bar.println(format!(
+            "fdi-launch: {}; its agents are lost, the run goes on",
+            lost.message()
+        ));
+        None
     }
 
     /// Reaps exited children; returns the first abnormal exit that ends the run. Once a realtime
@@ -403,7 +446,15 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             waker: transport.waker(Wake::Launcher).context(DidNotStart)?,
             interrupted,
             started: false,
+            remote: None,
         };
+        if let Some(d) = &opts.deployment {
+            let connected = crate::remote::Remote::connect(d.clone(), &prefix).and_then(|mut r| {
+                r.start_bridge(fdi_runtime::process::sizing_for(resolved))?;
+                Ok(r)
+            });
+            launcher.remote = Some(connected.context(DidNotStart)?);
+        }
         let r = spawn_and_supervise(
             resolved,
             opts,
@@ -415,16 +466,35 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         launcher.teardown();
         // Every child has exited: what they printed is relayed whole before we go on.
         launcher.procs.drain_stderr();
+        let mut remote_left = Vec::new();
+        if let Some(remote) = launcher.remote.take() {
+            if launcher.started {
+                for p in remote.fetch_traces(&opts.run_dir) {
+                    eprintln!("fdi-launch: warning: {p}");
+                }
+            }
+            let (left, problems) = remote.release();
+            for p in problems {
+                eprintln!("fdi-launch: warning: {p}");
+            }
+            remote_left = left;
+        }
         let r = match r {
             Err(e) if !launcher.started => Err(e.context(DidNotStart)),
             r => r,
         };
-        (r, std::mem::take(&mut launcher.lost), launcher.exits())
+        (
+            r,
+            std::mem::take(&mut launcher.lost),
+            launcher.exits(),
+            remote_left,
+        )
         // ports and node dropped here, before the files are removed
     };
-    let (result, lost, exits) = result;
+    let (result, lost, exits, remote_left) = result;
     Shm::remove_leftovers(&prefix).ok();
-    let leftovers = Shm::leftovers(&prefix);
+    let mut leftovers = Shm::leftovers(&prefix);
+    leftovers.extend(remote_left.into_iter().map(PathBuf::from));
     let Supervised {
         wall_s,
         interrupted,
@@ -502,7 +572,29 @@ fn spawn_roles<X: Transport>(
             ));
         }
     }
+    let mut remote_procs = Vec::new();
     for (role, name, wake, agent) in roles {
+        let label = match agent {
+            Some(id) => format!("agent {id}"),
+            None => role.clone(),
+        };
+        if let Some(d) = l.remote.as_ref().map(|r| &r.deployment) {
+            if !d.is_local(wake) {
+                let p = crate::hosts::RemoteProcess {
+                    role: role.clone(),
+                    name: name.clone(),
+                    agent,
+                    label: label.clone(),
+                };
+                let slot = Slot {
+                    wake,
+                    ready: false,
+                    external: None,
+                };
+                remote_procs.push((p, wake, slot));
+                continue;
+            }
+        }
         if let Some(signal) = l.interrupt() {
             return Err(Interrupted {
                 signal,
@@ -524,10 +616,6 @@ fn spawn_roles<X: Transport>(
             placement: opts.placement.clone(),
         };
         cmd.args(args.to_args());
-        let label = match agent {
-            Some(id) => format!("agent {id}"),
-            None => role.clone(),
-        };
         l.procs.spawn(
             label,
             Slot {
@@ -538,7 +626,14 @@ fn spawn_roles<X: Transport>(
             cmd,
         )?;
     }
-
+    if let Some(remote) = &mut l.remote {
+        let scenario = std::fs::read_to_string(scenario_path)
+            .with_context(|| format!("reading {}", scenario_path.display()))?;
+        remote.start_hosts(&scenario, remote_procs, &mut l.procs)?;
+        for line in remote.describe() {
+            eprintln!("fdi-launch: {line}");
+        }
+    }
     Ok(())
 }
 
@@ -633,6 +728,9 @@ fn await_ready<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
         if let Some(stall) = l.stalled() {
             bail!("{stall} (before the start)");
         }
+        if let Some(lost) = l.host_lost(&mut [], &ProgressBar::hidden()) {
+            bail!("{lost} (before the start)");
+        }
         // The run's own processes get READY_TIMEOUT; a program outside the project its
         // role's timeout.
         let late: Vec<&str> = l
@@ -725,6 +823,10 @@ fn supervise<X: Transport>(
             return Ok(end);
         }
         l.take_status(&mut done, bar, dt)?;
+        if let Some(lost) = l.host_lost(&mut done, bar) {
+            bar.abandon();
+            bail!("run stopped: {lost}");
+        }
         if let Some(failed) = l.poll_children() {
             // A child killed by the signal that interrupted the launcher (the same kill() of the
             // process group) is part of the interrupt, not a failure.

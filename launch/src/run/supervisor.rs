@@ -5,8 +5,9 @@
 //! SIGTERM then SIGKILL after a grace period, and killed if still running when the supervisor is
 //! dropped.
 
-use std::os::unix::process::CommandExt;
+use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::process::{Command, ExitStatus, Stdio};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -22,22 +23,84 @@ pub struct Child<M> {
     pub meta: M,
     /// How it ended, once reaped.
     pub status: Option<ExitStatus>,
-    child: std::process::Child,
+    child: Handle,
     /// Since when it has been seen stopped, for [`Supervisor::stalled`].
     stopped_since: Option<Instant>,
     /// Its stderr, relayed to ours; its last line is the cause of a failure.
     stderr: Option<StderrRelay>,
 }
 
+/// A child on this host, or one that the `fdi-launch serve` of another host runs for us.
+#[derive(Debug)]
+enum Handle {
+    Local(std::process::Child),
+    Remote(Remote),
+}
+
+/// A process another host runs for this run: what its serve reported of it.
+#[derive(Debug, Clone)]
+pub struct Remote {
+    pub host: String,
+    pub pid: u32,
+    pub state: Arc<Mutex<RemoteState>>,
+    /// Asks its host to stop it: `true` SIGKILL, `false` SIGTERM.
+    pub stop: Stopper,
+}
+
+/// How a remote child is stopped: a message to its host.
+#[derive(Clone)]
+pub struct Stopper(pub Arc<dyn Fn(bool) + Send + Sync>);
+
+impl std::fmt::Debug for Stopper {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Stopper")
+    }
+}
+
+/// What the serve of a remote child's host said of it.
+#[derive(Debug, Default)]
+pub struct RemoteState {
+    /// Its wait status and how its host described its end, once it exited.
+    pub exit: Option<(i32, String)>,
+    /// Its host reported it stopped (SIGSTOP, a debugger): the message.
+    pub stalled: Option<String>,
+    /// Its host is unreachable: nothing more will be heard of it.
+    pub host_lost: bool,
+}
+
 impl<M> Child<M> {
     pub fn pid(&self) -> u32 {
-        self.child.id()
+        match &self.child {
+            Handle::Local(c) => c.id(),
+            Handle::Remote(r) => r.pid,
+        }
+    }
+
+    /// The host it runs on, when that is not this one.
+    pub fn host(&self) -> Option<&str> {
+        match &self.child {
+            Handle::Local(_) => None,
+            Handle::Remote(r) => Some(&r.host),
+        }
     }
 
     /// How it ended: with the cause it printed last when it exited with a status (a failure it
     /// reported), else the signal or the status alone.
     pub fn ended(&mut self, st: ExitStatus) -> String {
-        let pid = self.child.id();
+        if let Handle::Remote(r) = &self.child {
+            let said = lock(&r.state).exit.as_ref().map(|(_, s)| s.clone());
+            return match said {
+                Some(s) => format!("{s} on host `{}`", r.host),
+                None => format!(
+                    "{} (pid {}) {} on host `{}`",
+                    self.label,
+                    r.pid,
+                    describe_status(st),
+                    r.host
+                ),
+            };
+        }
+        let pid = self.pid();
         let cause = match (st.code(), &mut self.stderr) {
             (Some(_), Some(relay)) => relay.cause(),
             _ => None,
@@ -54,15 +117,25 @@ impl<M> Child<M> {
 }
 
 /// The children of one run (or one bench case).
-#[derive(Debug)]
 pub struct Supervisor<M> {
     children: Vec<Child<M>>,
+    /// Where the lines the children print also go (`fdi-launch serve`: to the coordinator).
+    tee: Option<crate::relay::Tee>,
+}
+
+impl<M: std::fmt::Debug> std::fmt::Debug for Supervisor<M> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Supervisor")
+            .field("children", &self.children)
+            .finish_non_exhaustive()
+    }
 }
 
 impl<M> Default for Supervisor<M> {
     fn default() -> Self {
         Self {
             children: Vec::new(),
+            tee: None,
         }
     }
 }
@@ -81,6 +154,14 @@ impl<M> std::ops::DerefMut for Supervisor<M> {
 }
 
 impl<M> Supervisor<M> {
+    /// A supervisor that also hands every line its children print to `tee`.
+    pub fn with_tee(tee: crate::relay::Tee) -> Self {
+        Self {
+            children: Vec::new(),
+            tee: Some(tee),
+        }
+    }
+
     /// Spawns `cmd` as `label`: no stdin or stdout, its stderr relayed (its lines reach ours
     /// as it prints them), in a process group of its own.
     pub fn spawn(&mut self, label: String, meta: M, mut cmd: Command) -> Result<()> {
@@ -89,18 +170,21 @@ impl<M> Supervisor<M> {
             .stderr(Stdio::piped())
             .process_group(0);
         let mut child = cmd.spawn().with_context(|| format!("spawning {label}"))?;
-        let stderr = child.stderr.take().map(|e| StderrRelay::start(e, &label));
-        self.push(label, meta, child, stderr);
+        let tee = self.tee.clone();
+        let stderr = child
+            .stderr
+            .take()
+            .map(|e| StderrRelay::start_teed(e, &label, None, tee));
+        self.push(label, meta, Handle::Local(child), stderr);
         Ok(())
     }
 
-    fn push(
-        &mut self,
-        label: String,
-        meta: M,
-        child: std::process::Child,
-        stderr: Option<StderrRelay>,
-    ) {
+    /// Supervises `label`, a process the serve of another host runs for this run.
+    pub fn adopt_remote(&mut self, label: String, meta: M, remote: Remote) {
+        self.push(label, meta, Handle::Remote(remote), None);
+    }
+
+    fn push(&mut self, label: String, meta: M, child: Handle, stderr: Option<StderrRelay>) {
         self.children.push(Child {
             label,
             meta,
@@ -130,7 +214,7 @@ impl<M> Supervisor<M> {
         // sees the end of the stream when the child exits.
         drop(cmd);
         let stderr = StderrRelay::start_prefixed(reader, &label, Some(label.clone()));
-        self.push(label, meta, child, Some(stderr));
+        self.push(label, meta, Handle::Local(child), Some(stderr));
         Ok(())
     }
 
@@ -139,7 +223,14 @@ impl<M> Supervisor<M> {
         let mut out = Vec::new();
         for (i, c) in self.children.iter_mut().enumerate() {
             if c.status.is_none() {
-                if let Ok(Some(st)) = c.child.try_wait() {
+                let exited = match &mut c.child {
+                    Handle::Local(child) => child.try_wait().ok().flatten(),
+                    Handle::Remote(r) => lock(&r.state)
+                        .exit
+                        .as_ref()
+                        .map(|(raw, _)| ExitStatus::from_raw(*raw)),
+                };
+                if let Some(st) = exited {
                     c.status = Some(st);
                     out.push(i);
                 }
@@ -155,11 +246,21 @@ impl<M> Supervisor<M> {
             if c.status.is_some() {
                 continue;
             }
-            let stopped = procfs::state(c.child.id()).is_ok_and(|s| matches!(s, 'T' | 't'));
+            let pid = match &c.child {
+                Handle::Local(child) => child.id(),
+                Handle::Remote(r) => {
+                    // Its host watches it and says so.
+                    if let Some(said) = lock(&r.state).stalled.take() {
+                        return Some(format!("{said} on host `{}`", r.host));
+                    }
+                    continue;
+                }
+            };
+            let stopped = procfs::state(pid).is_ok_and(|s| matches!(s, 'T' | 't'));
             match (stopped, c.stopped_since) {
                 (true, None) => c.stopped_since = Some(now),
                 (true, Some(since)) if now.duration_since(since) > limit => {
-                    return Some(format!("{} (pid {}) has been stopped (SIGSTOP or a debugger) for {:.1} s; its peers are waiting for it", c.label, c.child.id(), now.duration_since(since).as_secs_f64()));
+                    return Some(format!("{} (pid {pid}) has been stopped (SIGSTOP or a debugger) for {:.1} s; its peers are waiting for it", c.label, now.duration_since(since).as_secs_f64()));
                 }
                 (false, _) => c.stopped_since = None,
                 _ => {}
@@ -181,9 +282,14 @@ impl<M> Supervisor<M> {
             .iter()
             .filter(|c| !c.status.is_some_and(|s| s.success()))
         {
-            parts.push(match c.status {
-                Some(st) => format!("{} {}", c.label, describe_status(st)),
-                None => format!("{} still running", c.label),
+            let lost = match &c.child {
+                Handle::Remote(r) => lock(&r.state).host_lost.then(|| r.host.clone()),
+                Handle::Local(_) => None,
+            };
+            parts.push(match (c.status, lost) {
+                (Some(st), _) => format!("{} {}", c.label, describe_status(st)),
+                (None, Some(host)) => format!("{} unknown (host `{host}` unreachable)", c.label),
+                (None, None) => format!("{} still running", c.label),
             });
         }
         parts.join(", ")
@@ -194,9 +300,16 @@ impl<M> Supervisor<M> {
     pub fn signal_term(&self) {
         for c in &self.children {
             if c.status.is_none() {
-                if let Some(pid) = rustix::process::Pid::from_raw(c.child.id() as i32) {
-                    let _ = rustix::process::kill_process(pid, rustix::process::Signal::TERM);
-                    let _ = rustix::process::kill_process(pid, rustix::process::Signal::CONT);
+                match &c.child {
+                    Handle::Local(child) => {
+                        if let Some(pid) = rustix::process::Pid::from_raw(child.id() as i32) {
+                            let _ =
+                                rustix::process::kill_process(pid, rustix::process::Signal::TERM);
+                            let _ =
+                                rustix::process::kill_process(pid, rustix::process::Signal::CONT);
+                        }
+                    }
+                    Handle::Remote(r) => (r.stop.0)(false),
                 }
             }
         }
@@ -210,7 +323,7 @@ impl<M> Supervisor<M> {
                 bail!(
                     "{} (pid {}) did not exit within {timeout:?}",
                     c.label,
-                    c.child.id()
+                    c.pid()
                 );
             }
             self.reap();
@@ -233,15 +346,46 @@ impl<M> Supervisor<M> {
         }
     }
 
-    /// SIGKILLs every child still running and reaps it.
+    /// SIGKILLs every child still running and reaps it. A remote child's host is asked to, and
+    /// its exit awaited for at most [`REMOTE_KILL_WAIT`] in all (none when its host is lost).
     pub fn kill_rest(&mut self) {
+        let mut remote = false;
         for c in &mut self.children {
             if c.status.is_none() {
-                let _ = c.child.kill();
-                c.status = c.child.wait().ok();
+                match &mut c.child {
+                    Handle::Local(child) => {
+                        let _ = child.kill();
+                        c.status = child.wait().ok();
+                    }
+                    Handle::Remote(r) => {
+                        if !lock(&r.state).host_lost {
+                            (r.stop.0)(true);
+                            remote = true;
+                        }
+                    }
+                }
             }
         }
+        let began = Instant::now();
+        while remote && began.elapsed() < REMOTE_KILL_WAIT {
+            self.reap();
+            remote = self.children.iter().any(|c| {
+                c.status.is_none()
+                    && matches!(&c.child, Handle::Remote(r) if !lock(&r.state).host_lost)
+            });
+            std::thread::sleep(Duration::from_millis(5));
+        }
     }
+}
+
+/// How long [`Supervisor::kill_rest`] waits for the hosts of remote children to report them
+/// gone.
+pub const REMOTE_KILL_WAIT: Duration = Duration::from_secs(3);
+
+/// The state behind a lock, even if a thread panicked while holding it (the state is plain
+/// data, consistent at every step).
+pub fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 impl<M> Drop for Supervisor<M> {

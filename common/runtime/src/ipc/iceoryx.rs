@@ -195,13 +195,26 @@ where
     }
 
     fn waker(&self, wake: Wake) -> Result<IoxWaker<S>, IpcError> {
-        let service = wake.service_name();
-        let port = self
-            .event(wake)?
-            .listener_builder()
-            .create()
-            .map_err(port_error(&service))?;
-        Ok(IoxWaker { port, service })
+        self.waker_any(&[wake])
+    }
+
+    fn waker_any(&self, wakes: &[Wake]) -> Result<IoxWaker<S>, IpcError> {
+        let mut ports = Vec::with_capacity(wakes.len());
+        for &wake in wakes {
+            let service = wake.service_name();
+            let port = self
+                .event(wake)?
+                .listener_builder()
+                .create()
+                .map_err(port_error(&service))?;
+            ports.push(port);
+        }
+        let service = wakes
+            .iter()
+            .map(|w| w.service_name())
+            .collect::<Vec<_>>()
+            .join(", ");
+        Ok(IoxWaker { ports, service })
     }
 
     fn subscribers_of<T: Payload>(&self, stream: Stream) -> Result<usize, IpcError> {
@@ -465,10 +478,11 @@ impl<S: Variant> super::Bell for IoxBell<S> {
     }
 }
 
-/// This process's wake-up event.
+/// This process's wake-up event (or, for the bridge between hosts, the events of several
+/// processes of other hosts).
 #[derive(Debug)]
 pub struct IoxWaker<S: Variant> {
-    port: Listener<S>,
+    ports: Vec<Listener<S>>,
     service: String,
 }
 
@@ -476,12 +490,12 @@ impl<S: Variant> IoxWaker<S> {
     /// Consumes every pending notification without blocking; whether there was one.
     fn poll(&self) -> Result<bool, IpcError> {
         let mut rung = false;
-        self.port
-            .try_wait(|_| rung = true)
-            .map_err(|e| IpcError::Wait {
+        for port in &self.ports {
+            port.try_wait(|_| rung = true).map_err(|e| IpcError::Wait {
                 service: self.service.clone(),
                 source: e.into(),
             })?;
+        }
         Ok(rung)
     }
 }
@@ -491,13 +505,16 @@ where
     Listener<S>: FileDescriptorBased,
 {
     fn wait(&self, timeout: Duration) -> Result<bool, IpcError> {
+        let [port] = self.ports.as_slice() else {
+            return self.wait_precise(timeout);
+        };
         // iceoryx2 turns the timeout into SO_RCVTIMEO with microsecond resolution, and a zero
         // timeval there means "block forever": below 1 µs, only poll.
         if timeout < Duration::from_micros(1) {
             return self.poll();
         }
         let mut rung = false;
-        match self.port.timed_wait(|_| rung = true, timeout) {
+        match port.timed_wait(|_| rung = true, timeout) {
             Ok(_) => {}
             Err(iceoryx2::port::listener::ListenerWaitError::InterruptSignal) => return Ok(false),
             Err(e) => {
@@ -508,11 +525,11 @@ where
             }
         }
         // Coalesce whatever else arrived meanwhile.
-        let _ = self.port.try_wait(|_| rung = true);
+        let _ = port.try_wait(|_| rung = true);
         Ok(rung)
     }
 
-    /// `ppoll` on the listener's file descriptor (a high-resolution timer) instead of the
+    /// `ppoll` on the listeners' file descriptors (a high-resolution timer) instead of the
     /// socket receive timeout, whose resolution is the scheduler tick.
     ///
     /// The event is more than its descriptor: a shared-memory state tells notifiers whether a
@@ -520,27 +537,33 @@ where
     /// notifications can leave that state "pending" with an empty socket (a notifier slipped in
     /// between the listener's two steps); polling the descriptor then would sleep through every
     /// later ring until the timeout. So the pending state is consumed first, through the
-    /// listener's own non-blocking wait, and the descriptor is polled only when nothing is
+    /// listener's own non-blocking wait, and the descriptors are polled only when nothing is
     /// pending.
     #[allow(unsafe_code)]
     fn wait_precise(&self, timeout: Duration) -> Result<bool, IpcError> {
         if self.poll()? {
             return Ok(true);
         }
-        // SAFETY: the descriptor is owned by the listener, which outlives this call; it is
-        // only borrowed for the poll below and never closed or duplicated here.
-        let raw = unsafe { self.port.file_descriptor().native_handle() };
-        // SAFETY: `raw` is open for the whole borrow (see above).
-        let fd = unsafe { rustix::fd::BorrowedFd::borrow_raw(raw) };
+        let fds: Vec<rustix::fd::BorrowedFd<'_>> = self
+            .ports
+            .iter()
+            .map(|port| {
+                // SAFETY: the descriptor is owned by the listener, which outlives this call; it
+                // is only borrowed for the poll below and never closed or duplicated here.
+                let raw = unsafe { port.file_descriptor().native_handle() };
+                // SAFETY: `raw` is open for the whole borrow (see above).
+                unsafe { rustix::fd::BorrowedFd::borrow_raw(raw) }
+            })
+            .collect();
         let ts = rustix::time::Timespec {
             tv_sec: i64::try_from(timeout.as_secs()).unwrap_or(i64::MAX),
             tv_nsec: i64::from(timeout.subsec_nanos()),
         };
-        let mut fds = [rustix::event::PollFd::new(
-            &fd,
-            rustix::event::PollFlags::IN,
-        )];
-        match rustix::event::poll(&mut fds, Some(&ts)) {
+        let mut polled: Vec<rustix::event::PollFd<'_>> = fds
+            .iter()
+            .map(|fd| rustix::event::PollFd::new(fd, rustix::event::PollFlags::IN))
+            .collect();
+        match rustix::event::poll(&mut polled, Some(&ts)) {
             Ok(_) | Err(rustix::io::Errno::INTR) => {}
             Err(e) => {
                 return Err(IpcError::Wait {

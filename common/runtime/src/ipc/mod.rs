@@ -101,7 +101,7 @@ pub enum IpcError {
 }
 
 /// Publish–subscribe streams of a run.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Stream {
     Measurement,
     Tampered,
@@ -136,7 +136,7 @@ impl Stream {
 }
 
 /// Wake-up event services, one per process.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum Wake {
     Agent(u32),
     Attacker,
@@ -305,6 +305,9 @@ pub trait Transport: Sized + std::fmt::Debug {
     fn notifier(&self, wake: Wake) -> Result<Self::Bell, IpcError>;
     /// The waker this process blocks on.
     fn waker(&self, wake: Wake) -> Result<Self::Waker, IpcError>;
+    /// One waker on the events of several processes (the bridge between hosts waits, in
+    /// place of the processes of other hosts, for whatever the local ones send them).
+    fn waker_any(&self, wakes: &[Wake]) -> Result<Self::Waker, IpcError>;
     /// Number of subscribers currently connected to `stream`.
     fn subscribers_of<T: Payload>(&self, stream: Stream) -> Result<usize, IpcError>;
     /// Reclaims what the dead nodes of this run (crashed processes) hold; returns how many.

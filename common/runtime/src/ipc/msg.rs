@@ -2,6 +2,7 @@
 //! nalgebra types are not `ZeroCopySend`, so vectors travel as `[f64; MAX_DOF]` plus `dof`.
 
 use iceoryx2::prelude::ZeroCopySend;
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use fdi_common::model::Vector;
 use fdi_common::scenario::MAX_DOF;
@@ -25,7 +26,9 @@ pub fn from_vector<const N: usize>(v: &Vector<N>) -> [f64; MAX_DOF] {
 }
 
 /// A measurement: agent → attacker (clean), attacker → control center (tampered).
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+)]
 #[repr(C)]
 #[type_name("fdi_mas::MeasurementMsg")]
 pub struct MeasurementMsg {
@@ -79,7 +82,9 @@ impl MeasurementMsg {
 }
 
 /// A torque command: control center → agent, stamped with its send time `t_k`.
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+)]
 #[repr(C)]
 #[type_name("fdi_mas::TorqueMsg")]
 pub struct TorqueMsg {
@@ -114,7 +119,9 @@ impl TorqueMsg {
 }
 
 /// Launcher → every process.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+)]
 #[repr(C)]
 #[type_name("fdi_mas::ControlMsg")]
 pub struct ControlMsg {
@@ -131,7 +138,9 @@ impl ControlMsg {
 }
 
 /// Process → launcher.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+)]
 #[repr(C)]
 #[type_name("fdi_mas::StatusMsg")]
 pub struct StatusMsg {
@@ -161,7 +170,9 @@ impl StatusMsg {
 
 /// A monitor's verdict on one tick of one agent: monitor program → control center, one per
 /// agent and tick, in tick order (docs/protocol.md).
-#[derive(Debug, Clone, Copy, PartialEq, ZeroCopySend)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+)]
 #[repr(C)]
 #[type_name("fdi_mas::AlarmMsg")]
 pub struct AlarmMsg {

@@ -1,0 +1,1082 @@
+//! The network side of the transport: a run's services carried between hosts over Zenoh, and
+//! the few Zenoh calls the launcher and `fdi-launch serve` make to find each other. The only
+//! code that calls Zenoh (docs/multi-host.md).
+//!
+//! Inside a host the run's processes talk over shared memory as on one host; they never know
+//! the run is split. On each host a [`Bridge`] stands in for the processes of the other hosts:
+//! it listens on their wake-up events, so a local process that publishes for one of them wakes
+//! the bridge, which drains the stream and puts each payload's bytes (its `#[repr(C)]` layout)
+//! on Zenoh; on the receiving host the bridge publishes them into shared memory and only then
+//! rings the local receiver, so a wake-up never overtakes its data. Which streams go out and
+//! which come in on a host is decided by [`plan`] from where each process runs.
+//!
+//! Zenoh sample delivery is reliable and in order per key; publishers block rather than drop
+//! (`CongestionControl::Block`), so lockstep across hosts loses nothing and stays
+//! deterministic. A cut network is noticed through Zenoh's liveliness tokens, which vanish when
+//! the session's lease ([`LEASE`]) runs out.
+//!
+//! Keys (all built in [`keys`]), under `fdi-mas/`: `host/<name>` (a serve's liveliness),
+//! `host/<name>/run` (its run requests), and per run `run/<prefix>/...`: `s/<service>` (the
+//! services), `coordinator` (the launcher's liveliness), `clock`, `events/<host>`,
+//! `cmd/<host>`, `traces/<host>`.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{mpsc, Arc};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use zenoh::Wait as _;
+use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
+
+use crate::ipc::{
+    AlarmMsg, Bell as _, ControlMsg, Inbox as _, IpcError, MeasurementMsg, Outbox as _, Payload,
+    Sizing, Source, StatusMsg, Stream, TorqueMsg, Transport, Wake, Waker as _,
+};
+
+/// How long a host may be silent before Zenoh declares it gone (its liveliness tokens vanish):
+/// the session lease. Zenoh's own default is 10 s.
+pub const LEASE: Duration = Duration::from_secs(1);
+
+/// Errors of the network side name the key or the host concerned.
+#[derive(Debug, thiserror::Error)]
+pub enum NetError {
+    #[error("opening the Zenoh session ({what}): {source}")]
+    Session {
+        what: String,
+        #[source]
+        source: Source,
+    },
+    #[error("Zenoh key `{key}`: {source}")]
+    Key {
+        key: String,
+        #[source]
+        source: Source,
+    },
+    #[error("{message}")]
+    Refused { key: String, message: String },
+    #[error("no answer on `{key}` within {:.1} s", .timeout.as_secs_f64())]
+    NoAnswer { key: String, timeout: Duration },
+    #[error("frame on `{key}`: {what}")]
+    Frame { key: String, what: String },
+    #[error(transparent)]
+    Ipc(#[from] IpcError),
+}
+
+/// Checks a host name: 1 to 40 bytes of ASCII letters, digits, `_` and `-` (it becomes part of
+/// Zenoh keys and of labels).
+pub fn check_host_name(name: &str) -> Result<(), String> {
+    if name.is_empty() || name.len() > 40 {
+        return Err(format!("host name `{name}` must be 1..=40 bytes"));
+    }
+    if !name
+        .bytes()
+        .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-')
+    {
+        return Err(format!(
+            "host name `{name}`: only ASCII letters, digits, `_` and `-` are allowed"
+        ));
+    }
+    Ok(())
+}
+
+/// Checks a Zenoh endpoint of a host: `tcp/<address>:<port>` (the only transport built in).
+pub fn check_endpoint(endpoint: &str) -> Result<(), String> {
+    let Some(rest) = endpoint.strip_prefix("tcp/") else {
+        return Err(format!(
+            "endpoint `{endpoint}` must be `tcp/<address>:<port>` (only TCP is built in)"
+        ));
+    };
+    let Some((host, port)) = rest.rsplit_once(':') else {
+        return Err(format!("endpoint `{endpoint}` has no `:<port>`"));
+    };
+    if host.is_empty() || port.parse::<u16>().map_or(true, |p| p == 0) {
+        return Err(format!(
+            "endpoint `{endpoint}` must be `tcp/<address>:<port>` with a port in 1..=65535"
+        ));
+    }
+    Ok(())
+}
+
+/// The keys of the network side, built in one place.
+pub mod keys {
+    use crate::ipc::Stream;
+
+    /// Liveliness token of the serve of host `name`.
+    pub fn host(name: &str) -> String {
+        format!("fdi-mas/host/{name}")
+    }
+
+    /// Where the serve of host `name` takes run requests.
+    pub fn host_run(name: &str) -> String {
+        format!("fdi-mas/host/{name}/run")
+    }
+
+    /// A key of the run `prefix`: `coordinator`, `clock`, `events/<host>`, ...
+    pub fn run(prefix: &str, what: &str) -> String {
+        format!("fdi-mas/run/{prefix}/{what}")
+    }
+
+    /// The service `stream` of the run `prefix`.
+    pub fn stream(prefix: &str, stream: Stream) -> String {
+        format!("fdi-mas/run/{prefix}/s/{}", stream.service_name())
+    }
+}
+
+/// The Zenoh session of a host: where it listens, whom it connects to.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct NetConfig {
+    /// Endpoints this host listens on (`tcp/10.0.0.2:7447`).
+    pub listen: Vec<String>,
+    /// Endpoints of the hosts it connects to.
+    pub connect: Vec<String>,
+}
+
+impl NetConfig {
+    fn zenoh(&self) -> Result<zenoh::Config, NetError> {
+        let mut c = zenoh::Config::default();
+        let set = |c: &mut zenoh::Config, key: &str, value: String| {
+            c.insert_json5(key, &value)
+                .map_err(|source| NetError::Session {
+                    what: format!("setting `{key}` to {value}"),
+                    source,
+                })
+        };
+        let list = |v: &[String], suffix: &str| {
+            let items: Vec<String> = v.iter().map(|e| format!("\"{e}{suffix}\"")).collect();
+            format!("[{}]", items.join(", "))
+        };
+        set(&mut c, "mode", "\"peer\"".into())?;
+        // Only the endpoints named: no multicast scouting on a lab network.
+        set(&mut c, "scouting/multicast/enabled", "false".into())?;
+        set(&mut c, "listen/endpoints", list(&self.listen, ""))?;
+        // Reconnect quickly once a cut network is back (Zenoh's default waits seconds).
+        set(
+            &mut c,
+            "connect/endpoints",
+            list(
+                &self.connect,
+                "#retry_period_init_ms=100;retry_period_max_ms=250",
+            ),
+        )?;
+        set(
+            &mut c,
+            "transport/link/tx/lease",
+            LEASE.as_millis().to_string(),
+        )?;
+        set(&mut c, "adminspace/enabled", "false".into())?;
+        Ok(c)
+    }
+}
+
+/// A host's Zenoh session.
+#[derive(Debug, Clone)]
+pub struct Net {
+    session: zenoh::Session,
+}
+
+/// A liveliness token: while it is held (and the network is up), the key is alive.
+#[derive(Debug)]
+pub struct Token(#[allow(dead_code)] zenoh::liveliness::LivelinessToken);
+
+/// A subscription (payloads handed to a callback), held for as long as it is wanted.
+#[derive(Debug)]
+pub struct Subscription(#[allow(dead_code)] zenoh::pubsub::Subscriber<()>);
+
+/// A queryable answered by a callback, held for as long as it answers.
+#[derive(Debug)]
+pub struct Answering(#[allow(dead_code)] zenoh::query::Queryable<()>);
+
+/// Sends payloads on one key (reliable, in order, blocking rather than dropping).
+#[derive(Debug)]
+pub struct NetOutbox {
+    key: String,
+    publisher: zenoh::pubsub::Publisher<'static>,
+}
+
+impl NetOutbox {
+    pub fn put(&self, bytes: &[u8]) -> Result<(), NetError> {
+        self.publisher
+            .put(bytes.to_vec())
+            .wait()
+            .map_err(|source| NetError::Key {
+                key: self.key.clone(),
+                source,
+            })
+    }
+}
+
+/// Requests taken one at a time by the caller (`fdi-launch serve`'s run requests).
+#[derive(Debug)]
+pub struct Requests {
+    key: String,
+    queryable: zenoh::query::Queryable<zenoh::handlers::FifoChannelHandler<zenoh::query::Query>>,
+}
+
+/// One request: its body, answered once.
+#[derive(Debug)]
+pub struct Request(zenoh::query::Query);
+
+impl Requests {
+    /// The next request, or None after `timeout`.
+    pub fn next(&self, timeout: Duration) -> Result<Option<Request>, NetError> {
+        self.queryable
+            .recv_timeout(timeout)
+            .map(|q| q.map(Request))
+            .map_err(|source| NetError::Key {
+                key: self.key.clone(),
+                source,
+            })
+    }
+}
+
+impl Request {
+    pub fn body(&self) -> Vec<u8> {
+        self.0
+            .payload()
+            .map(|p| p.to_bytes().into_owned())
+            .unwrap_or_default()
+    }
+
+    /// Answers with `Ok(body)` or refuses with a message.
+    pub fn answer(self, answer: Result<Vec<u8>, String>) -> Result<(), NetError> {
+        let key = self.0.key_expr().to_string();
+        let sent = match answer {
+            Ok(body) => self.0.reply(self.0.key_expr().clone(), body).wait(),
+            Err(message) => self.0.reply_err(message).wait(),
+        };
+        sent.map_err(|source| NetError::Key { key, source })
+    }
+}
+
+impl Net {
+    /// Opens the session; fails naming the endpoint that cannot be listened on.
+    pub fn open(config: &NetConfig) -> Result<Self, NetError> {
+        let session = zenoh::open(config.zenoh()?)
+            .wait()
+            .map_err(|source| NetError::Session {
+                what: format!(
+                    "listening on [{}], connecting to [{}]",
+                    config.listen.join(", "),
+                    config.connect.join(", ")
+                ),
+                source,
+            })?;
+        Ok(Self { session })
+    }
+
+    fn key_error(key: &str) -> impl FnOnce(Source) -> NetError + '_ {
+        move |source| NetError::Key {
+            key: key.to_string(),
+            source,
+        }
+    }
+
+    /// Declares `key` alive for as long as the token is held.
+    pub fn token(&self, key: &str) -> Result<Token, NetError> {
+        self.session
+            .liveliness()
+            .declare_token(key.to_string())
+            .wait()
+            .map(Token)
+            .map_err(Self::key_error(key))
+    }
+
+    /// Whether some host declares `key` alive, asked with a bounded wait.
+    pub fn alive(&self, key: &str, timeout: Duration) -> Result<bool, NetError> {
+        let replies = self
+            .session
+            .liveliness()
+            .get(key.to_string())
+            .timeout(timeout)
+            .wait()
+            .map_err(Self::key_error(key))?;
+        while let Ok(reply) = replies.recv() {
+            if reply.result().is_ok() {
+                return Ok(true);
+            }
+        }
+        Ok(false)
+    }
+
+    /// Calls `on_change(true)` when `key` becomes alive (at once if it is) and
+    /// `on_change(false)` when it is gone (its host closed it, died, or its network was cut
+    /// for longer than the lease).
+    pub fn watch(
+        &self,
+        key: &str,
+        on_change: impl Fn(bool) + Send + Sync + 'static,
+    ) -> Result<Subscription, NetError> {
+        self.session
+            .liveliness()
+            .declare_subscriber(key.to_string())
+            .history(true)
+            .callback(move |sample| on_change(sample.kind() == zenoh::sample::SampleKind::Put))
+            .wait()
+            .map(Subscription)
+            .map_err(Self::key_error(key))
+    }
+
+    /// A publisher on `key`.
+    pub fn outbox(&self, key: &str) -> Result<NetOutbox, NetError> {
+        let publisher = self
+            .session
+            .declare_publisher(key.to_string())
+            .congestion_control(zenoh::qos::CongestionControl::Block)
+            .wait()
+            .map_err(Self::key_error(key))?;
+        Ok(NetOutbox {
+            key: key.into(),
+            publisher,
+        })
+    }
+
+    /// Hands every payload put on `key` to `f` (on a Zenoh thread: keep it short).
+    pub fn subscribe(
+        &self,
+        key: &str,
+        f: impl Fn(Vec<u8>) + Send + Sync + 'static,
+    ) -> Result<Subscription, NetError> {
+        self.session
+            .declare_subscriber(key.to_string())
+            .callback(move |sample| f(sample.payload().to_bytes().into_owned()))
+            .wait()
+            .map(Subscription)
+            .map_err(Self::key_error(key))
+    }
+
+    /// Answers every request on `key` with `f` (on a Zenoh thread).
+    pub fn answer(
+        &self,
+        key: &str,
+        f: impl Fn(&[u8]) -> Result<Vec<u8>, String> + Send + Sync + 'static,
+    ) -> Result<Answering, NetError> {
+        self.session
+            .declare_queryable(key.to_string())
+            .callback(move |query| {
+                let body = query
+                    .payload()
+                    .map(|p| p.to_bytes().into_owned())
+                    .unwrap_or_default();
+                let _ = match f(&body) {
+                    Ok(reply) => query.reply(query.key_expr().clone(), reply).wait(),
+                    Err(message) => query.reply_err(message).wait(),
+                };
+            })
+            .wait()
+            .map(Answering)
+            .map_err(Self::key_error(key))
+    }
+
+    /// Requests on `key`, taken by the caller one at a time ([`Requests::next`]).
+    pub fn requests(&self, key: &str) -> Result<Requests, NetError> {
+        let queryable = self
+            .session
+            .declare_queryable(key.to_string())
+            .wait()
+            .map_err(Self::key_error(key))?;
+        Ok(Requests {
+            key: key.into(),
+            queryable,
+        })
+    }
+
+    /// Sends `body` to whoever answers `key` and returns its answer; a refusal is
+    /// [`NetError::Refused`] with the answerer's message.
+    pub fn request(&self, key: &str, body: &[u8], timeout: Duration) -> Result<Vec<u8>, NetError> {
+        let replies = self
+            .session
+            .get(key.to_string())
+            .payload(body.to_vec())
+            .timeout(timeout)
+            .wait()
+            .map_err(Self::key_error(key))?;
+        match replies.recv() {
+            Ok(reply) => match reply.into_result() {
+                Ok(sample) => Ok(sample.payload().to_bytes().into_owned()),
+                Err(e) => Err(NetError::Refused {
+                    key: key.into(),
+                    message: String::from_utf8_lossy(&e.payload().to_bytes()).into_owned(),
+                }),
+            },
+            Err(_) => Err(NetError::NoAnswer {
+                key: key.into(),
+                timeout,
+            }),
+        }
+    }
+
+    /// Answers clock requests on `key` with this host's CLOCK_MONOTONIC (ns, little endian).
+    pub fn answer_clock(&self, key: &str) -> Result<Answering, NetError> {
+        self.answer(key, |_| {
+            Ok(crate::ipc::monotonic_ns().to_le_bytes().to_vec())
+        })
+    }
+
+    /// Estimates the offset of the clock answering on `key` from this host's CLOCK_MONOTONIC
+    /// by `rounds` round trips, keeping the fastest (its midpoint is the least uncertain).
+    pub fn clock_offset(&self, key: &str, rounds: usize) -> Result<ClockOffset, NetError> {
+        let mut best: Option<ClockOffset> = None;
+        for _ in 0..rounds.max(1) {
+            let t0 = crate::ipc::monotonic_ns();
+            let answer = self.request(key, &[], Duration::from_secs(5))?;
+            let t1 = crate::ipc::monotonic_ns();
+            let Ok(bytes) = <[u8; 8]>::try_from(answer.as_slice()) else {
+                return Err(NetError::Frame {
+                    key: key.into(),
+                    what: format!("a clock answer of {} bytes, not 8", answer.len()),
+                });
+            };
+            let theirs = u64::from_le_bytes(bytes);
+            let rtt_ns = t1.saturating_sub(t0);
+            let mid = t0 / 2 + t1 / 2;
+            let offset_ns = i64::try_from(i128::from(theirs) - i128::from(mid)).unwrap_or(0);
+            if best.is_none_or(|b| rtt_ns < b.rtt_ns) {
+                best = Some(ClockOffset { offset_ns, rtt_ns });
+            }
+        }
+        best.ok_or_else(|| NetError::NoAnswer {
+            key: key.into(),
+            timeout: Duration::from_secs(5),
+        })
+    }
+}
+
+/// A remote clock against this host's: theirs = ours + `offset_ns`, known to within half of
+/// `rtt_ns`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ClockOffset {
+    pub offset_ns: i64,
+    pub rtt_ns: u64,
+}
+
+/// Where the processes of a split run are: which host each process's wake-up event (its
+/// identity in the run) belongs to. [`Wake::Launcher`] is on the coordinating host.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Layout {
+    pub host_of: BTreeMap<Wake, String>,
+}
+
+/// What the bridge of one host carries.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub struct HostPlan {
+    /// Streams published on this host for processes elsewhere.
+    pub outbound: Vec<Stream>,
+    /// The wake-up events of those processes: the bridge listens on them in their place.
+    pub remote_wakes: Vec<Wake>,
+    /// Streams published elsewhere for processes here, with the local wake-up events rung
+    /// after each arrival.
+    pub inbound: Vec<(Stream, Vec<Wake>)>,
+}
+
+impl HostPlan {
+    pub fn is_empty(&self) -> bool {
+        self.outbound.is_empty() && self.inbound.is_empty()
+    }
+}
+
+/// The streams of a run whose processes are `procs`: (stream, publishers, consumers).
+pub fn streams(procs: &[Wake]) -> Vec<(Stream, Vec<Wake>, Vec<Wake>)> {
+    let has = |w: Wake| procs.contains(&w);
+    let only = |ws: &[Wake]| ws.iter().copied().filter(|w| has(*w)).collect::<Vec<_>>();
+    let agents: Vec<u32> = procs
+        .iter()
+        .filter_map(|w| match w {
+            Wake::Agent(id) => Some(*id),
+            _ => None,
+        })
+        .collect();
+    let agent_wakes: Vec<Wake> = agents.iter().map(|&id| Wake::Agent(id)).collect();
+    let processes: Vec<Wake> = procs
+        .iter()
+        .copied()
+        .filter(|w| *w != Wake::Launcher)
+        .collect();
+    let mut out = vec![
+        (
+            Stream::Measurement,
+            agent_wakes.clone(),
+            only(&[Wake::Attacker]),
+        ),
+        (
+            Stream::Tampered,
+            only(&[Wake::Attacker]),
+            only(&[Wake::Center, Wake::Monitor]),
+        ),
+        (
+            Stream::Actuation,
+            only(&[Wake::Center]),
+            only(&[Wake::Attacker]),
+        ),
+        (Stream::Control, only(&[Wake::Launcher]), processes.clone()),
+        (Stream::Status, processes, only(&[Wake::Launcher])),
+        (
+            Stream::ExternalIn,
+            only(&[Wake::Attacker]),
+            only(&[Wake::ExternalAttacker]),
+        ),
+        (
+            Stream::ExternalOut,
+            only(&[Wake::ExternalAttacker]),
+            only(&[Wake::Attacker]),
+        ),
+        (Stream::Alarm, only(&[Wake::Monitor]), only(&[Wake::Center])),
+    ];
+    for &id in &agents {
+        out.push((
+            Stream::Torque(id),
+            only(&[Wake::Center]),
+            only(&[Wake::Agent(id), Wake::Monitor]),
+        ));
+    }
+    out.retain(|(_, p, c)| !p.is_empty() && !c.is_empty());
+    out
+}
+
+/// What the bridge of host `here` carries in the run laid out as `layout`. Errors when a
+/// stream would have to go both out of and into one host (a loop the bridges could not break).
+pub fn plan(layout: &Layout, here: &str) -> Result<HostPlan, String> {
+    let procs: Vec<Wake> = layout.host_of.keys().copied().collect();
+    let on = |w: &Wake, host: &str| layout.host_of.get(w).is_some_and(|h| h == host);
+    let mut plan = HostPlan::default();
+    let mut remote: BTreeSet<Wake> = BTreeSet::new();
+    for (stream, pubs, cons) in streams(&procs) {
+        let out = pubs.iter().any(|p| on(p, here)) && cons.iter().any(|c| !on(c, here));
+        let inb = cons.iter().any(|c| on(c, here)) && pubs.iter().any(|p| !on(p, here));
+        if out && inb {
+            return Err(format!(
+                "`{}` would go both out of and into host `{here}`: its publishers and its \
+                 receivers are each split over hosts",
+                stream.service_name()
+            ));
+        }
+        if out {
+            plan.outbound.push(stream);
+            remote.extend(cons.iter().copied().filter(|c| !on(c, here)));
+        }
+        if inb {
+            let local: Vec<Wake> = cons.iter().copied().filter(|c| on(c, here)).collect();
+            plan.inbound.push((stream, local));
+        }
+    }
+    plan.remote_wakes = remote.into_iter().collect();
+    Ok(plan)
+}
+
+/// A payload the bridge carries: its bytes are its layout (no padding: checked by zerocopy),
+/// and its CLOCK_MONOTONIC stamps are moved to the receiving host's clock.
+trait Carried: Payload + IntoBytes + FromBytes + Immutable + KnownLayout {
+    /// Adds `by` ns to every stamp that is set (non-zero).
+    fn shift_clock(&mut self, by: i64);
+}
+
+fn shifted(ns: &mut u64, by: i64) {
+    if *ns != 0 {
+        *ns = ns.saturating_add_signed(by);
+    }
+}
+
+impl Carried for MeasurementMsg {
+    fn shift_clock(&mut self, by: i64) {
+        for ns in [
+            &mut self.agent_sent_ns,
+            &mut self.attacker_received_ns,
+            &mut self.attacker_sent_ns,
+        ] {
+            shifted(ns, by);
+        }
+    }
+}
+
+impl Carried for TorqueMsg {
+    fn shift_clock(&mut self, by: i64) {
+        for ns in [
+            &mut self.agent_sent_ns,
+            &mut self.attacker_received_ns,
+            &mut self.attacker_sent_ns,
+            &mut self.center_received_ns,
+            &mut self.center_sent_ns,
+        ] {
+            shifted(ns, by);
+        }
+    }
+}
+
+impl Carried for ControlMsg {
+    fn shift_clock(&mut self, by: i64) {
+        shifted(&mut self.epoch_ns, by);
+    }
+}
+
+impl Carried for StatusMsg {
+    fn shift_clock(&mut self, _by: i64) {}
+}
+
+impl Carried for AlarmMsg {
+    fn shift_clock(&mut self, by: i64) {
+        shifted(&mut self.monitor_sent_ns, by);
+    }
+}
+
+/// Decodes a frame of `T` (exactly its size) and moves its stamps by `by` ns.
+fn decode<T: Carried>(key: &str, bytes: &[u8], by: i64) -> Result<T, NetError> {
+    let mut value = T::read_from_bytes(bytes).map_err(|_| NetError::Frame {
+        key: key.into(),
+        what: format!(
+            "{} bytes where {} are {} bytes (do both hosts run the same fdi-mas?)",
+            bytes.len(),
+            std::any::type_name::<T>(),
+            std::mem::size_of::<T>()
+        ),
+    })?;
+    value.shift_clock(by);
+    Ok(value)
+}
+
+/// Encodes `value` with its stamps moved by `by` ns.
+fn encode<T: Carried>(mut value: T, by: i64) -> Vec<u8> {
+    value.shift_clock(by);
+    value.as_bytes().to_vec()
+}
+
+/// What a bridge carried.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct BridgeCounts {
+    /// Payloads put on the network.
+    pub sent: u64,
+    /// Payloads received and published locally.
+    pub received: u64,
+}
+
+/// The local receiving side of an outbound stream, by payload type.
+enum OutPort<X: Transport> {
+    Measurement(X::Inbox<MeasurementMsg>),
+    Torque(X::Inbox<TorqueMsg>),
+    Control(X::Inbox<ControlMsg>),
+    Status(X::Inbox<StatusMsg>),
+    Alarm(X::Inbox<AlarmMsg>),
+}
+
+/// The local publishing side of an inbound stream, by payload type.
+enum InPort<X: Transport> {
+    Measurement(X::Outbox<MeasurementMsg>),
+    Torque(X::Outbox<TorqueMsg>),
+    Control(X::Outbox<ControlMsg>),
+    Status(X::Outbox<StatusMsg>),
+    Alarm(X::Outbox<AlarmMsg>),
+}
+
+#[derive(Clone, Copy)]
+enum Kind {
+    Measurement,
+    Torque,
+    Control,
+    Status,
+    Alarm,
+}
+
+fn kind(stream: Stream) -> Kind {
+    match stream {
+        Stream::Measurement | Stream::Tampered | Stream::ExternalIn | Stream::ExternalOut => {
+            Kind::Measurement
+        }
+        Stream::Torque(_) | Stream::Actuation => Kind::Torque,
+        Stream::Control => Kind::Control,
+        Stream::Status => Kind::Status,
+        Stream::Alarm => Kind::Alarm,
+    }
+}
+
+impl<X: Transport> OutPort<X> {
+    fn open(t: &X, stream: Stream) -> Result<Self, IpcError> {
+        Ok(match kind(stream) {
+            Kind::Measurement => Self::Measurement(t.subscriber(stream)?),
+            Kind::Torque => Self::Torque(t.subscriber(stream)?),
+            Kind::Control => Self::Control(t.subscriber(stream)?),
+            Kind::Status => Self::Status(t.subscriber(stream)?),
+            Kind::Alarm => Self::Alarm(t.subscriber(stream)?),
+        })
+    }
+
+    fn drain(&self, by: i64, mut f: impl FnMut(Vec<u8>)) -> Result<usize, IpcError> {
+        match self {
+            Self::Measurement(p) => p.drain(|m| f(encode(m, by))),
+            Self::Torque(p) => p.drain(|m| f(encode(m, by))),
+            Self::Control(p) => p.drain(|m| f(encode(m, by))),
+            Self::Status(p) => p.drain(|m| f(encode(m, by))),
+            Self::Alarm(p) => p.drain(|m| f(encode(m, by))),
+        }
+    }
+}
+
+impl<X: Transport> InPort<X> {
+    fn open(t: &X, stream: Stream) -> Result<Self, IpcError> {
+        Ok(match kind(stream) {
+            Kind::Measurement => Self::Measurement(t.publisher(stream)?),
+            Kind::Torque => Self::Torque(t.publisher(stream)?),
+            Kind::Control => Self::Control(t.publisher(stream)?),
+            Kind::Status => Self::Status(t.publisher(stream)?),
+            Kind::Alarm => Self::Alarm(t.publisher(stream)?),
+        })
+    }
+
+    fn publish(&self, key: &str, bytes: &[u8], by: i64) -> Result<(), NetError> {
+        match self {
+            Self::Measurement(p) => p.send(decode(key, bytes, by)?)?,
+            Self::Torque(p) => p.send(decode(key, bytes, by)?)?,
+            Self::Control(p) => p.send(decode(key, bytes, by)?)?,
+            Self::Status(p) => p.send(decode(key, bytes, by)?)?,
+            Self::Alarm(p) => p.send(decode(key, bytes, by)?)?,
+        };
+        Ok(())
+    }
+}
+
+/// How long a bridge thread blocks before it looks at its stop flag (and, outbound, drains
+/// its streams anyway: a wake-up it missed costs at most this much).
+const BRIDGE_POLL: Duration = Duration::from_millis(20);
+
+/// The bridge of one host for one run: two threads, one carrying the local streams out, one
+/// carrying the other hosts' in.
+#[derive(Debug)]
+pub struct Bridge {
+    stop: Arc<AtomicBool>,
+    threads: Vec<JoinHandle<Result<(), NetError>>>,
+    sent: Arc<AtomicU64>,
+    received: Arc<AtomicU64>,
+    _subscriptions: Vec<Subscription>,
+}
+
+impl Bridge {
+    /// Starts the bridge of `plan` for the run `prefix` on this host's transport `X`. Stamps
+    /// travel in the coordinating host's clock, which is ours + `offset_ns` (0 on that host):
+    /// ours are moved to it on the way out, and back to ours on the way in. Returns once its wakers and ports exist: the
+    /// local processes may be started then, and none of what they send is lost.
+    pub fn start<X: Transport + 'static>(
+        net: &Net,
+        prefix: &str,
+        sizing: Sizing,
+        plan: &HostPlan,
+        offset_ns: i64,
+    ) -> Result<Self, NetError> {
+        let stop = Arc::new(AtomicBool::new(false));
+        let sent = Arc::new(AtomicU64::new(0));
+        let received = Arc::new(AtomicU64::new(0));
+        let mut threads = Vec::new();
+        let mut subscriptions = Vec::new();
+
+        if !plan.outbound.is_empty() {
+            let outboxes: Vec<(Stream, NetOutbox)> = plan
+                .outbound
+                .iter()
+                .map(|&s| Ok((s, net.outbox(&keys::stream(prefix, s))?)))
+                .collect::<Result<_, NetError>>()?;
+            let (ready_tx, ready_rx) = mpsc::channel();
+            let (prefix, wakes) = (prefix.to_string(), plan.remote_wakes.clone());
+            let (stop, sent) = (stop.clone(), sent.clone());
+            let thread = std::thread::Builder::new()
+                .name("bridge out".into())
+                .spawn(move || {
+                    let opened = (|| {
+                        let t = X::open(&prefix, "bridge-out", sizing)?;
+                        let waker = t.waker_any(&wakes)?;
+                        let ports = outboxes
+                            .iter()
+                            .map(|(s, _)| OutPort::<X>::open(&t, *s))
+                            .collect::<Result<Vec<_>, IpcError>>()?;
+                        Ok::<_, IpcError>((t, waker, ports))
+                    })();
+                    let (_t, waker, ports) = match opened {
+                        Ok(x) => {
+                            let _ = ready_tx.send(Ok(()));
+                            x
+                        }
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(e));
+                            return Ok(());
+                        }
+                    };
+                    loop {
+                        let stopping = stop.load(Ordering::SeqCst);
+                        waker.wait(BRIDGE_POLL)?;
+                        for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
+                            let mut failed = None;
+                            port.drain(offset_ns, |bytes| {
+                                if failed.is_none() {
+                                    match outbox.put(&bytes) {
+                                        Ok(()) => {
+                                            sent.fetch_add(1, Ordering::Relaxed);
+                                        }
+                                        Err(e) => failed = Some(e),
+                                    }
+                                }
+                            })?;
+                            if let Some(e) = failed {
+                                return Err(e);
+                            }
+                        }
+                        // One more drain after the stop was asked: what was sent before it
+                        // leaves.
+                        if stopping {
+                            return Ok(());
+                        }
+                    }
+                })
+                .map_err(|e| NetError::Ipc(thread_error(e)))?;
+            threads.push(thread);
+            wait_ready(&ready_rx)?;
+        }
+
+        if !plan.inbound.is_empty() {
+            let (tx, rx) = mpsc::channel::<(usize, Vec<u8>)>();
+            let (ready_tx, ready_rx) = mpsc::channel();
+            let inbound = plan.inbound.clone();
+            let keys: Vec<String> = inbound
+                .iter()
+                .map(|(s, _)| keys::stream(prefix, *s))
+                .collect();
+            let thread_keys = keys.clone();
+            let thread_prefix = prefix.to_string();
+            let (stop, received) = (stop.clone(), received.clone());
+            let thread = std::thread::Builder::new()
+                .name("bridge in".into())
+                .spawn(move || {
+                    let opened = (|| {
+                        let t = X::open(&thread_prefix, "bridge-in", sizing)?;
+                        let ports = inbound
+                            .iter()
+                            .map(|(s, _)| InPort::<X>::open(&t, *s))
+                            .collect::<Result<Vec<_>, IpcError>>()?;
+                        Ok::<_, IpcError>((t, ports))
+                    })();
+                    let (t, ports) = match opened {
+                        Ok(x) => {
+                            let _ = ready_tx.send(Ok(()));
+                            x
+                        }
+                        Err(e) => {
+                            let _ = ready_tx.send(Err(e));
+                            return Ok(());
+                        }
+                    };
+                    // Bells are made at the first ring: the local processes' wakers exist by
+                    // then (nothing arrives for a process before the start, which follows its
+                    // ready).
+                    let mut bells: BTreeMap<Wake, X::Bell> = BTreeMap::new();
+                    let mut due: BTreeSet<Wake> = BTreeSet::new();
+                    loop {
+                        let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
+                            Ok(frame) => Some(frame),
+                            Err(mpsc::RecvTimeoutError::Timeout) => None,
+                            Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
+                        };
+                        for (i, bytes) in first.into_iter().chain(rx.try_iter()) {
+                            ports[i].publish(&thread_keys[i], &bytes, offset_ns.wrapping_neg())?;
+                            received.fetch_add(1, Ordering::Relaxed);
+                            due.extend(inbound[i].1.iter().copied());
+                        }
+                        for wake in std::mem::take(&mut due) {
+                            if let std::collections::btree_map::Entry::Vacant(e) = bells.entry(wake)
+                            {
+                                e.insert(t.notifier(wake)?);
+                            }
+                            if let Some(bell) = bells.get(&wake) {
+                                bell.ring()?;
+                            }
+                        }
+                        if stop.load(Ordering::SeqCst) {
+                            return Ok(());
+                        }
+                    }
+                })
+                .map_err(|e| NetError::Ipc(thread_error(e)))?;
+            threads.push(thread);
+            wait_ready(&ready_rx)?;
+            for (i, key) in keys.iter().enumerate() {
+                let tx = tx.clone();
+                subscriptions.push(net.subscribe(key, move |bytes| {
+                    let _ = tx.send((i, bytes));
+                })?);
+            }
+        }
+        Ok(Self {
+            stop,
+            threads,
+            sent,
+            received,
+            _subscriptions: subscriptions,
+        })
+    }
+
+    /// What it carried so far.
+    pub fn counts(&self) -> BridgeCounts {
+        BridgeCounts {
+            sent: self.sent.load(Ordering::Relaxed),
+            received: self.received.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Stops the bridge (what was published locally before is still sent); the first error a
+    /// thread met, if any.
+    pub fn stop(mut self) -> Result<BridgeCounts, NetError> {
+        self.stop.store(true, Ordering::SeqCst);
+        let mut first = Ok(());
+        for t in self.threads.drain(..) {
+            let r = t
+                .join()
+                .unwrap_or_else(|_| Err(NetError::Ipc(thread_error("a bridge thread panicked"))));
+            if first.is_ok() {
+                first = r;
+            }
+        }
+        first.map(|()| self.counts())
+    }
+}
+
+impl Drop for Bridge {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        for t in self.threads.drain(..) {
+            let _ = t.join();
+        }
+    }
+}
+
+fn thread_error(e: impl std::fmt::Display) -> IpcError {
+    IpcError::Node {
+        name: "bridge".into(),
+        source: e.to_string().into(),
+    }
+}
+
+fn wait_ready(rx: &mpsc::Receiver<Result<(), IpcError>>) -> Result<(), NetError> {
+    match rx.recv_timeout(Duration::from_secs(10)) {
+        Ok(r) => r.map_err(NetError::Ipc),
+        Err(_) => Err(NetError::Ipc(thread_error(
+            "a bridge thread did not open its ports within 10 s",
+        ))),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn layout(entries: &[(Wake, &str)]) -> Layout {
+        Layout {
+            host_of: entries.iter().map(|(w, h)| (*w, h.to_string())).collect(),
+        }
+    }
+
+    fn split() -> Layout {
+        layout(&[
+            (Wake::Launcher, "control"),
+            (Wake::Center, "control"),
+            (Wake::Attacker, "control"),
+            (Wake::Agent(1), "cell-a"),
+            (Wake::Agent(2), "cell-a"),
+            (Wake::Agent(3), "cell-b"),
+            (Wake::Agent(4), "control"),
+        ])
+    }
+
+    #[test]
+    fn every_stream_between_hosts_goes_out_of_its_publishers_host_into_its_receivers() {
+        let l = split();
+        let hosts = ["control", "cell-a", "cell-b"];
+        let plans: BTreeMap<&str, HostPlan> = hosts
+            .iter()
+            .map(|h| (*h, plan(&l, h).expect("plan")))
+            .collect();
+        let procs: Vec<Wake> = l.host_of.keys().copied().collect();
+        for (stream, pubs, cons) in streams(&procs) {
+            for p in &pubs {
+                for c in &cons {
+                    let (hp, hc) = (&l.host_of[p], &l.host_of[c]);
+                    if hp == hc {
+                        continue;
+                    }
+                    assert!(
+                        plans[hp.as_str()].outbound.contains(&stream),
+                        "{stream:?} out of {hp}"
+                    );
+                    assert!(
+                        plans[hp.as_str()].remote_wakes.contains(c),
+                        "{c:?} listened on {hp}"
+                    );
+                    let inbound = &plans[hc.as_str()].inbound;
+                    assert!(
+                        inbound.iter().any(|(s, w)| *s == stream && w.contains(c)),
+                        "{stream:?} into {hc} rings {c:?}"
+                    );
+                }
+            }
+        }
+        // Nothing crosses where nothing needs to.
+        let cell_b = &plans["cell-b"];
+        assert!(!cell_b.inbound.iter().any(|(s, _)| *s == Stream::Torque(1)));
+        assert!(!plans["control"].outbound.contains(&Stream::Torque(4)));
+        assert_eq!(cell_b.remote_wakes, vec![Wake::Attacker, Wake::Launcher]);
+    }
+
+    #[test]
+    fn a_run_on_one_host_carries_nothing() {
+        let l = layout(&[
+            (Wake::Launcher, "h"),
+            (Wake::Center, "h"),
+            (Wake::Attacker, "h"),
+            (Wake::Agent(1), "h"),
+        ]);
+        assert!(plan(&l, "h").expect("plan").is_empty());
+    }
+
+    #[test]
+    fn an_attacker_on_a_host_of_its_own_gets_the_measurements_and_the_actuation() {
+        let mut l = split();
+        l.host_of.insert(Wake::Attacker, "adversary".into());
+        let p = plan(&l, "adversary").expect("plan");
+        let inbound: Vec<Stream> = p.inbound.iter().map(|(s, _)| *s).collect();
+        assert!(inbound.contains(&Stream::Measurement));
+        assert!(inbound.contains(&Stream::Actuation));
+        assert!(inbound.contains(&Stream::Control));
+        assert_eq!(p.outbound, vec![Stream::Tampered, Stream::Status]);
+    }
+
+    #[test]
+    fn frames_round_trip_with_their_stamps_moved_and_a_wrong_size_is_refused() {
+        let m = MeasurementMsg {
+            seq: 7,
+            agent: 2,
+            dof: 2,
+            t: 0.25,
+            y: [1.5; fdi_common::scenario::MAX_DOF],
+            yd: [-0.5; fdi_common::scenario::MAX_DOF],
+            agent_sent_ns: 1_000,
+            attacker_received_ns: 0,
+            attacker_sent_ns: 3_000,
+            flags: 0,
+            reserved: 0,
+        };
+        let bytes = encode(m, 500);
+        assert_eq!(bytes.len(), std::mem::size_of::<MeasurementMsg>());
+        let back: MeasurementMsg = decode("k", &bytes, -500).expect("decodes");
+        assert_eq!(back, m, "moved there and back, unset stamps stay unset");
+        let shifted: MeasurementMsg = decode("k", &bytes, 0).expect("decodes");
+        assert_eq!(shifted.agent_sent_ns, 1_500);
+        assert_eq!(shifted.attacker_received_ns, 0);
+        let err = decode::<MeasurementMsg>("k", &bytes[1..], 0).expect_err("short frame");
+        assert!(err.to_string().contains("frame on `k`"), "{err}");
+    }
+
+    #[test]
+    fn host_names_and_endpoints_are_checked() {
+        assert!(check_host_name("cell-a").is_ok());
+        assert!(check_host_name("cell a").is_err());
+        assert!(check_host_name("").is_err());
+        assert!(check_endpoint("tcp/10.0.0.2:7447").is_ok());
+        assert!(check_endpoint("tcp/[::1]:7447").is_ok());
+        assert!(check_endpoint("udp/10.0.0.2:7447").is_err());
+        assert!(check_endpoint("tcp/10.0.0.2").is_err());
+        assert!(check_endpoint("tcp/10.0.0.2:0").is_err());
+    }
+}

@@ -1,0 +1,401 @@
+//! `fdi-launch serve`: the other hosts' side of a split run. It waits for runs; for each it
+//! runs the processes the coordinating host gives it on its own shared memory, bridges the
+//! run's services with the other hosts (`fdi_runtime::net::Bridge`), reports what its
+//! processes print and how they end, hands their traces to the coordinator, and removes
+//! everything the run left once it is released, or at once when the coordinator is gone.
+
+use std::os::unix::process::ExitStatusExt;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use fdi_runtime::ipc::{check_prefix, Shm, Transport as _};
+use fdi_runtime::net::{self, keys, Bridge, Layout, Net, NetConfig, NetOutbox, Request};
+use fdi_runtime::process::{sizing_for, Placement, ProcessArgs};
+
+use crate::hosts::{parse_wake, HostCommand, HostEvent, Released, RunReply, RunRequest};
+use crate::supervisor::Supervisor;
+
+/// `fdi-launch serve`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ServeArgs {
+    /// This host's name, as the deployment file names it (`hosts.<name>`).
+    #[arg(long)]
+    pub name: String,
+    /// The Zenoh endpoint to listen on, as the deployment file gives it:
+    /// `tcp/<address>:<port>`.
+    #[arg(long)]
+    pub listen: String,
+    /// Where a run's processes keep their traces until the coordinator has them (a folder per
+    /// run, removed at its release). Default: the system's temporary folder.
+    #[arg(long)]
+    pub work_dir: Option<PathBuf>,
+    /// Serve this many runs, then exit (default: until interrupted).
+    #[arg(long)]
+    pub runs: Option<u64>,
+}
+
+/// How long the coordinator's liveliness may stay unseen once a run is taken.
+const COORDINATOR_SEEN_TIMEOUT: Duration = Duration::from_secs(5);
+/// A local process stopped (SIGSTOP) this long is reported.
+const STALL_LIMIT: Duration = Duration::from_secs(1);
+/// SIGTERM, then SIGKILL after this long, when a run is torn down here.
+const GRACE: Duration = Duration::from_secs(2);
+
+pub fn serve(args: &ServeArgs) -> Result<ExitCode> {
+    net::check_host_name(&args.name).map_err(|e| anyhow::anyhow!("--name: {e}"))?;
+    net::check_endpoint(&args.listen).map_err(|e| anyhow::anyhow!("--listen: {e}"))?;
+    let net = Net::open(&NetConfig {
+        listen: vec![args.listen.clone()],
+        connect: Vec::new(),
+    })
+    .with_context(|| format!("host `{}`", args.name))?;
+    let _token = net.token(&keys::host(&args.name))?;
+    let requests = net.requests(&keys::host_run(&args.name))?;
+    eprintln!(
+        "fdi-launch serve: host `{}` listens on {}; waiting for runs (Ctrl-C stops)",
+        args.name, args.listen
+    );
+    let mut served = 0u64;
+    while crate::interrupt::pending().is_none() {
+        let Some(request) = requests.next(Duration::from_millis(200))? else {
+            continue;
+        };
+        match serve_run(&net, args, request) {
+            Ok(said) => eprintln!("fdi-launch serve: {said}"),
+            Err(e) => eprintln!("fdi-launch serve: {}", crate::cli::describe_error(&e)),
+        }
+        served += 1;
+        if args.runs.is_some_and(|n| served >= n) {
+            break;
+        }
+    }
+    if let Some(sig) = crate::interrupt::take() {
+        eprintln!(
+            "fdi-launch serve: host `{}` stops ({})",
+            args.name,
+            crate::runtime::signal_name(sig)
+        );
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Takes one run request: starts the processes and answers, then follows the run to its
+/// release (or the coordinator's loss). Returns what happened, in a line.
+fn serve_run(net: &Net, args: &ServeArgs, request: Request) -> Result<String> {
+    let parsed = serde_json::from_slice::<RunRequest>(&request.body())
+        .map_err(|e| anyhow::anyhow!("not a run request: {e}"))
+        .and_then(|r| {
+            if r.host != args.name {
+                bail!(
+                    "the request is for host `{}`, this is `{}`",
+                    r.host,
+                    args.name
+                );
+            }
+            if r.version != env!("CARGO_PKG_VERSION") {
+                bail!(
+                    "the coordinator runs fdi-mas {}, this host {}: both must run the same \
+                     (the payloads travel as their layouts)",
+                    r.version,
+                    env!("CARGO_PKG_VERSION")
+                );
+            }
+            check_prefix(&r.prefix)?;
+            Ok(r)
+        });
+    let r = match parsed {
+        Ok(r) => r,
+        Err(e) => {
+            let _ = request.answer(Err(format!("host `{}`: {e:#}", args.name)));
+            return Err(e);
+        }
+    };
+    let run = match HostRun::start(net, args, &r) {
+        Ok(run) => run,
+        Err(e) => {
+            let _ = request.answer(Err(format!(
+                "host `{}`: {}",
+                args.name,
+                crate::cli::describe_error(&e)
+            )));
+            return Err(e.context(format!("run {}", r.prefix)));
+        }
+    };
+    let reply = serde_json::to_vec(&run.reply)?;
+    request.answer(Ok(reply))?;
+    run.follow(net, args)
+}
+
+/// A run's share on this host.
+struct HostRun {
+    prefix: String,
+    coordinator: String,
+    reply: RunReply,
+    procs: Supervisor<()>,
+    bridge: Option<Bridge>,
+    events: Arc<NetOutbox>,
+    /// Per child: its end was reported.
+    reported: Vec<bool>,
+    /// The trace names of its processes (`agent-3`, ...).
+    names: Vec<String>,
+    dir: tempfile::TempDir,
+}
+
+impl HostRun {
+    fn start(net: &Net, args: &ServeArgs, r: &RunRequest) -> Result<Self> {
+        let base = args.work_dir.clone().unwrap_or_else(std::env::temp_dir);
+        std::fs::create_dir_all(&base)
+            .with_context(|| format!("creating the work folder {}", base.display()))?;
+        let dir = tempfile::Builder::new()
+            .prefix(&format!("fdi-serve-{}-", r.prefix))
+            .tempdir_in(&base)
+            .with_context(|| format!("making a run folder in {}", base.display()))?;
+        let scenario = dir.path().join("scenario.toml");
+        std::fs::write(&scenario, &r.scenario).context("writing the run's scenario")?;
+        std::fs::create_dir_all(dir.path().join("traces")).context("making traces/")?;
+        let resolved = fdi_common::scenario::load_file(&scenario)
+            .map_err(|e| anyhow::anyhow!("the run's scenario: {e}"))?;
+        let mut layout = Layout {
+            host_of: Default::default(),
+        };
+        for (word, host) in &r.layout {
+            layout.host_of.insert(parse_wake(word)?, host.clone());
+        }
+        let plan = net::plan(&layout, &args.name).map_err(anyhow::Error::msg)?;
+        let clock = net
+            .clock_offset(&keys::run(&r.prefix, "clock"), 16)
+            .context("measuring the clock against the coordinator's")?;
+        let bridge = Bridge::start::<Shm>(
+            net,
+            &r.prefix,
+            sizing_for(&resolved),
+            &plan,
+            clock.offset_ns,
+        )?;
+        let events = Arc::new(net.outbox(&keys::run(&r.prefix, &format!("events/{}", args.name)))?);
+        let tee_events = events.clone();
+        let mut procs = Supervisor::with_tee(Arc::new(move |line: &str| {
+            let event = HostEvent::Line { text: line.into() };
+            if let Ok(body) = serde_json::to_vec(&event) {
+                let _ = tee_events.put(&body);
+            }
+        }));
+        let mut pids = Vec::new();
+        for p in &r.processes {
+            let mut cmd = crate::runtime::role_command(&p.role)?;
+            let child = ProcessArgs {
+                prefix: r.prefix.clone(),
+                scenario: scenario.clone(),
+                trace: dir.path().join("traces").join(format!("{}.trace", p.name)),
+                agent: p.agent,
+                launcher_pid: Some(std::process::id()),
+                placement: Placement::default(),
+            };
+            cmd.args(child.to_args());
+            procs.spawn(p.label.clone(), (), cmd)?;
+            if let Some(c) = procs.last() {
+                pids.push((p.label.clone(), c.pid()));
+            }
+        }
+        let n = procs.len();
+        Ok(Self {
+            prefix: r.prefix.clone(),
+            coordinator: r.coordinator.clone(),
+            reply: RunReply {
+                pids,
+                offset_ns: clock.offset_ns,
+                rtt_ns: clock.rtt_ns,
+            },
+            procs,
+            bridge: Some(bridge),
+            events,
+            reported: vec![false; n],
+            names: r.processes.iter().map(|p| p.name.clone()).collect(),
+            dir,
+        })
+    }
+
+    fn send(&self, event: &HostEvent) {
+        if let Ok(body) = serde_json::to_vec(event) {
+            let _ = self.events.put(&body);
+        }
+    }
+
+    /// Reports the children that ended since the last call.
+    fn report_exits(&mut self) {
+        self.procs.reap();
+        for i in 0..self.procs.len() {
+            let Some(st) = self.procs[i].status else {
+                continue;
+            };
+            if std::mem::replace(&mut self.reported[i], true) {
+                continue;
+            }
+            let ended = if st.success() {
+                format!(
+                    "{} (pid {}) exited 0",
+                    self.procs[i].label,
+                    self.procs[i].pid()
+                )
+            } else {
+                self.procs[i].ended(st)
+            };
+            let event = HostEvent::Exited {
+                label: self.procs[i].label.clone(),
+                raw: st.into_raw(),
+                ended,
+            };
+            self.send(&event);
+        }
+    }
+
+    /// Follows the run until the coordinator releases it or is gone; then removes what the
+    /// run left on this host.
+    fn follow(mut self, net: &Net, args: &ServeArgs) -> Result<String> {
+        let (cmd_tx, cmd_rx) = mpsc::channel();
+        let _commands = net.subscribe(
+            &keys::run(&self.prefix, &format!("cmd/{}", args.name)),
+            move |bytes| {
+                if let Ok(c) = serde_json::from_slice::<HostCommand>(&bytes) {
+                    let _ = cmd_tx.send(c);
+                }
+            },
+        )?;
+        let (seen, alive) = (
+            Arc::new(AtomicBool::new(false)),
+            Arc::new(AtomicBool::new(false)),
+        );
+        let (s, a) = (seen.clone(), alive.clone());
+        let _watch = net.watch(&keys::run(&self.prefix, "coordinator"), move |up| {
+            if up {
+                s.store(true, Ordering::SeqCst);
+            }
+            a.store(up, Ordering::SeqCst);
+        })?;
+        let traces = self.dir.path().join("traces");
+        let names = self.names.clone();
+        let _traces = net.answer(
+            &keys::run(&self.prefix, &format!("traces/{}", args.name)),
+            move |name| {
+                let name = String::from_utf8_lossy(name).into_owned();
+                if !names.contains(&name) {
+                    return Err(format!("no process `{name}` ran on this host"));
+                }
+                let path = traces.join(format!("{name}.trace"));
+                std::fs::read(&path).map_err(|e| format!("reading {}: {e}", path.display()))
+            },
+        )?;
+        let release = net.requests(&keys::run(&self.prefix, &format!("release/{}", args.name)))?;
+        let began = Instant::now();
+        loop {
+            self.report_exits();
+            if let Some(text) = self.procs.stalled(STALL_LIMIT) {
+                let label = self
+                    .procs
+                    .iter()
+                    .find(|c| text.starts_with(&c.label))
+                    .map(|c| c.label.clone())
+                    .unwrap_or_default();
+                self.send(&HostEvent::Stalled { label, text });
+            }
+            for c in cmd_rx.try_iter() {
+                match c {
+                    HostCommand::Term => self.procs.signal_term(),
+                    HostCommand::Kill => self.procs.kill_rest(),
+                }
+            }
+            if let Some(req) = release.next(Duration::from_millis(20))? {
+                self.stop_processes();
+                let (removed, leftovers, counts) = self.clean_up();
+                let released = Released {
+                    removed,
+                    leftovers: leftovers.clone(),
+                    sent: counts.0,
+                    received: counts.1,
+                };
+                req.answer(Ok(serde_json::to_vec(&released)?))?;
+                return Ok(format!(
+                    "run {} released by `{}`: {} payloads sent, {} received; {}",
+                    self.prefix,
+                    self.coordinator,
+                    counts.0,
+                    counts.1,
+                    left_behind(&leftovers)
+                ));
+            }
+            let lost = if seen.load(Ordering::SeqCst) {
+                !alive.load(Ordering::SeqCst)
+            } else {
+                began.elapsed() > COORDINATOR_SEEN_TIMEOUT
+            };
+            let interrupted = crate::interrupt::pending();
+            if lost || interrupted.is_some() {
+                let labels: Vec<String> = self.procs.iter().map(|c| c.label.clone()).collect();
+                self.stop_processes();
+                let (_, leftovers, _) = self.clean_up();
+                let why = match interrupted {
+                    Some(sig) => format!("interrupted by {}", crate::runtime::signal_name(sig)),
+                    None => format!(
+                        "the coordinator `{}` is unreachable (nothing heard for the {:.1} s \
+                         lease)",
+                        self.coordinator,
+                        net::LEASE.as_secs_f64()
+                    ),
+                };
+                return Ok(format!(
+                    "run {}: {why}: stopped {}; {}",
+                    self.prefix,
+                    labels.join(", "),
+                    left_behind(&leftovers)
+                ));
+            }
+        }
+    }
+
+    /// SIGTERM to what still runs, SIGKILL after the grace.
+    fn stop_processes(&mut self) {
+        self.procs.signal_term();
+        let began = Instant::now();
+        while self.procs.iter().any(|c| c.status.is_none()) && began.elapsed() < GRACE {
+            self.report_exits();
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        self.procs.kill_rest();
+        self.report_exits();
+        self.procs.drain_stderr();
+    }
+
+    /// Stops the bridge and removes the run's files here: (removed, left, (sent, received)).
+    fn clean_up(&mut self) -> (usize, Vec<String>, (u64, u64)) {
+        let counts = match self.bridge.take().map(Bridge::stop) {
+            Some(Ok(c)) => (c.sent, c.received),
+            Some(Err(e)) => {
+                eprintln!("fdi-launch serve: run {}: the bridge: {e}", self.prefix);
+                (0, 0)
+            }
+            None => (0, 0),
+        };
+        let removed = Shm::remove_leftovers(&self.prefix).unwrap_or(0);
+        let leftovers = Shm::leftovers(&self.prefix)
+            .iter()
+            .map(|p| p.display().to_string())
+            .collect();
+        (removed, leftovers, counts)
+    }
+}
+
+fn left_behind(leftovers: &[String]) -> String {
+    if leftovers.is_empty() {
+        "nothing is left on this host".into()
+    } else {
+        format!(
+            "{} files could not be removed: {}",
+            leftovers.len(),
+            leftovers.join(", ")
+        )
+    }
+}
