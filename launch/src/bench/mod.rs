@@ -72,6 +72,11 @@ pub struct LatencyArgs {
     /// Placement of the run's processes (and of the timer probe beside them).
     #[command(flatten)]
     pub placement: crate::runtime::Placement,
+    /// Split the measured run over hosts (a deployment file, docs/multi-host.md): the hops
+    /// between hosts include the network, the stamps are moved to the coordinator's clock by
+    /// the offset measured at the start, and end-to-end is one clock's (the agent's).
+    #[arg(long, value_name = "FILE")]
+    pub hosts: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]
@@ -276,16 +281,21 @@ fn run_beside_probe(a: &LatencyArgs, r: &Resolved, period_ns: i64) -> Result<Mea
     let placement = &a.placement;
     crate::run::check_placement(r, Engine::Ipc, placement)?;
     let dir = output::create_run_dir(&a.out, r)?;
+    let deployment = match &a.hosts {
+        Some(path) => Some(crate::hosts::Deployment::load(path, r)?),
+        None => None,
+    };
     let probe = crate::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
     let summary = output::discard_if_not_started(
         &dir,
-        execute(
+        crate::run::execute_on(
             r,
             Engine::Ipc,
             Some(&dir),
             !a.json,
             placement,
             crate::run::Traces::Full,
+            deployment.as_ref(),
         ),
     );
     let wakeups = probe.finish();
@@ -546,6 +556,7 @@ fn transport(a: &TransportArgs) -> Result<ExitCode> {
         json: true,
         out: a.out.clone(),
         placement: Default::default(),
+        hosts: None,
     })?;
     let hops = [
         rt.hops_us.agent_to_attacker.p50,

@@ -412,7 +412,9 @@ impl<X: Transport> Launcher<X> {
         // its own with its trace flushed, not SIGKILLed after the grace.
         self.procs.signal_term();
         let began = Instant::now();
-        while self.procs.iter().any(|p| p.status.is_none()) && began.elapsed() < GRACE {
+        while self.procs.iter().any(|p| p.status.is_none() && !p.unreachable())
+            && began.elapsed() < GRACE
+        {
             self.poll_children();
             std::thread::sleep(Duration::from_millis(10));
         }
@@ -884,7 +886,9 @@ fn release_and_reap<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
         epoch_ns: 0,
     });
     let began = Instant::now();
-    while l.procs.iter().any(|p| p.status.is_none()) && began.elapsed() < GRACE {
+    while l.procs.iter().any(|p| p.status.is_none() && !p.unreachable())
+        && began.elapsed() < GRACE
+    {
         if let Some(failed) = l.poll_children() {
             bail!("run stopped: {failed}");
         }

@@ -76,6 +76,11 @@ impl<M> Child<M> {
         }
     }
 
+    /// Nothing more will be heard of it: it runs on a host that is unreachable.
+    pub fn unreachable(&self) -> bool {
+        matches!(&self.child, Handle::Remote(r) if lock(&r.state).host_lost)
+    }
+
     /// The host it runs on, when that is not this one.
     pub fn host(&self) -> Option<&str> {
         match &self.child {
