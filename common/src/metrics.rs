@@ -454,7 +454,9 @@ impl Evaluator {
                     } else {
                         f64::NAN
                     },
-                    max_abs_error_rad: a.max_abs,
+                    // No tick covered (an agent whose trace stayed on a lost host): no maximum,
+                    // as no RMSE, rather than a zero that reads as a perfect run.
+                    max_abs_error_rad: if a.count > 0 { a.max_abs } else { f64::NAN },
                     alarm_coverage: a.s_hat_norm.coverage_or_zero(),
                     attacked_ticks: a.s_hat_norm.attacked_ticks,
                     false_alarms: a.s_hat_norm.false_alarms,

@@ -77,18 +77,36 @@ impl Hosts {
         let c = hosts.names[0].clone();
         ip(&["-n", &c, "link", "set", "lo", "up"])?;
         ip(&["-n", &c, "link", "add", "br0", "type", "bridge"])?;
-        ip(&["-n", &c, "addr", "add", &format!("{}/24", address(0)), "dev", "br0"])?;
+        ip(&[
+            "-n",
+            &c,
+            "addr",
+            "add",
+            &format!("{}/24", address(0)),
+            "dev",
+            "br0",
+        ])?;
         ip(&["-n", &c, "link", "set", "br0", "up"])?;
         hosts.devices.push("br0".into());
         for i in 1..n {
             let (outer, inner) = (format!("fv{tag}o{i}"), format!("fv{tag}i{i}"));
             let h = hosts.names[i].clone();
-            ip(&["link", "add", &outer, "type", "veth", "peer", "name", &inner])?;
+            ip(&[
+                "link", "add", &outer, "type", "veth", "peer", "name", &inner,
+            ])?;
             ip(&["link", "set", &outer, "netns", &c])?;
             ip(&["link", "set", &inner, "netns", &h])?;
             ip(&["-n", &c, "link", "set", &outer, "master", "br0"])?;
             ip(&["-n", &c, "link", "set", &outer, "up"])?;
-            ip(&["-n", &h, "addr", "add", &format!("{}/24", address(i)), "dev", &inner])?;
+            ip(&[
+                "-n",
+                &h,
+                "addr",
+                "add",
+                &format!("{}/24", address(i)),
+                "dev",
+                &inner,
+            ])?;
             ip(&["-n", &h, "link", "set", "lo", "up"])?;
             ip(&["-n", &h, "link", "set", &inner, "up"])?;
             hosts.devices.push(inner);

@@ -341,12 +341,12 @@ impl Remote {
                 let path = crate::runtime::trace_path(run_dir, &p.name);
                 if !l.alive.load(Ordering::SeqCst) {
                     let note = format!(
-                        "{}'s trace stayed on host `{}` ({}), which became unreachable during \
+                        "its trace stayed on host `{}` ({}), which became unreachable during \
                          the run",
-                        p.label, l.host.name, l.host.endpoint
+                        l.host.name, l.host.endpoint
                     );
                     let _ = std::fs::write(path.with_extension("lost"), &note);
-                    problems.push(note);
+                    problems.push(format!("{}: {note}", p.label));
                     continue;
                 }
                 let key = keys::run(&self.prefix, &format!("traces/{}", l.host.name));

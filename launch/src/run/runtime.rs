@@ -252,10 +252,15 @@ impl<X: Transport> Launcher<X> {
                 }),
             }
         }
-        bar.println(format!(
+        let line = format!(
             "fdi-launch: {}; its agents are lost, the run goes on",
             lost.message()
-        ));
+        );
+        if bar.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            bar.println(line);
+        }
         None
     }
 
@@ -412,7 +417,10 @@ impl<X: Transport> Launcher<X> {
         // its own with its trace flushed, not SIGKILLed after the grace.
         self.procs.signal_term();
         let began = Instant::now();
-        while self.procs.iter().any(|p| p.status.is_none() && !p.unreachable())
+        while self
+            .procs
+            .iter()
+            .any(|p| p.status.is_none() && !p.unreachable())
             && began.elapsed() < GRACE
         {
             self.poll_children();
@@ -886,7 +894,10 @@ fn release_and_reap<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
         epoch_ns: 0,
     });
     let began = Instant::now();
-    while l.procs.iter().any(|p| p.status.is_none() && !p.unreachable())
+    while l
+        .procs
+        .iter()
+        .any(|p| p.status.is_none() && !p.unreachable())
         && began.elapsed() < GRACE
     {
         if let Some(failed) = l.poll_children() {
