@@ -741,6 +741,8 @@ const BRIDGE_POLL: Duration = Duration::from_millis(20);
 #[derive(Debug)]
 pub struct Bridge {
     stop: Arc<AtomicBool>,
+    /// The first error a thread met (it ended there).
+    failure: Arc<std::sync::Mutex<Option<String>>>,
     threads: Vec<JoinHandle<Result<(), NetError>>>,
     sent: Arc<AtomicU64>,
     received: Arc<AtomicU64>,
@@ -760,6 +762,7 @@ impl Bridge {
         offset_ns: i64,
     ) -> Result<Self, NetError> {
         let stop = Arc::new(AtomicBool::new(false));
+        let failure: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
         let sent = Arc::new(AtomicU64::new(0));
         let received = Arc::new(AtomicU64::new(0));
         let mut threads = Vec::new();
@@ -773,54 +776,56 @@ impl Bridge {
                 .collect::<Result<_, NetError>>()?;
             let (ready_tx, ready_rx) = mpsc::channel();
             let (prefix, wakes) = (prefix.to_string(), plan.remote_wakes.clone());
-            let (stop, sent) = (stop.clone(), sent.clone());
+            let (stop, sent, fail) = (stop.clone(), sent.clone(), failure.clone());
             let thread = std::thread::Builder::new()
                 .name("bridge out".into())
                 .spawn(move || {
-                    let opened = (|| {
-                        let t = X::open(&prefix, "bridge-out", sizing)?;
-                        let waker = t.waker_any(&wakes)?;
-                        let ports = outboxes
-                            .iter()
-                            .map(|(s, _)| OutPort::<X>::open(&t, *s))
-                            .collect::<Result<Vec<_>, IpcError>>()?;
-                        Ok::<_, IpcError>((t, waker, ports))
-                    })();
-                    let (_t, waker, ports) = match opened {
-                        Ok(x) => {
-                            let _ = ready_tx.send(Ok(()));
-                            x
-                        }
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(e));
-                            return Ok(());
-                        }
-                    };
-                    loop {
-                        let stopping = stop.load(Ordering::SeqCst);
-                        waker.wait(BRIDGE_POLL)?;
-                        for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
-                            let mut failed = None;
-                            port.drain(offset_ns, |bytes| {
-                                if failed.is_none() {
-                                    match outbox.put(&bytes) {
-                                        Ok(()) => {
-                                            sent.fetch_add(1, Ordering::Relaxed);
+                    noted(&fail, || {
+                        let opened = (|| {
+                            let t = X::open(&prefix, "bridge-out", sizing)?;
+                            let waker = t.waker_any(&wakes)?;
+                            let ports = outboxes
+                                .iter()
+                                .map(|(s, _)| OutPort::<X>::open(&t, *s))
+                                .collect::<Result<Vec<_>, IpcError>>()?;
+                            Ok::<_, IpcError>((t, waker, ports))
+                        })();
+                        let (_t, waker, ports) = match opened {
+                            Ok(x) => {
+                                let _ = ready_tx.send(Ok(()));
+                                x
+                            }
+                            Err(e) => {
+                                let _ = ready_tx.send(Err(e));
+                                return Ok(());
+                            }
+                        };
+                        loop {
+                            let stopping = stop.load(Ordering::SeqCst);
+                            waker.wait(BRIDGE_POLL)?;
+                            for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
+                                let mut failed = None;
+                                port.drain(offset_ns, |bytes| {
+                                    if failed.is_none() {
+                                        match outbox.put(&bytes) {
+                                            Ok(()) => {
+                                                sent.fetch_add(1, Ordering::Relaxed);
+                                            }
+                                            Err(e) => failed = Some(e),
                                         }
-                                        Err(e) => failed = Some(e),
                                     }
+                                })?;
+                                if let Some(e) = failed {
+                                    return Err(e);
                                 }
-                            })?;
-                            if let Some(e) = failed {
-                                return Err(e);
+                            }
+                            // One more drain after the stop was asked: what was sent before it
+                            // leaves.
+                            if stopping {
+                                return Ok(());
                             }
                         }
-                        // One more drain after the stop was asked: what was sent before it
-                        // leaves.
-                        if stopping {
-                            return Ok(());
-                        }
-                    }
+                    })
                 })
                 .map_err(|e| NetError::Ipc(thread_error(e)))?;
             threads.push(thread);
@@ -837,57 +842,64 @@ impl Bridge {
                 .collect();
             let thread_keys = keys.clone();
             let thread_prefix = prefix.to_string();
-            let (stop, received) = (stop.clone(), received.clone());
+            let (stop, received, fail) = (stop.clone(), received.clone(), failure.clone());
             let thread = std::thread::Builder::new()
                 .name("bridge in".into())
                 .spawn(move || {
-                    let opened = (|| {
-                        let t = X::open(&thread_prefix, "bridge-in", sizing)?;
-                        let ports = inbound
-                            .iter()
-                            .map(|(s, _)| InPort::<X>::open(&t, *s))
-                            .collect::<Result<Vec<_>, IpcError>>()?;
-                        Ok::<_, IpcError>((t, ports))
-                    })();
-                    let (t, ports) = match opened {
-                        Ok(x) => {
-                            let _ = ready_tx.send(Ok(()));
-                            x
-                        }
-                        Err(e) => {
-                            let _ = ready_tx.send(Err(e));
-                            return Ok(());
-                        }
-                    };
-                    // Bells are made at the first ring: the local processes' wakers exist by
-                    // then (nothing arrives for a process before the start, which follows its
-                    // ready).
-                    let mut bells: BTreeMap<Wake, X::Bell> = BTreeMap::new();
-                    let mut due: BTreeSet<Wake> = BTreeSet::new();
-                    loop {
-                        let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
-                            Ok(frame) => Some(frame),
-                            Err(mpsc::RecvTimeoutError::Timeout) => None,
-                            Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
+                    noted(&fail, || {
+                        let opened = (|| {
+                            let t = X::open(&thread_prefix, "bridge-in", sizing)?;
+                            let ports = inbound
+                                .iter()
+                                .map(|(s, _)| InPort::<X>::open(&t, *s))
+                                .collect::<Result<Vec<_>, IpcError>>()?;
+                            Ok::<_, IpcError>((t, ports))
+                        })();
+                        let (t, ports) = match opened {
+                            Ok(x) => {
+                                let _ = ready_tx.send(Ok(()));
+                                x
+                            }
+                            Err(e) => {
+                                let _ = ready_tx.send(Err(e));
+                                return Ok(());
+                            }
                         };
-                        for (i, bytes) in first.into_iter().chain(rx.try_iter()) {
-                            ports[i].publish(&thread_keys[i], &bytes, offset_ns.wrapping_neg())?;
-                            received.fetch_add(1, Ordering::Relaxed);
-                            due.extend(inbound[i].1.iter().copied());
-                        }
-                        for wake in std::mem::take(&mut due) {
-                            if let std::collections::btree_map::Entry::Vacant(e) = bells.entry(wake)
-                            {
-                                e.insert(t.notifier(wake)?);
+                        // Bells are made at the first ring: the local processes' wakers exist by
+                        // then (nothing arrives for a process before the start, which follows its
+                        // ready).
+                        let mut bells: BTreeMap<Wake, X::Bell> = BTreeMap::new();
+                        let mut due: BTreeSet<Wake> = BTreeSet::new();
+                        loop {
+                            let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
+                                Ok(frame) => Some(frame),
+                                Err(mpsc::RecvTimeoutError::Timeout) => None,
+                                Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
+                            };
+                            for (i, bytes) in first.into_iter().chain(rx.try_iter()) {
+                                ports[i].publish(
+                                    &thread_keys[i],
+                                    &bytes,
+                                    offset_ns.wrapping_neg(),
+                                )?;
+                                received.fetch_add(1, Ordering::Relaxed);
+                                due.extend(inbound[i].1.iter().copied());
                             }
-                            if let Some(bell) = bells.get(&wake) {
-                                bell.ring()?;
+                            for wake in std::mem::take(&mut due) {
+                                if let std::collections::btree_map::Entry::Vacant(e) =
+                                    bells.entry(wake)
+                                {
+                                    e.insert(t.notifier(wake)?);
+                                }
+                                if let Some(bell) = bells.get(&wake) {
+                                    bell.ring()?;
+                                }
+                            }
+                            if stop.load(Ordering::SeqCst) {
+                                return Ok(());
                             }
                         }
-                        if stop.load(Ordering::SeqCst) {
-                            return Ok(());
-                        }
-                    }
+                    })
                 })
                 .map_err(|e| NetError::Ipc(thread_error(e)))?;
             threads.push(thread);
@@ -901,11 +913,20 @@ impl Bridge {
         }
         Ok(Self {
             stop,
+            failure,
             threads,
             sent,
             received,
             _subscriptions: subscriptions,
         })
+    }
+
+    /// Why a thread of the bridge ended early, if one did: the run cannot go on without it.
+    pub fn failure(&self) -> Option<String> {
+        self.failure
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
     }
 
     /// What it carried so far.
@@ -940,6 +961,21 @@ impl Drop for Bridge {
             let _ = t.join();
         }
     }
+}
+
+/// Runs a bridge thread's body, keeping its error where [`Bridge::failure`] finds it.
+fn noted(
+    failure: &std::sync::Mutex<Option<String>>,
+    body: impl FnOnce() -> Result<(), NetError>,
+) -> Result<(), NetError> {
+    let r = body();
+    if let Err(e) = &r {
+        failure
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .get_or_insert_with(|| format!("the bridge between hosts stopped: {e}"));
+    }
+    r
 }
 
 fn thread_error(e: impl std::fmt::Display) -> IpcError {

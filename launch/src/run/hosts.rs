@@ -294,6 +294,8 @@ pub enum HostEvent {
     },
     /// A process has been stopped (SIGSTOP) for too long.
     Stalled { label: String, text: String },
+    /// The host cannot go on with the run (its bridge stopped).
+    Failed { text: String },
 }
 
 /// Coordinator → serve, during the run.

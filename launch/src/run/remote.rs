@@ -37,6 +37,8 @@ struct HostLink {
     processes: Vec<(RemoteProcess, Wake)>,
     states: Arc<Mutex<BTreeMap<String, Arc<Mutex<RemoteState>>>>>,
     reply: Option<RunReply>,
+    /// What the host said made it fail.
+    failed: Arc<Mutex<Option<String>>>,
     _watch: Subscription,
     _events: Subscription,
 }
@@ -111,6 +113,8 @@ impl Remote {
             })?;
             let states: Arc<Mutex<BTreeMap<String, Arc<Mutex<RemoteState>>>>> = Arc::default();
             let st = states.clone();
+            let failed: Arc<Mutex<Option<String>>> = Arc::default();
+            let fl = failed.clone();
             let name = h.name.clone();
             let events = net.subscribe(
                 &keys::run(prefix, &format!("events/{}", h.name)),
@@ -126,6 +130,9 @@ impl Remote {
                             lock(s).stalled = Some(text);
                         }
                     }
+                    Ok(HostEvent::Failed { text }) => {
+                        lock(&fl).get_or_insert(text);
+                    }
                     Err(e) => eprintln!(
                         "fdi-launch: warning: host `{name}` sent an event that is not one ({e})"
                     ),
@@ -138,6 +145,7 @@ impl Remote {
                 processes: Vec::new(),
                 states,
                 reply: None,
+                failed,
                 _watch: watch,
                 _events: events,
             });
@@ -285,6 +293,22 @@ impl Remote {
         Ok(())
     }
 
+    /// Why the run cannot go on across hosts, if it cannot: the coordinator's bridge stopped, or
+    /// a host said its own did.
+    pub fn failure(&self) -> Option<String> {
+        if let Some(f) = self.bridge.as_ref().and_then(Bridge::failure) {
+            return Some(format!(
+                "host `{}` (the coordinator): {f}",
+                self.deployment.coordinator.name
+            ));
+        }
+        self.hosts.iter().find_map(|l| {
+            lock(&l.failed)
+                .as_ref()
+                .map(|f| format!("host `{}` ({}): {f}", l.host.name, l.host.endpoint))
+        })
+    }
+
     /// A host that is gone since the last call (each reported once).
     pub fn lost_host(&mut self) -> Option<LostHost> {
         let link = self
@@ -392,6 +416,12 @@ impl Remote {
                 problems.push(format!("the coordinator's bridge: {e}"));
             }
         }
+        // Closing the session waits for its connectors, and one still trying an unreachable
+        // host waits for the network's timeout (seconds): the session is closed aside, the run
+        // has nothing more to say on it.
+        let _ = std::thread::Builder::new()
+            .name("zenoh close".into())
+            .spawn(move || drop(self));
         (leftovers, problems)
     }
 }

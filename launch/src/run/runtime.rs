@@ -223,6 +223,9 @@ impl<X: Transport> Launcher<X> {
     /// A host of a split run that is gone: before the start or in lockstep it ends the run
     /// (its message); in a started realtime run its agents are lost and the run goes on.
     fn host_lost(&mut self, done: &mut [bool], bar: &ProgressBar) -> Option<String> {
+        if let Some(failed) = self.remote.as_ref()?.failure() {
+            return Some(failed);
+        }
         let lost = self.remote.as_mut()?.lost_host()?;
         let ran_only_agents = self
             .procs

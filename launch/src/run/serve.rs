@@ -291,8 +291,15 @@ impl HostRun {
         )?;
         let release = net.requests(&keys::run(&self.prefix, &format!("release/{}", args.name)))?;
         let began = Instant::now();
+        let mut failed = false;
         loop {
             self.report_exits();
+            if let Some(text) = self.bridge.as_ref().and_then(Bridge::failure) {
+                if !std::mem::replace(&mut failed, true) {
+                    eprintln!("fdi-launch serve: run {}: {text}", self.prefix);
+                    self.send(&HostEvent::Failed { text });
+                }
+            }
             if let Some(text) = self.procs.stalled(STALL_LIMIT) {
                 let label = self
                     .procs
