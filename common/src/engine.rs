@@ -170,6 +170,9 @@ pub struct RunSummary {
     /// CPUs 1` (`--rt-priority`, `--cpus`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub placement: Option<String>,
+    /// A run split over hosts (`--hosts`): one line per host, its processes and its clock.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub hosts: Vec<String>,
     /// Set when the run ended before its scenario's end (interrupted): every metric covers the
     /// `ticks` recorded, not the `planned_ticks`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -257,6 +260,7 @@ pub fn summarize(
         metrics,
         lost_agents: Vec::new(),
         placement: None,
+        hosts: Vec::new(),
         partial: None,
     }
 }

@@ -133,14 +133,12 @@ fn digest(out: &Output) -> String {
         .to_string()
 }
 
-/// The digest of the in-process engine on one host.
-fn inproc_digest(duration_s: &str) -> String {
+/// The digest of the in-process engine on one host, for the run `args`.
+fn inproc_digest(args: &[&str]) -> String {
     let s = Scratch::new("multihost-inproc");
-    digest(&fdi_tests::launch(
-        &["run", "--engine", "inproc", "--duration-s", duration_s],
-        &s.0,
-        Duration::from_secs(120),
-    ))
+    let mut all = vec!["run", "--engine", "inproc"];
+    all.extend(args);
+    digest(&fdi_tests::launch(&all, &s.0, Duration::from_secs(120)))
 }
 
 const TWO_HOSTS: &str = r#"
@@ -174,8 +172,30 @@ endpoint = "tcp/10.77.0.3:7447"
 roles = ["attacker"]
 "#,
     );
+    // An attack on the torques too: the attacker, on its host, forges them for the agents.
+    let out = lab.run(&[
+        "run",
+        "--hosts",
+        &file,
+        "--duration-s",
+        "2",
+        "--attack",
+        "actuator-bias",
+    ]);
+    assert_eq!(
+        digest(&out),
+        inproc_digest(&["--duration-s", "2", "--attack", "actuator-bias"]),
+        "{}",
+        stderr(&out)
+    );
+    std::fs::remove_dir_all(lab.scratch.0.join("runs")).expect("removing the first run");
     let out = lab.run(&["run", "--hosts", &file, "--duration-s", "3"]);
-    assert_eq!(digest(&out), inproc_digest("3"), "{}", stderr(&out));
+    assert_eq!(
+        digest(&out),
+        inproc_digest(&["--duration-s", "3"]),
+        "{}",
+        stderr(&out)
+    );
     let err = stderr(&out);
     assert!(
         err.contains("host `cell` (tcp/10.77.0.2:7447): agent 3, agent 4"),
@@ -258,7 +278,12 @@ fn a_cut_network_stops_a_lockstep_run_naming_the_host_and_the_next_run_is_clean(
     // Back on the network, the same serve takes the next run, which is clean.
     lab.hosts.set_link(1, true);
     let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
-    assert_eq!(digest(&out), inproc_digest("1"), "{}", stderr(&out));
+    assert_eq!(
+        digest(&out),
+        inproc_digest(&["--duration-s", "1"]),
+        "{}",
+        stderr(&out)
+    );
 }
 
 #[test]

@@ -195,6 +195,14 @@ pub struct NetOutbox {
 }
 
 impl NetOutbox {
+    /// Whether some subscriber of another session matches the key (Zenoh knows a route).
+    pub fn matched(&self) -> bool {
+        self.publisher
+            .matching_status()
+            .wait()
+            .is_ok_and(|m| m.matching())
+    }
+
     pub fn put(&self, bytes: &[u8]) -> Result<(), NetError> {
         self.publisher
             .put(bytes.to_vec())
@@ -430,7 +438,12 @@ impl Net {
             let theirs = u64::from_le_bytes(bytes);
             let rtt_ns = t1.saturating_sub(t0);
             let mid = t0 / 2 + t1 / 2;
-            let offset_ns = i64::try_from(i128::from(theirs) - i128::from(mid)).unwrap_or(0);
+            let Ok(offset_ns) = i64::try_from(i128::from(theirs) - i128::from(mid)) else {
+                return Err(NetError::Frame {
+                    key: key.into(),
+                    what: format!("a clock of {theirs} ns, out of range against ours ({mid} ns)"),
+                });
+            };
             if best.is_none_or(|b| rtt_ns < b.rtt_ns) {
                 best = Some(ClockOffset { offset_ns, rtt_ns });
             }
@@ -452,9 +465,29 @@ pub struct ClockOffset {
 
 /// Where the processes of a split run are: which host each process's wake-up event (its
 /// identity in the run) belongs to. [`Wake::Launcher`] is on the coordinating host.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
 pub struct Layout {
     pub host_of: BTreeMap<Wake, String>,
+    /// The agents whose torques the run attacks: the attacker publishes theirs on
+    /// `fdi/torque/<id>`, the control center everyone else's.
+    pub attacked_torques: BTreeSet<u32>,
+}
+
+impl Layout {
+    /// The layout `host_of` of the run `resolved`.
+    pub fn new(host_of: BTreeMap<Wake, String>, resolved: &fdi_common::scenario::Resolved) -> Self {
+        let attacked_torques = resolved
+            .scenario
+            .agents
+            .iter()
+            .map(|a| a.id)
+            .filter(|&id| resolved.attack.attacks_torque_of(id))
+            .collect();
+        Self {
+            host_of,
+            attacked_torques,
+        }
+    }
 }
 
 /// What the bridge of one host carries.
@@ -475,8 +508,12 @@ impl HostPlan {
     }
 }
 
-/// The streams of a run whose processes are `procs`: (stream, publishers, consumers).
-pub fn streams(procs: &[Wake]) -> Vec<(Stream, Vec<Wake>, Vec<Wake>)> {
+/// The streams of a run whose processes are `procs` and whose attacker forges the torques of
+/// `attacked_torques`: (stream, publishers, consumers).
+pub fn streams(
+    procs: &[Wake],
+    attacked_torques: &BTreeSet<u32>,
+) -> Vec<(Stream, Vec<Wake>, Vec<Wake>)> {
     let has = |w: Wake| procs.contains(&w);
     let only = |ws: &[Wake]| ws.iter().copied().filter(|w| has(*w)).collect::<Vec<_>>();
     let agents: Vec<u32> = procs
@@ -523,9 +560,16 @@ pub fn streams(procs: &[Wake]) -> Vec<(Stream, Vec<Wake>, Vec<Wake>)> {
         (Stream::Alarm, only(&[Wake::Monitor]), only(&[Wake::Center])),
     ];
     for &id in &agents {
+        // The control center publishes an agent's torques, or, when the run attacks them, the
+        // attacker does (the center then sends them on `fdi/actuation`).
+        let publisher = if attacked_torques.contains(&id) {
+            Wake::Attacker
+        } else {
+            Wake::Center
+        };
         out.push((
             Stream::Torque(id),
-            only(&[Wake::Center]),
+            only(&[publisher]),
             only(&[Wake::Agent(id), Wake::Monitor]),
         ));
     }
@@ -540,7 +584,7 @@ pub fn plan(layout: &Layout, here: &str) -> Result<HostPlan, String> {
     let on = |w: &Wake, host: &str| layout.host_of.get(w).is_some_and(|h| h == host);
     let mut plan = HostPlan::default();
     let mut remote: BTreeSet<Wake> = BTreeSet::new();
-    for (stream, pubs, cons) in streams(&procs) {
+    for (stream, pubs, cons) in streams(&procs, &layout.attacked_torques) {
         let out = pubs.iter().any(|p| on(p, here)) && cons.iter().any(|c| !on(c, here));
         let inb = cons.iter().any(|c| on(c, here)) && pubs.iter().any(|p| !on(p, here));
         if out && inb {
@@ -648,6 +692,21 @@ pub struct BridgeCounts {
     pub received: u64,
 }
 
+/// The network publishers of a bridge.
+#[derive(Debug, Clone)]
+pub struct Routes(Vec<Arc<NetOutbox>>);
+
+impl Routes {
+    /// The keys no other host subscribes to yet.
+    pub fn unmatched(&self) -> Vec<String> {
+        self.0
+            .iter()
+            .filter(|o| !o.matched())
+            .map(|o| o.key.clone())
+            .collect()
+    }
+}
+
 /// The local receiving side of an outbound stream, by payload type.
 enum OutPort<X: Transport> {
     Measurement(X::Inbox<MeasurementMsg>),
@@ -743,6 +802,8 @@ pub struct Bridge {
     stop: Arc<AtomicBool>,
     /// The first error a thread met (it ended there).
     failure: Arc<std::sync::Mutex<Option<String>>>,
+    /// Its publishers on the network, for [`Bridge::unmatched`].
+    routes: Vec<Arc<NetOutbox>>,
     threads: Vec<JoinHandle<Result<(), NetError>>>,
     sent: Arc<AtomicU64>,
     received: Arc<AtomicU64>,
@@ -750,13 +811,16 @@ pub struct Bridge {
 }
 
 impl Bridge {
-    /// Starts the bridge of `plan` for the run `prefix` on this host's transport `X`. Stamps
+    /// Starts the bridge of `plan` for the run `prefix` on this host's transport `X` (the run
+    /// is `run` on the network: the same prefix, except in tests that put two "hosts" in one
+    /// process, each with a prefix of its own). Stamps
     /// travel in the coordinating host's clock, which is ours + `offset_ns` (0 on that host):
     /// ours are moved to it on the way out, and back to ours on the way in. Returns once its wakers and ports exist: the
     /// local processes may be started then, and none of what they send is lost.
     pub fn start<X: Transport + 'static>(
         net: &Net,
         prefix: &str,
+        run: &str,
         sizing: Sizing,
         plan: &HostPlan,
         offset_ns: i64,
@@ -767,13 +831,15 @@ impl Bridge {
         let received = Arc::new(AtomicU64::new(0));
         let mut threads = Vec::new();
         let mut subscriptions = Vec::new();
+        let mut routes = Vec::new();
 
         if !plan.outbound.is_empty() {
-            let outboxes: Vec<(Stream, NetOutbox)> = plan
+            let outboxes: Vec<(Stream, Arc<NetOutbox>)> = plan
                 .outbound
                 .iter()
-                .map(|&s| Ok((s, net.outbox(&keys::stream(prefix, s))?)))
+                .map(|&s| Ok((s, Arc::new(net.outbox(&keys::stream(run, s))?))))
                 .collect::<Result<_, NetError>>()?;
+            routes.extend(outboxes.iter().map(|(_, o)| o.clone()));
             let (ready_tx, ready_rx) = mpsc::channel();
             let (prefix, wakes) = (prefix.to_string(), plan.remote_wakes.clone());
             let (stop, sent, fail) = (stop.clone(), sent.clone(), failure.clone());
@@ -829,17 +895,14 @@ impl Bridge {
                 })
                 .map_err(|e| NetError::Ipc(thread_error(e)))?;
             threads.push(thread);
-            wait_ready(&ready_rx)?;
+            wait_ready(&ready_rx, "out")?;
         }
 
         if !plan.inbound.is_empty() {
             let (tx, rx) = mpsc::channel::<(usize, Vec<u8>)>();
             let (ready_tx, ready_rx) = mpsc::channel();
             let inbound = plan.inbound.clone();
-            let keys: Vec<String> = inbound
-                .iter()
-                .map(|(s, _)| keys::stream(prefix, *s))
-                .collect();
+            let keys: Vec<String> = inbound.iter().map(|(s, _)| keys::stream(run, *s)).collect();
             let thread_keys = keys.clone();
             let thread_prefix = prefix.to_string();
             let (stop, received, fail) = (stop.clone(), received.clone(), failure.clone());
@@ -903,7 +966,7 @@ impl Bridge {
                 })
                 .map_err(|e| NetError::Ipc(thread_error(e)))?;
             threads.push(thread);
-            wait_ready(&ready_rx)?;
+            wait_ready(&ready_rx, "in")?;
             for (i, key) in keys.iter().enumerate() {
                 let tx = tx.clone();
                 subscriptions.push(net.subscribe(key, move |bytes| {
@@ -914,6 +977,7 @@ impl Bridge {
         Ok(Self {
             stop,
             failure,
+            routes,
             threads,
             sent,
             received,
@@ -927,6 +991,17 @@ impl Bridge {
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .clone()
+    }
+
+    /// The keys it sends on that no other host subscribes to yet: a sample put there now would
+    /// be lost. Empty once every route of the run is known.
+    pub fn unmatched(&self) -> Vec<String> {
+        self.routes().unmatched()
+    }
+
+    /// Its publishers on the network, to ask [`Routes::unmatched`] from another thread.
+    pub fn routes(&self) -> Routes {
+        Routes(self.routes.clone())
     }
 
     /// What it carried so far.
@@ -985,12 +1060,12 @@ fn thread_error(e: impl std::fmt::Display) -> IpcError {
     }
 }
 
-fn wait_ready(rx: &mpsc::Receiver<Result<(), IpcError>>) -> Result<(), NetError> {
+fn wait_ready(rx: &mpsc::Receiver<Result<(), IpcError>>, side: &str) -> Result<(), NetError> {
     match rx.recv_timeout(Duration::from_secs(10)) {
         Ok(r) => r.map_err(NetError::Ipc),
-        Err(_) => Err(NetError::Ipc(thread_error(
-            "a bridge thread did not open its ports within 10 s",
-        ))),
+        Err(_) => Err(NetError::Ipc(thread_error(format!(
+            "the bridge's `{side}` thread did not open its shared-memory ports within 10 s"
+        )))),
     }
 }
 
@@ -1001,6 +1076,7 @@ mod tests {
     fn layout(entries: &[(Wake, &str)]) -> Layout {
         Layout {
             host_of: entries.iter().map(|(w, h)| (*w, h.to_string())).collect(),
+            attacked_torques: BTreeSet::new(),
         }
     }
 
@@ -1025,7 +1101,7 @@ mod tests {
             .map(|h| (*h, plan(&l, h).expect("plan")))
             .collect();
         let procs: Vec<Wake> = l.host_of.keys().copied().collect();
-        for (stream, pubs, cons) in streams(&procs) {
+        for (stream, pubs, cons) in streams(&procs, &l.attacked_torques) {
             for p in &pubs {
                 for c in &cons {
                     let (hp, hc) = (&l.host_of[p], &l.host_of[c]);
@@ -1076,6 +1152,23 @@ mod tests {
         assert!(inbound.contains(&Stream::Actuation));
         assert!(inbound.contains(&Stream::Control));
         assert_eq!(p.outbound, vec![Stream::Tampered, Stream::Status]);
+        // When the run attacks agent 3's torques, the attacker forges them and sends them to
+        // its host; the center no longer does.
+        l.attacked_torques.insert(3);
+        let p = plan(&l, "adversary").expect("plan");
+        assert_eq!(
+            p.outbound,
+            vec![Stream::Tampered, Stream::Status, Stream::Torque(3)]
+        );
+        assert!(!plan(&l, "control")
+            .expect("plan")
+            .outbound
+            .contains(&Stream::Torque(3)));
+        let cell_b = plan(&l, "cell-b").expect("plan");
+        assert!(cell_b
+            .inbound
+            .iter()
+            .any(|(s, w)| *s == Stream::Torque(3) && w == &[Wake::Agent(3)]));
     }
 
     #[test]
@@ -1102,6 +1195,152 @@ mod tests {
         assert_eq!(shifted.attacker_received_ns, 0);
         let err = decode::<MeasurementMsg>("k", &bytes[1..], 0).expect_err("short frame");
         assert!(err.to_string().contains("frame on `k`"), "{err}");
+    }
+
+    /// A free TCP port of the loopback interface (bound, read, released).
+    fn free_port() -> u16 {
+        std::net::TcpListener::bind("127.0.0.1:0")
+            .and_then(|l| l.local_addr())
+            .map(|a| a.port())
+            .expect("a free port")
+    }
+
+    /// Two "hosts" in this process: each its own prefix on the in-process transport, each its
+    /// own Zenoh session on loopback. Agent 1 on `cell` publishes measurements for the attacker
+    /// on `control`: they arrive whole, in order, with their stamps moved, and the attacker's
+    /// wake-up event is rung after them; a frame of the wrong size stops the bridge, named.
+    #[test]
+    fn a_bridge_carries_a_stream_in_order_and_refuses_a_frame_of_another_shape() {
+        use crate::ipc::Local;
+        let port = free_port();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let control_net = Net::open(&NetConfig {
+            listen: vec![endpoint.clone()],
+            connect: Vec::new(),
+        })
+        .expect("control session");
+        let cell_net = Net::open(&NetConfig {
+            listen: Vec::new(),
+            connect: vec![endpoint],
+        })
+        .expect("cell session");
+        let l = layout(&[
+            (Wake::Launcher, "control"),
+            (Wake::Attacker, "control"),
+            (Wake::Center, "control"),
+            (Wake::Agent(1), "cell"),
+        ]);
+        let sizing = Sizing::new(1, 4);
+        let run = format!("bridge{}", std::process::id());
+        let (pc, pa) = (format!("{run}c"), format!("{run}a"));
+        let control = Bridge::start::<Local>(
+            &control_net,
+            &pc,
+            &run,
+            sizing,
+            &plan(&l, "control").expect("plan"),
+            0,
+        )
+        .expect("control bridge");
+        let cell = Bridge::start::<Local>(
+            &cell_net,
+            &pa,
+            &run,
+            sizing,
+            &plan(&l, "cell").expect("plan"),
+            250,
+        )
+        .expect("cell bridge");
+        // The attacker on `control` and agent 1 on `cell`.
+        let attacker = Local::open(&pc, "attacker", sizing).expect("attacker node");
+        let inbox = attacker
+            .subscriber::<MeasurementMsg>(Stream::Measurement)
+            .expect("sub");
+        let woken = attacker.waker(Wake::Attacker).expect("waker");
+        let agent = Local::open(&pa, "agent", sizing).expect("agent node");
+        let outbox = agent
+            .publisher::<MeasurementMsg>(Stream::Measurement)
+            .expect("pub");
+        let bell = agent.notifier(Wake::Attacker).expect("bell");
+        // Wait until the sessions see each other (the subscription reaches the publisher).
+        let began = std::time::Instant::now();
+        let mut got: Vec<MeasurementMsg> = Vec::new();
+        let msg = |seq: u64| MeasurementMsg {
+            seq,
+            agent: 1,
+            dof: 2,
+            t: seq as f64 * 1e-3,
+            y: [seq as f64; fdi_common::scenario::MAX_DOF],
+            yd: [0.0; fdi_common::scenario::MAX_DOF],
+            agent_sent_ns: 1_000 + seq,
+            attacker_received_ns: 0,
+            attacker_sent_ns: 0,
+            flags: 0,
+            reserved: 0,
+        };
+        // A probe until the path is up (Zenoh connects in the background).
+        while got.is_empty() {
+            assert!(
+                began.elapsed() < Duration::from_secs(10),
+                "no path between the sessions"
+            );
+            outbox.send(msg(0)).expect("send");
+            bell.ring().expect("ring");
+            woken.wait(Duration::from_millis(50)).expect("wait");
+            inbox.drain(|m| got.push(m)).expect("drain");
+        }
+        got.clear();
+        for seq in 1..=200 {
+            outbox.send(msg(seq)).expect("send");
+            bell.ring().expect("ring");
+        }
+        let began = std::time::Instant::now();
+        while got.iter().filter(|m| m.seq > 0).count() < 200 {
+            assert!(
+                began.elapsed() < Duration::from_secs(10),
+                "only {} arrived",
+                got.len()
+            );
+            // Rung after the data: each wake-up finds what woke it.
+            if woken.wait(Duration::from_millis(100)).expect("wait") {
+                assert!(inbox.has_messages().expect("has") || !got.is_empty());
+            }
+            inbox.drain(|m| got.push(m)).expect("drain");
+        }
+        let seqs: Vec<u64> = got.iter().map(|m| m.seq).filter(|&s| s > 0).collect();
+        assert_eq!(seqs, (1..=200).collect::<Vec<_>>(), "whole and in order");
+        let last = got.last().expect("some");
+        assert_eq!(
+            last.agent_sent_ns,
+            1_200 + 250,
+            "moved to the coordinator's clock"
+        );
+        assert_eq!(last.attacker_received_ns, 0, "an unset stamp stays unset");
+        assert!(cell.counts().sent >= 200 && control.counts().received >= 200);
+        assert_eq!(control.failure(), None);
+        // A frame of another shape on the run's key: the receiving bridge stops, naming it.
+        let key = keys::stream(&run, Stream::Measurement);
+        cell_net
+            .outbox(&key)
+            .expect("raw")
+            .put(&[0u8; 7])
+            .expect("put");
+        let began = std::time::Instant::now();
+        while control.failure().is_none() {
+            assert!(
+                began.elapsed() < Duration::from_secs(10),
+                "the frame was not refused"
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let f = control.failure().expect("failure");
+        assert!(
+            f.contains("7 bytes") && f.contains("fdi/measurement"),
+            "{f}"
+        );
+        drop((outbox, bell, inbox, woken));
+        let _ = cell.stop();
+        assert!(control.stop().is_err(), "the refusal is the bridge's error");
     }
 
     #[test]

@@ -160,6 +160,7 @@ pub fn report(run_dir: &Path) -> Result<()> {
         Some(s) => {
             summary.engine.clone_from(&s.engine);
             summary.placement.clone_from(&s.placement);
+            summary.hosts.clone_from(&s.hosts);
             // What only the run knew: which robots were lost, and why it ended early.
             summary.lost_agents.clone_from(&s.lost_agents);
             summary.partial.clone_from(&s.partial);
@@ -916,6 +917,9 @@ fn run_section(md: &mut String, run_dir: &Path, r: &Resolved, s: &RunSummary) {
     }
     if let Some(p) = &s.placement {
         let _ = writeln!(md, "| processes | {p} |");
+    }
+    if !s.hosts.is_empty() {
+        let _ = writeln!(md, "| hosts | {} |", s.hosts.join("<br>"));
     }
 }
 

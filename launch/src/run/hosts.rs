@@ -172,7 +172,7 @@ impl Deployment {
                 }
             }
         }
-        let layout = Layout { host_of };
+        let layout = Layout::new(host_of, resolved);
         for name in file.hosts.keys() {
             fdi_runtime::net::plan(&layout, name).map_err(|e| problem("hosts".into(), e))?;
         }
@@ -241,6 +241,14 @@ pub fn parse_wake(word: &str) -> Result<Wake> {
             _ => bail!("`{w}` names no process of a run"),
         },
     })
+}
+
+/// Puts `value` as JSON on `outbox`, best effort: the messages of a run's control plane that
+/// nobody waits for (a line, an exit, a stop); a lost one is covered by the host's liveliness.
+pub fn put_json(outbox: &fdi_runtime::net::NetOutbox, value: &impl Serialize) {
+    if let Ok(body) = serde_json::to_vec(value) {
+        let _ = outbox.put(&body);
+    }
 }
 
 /// One process a serve is to run.

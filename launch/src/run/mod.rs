@@ -226,6 +226,7 @@ pub fn execute_on(
                 (outcome, joined, tapped.write_error)
             };
             joined.summary.lost_agents = outcome.lost;
+            joined.summary.hosts = outcome.hosts;
             if let Some(signal) = outcome.interrupted {
                 let s = &mut joined.summary;
                 eprintln!(

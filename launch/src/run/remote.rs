@@ -24,8 +24,13 @@ use crate::supervisor::{lock, Remote as RemoteChild, RemoteState, Stopper, Super
 const REACH_TIMEOUT: Duration = Duration::from_secs(5);
 /// How long a host may take to start its processes (their ports open).
 const START_TIMEOUT: Duration = Duration::from_secs(30);
-/// How long a host may take to send one trace.
-const TRACE_TIMEOUT: Duration = Duration::from_secs(120);
+/// How long a host may take to send one piece of a trace.
+const TRACE_TIMEOUT: Duration = Duration::from_secs(60);
+/// The pieces a trace is fetched in (Zenoh carries messages of up to 1 GiB; traces may be
+/// larger, and a piece is answered on one of Zenoh's threads).
+pub const TRACE_PIECE: u64 = 4 << 20;
+/// How long every route between the hosts may take to be known before the start.
+const ROUTES_TIMEOUT: Duration = Duration::from_secs(10);
 
 /// One host of the run, as the coordinator follows it.
 struct HostLink {
@@ -41,6 +46,14 @@ struct HostLink {
     failed: Arc<Mutex<Option<String>>>,
     _watch: Subscription,
     _events: Subscription,
+}
+
+impl HostLink {
+    /// Started, and not lost: a host lost once keeps nothing of the run even if it is heard
+    /// from again (its serve stopped and cleaned up when it lost the coordinator).
+    fn reachable(&self) -> bool {
+        self.reply.is_some() && !self.lost_reported && self.alive.load(Ordering::SeqCst)
+    }
 }
 
 /// The coordinator's link to the other hosts of a run.
@@ -187,6 +200,7 @@ impl Remote {
         self.bridge = Some(Bridge::start::<Shm>(
             &self.net,
             &self.prefix,
+            &self.prefix,
             sizing,
             &plan,
             0,
@@ -330,6 +344,29 @@ impl Remote {
         })
     }
 
+    /// The coordinating host's line for the report: the processes it ran.
+    pub fn describe_coordinator(&self) -> String {
+        let here = &self.deployment.coordinator;
+        let procs: Vec<String> = self
+            .deployment
+            .layout
+            .host_of
+            .iter()
+            .filter(|(_, h)| **h == here.name)
+            .map(|(w, _)| match w {
+                Wake::Agent(id) => format!("agent {id}"),
+                Wake::Center => "control-center".into(),
+                w => wake_word(*w),
+            })
+            .collect();
+        format!(
+            "host `{}` ({}, the coordinator): {}",
+            here.name,
+            here.endpoint,
+            procs.join(", ")
+        )
+    }
+
     /// Lines for the report: each host, its processes and its clock against ours.
     pub fn describe(&self) -> Vec<String> {
         self.hosts
@@ -355,7 +392,9 @@ impl Remote {
     /// Fetches the traces of every reachable host into `run_dir/traces`. A host that is gone
     /// keeps its traces: for each of its agents a `<name>.lost` note says so, which the join
     /// reads (those agents' ticks count as missing). Problems are returned, one per trace.
-    pub fn fetch_traces(&self, run_dir: &Path) -> Vec<String> {
+    pub fn fetch_traces(&mut self, run_dir: &Path) -> Vec<String> {
+        // A host gone by now is one lost, whether or not it was noticed during the run.
+        while self.lost_host().is_some() {}
         let mut problems = Vec::new();
         for l in &self.hosts {
             if l.reply.is_none() {
@@ -363,41 +402,104 @@ impl Remote {
             }
             for (p, _) in &l.processes {
                 let path = crate::runtime::trace_path(run_dir, &p.name);
-                if !l.alive.load(Ordering::SeqCst) {
+                if !l.reachable() {
                     let note = format!(
                         "its trace stayed on host `{}` ({}), which became unreachable during \
                          the run",
                         l.host.name, l.host.endpoint
                     );
-                    let _ = std::fs::write(path.with_extension("lost"), &note);
+                    let lost = path.with_extension("lost");
+                    if let Err(e) = std::fs::write(&lost, &note) {
+                        problems.push(format!("writing {}: {e}", lost.display()));
+                    }
                     problems.push(format!("{}: {note}", p.label));
                     continue;
                 }
-                let key = keys::run(&self.prefix, &format!("traces/{}", l.host.name));
-                match self.net.request(&key, p.name.as_bytes(), TRACE_TIMEOUT) {
-                    Ok(bytes) => {
-                        if let Err(e) = std::fs::write(&path, &bytes) {
-                            problems.push(format!("writing {}: {e}", path.display()));
-                        }
-                    }
-                    Err(e) => problems.push(format!(
-                        "the trace of {} from host `{}`: {e}",
+                if let Err(e) = self.fetch_trace(l, &p.name, &path) {
+                    problems.push(format!(
+                        "the trace of {} from host `{}`: {e:#}",
                         p.label, l.host.name
-                    )),
+                    ));
                 }
             }
         }
         problems
     }
 
+    /// Fetches the trace `name` of host `l` into `path`, piece by piece.
+    fn fetch_trace(&self, l: &HostLink, name: &str, path: &Path) -> Result<()> {
+        use std::io::Write as _;
+        let key = keys::run(&self.prefix, &format!("traces/{}", l.host.name));
+        let mut file = std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+        );
+        let mut offset = 0u64;
+        loop {
+            let ask = format!("{name} {offset}");
+            let piece = self.net.request(&key, ask.as_bytes(), TRACE_TIMEOUT)?;
+            file.write_all(&piece)
+                .with_context(|| format!("writing {}", path.display()))?;
+            offset += piece.len() as u64;
+            if (piece.len() as u64) < TRACE_PIECE {
+                break;
+            }
+        }
+        file.flush()
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(())
+    }
+
+    /// Waits until every route of the run is known to Zenoh (each host's bridge has a
+    /// subscriber for every key it sends on): a sample sent before would be lost. Names the
+    /// host and the keys still unmatched after [`ROUTES_TIMEOUT`].
+    pub fn await_routes(&self) -> Result<()> {
+        let began = Instant::now();
+        loop {
+            let mut unmatched: Vec<(String, Vec<String>)> = Vec::new();
+            if let Some(b) = &self.bridge {
+                let u = b.unmatched();
+                if !u.is_empty() {
+                    unmatched.push((self.deployment.coordinator.name.clone(), u));
+                }
+            }
+            for l in self.hosts.iter().filter(|l| l.reply.is_some()) {
+                let key = keys::run(&self.prefix, &format!("routes/{}", l.host.name));
+                let u: Vec<String> = self
+                    .net
+                    .request(&key, &[], Duration::from_secs(5))
+                    .map_err(anyhow::Error::from)
+                    .and_then(|b| Ok(serde_json::from_slice(&b)?))
+                    .with_context(|| format!("asking host `{}` for its routes", l.host.name))?;
+                if !u.is_empty() {
+                    unmatched.push((l.host.name.clone(), u));
+                }
+            }
+            if unmatched.is_empty() {
+                return Ok(());
+            }
+            if began.elapsed() > ROUTES_TIMEOUT {
+                let said: Vec<String> = unmatched
+                    .iter()
+                    .map(|(h, keys)| {
+                        format!("host `{h}` sends on {} with no receiver", keys.join(", "))
+                    })
+                    .collect();
+                bail!(
+                    "the hosts do not all reach one another after {:.0} s: {} (can every host \
+                     connect to every other's endpoint? docs/multi-host.md, Ports)",
+                    ROUTES_TIMEOUT.as_secs_f64(),
+                    said.join("; ")
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
     /// Releases every reachable host (each removes what the run left there) and stops the
     /// bridge. Returns what could not be removed (`host:path`) and problems.
     pub fn release(mut self) -> (Vec<String>, Vec<String>) {
         let (mut leftovers, mut problems) = (Vec::new(), Vec::new());
-        for l in &self.hosts {
-            if l.reply.is_none() || !l.alive.load(Ordering::SeqCst) {
-                continue;
-            }
+        for l in self.hosts.iter().filter(|l| l.reachable()) {
             let key = keys::run(&self.prefix, &format!("release/{}", l.host.name));
             match self
                 .net

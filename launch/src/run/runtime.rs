@@ -21,11 +21,11 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use crate::supervisor::{Child, Supervisor};
 
 /// Grace period between SIGTERM and SIGKILL when a run is torn down.
-const GRACE: Duration = Duration::from_secs(2);
+pub(crate) const GRACE: Duration = Duration::from_secs(2);
 /// How long the processes may take to report ready.
 const READY_TIMEOUT: Duration = Duration::from_secs(30);
 /// A process stopped (SIGSTOP) this long stalls the run: the launcher stops it with a message.
-const STALL_LIMIT: Duration = Duration::from_secs(1);
+pub(crate) const STALL_LIMIT: Duration = Duration::from_secs(1);
 /// Realtime runs start this long after the start message, so every process sees it in time.
 const REALTIME_LEAD: Duration = Duration::from_millis(50);
 
@@ -162,6 +162,8 @@ pub struct IpcOutcome {
     pub interrupted: Option<i32>,
     /// How the processes ended, when interrupted.
     pub exits: String,
+    /// A run split over hosts: one line per host (`RunSummary::hosts`).
+    pub hosts: Vec<String>,
 }
 
 /// How the supervision of a started run ended.
@@ -461,26 +463,35 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             started: false,
             remote: None,
         };
-        if let Some(d) = &opts.deployment {
-            let connected = crate::remote::Remote::connect(d.clone(), &prefix).and_then(|mut r| {
-                r.start_bridge(fdi_runtime::process::sizing_for(resolved))?;
-                Ok(r)
-            });
-            launcher.remote = Some(connected.context(DidNotStart)?);
-        }
-        let r = spawn_and_supervise(
-            resolved,
-            opts,
-            &prefix,
-            &scenario_path,
-            &transport,
-            &mut launcher,
-        );
+        // A failure to reach the other hosts goes the way of every other failure: through the
+        // teardown and the removal of the run's files below.
+        let connected = match &opts.deployment {
+            Some(d) => crate::remote::Remote::connect(d.clone(), &prefix)
+                .and_then(|mut r| {
+                    r.start_bridge(fdi_runtime::process::sizing_for(resolved))?;
+                    Ok(r)
+                })
+                .map(|r| launcher.remote = Some(r)),
+            None => Ok(()),
+        };
+        let r = connected.and_then(|()| {
+            spawn_and_supervise(
+                resolved,
+                opts,
+                &prefix,
+                &scenario_path,
+                &transport,
+                &mut launcher,
+            )
+        });
         launcher.teardown();
         // Every child has exited: what they printed is relayed whole before we go on.
         launcher.procs.drain_stderr();
         let mut remote_left = Vec::new();
-        if let Some(remote) = launcher.remote.take() {
+        let mut hosts = Vec::new();
+        if let Some(mut remote) = launcher.remote.take() {
+            hosts.push(remote.describe_coordinator());
+            hosts.extend(remote.describe());
             if launcher.started {
                 for p in remote.fetch_traces(&opts.run_dir) {
                     eprintln!("fdi-launch: warning: {p}");
@@ -501,10 +512,11 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             std::mem::take(&mut launcher.lost),
             launcher.exits(),
             remote_left,
+            hosts,
         )
         // ports and node dropped here, before the files are removed
     };
-    let (result, lost, exits, remote_left) = result;
+    let (result, lost, exits, remote_left, hosts) = result;
     Shm::remove_leftovers(&prefix).ok();
     let mut leftovers = Shm::leftovers(&prefix);
     leftovers.extend(remote_left.into_iter().map(PathBuf::from));
@@ -523,6 +535,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         lost,
         interrupted,
         exits,
+        hosts,
     })
 }
 
@@ -539,6 +552,9 @@ fn spawn_and_supervise<X: Transport>(
     spawn_externals(resolved, opts, prefix, scenario_path, l)?;
     await_ready(l)?;
     let bar = progress_bar(resolved.ticks(), opts.progress);
+    if let Some(remote) = &l.remote {
+        remote.await_routes()?;
+    }
     let started = start_run(resolved, transport, l)?;
     let (wall_s, interrupted) = supervise(resolved, l, &bar, started)?;
     if interrupted.is_some() {

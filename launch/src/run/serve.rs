@@ -13,10 +13,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use fdi_runtime::ipc::{check_prefix, Shm, Transport as _};
-use fdi_runtime::net::{self, keys, Bridge, Layout, Net, NetConfig, NetOutbox, Request};
+use fdi_runtime::net::{self, keys, Bridge, Layout, Net, NetConfig, NetOutbox, Request, Requests};
 use fdi_runtime::process::{sizing_for, Placement, ProcessArgs};
 
-use crate::hosts::{parse_wake, HostCommand, HostEvent, Released, RunReply, RunRequest};
+use crate::hosts::{parse_wake, put_json, HostCommand, HostEvent, Released, RunReply, RunRequest};
 use crate::supervisor::Supervisor;
 
 /// `fdi-launch serve`.
@@ -40,10 +40,7 @@ pub struct ServeArgs {
 
 /// How long the coordinator's liveliness may stay unseen once a run is taken.
 const COORDINATOR_SEEN_TIMEOUT: Duration = Duration::from_secs(5);
-/// A local process stopped (SIGSTOP) this long is reported.
-const STALL_LIMIT: Duration = Duration::from_secs(1);
-/// SIGTERM, then SIGKILL after this long, when a run is torn down here.
-const GRACE: Duration = Duration::from_secs(2);
+use crate::runtime::{GRACE, STALL_LIMIT};
 
 pub fn serve(args: &ServeArgs) -> Result<ExitCode> {
     net::check_host_name(&args.name).map_err(|e| anyhow::anyhow!("--name: {e}"))?;
@@ -64,7 +61,7 @@ pub fn serve(args: &ServeArgs) -> Result<ExitCode> {
         let Some(request) = requests.next(Duration::from_millis(200))? else {
             continue;
         };
-        match serve_run(&net, args, request) {
+        match serve_run(&net, args, request, &requests) {
             Ok(said) => eprintln!("fdi-launch serve: {said}"),
             Err(e) => eprintln!("fdi-launch serve: {}", crate::cli::describe_error(&e)),
         }
@@ -85,7 +82,7 @@ pub fn serve(args: &ServeArgs) -> Result<ExitCode> {
 
 /// Takes one run request: starts the processes and answers, then follows the run to its
 /// release (or the coordinator's loss). Returns what happened, in a line.
-fn serve_run(net: &Net, args: &ServeArgs, request: Request) -> Result<String> {
+fn serve_run(net: &Net, args: &ServeArgs, request: Request, queue: &Requests) -> Result<String> {
     let parsed = serde_json::from_slice::<RunRequest>(&request.body())
         .map_err(|e| anyhow::anyhow!("not a run request: {e}"))
         .and_then(|r| {
@@ -114,20 +111,32 @@ fn serve_run(net: &Net, args: &ServeArgs, request: Request) -> Result<String> {
             return Err(e);
         }
     };
-    let run = match HostRun::start(net, args, &r) {
-        Ok(run) => run,
+    let result = match HostRun::start(net, args, &r) {
+        Ok(run) => match serde_json::to_vec(&run.reply) {
+            Ok(reply) => match request.answer(Ok(reply)) {
+                Ok(()) => run.follow(net, args, queue),
+                Err(e) => Err(e.into()),
+            },
+            Err(e) => Err(e.into()),
+        },
         Err(e) => {
             let _ = request.answer(Err(format!(
                 "host `{}`: {}",
                 args.name,
                 crate::cli::describe_error(&e)
             )));
-            return Err(e.context(format!("run {}", r.prefix)));
+            Err(e)
         }
     };
-    let reply = serde_json::to_vec(&run.reply)?;
-    request.answer(Ok(reply))?;
-    run.follow(net, args)
+    // However the run ended here (its processes and bridge are gone by now), nothing of it
+    // stays on this host.
+    if let Err(e) = Shm::remove_leftovers(&r.prefix) {
+        eprintln!(
+            "fdi-launch serve: run {}: removing its files: {e}",
+            r.prefix
+        );
+    }
+    result.map_err(|e| e.context(format!("run {}", r.prefix)))
 }
 
 /// A run's share on this host.
@@ -159,18 +168,20 @@ impl HostRun {
         std::fs::create_dir_all(dir.path().join("traces")).context("making traces/")?;
         let resolved = fdi_common::scenario::load_file(&scenario)
             .map_err(|e| anyhow::anyhow!("the run's scenario: {e}"))?;
-        let mut layout = Layout {
-            host_of: Default::default(),
-        };
-        for (word, host) in &r.layout {
-            layout.host_of.insert(parse_wake(word)?, host.clone());
+        let mut host_of = std::collections::BTreeMap::new();
+        for (i, (word, host)) in r.layout.iter().enumerate() {
+            let wake =
+                parse_wake(word).with_context(|| format!("the run request's layout[{i}]"))?;
+            host_of.insert(wake, host.clone());
         }
+        let layout = Layout::new(host_of, &resolved);
         let plan = net::plan(&layout, &args.name).map_err(anyhow::Error::msg)?;
         let clock = net
             .clock_offset(&keys::run(&r.prefix, "clock"), 16)
             .context("measuring the clock against the coordinator's")?;
         let bridge = Bridge::start::<Shm>(
             net,
+            &r.prefix,
             &r.prefix,
             sizing_for(&resolved),
             &plan,
@@ -179,10 +190,7 @@ impl HostRun {
         let events = Arc::new(net.outbox(&keys::run(&r.prefix, &format!("events/{}", args.name)))?);
         let tee_events = events.clone();
         let mut procs = Supervisor::with_tee(Arc::new(move |line: &str| {
-            let event = HostEvent::Line { text: line.into() };
-            if let Ok(body) = serde_json::to_vec(&event) {
-                let _ = tee_events.put(&body);
-            }
+            put_json(&tee_events, &HostEvent::Line { text: line.into() });
         }));
         let mut pids = Vec::new();
         for p in &r.processes {
@@ -220,9 +228,7 @@ impl HostRun {
     }
 
     fn send(&self, event: &HostEvent) {
-        if let Ok(body) = serde_json::to_vec(event) {
-            let _ = self.events.put(&body);
-        }
+        put_json(&self.events, event);
     }
 
     /// Reports the children that ended since the last call.
@@ -255,7 +261,7 @@ impl HostRun {
 
     /// Follows the run until the coordinator releases it or is gone; then removes what the
     /// run left on this host.
-    fn follow(mut self, net: &Net, args: &ServeArgs) -> Result<String> {
+    fn follow(mut self, net: &Net, args: &ServeArgs, queue: &Requests) -> Result<String> {
         let (cmd_tx, cmd_rx) = mpsc::channel();
         let _commands = net.subscribe(
             &keys::run(&self.prefix, &format!("cmd/{}", args.name)),
@@ -280,13 +286,28 @@ impl HostRun {
         let names = self.names.clone();
         let _traces = net.answer(
             &keys::run(&self.prefix, &format!("traces/{}", args.name)),
-            move |name| {
-                let name = String::from_utf8_lossy(name).into_owned();
+            move |ask| {
+                let ask = String::from_utf8_lossy(ask).into_owned();
+                let (name, offset) = ask
+                    .split_once(' ')
+                    .and_then(|(n, o)| Some((n.to_string(), o.parse::<u64>().ok()?)))
+                    .ok_or_else(|| format!("`{ask}` does not ask for a piece of a trace"))?;
                 if !names.contains(&name) {
                     return Err(format!("no process `{name}` ran on this host"));
                 }
                 let path = traces.join(format!("{name}.trace"));
-                std::fs::read(&path).map_err(|e| format!("reading {}: {e}", path.display()))
+                read_piece(&path, offset).map_err(|e| format!("reading {}: {e}", path.display()))
+            },
+        )?;
+        let bridge_routes = self.bridge.as_ref().map(Bridge::routes);
+        let _routes = net.answer(
+            &keys::run(&self.prefix, &format!("routes/{}", args.name)),
+            move |_| {
+                let unmatched = bridge_routes
+                    .as_ref()
+                    .map(|r| r.unmatched())
+                    .unwrap_or_default();
+                serde_json::to_vec(&unmatched).map_err(|e| e.to_string())
             },
         )?;
         let release = net.requests(&keys::run(&self.prefix, &format!("release/{}", args.name)))?;
@@ -301,13 +322,21 @@ impl HostRun {
                 }
             }
             if let Some(text) = self.procs.stalled(STALL_LIMIT) {
+                // The supervisor's message starts with `<label> (pid <pid>)`.
                 let label = self
                     .procs
                     .iter()
-                    .find(|c| text.starts_with(&c.label))
+                    .find(|c| text.starts_with(&format!("{} (pid {})", c.label, c.pid())))
                     .map(|c| c.label.clone())
                     .unwrap_or_default();
                 self.send(&HostEvent::Stalled { label, text });
+            }
+            // One run at a time: another coordinator is told at once, not left to time out.
+            while let Some(other) = queue.next(Duration::ZERO)? {
+                let _ = other.answer(Err(format!(
+                    "host `{}` is busy with run {} of `{}`",
+                    args.name, self.prefix, self.coordinator
+                )));
             }
             for c in cmd_rx.try_iter() {
                 match c {
@@ -318,19 +347,23 @@ impl HostRun {
             if let Some(req) = release.next(Duration::from_millis(20))? {
                 self.stop_processes();
                 let (removed, leftovers, counts) = self.clean_up();
+                let carried = match counts {
+                    Ok(c) => format!("{} payloads sent, {} received", c.sent, c.received),
+                    Err(ref e) => format!("its bridge failed: {e}"),
+                };
+                let counts = counts.unwrap_or_default();
                 let released = Released {
                     removed,
                     leftovers: leftovers.clone(),
-                    sent: counts.0,
-                    received: counts.1,
+                    sent: counts.sent,
+                    received: counts.received,
                 };
                 req.answer(Ok(serde_json::to_vec(&released)?))?;
                 return Ok(format!(
-                    "run {} released by `{}`: {} payloads sent, {} received; {}",
+                    "run {} released by `{}`: {}; {}",
                     self.prefix,
                     self.coordinator,
-                    counts.0,
-                    counts.1,
+                    carried,
                     left_behind(&leftovers)
                 ));
             }
@@ -376,15 +409,13 @@ impl HostRun {
         self.procs.drain_stderr();
     }
 
-    /// Stops the bridge and removes the run's files here: (removed, left, (sent, received)).
-    fn clean_up(&mut self) -> (usize, Vec<String>, (u64, u64)) {
+    /// Stops the bridge and removes the run's files here: (removed, left, what the bridge
+    /// carried or why it failed).
+    fn clean_up(&mut self) -> (usize, Vec<String>, Result<net::BridgeCounts, String>) {
         let counts = match self.bridge.take().map(Bridge::stop) {
-            Some(Ok(c)) => (c.sent, c.received),
-            Some(Err(e)) => {
-                eprintln!("fdi-launch serve: run {}: the bridge: {e}", self.prefix);
-                (0, 0)
-            }
-            None => (0, 0),
+            Some(Ok(c)) => Ok(c),
+            Some(Err(e)) => Err(e.to_string()),
+            None => Ok(net::BridgeCounts::default()),
         };
         let removed = Shm::remove_leftovers(&self.prefix).unwrap_or(0);
         let leftovers = Shm::leftovers(&self.prefix)
@@ -393,6 +424,16 @@ impl HostRun {
             .collect();
         (removed, leftovers, counts)
     }
+}
+
+/// The piece of `path` from `offset` on, at most [`crate::remote::TRACE_PIECE`] bytes.
+fn read_piece(path: &std::path::Path, offset: u64) -> std::io::Result<Vec<u8>> {
+    use std::io::{Read as _, Seek as _};
+    let mut f = std::fs::File::open(path)?;
+    f.seek(std::io::SeekFrom::Start(offset))?;
+    let mut piece = Vec::new();
+    f.take(crate::remote::TRACE_PIECE).read_to_end(&mut piece)?;
+    Ok(piece)
 }
 
 fn left_behind(leftovers: &[String]) -> String {
