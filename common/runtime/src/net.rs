@@ -240,20 +240,31 @@ impl Requests {
 
 impl Request {
     pub fn body(&self) -> Vec<u8> {
-        self.0
-            .payload()
-            .map(|p| p.to_bytes().into_owned())
-            .unwrap_or_default()
+        query_body(&self.0)
     }
 
     /// Answers with `Ok(body)` or refuses with a message.
     pub fn answer(self, answer: Result<Vec<u8>, String>) -> Result<(), NetError> {
-        let key = self.0.key_expr().to_string();
-        let sent = match answer {
-            Ok(body) => self.0.reply(self.0.key_expr().clone(), body).wait(),
-            Err(message) => self.0.reply_err(message).wait(),
-        };
-        sent.map_err(|source| NetError::Key { key, source })
+        reply(&self.0, answer).map_err(|source| NetError::Key {
+            key: self.0.key_expr().to_string(),
+            source,
+        })
+    }
+}
+
+/// The body of a query (empty when it has none).
+fn query_body(query: &zenoh::query::Query) -> Vec<u8> {
+    query
+        .payload()
+        .map(|p| p.to_bytes().into_owned())
+        .unwrap_or_default()
+}
+
+/// Answers `query` with `Ok(body)`, or refuses it with a message.
+fn reply(query: &zenoh::query::Query, answer: Result<Vec<u8>, String>) -> Result<(), Source> {
+    match answer {
+        Ok(body) => query.reply(query.key_expr().clone(), body).wait(),
+        Err(message) => query.reply_err(message).wait(),
     }
 }
 
@@ -362,14 +373,8 @@ impl Net {
         self.session
             .declare_queryable(key.to_string())
             .callback(move |query| {
-                let body = query
-                    .payload()
-                    .map(|p| p.to_bytes().into_owned())
-                    .unwrap_or_default();
-                let _ = match f(&body) {
-                    Ok(reply) => query.reply(query.key_expr().clone(), reply).wait(),
-                    Err(message) => query.reply_err(message).wait(),
-                };
+                // A requester gone before the answer: nobody to tell.
+                let _ = reply(&query, f(&query_body(&query)));
             })
             .wait()
             .map(Answering)
@@ -856,15 +861,8 @@ impl Bridge {
                                 .collect::<Result<Vec<_>, IpcError>>()?;
                             Ok::<_, IpcError>((t, waker, ports))
                         })();
-                        let (_t, waker, ports) = match opened {
-                            Ok(x) => {
-                                let _ = ready_tx.send(Ok(()));
-                                x
-                            }
-                            Err(e) => {
-                                let _ = ready_tx.send(Err(e));
-                                return Ok(());
-                            }
+                        let Some((_t, waker, ports)) = report_ready(&ready_tx, opened) else {
+                            return Ok(());
                         };
                         loop {
                             let stopping = stop.load(Ordering::SeqCst);
@@ -918,15 +916,8 @@ impl Bridge {
                                 .collect::<Result<Vec<_>, IpcError>>()?;
                             Ok::<_, IpcError>((t, ports))
                         })();
-                        let (t, ports) = match opened {
-                            Ok(x) => {
-                                let _ = ready_tx.send(Ok(()));
-                                x
-                            }
-                            Err(e) => {
-                                let _ = ready_tx.send(Err(e));
-                                return Ok(());
-                            }
+                        let Some((t, ports)) = report_ready(&ready_tx, opened) else {
+                            return Ok(());
                         };
                         // Bells are made at the first ring: the local processes' wakers exist by
                         // then (nothing arrives for a process before the start, which follows its
@@ -1057,6 +1048,24 @@ fn thread_error(e: impl std::fmt::Display) -> IpcError {
     IpcError::Node {
         name: "bridge".into(),
         source: e.to_string().into(),
+    }
+}
+
+/// Tells [`Bridge::start`] whether a bridge thread opened its ports (its error goes there);
+/// the ports, when it did.
+fn report_ready<T>(
+    tx: &mpsc::Sender<Result<(), IpcError>>,
+    opened: Result<T, IpcError>,
+) -> Option<T> {
+    match opened {
+        Ok(x) => {
+            let _ = tx.send(Ok(()));
+            Some(x)
+        }
+        Err(e) => {
+            let _ = tx.send(Err(e));
+            None
+        }
     }
 }
 
