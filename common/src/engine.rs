@@ -177,6 +177,10 @@ pub struct RunSummary {
     /// `ticks` recorded, not the `planned_ticks`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub partial: Option<Partial>,
+    /// The controller and numerics options of the run that differ from the paper's
+    /// calibration (empty: the paper's); [`crate::numerics`].
+    #[serde(default)]
+    pub numerics: Vec<crate::numerics::Difference>,
 }
 
 /// What a run that ended early covers.
@@ -262,6 +266,7 @@ pub fn summarize(
         placement: None,
         hosts: Vec::new(),
         partial: None,
+        numerics: crate::numerics::differences_from_paper(s, crate::numerics::Compare::WithMode),
     }
 }
 

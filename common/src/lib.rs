@@ -18,6 +18,7 @@ pub mod detect;
 pub mod engine;
 pub mod metrics;
 pub mod model;
+pub mod numerics;
 pub mod plant;
 pub mod records;
 pub mod rng;

@@ -1470,15 +1470,18 @@ mod tests {
     fn observer_input_parses_round_trips_and_a_bad_value_names_the_field() {
         assert_eq!(
             paper().expect("valid").scenario.controller.observer_input,
-            ObserverInput::StepMean,
-            "absent means step-mean"
+            ObserverInput::Sample,
+            "absent means sample (SPEC §4.6)"
         );
         let anchor = "detection = { threshold = 0.6, hold_s = 0.05 }\n";
         assert!(PAPER_SCENARIO.contains(anchor));
         let with =
             |v: &str| PAPER_SCENARIO.replace(anchor, &format!("{anchor}observer_input = {v}\n"));
-        let r = load_str(&with("\"sample\""), "t", None).expect("valid");
-        assert_eq!(r.scenario.controller.observer_input, ObserverInput::Sample);
+        let r = load_str(&with("\"step-mean\""), "t", None).expect("valid");
+        assert_eq!(
+            r.scenario.controller.observer_input,
+            ObserverInput::StepMean
+        );
         let again = load_str(&r.to_toml(), "again", None).expect("round trip");
         assert_eq!(again.scenario.controller, r.scenario.controller);
         assert!(

@@ -163,6 +163,60 @@ impl From<Controller> for ControllerMode {
     }
 }
 
+/// The controller's numerics options of the command line: each replaces the scenario's value
+/// (`[controller]`; docs/model.md, "Numerics of the delayed input" and "Long horizons").
+#[derive(Debug, Clone, Default, Args)]
+pub struct NumericsArgs {
+    /// Replace `controller.observer_input`: `sample` (the paper's default, SPEC §4.6) or
+    /// `step-mean`.
+    #[arg(long, value_name = "INPUT")]
+    pub observer_input: Option<fdi_common::control::ObserverInput>,
+    /// Replace `controller.update_law.leakage_w_per_s` (1/s; 0 = the paper's law).
+    #[arg(long, value_name = "PER_S", allow_negative_numbers = true)]
+    pub leakage_w_per_s: Option<f64>,
+    /// Replace `controller.update_law.dead_zone_rad_s` (rad/s; 0 = the paper's law).
+    #[arg(long, value_name = "RAD_S", allow_negative_numbers = true)]
+    pub dead_zone_rad_s: Option<f64>,
+    /// Replace `controller.update_law.innovation_time_constant_s` (s; 0 = the paper's law).
+    #[arg(long, value_name = "S", allow_negative_numbers = true)]
+    pub innovation_time_constant_s: Option<f64>,
+}
+
+impl NumericsArgs {
+    /// Writes the given options into the scenario (validated by the caller).
+    pub fn apply(&self, s: &mut fdi_common::scenario::Scenario) {
+        let c = &mut s.controller;
+        if let Some(v) = self.observer_input {
+            c.observer_input = v;
+        }
+        if let Some(v) = self.leakage_w_per_s {
+            c.update_law.leakage_w_per_s = v;
+        }
+        if let Some(v) = self.dead_zone_rad_s {
+            c.update_law.dead_zone_rad_s = v;
+        }
+        if let Some(v) = self.innovation_time_constant_s {
+            c.update_law.innovation_time_constant_s = v;
+        }
+    }
+
+    /// The flags given, by name.
+    pub fn given(&self) -> Vec<&'static str> {
+        [
+            ("--observer-input", self.observer_input.is_some()),
+            ("--leakage-w-per-s", self.leakage_w_per_s.is_some()),
+            ("--dead-zone-rad-s", self.dead_zone_rad_s.is_some()),
+            (
+                "--innovation-time-constant-s",
+                self.innovation_time_constant_s.is_some(),
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(name, given)| given.then_some(name))
+        .collect()
+    }
+}
+
 #[derive(Debug, Args)]
 pub struct RunArgs {
     /// Scenario TOML file; without it the embedded paper scenario runs.
@@ -185,6 +239,8 @@ pub struct RunArgs {
     /// Replace the scenario's seed.
     #[arg(long, allow_negative_numbers = true)]
     pub seed: Option<u64>,
+    #[command(flatten)]
+    pub numerics: NumericsArgs,
     /// Folder that receives the run directory.
     #[arg(long, default_value = "runs")]
     pub out: PathBuf,
@@ -213,7 +269,7 @@ pub struct RunArgs {
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
     /// tampered measurements and compare the trace digest with the recording's (exit status 1
     /// when they differ). The scenario comes from RUN_DIR.
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts", "observer_input", "leakage_w_per_s", "dead_zone_rad_s", "innovation_time_constant_s"])]
     pub replay: Option<PathBuf>,
 }
 
@@ -247,6 +303,9 @@ pub struct DetectArgs {
     /// A scenario TARGET: replace its seed (as `run --seed`).
     #[arg(long, allow_negative_numbers = true)]
     pub seed: Option<u64>,
+    /// A scenario TARGET: its controller's numerics (as `run`).
+    #[command(flatten)]
+    pub numerics: NumericsArgs,
     /// A scenario TARGET: the folder that receives its run directory (as `run --out`).
     #[arg(long, default_value = "runs")]
     pub runs: PathBuf,
@@ -265,6 +324,7 @@ impl DetectArgs {
         ]
         .into_iter()
         .filter_map(|(name, given)| given.then_some(name))
+        .chain(self.numerics.given())
         .collect()
     }
 
@@ -278,6 +338,7 @@ impl DetectArgs {
             controller: self.controller,
             duration_s: self.duration_s,
             seed: self.seed,
+            numerics: self.numerics.clone(),
             out: self.runs.clone(),
             json: false,
             traces: Traces::Full,
@@ -367,6 +428,7 @@ pub fn apply_overrides(mut r: Resolved, args: &RunArgs) -> Result<Resolved> {
     if let Some(s) = args.seed {
         r.scenario.seed = s;
     }
+    args.numerics.apply(&mut r.scenario);
     if let Some(c) = args.clock {
         r.scenario.clock = match c {
             Clock::Lockstep => ClockMode::Lockstep,
@@ -521,6 +583,12 @@ fn run_name(r: &Resolved, args: &RunArgs) -> String {
     if let Some(d) = args.duration_s {
         parts.push(format!("{d}s"));
     }
+    parts.extend(
+        args.numerics
+            .given()
+            .into_iter()
+            .map(|flag| flag.trim_start_matches('-').to_string()),
+    );
     parts.join("-")
 }
 
@@ -591,6 +659,7 @@ fn print_summary(s: &RunSummary) {
         "scenario {} | engine {} | clock {} | controller {} | attack {} | {} agents | {:.1} s simulated in {:.2} s wall",
         s.scenario, s.engine, s.clock, s.controller, s.attack, s.agents, s.sim_s, s.wall_s
     );
+    println!("numerics: {}", output::numerics_line(s));
     if let Some(p) = &s.placement {
         println!("processes: {p}");
     }

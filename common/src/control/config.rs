@@ -32,10 +32,11 @@ impl ControllerMode {
 pub enum ObserverInput {
     /// The mean of the delayed input `u(s − τ(s))` over the step: the input the plant
     /// integrates over that step.
-    #[default]
     StepMean,
     /// The single sample `u(t_k − τ(t_k))` held over the step (SPEC §4.6 as written; the
-    /// numerics of the SPEC's prototype). It lags the plant's input by about half a period.
+    /// numerics of the SPEC's prototype; the default: it reproduces the paper's Table I). It
+    /// lags the plant's input by about half a period.
+    #[default]
     Sample,
 }
 
@@ -49,6 +50,24 @@ impl ObserverInput {
 
     pub(crate) fn is_default(&self) -> bool {
         *self == Self::default()
+    }
+
+    /// Every choice, in the order of the documentation.
+    pub const ALL: [Self; 2] = [Self::Sample, Self::StepMean];
+}
+
+impl std::str::FromStr for ObserverInput {
+    type Err = String;
+
+    /// The names of a scenario file: `sample` or `step-mean`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|c| c.as_str() == s)
+            .ok_or_else(|| {
+                let names: Vec<&str> = Self::ALL.iter().map(|c| c.as_str()).collect();
+                format!("`{s}` is not an observer input: {}", names.join(" or "))
+            })
     }
 }
 
@@ -95,8 +114,8 @@ pub struct ControllerConfig {
     /// or all 0: the paper's laws.
     #[serde(default, skip_serializing_if = "UpdateLaw::is_paper")]
     pub update_law: UpdateLaw,
-    /// `observer_input`: `"step-mean"` (default) or `"sample"`, the discretization of the
-    /// observer's input `u_τ` ([`ObserverInput`]).
+    /// `observer_input`: `"sample"` (default, SPEC §4.6) or `"step-mean"`, the discretization
+    /// of the observer's input `u_τ` ([`ObserverInput`]).
     #[serde(default, skip_serializing_if = "ObserverInput::is_default")]
     pub observer_input: ObserverInput,
 }

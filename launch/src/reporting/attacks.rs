@@ -22,7 +22,7 @@ use serde::Serialize;
 
 use crate::output::{csv_bytes, md_table_head, rmse_cell};
 use crate::plot::PALETTE;
-use crate::tables::{rmse_chart, Table};
+use crate::tables::{rmse_chart, with_comment, MadeWith, Table};
 
 #[derive(Debug, Args)]
 pub struct AttacksArgs {
@@ -37,6 +37,12 @@ pub struct AttacksArgs {
     /// Print JSON instead of markdown.
     #[arg(long)]
     pub json: bool,
+    /// Base scenario (default: the embedded paper scenario): its robots, gains and numerics
+    /// under every class (a class's own scenario file gives its attack and detectors only).
+    #[arg(long, value_name = "FILE")]
+    pub scenario: Option<PathBuf>,
+    #[command(flatten)]
+    pub numerics: crate::cli::NumericsArgs,
 }
 
 /// Where a class's run comes from.
@@ -65,13 +71,13 @@ impl Source {
         }
     }
 
-    /// The class's scenario as shipped (before the table's controller and duration).
-    fn resolve(self) -> Result<Resolved> {
+    /// The class's scenario on `base` (before the table's controller and duration): the base
+    /// with the class's attack (and, for a scenario file of its own, its detectors).
+    fn resolve(self, base: &Resolved) -> Result<Resolved> {
         Ok(match self {
             Self::Preset(name) => {
-                let r = scenario::paper()?;
-                let profile = scenario::attack_from_arg(name, &r.scenario)?;
-                r.with_attack(profile)?
+                let profile = scenario::attack_from_arg(name, &base.scenario)?;
+                base.clone().with_attack(profile)?
             }
             Self::AttackFile { path, text } => {
                 // The attack-file loader reads a file: the embedded text goes to a scratch one.
@@ -84,9 +90,17 @@ impl Source {
                     .context("writing an embedded attack profile")?;
                 let profile =
                     scenario::load_attack_file(f.path()).map_err(|e| anyhow!("{path}: {e}"))?;
-                scenario::paper()?.with_attack(profile)?
+                base.clone().with_attack(profile)?
             }
-            Self::Scenario { path, text } => scenario::load_str(text, path, None)?,
+            Self::Scenario { path, text } => {
+                let own = scenario::load_str(text, path, None)?;
+                let mut r = base
+                    .clone()
+                    .with_attack(own.attack.for_agents(&base.scenario.agent_dofs()))?;
+                r.scenario.detectors = own.scenario.detectors;
+                r.scenario.name = own.scenario.name;
+                r
+            }
         })
     }
 }
@@ -216,8 +230,13 @@ struct Outcome {
 }
 
 /// Runs one class under one controller, in-process.
-fn run_one(class: &Class, mode: ControllerMode, duration_s: Option<f64>) -> Result<Outcome> {
-    let mut r = class.source.resolve()?;
+fn run_one(
+    class: &Class,
+    base: &Resolved,
+    mode: ControllerMode,
+    duration_s: Option<f64>,
+) -> Result<Outcome> {
+    let mut r = class.source.resolve(base)?;
     r.scenario.controller.mode = mode;
     if let Some(d) = duration_s {
         r.scenario.duration_s = d;
@@ -349,11 +368,30 @@ fn metrics_of(s: &RunSummary, robot: u32) -> Result<&AgentMetrics> {
         .ok_or_else(|| anyhow!("run `{}` has no robot {robot}", s.attack))
 }
 
-fn rows_of(class: &Class, traditional: &Outcome, proposed: &Outcome) -> Result<Vec<Row>> {
-    class
+/// The rows of a class: its robots that the base scenario has (a class none of whose robots
+/// is there is refused, naming them).
+fn rows_of(
+    class: &Class,
+    base: &Resolved,
+    traditional: &Outcome,
+    proposed: &Outcome,
+) -> Result<Vec<Row>> {
+    let present: Vec<u32> = class
         .robots
         .iter()
-        .map(|&robot| {
+        .copied()
+        .filter(|&id| base.scenario.agents.iter().any(|a| a.id == id))
+        .collect();
+    if present.is_empty() {
+        return Err(anyhow!(
+            "attack class `{}` reports robots {:?}, and the base scenario has none of them",
+            class.name,
+            class.robots
+        ));
+    }
+    present
+        .into_iter()
+        .map(|robot| {
             let t = metrics_of(&traditional.summary, robot)?;
             let p = metrics_of(&proposed.summary, robot)?;
             Ok(Row {
@@ -380,14 +418,15 @@ fn rows_of(class: &Class, traditional: &Outcome, proposed: &Outcome) -> Result<V
 const DETECTOR_TITLES: [&str; 3] = ["‖Ŝ‖", "χ²", "CUSUM"];
 
 /// `attacks.md` (without its leading `# `), as printed.
-fn markdown(rows: &[Row], duration_s: Option<f64>) -> String {
+fn markdown(rows: &[Row], duration_s: Option<f64>, made: &MadeWith) -> String {
     let span = duration_s.map_or_else(
         || "each scenario's full duration (40 s)".to_string(),
         |d| format!("{d} s"),
     );
     let mut md = format!(
         "Attack classes on the paper's robots: RMSE (rad) under the traditional and the proposed \
-         controller, and detection under the proposed controller; in-process engine, {span}\n\n"
+         controller, and detection under the proposed controller; in-process engine, {span}\n\n{}",
+        made.md()
     );
     let mut head = vec!["class", "robot", "RMSE traditional", "RMSE proposed"];
     let titles: Vec<String> = DETECTOR_TITLES
@@ -540,10 +579,11 @@ pub fn attacks(args: &AttacksArgs) -> Result<ExitCode> {
     let dir = args.out.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!("{}-attacks", crate::output::timestamp()))
     });
+    let (base, made) = MadeWith::load(args.scenario.as_deref(), &args.numerics)?;
     // Every class resolves before anything runs: a broken one stops the table at once.
     for c in CLASSES {
         c.source
-            .resolve()
+            .resolve(&base)
             .with_context(|| format!("attack class `{}`", c.name))?;
     }
     let jobs: Vec<(usize, ControllerMode)> = (0..CLASSES.len())
@@ -554,7 +594,7 @@ pub fn attacks(args: &AttacksArgs) -> Result<ExitCode> {
             ]
         })
         .collect();
-    let results = run_all(&jobs, args)?;
+    let results = run_all(&jobs, &base, args)?;
     let mut rows = Vec::new();
     for (i, c) in CLASSES.iter().enumerate() {
         let [t, p] = [ControllerMode::Traditional, ControllerMode::Proposed].map(|m| {
@@ -565,14 +605,15 @@ pub fn attacks(args: &AttacksArgs) -> Result<ExitCode> {
         let (Some(t), Some(p)) = (t, p) else {
             return Err(anyhow!("attack class `{}`: a run is missing", c.name));
         };
-        rows.extend(rows_of(c, t, p)?);
+        rows.extend(rows_of(c, &base, t, p)?);
     }
     let table = Table {
         name: "attacks",
-        md: markdown(&rows, args.duration_s),
-        csv: csv(&rows)?,
+        md: markdown(&rows, args.duration_s, &made),
+        csv: with_comment(&made, csv(&rows)?),
         json: serde_json::json!({
             "engine": "inproc",
+            "made_with": made,
             "duration_s": args.duration_s,
             "classes": CLASSES.iter().map(|c| serde_json::json!({
                 "name": c.name, "file": c.source.file(), "robots": c.robots, "what": c.what,
@@ -613,7 +654,11 @@ pub fn attacks(args: &AttacksArgs) -> Result<ExitCode> {
 
 /// Runs every job on up to two threads, with a progress bar on stderr (hidden when stderr is not
 /// a terminal, or with `--json`). Stops at the first error or interrupt.
-fn run_all(jobs: &[(usize, ControllerMode)], args: &AttacksArgs) -> Result<Vec<Option<Outcome>>> {
+fn run_all(
+    jobs: &[(usize, ControllerMode)],
+    base: &Resolved,
+    args: &AttacksArgs,
+) -> Result<Vec<Option<Outcome>>> {
     let bar = if args.json {
         ProgressBar::hidden()
     } else {
@@ -642,7 +687,7 @@ fn run_all(jobs: &[(usize, ControllerMode)], args: &AttacksArgs) -> Result<Vec<O
                 }
                 let class = &CLASSES[i];
                 let outcome = crate::interrupt::check(DURING_THE_TABLE)
-                    .and_then(|()| run_one(class, mode, args.duration_s))
+                    .and_then(|()| run_one(class, base, mode, args.duration_s))
                     .with_context(|| format!("attack class `{}`, {}", class.name, mode.as_str()));
                 match outcome {
                     Ok(o) => {
@@ -682,9 +727,10 @@ mod tests {
     #[test]
     fn every_class_resolves_and_names_robots_of_its_scenario() {
         for c in CLASSES {
+            let paper = scenario::paper().expect("the embedded scenario");
             let r = c
                 .source
-                .resolve()
+                .resolve(&paper)
                 .unwrap_or_else(|e| panic!("{}: {e}", c.name));
             assert!(!c.robots.is_empty(), "{}", c.name);
             for id in c.robots {

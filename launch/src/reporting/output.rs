@@ -153,10 +153,27 @@ fn write_summary_json(dir: &Path, v: serde_json::Value) -> Result<()> {
     .context("writing summary.json")
 }
 
+/// The controller and numerics options of a run beyond its mode (which its header names):
+/// `the paper's calibration (SPEC §4)` or each difference with the paper's value.
+pub fn numerics_line(s: &RunSummary) -> String {
+    let beyond_mode: Vec<_> = s
+        .numerics
+        .iter()
+        .filter(|d| d.field != "controller.mode")
+        .cloned()
+        .collect();
+    fdi_common::numerics::describe(&beyond_mode)
+}
+
 fn write_tables(dir: &Path, s: &RunSummary) -> Result<()> {
     let mut md = format!(
-        "# RMSE of run `{}` ({} engine, {} clock, {} controller, attack `{}`)\n\n",
-        s.scenario, s.engine, s.clock, s.controller, s.attack
+        "# RMSE of run `{}` ({} engine, {} clock, {} controller, attack `{}`)\n\nNumerics: {}.\n\n",
+        s.scenario,
+        s.engine,
+        s.clock,
+        s.controller,
+        s.attack,
+        numerics_line(s)
     );
     if let Some(notice) = partial_notice(s) {
         let _ = writeln!(md, "**{notice}.**\n");

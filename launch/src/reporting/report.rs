@@ -924,7 +924,7 @@ fn run_section(md: &mut String, run_dir: &Path, r: &Resolved, s: &RunSummary) {
 }
 
 /// The rows of the parameter table: (parameter, value).
-fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 12] {
+fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 13] {
     let c = &r.scenario.controller;
     let d = &r.scenario.detectors;
     [
@@ -934,6 +934,15 @@ fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 12] {
         (
             "controller",
             format!("{} (k = {}, β = {})", s.controller, c.gain_k, c.beta),
+        ),
+        (
+            "numerics",
+            // From the run's scenario, not its summary: a summary written before it was
+            // recorded would read as the paper's.
+            fdi_common::numerics::describe(&fdi_common::numerics::differences_from_paper(
+                &r.scenario,
+                fdi_common::numerics::Compare::WithoutMode,
+            )),
         ),
         ("attack", format!("`{}`", s.attack)),
         ("seed", s.seed.to_string()),

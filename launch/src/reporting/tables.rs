@@ -20,6 +20,13 @@ use plotters::style::RGBColor;
 pub struct TableArgs {
     #[arg(long, value_enum, default_value_t = Engine::Ipc)]
     pub engine: Engine,
+    /// Base scenario (default: the embedded paper scenario): its robots, gains and numerics. Its
+    /// attack and duration are replaced by the table's (the paper's attack, 40 s), and the header
+    /// names what differs from the paper's calibration.
+    #[arg(long, value_name = "FILE")]
+    pub scenario: Option<PathBuf>,
+    #[command(flatten)]
+    pub numerics: crate::cli::NumericsArgs,
     /// Print JSON instead of markdown.
     #[arg(long)]
     pub json: bool,
@@ -66,8 +73,10 @@ struct Table1Row {
     robot: u32,
     traditional_rmse_rad: f64,
     proposed_rmse_rad: f64,
-    paper_traditional: f64,
-    paper_proposed: f64,
+    /// The paper's values, for a robot that is the paper's (same model, trajectory and delay);
+    /// `null` for any other robot.
+    paper_traditional: Option<f64>,
+    paper_proposed: Option<f64>,
 }
 
 #[derive(Debug, Serialize)]
@@ -75,7 +84,157 @@ struct Table2Row {
     case: &'static str,
     tau_ms: String,
     rmse_rad: f64,
-    paper_rmse_rad: f64,
+    /// The paper's value, when robot 1 is the paper's robot 1 (model and trajectory).
+    paper_rmse_rad: Option<f64>,
+}
+
+/// How a table was made: its base scenario, what the table replaced in it, and its controller
+/// and numerics options that differ from the paper's calibration. Every table shows it in its
+/// header (markdown), a leading `#` comment (CSV) and a `made_with` field (JSON).
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct MadeWith {
+    /// `the embedded paper scenario` or the file given.
+    pub scenario: String,
+    /// What the table replaced in the base scenario, e.g. `attack `none` → `paper``.
+    pub replaced: Vec<String>,
+    /// The options that differ from the paper's calibration (empty: the paper's).
+    pub numerics: Vec<fdi_common::numerics::Difference>,
+}
+
+impl MadeWith {
+    /// The base scenario of `args` (file or embedded), with the numerics options applied, and
+    /// how it differs from the paper's.
+    pub fn load(
+        scenario: Option<&Path>,
+        numerics: &crate::cli::NumericsArgs,
+    ) -> Result<(Resolved, Self)> {
+        let mut r = crate::cli::load(scenario)?;
+        numerics.apply(&mut r.scenario);
+        let r = crate::run::check_overrides(r)?;
+        let made = Self {
+            scenario: scenario.map_or_else(
+                || "the embedded paper scenario".into(),
+                |p| p.display().to_string(),
+            ),
+            replaced: Vec::new(),
+            numerics: fdi_common::numerics::differences_from_paper(
+                &r.scenario,
+                fdi_common::numerics::Compare::WithoutMode,
+            ),
+        };
+        Ok((r, made))
+    }
+
+    /// One line: `scenario X (…replaced…); numerics: …`.
+    pub fn line(&self) -> String {
+        let mut out = format!("scenario: {}", self.scenario);
+        if !self.replaced.is_empty() {
+            let _ = write!(
+                out,
+                " (replaced for this table: {})",
+                self.replaced.join(", ")
+            );
+        }
+        let _ = write!(
+            out,
+            "; numerics: {}",
+            fdi_common::numerics::describe(&self.numerics)
+        );
+        out
+    }
+
+    /// The markdown paragraph under a table's title.
+    pub fn md(&self) -> String {
+        let mut out = format!("Made with {}", self.line());
+        if !self.numerics.is_empty() {
+            out.push_str(
+                ". **These numerics differ from the paper's calibration**: the paper's values are shown for comparison only",
+            );
+        }
+        out.push_str(".\n\n");
+        out
+    }
+
+    /// The CSV's leading comment line (read with `comment='#'` in pandas).
+    pub fn csv_comment(&self) -> Vec<u8> {
+        format!("# made with {}\n", self.line().replace('\n', " ")).into_bytes()
+    }
+}
+
+/// A table's CSV: its [`MadeWith`] comment, then the header and rows.
+pub(crate) fn with_comment(made: &MadeWith, csv: Vec<u8>) -> Vec<u8> {
+    let mut out = made.csv_comment();
+    out.extend(csv);
+    out
+}
+
+/// The base scenario of Tables I and II: the given one (or the paper's), under the paper's
+/// attack, for the paper's 40 s unless `--duration-s` says otherwise.
+fn base(args: &TableArgs) -> Result<(Resolved, MadeWith)> {
+    let (mut r, mut made) = MadeWith::load(args.scenario.as_deref(), &args.numerics)?;
+    let paper = scenario::paper()?;
+    if r.attack.name != paper.attack.name {
+        let profile = scenario::attack_from_arg(&paper.attack.name, &r.scenario)?;
+        made.replaced.push(format!(
+            "attack `{}` → `{}`",
+            r.attack.name, paper.attack.name
+        ));
+        r = r.with_attack(profile)?;
+    }
+    let duration = args.duration_s.unwrap_or(paper.scenario.duration_s);
+    if r.scenario.duration_s != duration {
+        made.replaced.push(format!(
+            "duration {} s → {duration} s",
+            r.scenario.duration_s
+        ));
+        r.scenario.duration_s = duration;
+    }
+    Ok((crate::run::check_overrides(r)?, made))
+}
+
+/// True when robot `id` of `r` is the paper's robot `id`: same model and trajectory, and the
+/// same delay where `same_delay` (gains and numerics may differ: the table names them).
+fn is_papers_robot(r: &Resolved, id: u32, same_delay: bool) -> bool {
+    static PAPER: std::sync::OnceLock<Option<Resolved>> = std::sync::OnceLock::new();
+    let Some(paper) = PAPER.get_or_init(|| scenario::paper().ok()) else {
+        return false;
+    };
+    let find = |r: &Resolved| r.scenario.agents.iter().find(|a| a.id == id).cloned();
+    match (find(r), find(paper)) {
+        (Some(a), Some(b)) => {
+            a.model == b.model
+                && a.trajectory == b.trajectory
+                && (!same_delay || a.delay == b.delay)
+        }
+        _ => false,
+    }
+}
+
+/// The paper's Table I values (traditional, proposed) of robot `id` of `r`, when it is the
+/// paper's robot.
+fn paper_table1(r: &Resolved, id: u32) -> Option<(f64, f64)> {
+    PAPER_TABLE1
+        .iter()
+        .find(|(robot, _, _)| *robot == id)
+        .filter(|_| is_papers_robot(r, id, true))
+        .map(|&(_, t, p)| (t, p))
+}
+
+/// `{:.prec$}` of a paper value, `—` where the table has none.
+fn or_dash(v: Option<f64>, prec: usize) -> String {
+    v.map_or_else(|| "—".into(), |v| format!("{v:.prec$}"))
+}
+
+/// A CSV cell of an optional value: empty where there is none.
+fn or_empty(v: Option<f64>) -> String {
+    v.map_or_else(String::new, |v| v.to_string())
+}
+
+/// The robots of a Table I: the base scenario's, in id order.
+fn robots(r: &Resolved) -> Vec<u32> {
+    let mut ids: Vec<u32> = r.scenario.agents.iter().map(|a| a.id).collect();
+    ids.sort_unstable();
+    ids
 }
 
 /// Runs one table entry; ipc runs keep their run directory under the table's folder.
@@ -126,14 +285,6 @@ fn run_case(
     }
 }
 
-fn base(args: &TableArgs) -> Result<Resolved> {
-    let mut r = scenario::paper()?;
-    if let Some(d) = args.duration_s {
-        r.scenario.duration_s = d;
-    }
-    crate::run::check_overrides(r)
-}
-
 /// The folder of one table: `<out>/<timestamp>-<name>`.
 fn table_dir(args: &TableArgs, name: &str) -> PathBuf {
     args.out
@@ -149,49 +300,57 @@ fn robot_rmse(s: &RunSummary, robot: u32) -> f64 {
 }
 
 pub fn table1(args: &TableArgs) -> Result<ExitCode> {
-    let paper = base(args)?;
+    let (base, made) = base(args)?;
     let dir = table_dir(args, "table1");
     if let Some(n) = args.seeds {
-        return seeded::table1(args, &paper, &dir, n);
+        return seeded::table1(args, &base, &made, &dir, n);
     }
     let run_mode = |mode: ControllerMode| {
-        let mut r = paper.clone();
+        let mut r = base.clone();
         r.scenario.controller.mode = mode;
         run_case(&r, args, &dir, mode.as_str(), !args.json)
     };
     let traditional = run_mode(ControllerMode::Traditional)?;
     let proposed = run_mode(ControllerMode::Proposed)?;
-    let rows = table1_rows(&traditional, &proposed);
+    let rows = table1_rows(&base, &traditional, &proposed);
     let table = Table {
         name: "table1",
-        md: table1_markdown(args.engine, &rows),
-        csv: table1_csv(&rows)?,
-        json: serde_json::json!({ "engine": args.engine.as_str(), "rows": rows }),
+        md: table1_markdown(args.engine, &made, &rows),
+        csv: with_comment(&made, table1_csv(&rows)?),
+        json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows }),
         chart: table1_chart(args.engine, &rows),
     };
     table.publish(args.json, &dir)
 }
 
-/// Table I's rows: the paper's robots, their RMSE in the two runs beside the paper's.
-fn table1_rows(traditional: &RunSummary, proposed: &RunSummary) -> Vec<Table1Row> {
-    PAPER_TABLE1
-        .iter()
-        .map(|&(robot, pt, pp)| Table1Row {
-            robot,
-            traditional_rmse_rad: robot_rmse(traditional, robot),
-            proposed_rmse_rad: robot_rmse(proposed, robot),
-            paper_traditional: pt,
-            paper_proposed: pp,
+/// Table I's rows: the base scenario's robots, their RMSE in the two runs beside the paper's.
+fn table1_rows(base: &Resolved, traditional: &RunSummary, proposed: &RunSummary) -> Vec<Table1Row> {
+    robots(base)
+        .into_iter()
+        .map(|robot| {
+            let paper = paper_table1(base, robot);
+            Table1Row {
+                robot,
+                traditional_rmse_rad: robot_rmse(traditional, robot),
+                proposed_rmse_rad: robot_rmse(proposed, robot),
+                paper_traditional: paper.map(|p| p.0),
+                paper_proposed: paper.map(|p| p.1),
+            }
         })
         .collect()
 }
 
-/// `table1.md` (without its leading `# `), as printed.
-fn table1_markdown(engine: Engine, rows: &[Table1Row]) -> String {
-    let mut md = format!(
-        "Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}\n\n",
+/// The title of a Table I.
+fn table1_title(engine: Engine) -> String {
+    format!(
+        "Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}",
         engine.as_str()
-    );
+    )
+}
+
+/// `table1.md` (without its leading `# `), as printed.
+fn table1_markdown(engine: Engine, made: &MadeWith, rows: &[Table1Row]) -> String {
+    let mut md = format!("{}\n\n{}", table1_title(engine), made.md());
     md.push_str(&md_table_head(&[
         "robot",
         "traditional",
@@ -204,50 +363,53 @@ fn table1_markdown(engine: Engine, rows: &[Table1Row]) -> String {
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {:.4} | {:.4} | {:.2} | {:.3} | {:.3} | {:.2} |",
+            "| {} | {:.4} | {:.4} | {:.2} | {} | {} | {} |",
             r.robot,
             r.traditional_rmse_rad,
             r.proposed_rmse_rad,
             r.traditional_rmse_rad / r.proposed_rmse_rad,
-            r.paper_traditional,
-            r.paper_proposed,
-            r.paper_traditional / r.paper_proposed
+            or_dash(r.paper_traditional, 3),
+            or_dash(r.paper_proposed, 3),
+            or_dash(ratio(r.paper_traditional, r.paper_proposed), 2)
         );
     }
     md
 }
 
-/// Table I's bar chart: per robot, each controller's RMSE beside the paper's.
+/// `a / b` of two values that may be missing.
+fn ratio(a: Option<f64>, b: Option<f64>) -> Option<f64> {
+    Some(a? / b?)
+}
+
+/// Table I's bar chart: per robot, each controller's RMSE beside the paper's (the paper's bars
+/// only where every robot has a paper value).
 fn table1_chart(engine: Engine, rows: &[Table1Row]) -> BarChart {
     let values = |f: fn(&Table1Row) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
+    let paper =
+        |f: fn(&Table1Row) -> Option<f64>| -> Option<Vec<f64>> { rows.iter().map(f).collect() };
+    let mut series = vec![(
+        "traditional".into(),
+        PALETTE[1],
+        values(|r| r.traditional_rmse_rad),
+    )];
+    if let Some(v) = paper(|r| r.paper_traditional) {
+        series.push(("paper traditional".into(), PAPER_SHADE[1], v));
+    }
+    series.push((
+        "proposed".into(),
+        PALETTE[0],
+        values(|r| r.proposed_rmse_rad),
+    ));
+    if let Some(v) = paper(|r| r.paper_proposed) {
+        series.push(("paper proposed".into(), PAPER_SHADE[0], v));
+    }
     rmse_chart(
         format!(
             "Table I: RMSE per robot, this run ({} engine) beside the paper",
             engine.as_str()
         ),
         rows.iter().map(|r| format!("robot {}", r.robot)).collect(),
-        vec![
-            (
-                "traditional".into(),
-                PALETTE[1],
-                values(|r| r.traditional_rmse_rad),
-            ),
-            (
-                "paper traditional".into(),
-                PAPER_SHADE[1],
-                values(|r| r.paper_traditional),
-            ),
-            (
-                "proposed".into(),
-                PALETTE[0],
-                values(|r| r.proposed_rmse_rad),
-            ),
-            (
-                "paper proposed".into(),
-                PAPER_SHADE[0],
-                values(|r| r.paper_proposed),
-            ),
-        ],
+        series,
     )
 }
 
@@ -265,8 +427,8 @@ fn table1_csv(rows: &[Table1Row]) -> Result<Vec<u8>> {
             r.robot.to_string(),
             r.traditional_rmse_rad.to_string(),
             r.proposed_rmse_rad.to_string(),
-            r.paper_traditional.to_string(),
-            r.paper_proposed.to_string(),
+            or_empty(r.paper_traditional),
+            or_empty(r.paper_proposed),
         ]
     });
     csv_bytes(&HEADER, rows).context("writing table1.csv")
@@ -280,7 +442,7 @@ fn table2_csv(rows: &[Table2Row]) -> Result<Vec<u8>> {
             r.case.to_string(),
             r.tau_ms.clone(),
             r.rmse_rad.to_string(),
-            r.paper_rmse_rad.to_string(),
+            or_empty(r.paper_rmse_rad),
         ]
     });
     csv_bytes(&HEADER, rows).context("writing table2.csv")
@@ -351,47 +513,66 @@ impl Table {
 }
 
 pub fn table2(args: &TableArgs) -> Result<ExitCode> {
-    let paper = base(args)?;
+    let (base, made) = base(args)?;
+    table2_robot(&base, args.scenario.as_deref())?;
     let dir = table_dir(args, "table2");
     if let Some(n) = args.seeds {
-        return seeded::table2(args, &paper, &dir, n);
+        return seeded::table2(args, &base, &made, &dir, n);
     }
+    let compare = is_papers_robot(&base, 1, false);
     let mut rows = Vec::new();
     for (case, delay, paper_rmse) in paper_table2() {
-        let r = table2_case(&paper, delay);
+        let r = table2_case(&base, delay);
         let summary = run_case(&r, args, &dir, case, !args.json)?;
         rows.push(Table2Row {
             case,
             tau_ms: delay.describe_ms(),
             rmse_rad: robot_rmse(&summary, 1),
-            paper_rmse_rad: paper_rmse,
+            paper_rmse_rad: compare.then_some(paper_rmse),
         });
     }
     let table = Table {
         name: "table2",
-        md: table2_markdown(args.engine, &rows),
-        csv: table2_csv(&rows)?,
-        json: serde_json::json!({ "engine": args.engine.as_str(), "rows": rows }),
+        md: table2_markdown(args.engine, &made, &rows),
+        csv: with_comment(&made, table2_csv(&rows)?),
+        json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows }),
         chart: table2_chart(args.engine, &rows),
     };
     table.publish(args.json, &dir)
 }
 
+/// Table II is robot 1's: a base scenario without an agent 1 is refused, naming the file.
+fn table2_robot(base: &Resolved, file: Option<&Path>) -> Result<()> {
+    if base.scenario.agents.iter().any(|a| a.id == 1) {
+        return Ok(());
+    }
+    anyhow::bail!(
+        "{}: Table II runs robot 1 under four delays, and this scenario has no agent with id 1 (its agents: {:?})",
+        file.map_or_else(|| "the scenario".into(), |p| p.display().to_string()),
+        robots(base)
+    )
+}
+
 /// The scenario of one Table II case: robot 1 alone under `delay`.
-fn table2_case(paper: &Resolved, delay: DelayProfile) -> Resolved {
-    let mut r = paper.clone().retain_agents(|a| a.id == 1);
+fn table2_case(base: &Resolved, delay: DelayProfile) -> Resolved {
+    let mut r = base.clone().retain_agents(|a| a.id == 1);
     for a in &mut r.scenario.agents {
         a.delay = delay;
     }
     r
 }
 
-/// `table2.md` (without its leading `# `), as printed.
-fn table2_markdown(engine: Engine, rows: &[Table2Row]) -> String {
-    let mut md = format!(
-        "Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}\n\n",
+/// The title of a Table II.
+fn table2_title(engine: Engine) -> String {
+    format!(
+        "Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}",
         engine.as_str()
-    );
+    )
+}
+
+/// `table2.md` (without its leading `# `), as printed.
+fn table2_markdown(engine: Engine, made: &MadeWith, rows: &[Table2Row]) -> String {
+    let mut md = format!("{}\n\n{}", table2_title(engine), made.md());
     md.push_str(&md_table_head(&[
         "case",
         "tau(t) (ms)",
@@ -401,8 +582,11 @@ fn table2_markdown(engine: Engine, rows: &[Table2Row]) -> String {
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {:.4} | {:.4} |",
-            r.case, r.tau_ms, r.rmse_rad, r.paper_rmse_rad
+            "| {} | {} | {:.4} | {} |",
+            r.case,
+            r.tau_ms,
+            r.rmse_rad,
+            or_dash(r.paper_rmse_rad, 4)
         );
     }
     md
@@ -416,18 +600,18 @@ fn table2_chart(engine: Engine, rows: &[Table2Row]) -> BarChart {
             engine.as_str()
         ),
         rows.iter().map(|r| r.case.to_string()).collect(),
-        vec![
-            (
-                "this run".into(),
-                PALETTE[0],
-                rows.iter().map(|r| r.rmse_rad).collect(),
-            ),
-            (
-                "paper".into(),
-                PAPER_SHADE[0],
-                rows.iter().map(|r| r.paper_rmse_rad).collect(),
-            ),
-        ],
+        std::iter::once((
+            "this run".into(),
+            PALETTE[0],
+            rows.iter().map(|r| r.rmse_rad).collect(),
+        ))
+        .chain(
+            rows.iter()
+                .map(|r| r.paper_rmse_rad)
+                .collect::<Option<Vec<f64>>>()
+                .map(|v| ("paper".into(), PAPER_SHADE[0], v)),
+        )
+        .collect(),
     )
 }
 
@@ -572,11 +756,17 @@ mod seeded {
         robot: u32,
         traditional_rmse_rad: CellStats,
         proposed_rmse_rad: CellStats,
-        paper_traditional: f64,
-        paper_proposed: f64,
+        paper_traditional: Option<f64>,
+        paper_proposed: Option<f64>,
     }
 
-    pub fn table1(args: &TableArgs, paper: &Resolved, dir: &Path, n: u32) -> Result<ExitCode> {
+    pub fn table1(
+        args: &TableArgs,
+        paper: &Resolved,
+        made: &MadeWith,
+        dir: &Path,
+        n: u32,
+    ) -> Result<ExitCode> {
         let seeds = seeds(paper.scenario.seed, n)?;
         let modes = [ControllerMode::Traditional, ControllerMode::Proposed];
         let mut cases = Vec::new();
@@ -590,10 +780,12 @@ mod seeded {
         let summaries = run_all(args, dir, &cases)?;
         let (trad, prop) = summaries.split_at(seeds.len());
         let mut rows = Vec::new();
-        for &(robot, pt, pp) in &PAPER_TABLE1 {
+        for robot in robots(paper) {
             let rmse = |runs: &[RunSummary]| -> Vec<f64> {
                 runs.iter().map(|s| robot_rmse(s, robot)).collect()
             };
+            let values = paper_table1(paper, robot);
+            let (pt, pp) = (values.map(|v| v.0), values.map(|v| v.1));
             rows.push(Row1 {
                 robot,
                 traditional_rmse_rad: CellStats::of(
@@ -607,8 +799,9 @@ mod seeded {
         }
         let over = describe_seeds(&seeds);
         let mut md = format!(
-            "Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n",
-            args.engine.as_str()
+            "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
+            table1_title(args.engine),
+            made.md()
         );
         md.push_str(&md_table_head(&[
             "robot",
@@ -622,14 +815,14 @@ mod seeded {
         for r in &rows {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.2} | {:.3} | {:.3} | {:.2} |",
+                "| {} | {} | {} | {:.2} | {} | {} | {} |",
                 r.robot,
                 r.traditional_rmse_rad.md(),
                 r.proposed_rmse_rad.md(),
                 r.traditional_rmse_rad.mean / r.proposed_rmse_rad.mean,
-                r.paper_traditional,
-                r.paper_proposed,
-                r.paper_traditional / r.paper_proposed
+                or_dash(r.paper_traditional, 3),
+                or_dash(r.paper_proposed, 3),
+                or_dash(ratio(r.paper_traditional, r.paper_proposed), 2)
             );
         }
         let mut header = vec!["robot".to_string()];
@@ -647,8 +840,8 @@ mod seeded {
                 let mut rec = vec![r.robot.to_string()];
                 rec.extend(r.traditional_rmse_rad.csv());
                 rec.extend(r.proposed_rmse_rad.csv());
-                rec.push(r.paper_traditional.to_string());
-                rec.push(r.paper_proposed.to_string());
+                rec.push(or_empty(r.paper_traditional));
+                rec.push(or_empty(r.paper_proposed));
                 rec
             }),
         )
@@ -664,7 +857,16 @@ mod seeded {
             })
             .collect();
         let chart = table1_chart(args.engine, &plain);
-        publish(args, dir, "table1", md, csv, chart, (&over, &seeds), &rows)
+        let csv = with_comment(made, csv);
+        publish(
+            args,
+            dir,
+            "table1",
+            (md, csv, chart),
+            made,
+            (&over, &seeds),
+            &rows,
+        )
     }
 
     #[derive(Debug, Serialize)]
@@ -672,11 +874,18 @@ mod seeded {
         case: &'static str,
         tau_ms: String,
         rmse_rad: CellStats,
-        paper_rmse_rad: f64,
+        paper_rmse_rad: Option<f64>,
     }
 
-    pub fn table2(args: &TableArgs, paper: &Resolved, dir: &Path, n: u32) -> Result<ExitCode> {
+    pub fn table2(
+        args: &TableArgs,
+        paper: &Resolved,
+        made: &MadeWith,
+        dir: &Path,
+        n: u32,
+    ) -> Result<ExitCode> {
         let seeds = seeds(paper.scenario.seed, n)?;
+        let compare = is_papers_robot(paper, 1, false);
         let mut cases = Vec::new();
         for (case, delay, _) in paper_table2() {
             let r = table2_case(paper, delay);
@@ -695,13 +904,14 @@ mod seeded {
                 case,
                 tau_ms: delay.describe_ms(),
                 rmse_rad: CellStats::of(&rmse, case)?,
-                paper_rmse_rad: paper_rmse,
+                paper_rmse_rad: compare.then_some(paper_rmse),
             });
         }
         let over = describe_seeds(&seeds);
         let mut md = format!(
-            "Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n",
-            args.engine.as_str()
+            "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
+            table2_title(args.engine),
+            made.md()
         );
         md.push_str(&md_table_head(&[
             "case",
@@ -712,11 +922,11 @@ mod seeded {
         for r in &rows {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.4} |",
+                "| {} | {} | {} | {} |",
                 r.case,
                 r.tau_ms,
                 r.rmse_rad.md(),
-                r.paper_rmse_rad
+                or_dash(r.paper_rmse_rad, 4)
             );
         }
         let mut header = vec!["case".to_string(), "tau_ms".into()];
@@ -728,7 +938,7 @@ mod seeded {
             rows.iter().map(|r| {
                 let mut rec = vec![r.case.to_string(), r.tau_ms.clone()];
                 rec.extend(r.rmse_rad.csv());
-                rec.push(r.paper_rmse_rad.to_string());
+                rec.push(or_empty(r.paper_rmse_rad));
                 rec
             }),
         )
@@ -743,19 +953,26 @@ mod seeded {
             })
             .collect();
         let chart = table2_chart(args.engine, &plain);
-        publish(args, dir, "table2", md, csv, chart, (&over, &seeds), &rows)
+        let csv = with_comment(made, csv);
+        publish(
+            args,
+            dir,
+            "table2",
+            (md, csv, chart),
+            made,
+            (&over, &seeds),
+            &rows,
+        )
     }
 
     /// Writes and prints a seeded table: its chart titled with the seeds (`over`, as words),
     /// its JSON with the engine, the seeds, the confidence level and the rows.
-    #[allow(clippy::too_many_arguments)]
     fn publish<R: Serialize>(
         args: &TableArgs,
         dir: &Path,
         name: &'static str,
-        md: String,
-        csv: Vec<u8>,
-        mut chart: BarChart,
+        (md, csv, mut chart): (String, Vec<u8>, BarChart),
+        made: &MadeWith,
         (over, seeds): (&str, &[u64]),
         rows: &R,
     ) -> Result<ExitCode> {
@@ -766,6 +983,7 @@ mod seeded {
             csv,
             json: serde_json::json!({
                 "engine": args.engine.as_str(),
+                "made_with": made,
                 "seeds": seeds,
                 "confidence": stats::LEVEL,
                 "rows": rows
@@ -786,8 +1004,8 @@ mod tests {
             robot: 2,
             traditional_rmse_rad: 0.041,
             proposed_rmse_rad: 1.0 / 3.0,
-            paper_traditional: 0.041,
-            paper_proposed: 0.013,
+            paper_traditional: Some(0.041),
+            paper_proposed: Some(0.013),
         }])
         .expect("csv");
         let mut r = csv::Reader::from_reader(t1.as_slice());
@@ -814,7 +1032,7 @@ mod tests {
             case,
             tau_ms: delay.describe_ms(),
             rmse_rad: 0.01,
-            paper_rmse_rad: paper,
+            paper_rmse_rad: Some(paper),
         }])
         .expect("csv");
         assert_eq!(
