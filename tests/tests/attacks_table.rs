@@ -55,6 +55,12 @@ fn attacks_table_has_a_row_per_class_and_marks_what_is_undefined() {
     }
 
     let csv_text = std::fs::read_to_string(dir.0.join("attacks.csv")).expect("attacks.csv");
+    // The first line says how the table was made (a `#` comment), then the CSV proper.
+    let (made, csv_text) = csv_text.split_once('\n').expect("a comment line");
+    assert_eq!(
+        made,
+        "# made with scenario: the embedded paper scenario; numerics: the paper's calibration (SPEC §4)"
+    );
     // No field of this table needs CSV quoting (names, numbers, empty fields).
     assert!(!csv_text.contains('"'), "{csv_text}");
     let mut lines = csv_text.lines();

@@ -150,8 +150,13 @@ fn proposed_beats_traditional_on_a_shortened_paper_run() {
 #[test]
 fn constant_delays_on_the_tick_grid_equal_the_same_delay_plus_a_hair() {
     use fdi_common::delay::DelayProfile;
+    // Under the `step-mean` observer input: the plant and the observer then integrate the same
+    // delayed input, continuous in τ. The default `sample` input takes the command in force at
+    // t_k − τ, which at a whole number of periods is a stamp itself: one period of difference in
+    // what the observer sees, by construction (docs/model.md, "Numerics of the delayed input").
     let with_delay = |value_s: f64| {
         let mut r = paper(10.0);
+        r.scenario.controller.observer_input = fdi_common::control::ObserverInput::StepMean;
         for a in &mut r.scenario.agents {
             a.delay = DelayProfile::Constant { value_s };
         }
