@@ -836,9 +836,10 @@ fn agent_trajectory_problems(i: usize, a: &AgentConfig) -> Vec<Problem> {
     out
 }
 
-/// Reads a TOML file of at most [`MAX_FILE_BYTES`]. Only a regular file is read (a device, a
-/// pipe or a directory is refused without reading from it), and never more than the limit
-/// whatever size the file claims (files in `/proc` claim 0 bytes; a file may grow while read).
+/// Reads a TOML file of at most [`MAX_FILE_BYTES`]: a scenario, an attack, a campaign or a
+/// deployment file. Only a regular file is read (a device, a pipe or a directory is refused
+/// without reading from it), and never more than the limit whatever size the file claims
+/// (files in `/proc` claim 0 bytes; a file may grow while read).
 pub fn read_limited(path: &Path) -> Result<String, String> {
     use std::io::Read;
     let cannot = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
@@ -846,7 +847,7 @@ pub fn read_limited(path: &Path) -> Result<String, String> {
     let meta = file.metadata().map_err(cannot)?;
     if !meta.is_file() {
         return Err(format!(
-            "{} is not a regular file ({}): scenario and attack files must be regular files of at most {MAX_FILE_BYTES} bytes",
+            "{} is not a regular file ({}): scenario, attack, campaign and deployment files must be regular files of at most {MAX_FILE_BYTES} bytes",
             path.display(),
             crate::trace::file_kind(meta.file_type()),
         ));
@@ -877,6 +878,15 @@ pub fn read_limited(path: &Path) -> Result<String, String> {
     })
 }
 
+/// A TOML syntax error of `text` as `TOML syntax at line L, column C: <what>`.
+pub fn toml_syntax_error(text: &str, e: &toml::de::Error) -> String {
+    let at = e.span().map_or(String::new(), |span| {
+        let (line, column) = line_column(text, span.start);
+        format!(" at line {line}, column {column}")
+    });
+    format!("TOML syntax{at}: {}", e.message().trim_end())
+}
+
 /// Deserializes `text`, collecting every unknown key (each one is removed and parsing retried)
 /// before reporting the first other error. Returns the value and the unknown-key problems.
 fn parse_collecting<T: serde::de::DeserializeOwned>(
@@ -884,17 +894,8 @@ fn parse_collecting<T: serde::de::DeserializeOwned>(
     source_name: &str,
 ) -> Result<(Option<T>, Vec<Problem>), ScenarioError> {
     // Syntax errors first, with their line and column.
-    let mut value: toml::Table = toml::from_str(text).map_err(|e| {
-        let at = e.span().map_or(String::new(), |span| {
-            let (line, column) = line_column(text, span.start);
-            format!(" at line {line}, column {column}")
-        });
-        ScenarioError::one(
-            source_name,
-            "<file>",
-            format!("TOML syntax{at}: {}", e.message().trim_end()),
-        )
-    })?;
+    let mut value: toml::Table = toml::from_str(text)
+        .map_err(|e| ScenarioError::one(source_name, "<file>", toml_syntax_error(text, &e)))?;
     apply_agent_defaults(&mut value);
     let mut problems = Vec::new();
     for _ in 0..256 {
@@ -1189,7 +1190,7 @@ pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, 
 /// hold (a missing key, one inherited from `[defaults]`) gives the place of the nearest table
 /// above it that the text holds; `None` when the text does not parse or nothing of the path is
 /// in it.
-fn locate(text: &str, path: &str) -> Option<usize> {
+pub fn locate(text: &str, path: &str) -> Option<usize> {
     use toml::de::{DeTable, DeValue};
     let root = DeTable::parse(text).ok()?;
     let mut segments: Vec<Result<&str, usize>> = Vec::new();
@@ -1243,7 +1244,7 @@ fn with_locations(problems: Vec<Problem>, text: &str, name: Option<&str>) -> Vec
 }
 
 /// `line L, column C` (1-based, columns in characters) of byte `offset` of `text`.
-fn line_column(text: &str, offset: usize) -> (usize, usize) {
+pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
     let mut end = offset.min(text.len());
     while !text.is_char_boundary(end) {
         end -= 1;

@@ -226,6 +226,65 @@ fn a_bad_axis_path_is_refused_by_name() {
     );
 }
 
+/// A seed range near 2⁶³ was computed in floats: its eight seeds were one, the campaign ran
+/// once and showed the seed as 9223372036854776000.
+#[test]
+fn a_seed_range_near_2_to_the_63_runs_every_seed_exactly() {
+    let s = Scratch::new("sweep-seeds");
+    let c = s.0.join("seeds.toml");
+    std::fs::write(
+        &c,
+        "name = \"seeds\"\n[set]\nduration_s = 0.1\n[[axes]]\npath = \"seed\"\n\
+         range = { start = 9223372036854775800, stop = 9223372036854775807, step = 1 }\n",
+    )
+    .expect("campaign file");
+    let out = s.0.join("out");
+    let (stdout, _) = sweep(&c, &out);
+    assert!(
+        stdout.contains("8 runs (1 points × 8 seeds)") && stdout.contains("ran 8, failed 0"),
+        "{stdout}"
+    );
+    let seeds: Vec<Option<u64>> = results(&out).iter().map(|r| r["seed"].as_u64()).collect();
+    let want: Vec<u64> = (i64::MAX as u64 - 7..=i64::MAX as u64).collect();
+    assert_eq!(seeds, want.iter().copied().map(Some).collect::<Vec<_>>());
+    // results.csv: the header names `seed` once; every seed is written to its last digit.
+    let csv = std::fs::read_to_string(out.join("results.csv")).expect("results.csv");
+    let header: Vec<&str> = csv.lines().next().expect("a header").split(',').collect();
+    let column = header
+        .iter()
+        .position(|h| *h == "seed")
+        .expect("a seed column");
+    let shown: Vec<&str> = csv
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(column).expect("a seed cell"))
+        .collect();
+    let want_text: Vec<String> = want.iter().map(u64::to_string).collect();
+    assert_eq!(shown, want_text);
+}
+
+/// Two axes on one path ran the later axis's value under the earlier one's column.
+#[test]
+fn two_axes_on_one_path_are_refused_before_anything_runs() {
+    let s = Scratch::new("sweep-two-axes");
+    let c = s.0.join("two.toml");
+    std::fs::write(
+        &c,
+        "name = \"two\"\n[[axes]]\nlabel = \"a\"\npath = \"controller.beta\"\nvalues = [10.0, 20.0]\n\
+         [[axes]]\nlabel = \"b\"\npath = \"controller.beta\"\nvalues = [30.0]\n",
+    )
+    .expect("campaign file");
+    let out = s.0.join("out");
+    let o = launch(&["sweep", &c.to_string_lossy()], &out, WATCHDOG);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("axes `a` (axes[0].path (line 4, column 1)) and `b` (axes[1].path (line 8, column 1)) both set `controller.beta`"),
+        "{stderr}"
+    );
+    assert!(!out.exists(), "a refused campaign created its folder");
+}
+
 #[test]
 fn table1_over_two_seeds_gives_a_mean_and_an_interval_per_cell() {
     let s = Scratch::new("table1-seeds");

@@ -14,6 +14,8 @@ use serde_json::Value;
 #[derive(Debug, Clone, PartialEq)]
 pub enum Cell {
     Num(f64),
+    /// An integer kept exact (a seed near 2⁶³ is not a float).
+    Int(i128),
     Text(String),
     Empty,
 }
@@ -22,6 +24,7 @@ impl Cell {
     pub fn num(&self) -> Option<f64> {
         match self {
             Self::Num(x) if x.is_finite() => Some(*x),
+            Self::Int(i) => Some(*i as f64),
             _ => None,
         }
     }
@@ -30,6 +33,7 @@ impl Cell {
     pub fn csv(&self) -> String {
         match self {
             Self::Num(x) => x.to_string(),
+            Self::Int(i) => i.to_string(),
             Self::Text(s) => s.clone(),
             Self::Empty => String::new(),
         }
@@ -38,6 +42,12 @@ impl Cell {
     pub fn json(&self) -> Value {
         match self {
             Self::Num(x) => serde_json::Number::from_f64(*x).map_or(Value::Null, Value::Number),
+            Self::Int(i) => match (u64::try_from(*i), i64::try_from(*i)) {
+                (Ok(u), _) => Value::Number(u.into()),
+                (_, Ok(i)) => Value::Number(i.into()),
+                // Beyond 64 bits (no summary or TOML value is): the digits, exact.
+                _ => Value::String(i.to_string()),
+            },
             Self::Text(s) => Value::String(s.clone()),
             Self::Empty => Value::Null,
         }

@@ -126,6 +126,8 @@ const MAX_RUNS: usize = 100_000;
 struct Axis {
     label: String,
     paths: Vec<FieldPath>,
+    /// Where each path is written in the campaign file (`axes[1].path`, `axes[0].paths[2]`).
+    fields: Vec<String>,
     values: Vec<toml::Value>,
     /// The values multiply the base value at each path.
     factors: bool,
@@ -171,70 +173,180 @@ fn number(v: &toml::Value, what: &str) -> Result<f64> {
     }
 }
 
-fn range_values(r: &RangeFile, at: &str) -> Result<Vec<toml::Value>> {
-    let start = number(&r.start, &format!("{at}.start"))?;
-    let stop = number(&r.stop, &format!("{at}.stop"))?;
+/// The values of a range; `at` names a field of the range (`start`, `step`, …) with its place
+/// in the campaign file. A range of integers (`start`, `stop` and `step` or the steps of a
+/// `count` all whole) gives integers, computed exactly (a seed near 2⁶³ stays itself); a range
+/// of more values than a campaign may run is refused before any is made, whatever the count
+/// (a step of 1e-300, a span beyond the largest float).
+fn range_values(r: &RangeFile, at: &dyn Fn(&str) -> String) -> Result<Vec<toml::Value>> {
+    let too_many = |n: String| {
+        anyhow::anyhow!(
+            "{}: {n} values, more than the {MAX_RUNS} runs a campaign may hold",
+            at("")
+        )
+    };
     match (&r.step, r.count) {
         (Some(step), None) => {
-            let ints = matches!(
-                (&r.start, &r.stop, step),
-                (
-                    toml::Value::Integer(_),
-                    toml::Value::Integer(_),
-                    toml::Value::Integer(_)
-                )
-            );
-            let step = number(step, &format!("{at}.step"))?;
+            if let (toml::Value::Integer(a), toml::Value::Integer(b), toml::Value::Integer(d)) =
+                (&r.start, &r.stop, step)
+            {
+                let (a, b, d) = (i128::from(*a), i128::from(*b), i128::from(*d));
+                if d == 0 || (b - a) * d.signum() < 0 {
+                    bail!("{}: step {d} never goes from {a} to {b}", at("step"));
+                }
+                let n = (b - a) / d + 1;
+                if n > MAX_RUNS as i128 {
+                    return Err(too_many(n.to_string()));
+                }
+                return integer_values((0..n).map(|i| a + i * d), at(""));
+            }
+            let start = number(&r.start, &at("start"))?;
+            let stop = number(&r.stop, &at("stop"))?;
+            let step = number(step, &at("step"))?;
             if step == 0.0 || (stop - start) * step < 0.0 {
-                bail!("{at}: step {step} never goes from {start} to {stop}");
+                bail!(
+                    "{}: step {step} never goes from {start} to {stop}",
+                    at("step")
+                );
             }
-            let n = ((stop - start) / step + 1e-9).floor() as usize + 1;
-            if n > MAX_RUNS {
-                bail!("{at}: {n} values, more than {MAX_RUNS}");
+            // The number of steps; beyond the largest float the span is divided piecewise.
+            let span = stop - start;
+            let steps = if span.is_finite() {
+                span / step
+            } else {
+                stop / step - start / step
+            };
+            let n = (steps + 1e-9).floor() + 1.0;
+            if n.is_nan() || n > MAX_RUNS as f64 {
+                return Err(too_many(if n.is_finite() {
+                    format!("about {n:.1e}")
+                } else {
+                    "more than 10^308".into()
+                }));
             }
-            Ok((0..n)
-                .map(|i| {
-                    let x = start + i as f64 * step;
-                    if ints {
-                        toml::Value::Integer(x.round() as i64)
+            // n ≤ MAX_RUNS: exact as an integer.
+            let n = n as usize;
+            finite_values(
+                (0..n).map(|i| {
+                    if span.is_finite() {
+                        start + i as f64 * step
                     } else {
-                        toml::Value::Float(x)
+                        // i · step may pass the largest float where the value does not.
+                        2.0 * (start / 2.0 + i as f64 * (step / 2.0))
                     }
-                })
-                .collect())
+                }),
+                at(""),
+            )
         }
         (None, Some(count)) => {
             if count == 0 || count > MAX_RUNS {
-                bail!("{at}.count must be between 1 and {MAX_RUNS}, not {count}");
+                bail!(
+                    "{}: must be between 1 and {MAX_RUNS}, not {count}",
+                    at("count")
+                );
             }
-            Ok((0..count)
-                .map(|i| {
+            if let (toml::Value::Integer(a), toml::Value::Integer(b)) = (&r.start, &r.stop) {
+                let (a, b) = (i128::from(*a), i128::from(*b));
+                let gaps = count as i128 - 1;
+                if gaps == 0 || (b - a) % gaps == 0 {
+                    let d = if gaps == 0 { 0 } else { (b - a) / gaps };
+                    return integer_values((0..count as i128).map(|i| a + i * d), at(""));
+                }
+            }
+            let start = number(&r.start, &at("start"))?;
+            let stop = number(&r.stop, &at("stop"))?;
+            let span = stop - start;
+            finite_values(
+                (0..count).map(|i| {
+                    let t = i as f64 / (count.max(2) - 1) as f64;
                     if count == 1 {
                         start
                     } else if i + 1 == count {
                         stop
+                    } else if span.is_finite() {
+                        start + span * t
                     } else {
-                        start + (stop - start) * i as f64 / (count - 1) as f64
+                        // The span is beyond the largest float: weigh the ends instead.
+                        start * (1.0 - t) + stop * t
                     }
-                })
-                .map(toml::Value::Float)
-                .collect())
+                }),
+                at(""),
+            )
         }
-        _ => bail!("{at} takes exactly one of `step` and `count` beside `start` and `stop`"),
+        _ => bail!(
+            "{}: takes exactly one of `step` and `count` beside `start` and `stop`",
+            at("")
+        ),
     }
 }
 
-fn resolve_axes(file: &CampaignFile) -> Result<Vec<Axis>> {
+/// The values as integers of TOML (64-bit), or an error naming `at`.
+fn integer_values(xs: impl Iterator<Item = i128>, at: String) -> Result<Vec<toml::Value>> {
+    xs.map(|x| {
+        i64::try_from(x)
+            .map(toml::Value::Integer)
+            .map_err(|_| anyhow::anyhow!("{at}: gives {x}, beyond the integers of TOML"))
+    })
+    .collect()
+}
+
+/// The values as floats, each finite, or an error naming `at`.
+fn finite_values(xs: impl Iterator<Item = f64>, at: String) -> Result<Vec<toml::Value>> {
+    xs.map(|x| {
+        if x.is_finite() {
+            Ok(toml::Value::Float(x))
+        } else {
+            Err(anyhow::anyhow!(
+                "{at}: gives the value {x}, not a finite number"
+            ))
+        }
+    })
+    .collect()
+}
+
+/// The campaign file's text, to say where in it a field is.
+struct Source<'a> {
+    name: &'a str,
+    text: &'a str,
+}
+
+impl Source<'_> {
+    /// `FILE: FIELD (line L, column C)` of a field path of the campaign file (`axes[1].path`);
+    /// a field the text does not hold is placed at the nearest table above it that it holds,
+    /// and named without a place when it holds nothing of it.
+    fn at(&self, field: &str) -> String {
+        format!("{}: {}", self.name, self.place(field))
+    }
+
+    /// `FIELD (line L, column C)`, as [`Source::at`] without the file.
+    fn place(&self, field: &str) -> String {
+        match scenario::locate(self.text, field) {
+            Some(offset) => {
+                let (line, column) = scenario::line_column(self.text, offset);
+                format!("{field} (line {line}, column {column})")
+            }
+            None => field.to_string(),
+        }
+    }
+}
+
+fn resolve_axes(file: &CampaignFile, src: &Source) -> Result<Vec<Axis>> {
     if file.axes.is_empty() {
-        bail!("a campaign needs at least one [[axes]]");
+        bail!("{}: a campaign needs at least one [[axes]]", src.name);
     }
     let mut axes = Vec::new();
     for (i, a) in file.axes.iter().enumerate() {
-        let at = format!("axes[{i}]");
-        let paths: Vec<String> = match (&a.path, &a.paths) {
-            (Some(p), None) => vec![p.clone()],
-            (None, Some(ps)) if !ps.is_empty() => ps.clone(),
-            _ => bail!("{at} takes exactly one of `path` and `paths` (a non-empty list)"),
+        let field = format!("axes[{i}]");
+        let at = src.at(&field);
+        let (paths, fields): (Vec<String>, Vec<String>) = match (&a.path, &a.paths) {
+            (Some(p), None) => (vec![p.clone()], vec![format!("{field}.path")]),
+            (None, Some(ps)) if !ps.is_empty() => (
+                ps.clone(),
+                (0..ps.len())
+                    .map(|j| format!("{field}.paths[{j}]"))
+                    .collect(),
+            ),
+            _ => bail!("{at}: takes exactly one of `path` and `paths` (a non-empty list)"),
         };
         let label = match (&a.label, paths.as_slice()) {
             (Some(l), _) => l.clone(),
@@ -243,18 +355,29 @@ fn resolve_axes(file: &CampaignFile) -> Result<Vec<Axis>> {
         };
         let paths = paths
             .iter()
-            .map(|p| FieldPath::parse(p).with_context(|| at.clone()))
+            .zip(&fields)
+            .map(|(p, f)| FieldPath::parse(p).with_context(|| src.at(f)))
             .collect::<Result<Vec<_>>>()?;
+        let range_at = |sub: &str| {
+            if sub.is_empty() {
+                src.at(&format!("{field}.range"))
+            } else {
+                src.at(&format!("{field}.range.{sub}"))
+            }
+        };
         let (values, factors) = match (&a.values, &a.range, &a.factors) {
             (Some(v), None, None) => (v.clone(), false),
-            (None, Some(r), None) => (range_values(r, &format!("{at}.range"))?, false),
+            (None, Some(r), None) => (range_values(r, &range_at)?, false),
             (None, None, Some(f)) => {
                 if let Some(bad) = f.iter().find(|x| !x.is_finite()) {
-                    bail!("{at}.factors: {bad} is not a finite number");
+                    bail!(
+                        "{}: {bad} is not a finite number",
+                        src.at(&format!("{field}.factors"))
+                    );
                 }
                 (f.iter().map(|x| toml::Value::Float(*x)).collect(), true)
             }
-            _ => bail!("{at} takes exactly one of `values`, `range` and `factors`"),
+            _ => bail!("{at}: takes exactly one of `values`, `range` and `factors`"),
         };
         if values.is_empty() {
             bail!("{at} ({label}) has no values");
@@ -262,23 +385,111 @@ fn resolve_axes(file: &CampaignFile) -> Result<Vec<Axis>> {
         axes.push(Axis {
             label,
             paths,
+            fields,
             values,
             factors,
         });
     }
     let mut labels = BTreeSet::new();
-    for a in &axes {
+    for (i, a) in axes.iter().enumerate() {
         if !labels.insert(a.label.as_str()) {
-            bail!("two axes are labelled `{}`: give one a `label`", a.label);
+            bail!(
+                "{}: two axes are labelled `{}`: give one a `label`",
+                src.at(&format!("axes[{i}]")),
+                a.label
+            );
         }
         if a.is_seed() && a.factors {
-            bail!("the seed axis takes `values` or a `range`, not `factors`");
+            bail!(
+                "{}: the seed axis takes `values` or a `range`, not `factors`",
+                src.at(&format!("axes[{i}]"))
+            );
         }
     }
-    if axes.iter().filter(|a| a.is_seed()).count() > 1 {
-        bail!("more than one axis sets `seed`");
-    }
+    refuse_overlaps(&axes, src)?;
     Ok(axes)
+}
+
+/// The campaign file from its text: a syntax error, an unknown key or a value of the wrong type
+/// is named with its line and column.
+fn parse_campaign(text: &str, name: &str) -> Result<CampaignFile> {
+    // Syntax first, as scenario files are checked.
+    toml::from_str::<toml::Table>(text)
+        .map_err(|e| anyhow::anyhow!("{name}: {}", scenario::toml_syntax_error(text, &e)))?;
+    toml::from_str(text).map_err(|e| {
+        let at = e.span().map_or(String::new(), |span| {
+            let (line, column) = scenario::line_column(text, span.start);
+            format!(" (line {line}, column {column})")
+        });
+        anyhow::anyhow!("{name}{at}: {}", e.message().trim_end())
+    })
+}
+
+/// Refuses a `[set]` edit that an axis overwrites in every run (the axis's path is the edit's
+/// or a table holding it); an axis of `factors` scales the value `[set]` gives, so an edit
+/// under it is meant.
+fn refuse_set_under_axes(
+    set: &[(FieldPath, toml::Value)],
+    axes: &[Axis],
+    src: &Source,
+) -> Result<()> {
+    for (p, _) in set {
+        for a in axes.iter().filter(|a| !a.factors) {
+            for (q, f) in a.paths.iter().zip(&a.fields) {
+                if q.holds(p) {
+                    bail!(
+                        "{}: `{p}` in [set] ({}) is overwritten in every run by axis `{}` ({}): set it in one place",
+                        src.name,
+                        src.place("set"),
+                        a.label,
+                        src.place(f)
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Refuses two paths of the axes that reach one value (the same path, `attack.x` and
+/// `attack.profile.x`, or a table and a value inside it): the later one would overwrite the
+/// earlier in every run, which would run one value and report another. Names both axes, the
+/// paths and their places in the campaign file.
+fn refuse_overlaps(axes: &[Axis], src: &Source) -> Result<()> {
+    let all: Vec<(&Axis, &FieldPath, &String)> = axes
+        .iter()
+        .flat_map(|a| a.paths.iter().zip(&a.fields).map(move |(p, f)| (a, p, f)))
+        .collect();
+    for (n, (a, p, f)) in all.iter().enumerate() {
+        for (b, q, g) in &all[n + 1..] {
+            if !p.overlaps(q) {
+                continue;
+            }
+            let what = if p.text == q.text {
+                format!("`{p}`")
+            } else {
+                format!("`{p}` and `{q}`, which reach one value")
+            };
+            if std::ptr::eq(*a, *b) {
+                bail!(
+                    "{}: axis `{}` sets {what} twice, at {} and at {}: each path of an axis must reach a value of its own",
+                    src.name,
+                    a.label,
+                    src.place(f),
+                    src.place(g)
+                );
+            }
+            bail!(
+                "{}: axes `{}` ({}) and `{}` ({}) both set {what}: every run would hold the later axis's value whatever the earlier one's column says; sweep the path on one axis (several values in lockstep: mode = \"zip\"; one value at several paths: `paths`)",
+                src.name,
+                a.label,
+                src.place(f),
+                b.label,
+                src.place(g)
+            );
+        }
+    }
+    Ok(())
 }
 
 /// The combinations of the non-seed axes (indices into each one's values).
@@ -369,8 +580,17 @@ struct Plan {
 fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
     let name_of = campaign.display().to_string();
     let text = scenario::read_limited(campaign).map_err(anyhow::Error::msg)?;
-    let file: CampaignFile =
-        toml::from_str(&text).map_err(|e| anyhow::anyhow!("{name_of}: {}", e.message()))?;
+    let file = parse_campaign(&text, &name_of)?;
+    let src = Source {
+        name: &name_of,
+        text: &text,
+    };
+    if crate::output::safe_name(&file.name).is_empty() {
+        bail!(
+            "{}: is empty: the campaign's folder is runs/campaigns/<name>",
+            src.at("name")
+        );
+    }
     let file_dir = campaign.parent().unwrap_or(Path::new(""));
     let (base_text, base_name, base_dir) = match &file.scenario {
         Some(p) => {
@@ -390,12 +610,18 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
     let base = scenario::load_str(&base_text, &base_name, base_dir.as_deref())?;
     let mut doc: toml::Table =
         toml::from_str(&base_text).with_context(|| format!("{base_name}: not a TOML document"))?;
-    let axes = resolve_axes(&file)?;
+    let axes = resolve_axes(&file, &src)?;
     let set: Vec<(FieldPath, toml::Value)> = file
         .set
         .iter()
-        .map(|(k, v)| Ok((FieldPath::parse(k).context("[set]")?, v.clone())))
+        .map(|(k, v)| {
+            Ok((
+                FieldPath::parse(k).with_context(|| src.at("set"))?,
+                v.clone(),
+            ))
+        })
         .collect::<Result<_>>()?;
+    refuse_set_under_axes(&set, &axes, &src)?;
     let touches_attack = set.iter().any(|(p, _)| p.is_in_attack_profile())
         || axes
             .iter()
@@ -411,7 +637,7 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
         doc.insert("attack".into(), toml::Value::Table(attack));
     }
     for (p, v) in &set {
-        p.set(&mut doc, v).context("[set]")?;
+        p.set(&mut doc, v).with_context(|| src.at("set"))?;
     }
     let seed_axis = axes.iter().find(|a| a.is_seed()).cloned();
     let others: Vec<&Axis> = axes.iter().filter(|a| !a.is_seed()).collect();
@@ -515,12 +741,18 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// The folder of a campaign without `--out`: `runs/campaigns/<name>`, the name made one
+/// component of the path by the rule of run folders ([`crate::output::safe_name`]), so that
+/// `../x` or `/x` stays under `runs/campaigns/` (an empty name is refused by [`plan`]).
+fn default_out(name: &str) -> PathBuf {
+    PathBuf::from("runs")
+        .join("campaigns")
+        .join(crate::output::safe_name(name))
+}
+
 pub fn sweep(args: &SweepArgs) -> Result<ExitCode> {
     let plan = plan(&args.campaign, args.engine)?;
-    let out = args
-        .out
-        .clone()
-        .unwrap_or_else(|| PathBuf::from("runs").join("campaigns").join(&plan.name));
+    let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
     if out.exists() && !out.is_dir() {
         bail!("--out {} is not a folder", out.display());
     }
@@ -654,6 +886,7 @@ fn run_one(job: &Job, name: &str, args: &SweepArgs, runs_root: &Path) -> Result<
 /// One row of the results table.
 struct Row<'a> {
     job: &'a Job,
+    seed: u64,
     cells: Vec<(String, Cell)>,
 }
 
@@ -673,10 +906,14 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
             .iter()
             .map(|(l, v)| (l.clone(), toml_cell(v)))
             .collect();
-        cells.push(("seed".into(), Cell::Num(s.seed as f64)));
+        cells.push(("seed".into(), Cell::Int(i128::from(s.seed))));
         cells.push(("key".into(), Cell::Text(job.key[..16].to_string())));
         cells.extend(flatten::flatten(s)?);
-        rows.push(Row { job, cells });
+        rows.push(Row {
+            job,
+            seed: s.seed,
+            cells,
+        });
     }
     // Every column any row has, in first-seen order.
     let mut columns: Vec<String> = Vec::new();
@@ -739,10 +976,7 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
         aggregate.push(Aggregate {
             point: point.clone(),
             runs: members.len(),
-            seeds: members
-                .iter()
-                .filter_map(|r| lookup(r, "seed").num())
-                .collect(),
+            seeds: members.iter().map(|r| r.seed).collect(),
             metrics,
         });
     }
@@ -810,7 +1044,7 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
 
 fn toml_cell(v: &toml::Value) -> Cell {
     match v {
-        toml::Value::Integer(i) => Cell::Num(*i as f64),
+        toml::Value::Integer(i) => Cell::Int(i128::from(*i)),
         toml::Value::Float(f) => Cell::Num(*f),
         other => Cell::Text(show(other)),
     }
@@ -821,7 +1055,8 @@ fn toml_cell(v: &toml::Value) -> Cell {
 pub(crate) struct Aggregate {
     point: Point,
     runs: usize,
-    seeds: Vec<f64>,
+    /// The seeds of its runs, exact.
+    seeds: Vec<u64>,
     /// Per column: `None` when no run of the point has a number there.
     metrics: BTreeMap<String, Option<Stats>>,
 }
@@ -949,24 +1184,291 @@ pub(crate) fn sig(x: f64) -> String {
 mod tests {
     use super::*;
 
+    fn r(text: &str) -> RangeFile {
+        toml::from_str::<RangeFile>(text).expect("range")
+    }
+
+    fn values(text: &str) -> Result<Vec<toml::Value>> {
+        range_values(&r(text), &|f: &str| format!("r.{f}"))
+    }
+
     #[test]
     fn ranges_by_step_and_by_count() {
-        let r = |s: &str| toml::from_str::<RangeFile>(s).expect("range");
-        let ints = range_values(&r("start = 1\nstop = 4\nstep = 1"), "r").expect("values");
+        let ints = values("start = 1\nstop = 4\nstep = 1").expect("values");
         assert_eq!(ints, (1..=4).map(toml::Value::Integer).collect::<Vec<_>>());
-        let fl = range_values(&r("start = 0.0\nstop = 0.3\nstep = 0.1"), "r").expect("values");
+        let down = values("start = 4\nstop = 0\nstep = -2").expect("values");
+        assert_eq!(down, [4, 2, 0].map(toml::Value::Integer).to_vec());
+        let fl = values("start = 0.0\nstop = 0.3\nstep = 0.1").expect("values");
         assert_eq!(fl.len(), 4);
-        let c = range_values(&r("start = 10\nstop = 40\ncount = 4"), "r").expect("values");
+        // Integer ends and whole steps: integers.
+        let c = values("start = 10\nstop = 40\ncount = 4").expect("values");
+        assert_eq!(c, [10, 20, 30, 40].map(toml::Value::Integer).to_vec());
+        let c = values("start = 1\nstop = 2\ncount = 3").expect("values");
+        assert_eq!(c, [1.0, 1.5, 2.0].map(toml::Value::Float).to_vec());
+        let c = values("start = 10.0\nstop = 40.0\ncount = 4").expect("values");
         assert_eq!(c, [10.0, 20.0, 30.0, 40.0].map(toml::Value::Float).to_vec());
         for bad in [
             "start = 1\nstop = 4",
             "start = 1\nstop = 4\nstep = 1\ncount = 2",
             "start = 1\nstop = 4\nstep = 0",
             "start = 4\nstop = 1\nstep = 1",
+            "start = 1.0\nstop = 4.0\nstep = 0.0",
+            "start = 4.0\nstop = 1.0\nstep = 1.0",
             "start = 1\nstop = 4\ncount = 0",
+            "start = nan\nstop = 4.0\nstep = 1.0",
         ] {
-            assert!(range_values(&r(bad), "r").is_err(), "{bad}");
+            assert!(values(bad).is_err(), "{bad}");
         }
+    }
+
+    /// A range near 2⁶³ used to be computed in floats: its eight seeds were one
+    /// (9223372036854775807 rounds to 9223372036854775808.0), the campaign ran once and showed
+    /// the seed as 9223372036854776000.
+    #[test]
+    fn seeds_near_2_to_the_63_stay_exact() {
+        let seeds = values("start = 9223372036854775800\nstop = 9223372036854775807\nstep = 1")
+            .expect("values");
+        assert_eq!(
+            seeds,
+            (i64::MAX - 7..=i64::MAX)
+                .map(toml::Value::Integer)
+                .collect::<Vec<_>>()
+        );
+        let by_count = values("start = 9223372036854775800\nstop = 9223372036854775807\ncount = 8")
+            .expect("values");
+        assert_eq!(by_count, seeds);
+
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let file = dir.path().join("seeds.toml");
+        std::fs::write(
+            &file,
+            "name = \"seeds\"\n[set]\nduration_s = 0.1\n[[axes]]\npath = \"seed\"\n\
+             range = { start = 9223372036854775800, stop = 9223372036854775807, step = 1 }\n",
+        )
+        .expect("campaign file");
+        let plan = plan(&file, Engine::Inproc).expect("plan");
+        assert_eq!(plan.jobs.len(), 8);
+        let ran: Vec<u64> = plan.jobs.iter().map(|j| j.resolved.scenario.seed).collect();
+        let want: Vec<u64> = (i64::MAX as u64 - 7..=i64::MAX as u64).collect();
+        assert_eq!(ran, want);
+        let keys: BTreeSet<&str> = plan.jobs.iter().map(|j| j.key.as_str()).collect();
+        assert_eq!(keys.len(), 8, "eight seeds are eight runs");
+        assert_eq!(plan.jobs[7].label, "seed = 9223372036854775807");
+
+        // The tables show each seed as it ran, to the last digit.
+        let results: Vec<Option<RunSummary>> = ran
+            .iter()
+            .map(|&seed| {
+                let mut s = crate::output::sample_summary();
+                s.seed = seed;
+                Some(s)
+            })
+            .collect();
+        let out = dir.path().join("out");
+        write_outputs(&plan, &results, &out).expect("outputs");
+        let csv = std::fs::read_to_string(out.join("results.csv")).expect("results.csv");
+        let mut reader = csv::Reader::from_reader(csv.as_bytes());
+        let column = reader
+            .headers()
+            .expect("header")
+            .iter()
+            .position(|h| h == "seed")
+            .expect("a seed column");
+        let shown: Vec<String> = reader
+            .records()
+            .map(|r| r.expect("row")[column].to_string())
+            .collect();
+        let want_text: Vec<String> = want.iter().map(u64::to_string).collect();
+        assert_eq!(shown, want_text);
+        let json: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("results.json")).expect("results.json"),
+        )
+        .expect("JSON");
+        let json_seeds: Vec<Option<u64>> = json
+            .as_array()
+            .expect("rows")
+            .iter()
+            .map(|r| r["seed"].as_u64())
+            .collect();
+        assert_eq!(
+            json_seeds,
+            want.iter().copied().map(Some).collect::<Vec<_>>()
+        );
+        let aggregate: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("aggregate.json")).expect("aggregate.json"),
+        )
+        .expect("JSON");
+        assert_eq!(aggregate[0]["seeds"], serde_json::json!(want));
+    }
+
+    /// A step of 1e-300 (or a span beyond the largest float) made the count wrap: "has no
+    /// values". It is the run limit that refuses it, saying so.
+    #[test]
+    fn a_step_of_1e_300_hits_the_run_limit() {
+        for text in [
+            "start = 0.0\nstop = 1.0\nstep = 1e-300",
+            "start = -1e308\nstop = 1e308\nstep = 1.0",
+            "start = -9223372036854775808\nstop = 9223372036854775807\nstep = 1",
+            "start = 0\nstop = 100000\nstep = 1",
+        ] {
+            let e = values(text).expect_err(text).to_string();
+            assert!(
+                e.starts_with("r.: ")
+                    && e.contains(&format!(
+                        "more than the {MAX_RUNS} runs a campaign may hold"
+                    )),
+                "{text}: {e}"
+            );
+        }
+        assert_eq!(
+            values("start = 0\nstop = 99999\nstep = 1")
+                .expect("the limit itself")
+                .len(),
+            MAX_RUNS
+        );
+        // A span beyond the largest float in few steps is a range of finite values.
+        let wide = values("start = -1e308\nstop = 1e308\nstep = 1e307").expect("values");
+        assert_eq!(wide.len(), 21);
+        assert_eq!(wide[20], toml::Value::Float(1e308));
+        let wide = values("start = -1e308\nstop = 1e308\ncount = 3").expect("values");
+        assert_eq!(wide, [-1e308, 0.0, 1e308].map(toml::Value::Float).to_vec());
+    }
+
+    /// Writes `text` as a campaign file and plans it: the error, or a panic if it plans.
+    fn refusal(text: &str) -> String {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let file = dir.path().join("c.toml");
+        std::fs::write(&file, text).expect("campaign file");
+        let e = match plan(&file, Engine::Inproc) {
+            Ok(_) => panic!("planned:\n{text}"),
+            Err(e) => format!("{e:#}"),
+        };
+        let name = file.display().to_string();
+        assert!(e.starts_with(&name), "{e}");
+        e.replacen(&name, "c.toml", 1)
+    }
+
+    /// `a` = controller.beta [10, 20] and `b` = controller.beta [30] ran β = 30 twice and
+    /// reported rows a = 10 and a = 20.
+    #[test]
+    fn two_axes_on_one_path_are_refused() {
+        let e = refusal(
+            "name = \"x\"\n\
+             [[axes]]\nlabel = \"a\"\npath = \"controller.beta\"\nvalues = [10.0, 20.0]\n\
+             [[axes]]\nlabel = \"b\"\npath = \"controller.beta\"\nvalues = [30.0]\n",
+        );
+        assert!(
+            e.starts_with(
+                "c.toml: axes `a` (axes[0].path (line 4, column 1)) and `b` (axes[1].path (line 8, column 1)) both set `controller.beta`"
+            ),
+            "{e}"
+        );
+        // One value reached by two spellings, and a table holding a swept value.
+        let e = refusal(
+            "name = \"x\"\n\
+             [[axes]]\npath = \"attack.channels[0].segments[1].waveform.value\"\nvalues = [1.0]\n\
+             [[axes]]\npath = \"attack.profile.channels\"\nvalues = [[]]\n",
+        );
+        assert!(
+            e.contains("both set `attack.channels[0].segments[1].waveform.value` and `attack.profile.channels`, which reach one value")
+                && e.contains("(line 3, column 1)")
+                && e.contains("(line 6, column 1)"),
+            "{e}"
+        );
+        // One path twice in one axis (with factors, it was scaled twice).
+        let e = refusal(
+            "name = \"x\"\n[[axes]]\nlabel = \"k\"\n\
+             paths = [\"controller.beta\", \"controller.beta\"]\nfactors = [2.0]\n",
+        );
+        assert!(
+            e.contains("axis `k` sets `controller.beta` twice, at axes[0].paths[0] (line 4, column 10) and at axes[0].paths[1] (line 4, column 29)"),
+            "{e}"
+        );
+        // A [set] edit that an axis overwrites in every run.
+        let e = refusal(
+            "name = \"x\"\n[set]\n\"controller.beta\" = 5.0\n\
+             [[axes]]\npath = \"controller\"\nvalues = [{ mode = \"proposed\" }]\n",
+        );
+        assert!(
+            e.contains("`controller.beta` in [set] (set (line 2, column 2)) is overwritten in every run by axis `controller` (axes[0].path (line 5, column 1))"),
+            "{e}"
+        );
+        // An axis of factors scales what [set] gives: meant, and planned.
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let file = dir.path().join("c.toml");
+        std::fs::write(
+            &file,
+            "name = \"x\"\n[set]\n\"controller.beta\" = 5.0\n\
+             [[axes]]\npath = \"controller.beta\"\nfactors = [1.0, 2.0]\n",
+        )
+        .expect("campaign file");
+        let p = plan(&file, Engine::Inproc).expect("plan");
+        let betas: Vec<f64> = p
+            .jobs
+            .iter()
+            .map(|j| j.resolved.scenario.controller.beta)
+            .collect();
+        assert_eq!(betas, [5.0, 10.0]);
+    }
+
+    #[test]
+    fn campaign_toml_syntax_error_has_line_and_column() {
+        let e = refusal("name = \"x\"\n[[axes]]\npath = \"controller.beta\nvalues = [1.0]\n");
+        assert!(
+            e.starts_with("c.toml: TOML syntax at line 3, column "),
+            "{e}"
+        );
+        let e = refusal("name = \"x\"\n[[axes]]\npath = \"controller.beta\"\nvalue = [1.0]\n");
+        assert!(
+            e.starts_with("c.toml (line 4, column 1): unknown field `value`"),
+            "{e}"
+        );
+        let e = refusal(
+            "name = \"x\"\n[[axes]]\npath = \"controller.beta\"\n\
+             range = { start = 1.0, stop = 2.0, step = -1.0 }\n",
+        );
+        assert!(
+            e.starts_with("c.toml: axes[0].range.step (line 4, column 36): step -1 never goes"),
+            "{e}"
+        );
+    }
+
+    /// `name = "../../../x"` or `"/abs/x"` wrote the campaign outside `runs/`, `""` into
+    /// `runs/campaigns/` itself.
+    #[test]
+    fn campaign_names_cannot_leave_the_runs_folder() {
+        let campaigns = Path::new("runs").join("campaigns");
+        for name in [
+            "../../../x",
+            "/abs/x",
+            "..",
+            ".",
+            "a/../../b",
+            "x\0y",
+            "beta-sweep",
+        ] {
+            let out = default_out(name);
+            assert_eq!(out.parent(), Some(campaigns.as_path()), "{name:?}: {out:?}");
+            assert!(
+                matches!(
+                    out.components().next_back(),
+                    Some(std::path::Component::Normal(_))
+                ),
+                "{name:?}: {out:?}"
+            );
+            // The rule of run folders, one function for both.
+            assert_eq!(
+                out.file_name().and_then(|n| n.to_str()),
+                Some(crate::output::safe_name(name).as_str())
+            );
+        }
+        assert_eq!(default_out("beta-sweep"), campaigns.join("beta-sweep"));
+        assert_eq!(default_out("../../../x"), campaigns.join("_________x"));
+        let e = refusal("name = \"\"\n[[axes]]\npath = \"seed\"\nvalues = [1]\n");
+        assert!(
+            e.starts_with("c.toml: name (line 1, column 1): is empty"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -974,6 +1476,7 @@ mod tests {
         let axis = |n: usize| Axis {
             label: format!("a{n}"),
             paths: vec![],
+            fields: vec![],
             values: (0..n as i64).map(toml::Value::Integer).collect(),
             factors: false,
         };

@@ -91,6 +91,27 @@ impl FieldPath {
             if a == "attack" && !ATTACK_SOURCE_KEYS.contains(&k.as_str()))
     }
 
+    /// The steps this path takes through the document: a path into the attack profile
+    /// (`attack.channels…`) goes through `attack.profile`, where the edit is made.
+    fn target(&self) -> Vec<Seg> {
+        let mut segs = self.segs.clone();
+        if self.is_in_attack_profile() {
+            segs.insert(1, Seg::Key("profile".into()));
+        }
+        segs
+    }
+
+    /// True when the two paths reach one value, or one reaches a value inside the other's
+    /// (`agents[0].delay` and `agents[0].delay.offset_s`): an edit at one changes the other.
+    pub fn overlaps(&self, other: &FieldPath) -> bool {
+        self.holds(other) || other.holds(self)
+    }
+
+    /// True when `other` reaches the value this path does or a value inside it.
+    pub fn holds(&self, other: &FieldPath) -> bool {
+        other.target().starts_with(&self.target())
+    }
+
     /// The path as written up to (not including) segment `n`.
     fn prefix(&self, n: usize) -> String {
         let mut s = String::new();
@@ -202,14 +223,21 @@ impl FieldPath {
         let new = match (&*slot, value) {
             (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
             (toml::Value::Integer(_), toml::Value::Float(f)) => {
-                if f.fract() == 0.0 && f.abs() < 9.0e15 {
-                    toml::Value::Integer(*f as i64)
-                } else {
+                if f.fract() != 0.0 || !f.is_finite() {
                     bail!(
                         "field path `{}` holds an integer; the value {f} is not a whole number",
                         self.text
                     )
                 }
+                // Every integer up to 2^53 is a float exactly; beyond, a float may stand for
+                // another integer than the one written: write such values as integers.
+                if f.abs() > 9.0e15 {
+                    bail!(
+                        "field path `{}` holds an integer; the value {f} is a float, exact as an integer only up to 9e15: write it as an integer",
+                        self.text
+                    )
+                }
+                toml::Value::Integer(*f as i64)
             }
             (old, new) if std::mem::discriminant(old) == std::mem::discriminant(new) => new.clone(),
             (old, new) => bail!(
@@ -277,6 +305,20 @@ mod tests {
             };
         }
         v
+    }
+
+    #[test]
+    fn paths_to_one_value_overlap() {
+        let p = |t: &str| FieldPath::parse(t).expect("path");
+        assert!(p("controller.beta").overlaps(&p("controller.beta")));
+        assert!(p("controller").overlaps(&p("controller.beta")));
+        assert!(p("agents[0].delay.offset_s").overlaps(&p("agents[0].delay")));
+        assert!(p("attack.channels[0]").overlaps(&p("attack.profile.channels[0].agent")));
+        assert!(!p("controller.beta").overlaps(&p("controller.gain_k")));
+        assert!(!p("agents[0].delay").overlaps(&p("agents[1].delay")));
+        assert!(!p("controller.beta").overlaps(&p("controller.beta2")));
+        assert!(p("attack.profile.channels").holds(&p("attack.channels[0]")));
+        assert!(!p("attack.channels[0]").holds(&p("attack.profile.channels")));
     }
 
     #[test]

@@ -22,8 +22,23 @@ pub fn create_run_dir(root: &Path, resolved: &Resolved) -> Result<PathBuf> {
     create_named_run_dir(root, resolved, &resolved.scenario.name)
 }
 
-/// [`create_run_dir`] named `<timestamp>-<name>` (characters other than ASCII letters, digits,
-/// `-` and `_` become `_`).
+/// A name as one component of a path, the one rule for the folders of runs and campaigns:
+/// every character other than an ASCII letter, a digit, `-` and `_` becomes `_`, so the result
+/// never holds a `/`, never is `.` or `..`, and stays inside the folder it is joined to. An
+/// empty name stays empty (a caller that joins it alone refuses it).
+pub fn safe_name(name: &str) -> String {
+    name.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// [`create_run_dir`] named `<timestamp>-<name>` ([`safe_name`]).
 pub fn create_named_run_dir(root: &Path, resolved: &Resolved, name: &str) -> Result<PathBuf> {
     let toml = resolved.to_toml();
     if toml.len() as u64 > MAX_FILE_BYTES {
@@ -32,16 +47,7 @@ pub fn create_named_run_dir(root: &Path, resolved: &Resolved, name: &str) -> Res
             toml.len()
         );
     }
-    let name: String = name
-        .chars()
-        .map(|c| {
-            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
-                c
-            } else {
-                '_'
-            }
-        })
-        .collect();
+    let name = safe_name(name);
     let base = root.join(format!("{}-{name}", timestamp()));
     if root.exists() && !root.is_dir() {
         bail!(

@@ -6,8 +6,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
-use fdi_common::scenario::Resolved;
+use anyhow::{bail, Result};
+use fdi_common::scenario::{self, Resolved};
 use fdi_runtime::ipc::Wake;
 use fdi_runtime::net::{check_endpoint, check_host_name, Layout};
 use serde::{Deserialize, Serialize};
@@ -61,10 +61,12 @@ const PLACEABLE: [(&str, Wake); 2] = [
 
 impl Deployment {
     /// Reads and checks `path` against the run's scenario: every problem names the file and
-    /// the field.
+    /// the field. The file is read as scenario files are ([`scenario::read_limited`]): a
+    /// regular file of at most [`scenario::MAX_FILE_BYTES`], refused otherwise without reading
+    /// beyond the limit.
     pub fn load(path: &Path, resolved: &Resolved) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading the deployment file {}", path.display()))?;
+        let text = scenario::read_limited(path)
+            .map_err(|e| anyhow::anyhow!("the deployment file (--hosts): {e}"))?;
         let source = path.display().to_string();
         let file: DeploymentFile =
             toml::from_str(&text).map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
@@ -397,6 +399,40 @@ mod tests {
             assert!(e.starts_with("hosts.toml: "), "{e}");
         }
         assert!(check(&SPLIT.replace("agents = [1, 2]", "agent = [1, 2]")).is_err());
+    }
+
+    #[test]
+    fn deployment_file_from_dev_zero_is_refused() {
+        // `/dev/zero` never ends: it used to be read until memory ran out.
+        let e = Deployment::load(Path::new("/dev/zero"), &paper())
+            .expect_err("a device is not a deployment file")
+            .to_string();
+        assert!(
+            e.contains("the deployment file (--hosts): /dev/zero is not a regular file")
+                && e.contains("must be regular files of at most"),
+            "{e}"
+        );
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let e = Deployment::load(dir.path(), &paper())
+            .expect_err("a folder is not a deployment file")
+            .to_string();
+        assert!(e.contains("is not a regular file"), "{e}");
+        let big = dir.path().join("hosts.toml");
+        let mut text = SPLIT.to_string();
+        while text.len() as u64 <= scenario::MAX_FILE_BYTES {
+            text.push_str("# padding padding padding padding padding padding padding\n");
+        }
+        std::fs::write(&big, &text).expect("write the oversized file");
+        let e = Deployment::load(&big, &paper())
+            .expect_err("an oversized deployment file")
+            .to_string();
+        assert!(
+            e.contains(&format!(
+                "larger than the {} byte limit",
+                scenario::MAX_FILE_BYTES
+            )),
+            "{e}"
+        );
     }
 
     #[test]
