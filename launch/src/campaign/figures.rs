@@ -163,7 +163,9 @@ where
         (a - m, b + m)
     };
     let (x0, x1) = pad(x0, x1);
+    let (x0, x1) = crate::plot::drawable(x0, x1);
     let (y0, y1) = pad(y0, y1);
+    let (y0, y1) = crate::plot::drawable(y0, y1);
     let mut chart = ChartBuilder::on(area)
         .caption(&c.title, (FONT, 17))
         .margin(14)

@@ -616,6 +616,33 @@ fn figure_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, fig: &Figure) ->
     Ok(())
 }
 
+/// The largest magnitude an axis reaches: data beyond it (a diverged run, 1e300) is clipped
+/// at the axis, never handed to the tick computation.
+pub(crate) const AXIS_LIMIT: f64 = 1e15;
+
+/// An axis range that can be drawn in bounded time: finite, within ±[`AXIS_LIMIT`], ordered,
+/// and wide enough against its magnitude that tick steps stay above the rounding of its values
+/// (a range of non-finite, huge or collapsed values made the tick computation loop for ever).
+pub(crate) fn drawable(lo: f64, hi: f64) -> (f64, f64) {
+    let clamp = |v: f64, fallback: f64| {
+        if v.is_nan() {
+            fallback
+        } else {
+            v.clamp(-AXIS_LIMIT, AXIS_LIMIT)
+        }
+    };
+    let (a, b) = (clamp(lo, -1.0), clamp(hi, 1.0));
+    let (a, b) = if a <= b { (a, b) } else { (b, a) };
+    let mid = a / 2.0 + b / 2.0;
+    let least = (mid.abs() * 1e-9).max(1e-12);
+    if b - a >= 2.0 * least {
+        (a, b)
+    } else {
+        let mid = mid.clamp(-AXIS_LIMIT + least, AXIS_LIMIT - least);
+        (mid - least, mid + least)
+    }
+}
+
 /// The chart of one panel: time on x, values (or timeline rows) on y.
 type PanelChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
@@ -629,6 +656,8 @@ fn panel_axes<'a, DB: DrawingBackend + 'a>(
     (y0, y1): (f64, f64),
     y_ticks: bool,
 ) -> Result<PanelChart<'a, DB>> {
+    let (x0, x1) = drawable(x0, x1);
+    let (y0, y1) = drawable(y0, y1);
     let mut chart = ChartBuilder::on(plot_area)
         .caption(&panel.title, (FONT, 16))
         .margin(8)
@@ -911,6 +940,7 @@ fn band_detail(b: &Band, (x0, x1): (f64, f64)) -> String {
 fn decades(values: impl Iterator<Item = f64>) -> (f64, f64) {
     let (lo, hi) = values
         .filter(|v| v.is_finite() && *v > 0.0)
+        .map(|v| v.clamp(1.0 / AXIS_LIMIT, AXIS_LIMIT))
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| {
             (a.min(v), b.max(v))
         });
@@ -944,6 +974,7 @@ fn bars_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &BarChart) -> R
     } else {
         let top = values().filter(|v| v.is_finite()).fold(0.0_f64, f64::max);
         let top = if top > 0.0 { top * 1.2 } else { 1.0 };
+        let (_, top) = drawable(0.0, top);
         let chart = builder(root)
             .build_cartesian_2d(0.0..cats, 0.0..top)
             .map_err(plot_err)?;
@@ -1015,6 +1046,92 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn drawable_ranges_are_finite_bounded_and_wide_enough_whatever_the_data() {
+        for (lo, hi) in [
+            (f64::NAN, f64::NAN),
+            (f64::NEG_INFINITY, f64::INFINITY),
+            (-1e300, 1e300),
+            (1e300, 1e300 * (1.0 + f64::EPSILON)),
+            (0.0, 0.0),
+            (5.0, 5.0),
+            (3.0, -2.0),
+            (1e-300, 2e-300),
+        ] {
+            let (a, b) = drawable(lo, hi);
+            assert!(a.is_finite() && b.is_finite() && a < b, "{lo}, {hi}: {a}, {b}");
+            assert!(a >= -AXIS_LIMIT && b <= AXIS_LIMIT, "{lo}, {hi}: {a}, {b}");
+            let mid = a / 2.0 + b / 2.0;
+            assert!(b - a >= mid.abs() * 1e-9, "{lo}, {hi}: {a}, {b}");
+        }
+        assert_eq!(drawable(-0.02, 0.03), (-0.02, 0.03), "ordinary data is kept");
+    }
+
+    #[test]
+    fn a_figure_of_diverged_data_is_drawn_in_bounded_time() {
+        // Values of a diverged run (gain_k = 21000): 1e300, non-finite, collapsed. Drawing them
+        // made the axis ticks loop for ever; the figure must now simply be written.
+        let dir = tempfile::tempdir().expect("a scratch folder");
+        let line = |label: &str, points: Vec<(f64, f64)>| Line {
+            label: label.into(),
+            color: PALETTE[0],
+            points,
+            keep: false,
+        };
+        let fig = Figure {
+            title: "diverged".into(),
+            x_label: "t (s)".into(),
+            x_range: (0.0, 0.2),
+            markers: vec![0.1],
+            marker_label: "switch".into(),
+            panels: vec![
+                Panel {
+                    title: "huge".into(),
+                    y_label: "rad".into(),
+                    kind: PanelKind::Lines(vec![line(
+                        "e",
+                        (0..200)
+                            .map(|k| (k as f64 * 1e-3, 1e300 * k as f64))
+                            .collect(),
+                    )]),
+                    guides: vec![],
+                },
+                Panel {
+                    title: "non-finite".into(),
+                    y_label: "rad".into(),
+                    kind: PanelKind::Lines(vec![line(
+                        "e",
+                        vec![(0.0, f64::NAN), (0.1, f64::INFINITY), (0.2, f64::NEG_INFINITY)],
+                    )]),
+                    guides: vec![],
+                },
+                Panel {
+                    title: "collapsed".into(),
+                    y_label: "rad".into(),
+                    kind: PanelKind::Lines(vec![line("e", vec![(0.0, 1e300), (0.2, 1e300)])]),
+                    guides: vec![],
+                },
+            ],
+        };
+        let written = save_figure(&fig, &dir.path().join("diverged"), (600, 600)).expect("drawn");
+        for p in written {
+            assert!(std::fs::metadata(&p).is_ok_and(|m| m.len() > 0), "{}", p.display());
+        }
+        let bars = BarChart {
+            title: "huge bars".into(),
+            y_label: "RMSE".into(),
+            categories: vec!["a".into(), "b".into()],
+            series: vec![("s".into(), PALETTE[0], vec![1e300, f64::NAN])],
+            log_y: false,
+        };
+        save_bars(&bars, &dir.path().join("bars"), (400, 300)).expect("drawn");
+        let log_bars = BarChart {
+            log_y: true,
+            ..bars
+        };
+        save_bars(&log_bars, &dir.path().join("log-bars"), (400, 300)).expect("drawn");
+    }
 
     #[test]
     fn envelope_keeps_spikes_and_time_order() {

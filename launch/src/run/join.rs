@@ -368,7 +368,9 @@ pub fn walk(
                 }
             }
         }
-        if !join.control_ended {
+        // The ticks joined: up to the last one that some robot was still controlled on (each
+        // robot's metrics say how many of its own ticks they cover).
+        if join.control_ended.iter().any(|ended| !ended) {
             joined = k + 1;
         }
     }
@@ -401,10 +403,14 @@ struct Join {
     routed: Vec<bool>,
     /// Agent-ticks of such agents without the attacker's torque record.
     actuation_lost: u64,
-    /// Ticks the agents recorded after the attacker or control-center trace ended: they ran on
-    /// without control, and their own records (deadline misses) still count.
+    /// Ticks the agents recorded after the attacker or control-center trace ended for them:
+    /// they ran on without control, and their own records (deadline misses) still count.
     after_control: u64,
-    control_ended: bool,
+    /// Per agent (scenario order): the attacker's or the control center's records of it have
+    /// ended. Each robot's control ends where its own records end: the center computes each
+    /// robot's tick as its measurement arrives, so an interrupted run leaves the robots at
+    /// different ticks.
+    control_ended: Vec<bool>,
 }
 
 impl Join {
@@ -423,7 +429,7 @@ impl Join {
                 .collect(),
             actuation_lost: 0,
             after_control: 0,
-            control_ended: false,
+            control_ended: vec![false; resolved.scenario.agents.len()],
         }
     }
 
@@ -444,7 +450,7 @@ impl Join {
                 .push(format!("agent {id}: its trace ends at tick {k} of {ticks}"));
             return false;
         };
-        if self.control_ended {
+        if self.control_ended[n] {
             self.after_control += 1;
             self.evaluator.push_uncontrolled(&a);
             return true;
@@ -463,7 +469,7 @@ impl Join {
                 self.warnings.push(format!(
                     "the attacker or control-center trace ends at tick {k} of {ticks} (agent {id})"
                 ));
-                self.control_ended = true;
+                self.control_ended[n] = true;
                 self.after_control += 1;
                 self.evaluator.push_uncontrolled(&a);
                 return true;
