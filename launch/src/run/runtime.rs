@@ -22,6 +22,9 @@ use crate::supervisor::{Child, Supervisor};
 
 /// Grace period between SIGTERM and SIGKILL when a run is torn down.
 pub(crate) const GRACE: Duration = Duration::from_secs(2);
+/// How long the end of the children's output is awaited once they are gone (the output of a
+/// program outside the project may be held open by a process that left its group).
+pub(crate) const OUTPUT_WAIT: Duration = Duration::from_secs(1);
 /// How long the processes may take to report ready.
 const READY_TIMEOUT: Duration = Duration::from_secs(30);
 /// A process stopped (SIGSTOP) this long stalls the run: the launcher stops it with a message.
@@ -432,6 +435,10 @@ impl<X: Transport> Launcher<X> {
             std::thread::sleep(Duration::from_millis(10));
         }
         self.procs.kill_rest();
+        // What the programs outside the project started goes with them, named.
+        for line in self.procs.end_programs(GRACE) {
+            eprintln!("fdi-launch: {line}");
+        }
     }
 }
 
@@ -485,8 +492,11 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             )
         });
         launcher.teardown();
-        // Every child has exited: what they printed is relayed whole before we go on.
-        launcher.procs.drain_stderr();
+        // Every child has exited: what they printed is relayed whole before we go on, unless
+        // a process that left a program's group still holds its output.
+        for line in launcher.procs.drain_stderr(OUTPUT_WAIT) {
+            eprintln!("fdi-launch: warning: {line}");
+        }
         let mut remote_left = Vec::new();
         let mut hosts = Vec::new();
         if let Some(mut remote) = launcher.remote.take() {
