@@ -451,21 +451,41 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     let interrupted = crate::interrupt::flag();
     crate::interrupt::check(BEFORE_THE_START).context(DidNotStart)?;
 
-    let result = {
-        let transport = Shm::open(
-            &prefix,
-            "launcher",
-            fdi_runtime::process::sizing_for(resolved),
-        )
+    let sizing = fdi_runtime::process::sizing_for(resolved);
+    // A full shared-memory folder, a read-only iceoryx2 folder or a low open-file limit is
+    // named now, with its fix: past this point iceoryx2 reports them as a SIGBUS or an
+    // internal error.
+    let external =
+        resolved.scenario.roles.attacker.is_some() || resolved.scenario.roles.monitor.is_some();
+    ipc::machine::check(sizing, external, &prefix)
+        .context("the machine cannot carry this run")
         .context(DidNotStart)?;
+
+    let result = {
+        // What a failed node or port creation made is the run's: removed.
+        let opened = Shm::open(&prefix, "launcher", sizing).and_then(|transport| {
+            let ports = (
+                transport.publisher(Stream::Control)?,
+                transport.subscriber(Stream::Status)?,
+                transport.waker(Wake::Launcher)?,
+            );
+            Ok((transport, ports))
+        });
+        let (transport, (control, status, waker)) = match opened {
+            Ok(opened) => opened,
+            Err(e) => {
+                Shm::remove_leftovers(&prefix).ok();
+                return Err(anyhow::Error::new(e).context(DidNotStart));
+            }
+        };
         let mut launcher = Launcher {
             realtime: resolved.scenario.clock == ClockMode::Realtime,
             lost: Vec::new(),
             procs: Supervisor::default(),
             bells: Vec::new(),
-            control: transport.publisher(Stream::Control).context(DidNotStart)?,
-            status: transport.subscriber(Stream::Status).context(DidNotStart)?,
-            waker: transport.waker(Wake::Launcher).context(DidNotStart)?,
+            control,
+            status,
+            waker,
             interrupted,
             started: false,
             remote: None,
