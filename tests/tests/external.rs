@@ -512,3 +512,121 @@ fn realtime_the_monitors_verdicts_are_counted_received_late_and_missing() {
         eprintln!("{lost} agents were lost for a while: the missing count is not compared");
     }
 }
+
+/// The paper scenario, lockstep, with `[roles.attacker]` running `sh -c script` (a program that
+/// does not speak the protocol: it never says ready, and the run stops after its 1 s timeout),
+/// written into `dir`.
+fn sh_attacker(dir: &Path, name: &str, script: &str) -> String {
+    let text = std::fs::read_to_string(repo_path("scenarios/paper.toml")).expect("the scenario");
+    let mut doc: toml::Table = toml::from_str(&text).expect("TOML");
+    let mut role = toml::Table::new();
+    role.insert(
+        "command".into(),
+        toml::Value::Array(vec!["sh".into(), "-c".into(), script.into()]),
+    );
+    role.insert("name".into(), name.into());
+    role.insert("timeout_s".into(), 1.0.into());
+    set_role(&mut doc, "attacker", toml::Value::Table(role), 1.0);
+    let mut attack = toml::Table::new();
+    attack.insert("preset".into(), "none".into());
+    doc.insert("attack".into(), toml::Value::Table(attack));
+    let path = dir.join("scenario.toml");
+    std::fs::write(&path, toml::to_string(&doc).expect("TOML out")).expect("writing");
+    path.display().to_string()
+}
+
+/// The pid a script wrote into `file`, once it did.
+fn pid_written(file: &Path) -> u32 {
+    let mut pid = None;
+    fdi_tests::wait_until(Duration::from_secs(30), || {
+        pid = std::fs::read_to_string(file)
+            .ok()
+            .and_then(|s| s.trim().parse().ok());
+        pid.is_some()
+    });
+    pid.unwrap_or_else(|| panic!("{} never held a pid", file.display()))
+}
+
+/// Runs `scenario` through `fdi-launch` with the watchdog (a hang fails the test), and checks
+/// it stopped naming the program `name` and left no shared-memory file.
+fn run_sh_attacker(scenario: &str, out_dir: &Path, name: &str, what: &str) -> Output {
+    let child = fdi_tests::spawn(&["run", scenario, "--json"], out_dir);
+    let pid = child.id();
+    let out = fdi_tests::wait_with_watchdog(child, WATCHDOG);
+    fdi_tests::assert_no_leftovers(pid);
+    assert_failed_naming(&out, name, what);
+    out
+}
+
+/// Regression (issue 29): a child that kept the program's stdout and stderr made the launcher
+/// wait, silent, until it exited (a 2 s run took 20.6 s with a 20 s child). The children run
+/// for an hour here: the watchdog catches a launcher that waits for them; once the launcher is
+/// back, they are gone. Both a program that is still running at the end and one that exited
+/// first, leaving its child, are checked.
+#[test]
+fn an_external_programs_lingering_child_does_not_delay_the_run() {
+    for (name, end, what) in [
+        ("lingering", "exec sleep 3600", "not ready after"),
+        ("gone-first", "exit 0", "exited before it was ready"),
+    ] {
+        let s = Scratch::new(&format!("ext-{name}"));
+        let pid_file = s.0.join("child.pid");
+        let script = format!(
+            "sleep 3600 & echo $! > {}; echo waiting; {end}",
+            pid_file.display()
+        );
+        let scenario = sh_attacker(&s.0, name, &script);
+        let out = run_sh_attacker(&scenario, &s.0.join("runs"), name, what);
+        let child = pid_written(&pid_file);
+        assert!(
+            !fdi_tests::alive(child),
+            "{name}: the program's child (pid {child}) outlived the run"
+        );
+        let err = stderr(&out);
+        assert!(
+            err.contains(&format!("external attacker `{name}`: waiting")),
+            "{name}: the program's output is relayed: {err}"
+        );
+        if end == "exit 0" {
+            assert!(
+                err.contains(&format!("external attacker `{name}`"))
+                    && err.contains(&format!(
+                        "left 1 process running, ended: pid {child} (sleep)"
+                    )),
+                "{name}: the launcher names the program and what it ended: {err}"
+            );
+        }
+    }
+}
+
+/// Regression (issue 29): a child that detached (its own session, its output closed) was
+/// still running after the run ended. One that left the program's process group and was
+/// orphaned (a double fork: init is its parent) is found by the run's variables in its
+/// environment; one that left the group while the program lives, as a descendant.
+#[test]
+fn an_external_programs_detached_child_is_gone_when_the_run_ends() {
+    let s = Scratch::new("ext-detached");
+    let (orphan, descendant) = (s.0.join("orphan.pid"), s.0.join("descendant.pid"));
+    let script = format!(
+        "(setsid sleep 3600 < /dev/null > /dev/null 2>&1 & echo $! > {orphan}); \
+         setsid sleep 3601 < /dev/null > /dev/null 2>&1 & echo $! > {descendant}; \
+         exec sleep 3600",
+        orphan = orphan.display(),
+        descendant = descendant.display()
+    );
+    let scenario = sh_attacker(&s.0, "detached", &script);
+    let out = run_sh_attacker(&scenario, &s.0.join("runs"), "detached", "not ready after");
+    for file in [&orphan, &descendant] {
+        let pid = pid_written(file);
+        assert!(
+            !fdi_tests::alive(pid),
+            "the detached child (pid {pid}, {}) outlived the run",
+            file.display()
+        );
+    }
+    let err = stderr(&out);
+    assert!(
+        err.contains("external attacker `detached`") && err.contains("outside its group"),
+        "the launcher names the program and what it ended: {err}"
+    );
+}

@@ -6,6 +6,7 @@
 pub mod hosts;
 pub mod interrupt;
 pub mod join;
+pub mod program;
 pub mod relay;
 pub mod remote;
 pub mod replayer;

@@ -22,6 +22,9 @@ use crate::supervisor::{Child, Supervisor};
 
 /// Grace period between SIGTERM and SIGKILL when a run is torn down.
 pub(crate) const GRACE: Duration = Duration::from_secs(2);
+/// How long the end of the children's output is awaited once they are gone (the output of a
+/// program outside the project may be held open by a process that left its group).
+pub(crate) const OUTPUT_WAIT: Duration = Duration::from_secs(1);
 /// How long the processes may take to report ready.
 const READY_TIMEOUT: Duration = Duration::from_secs(30);
 /// A process stopped (SIGSTOP) this long stalls the run: the launcher stops it with a message.
@@ -432,6 +435,10 @@ impl<X: Transport> Launcher<X> {
             std::thread::sleep(Duration::from_millis(10));
         }
         self.procs.kill_rest();
+        // What the programs outside the project started goes with them, named.
+        for line in self.procs.end_programs(GRACE) {
+            eprintln!("fdi-launch: {line}");
+        }
     }
 }
 
@@ -444,21 +451,41 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     let interrupted = crate::interrupt::flag();
     crate::interrupt::check(BEFORE_THE_START).context(DidNotStart)?;
 
-    let result = {
-        let transport = Shm::open(
-            &prefix,
-            "launcher",
-            fdi_runtime::process::sizing_for(resolved),
-        )
+    let sizing = fdi_runtime::process::sizing_for(resolved);
+    // A full shared-memory folder, a read-only iceoryx2 folder or a low open-file limit is
+    // named now, with its fix: past this point iceoryx2 reports them as a SIGBUS or an
+    // internal error.
+    let external =
+        resolved.scenario.roles.attacker.is_some() || resolved.scenario.roles.monitor.is_some();
+    ipc::machine::check(sizing, external, &prefix)
+        .context("the machine cannot carry this run")
         .context(DidNotStart)?;
+
+    let result = {
+        // What a failed node or port creation made is the run's: removed.
+        let opened = Shm::open(&prefix, "launcher", sizing).and_then(|transport| {
+            let ports = (
+                transport.publisher(Stream::Control)?,
+                transport.subscriber(Stream::Status)?,
+                transport.waker(Wake::Launcher)?,
+            );
+            Ok((transport, ports))
+        });
+        let (transport, (control, status, waker)) = match opened {
+            Ok(opened) => opened,
+            Err(e) => {
+                Shm::remove_leftovers(&prefix).ok();
+                return Err(anyhow::Error::new(e).context(DidNotStart));
+            }
+        };
         let mut launcher = Launcher {
             realtime: resolved.scenario.clock == ClockMode::Realtime,
             lost: Vec::new(),
             procs: Supervisor::default(),
             bells: Vec::new(),
-            control: transport.publisher(Stream::Control).context(DidNotStart)?,
-            status: transport.subscriber(Stream::Status).context(DidNotStart)?,
-            waker: transport.waker(Wake::Launcher).context(DidNotStart)?,
+            control,
+            status,
+            waker,
             interrupted,
             started: false,
             remote: None,
@@ -485,8 +512,11 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
             )
         });
         launcher.teardown();
-        // Every child has exited: what they printed is relayed whole before we go on.
-        launcher.procs.drain_stderr();
+        // Every child has exited: what they printed is relayed whole before we go on, unless
+        // a process that left a program's group still holds its output.
+        for line in launcher.procs.drain_stderr(OUTPUT_WAIT) {
+            eprintln!("fdi-launch: warning: {line}");
+        }
         let mut remote_left = Vec::new();
         let mut hosts = Vec::new();
         if let Some(mut remote) = launcher.remote.take() {

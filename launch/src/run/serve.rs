@@ -406,7 +406,9 @@ impl HostRun {
         }
         self.procs.kill_rest();
         self.report_exits();
-        self.procs.drain_stderr();
+        for line in self.procs.drain_stderr(crate::runtime::OUTPUT_WAIT) {
+            eprintln!("fdi-launch serve: warning: {line}");
+        }
     }
 
     /// Stops the bridge and removes the run's files here: (removed, left, what the bridge

@@ -3,7 +3,8 @@
 //! stops them in order) with its stderr relayed, reaped without blocking, described by the cause
 //! it printed last when it fails, noticed when stopped (SIGSTOP, a debugger), torn down with
 //! SIGTERM then SIGKILL after a grace period, and killed if still running when the supervisor is
-//! dropped.
+//! dropped. A program outside the project is ended with its whole process group and what it
+//! started ([`crate::run::program`]); its output is awaited for a bounded time only.
 
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::process::{Command, ExitStatus, Stdio};
@@ -14,6 +15,7 @@ use anyhow::{bail, Context, Result};
 use fdi_runtime::process::procfs;
 
 use crate::relay::StderrRelay;
+use crate::run::program::{self, Program};
 use crate::runtime::describe_status;
 
 /// One supervised child; `meta` is what its supervisor's user keeps about it.
@@ -28,6 +30,8 @@ pub struct Child<M> {
     stopped_since: Option<Instant>,
     /// Its stderr, relayed to ours; its last line is the cause of a failure.
     stderr: Option<StderrRelay>,
+    /// A program outside the project: its process group and what it started.
+    program: Option<Program>,
 }
 
 /// A child on this host, or one that the `fdi-launch serve` of another host runs for us.
@@ -106,7 +110,7 @@ impl<M> Child<M> {
             };
         }
         let pid = self.pid();
-        let cause = match (st.code(), &mut self.stderr) {
+        let cause = match (st.code(), &self.stderr) {
             (Some(_), Some(relay)) => relay.cause(),
             _ => None,
         };
@@ -180,16 +184,23 @@ impl<M> Supervisor<M> {
             .stderr
             .take()
             .map(|e| StderrRelay::start_teed(e, &label, None, tee));
-        self.push(label, meta, Handle::Local(child), stderr);
+        self.push(label, meta, Handle::Local(child), stderr, None);
         Ok(())
     }
 
     /// Supervises `label`, a process the serve of another host runs for this run.
     pub fn adopt_remote(&mut self, label: String, meta: M, remote: Remote) {
-        self.push(label, meta, Handle::Remote(remote), None);
+        self.push(label, meta, Handle::Remote(remote), None, None);
     }
 
-    fn push(&mut self, label: String, meta: M, child: Handle, stderr: Option<StderrRelay>) {
+    fn push(
+        &mut self,
+        label: String,
+        meta: M,
+        child: Handle,
+        stderr: Option<StderrRelay>,
+        program: Option<Program>,
+    ) {
         self.children.push(Child {
             label,
             meta,
@@ -197,12 +208,13 @@ impl<M> Supervisor<M> {
             child,
             stopped_since: None,
             stderr,
+            program,
         });
     }
 
     /// Spawns a program outside the project (`[roles]`) as `label`: no stdin, its stdout and
     /// stderr both relayed to our stderr, each line after `label: `, in a process group of its
-    /// own.
+    /// own, which [`Self::end_programs`] ends with whatever it started.
     pub fn spawn_external(&mut self, label: String, meta: M, mut cmd: Command) -> Result<()> {
         let (reader, writer) = std::io::pipe().context("making a pipe for its output")?;
         cmd.stdin(Stdio::null())
@@ -215,11 +227,18 @@ impl<M> Supervisor<M> {
                 cmd.get_program()
             )
         })?;
+        let program = Program::new(child.id(), &cmd);
         // Our copies of the write end went into the command: dropped with it, so the relay
-        // sees the end of the stream when the child exits.
+        // sees the end of the stream when the child (and whatever it started) exits.
         drop(cmd);
         let stderr = StderrRelay::start_prefixed(reader, &label, Some(label.clone()));
-        self.push(label, meta, Handle::Local(child), Some(stderr));
+        self.push(
+            label,
+            meta,
+            Handle::Local(child),
+            Some(stderr),
+            Some(program),
+        );
         Ok(())
     }
 
@@ -301,17 +320,21 @@ impl<M> Supervisor<M> {
     }
 
     /// Sends SIGTERM to every child still running, and SIGCONT, so that a stopped one acts
-    /// on it and exits on its own.
+    /// on it and exits on its own. A program outside the project gets them through its whole
+    /// process group.
     pub fn signal_term(&self) {
+        use rustix::process::{kill_process, kill_process_group, Signal};
         for c in &self.children {
             if c.status.is_none() {
                 match &c.child {
                     Handle::Local(child) => {
                         if let Some(pid) = rustix::process::Pid::from_raw(child.id() as i32) {
-                            let _ =
-                                rustix::process::kill_process(pid, rustix::process::Signal::TERM);
-                            let _ =
-                                rustix::process::kill_process(pid, rustix::process::Signal::CONT);
+                            let kill = |sig| match c.program {
+                                Some(_) => kill_process_group(pid, sig),
+                                None => kill_process(pid, sig),
+                            };
+                            let _ = kill(Signal::TERM);
+                            let _ = kill(Signal::CONT);
                         }
                     }
                     Handle::Remote(r) => (r.stop.0)(false),
@@ -342,17 +365,56 @@ impl<M> Supervisor<M> {
         Ok(())
     }
 
-    /// Relays what every child printed to the end (call once they all exited).
-    pub fn drain_stderr(&mut self) {
-        for c in &mut self.children {
-            if let Some(relay) = &mut c.stderr {
-                relay.last_line();
+    /// Ends what the programs outside the project left running once they exited or were
+    /// stopped (children that kept their output open or detached): their whole process group
+    /// and the processes that left it, SIGTERM then SIGKILL after `grace`. Call it once the
+    /// children themselves are reaped. Returns what it ended, one line per program that left
+    /// something, naming the program.
+    pub fn end_programs(&mut self, grace: Duration) -> Vec<String> {
+        let mut out = Vec::new();
+        for c in &self.children {
+            let Some(program) = &c.program else { continue };
+            let spare = c.status.is_none().then(|| c.pid());
+            let left = program.end(grace, spare);
+            if !left.is_empty() {
+                out.push(format!(
+                    "{} (pid {}) left {} process{} running, ended: {}",
+                    c.label,
+                    c.pid(),
+                    left.len(),
+                    if left.len() == 1 { "" } else { "es" },
+                    program::describe(&left)
+                ));
             }
         }
+        out
     }
 
-    /// SIGKILLs every child still running and reaps it. A remote child's host is asked to, and
-    /// its exit awaited for at most [`REMOTE_KILL_WAIT`] in all (none when its host is lost).
+    /// Relays what every child printed to the end (call once they all exited, and
+    /// [`Self::end_programs`]), waiting at most `limit` in all for the ends of their output:
+    /// a process that left a program's process group and outlived it may hold the program's
+    /// output open. Returns a line for each output no longer awaited, naming its program.
+    pub fn drain_stderr(&mut self, limit: Duration) -> Vec<String> {
+        let deadline = Instant::now() + limit;
+        let mut open = Vec::new();
+        for c in &self.children {
+            if let Some(relay) = &c.stderr {
+                if !relay.wait_end(deadline.saturating_duration_since(Instant::now())) {
+                    open.push(format!(
+                        "the output of {} (pid {}) was still open {:.1} s after its end (a \
+                         process outside its process group holds it): no longer relayed",
+                        c.label,
+                        c.pid(),
+                        limit.as_secs_f64()
+                    ));
+                }
+            }
+        }
+        open
+    }
+
+    /// SIGKILLs every child still running and reaps it. A remote child's host is asked to, and its exit awaited for at most
+    /// [`REMOTE_KILL_WAIT`] in all (none when its host is lost).
     pub fn kill_rest(&mut self) {
         let mut remote = false;
         for c in &mut self.children {
@@ -396,5 +458,8 @@ pub fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 impl<M> Drop for Supervisor<M> {
     fn drop(&mut self) {
         self.kill_rest();
+        for program in self.children.iter().filter_map(|c| c.program.as_ref()) {
+            program.kill();
+        }
     }
 }

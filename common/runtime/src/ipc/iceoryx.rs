@@ -308,7 +308,7 @@ fn reap_dead_nodes<S: Variant>(config: &Config) -> usize {
 /// the root's `services/` and `nodes/`, and each per-node folder in `nodes/`.
 fn resource_dirs(root: &Path) -> Vec<PathBuf> {
     let mut dirs = vec![
-        PathBuf::from("/dev/shm"),
+        shm_dir(),
         root.to_path_buf(),
         root.join("services"),
         root.join("nodes"),
@@ -406,8 +406,16 @@ fn route_iceoryx2_log() {
     });
 }
 
-/// The iceoryx2 root folder (the same for every prefix).
-fn root_dir() -> PathBuf {
+/// The folder of the shared memory iceoryx2 makes (`/dev/shm` on Linux), as iceoryx2's
+/// platform settings name it.
+pub fn shm_dir() -> PathBuf {
+    let dir = String::from_utf8_lossy(iceoryx2_pal_configuration::SHARED_MEMORY_DIRECTORY);
+    PathBuf::from(dir.trim_end_matches('/'))
+}
+
+/// The iceoryx2 root folder (the same for every prefix), where it keeps its node and service
+/// files.
+pub fn root_dir() -> PathBuf {
     route_iceoryx2_log();
     PathBuf::from(Config::default().global.root_path().to_string())
 }

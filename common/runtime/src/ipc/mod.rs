@@ -37,13 +37,15 @@
 //! old, which is why the launcher starts the run only after every process reported ready.
 
 pub mod iceoryx;
+pub mod machine;
 pub mod msg;
 pub mod prefix;
 
 use std::path::PathBuf;
 use std::time::Duration;
 
-pub use iceoryx::{Local, Shm};
+pub use iceoryx::{root_dir, shm_dir, Local, Shm};
+pub use machine::MachineError;
 pub use msg::{AlarmMsg, ControlMsg, MeasurementMsg, Role, StatusMsg, TorqueMsg};
 pub use prefix::RunPrefix;
 

@@ -1,5 +1,6 @@
-//! What `/proc` says about processes (Linux): which exist, their state letter and parent from
-//! `/proc/PID/stat`, their command line. The stat line is parsed here and nowhere else.
+//! What `/proc` says about processes (Linux): which exist, their state letter, parent and
+//! process group from `/proc/PID/stat`, their command line and environment. The stat line is
+//! parsed here and nowhere else.
 
 use std::path::{Path, PathBuf};
 
@@ -48,6 +49,11 @@ impl Stat {
             ppid: fields.next()?.parse().ok()?,
             rest: rest.trim().to_string(),
         })
+    }
+
+    /// The process group (field 5).
+    pub fn pgrp(&self) -> Option<u32> {
+        self.field(5)?.parse().ok()
     }
 
     /// Field `n` as proc(5) numbers them, from 3 (the state) on: 4 is the parent, 40 the
@@ -106,6 +112,13 @@ pub fn cmdline(pid: u32) -> Result<Vec<u8>, ProcError> {
     std::fs::read(&path).map_err(|source| ProcError::Read { path, source })
 }
 
+/// The environment `pid` was started with, as the kernel keeps it: `KEY=VALUE` entries, each
+/// followed by a NUL byte (readable for the processes of the same user, or by root).
+pub fn environ(pid: u32) -> Result<Vec<u8>, ProcError> {
+    let path = path_of(pid, "environ");
+    std::fs::read(&path).map_err(|source| ProcError::Read { path, source })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -123,6 +136,7 @@ mod tests {
         assert_eq!(s.field(4), Some("17"));
         assert_eq!((s.field(40), s.field(41)), (Some("7"), Some("1")));
         assert_eq!((s.field(2), s.field(45)), (None, None));
+        assert_eq!(s.pgrp(), Some(4242));
     }
 
     #[test]
@@ -159,6 +173,18 @@ mod tests {
         let cmd = cmdline(me).expect("own cmdline");
         assert!(cmd.ends_with(b"\0"), "{cmd:?}");
         assert!(String::from_utf8_lossy(&cmd).contains(&*name), "{cmd:?}");
+        assert_eq!(
+            s.pgrp(),
+            Some(rustix::process::getpgrp().as_raw_nonzero().get() as u32)
+        );
+        if let Ok(path) = std::env::var("PATH") {
+            let env = environ(me).expect("own environment");
+            let entry = format!("PATH={path}\0");
+            assert!(
+                env.windows(entry.len()).any(|w| w == entry.as_bytes()),
+                "{entry:?}"
+            );
+        }
     }
 
     #[test]
