@@ -107,7 +107,7 @@ fn options(s: &Scenario) -> BTreeMap<String, String> {
         }
     }
     for (at, value) in [
-        ("noise", serde_json::to_value(&s.noise)),
+        ("noise", serde_json::to_value(s.noise)),
         ("disturbance", serde_json::to_value(&s.disturbance)),
     ] {
         match value {

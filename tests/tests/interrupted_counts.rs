@@ -4,11 +4,13 @@
 //! later tick of every robot as "after the control stopped" (711 uncontrolled ticks reported for
 //! a robot with about 5). Each robot's counts must be what its traces show.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
 use fdi_common::trace::TraceRecord;
-use fdi_tests::{run_dir_of, signal, spawn, trace_records, wait_until, wait_with_watchdog, Scratch};
+use fdi_tests::{
+    run_dir_of, signal, spawn, trace_records, wait_until, wait_with_watchdog, Scratch,
+};
 
 const WATCHDOG: Duration = Duration::from_secs(300);
 
@@ -40,29 +42,49 @@ fn an_interrupted_runs_uncontrolled_ticks_are_what_its_traces_show() {
     assert!(v["partial"].is_object(), "{v}");
     let dir = run_dir_of(&v);
 
-    // Per robot: the ticks it recorded, and the ticks the control center computed for it.
-    let mut center: BTreeMap<u32, u64> = BTreeMap::new();
+    // Per robot: the ticks the control center computed for it (and the attacker relayed).
+    let mut center: BTreeMap<u32, BTreeSet<u64>> = BTreeMap::new();
     for r in trace_records(&dir.join("traces/control-center.trace")) {
         if let TraceRecord::Center(c) = r {
-            *center.entry(c.agent).or_default() += 1;
+            center.entry(c.agent).or_default().insert(c.k);
+        }
+    }
+    let mut relayed: BTreeMap<u32, BTreeSet<u64>> = BTreeMap::new();
+    for r in trace_records(&dir.join("traces/attacker.trace")) {
+        if let TraceRecord::Attack(x) = r {
+            relayed.entry(x.agent).or_default().insert(x.k);
         }
     }
     let mut after_control = 0;
+    let none = BTreeSet::new();
     for id in 1..=4u32 {
-        let recorded = trace_records(&dir.join(format!("traces/agent-{id}.trace")))
+        // The robot's own ticks, controlled where both the attacker's and the center's records
+        // of that tick exist.
+        let ticks: Vec<u64> = trace_records(&dir.join(format!("traces/agent-{id}.trace")))
             .iter()
-            .filter(|r| matches!(r, TraceRecord::Agent(_)))
+            .filter_map(|r| match r {
+                TraceRecord::Agent(a) => Some(a.k),
+                _ => None,
+            })
+            .collect();
+        let (c, x) = (
+            center.get(&id).unwrap_or(&none),
+            relayed.get(&id).unwrap_or(&none),
+        );
+        let controlled = ticks
+            .iter()
+            .filter(|k| c.contains(k) && x.contains(k))
             .count() as u64;
-        let controlled = center.get(&id).copied().unwrap_or(0);
-        assert!(controlled <= recorded, "robot {id}: {controlled} > {recorded}");
+        let uncontrolled = ticks.len() as u64 - controlled;
         let m = &v["metrics"][id.to_string()];
         assert_eq!(
             m["uncontrolled_ticks"].as_u64(),
-            Some(recorded - controlled),
-            "robot {id}: recorded {recorded} ticks, the center computed {controlled}: {m}"
+            Some(uncontrolled),
+            "robot {id}: {} ticks recorded, {controlled} controlled in the traces: {m}",
+            ticks.len()
         );
         assert_eq!(m["ticks"].as_u64(), Some(controlled), "robot {id}: {m}");
-        after_control += recorded - controlled;
+        after_control += uncontrolled;
     }
     if after_control > 0 {
         assert!(

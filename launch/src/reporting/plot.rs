@@ -1060,12 +1060,19 @@ mod tests {
             (1e-300, 2e-300),
         ] {
             let (a, b) = drawable(lo, hi);
-            assert!(a.is_finite() && b.is_finite() && a < b, "{lo}, {hi}: {a}, {b}");
+            assert!(
+                a.is_finite() && b.is_finite() && a < b,
+                "{lo}, {hi}: {a}, {b}"
+            );
             assert!(a >= -AXIS_LIMIT && b <= AXIS_LIMIT, "{lo}, {hi}: {a}, {b}");
             let mid = a / 2.0 + b / 2.0;
             assert!(b - a >= mid.abs() * 1e-9, "{lo}, {hi}: {a}, {b}");
         }
-        assert_eq!(drawable(-0.02, 0.03), (-0.02, 0.03), "ordinary data is kept");
+        assert_eq!(
+            drawable(-0.02, 0.03),
+            (-0.02, 0.03),
+            "ordinary data is kept"
+        );
     }
 
     #[test]
@@ -1102,7 +1109,11 @@ mod tests {
                     y_label: "rad".into(),
                     kind: PanelKind::Lines(vec![line(
                         "e",
-                        vec![(0.0, f64::NAN), (0.1, f64::INFINITY), (0.2, f64::NEG_INFINITY)],
+                        vec![
+                            (0.0, f64::NAN),
+                            (0.1, f64::INFINITY),
+                            (0.2, f64::NEG_INFINITY),
+                        ],
                     )]),
                     guides: vec![],
                 },
@@ -1116,7 +1127,11 @@ mod tests {
         };
         let written = save_figure(&fig, &dir.path().join("diverged"), (600, 600)).expect("drawn");
         for p in written {
-            assert!(std::fs::metadata(&p).is_ok_and(|m| m.len() > 0), "{}", p.display());
+            assert!(
+                std::fs::metadata(&p).is_ok_and(|m| m.len() > 0),
+                "{}",
+                p.display()
+            );
         }
         let bars = BarChart {
             title: "huge bars".into(),
