@@ -1,7 +1,7 @@
 //! Mounts for the tests of full disks and of files that cannot be removed: a small tmpfs (a
 //! disk that fills up) and a read-only bind mount of a folder (whose files not even root can
 //! delete). Both need root and `mount`; without them [`Mount`] says why, and the tests say they
-//! are skipped, unless `FDI_REQUIRE_MOUNT` is set (CI), where they fail. Every mount is undone
+//! are skipped, unless `FDI_REQUIRE_ROOT` is set (CI), where they fail. Every mount is undone
 //! on drop, also when the test fails.
 
 use std::path::{Path, PathBuf};
@@ -24,11 +24,11 @@ fn run(program: &str, args: &[&str]) -> Result<(), String> {
     }
 }
 
-/// Why the tests that mount cannot run here; panics instead when `FDI_REQUIRE_MOUNT` is set.
+/// Why the tests that mount cannot run here; panics instead when `FDI_REQUIRE_ROOT` is set.
 pub fn skip_reason(e: &str) -> String {
     assert!(
-        std::env::var_os("FDI_REQUIRE_MOUNT").is_none(),
-        "FDI_REQUIRE_MOUNT is set but the test cannot mount: {e}"
+        std::env::var_os("FDI_REQUIRE_ROOT").is_none(),
+        "FDI_REQUIRE_ROOT is set but the test cannot mount: {e}"
     );
     format!("skipped: the test cannot mount here ({e}); run as root")
 }
