@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests: locating (and if needed building) the real
 //! binaries, scratch folders, process and shared-memory inspection, a watchdog.
 
+pub mod mounts;
 pub mod netns;
 pub mod threads;
 

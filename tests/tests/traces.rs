@@ -238,3 +238,263 @@ fn realtime_run_with_traces_none_over_ipc_completes_with_its_metrics() {
     let dir = run_dir_of(&s);
     assert!(trace_files(&dir).is_empty());
 }
+
+/// The folder names in `dir` (hidden ones too), sorted; none when it does not exist.
+fn names_in(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .map(|d| {
+            d.flatten()
+                .map(|e| e.file_name().to_string_lossy().into_owned())
+                .collect()
+        })
+        .unwrap_or_default();
+    v.sort();
+    v
+}
+
+/// A copy of the run directory `run` (scenario, summary, traces) at `at/run` on a tmpfs with
+/// about `room` bytes to spare: a disk that fills up as soon as an export writes more. `None`
+/// (the test is skipped, saying why) where the test cannot mount.
+fn on_a_small_disk(
+    run: &Path,
+    at: &Path,
+    room: u64,
+) -> Option<(fdi_tests::mounts::Mount, std::path::PathBuf)> {
+    let page = |n: u64| n.div_ceil(4096) * 4096;
+    let mut files = vec![run.join("scenario.toml"), run.join("summary.json")];
+    files.extend(trace_files(run).iter().map(|f| run.join("traces").join(f)));
+    let used: u64 = files
+        .iter()
+        .map(|f| page(std::fs::metadata(f).expect("a file of the run").len()))
+        .sum();
+    let mount = match fdi_tests::mounts::Mount::tmpfs(at, used + room) {
+        Ok(m) => m,
+        Err(e) => {
+            eprintln!("{}", fdi_tests::mounts::skip_reason(&e));
+            return None;
+        }
+    };
+    let copy = at.join("run");
+    std::fs::create_dir_all(copy.join("traces")).expect("the copy's folders");
+    for f in &files {
+        let rel = f.strip_prefix(run).expect("in the run");
+        std::fs::copy(f, copy.join(rel)).expect("the run fits on the small disk");
+    }
+    Some((mount, copy))
+}
+
+/// What an earlier export left in `RUN_DIR/export`, which a failed export must not touch.
+const EARLIER: [(&str, &str); 2] = [
+    ("run.mcap", "an earlier MCAP export\n"),
+    ("agent-1.csv", "an earlier CSV export\n"),
+];
+
+fn earlier_export(run: &Path) {
+    std::fs::create_dir_all(run.join("export")).expect("export/");
+    for (name, text) in EARLIER {
+        std::fs::write(run.join("export").join(name), text).expect("an earlier export");
+    }
+}
+
+fn assert_only_the_earlier_export(run: &Path, what: &str) {
+    let names: Vec<&str> = EARLIER.iter().map(|(n, _)| *n).collect();
+    let mut want = names.clone();
+    want.sort_unstable();
+    assert_eq!(names_in(&run.join("export")), want, "{what}");
+    for (name, text) in EARLIER {
+        let got = std::fs::read_to_string(run.join("export").join(name)).expect("still there");
+        assert_eq!(got, text, "{what}: {name} was changed");
+    }
+}
+
+/// Regression (issue 29): an MCAP export into a full disk said "attempted another write after a
+/// write method failed" without naming ENOSPC and left a partial `run.mcap`. It names the file
+/// and the cause, and leaves nothing: no `export/` it made, an earlier `run.mcap` untouched.
+#[test]
+fn mcap_export_into_a_full_disk_leaves_no_partial_file_and_names_enospc() {
+    let out = Scratch::new("export-full-mcap");
+    let s = run(&out.0, "1", &["--engine", "inproc"]);
+    // ~2.5 MB of traces, ~10 MB of MCAP: 256 KiB to spare is full long before the end.
+    let Some((_disk, run_dir)) = on_a_small_disk(&run_dir_of(&s), &out.0.join("disk"), 256 << 10)
+    else {
+        return;
+    };
+    let d = run_dir.to_string_lossy().into_owned();
+    for earlier in [false, true] {
+        if earlier {
+            earlier_export(&run_dir);
+        }
+        let o = fdi_tests::launch_plain(&["trace", "export", &d, "--format", "mcap"], WATCHDOG);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "the export into a full disk succeeded");
+        let file = run_dir.join("export/run.mcap");
+        assert!(
+            err.contains(&format!(
+                "writing {}: no space left on device (ENOSPC)",
+                file.display()
+            )) && err.contains("abandoned"),
+            "{err}"
+        );
+        assert!(!err.contains("attempted another write"), "{err}");
+        if earlier {
+            assert_only_the_earlier_export(&run_dir, "MCAP");
+        } else {
+            assert!(
+                !run_dir.join("export").exists(),
+                "{:?}",
+                names_in(&run_dir.join("export"))
+            );
+        }
+    }
+}
+
+/// Regression (issue 29): a CSV export into a full disk left a half-written `export/`. It names
+/// the file and the cause, and leaves nothing: no `export/` it made, earlier files untouched.
+#[test]
+fn csv_export_into_a_full_disk_leaves_no_partial_export() {
+    let out = Scratch::new("export-full-csv");
+    let s = run(&out.0, "1", &["--engine", "inproc"]);
+    let Some((_disk, run_dir)) = on_a_small_disk(&run_dir_of(&s), &out.0.join("disk"), 256 << 10)
+    else {
+        return;
+    };
+    let d = run_dir.to_string_lossy().into_owned();
+    for earlier in [false, true] {
+        if earlier {
+            earlier_export(&run_dir);
+        }
+        let o = fdi_tests::launch_plain(&["trace", "export", &d, "--format", "csv"], WATCHDOG);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "the export into a full disk succeeded");
+        let export = run_dir.join("export").display().to_string();
+        assert!(
+            err.contains(&format!("writing {export}/"))
+                && err.contains(".csv: no space left on device (ENOSPC)")
+                && err.contains("abandoned"),
+            "{err}"
+        );
+        if earlier {
+            assert_only_the_earlier_export(&run_dir, "CSV");
+        } else {
+            assert!(
+                !run_dir.join("export").exists(),
+                "{:?}",
+                names_in(&run_dir.join("export"))
+            );
+        }
+    }
+}
+
+/// What keeps a folder's files from being removed, undone on drop: a read-only mount as root
+/// (root may delete anything else), a folder without write permission otherwise.
+enum Stubborn {
+    Mounted {
+        _undone_on_drop: fdi_tests::mounts::Mount,
+    },
+    ReadOnly(Vec<std::path::PathBuf>),
+}
+
+impl Stubborn {
+    /// `dir`'s files cannot be removed; `moved`: where `dir` may be by the time this is
+    /// undone. `None` (the test is skipped, saying why) where that cannot be made.
+    fn make(dir: &Path, moved: std::path::PathBuf) -> Option<Self> {
+        use std::os::unix::fs::{MetadataExt, PermissionsExt};
+        let root = std::fs::metadata("/proc/self").is_ok_and(|m| m.uid() == 0);
+        if !root {
+            let ro = std::fs::Permissions::from_mode(0o555);
+            std::fs::set_permissions(dir, ro).expect("chmod");
+            return Some(Self::ReadOnly(vec![dir.to_path_buf(), moved]));
+        }
+        match fdi_tests::mounts::Mount::read_only(dir) {
+            Ok(mut m) => {
+                m.also_at(moved);
+                Some(Self::Mounted { _undone_on_drop: m })
+            }
+            Err(e) => {
+                eprintln!("{}", fdi_tests::mounts::skip_reason(&e));
+                None
+            }
+        }
+    }
+}
+
+impl Drop for Stubborn {
+    fn drop(&mut self) {
+        use std::os::unix::fs::PermissionsExt;
+        if let Self::ReadOnly(dirs) = self {
+            for d in dirs.iter() {
+                let _ = std::fs::set_permissions(d, std::fs::Permissions::from_mode(0o755));
+            }
+        }
+    }
+}
+
+/// Regression (issue 29): `runs prune` that met a file it could not delete stopped, left that
+/// run directory half-removed and no longer listed, and skipped the older ones. It names the
+/// path and the cause, removes the older ones all the same, leaves a tombstone that `runs list`
+/// shows, and the next prune removes it.
+#[test]
+fn prune_continues_past_a_file_it_cannot_remove() {
+    let out = Scratch::new("prune-stubborn");
+    let mut dirs = Vec::new();
+    for _ in 0..3 {
+        let s = run(&out.0, "0.05", &["--engine", "inproc"]);
+        dirs.push(run_dir_of(&s));
+        std::thread::sleep(Duration::from_millis(30));
+    }
+    let name = dirs[1]
+        .file_name()
+        .expect("a name")
+        .to_string_lossy()
+        .into_owned();
+    let tomb = out.0.join(format!("{name}.pruning"));
+    let Some(stubborn) = Stubborn::make(&dirs[1].join("traces"), tomb.join("traces")) else {
+        return;
+    };
+    let root = out.0.to_string_lossy().into_owned();
+    let o = fdi_tests::launch_plain(&["runs", "prune", "--keep", "1", "--out", &root], WATCHDOG);
+    let (text, err) = (
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr),
+    );
+    assert!(
+        !o.status.success(),
+        "a prune that left a run succeeded: {text}"
+    );
+    let cause = match &stubborn {
+        Stubborn::Mounted { .. } => "read-only file system (EROFS)",
+        Stubborn::ReadOnly(_) => "permission denied (EACCES)",
+    };
+    // Each trace file is named (in the order the folder lists them) with the cause.
+    let traces = format!("could not remove {}/", tomb.join("traces").display());
+    assert!(
+        err.lines()
+            .any(|l| l.contains(&traces) && l.ends_with(&format!(".trace: {cause}"))),
+        "{err}"
+    );
+    assert!(
+        err.contains(&format!("stays as {}", tomb.display())),
+        "{err}"
+    );
+    assert!(text.contains("removed 1 run directories"), "{text}");
+    assert!(!dirs[0].exists(), "the older run was skipped");
+    assert!(dirs[2].is_dir(), "the newest run was removed");
+    assert!(!dirs[1].exists() && tomb.is_dir());
+    let o = fdi_tests::launch_plain(&["runs", "list", "--out", &root], WATCHDOG);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        text.contains(&format!("{name}.pruning")) && text.contains("half-removed"),
+        "{text}"
+    );
+    assert!(text.contains("1 run directories"), "{text}");
+    drop(stubborn);
+    let o = fdi_tests::launch_plain(&["runs", "prune", "--keep", "1", "--out", &root], WATCHDOG);
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        text.contains(&format!("removed {}", tomb.display())),
+        "{text}"
+    );
+    assert!(!tomb.exists() && dirs[2].is_dir());
+}

@@ -262,9 +262,36 @@ impl Recorder {
 
     /// Feeds one joined tick record (ticks of one agent in order; agents interleaved freely).
     pub fn push(&mut self, r: &TickRecord) {
+        let Some(samples) = self.observe(r) else {
+            return;
+        };
         let Some(robot) = self.robots.get_mut(&r.agent.agent) else {
             return;
         };
+        for (series, sample) in [&mut robot.s_hat, &mut robot.chi2, &mut robot.cusum]
+            .into_iter()
+            .zip(samples)
+        {
+            series.push(sample);
+        }
+    }
+
+    /// Every detector's configured threshold, in the order of [`super::NAMES`] (`None`: χ²
+    /// has none when no quantile could be had).
+    pub fn configured(&self) -> [(&'static str, Option<f64>); 3] {
+        [
+            (S_HAT_NORM, Some(self.s_hat_threshold)),
+            (CHI2, self.chi2_threshold),
+            (CUSUM, Some(self.cusum_threshold)),
+        ]
+    }
+
+    /// Feeds one joined tick record as [`Self::push`] does, and returns the tick's sample of
+    /// every detector (in the order of [`super::NAMES`]) without keeping it: memory stays the
+    /// same however long the run (the MCAP export writes them as they come). `None` for an
+    /// agent the scenario does not have.
+    pub fn observe(&mut self, r: &TickRecord) -> Option<[Sample; 3]> {
+        let robot = self.robots.get_mut(&r.agent.agent)?;
         let (t, active) = (r.agent.t, in_force(r));
         let held = robot.held.push(
             tick_time(r.center.k, self.control_period_s),
@@ -276,17 +303,11 @@ impl Recorder {
         };
         robot.mismatches += u64::from(s_hat.alarm(false) != r.center.alarm);
         let v = robot.detectors.push(r);
-        for (series, verdict) in [
-            (&mut robot.s_hat, s_hat),
-            (&mut robot.chi2, v.chi2),
-            (&mut robot.cusum, v.cusum),
-        ] {
-            series.push(Sample {
-                t,
-                in_force: active,
-                verdict,
-            });
-        }
+        Some([s_hat, v.chi2, v.cusum].map(|verdict| Sample {
+            t,
+            in_force: active,
+            verdict,
+        }))
     }
 
     pub fn finish(self) -> Recorded {

@@ -3,6 +3,7 @@
 
 pub mod attacks;
 pub mod export;
+pub mod io_cause;
 pub mod output;
 pub mod plot;
 pub mod report;

@@ -265,3 +265,38 @@ fn the_configured_thresholds_reproduce_the_metrics_and_the_centers_alarm() {
     }
     assert_eq!(compared, 12);
 }
+
+/// The MCAP export writes each tick's statistics as they come: `observe` gives the very samples
+/// `push` keeps, in the order of `NAMES`, and keeps none of them (memory does not grow with the
+/// run), with the thresholds `finish` reports.
+#[test]
+fn observe_gives_the_samples_push_keeps_and_keeps_none() {
+    let mut r = crate::scenario::paper().expect("paper");
+    r.scenario.duration_s = 1.0;
+    let (mut kept, mut streamed) = (Recorder::for_scenario(&r), Recorder::for_scenario(&r));
+    let mut seen: BTreeMap<u32, Vec<[Sample; 3]>> = BTreeMap::new();
+    crate::engine::run_inproc_any(&r, |t| {
+        kept.push(t);
+        let s = streamed.observe(t).expect("an agent of the scenario");
+        seen.entry(t.agent.agent).or_default().push(s);
+    })
+    .expect("run");
+    let configured = streamed.configured();
+    let (kept, streamed) = (kept.finish(), streamed.finish());
+    assert_eq!(seen.len(), 4);
+    for (i, name) in NAMES.iter().enumerate() {
+        let d = kept.detector(name).expect("detector");
+        assert_eq!(configured[i], (*name, d.configured));
+        for (id, series) in &d.robots {
+            let got: Vec<Sample> = seen[id].iter().map(|s| s[i]).collect();
+            // Compared as text: a NaN threshold is equal to itself there.
+            assert_eq!(
+                format!("{got:?}"),
+                format!("{series:?}"),
+                "{name}, robot {id}"
+            );
+        }
+        let none = streamed.detector(name).expect("detector");
+        assert!(none.robots.values().all(Vec::is_empty), "{name}");
+    }
+}

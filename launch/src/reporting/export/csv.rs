@@ -30,27 +30,78 @@ use fdi_common::records::{
 use fdi_common::scenario::MAX_DOF;
 use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
 
-use super::{failed, out_dir, read_sorted, scan, stem, trace_files, Kind, RunInfo, Sorted};
+use super::{
+    abandoned, failed, read_sorted, scan, stem, trace_files, write_failure, Kind, OutDir, RunInfo,
+    Sorted, WriteFailed,
+};
 
 pub(super) fn export(run_dir: &Path) -> Result<()> {
     let files = trace_files(run_dir)?;
-    let out = out_dir(run_dir)?;
-    let events_path = out.join("events.csv");
-    let mut events = Csv::create(&events_path, &["process", "t_s", "message"])?;
+    let dir = OutDir::open(run_dir)?;
+    // Every CSV is written into a temporary folder in `RUN_DIR/export` (removed when dropped),
+    // then moved into place once all are whole: a failed export leaves no partial file, and
+    // the files of an earlier export stay as they were.
+    let written = tempfile::Builder::new()
+        .prefix(".csv.")
+        .tempdir_in(&dir.path)
+        .map_err(|e| WriteFailed::io(&dir.path, e))
+        .and_then(|tmp| {
+            let out = Out {
+                tmp: tmp.path().to_path_buf(),
+                dir: dir.path.clone(),
+            };
+            let failures = write(&files, &out)?;
+            out.commit()?;
+            Ok(failures)
+        });
+    match written {
+        Ok(failures) => failed(failures),
+        Err(e) => {
+            dir.discard();
+            Err(abandoned(e, "CSV"))
+        }
+    }
+}
+
+/// Where the CSV files go: written in `tmp`, moved into `dir` (`RUN_DIR/export`) when whole.
+struct Out {
+    tmp: PathBuf,
+    dir: PathBuf,
+}
+
+impl Out {
+    /// Moves every file written into place. A rename within one folder of one file system
+    /// needs no space; one that fails anyway is named.
+    fn commit(&self) -> Result<()> {
+        let entries = std::fs::read_dir(&self.tmp).map_err(|e| WriteFailed::io(&self.dir, e))?;
+        for e in entries {
+            let name = e.map_err(|e| WriteFailed::io(&self.dir, e))?.file_name();
+            let to = self.dir.join(&name);
+            std::fs::rename(self.tmp.join(&name), &to).map_err(|e| WriteFailed::io(&to, e))?;
+        }
+        Ok(())
+    }
+}
+
+/// Writes every CSV of `files` into `out.tmp`. The failures of traces that could not be
+/// exported whole (their files hold what was read before); an error ends the export.
+fn write(files: &[PathBuf], out: &Out) -> Result<Vec<String>> {
+    let mut events = Csv::create(out, "events.csv", &["process", "t_s", "message"])?;
     let mut failures = Vec::new();
-    for f in &files {
+    for f in files {
         let mut n = 0;
-        match export_file(f, &out, &mut events, &mut n) {
-            Ok(()) => println!("{} -> {}: {n} records", f.display(), out.display()),
+        match export_file(f, out, &mut events, &mut n) {
+            Ok(()) => println!("{} -> {}: {n} records", f.display(), out.dir.display()),
+            Err(e) if write_failure(&e).is_some() => return Err(e),
             Err(e) if n > 0 => failures.push(format!(
                 "{e:#} (the {n} records before it are exported to {})",
-                out.display()
+                out.dir.display()
             )),
             Err(e) => failures.push(format!("{e:#}")),
         }
     }
     events.finish()?;
-    failed(failures)
+    Ok(failures)
 }
 
 /// One row being built: its fields, each formatted with `{}`.
@@ -72,26 +123,29 @@ impl Row {
     }
 }
 
-/// A CSV file being written. A row reaches the file whole or not at all.
+/// A CSV file being written (under the export's temporary folder). A row reaches the file
+/// whole or not at all.
 struct Csv {
+    /// The file it becomes, for the messages.
     path: PathBuf,
     out: csv::Writer<File>,
     row: Row,
 }
 
 impl Csv {
-    fn create<H: AsRef<[u8]>>(path: &Path, header: &[H]) -> Result<Self> {
-        let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    /// The file `name` of the export `out`, with its header row.
+    fn create<H: AsRef<[u8]>>(out: &Out, name: &str, header: &[H]) -> Result<Self> {
+        let path = out.dir.join(name);
+        let file = File::create(out.tmp.join(name)).map_err(|e| WriteFailed::io(&path, e))?;
         let mut c = Self {
-            path: path.to_path_buf(),
+            path,
             out: csv::WriterBuilder::new()
                 .buffer_capacity(1 << 16)
                 .from_writer(file),
             row: Row::default(),
         };
-        c.out
-            .write_record(header)
-            .with_context(|| format!("writing {}", c.path.display()))?;
+        let written = c.out.write_record(header);
+        written.map_err(|e| c.failure(e))?;
         Ok(c)
     }
 
@@ -99,13 +153,25 @@ impl Csv {
     fn end(&mut self) -> Result<()> {
         let written = self.out.write_byte_record(&self.row.record);
         self.row.record.clear();
-        written.with_context(|| format!("writing {}", self.path.display()))
+        written.map_err(|e| self.failure(e))
     }
 
-    fn finish(mut self) -> Result<()> {
-        self.out
-            .flush()
-            .with_context(|| format!("writing {}", self.path.display()))
+    /// A failure to write the file: every one abandons the export (a row of the wrong length
+    /// is a fault of this program, not of the trace).
+    fn failure(&self, e: csv::Error) -> anyhow::Error {
+        match e.into_kind() {
+            csv::ErrorKind::Io(e) => WriteFailed::io(&self.path, e),
+            other => WriteFailed::other(&self.path, format!("{other:?}")),
+        }
+    }
+
+    /// Writes what is buffered and waits until every byte is on disk.
+    fn finish(self) -> Result<()> {
+        let file = self
+            .out
+            .into_inner()
+            .map_err(|e| WriteFailed::io(&self.path, e.into_error()))?;
+        file.sync_all().map_err(|e| WriteFailed::io(&self.path, e))
     }
 }
 
@@ -288,7 +354,7 @@ impl AttackLookup {
 }
 
 /// Exports one trace, counting its records in `n`. Records before a damage are written.
-fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result<()> {
+fn export_file(path: &Path, out: &Out, events: &mut Csv, n: &mut u64) -> Result<()> {
     let mut reader = TraceReader::open(path)?;
     let stem = stem(path);
     let header = reader.header().clone();
@@ -296,15 +362,15 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
     let dof = info.dof;
     let main = main_kind(&header.process).or_else(|| main_kind(&stem));
     let mut files: BTreeMap<Kind, Csv> = BTreeMap::new();
-    let file_for = |kind: Kind| -> PathBuf {
+    let file_for = |kind: Kind| -> String {
         if Some(kind) == main {
-            out.join(format!("{stem}.csv"))
+            format!("{stem}.csv")
         } else {
-            out.join(format!("{stem}-{}.csv", kind.name()))
+            format!("{stem}-{}.csv", kind.name())
         }
     };
     if let Some(k) = main {
-        files.insert(k, Csv::create(&file_for(k), &k.header(dof))?);
+        files.insert(k, Csv::create(out, &file_for(k), &k.header(dof))?);
     }
     // The attacker trace beside this one, for S in the control center's rows.
     let attacker = path.with_file_name("attacker.trace");
@@ -322,7 +388,7 @@ fn export_file(path: &Path, out: &Path, events: &mut Csv, n: &mut u64) -> Result
         let csv = match files.entry(kind) {
             std::collections::btree_map::Entry::Occupied(e) => e.into_mut(),
             std::collections::btree_map::Entry::Vacant(e) => {
-                e.insert(Csv::create(&file_for(kind), &kind.header(dof))?)
+                e.insert(Csv::create(out, &file_for(kind), &kind.header(dof))?)
             }
         };
         let attack = match rec {

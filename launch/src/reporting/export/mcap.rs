@@ -9,14 +9,19 @@
 //! a non-finite number (a corrupt attack, a diverged robot) is written as `null`.
 //!
 //! The detector statistics (`/agent<id>/detectors`) are those of `fdi-launch detect`: the
-//! run's traces joined and fed to [`Recorder`]. The file is uncompressed (the compressions of
-//! the `mcap` crate are C libraries); a damaged trace is exported up to its last whole record,
-//! the file is closed whole, then the export fails naming the file and the byte offset.
+//! run's traces joined and fed to [`Recorder::observe`], each tick's written as it comes. The
+//! file is uncompressed (the compressions of the `mcap` crate are C libraries) and written in
+//! chunks of [`CHUNK_SIZE`]: memory does not grow with the run but for one chunk index per
+//! chunk. A damaged trace is exported up to its last whole record, the file is closed whole,
+//! then the export fails naming the file and the byte offset. A failed write abandons the
+//! export and removes its temporary file ([`super`]).
 
+use std::cell::{Cell, RefCell};
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 
 use anyhow::{bail, Context, Result};
 use fdi_common::detect::sweep::Recorder;
@@ -25,7 +30,9 @@ use fdi_common::records::{true_s, TickRecord};
 use fdi_common::trace::{TraceReader, TraceRecord};
 use serde_json::{json, Map, Value};
 
-use super::{failed, out_dir, read_sorted, stem, trace_files, RunInfo};
+use super::{
+    abandoned, failed, read_sorted, stem, trace_files, write_failure, OutDir, RunInfo, WriteFailed,
+};
 use crate::join;
 
 /// The type of a message field, as its JSON schema says.
@@ -367,10 +374,19 @@ pub(crate) fn json_schema(s: &Schema) -> Value {
     })
 }
 
+/// The chunk size of the MCAP file, bytes: messages are written to the file a chunk at a time
+/// (the `mcap` crate writes a chunk straight to the file and keeps only the chunk's message
+/// index, 16 bytes a message), and the summary keeps one chunk index per chunk: about 500
+/// bytes a chunk, 1.5 MB for the 3 GB of a 300 s run of the paper's four robots.
+pub(crate) const CHUNK_SIZE: u64 = 1 << 20;
+
 /// The MCAP file being written: its channels made as their first message comes.
 struct Mcap {
+    /// The file it becomes (it is written under a temporary name beside it).
     path: PathBuf,
-    w: mcap::Writer<BufWriter<File>>,
+    w: mcap::Writer<BufWriter<Noted>>,
+    /// The first error of the file beneath the writer.
+    first: FirstError,
     channels: BTreeMap<(u32, &'static str), u16>,
     sequence: u32,
     buf: Vec<u8>,
@@ -385,19 +401,75 @@ fn ns(t: f64) -> Result<u64> {
     Ok(x as u64)
 }
 
+/// The options of the MCAP writer: uncompressed, in chunks of [`CHUNK_SIZE`].
+fn options() -> mcap::WriteOptions {
+    mcap::WriteOptions::new()
+        .compression(None)
+        .chunk_size(Some(CHUNK_SIZE))
+        .profile("")
+        .library(concat!("fdi-launch ", env!("CARGO_PKG_VERSION")))
+}
+
+/// The first error of the operating system that the file under the MCAP writer met.
+type FirstError = Rc<RefCell<Option<io::Error>>>;
+
+/// The file under the MCAP writer, keeping the first error the operating system gave: the
+/// `mcap` crate hands some on inside errors of its own, where the error's number (ENOSPC) is
+/// lost.
+struct Noted {
+    file: File,
+    first: FirstError,
+}
+
+impl Noted {
+    fn note<T>(&self, r: io::Result<T>) -> io::Result<T> {
+        if let Err(e) = &r {
+            let mut first = self.first.borrow_mut();
+            if first.is_none() && e.kind() != io::ErrorKind::Interrupted {
+                *first = Some(match e.raw_os_error() {
+                    Some(code) => io::Error::from_raw_os_error(code),
+                    None => io::Error::new(e.kind(), e.to_string()),
+                });
+            }
+        }
+        r
+    }
+}
+
+impl Write for Noted {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        let r = self.file.write(buf);
+        self.note(r)
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        let r = self.file.flush();
+        self.note(r)
+    }
+}
+
+impl Seek for Noted {
+    fn seek(&mut self, pos: SeekFrom) -> io::Result<u64> {
+        let r = self.file.seek(pos);
+        self.note(r)
+    }
+}
+
 impl Mcap {
-    fn create(path: &Path) -> Result<Self> {
-        let file = File::create(path).with_context(|| format!("creating {}", path.display()))?;
-        let w = mcap::WriteOptions::new()
-            .compression(None)
-            .chunk_size(Some(256 << 10))
-            .profile("")
-            .library(concat!("fdi-launch ", env!("CARGO_PKG_VERSION")))
-            .create(BufWriter::with_capacity(1 << 16, file))
-            .with_context(|| format!("creating {}", path.display()))?;
+    /// Writes the MCAP file `path` into `file` (its temporary).
+    fn create(path: &Path, file: File) -> Result<Self> {
+        let first = FirstError::default();
+        let noted = Noted {
+            file,
+            first: first.clone(),
+        };
+        let w = options()
+            .create(BufWriter::with_capacity(1 << 16, noted))
+            .map_err(|e| failure(path, &first, e))?;
         Ok(Self {
             path: path.to_path_buf(),
             w,
+            first,
             channels: BTreeMap::new(),
             sequence: 0,
             buf: Vec::with_capacity(1 << 10),
@@ -413,7 +485,7 @@ impl Mcap {
         t: f64,
         msg: &Value,
     ) -> Result<()> {
-        let path = &self.path;
+        let (path, first) = (&self.path, &self.first);
         let channel = match self.channels.get(&(agent, name)) {
             Some(c) => *c,
             None => {
@@ -421,7 +493,7 @@ impl Mcap {
                 let s = self
                     .w
                     .add_schema(schema.name, "jsonschema", &text)
-                    .with_context(|| format!("writing {}", path.display()))?;
+                    .map_err(|e| failure(path, first, e))?;
                 let topic = if agent == 0 {
                     name.to_string()
                 } else {
@@ -430,7 +502,7 @@ impl Mcap {
                 let c = self
                     .w
                     .add_channel(s, &topic, "json", &BTreeMap::new())
-                    .with_context(|| format!("writing {}", path.display()))?;
+                    .map_err(|e| failure(path, first, e))?;
                 self.channels.insert((agent, name), c);
                 c
             }
@@ -449,7 +521,7 @@ impl Mcap {
                 },
                 &self.buf,
             )
-            .with_context(|| format!("writing {}", self.path.display()))
+            .map_err(|e| failure(&self.path, &self.first, e))
     }
 
     fn metadata(&mut self, info: &RunInfo) -> Result<()> {
@@ -469,20 +541,81 @@ impl Mcap {
                 name: "fdi-mas".into(),
                 metadata: m,
             })
-            .with_context(|| format!("writing {}", self.path.display()))
+            .map_err(|e| failure(&self.path, &self.first, e))
+    }
+
+    /// Closes the file whole (summary, footer) and waits until every byte is on disk.
+    fn finish(mut self) -> Result<mcap::Summary> {
+        let summary = self
+            .w
+            .finish()
+            .map_err(|e| failure(&self.path, &self.first, e))?;
+        let noted = self
+            .w
+            .into_inner()
+            .into_inner()
+            .map_err(|e| WriteFailed::io(&self.path, e.into_error()))?;
+        noted
+            .file
+            .sync_all()
+            .map_err(|e| WriteFailed::io(&self.path, e))?;
+        Ok(summary)
+    }
+}
+
+/// A failure of the MCAP writer: every one ends the file (the writer refuses any later write),
+/// so every one abandons the export, named by its cause: the file's own first error when it
+/// had one (the `mcap` crate may have wrapped it), else the writer's.
+fn failure(path: &Path, first: &FirstError, e: mcap::McapError) -> anyhow::Error {
+    if let Some(os) = first.borrow_mut().take() {
+        return WriteFailed::io(path, os);
+    }
+    match e {
+        mcap::McapError::Io(e) => WriteFailed::io(path, e),
+        e => WriteFailed::other(path, e),
     }
 }
 
 pub(super) fn export(run_dir: &Path) -> Result<()> {
     let files = trace_files(run_dir)?;
-    let out = out_dir(run_dir)?.join("run.mcap");
-    let mut w = Mcap::create(&out)?;
+    let dir = OutDir::open(run_dir)?;
+    let out = dir.path.join("run.mcap");
+    // The file is written under a temporary name beside `run.mcap` (removed when dropped) and
+    // renamed once whole: a failed export leaves no partial file, and an earlier `run.mcap`
+    // stays as it was until the new one replaces it.
+    let written = tempfile::Builder::new()
+        .prefix(".run.mcap.")
+        // As `File::create` would make it (the umask applies), not only for its owner.
+        .permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666))
+        .tempfile_in(&dir.path)
+        .map_err(|e| WriteFailed::io(&out, e))
+        .and_then(|tmp| {
+            let (file, tmp) = tmp.into_parts();
+            let failures = write(run_dir, &files, &out, file)?;
+            tmp.persist(&out)
+                .map_err(|e| WriteFailed::io(&out, e.error))?;
+            Ok(failures)
+        });
+    match written {
+        Ok(failures) => failed(failures),
+        Err(e) => {
+            dir.discard();
+            Err(abandoned(e, "MCAP"))
+        }
+    }
+}
+
+/// Writes the MCAP file `out` into `file`, its temporary. The failures of traces that could not
+/// be exported whole (the file holds what was read before); an error ends the export.
+fn write(run_dir: &Path, files: &[PathBuf], out: &Path, file: File) -> Result<Vec<String>> {
+    let mut w = Mcap::create(out, file)?;
     let mut failures = Vec::new();
     let mut run: Option<RunInfo> = None;
-    for f in &files {
+    for f in files {
         let mut n = 0;
         match export_file(f, &mut w, &mut run, &mut n) {
             Ok(()) => println!("{} -> {}: {n} records", f.display(), out.display()),
+            Err(e) if write_failure(&e).is_some() => return Err(e),
             Err(e) if n > 0 => failures.push(format!(
                 "{e:#} (the {n} records before it are exported to {})",
                 out.display()
@@ -493,20 +626,19 @@ pub(super) fn export(run_dir: &Path) -> Result<()> {
     if let Some(info) = &run {
         match detectors(run_dir, info, &mut w) {
             Ok(n) => println!("detector statistics -> {}: {n} ticks", out.display()),
+            Err(e) if write_failure(&e).is_some() => return Err(e),
             Err(e) => failures.push(format!("{e:#}")),
         }
         w.metadata(info)?;
     }
-    let summary =
-        w.w.finish()
-            .with_context(|| format!("writing {}", out.display()))?;
+    let summary = w.finish()?;
     let messages = summary.stats.as_ref().map_or(0, |s| s.message_count);
     println!(
         "{}: {messages} messages on {} topics",
         out.display(),
         summary.channels.len()
     );
-    failed(failures)
+    Ok(failures)
 }
 
 fn nums(v: &[f64]) -> Value {
@@ -724,17 +856,69 @@ fn verdict(v: Verdict) -> (Option<f64>, &'static str) {
     }
 }
 
-/// The `/agent<id>/detectors` topics: the traces of `run_dir` joined (as `detect` joins them)
-/// and every detector's per-tick statistic recorded by [`Recorder`]. The number of joined
+/// The `/agent<id>/detectors` topics: the traces of `run_dir` joined (as `detect` joins them),
+/// and every detector's statistic of each joined tick computed by [`Recorder::observe`] and
+/// written at once: nothing is kept, so memory does not grow with the run. The number of joined
 /// ticks; the join's warnings go to stderr (a damaged trace is named by its own export).
 fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
     let mut recorder = Recorder::for_scenario(&info.resolved);
-    let mut ticks: BTreeMap<u32, Vec<u64>> = BTreeMap::new();
-    let joined = join::join_run(&info.resolved, run_dir, f64::NAN, |r: &TickRecord| {
-        ticks.entry(r.agent.agent).or_default().push(r.center.k);
-        recorder.push(r);
-    })
-    .with_context(|| {
+    let configured = recorder.configured();
+    // Per robot, each detector's alarm at its configured threshold so far.
+    let mut alarms: BTreeMap<u32, [bool; 3]> = BTreeMap::new();
+    let mut n = 0;
+    // The first write that failed: it stops the join and is the error.
+    let mut failure: Option<anyhow::Error> = None;
+    let stopped = Cell::new(false);
+    let joined = join::join_run_until(
+        &info.resolved,
+        run_dir,
+        f64::NAN,
+        |r: &TickRecord| {
+            if failure.is_some() {
+                return;
+            }
+            let Some(samples) = recorder.observe(r) else {
+                return;
+            };
+            let (id, k) = (r.agent.agent, r.center.k);
+            let t = info.t(k);
+            let alarms = alarms.entry(id).or_default();
+            let mut msg = Map::new();
+            msg.insert("k".into(), Value::from(k));
+            msg.insert("t_s".into(), Value::from(t));
+            msg.insert("in_force".into(), Value::from(samples[0].in_force));
+            for (((name, threshold), sample), alarm) in
+                configured.iter().zip(&samples).zip(alarms.iter_mut())
+            {
+                let (statistic, state) = verdict(sample.verdict);
+                *alarm = sample.verdict.alarm(*alarm);
+                msg.insert((*name).into(), statistic.map_or(Value::Null, Value::from));
+                msg.insert(
+                    format!("{name}_threshold"),
+                    threshold.map_or(Value::Null, Value::from),
+                );
+                msg.insert(format!("{name}_verdict"), Value::from(state));
+                msg.insert(format!("{name}_alarm"), Value::from(*alarm));
+            }
+            match w.write(id, "detectors", &DETECTORS, t, &Value::Object(msg)) {
+                Ok(()) => n += 1,
+                Err(e) => {
+                    failure = Some(e);
+                    stopped.set(true);
+                }
+            }
+        },
+        || {
+            if stopped.get() {
+                bail!("a detector statistic could not be written");
+            }
+            Ok(())
+        },
+    );
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    let joined = joined.with_context(|| {
         format!(
             "joining the traces in {} for the detector statistics",
             run_dir.join("traces").display()
@@ -742,46 +926,6 @@ fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
     })?;
     for warning in &joined.warnings {
         eprintln!("fdi-launch: warning: detector statistics: {warning}");
-    }
-    let recorded = recorder.finish();
-    let mut n = 0;
-    for (id, ks) in &ticks {
-        let series: Vec<_> = recorded
-            .detectors
-            .iter()
-            .map(|d| {
-                d.robots
-                    .get(id)
-                    .map(|s| (d.name, d.configured, s.as_slice()))
-                    .with_context(|| format!("the {} series of robot {id}", d.name))
-            })
-            .collect::<Result<_>>()?;
-        let mut alarms = vec![false; series.len()];
-        for (i, k) in ks.iter().enumerate() {
-            let t = info.t(*k);
-            let mut msg = Map::new();
-            msg.insert("k".into(), Value::from(*k));
-            msg.insert("t_s".into(), Value::from(t));
-            let mut in_force = false;
-            for ((name, configured, samples), alarm) in series.iter().zip(&mut alarms) {
-                let sample = samples.get(i).with_context(|| {
-                    format!("robot {id}: no {name} statistic for joined tick {k}")
-                })?;
-                in_force = sample.in_force;
-                let (statistic, state) = verdict(sample.verdict);
-                *alarm = sample.verdict.alarm(*alarm);
-                msg.insert((*name).into(), statistic.map_or(Value::Null, Value::from));
-                msg.insert(
-                    format!("{name}_threshold"),
-                    configured.map_or(Value::Null, Value::from),
-                );
-                msg.insert(format!("{name}_verdict"), Value::from(state));
-                msg.insert(format!("{name}_alarm"), Value::from(*alarm));
-            }
-            msg.insert("in_force".into(), Value::from(in_force));
-            w.write(*id, "detectors", &DETECTORS, t, &Value::Object(msg))?;
-            n += 1;
-        }
     }
     Ok(n)
 }
@@ -910,6 +1054,44 @@ mod tests {
             .expect("a summary");
         assert_eq!(summary.channels.len(), want.len());
         assert_eq!(summary.metadata_indexes.len(), 1, "the fdi-mas metadata");
+    }
+
+    /// The file is written a bounded chunk at a time: every chunk holds at most
+    /// [`CHUNK_SIZE`] bytes of messages (and the one message that crossed the line).
+    #[test]
+    fn messages_are_written_in_chunks_of_at_most_chunk_size() {
+        let dir = tempfile::tempdir().expect("scratch");
+        let path = dir.path().join("run.mcap");
+        let file = File::create(&path).expect("a file");
+        let mut w = Mcap::create(&path, file).expect("a writer");
+        let q: Vec<f64> = (0..6).map(|i| f64::from(i) * 0.1).collect();
+        let mut largest = 0;
+        for k in 0..40_000u64 {
+            let t = tick_time(k, 1e-3);
+            let msg = json!({"k": k, "t_s": t, "q_rad": q, "q_dot_rad_s": q, "q_ddot_rad_s2": q});
+            largest = largest.max(serde_json::to_vec(&msg).expect("JSON").len() as u64);
+            w.write(1 + (k % 4) as u32, "state", &STATE, t, &msg)
+                .expect("written");
+        }
+        w.finish().expect("closed");
+        let bytes = std::fs::read(&path).expect("run.mcap");
+        let summary = mcap::Summary::read(&bytes)
+            .expect("a summary")
+            .expect("a summary");
+        // A message record: opcode, length, header (22 bytes), data.
+        let record = 9 + 22 + largest;
+        assert!(
+            summary.chunk_indexes.len() >= 4,
+            "{} chunks",
+            summary.chunk_indexes.len()
+        );
+        for c in &summary.chunk_indexes {
+            assert!(
+                c.uncompressed_size <= CHUNK_SIZE + record,
+                "a chunk of {} bytes",
+                c.uncompressed_size
+            );
+        }
     }
 
     #[test]

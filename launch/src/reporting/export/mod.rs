@@ -13,11 +13,19 @@
 //! trajectory, the true attack term `S`) from the scenario in each trace's header. A damaged
 //! trace is exported up to its last whole record, then the export fails naming the file and
 //! the byte offset.
+//!
+//! An export never leaves a partial file: it is written under a temporary name in
+//! `RUN_DIR/export` (`.run.mcap.*`, a folder `.csv.*` for the CSV files) and renamed into place
+//! once every byte is on disk. A write that fails (a full disk, a read-only folder) abandons the
+//! export: the temporary is removed, what `RUN_DIR/export` held before is left as it was, and
+//! the error names the file and the cause (`no space left on device (ENOSPC)`).
 
 mod csv;
 mod mcap;
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::fmt;
+use std::io;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
@@ -58,10 +66,75 @@ fn trace_files(run_dir: &Path) -> Result<Vec<PathBuf>> {
 }
 
 /// The export folder `RUN_DIR/export`, made if need be.
-fn out_dir(run_dir: &Path) -> Result<PathBuf> {
-    let out = run_dir.join("export");
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
-    Ok(out)
+struct OutDir {
+    path: PathBuf,
+    /// This export made it: an abandoned export removes it again.
+    made: bool,
+}
+
+impl OutDir {
+    fn open(run_dir: &Path) -> Result<Self> {
+        let path = run_dir.join("export");
+        let made = !path.is_dir();
+        std::fs::create_dir_all(&path).map_err(|e| WriteFailed::io(&path, e))?;
+        Ok(Self { path, made })
+    }
+
+    /// After an abandoned export: removes the folder if this export made it (and it is empty).
+    fn discard(&self) {
+        if self.made {
+            let _ = std::fs::remove_dir(&self.path);
+        }
+    }
+}
+
+/// A write of the export's own files that failed (a full disk, a read-only folder): it ends the
+/// whole export, whose temporary files are then removed. `path` is the file the export was
+/// making (its final name).
+#[derive(Debug)]
+struct WriteFailed {
+    path: PathBuf,
+    cause: String,
+}
+
+impl WriteFailed {
+    fn io(path: &Path, e: io::Error) -> anyhow::Error {
+        anyhow::Error::new(Self {
+            path: path.to_path_buf(),
+            cause: crate::reporting::io_cause::describe(&e),
+        })
+    }
+
+    fn other(path: &Path, cause: impl fmt::Display) -> anyhow::Error {
+        anyhow::Error::new(Self {
+            path: path.to_path_buf(),
+            cause: cause.to_string(),
+        })
+    }
+}
+
+impl fmt::Display for WriteFailed {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "writing {}: {}", self.path.display(), self.cause)
+    }
+}
+
+impl std::error::Error for WriteFailed {}
+
+/// The failed write that `e` comes from, if it does.
+fn write_failure(e: &anyhow::Error) -> Option<&WriteFailed> {
+    e.chain().find_map(|c| c.downcast_ref::<WriteFailed>())
+}
+
+/// The error of an export abandoned on `e` (its temporary files already removed): a failed
+/// write says so, naming the file and the cause; any other error is `e`.
+fn abandoned(e: anyhow::Error, format: &str) -> anyhow::Error {
+    match write_failure(&e) {
+        Some(w) => anyhow::anyhow!(
+            "{w}: the {format} export is abandoned, its temporary files removed (nothing partial is left)"
+        ),
+        None => e,
+    }
 }
 
 /// The file stem of a trace (`agent-1`, `attacker`, …).
