@@ -22,7 +22,7 @@ use serde::Serialize;
 
 use crate::output::{csv_bytes, md_table_head, rmse_cell};
 use crate::plot::PALETTE;
-use crate::tables::{rmse_chart, with_comment, MadeWith, Table};
+use crate::tables::{rmse_chart, MadeWith, Table};
 
 #[derive(Debug, Args)]
 pub struct AttacksArgs {
@@ -610,7 +610,7 @@ pub fn attacks(args: &AttacksArgs) -> Result<ExitCode> {
     let table = Table {
         name: "attacks",
         md: markdown(&rows, args.duration_s, &made),
-        csv: with_comment(&made, csv(&rows)?),
+        csv: csv(&rows)?,
         json: serde_json::json!({
             "engine": "inproc",
             "made_with": made,
@@ -648,6 +648,7 @@ pub fn attacks(args: &AttacksArgs) -> Result<ExitCode> {
                 ),
             ],
         ),
+        made,
     };
     table.publish(args.json, &dir)
 }

@@ -161,13 +161,6 @@ impl MadeWith {
     }
 }
 
-/// A table's CSV: its [`MadeWith`] comment, then the header and rows.
-pub(crate) fn with_comment(made: &MadeWith, csv: Vec<u8>) -> Vec<u8> {
-    let mut out = made.csv_comment();
-    out.extend(csv);
-    out
-}
-
 /// The base scenario of Tables I and II: the given one (or the paper's), under the paper's
 /// attack, for the paper's 40 s unless `--duration-s` says otherwise.
 fn base(args: &TableArgs) -> Result<(Resolved, MadeWith)> {
@@ -316,9 +309,10 @@ pub fn table1(args: &TableArgs) -> Result<ExitCode> {
     let table = Table {
         name: "table1",
         md: table1_markdown(args.engine, &made, &rows),
-        csv: with_comment(&made, table1_csv(&rows)?),
+        csv: table1_csv(&rows)?,
         json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows }),
         chart: table1_chart(args.engine, &rows),
+        made,
     };
     table.publish(args.json, &dir)
 }
@@ -472,9 +466,12 @@ pub(crate) struct Table {
     pub name: &'static str,
     /// The markdown, without the leading `# ` of its file.
     pub md: String,
+    /// The CSV's header and rows; the file starts with the [`MadeWith`] comment of `made`.
     pub csv: Vec<u8>,
     pub json: serde_json::Value,
     pub chart: BarChart,
+    /// How the table was made.
+    pub made: MadeWith,
 }
 
 impl Table {
@@ -499,7 +496,9 @@ impl Table {
             std::fs::write(&p, bytes).with_context(|| format!("writing {}", p.display()))
         };
         write("md", format!("# {}", self.md).as_bytes())?;
-        write("csv", &self.csv)?;
+        let mut csv = self.made.csv_comment();
+        csv.extend_from_slice(&self.csv);
+        write("csv", &csv)?;
         write(
             "json",
             (serde_json::to_string_pretty(&self.json)? + "\n").as_bytes(),
@@ -534,9 +533,10 @@ pub fn table2(args: &TableArgs) -> Result<ExitCode> {
     let table = Table {
         name: "table2",
         md: table2_markdown(args.engine, &made, &rows),
-        csv: with_comment(&made, table2_csv(&rows)?),
+        csv: table2_csv(&rows)?,
         json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows }),
         chart: table2_chart(args.engine, &rows),
+        made,
     };
     table.publish(args.json, &dir)
 }
@@ -857,7 +857,6 @@ mod seeded {
             })
             .collect();
         let chart = table1_chart(args.engine, &plain);
-        let csv = with_comment(made, csv);
         publish(
             args,
             dir,
@@ -953,7 +952,6 @@ mod seeded {
             })
             .collect();
         let chart = table2_chart(args.engine, &plain);
-        let csv = with_comment(made, csv);
         publish(
             args,
             dir,
@@ -989,6 +987,7 @@ mod seeded {
                 "rows": rows
             }),
             chart,
+            made: made.clone(),
         };
         table.publish(args.json, dir)
     }
