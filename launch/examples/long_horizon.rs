@@ -31,9 +31,7 @@ use fdi_common::rng::{stream, Purpose};
 use fdi_common::scenario::{self, AgentConfig, ControllerMode, ObserverInput, Resolved, Scenario};
 use fdi_common::trajectory::TrajectoryConfig;
 
-#[allow(dead_code)] // only the line figures of the launcher's plotting are used here
-#[path = "../src/reporting/plot.rs"]
-mod plot;
+use fdi_report::plot;
 
 /// Links of the paper's robots.
 const N: usize = 2;

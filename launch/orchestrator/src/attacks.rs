@@ -1,0 +1,780 @@
+//! The attack-class table (`fdi-launch attacks`, `docs/attacks.md`): every shipped attack class
+//! on the paper's robots, under the traditional and the proposed controller, with the detection
+//! of each detector and what the receivers counted.
+
+use fdi_common::stop::Stop;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+use anyhow::{anyhow, Context, Result};
+use clap::Args;
+use fdi_common::detect;
+use fdi_common::engine::{run_inproc_any, RunSummary};
+use fdi_common::metrics::{AgentMetrics, DetectorMetrics};
+use fdi_common::records::TickRecord;
+use fdi_common::scenario::{self, ControllerMode, Resolved};
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use serde::Serialize;
+
+use crate::tables::{rmse_chart, MadeWith, Table};
+use fdi_report::output::{csv_bytes, md_table_head, rmse_cell};
+use fdi_report::plot::PALETTE;
+
+#[derive(Debug, Args)]
+pub struct AttacksArgs {
+    /// Folder that receives `attacks.md`, `.csv`, `.json` and the bar chart; default a new
+    /// folder `runs/<timestamp>-attacks`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Shorten every run to this many seconds (default: each scenario's own, 40 s). Most
+    /// classes start at 10 s: a shorter run shows them without an onset.
+    #[arg(long, allow_negative_numbers = true)]
+    pub duration_s: Option<f64>,
+    /// Print JSON instead of markdown.
+    #[arg(long)]
+    pub json: bool,
+    /// Base scenario (default: the embedded paper scenario): its robots, gains and numerics
+    /// under every class (a class's own scenario file gives its attack and detectors only).
+    #[arg(long, value_name = "FILE")]
+    pub scenario: Option<PathBuf>,
+    #[command(flatten)]
+    pub numerics: crate::request::NumericsArgs,
+}
+
+/// Where a class's run comes from.
+#[derive(Debug, Clone, Copy)]
+pub enum Source {
+    /// The paper scenario with this shipped preset (`scenarios/attacks/<name>.toml`).
+    Preset(&'static str),
+    /// The paper scenario with this attack-profile file (embedded; `path` names it).
+    AttackFile {
+        path: &'static str,
+        text: &'static str,
+    },
+    /// A scenario file of its own (embedded; `path` names it), attack and detectors included.
+    Scenario {
+        path: &'static str,
+        text: &'static str,
+    },
+}
+
+impl Source {
+    /// The shipped file the class's attack (or whole scenario) comes from.
+    pub fn file(self) -> String {
+        match self {
+            Self::Preset(name) => format!("scenarios/attacks/{name}.toml"),
+            Self::AttackFile { path, .. } | Self::Scenario { path, .. } => path.to_string(),
+        }
+    }
+
+    /// The class's scenario on `base` (before the table's controller and duration): the base
+    /// with the class's attack (and, for a scenario file of its own, its detectors).
+    fn resolve(self, base: &Resolved) -> Result<Resolved> {
+        Ok(match self {
+            Self::Preset(name) => {
+                let profile = scenario::attack_from_arg(name, &base.scenario)?;
+                base.clone().with_attack(profile)?
+            }
+            Self::AttackFile { path, text } => {
+                // The attack-file loader reads a file: the embedded text goes to a scratch one.
+                let mut f = tempfile::Builder::new()
+                    .suffix(".toml")
+                    .tempfile()
+                    .context("a scratch file for an embedded attack profile")?;
+                f.write_all(text.as_bytes())
+                    .and_then(|()| f.flush())
+                    .context("writing an embedded attack profile")?;
+                let profile =
+                    scenario::load_attack_file(f.path()).map_err(|e| anyhow!("{path}: {e}"))?;
+                base.clone().with_attack(profile)?
+            }
+            Self::Scenario { path, text } => {
+                let own = scenario::load_str(text, path, None)?;
+                let mut r = base
+                    .clone()
+                    .with_attack(own.attack.for_agents(&base.scenario.agent_dofs()))?;
+                r.scenario.detectors = own.scenario.detectors;
+                r.scenario.name = own.scenario.name;
+                r
+            }
+        })
+    }
+}
+
+/// One attack class of the table.
+#[derive(Debug, Clone, Copy)]
+pub struct Class {
+    pub name: &'static str,
+    pub source: Source,
+    /// The robots the table reports: those attacked (robot 1 for `none`, the reference).
+    pub robots: &'static [u32],
+    /// One line: what the class does.
+    pub what: &'static str,
+}
+
+/// Every class of the table, in its order. A new class is one row here.
+pub const CLASSES: &[Class] = &[
+    Class {
+        name: "none",
+        source: Source::Preset("none"),
+        robots: &[1],
+        what: "no attack: the reference",
+    },
+    Class {
+        name: "paper",
+        source: Source::Preset("paper"),
+        robots: &[1, 2, 3, 4],
+        what: "the paper's FDI on position and velocity measurements (Table I)",
+    },
+    Class {
+        name: "scale",
+        source: Source::Preset("scale"),
+        robots: &[1],
+        what: "position measurements scaled by 1.05 over 10-20 s",
+    },
+    Class {
+        name: "sign-flip",
+        source: Source::Preset("sign-flip"),
+        robots: &[1],
+        what: "velocity of link 1 with its sign flipped over 10-12 s",
+    },
+    Class {
+        name: "freeze",
+        source: Source::Preset("freeze"),
+        robots: &[1],
+        what: "position and velocity stuck at their 10 s values over 10-20 s",
+    },
+    Class {
+        name: "replay-example",
+        source: Source::AttackFile {
+            path: "scenarios/attacks/replay-example.toml",
+            text: include_str!("../../../scenarios/attacks/replay-example.toml"),
+        },
+        robots: &[1],
+        what: "measurement values of 2-4 s played back in a loop from 6 s (fresh headers)",
+    },
+    Class {
+        name: "actuator-bias",
+        source: Source::Preset("actuator-bias"),
+        robots: &[1],
+        what: "+0.05 N·m on both torque commands over 10-20 s (actuator FDI)",
+    },
+    Class {
+        name: "torque-delay",
+        source: Source::Preset("torque-delay"),
+        robots: &[1],
+        what: "torque commands take effect 10 ms after the known delay, from 10 s on",
+    },
+    Class {
+        name: "dos-drop",
+        source: Source::Preset("dos-drop"),
+        robots: &[1],
+        what: "each measurement dropped with probability 0.5 over 10-20 s",
+    },
+    Class {
+        name: "dos-burst",
+        source: Source::Preset("dos-burst"),
+        robots: &[1],
+        what: "bursts of dropped measurements (50 ms, 1 s apart on average) over 10-30 s",
+    },
+    Class {
+        name: "dos-window",
+        source: Source::Preset("dos-window"),
+        robots: &[1],
+        what: "every torque command dropped over 10-10.2 s",
+    },
+    Class {
+        name: "measurement-delay",
+        source: Source::Preset("measurement-delay"),
+        robots: &[1],
+        what: "measurements 20 ms stale under the tick's header over 10-20 s",
+    },
+    Class {
+        name: "forge-stamp",
+        source: Source::Preset("forge-stamp"),
+        robots: &[1],
+        what: "torque send stamps forged (+5 ms) over 10-10.2 s",
+    },
+    Class {
+        name: "replay-original",
+        source: Source::Preset("replay-original"),
+        robots: &[1],
+        what: "measurements of 5-6 s re-sent with their original headers over 10-12 s",
+    },
+    Class {
+        name: "covert",
+        source: Source::Preset("covert"),
+        robots: &[1],
+        what: "actuator-bias hidden from the sensors by a twin-model correction from 10 s",
+    },
+    Class {
+        name: "stealthy-bias",
+        source: Source::Scenario {
+            path: "scenarios/stealthy-bias.toml",
+            text: include_str!("../../../scenarios/stealthy-bias.toml"),
+        },
+        robots: &[1],
+        what: "position bias ramped under the χ² threshold on Ψ2 from 5 s (detectors on Ψ2)",
+    },
+];
+
+/// What the table keeps of one run: its summary, and per robot the ticks whose measurement
+/// the control center found missing (dropped, forged, replayed, not yet delivered).
+struct Outcome {
+    summary: RunSummary,
+    missing_inputs: BTreeMap<u32, u64>,
+}
+
+/// Runs one class under one controller, in-process.
+fn run_one(
+    class: &Class,
+    base: &Resolved,
+    mode: ControllerMode,
+    duration_s: Option<f64>,
+) -> Result<Outcome> {
+    let mut r = class.source.resolve(base)?;
+    r.scenario.controller.mode = mode;
+    if let Some(d) = duration_s {
+        r.scenario.duration_s = d;
+    }
+    let r = crate::run::check_overrides(r)?;
+    let mut missing_inputs = BTreeMap::new();
+    let summary = run_inproc_any(&r, |rec: &TickRecord| {
+        if rec.center.missing_input {
+            *missing_inputs.entry(rec.agent.agent).or_insert(0) += 1;
+        }
+    })
+    .context("in-process engine")?;
+    Ok(Outcome {
+        summary,
+        missing_inputs,
+    })
+}
+
+/// One detector's outcome on one robot: its onsets sorted by what became of them.
+#[derive(Debug, Clone, Serialize)]
+struct Detection {
+    onsets: usize,
+    /// Detected by an alarm of the detector's own, after the onset.
+    detected: usize,
+    /// The alarm was already on at the tick before the onset (no detection of its own).
+    already_on: usize,
+    /// The attack ended before the detector started watching.
+    not_watched: usize,
+    /// Mean time to detect over the `detected` onsets, s; `None` when none was.
+    mean_time_to_detect_s: Option<f64>,
+    /// `None` when the detector watched no attack-free time.
+    false_alarms_per_min: Option<f64>,
+}
+
+impl Detection {
+    fn of(d: &DetectorMetrics) -> Self {
+        let (mut detected, mut already_on, mut not_watched, mut sum) = (0, 0, 0, 0.0);
+        for (i, o) in d.onsets.iter().enumerate() {
+            match o.time_to_detect_s {
+                Some(_) if d.alarm_on_at_onset.get(i) == Some(&true) => already_on += 1,
+                Some(x) => {
+                    detected += 1;
+                    sum += x;
+                }
+                None => {
+                    let unwatched = match (o.until_s, d.watched_from_s) {
+                        (_, None) => true,
+                        (Some(until), Some(from)) => until <= from,
+                        (None, Some(_)) => false,
+                    };
+                    not_watched += usize::from(unwatched);
+                }
+            }
+        }
+        Self {
+            onsets: d.onsets.len(),
+            detected,
+            already_on,
+            not_watched,
+            mean_time_to_detect_s: (detected > 0).then(|| sum / detected as f64),
+            false_alarms_per_min: d.false_alarms_per_min,
+        }
+    }
+
+    /// Onsets the detector watched and did not find on already.
+    fn judged(&self) -> usize {
+        self.onsets - self.already_on - self.not_watched
+    }
+
+    /// `detected / judged`, with the onsets left out said; `no onset` without any.
+    fn detected_cell(&self) -> String {
+        if self.onsets == 0 {
+            return "no onset".into();
+        }
+        let mut cell = format!("{}/{}", self.detected, self.judged());
+        let mut notes = Vec::new();
+        if self.already_on > 0 {
+            notes.push(format!("{} already on", self.already_on));
+        }
+        if self.not_watched > 0 {
+            notes.push(format!("{} not watched", self.not_watched));
+        }
+        if !notes.is_empty() {
+            let _ = write!(cell, " ({})", notes.join(", "));
+        }
+        cell
+    }
+
+    /// The mean time to detect, s; `missed`, `no onset` or `—` where it has no value.
+    fn time_cell(&self) -> String {
+        match self.mean_time_to_detect_s {
+            Some(x) => format!("{x:.3}"),
+            None if self.onsets == 0 => "no onset".into(),
+            None if self.judged() > 0 => "missed".into(),
+            None => "—".into(),
+        }
+    }
+
+    fn false_alarm_cell(&self) -> String {
+        self.false_alarms_per_min
+            .map_or_else(|| "—".into(), |x| format!("{x:.2}"))
+    }
+}
+
+/// One row: one robot under one class.
+#[derive(Debug, Serialize)]
+struct Row {
+    class: &'static str,
+    robot: u32,
+    traditional_rmse_rad: f64,
+    proposed_rmse_rad: f64,
+    traditional_diverged_at_s: Option<f64>,
+    proposed_diverged_at_s: Option<f64>,
+    #[serde(skip)]
+    traditional_cell: String,
+    #[serde(skip)]
+    proposed_cell: String,
+    /// Per detector of [`detect::NAMES`] the run has, under the proposed controller.
+    detectors: BTreeMap<&'static str, Detection>,
+    /// Proposed run: ticks the center found its measurement missing.
+    missing_inputs: u64,
+    /// Proposed run: steps the agent held its torque for want of the due command.
+    deadline_misses: u64,
+}
+
+fn metrics_of(s: &RunSummary, robot: u32) -> Result<&AgentMetrics> {
+    s.metrics
+        .get(&robot.to_string())
+        .ok_or_else(|| anyhow!("run `{}` has no robot {robot}", s.attack))
+}
+
+/// The rows of a class: its robots that the base scenario has (a class none of whose robots
+/// is there is refused, naming them).
+fn rows_of(
+    class: &Class,
+    base: &Resolved,
+    traditional: &Outcome,
+    proposed: &Outcome,
+) -> Result<Vec<Row>> {
+    let present: Vec<u32> = class
+        .robots
+        .iter()
+        .copied()
+        .filter(|&id| base.scenario.agents.iter().any(|a| a.id == id))
+        .collect();
+    if present.is_empty() {
+        return Err(anyhow!(
+            "attack class `{}` reports robots {:?}, and the base scenario has none of them",
+            class.name,
+            class.robots
+        ));
+    }
+    present
+        .into_iter()
+        .map(|robot| {
+            let t = metrics_of(&traditional.summary, robot)?;
+            let p = metrics_of(&proposed.summary, robot)?;
+            Ok(Row {
+                class: class.name,
+                robot,
+                traditional_rmse_rad: t.rmse_rad,
+                proposed_rmse_rad: p.rmse_rad,
+                traditional_diverged_at_s: t.diverged_at_s,
+                proposed_diverged_at_s: p.diverged_at_s,
+                traditional_cell: rmse_cell(t, 4),
+                proposed_cell: rmse_cell(p, 4),
+                detectors: detect::NAMES
+                    .iter()
+                    .filter_map(|&n| Some((n, Detection::of(p.detectors.get(n)?))))
+                    .collect(),
+                missing_inputs: proposed.missing_inputs.get(&robot).copied().unwrap_or(0),
+                deadline_misses: p.deadline_misses,
+            })
+        })
+        .collect()
+}
+
+/// Column titles of the detectors, in [`detect::NAMES`] order.
+const DETECTOR_TITLES: [&str; 3] = ["‖Ŝ‖", "χ²", "CUSUM"];
+
+/// `attacks.md` (without its leading `# `), as printed.
+fn markdown(rows: &[Row], duration_s: Option<f64>, made: &MadeWith) -> String {
+    let span = duration_s.map_or_else(
+        || "each scenario's full duration (40 s)".to_string(),
+        |d| format!("{d} s"),
+    );
+    let mut md = format!(
+        "Attack classes on the paper's robots: RMSE (rad) under the traditional and the proposed \
+         controller, and detection under the proposed controller; in-process engine, {span}\n\n{}",
+        made.md()
+    );
+    let mut head = vec!["class", "robot", "RMSE traditional", "RMSE proposed"];
+    let titles: Vec<String> = DETECTOR_TITLES
+        .iter()
+        .flat_map(|t| {
+            [
+                format!("{t} detected"),
+                format!("{t} time to detect (s)"),
+                format!("{t} false alarms/min"),
+            ]
+        })
+        .collect();
+    head.extend(titles.iter().map(String::as_str));
+    head.extend(["missing inputs (center)", "deadline misses (agent)"]);
+    md.push_str(&md_table_head(&head));
+    for r in rows {
+        let _ = write!(
+            md,
+            "| {} | {} | {} | {} |",
+            r.class, r.robot, r.traditional_cell, r.proposed_cell
+        );
+        for n in detect::NAMES {
+            match r.detectors.get(n) {
+                Some(d) => {
+                    let _ = write!(
+                        md,
+                        " {} | {} | {} |",
+                        d.detected_cell(),
+                        d.time_cell(),
+                        d.false_alarm_cell()
+                    );
+                }
+                None => md.push_str(" absent | absent | absent |"),
+            }
+        }
+        let _ = writeln!(md, " {} | {} |", r.missing_inputs, r.deadline_misses);
+    }
+    md.push_str(
+        "\n*detected*: onsets (rising edges of \"attack in force\", on the measurement or the \
+         torque path) found by an alarm of the detector's own, of those it watched; `already on`: \
+         the alarm was on at the tick before the onset (left out: no detection of its own); \
+         `not watched`: the attack ended before the detector started watching (left out). \
+         *time to detect*: the mean over the detected onsets; `missed`: none detected; \
+         `no onset`: the attack was never in force in the run (no value, not 0); `—`: no value. \
+         *false alarms/min*: alarm rising edges while no attack was in force, per minute of the \
+         attack-free time watched (`—`: none watched). *missing inputs*: ticks whose measurement \
+         the control center found missing (dropped, forged, replayed, not yet delivered) and \
+         replaced by its last one; *deadline misses*: steps the robot held its last torque for \
+         want of the command due. Detection and the two counts are of the proposed run.\n\n",
+    );
+    for c in CLASSES {
+        let _ = writeln!(
+            md,
+            "* `{}` ({}, {} {}): {}.",
+            c.name,
+            c.source.file(),
+            if c.robots.len() == 1 {
+                "robot"
+            } else {
+                "robots"
+            },
+            c.robots
+                .iter()
+                .map(u32::to_string)
+                .collect::<Vec<_>>()
+                .join(", "),
+            c.what
+        );
+    }
+    md
+}
+
+/// An optional value as a CSV field: empty when it has none.
+fn opt(x: Option<f64>) -> String {
+    x.map_or(String::new(), |v| v.to_string())
+}
+
+/// The RMSE of a robot as a result: `None` when it diverged (its RMSE is no result then).
+fn rmse_result(rmse: f64, diverged_at_s: Option<f64>) -> Option<f64> {
+    diverged_at_s.is_none().then_some(rmse)
+}
+
+/// [`rmse_result`] as a CSV field.
+fn result_rmse(rmse: f64, diverged_at_s: Option<f64>) -> String {
+    opt(rmse_result(rmse, diverged_at_s))
+}
+
+/// `attacks.csv`: one row per class and robot; a field without a value is empty (an RMSE too,
+/// when the robot diverged: its `diverged_at_s` says when).
+fn csv(rows: &[Row]) -> Result<Vec<u8>> {
+    let mut header: Vec<String> = [
+        "class",
+        "robot",
+        "traditional_rmse_rad",
+        "proposed_rmse_rad",
+        "traditional_diverged_at_s",
+        "proposed_diverged_at_s",
+    ]
+    .map(String::from)
+    .to_vec();
+    for n in detect::NAMES {
+        for f in [
+            "onsets",
+            "detected",
+            "already_on",
+            "not_watched",
+            "mean_time_to_detect_s",
+            "false_alarms_per_min",
+        ] {
+            header.push(format!("{n}_{f}"));
+        }
+    }
+    header.extend(["missing_inputs", "deadline_misses"].map(String::from));
+    let header: Vec<&str> = header.iter().map(String::as_str).collect();
+    let body = rows.iter().map(|r| {
+        let mut f = vec![
+            r.class.to_string(),
+            r.robot.to_string(),
+            result_rmse(r.traditional_rmse_rad, r.traditional_diverged_at_s),
+            result_rmse(r.proposed_rmse_rad, r.proposed_diverged_at_s),
+            opt(r.traditional_diverged_at_s),
+            opt(r.proposed_diverged_at_s),
+        ];
+        for n in detect::NAMES {
+            match r.detectors.get(n) {
+                Some(d) => f.extend([
+                    d.onsets.to_string(),
+                    d.detected.to_string(),
+                    d.already_on.to_string(),
+                    d.not_watched.to_string(),
+                    opt(d.mean_time_to_detect_s),
+                    opt(d.false_alarms_per_min),
+                ]),
+                None => f.extend(std::iter::repeat_n(String::new(), 6)),
+            }
+        }
+        f.extend([r.missing_inputs.to_string(), r.deadline_misses.to_string()]);
+        f
+    });
+    csv_bytes(&header, body).context("writing attacks.csv")
+}
+
+/// Phase of an interrupt that stops the table.
+const DURING_THE_TABLE: &str =
+    "during the attack table: the runs already done are discarded, nothing is written";
+
+/// `fdi-launch attacks`.
+pub fn attacks(args: &AttacksArgs, stop: &Stop) -> Result<ExitCode> {
+    stop.check(fdi_common::stop::BEFORE_THE_START)?;
+    let dir = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!("{}-attacks", crate::run_dirs::timestamp()))
+    });
+    let (base, made) = MadeWith::load(args.scenario.as_deref(), &args.numerics)?;
+    // Every class resolves before anything runs: a broken one stops the table at once.
+    for c in CLASSES {
+        c.source
+            .resolve(&base)
+            .with_context(|| format!("attack class `{}`", c.name))?;
+    }
+    let jobs: Vec<(usize, ControllerMode)> = (0..CLASSES.len())
+        .flat_map(|i| {
+            [
+                (i, ControllerMode::Traditional),
+                (i, ControllerMode::Proposed),
+            ]
+        })
+        .collect();
+    let results = run_all(&jobs, &base, args, stop)?;
+    let mut rows = Vec::new();
+    for (i, c) in CLASSES.iter().enumerate() {
+        let [t, p] = [ControllerMode::Traditional, ControllerMode::Proposed].map(|m| {
+            jobs.iter()
+                .position(|&j| j == (i, m))
+                .and_then(|k| results[k].as_ref())
+        });
+        let (Some(t), Some(p)) = (t, p) else {
+            return Err(anyhow!("attack class `{}`: a run is missing", c.name));
+        };
+        rows.extend(rows_of(c, &base, t, p)?);
+    }
+    let table = Table {
+        name: "attacks",
+        md: markdown(&rows, args.duration_s, &made),
+        csv: csv(&rows)?,
+        json: serde_json::json!({
+            "engine": "inproc",
+            "made_with": made,
+            "duration_s": args.duration_s,
+            "classes": CLASSES.iter().map(|c| serde_json::json!({
+                "name": c.name, "file": c.source.file(), "robots": c.robots, "what": c.what,
+            })).collect::<Vec<_>>(),
+            "rows": rows,
+        }),
+        chart: rmse_chart(
+            "Attack classes: RMSE of the attacked robots, traditional vs proposed (a robot that diverged has no bar)".into(),
+            rows.iter()
+                .map(|r| format!("{} r{}", r.class, r.robot))
+                .collect(),
+            vec![
+                (
+                    "traditional".into(),
+                    PALETTE[1],
+                    rows.iter()
+                        .map(|r| {
+                            rmse_result(r.traditional_rmse_rad, r.traditional_diverged_at_s)
+                                .unwrap_or(f64::NAN)
+                        })
+                        .collect(),
+                ),
+                (
+                    "proposed".into(),
+                    PALETTE[0],
+                    rows.iter()
+                        .map(|r| {
+                            rmse_result(r.proposed_rmse_rad, r.proposed_diverged_at_s)
+                                .unwrap_or(f64::NAN)
+                        })
+                        .collect(),
+                ),
+            ],
+        ),
+        made,
+    };
+    table.publish(args.json, &dir)
+}
+
+/// Runs every job on up to two threads, with a progress bar on stderr (hidden when stderr is not
+/// a terminal, or with `--json`). Stops at the first error or interrupt.
+fn run_all(
+    jobs: &[(usize, ControllerMode)],
+    base: &Resolved,
+    args: &AttacksArgs,
+    stop: &Stop,
+) -> Result<Vec<Option<Outcome>>> {
+    let bar = if args.json {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::with_draw_target(Some(jobs.len() as u64), ProgressDrawTarget::stderr())
+    };
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} runs | {msg}",
+        )
+        .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let threads = std::thread::available_parallelism()
+        .map_or(1, std::num::NonZeroUsize::get)
+        .clamp(1, 2);
+    let next = AtomicUsize::new(0);
+    let results: Mutex<Vec<Option<Outcome>>> = Mutex::new((0..jobs.len()).map(|_| None).collect());
+    let failure: Mutex<Option<anyhow::Error>> = Mutex::new(None);
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| loop {
+                let k = next.fetch_add(1, Ordering::SeqCst);
+                let Some(&(i, mode)) = jobs.get(k) else { break };
+                let failed = failure.lock().map_or(true, |f| f.is_some());
+                if failed {
+                    break;
+                }
+                let class = &CLASSES[i];
+                let outcome = stop
+                    .check(DURING_THE_TABLE)
+                    .map_err(anyhow::Error::from)
+                    .and_then(|()| run_one(class, base, mode, args.duration_s))
+                    .with_context(|| format!("attack class `{}`, {}", class.name, mode.as_str()));
+                match outcome {
+                    Ok(o) => {
+                        if let Ok(mut r) = results.lock() {
+                            r[k] = Some(o);
+                        }
+                        bar.set_message(format!("{} ({})", class.name, mode.as_str()));
+                        bar.inc(1);
+                    }
+                    Err(e) => {
+                        if let Ok(mut f) = failure.lock() {
+                            f.get_or_insert(e);
+                        }
+                        break;
+                    }
+                }
+            });
+        }
+    });
+    bar.finish_and_clear();
+    if let Some(e) = failure
+        .into_inner()
+        .map_err(|_| anyhow!("a run thread panicked"))?
+    {
+        return Err(e);
+    }
+    stop.check(DURING_THE_TABLE)?;
+    results
+        .into_inner()
+        .map_err(|_| anyhow!("a run thread panicked"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_class_resolves_and_names_robots_of_its_scenario() {
+        for c in CLASSES {
+            let paper = scenario::paper().expect("the embedded scenario");
+            let r = c
+                .source
+                .resolve(&paper)
+                .unwrap_or_else(|e| panic!("{}: {e}", c.name));
+            assert!(!c.robots.is_empty(), "{}", c.name);
+            for id in c.robots {
+                assert!(
+                    r.scenario.agents.iter().any(|a| a.id == *id),
+                    "{}: robot {id}",
+                    c.name
+                );
+            }
+        }
+        let names: std::collections::BTreeSet<_> = CLASSES.iter().map(|c| c.name).collect();
+        assert_eq!(names.len(), CLASSES.len(), "class names are unique");
+    }
+
+    #[test]
+    fn undefined_detection_values_are_not_zero() {
+        let none = Detection {
+            onsets: 0,
+            detected: 0,
+            already_on: 0,
+            not_watched: 0,
+            mean_time_to_detect_s: None,
+            false_alarms_per_min: None,
+        };
+        assert_eq!(none.detected_cell(), "no onset");
+        assert_eq!(none.time_cell(), "no onset");
+        assert_eq!(none.false_alarm_cell(), "—");
+        let missed = Detection {
+            onsets: 2,
+            already_on: 1,
+            ..none.clone()
+        };
+        assert_eq!(missed.detected_cell(), "0/1 (1 already on)");
+        assert_eq!(missed.time_cell(), "missed");
+        let only_on = Detection {
+            onsets: 1,
+            already_on: 1,
+            ..none
+        };
+        assert_eq!(only_on.time_cell(), "—");
+    }
+}

@@ -1,0 +1,965 @@
+//! Measurements (`fdi-launch bench ...`): latency of the realtime runtime per hop, the transport
+//! floor, and lockstep speed against the in-process engine. Results are printed and written to a
+//! run directory; nothing here asserts a speed.
+
+pub mod floor;
+pub mod probe;
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+use clap::{Args, Subcommand};
+use fdi_common::attack::{AttackProfile, Channel, CovertEntry, MessageAttack};
+use fdi_common::engine::RunSummary;
+use fdi_common::scenario::{self, ClockMode, Resolved};
+use fdi_common::stop::Stop;
+use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
+use hdrhistogram::Histogram;
+use serde::Serialize;
+
+use crate::run::{execute, Engine};
+
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Per-hop latency, control-center compute time, end-to-end sensor → actuation latency,
+    /// deadline misses and control-period jitter of a realtime run.
+    Latency(LatencyArgs),
+    /// Lockstep speed over IPC against the in-process engine, same scenario, same invocation.
+    Lockstep(LockstepArgs),
+    /// The transport floor (iceoryx2 ping-pong, a 3-hop chain, a Unix-socket ping-pong) with the
+    /// runtime's wait strategy, and the runtime's per-hop latency as a ratio to it.
+    Transport(TransportArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct TransportArgs {
+    /// Round trips per transport.
+    #[arg(long, default_value_t = 20_000, allow_negative_numbers = true)]
+    pub iterations: u64,
+    /// Spin before blocking, µs. Default 0: the realtime runtime's event-driven strategy, which
+    /// the runtime's latency is measured with.
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    pub spin_us: u64,
+    /// Agents and seconds of the realtime run measured beside the floor.
+    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
+    pub agents: usize,
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
+    pub duration_s: f64,
+    #[arg(long)]
+    pub json: bool,
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct LatencyArgs {
+    /// Number of agents (the paper's four robots, repeated).
+    #[arg(long, default_value_t = 4, allow_negative_numbers = true)]
+    pub agents: usize,
+    /// Simulated (= wall-clock) duration, s.
+    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
+    pub duration_s: f64,
+    /// Control rate, Hz.
+    #[arg(long, default_value_t = 1000.0, allow_negative_numbers = true)]
+    pub rate_hz: f64,
+    #[arg(long)]
+    pub json: bool,
+    /// Folder that receives the run directory.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+    /// Placement of the run's processes (and of the timer probe beside them).
+    #[command(flatten)]
+    pub placement: crate::run::runtime::Placement,
+    /// Split the measured run over hosts (a deployment file, docs/multi-host.md): the hops
+    /// between hosts include the network, the stamps are moved to the coordinator's clock by
+    /// the offset measured at the start, and end-to-end is one clock's (the agent's).
+    #[arg(long, value_name = "FILE")]
+    pub hosts: Option<PathBuf>,
+}
+
+#[derive(Debug, Args)]
+pub struct LockstepArgs {
+    /// Agent counts to measure (repeat the flag or separate with commas).
+    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16, 64])]
+    pub agents: Vec<usize>,
+    /// Simulated duration of each run, s (the paper's experiment is 40 s).
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    pub duration_s: f64,
+    #[arg(long)]
+    pub json: bool,
+    /// Keep the traces of the measured runs (by default only their summaries stay).
+    #[arg(long)]
+    pub keep_traces: bool,
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+    /// Attack of the runs instead of the paper's: a preset name or a profile file for the
+    /// paper's four robots (every copy of a robot gets its attack), e.g. `actuator-bias`, whose
+    /// torques go through the attacker (the extra hop).
+    #[arg(long)]
+    pub attack: Option<String>,
+}
+
+pub fn bench(b: &BenchCommand, stop: &Stop) -> Result<ExitCode> {
+    match b {
+        BenchCommand::Latency(a) => latency(a, stop),
+        BenchCommand::Lockstep(a) => lockstep(a, stop),
+        BenchCommand::Transport(a) => transport(a, stop),
+    }
+}
+
+/// The paper scenario with `n` agents: agent `i` is a copy of paper robot `(i − 1) % 4 + 1`,
+/// trajectory, delay and attack included (the paper's attack, or `attack`, a preset name or
+/// profile file written for the paper's robots).
+pub fn scaled_paper(n: usize, attack: Option<&str>) -> Result<Resolved> {
+    if n == 0 || n > scenario::MAX_AGENTS {
+        bail!("--agents must be in 1..={}", scenario::MAX_AGENTS);
+    }
+    let paper = scenario::paper()?;
+    let profile = match attack {
+        Some(arg) => scenario::attack_from_arg(arg, &paper.scenario)?,
+        None => paper.attack.clone(),
+    };
+    let mut r = paper.clone();
+    r.scenario.agents.clear();
+    r.attack = AttackProfile {
+        name: profile.name.clone(),
+        description: profile.description.clone(),
+        ..AttackProfile::default()
+    };
+    for i in 1..=n {
+        let src = &paper.scenario.agents[(i - 1) % paper.scenario.agents.len()];
+        let id = u32::try_from(i)?;
+        let mut a = src.clone();
+        a.id = id;
+        r.scenario.agents.push(a);
+        let of = |agent: u32| agent == src.id;
+        for ch in profile.channels.iter().filter(|c| of(c.agent)) {
+            r.attack.channels.push(Channel {
+                agent: id,
+                ..ch.clone()
+            });
+        }
+        for m in profile.messages.iter().filter(|m| of(m.agent)) {
+            r.attack.messages.push(MessageAttack {
+                agent: id,
+                ..m.clone()
+            });
+        }
+        for c in profile.covert.iter().filter(|c| of(c.agent)) {
+            r.attack.covert.push(CovertEntry { agent: id, ..*c });
+        }
+    }
+    r.scenario.name = format!("paper-x{n}");
+    Ok(r)
+}
+
+/// Percentiles of one latency, µs.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Percentiles {
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+    pub p999: f64,
+    pub max: f64,
+    pub count: u64,
+}
+
+fn histogram() -> Result<Histogram<u64>> {
+    // 1 ns .. 100 s at 3 significant digits.
+    Histogram::new_with_bounds(1, 100_000_000_000, 3).context("creating a latency histogram")
+}
+
+fn percentiles(h: &Histogram<u64>) -> Percentiles {
+    let us = |ns: u64| ns as f64 / 1000.0;
+    Percentiles {
+        p50: us(h.value_at_quantile(0.5)),
+        p90: us(h.value_at_quantile(0.9)),
+        p99: us(h.value_at_quantile(0.99)),
+        p999: us(h.value_at_quantile(0.999)),
+        max: us(h.max()),
+        count: h.len(),
+    }
+}
+
+#[derive(Debug, Serialize)]
+struct Hops {
+    agent_to_attacker: Percentiles,
+    attacker_to_center: Percentiles,
+    center_to_agent: Percentiles,
+}
+
+#[derive(Debug, Serialize)]
+struct LatencyReport {
+    agents: usize,
+    rate_hz: f64,
+    duration_s: f64,
+    ticks: u64,
+    e2e_us: Percentiles,
+    hops_us: Hops,
+    attacker_processing_us: Percentiles,
+    center_compute_us: Percentiles,
+    /// |actual − nominal| interval between two consecutive measurements of an agent.
+    period_jitter_us: Percentiles,
+    deadline_misses: u64,
+    deadline_miss_ratio: f64,
+    /// Torques that never reached their agent (of every tick but the last, whose torque no
+    /// step uses and which is left out of the latencies).
+    lost_ticks: u64,
+    /// Scheduling of the run's processes: `SCHED_OTHER` or `SCHED_FIFO <priority>`, and
+    /// `on CPUs <list>` when confined.
+    scheduling: String,
+    /// The machine beside the run: how late a timer thread of the launcher woke at every
+    /// period boundary (same scheduling as the run).
+    timer_probe_late_us: Percentiles,
+    /// Wake-ups of that thread late by 1 ms or more: stalls of the machine itself.
+    timer_probe_stalls_over_1ms: u64,
+    /// Deadline misses whose window (from the due command's measurement to the step that
+    /// missed it) overlaps a stall of the timer thread of 0.5 ms or more.
+    deadline_misses_in_machine_stalls: u64,
+    /// Share of all steps whose window overlaps such a stall (what chance alone would give).
+    steps_in_machine_stalls_ratio: f64,
+    run_dir: String,
+}
+
+/// Measures a realtime run and returns its latency report (written into its run directory).
+fn measure_latency(a: &LatencyArgs, stop: &Stop) -> Result<LatencyReport> {
+    let r = latency_scenario(a)?;
+    let period_ns = (r.scenario.control_period_s * 1e9) as i64;
+    let run = run_beside_probe(a, &r, period_ns, stop)?;
+    let mut lat = Latencies::new()?;
+    for agent in &r.scenario.agents {
+        let path = fdi_common::run_dir::RunDir::new(&run.dir)
+            .trace(fdi_common::run_dir::Process::Agent(agent.id));
+        lat.read_agent(&path, run.summary.ticks, period_ns)?;
+    }
+    let stalls = lat.stalls(&run.wakeups, period_ns.unsigned_abs())?;
+    let report = latency_report(a, &run, &lat, &stalls);
+    write_latency(&run.dir, &report)?;
+    latency_histogram_png(
+        &run.dir,
+        &[
+            ("end-to-end", &lat.e2e),
+            ("agent -> attacker", &lat.agent_to_attacker),
+            ("attacker -> center", &lat.attacker_to_center),
+            ("center -> agent", &lat.center_to_agent),
+        ],
+    )?;
+    Ok(report)
+}
+
+/// The scenario of `bench latency`: the scaled paper scenario on the realtime clock, at the
+/// asked rate and duration.
+fn latency_scenario(a: &LatencyArgs) -> Result<Resolved> {
+    if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
+        bail!("--rate-hz must be a positive number, got {}", a.rate_hz);
+    }
+    let mut r = scaled_paper(a.agents, None)?;
+    r.scenario.clock = ClockMode::Realtime;
+    r.scenario.duration_s = a.duration_s;
+    r.scenario.control_period_s = 1.0 / a.rate_hz;
+    let problems = r.scenario.validate();
+    if !problems.is_empty() {
+        bail!(scenario::ScenarioError {
+            source_name: "bench latency".into(),
+            problems
+        });
+    }
+    Ok(r)
+}
+
+/// A whole realtime run and the timer probe's wake-ups beside it.
+struct MeasuredRun {
+    dir: PathBuf,
+    summary: RunSummary,
+    wakeups: crate::bench::probe::Wakeups,
+}
+
+/// Runs `r` over IPC in a run directory of its own, with the timer probe running beside it
+/// under the same placement.
+fn run_beside_probe(
+    a: &LatencyArgs,
+    r: &Resolved,
+    period_ns: i64,
+    stop: &Stop,
+) -> Result<MeasuredRun> {
+    let placement = &a.placement;
+    crate::run::check_placement(r, Engine::Ipc, placement)?;
+    let dir = crate::run_dirs::create_run_dir(&a.out, r)?;
+    let deployment = match &a.hosts {
+        Some(path) => Some(crate::run::hosts::Deployment::load(path, r)?),
+        None => None,
+    };
+    let probe = crate::bench::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
+    let summary = crate::run_dirs::discard_if_not_started(
+        &dir,
+        crate::run::execute_on(
+            r,
+            Engine::Ipc,
+            Some(&dir),
+            &crate::run::Options {
+                progress: !a.json,
+                placement: placement.clone(),
+                traces: crate::run::Traces::Full,
+                stop: stop.clone(),
+            },
+            deployment.as_ref(),
+        ),
+    );
+    let wakeups = probe.finish();
+    let (summary, wakeups) = (crate::run::require_whole(summary?)?, wakeups?);
+    Ok(MeasuredRun {
+        dir,
+        summary,
+        wakeups,
+    })
+}
+
+/// What the agents' traces of a realtime run tell of its latencies (ns) and its steps.
+struct Latencies {
+    /// Sensor → actuation: a measurement sent to its torque received.
+    e2e: Histogram<u64>,
+    agent_to_attacker: Histogram<u64>,
+    attacker_processing: Histogram<u64>,
+    attacker_to_center: Histogram<u64>,
+    center_compute: Histogram<u64>,
+    center_to_agent: Histogram<u64>,
+    /// |actual − nominal| interval between two consecutive measurements of an agent.
+    jitter: Histogram<u64>,
+    /// Every step as a wall-clock window `[ran − τ − 2Δ, ran]`: from when the command due
+    /// could have been measured to when the step ran (and missed it, or not).
+    step_windows: Vec<(u64, u64)>,
+    /// The windows of the steps that missed their deadline.
+    miss_windows: Vec<(u64, u64)>,
+}
+
+impl Latencies {
+    fn new() -> Result<Self> {
+        Ok(Self {
+            e2e: histogram()?,
+            agent_to_attacker: histogram()?,
+            attacker_processing: histogram()?,
+            attacker_to_center: histogram()?,
+            center_compute: histogram()?,
+            center_to_agent: histogram()?,
+            jitter: histogram()?,
+            step_windows: Vec::new(),
+            miss_windows: Vec::new(),
+        })
+    }
+
+    /// Adds the trace of one agent of a run of `ticks` ticks: the hops and the jitter of its
+    /// measurements, and the window of each of its steps.
+    fn read_agent(&mut self, path: &Path, ticks: u64, period_ns: i64) -> Result<()> {
+        let mut last_sent: Option<u64> = None;
+        let mut sent_at = HashMap::new();
+        let mut steps = Vec::new();
+        for rec in TraceReader::open(path)? {
+            let rec = rec?;
+            if let TraceRecord::Agent(a) = &rec {
+                steps.push((a.k, a.tau, a.missed));
+            }
+            if let TraceRecord::Latency { stamps: s, k, .. } = rec {
+                sent_at.insert(k, s.agent_sent_ns);
+                // No step uses the last measurement's torque: the agent stamps it whenever it
+                // next looks, which may be in the run's teardown. Not a latency.
+                if k + 1 >= ticks {
+                    continue;
+                }
+                self.record_hops(&s);
+                // The first interval includes the realtime start lead (measurement 0 goes out on
+                // the start message, measurement 1 at the epoch): not jitter.
+                if let Some(prev) = last_sent.filter(|_| k > 1) {
+                    let dev = (s.agent_sent_ns as i64 - prev as i64 - period_ns).unsigned_abs();
+                    let _ = self.jitter.record(dev.max(1));
+                }
+                last_sent = Some(s.agent_sent_ns);
+            }
+        }
+        self.record_steps(&steps, &sent_at, period_ns.unsigned_abs());
+        Ok(())
+    }
+
+    /// The hops of one measurement, and its end-to-end latency.
+    fn record_hops(&mut self, s: &HopStamps) {
+        let rec_ns = |h: &mut Histogram<u64>, from: u64, to: u64| {
+            if from > 0 && to >= from {
+                let _ = h.record((to - from).max(1));
+            }
+        };
+        rec_ns(&mut self.e2e, s.agent_sent_ns, s.agent_received_ns);
+        rec_ns(
+            &mut self.agent_to_attacker,
+            s.agent_sent_ns,
+            s.attacker_received_ns,
+        );
+        rec_ns(
+            &mut self.attacker_processing,
+            s.attacker_received_ns,
+            s.attacker_sent_ns,
+        );
+        rec_ns(
+            &mut self.attacker_to_center,
+            s.attacker_sent_ns,
+            s.center_received_ns,
+        );
+        rec_ns(
+            &mut self.center_compute,
+            s.center_received_ns,
+            s.center_sent_ns,
+        );
+        rec_ns(
+            &mut self.center_to_agent,
+            s.center_sent_ns,
+            s.agent_received_ns,
+        );
+    }
+
+    /// The window of each step `(k, τ, missed)`, from the times its agent sent measurements.
+    fn record_steps(
+        &mut self,
+        steps: &[(u64, f64, bool)],
+        sent_at: &HashMap<u64, u64>,
+        period_ns: u64,
+    ) {
+        for &(k, tau, missed) in steps {
+            // The step from t_k ran just before measurement k + 1 went out.
+            let ran = sent_at
+                .get(&(k + 1))
+                .copied()
+                .or_else(|| sent_at.get(&k).map(|s| s + period_ns));
+            if let Some(ran) = ran {
+                let reach = (tau * 1e9) as u64 + 2 * period_ns;
+                let window = (ran.saturating_sub(reach), ran);
+                self.step_windows.push(window);
+                if missed {
+                    self.miss_windows.push(window);
+                }
+            }
+        }
+    }
+
+    /// What the timer probe saw during the run's steps, and how the steps' windows (the
+    /// missed ones and all) fall in the machine's stalls.
+    fn stalls(&self, wakeups: &crate::bench::probe::Wakeups, period_ns: u64) -> Result<Stalls> {
+        let steps = &self.step_windows;
+        // The probe's view of the run itself (its steps), not of start-up or teardown.
+        let run_from = steps
+            .iter()
+            .map(|w| w.1)
+            .min()
+            .unwrap_or(0)
+            .saturating_sub(period_ns);
+        let run_to = steps.iter().map(|w| w.1).max().unwrap_or(u64::MAX);
+        let probe = wakeups.within(run_from, run_to)?;
+        let misses_in_stalls =
+            crate::bench::probe::overlapping(&self.miss_windows, &probe.stalls) as u64;
+        // What share of all steps a stall touches: the rate at which misses would fall in
+        // stalls by chance alone.
+        let step_share = if steps.is_empty() {
+            0.0
+        } else {
+            crate::bench::probe::overlapping(steps, &probe.stalls) as f64 / steps.len() as f64
+        };
+        Ok(Stalls {
+            probe,
+            misses_in_stalls,
+            step_share,
+        })
+    }
+}
+
+/// The machine's stalls during a realtime run, against the run's steps.
+struct Stalls {
+    probe: crate::bench::probe::ProbeResult,
+    /// Deadline misses whose window overlaps a stall.
+    misses_in_stalls: u64,
+    /// Share of all steps whose window overlaps a stall.
+    step_share: f64,
+}
+
+/// The latency report of a measured run, as printed and written to `latency.json`.
+fn latency_report(
+    a: &LatencyArgs,
+    run: &MeasuredRun,
+    lat: &Latencies,
+    stalls: &Stalls,
+) -> LatencyReport {
+    let summary = &run.summary;
+    let misses: u64 = summary.metrics.values().map(|m| m.deadline_misses).sum();
+    let agent_ticks = summary.ticks * a.agents as u64;
+    LatencyReport {
+        agents: a.agents,
+        rate_hz: a.rate_hz,
+        duration_s: a.duration_s,
+        ticks: summary.ticks,
+        e2e_us: percentiles(&lat.e2e),
+        hops_us: Hops {
+            agent_to_attacker: percentiles(&lat.agent_to_attacker),
+            attacker_to_center: percentiles(&lat.attacker_to_center),
+            center_to_agent: percentiles(&lat.center_to_agent),
+        },
+        attacker_processing_us: percentiles(&lat.attacker_processing),
+        center_compute_us: percentiles(&lat.center_compute),
+        period_jitter_us: percentiles(&lat.jitter),
+        deadline_misses: misses,
+        deadline_miss_ratio: if agent_ticks > 0 {
+            misses as f64 / agent_ticks as f64
+        } else {
+            0.0
+        },
+        lost_ticks: (summary.ticks.saturating_sub(1) * a.agents as u64)
+            .saturating_sub(lat.e2e.len()),
+        scheduling: a.placement.describe(),
+        timer_probe_late_us: percentiles(&stalls.probe.late),
+        timer_probe_stalls_over_1ms: stalls.probe.stalls_over(1_000_000) as u64,
+        deadline_misses_in_machine_stalls: stalls.misses_in_stalls,
+        steps_in_machine_stalls_ratio: stalls.step_share,
+        run_dir: run.dir.display().to_string(),
+    }
+}
+
+fn latency(a: &LatencyArgs, stop: &Stop) -> Result<ExitCode> {
+    let report = measure_latency(a, stop)?;
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        print_latency(&report);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+#[derive(Debug, Serialize)]
+struct TransportReport {
+    floor: crate::bench::floor::FloorResult,
+    /// The iceoryx2 3-hop chain at the runtime's rate (one round trip per 1 ms period): its
+    /// processes sleep between messages, as the runtime's do between ticks.
+    paced_chain: crate::bench::floor::FloorCase,
+    runtime_hops_p50_us: [f64; 3],
+    /// Runtime per-hop p50 over the back-to-back 3-hop chain's per-hop p50, per hop.
+    runtime_over_floor: [f64; 3],
+    /// Runtime per-hop p50 over the paced 3-hop chain's per-hop p50, per hop.
+    runtime_over_paced_floor: [f64; 3],
+    runtime_run_dir: String,
+}
+
+fn transport(a: &TransportArgs, stop: &Stop) -> Result<ExitCode> {
+    let floor = crate::bench::floor::run_floor(&crate::bench::floor::FloorOptions {
+        iterations: a.iterations,
+        warmup: (a.iterations / 20).max(100),
+        spin: std::time::Duration::from_micros(a.spin_us),
+        pace: None,
+    })?;
+    // As many round trips as the runtime run has ticks.
+    let paced_trips = ((a.duration_s * 1000.0) as u64).max(1);
+    let paced_chain = crate::bench::floor::run_paced_chain(&crate::bench::floor::FloorOptions {
+        iterations: paced_trips,
+        warmup: (paced_trips / 20).max(10),
+        spin: std::time::Duration::from_micros(a.spin_us),
+        pace: Some(std::time::Duration::from_millis(1)),
+    })?;
+    let rt = measure_latency(
+        &LatencyArgs {
+            agents: a.agents,
+            duration_s: a.duration_s,
+            rate_hz: 1000.0,
+            json: true,
+            out: a.out.clone(),
+            placement: Default::default(),
+            hosts: None,
+        },
+        stop,
+    )?;
+    let hops = [
+        rt.hops_us.agent_to_attacker.p50,
+        rt.hops_us.attacker_to_center.p50,
+        rt.hops_us.center_to_agent.p50,
+    ];
+    let base = floor.ipc_chain.per_hop.p50_us;
+    let paced = paced_chain.per_hop.p50_us;
+    let report = TransportReport {
+        runtime_over_floor: hops.map(|h| h / base),
+        runtime_over_paced_floor: hops.map(|h| h / paced),
+        runtime_hops_p50_us: hops,
+        floor,
+        paced_chain,
+        runtime_run_dir: rt.run_dir,
+    };
+    if a.json {
+        println!("{}", serde_json::to_string(&report)?);
+    } else {
+        println!("{}", report.floor.to_markdown());
+        let p = &report.paced_chain.per_hop;
+        println!(
+            "iceoryx2 3-hop chain at the runtime's rate (one round trip per 1 ms, {} round trips): per hop p50 {:.1}, p90 {:.1}, p99 {:.1}, p99.9 {:.1}, max {:.1} µs",
+            paced_trips, p.p50_us, p.p90_us, p.p99_us, p.p999_us, p.max_us
+        );
+        println!();
+        println!("Runtime (realtime, {} agent(s), {} s) per-hop p50 against the 3-hop chain's per-hop p50, back to back ({base:.1} µs) and at the runtime's rate ({paced:.1} µs):", a.agents, a.duration_s);
+        println!();
+        println!("| hop | runtime p50 (µs) | ratio to back-to-back floor | ratio to paced floor |");
+        println!("|---|---|---|---|");
+        for (i, name) in [
+            "agent -> attacker",
+            "attacker -> control center",
+            "control center -> agent",
+        ]
+        .iter()
+        .enumerate()
+        {
+            println!(
+                "| {name} | {:.1} | {:.2} | {:.2} |",
+                report.runtime_hops_p50_us[i],
+                report.runtime_over_floor[i],
+                report.runtime_over_paced_floor[i]
+            );
+        }
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn latency_rows(r: &LatencyReport) -> Vec<(&'static str, Percentiles)> {
+    vec![
+        ("end-to-end sensor -> actuation", r.e2e_us),
+        ("hop agent -> attacker", r.hops_us.agent_to_attacker),
+        ("attacker processing", r.attacker_processing_us),
+        (
+            "hop attacker -> control center",
+            r.hops_us.attacker_to_center,
+        ),
+        ("control-center compute", r.center_compute_us),
+        ("hop control center -> agent", r.hops_us.center_to_agent),
+        ("control-period jitter", r.period_jitter_us),
+        ("machine: timer wake-up lateness", r.timer_probe_late_us),
+    ]
+}
+
+fn write_latency(dir: &Path, r: &LatencyReport) -> Result<()> {
+    std::fs::write(
+        dir.join("latency.json"),
+        serde_json::to_string_pretty(r)? + "\n",
+    )
+    .context("writing latency.json")?;
+    std::fs::write(dir.join("latency.csv"), latency_csv(r)?).context("writing latency.csv")
+}
+
+/// `latency.csv`: one row per measured latency, in µs.
+fn latency_csv(r: &LatencyReport) -> Result<Vec<u8>> {
+    const HEADER: [&str; 7] = [
+        "metric", "p50_us", "p90_us", "p99_us", "p999_us", "max_us", "count",
+    ];
+    let rows = latency_rows(r).into_iter().map(|(name, p)| {
+        [
+            name.to_string(),
+            p.p50.to_string(),
+            p.p90.to_string(),
+            p.p99.to_string(),
+            p.p999.to_string(),
+            p.max.to_string(),
+            p.count.to_string(),
+        ]
+    });
+    fdi_report::output::csv_bytes(&HEADER, rows).context("writing latency.csv")
+}
+
+/// `latency.png` / `latency.svg`: share of messages per latency bucket (log-spaced), per hop, on
+/// a logarithmic axis so that the tail (a few messages in 10⁵) shows beside the bulk.
+fn latency_histogram_png(dir: &Path, hists: &[(&str, &Histogram<u64>)]) -> Result<()> {
+    const EDGES_US: [u64; 11] = [
+        0,
+        10,
+        20,
+        50,
+        100,
+        200,
+        500,
+        1_000,
+        2_000,
+        5_000,
+        u64::MAX / 1_000,
+    ];
+    let categories = EDGES_US
+        .windows(2)
+        .map(|w| {
+            if w[1] >= u64::MAX / 1_000 {
+                format!("≥{} µs", w[0])
+            } else {
+                format!("{}–{} µs", w[0], w[1])
+            }
+        })
+        .collect();
+    let series = hists
+        .iter()
+        .zip(fdi_report::plot::PALETTE)
+        .map(|((name, h), color)| {
+            let total = h.len().max(1) as f64;
+            let shares = EDGES_US
+                .windows(2)
+                .map(|w| {
+                    100.0 * h.count_between(w[0] * 1_000, (w[1] * 1_000).saturating_sub(1)) as f64
+                        / total
+                })
+                .collect();
+            (format!("{name} ({} messages)", h.len()), color, shares)
+        })
+        .collect();
+    let chart = fdi_report::plot::BarChart {
+        title: "Realtime latency per hop".into(),
+        y_label: "share of messages (%)".into(),
+        categories,
+        series,
+        log_y: true,
+    };
+    fdi_report::plot::save_bars(&chart, &dir.join("latency"), (1100, 600))?;
+    Ok(())
+}
+
+fn print_latency(r: &LatencyReport) {
+    println!(
+        "Realtime latency: {} agents at {} Hz for {} s ({} ticks), {}",
+        r.agents, r.rate_hz, r.duration_s, r.ticks, r.scheduling
+    );
+    println!();
+    println!("| µs | p50 | p90 | p99 | p99.9 | max |");
+    println!("|---|---|---|---|---|---|");
+    for (name, p) in latency_rows(r) {
+        println!(
+            "| {name} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
+            p.p50, p.p90, p.p99, p.p999, p.max
+        );
+    }
+    println!();
+    println!(
+        "deadline misses {} of {} agent-ticks ({:.4} %), lost ticks {}",
+        r.deadline_misses,
+        r.ticks * r.agents as u64,
+        100.0 * r.deadline_miss_ratio,
+        r.lost_ticks
+    );
+    println!(
+        "machine stalls: timer threads beside the run (one per CPU) woke >= 1 ms late {} \
+         times; {} of the deadline misses fall in a stall of >= 0.5 ms (as do {:.2} % of all steps)",
+        r.timer_probe_stalls_over_1ms,
+        r.deadline_misses_in_machine_stalls,
+        100.0 * r.steps_in_machine_stalls_ratio
+    );
+    println!("run directory {}", r.run_dir);
+}
+
+#[derive(Debug, Serialize)]
+struct LockstepRow {
+    agents: usize,
+    processes: usize,
+    sim_s: f64,
+    ticks: u64,
+    inproc_wall_s: f64,
+    ipc_wall_s: f64,
+    ipc_over_inproc: f64,
+    ipc_realtime_factor: f64,
+    ipc_ticks_per_s: f64,
+    bit_identical: bool,
+}
+
+fn lockstep(a: &LockstepArgs, stop: &Stop) -> Result<ExitCode> {
+    let root = a
+        .out
+        .join(format!("{}-bench-lockstep", crate::run_dirs::timestamp()));
+    let mut rows = Vec::new();
+    for &n in &a.agents {
+        let row = lockstep_row(a, &root, n, stop)?;
+        if !a.json {
+            eprintln!(
+                "{n} agents: ipc {:.3} s, inproc {:.3} s",
+                row.ipc_wall_s, row.inproc_wall_s
+            );
+        }
+        rows.push(row);
+    }
+    std::fs::write(
+        root.join("lockstep.json"),
+        serde_json::to_string_pretty(&rows)? + "\n",
+    )
+    .context("writing lockstep.json")?;
+    if a.json {
+        println!(
+            "{}",
+            serde_json::json!({ "duration_s": a.duration_s, "rows": rows, "dir": root.display().to_string() })
+        );
+    } else {
+        print_lockstep(a.duration_s, &rows, &root);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// Runs the scaled paper scenario with `n` agents on the in-process engine, then over IPC, each
+/// into a run directory under `root` (without its traces unless `--keep-traces`).
+fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize, stop: &Stop) -> Result<LockstepRow> {
+    let mut r = scaled_paper(n, a.attack.as_deref())?;
+    r.scenario.duration_s = a.duration_s;
+    let dir_in = crate::run_dirs::create_run_dir(root, &named(&r, "inproc"))?;
+    let inproc = execute(
+        &r,
+        Engine::Inproc,
+        Some(&dir_in),
+        &crate::run::Options::quiet(crate::run::Traces::Full, stop),
+    )?;
+    let dir_ipc = crate::run_dirs::create_run_dir(root, &named(&r, "ipc"))?;
+    let ipc = execute(
+        &r,
+        Engine::Ipc,
+        Some(&dir_ipc),
+        &crate::run::Options {
+            progress: !a.json,
+            ..crate::run::Options::quiet(crate::run::Traces::Full, stop)
+        },
+    )
+    .and_then(crate::run::require_whole)?;
+    if !a.keep_traces {
+        for d in [&dir_in, &dir_ipc] {
+            let _ = std::fs::remove_dir_all(d.join("traces"));
+        }
+    }
+    Ok(LockstepRow {
+        agents: n,
+        processes: n + 2,
+        sim_s: ipc.sim_s,
+        ticks: ipc.ticks,
+        inproc_wall_s: inproc.wall_s,
+        ipc_wall_s: ipc.wall_s,
+        ipc_over_inproc: ipc.wall_s / inproc.wall_s,
+        ipc_realtime_factor: ipc.sim_s / ipc.wall_s,
+        ipc_ticks_per_s: ipc.ticks as f64 / ipc.wall_s,
+        bit_identical: ipc.trace_digest == inproc.trace_digest,
+    })
+}
+
+/// The lockstep table, as markdown on stdout.
+fn print_lockstep(duration_s: f64, rows: &[LockstepRow], root: &Path) {
+    println!(
+        "Lockstep speed, {} s simulated per run (both engines write their traces)",
+        duration_s
+    );
+    println!();
+    println!("| agents | processes | in-process wall (s) | IPC wall (s) | IPC / in-process | IPC × real time | IPC ticks/s | bit-identical |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for r in rows {
+        println!(
+            "| {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.0} | {} |",
+            r.agents,
+            r.processes,
+            r.inproc_wall_s,
+            r.ipc_wall_s,
+            r.ipc_over_inproc,
+            r.ipc_realtime_factor,
+            r.ipc_ticks_per_s,
+            r.bit_identical
+        );
+    }
+    println!();
+    println!("results in {}", root.display());
+}
+
+fn named(r: &Resolved, engine: &str) -> Resolved {
+    let mut n = r.clone();
+    n.scenario.name = format!("{}-{engine}", r.scenario.name);
+    n
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn scaled_paper_repeats_the_four_robots_with_their_attacks() {
+        let r = scaled_paper(9, None).expect("valid");
+        assert_eq!(r.agent_count(), 9);
+        assert_eq!(
+            r.scenario.agents[4].trajectory,
+            r.scenario.agents[0].trajectory
+        );
+        assert_eq!(
+            r.scenario.agents[5].trajectory,
+            r.scenario.agents[1].trajectory
+        );
+        // Every agent has the attack of the robot it copies (two channels each).
+        for id in 1..=9u32 {
+            assert_eq!(
+                r.attack.channels.iter().filter(|c| c.agent == id).count(),
+                2,
+                "agent {id}"
+            );
+        }
+        assert!(r.scenario.validate().is_empty());
+        assert!(r.attack.problems(&r.scenario.agent_dofs()).is_empty());
+        assert!(scaled_paper(0, None).is_err());
+        let covert = scaled_paper(5, Some("covert")).expect("valid");
+        assert_eq!(covert.attack.name, "covert");
+        for id in [1, 5] {
+            assert!(covert.attack.attacks_torque_of(id), "copies of robot 1");
+            assert!(covert.attack.covert.iter().any(|c| c.agent == id));
+        }
+        assert!(!covert.attack.attacks_torque_of(2));
+        assert!(covert
+            .attack
+            .problems(&covert.scenario.agent_dofs())
+            .is_empty());
+    }
+
+    #[test]
+    fn latency_csv_has_a_header_and_a_row_per_latency() {
+        let mut h = histogram().expect("histogram");
+        for ns in [1_000u64, 2_000, 3_000, 100_000] {
+            h.record(ns).expect("record");
+        }
+        let p = percentiles(&h);
+        let report = LatencyReport {
+            agents: 1,
+            rate_hz: 1000.0,
+            duration_s: 1.0,
+            ticks: 1000,
+            e2e_us: p,
+            hops_us: Hops {
+                agent_to_attacker: p,
+                attacker_to_center: p,
+                center_to_agent: p,
+            },
+            attacker_processing_us: p,
+            center_compute_us: p,
+            period_jitter_us: p,
+            deadline_misses: 0,
+            deadline_miss_ratio: 0.0,
+            lost_ticks: 0,
+            scheduling: "SCHED_OTHER".into(),
+            timer_probe_late_us: p,
+            timer_probe_stalls_over_1ms: 0,
+            deadline_misses_in_machine_stalls: 0,
+            steps_in_machine_stalls_ratio: 0.0,
+            run_dir: String::new(),
+        };
+        let bytes = latency_csv(&report).expect("csv");
+        let mut r = csv::Reader::from_reader(bytes.as_slice());
+        assert_eq!(
+            r.headers().expect("header"),
+            vec!["metric", "p50_us", "p90_us", "p99_us", "p999_us", "max_us", "count"]
+        );
+        let rows: Vec<csv::StringRecord> = r.records().map(|x| x.expect("row")).collect();
+        assert_eq!(rows.len(), latency_rows(&report).len());
+        assert_eq!(&rows[0][0], "end-to-end sensor -> actuation");
+        assert_eq!(rows[0][1].parse::<f64>().ok(), Some(p.p50));
+        assert_eq!(rows[0][5].parse::<f64>().ok(), Some(p.max));
+        assert_eq!(&rows[0][6], "4");
+    }
+
+    #[test]
+    fn percentiles_are_in_microseconds() {
+        let mut h = histogram().expect("histogram");
+        for ns in [1_000u64, 2_000, 3_000, 100_000] {
+            h.record(ns).expect("record");
+        }
+        let p = percentiles(&h);
+        assert!((p.p50 - 2.0).abs() < 0.01, "{p:?}");
+        assert!((p.max - 100.0).abs() < 0.1, "{p:?}");
+        assert_eq!(p.count, 4);
+    }
+}

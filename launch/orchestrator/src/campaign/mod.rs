@@ -1,0 +1,1503 @@
+//! Campaigns (`fdi-launch sweep CAMPAIGN.toml`): a base scenario, axes of values for fields of
+//! it, every combination run (in parallel, resumably), and the statistics over seeds.
+//!
+//! A campaign file:
+//!
+//! ```toml
+//! name = "beta-sweep"
+//! scenario = "../paper.toml"   # relative to this file; absent: the embedded paper scenario
+//! mode = "product"             # or "zip": the axes other than `seed` in lockstep
+//! [set]                        # edits made to every run (optional)
+//! duration_s = 20.0
+//! [[axes]]
+//! path = "controller.beta"     # a field path of the scenario
+//! values = [0.0, 15.0, 30.0]   # or range = { start, stop, step } / { start, stop, count },
+//!                              # or factors = [...]: multiples of the base value
+//! [[axes]]
+//! path = "seed"                # the replicates: always crossed with the other axes
+//! range = { start = 1, stop = 5, step = 1 }
+//! ```
+//!
+//! `paths = [...]` (with a `label`) sets one value at several paths (e.g. every amplitude of an
+//! attack scaled by one factor). Every run's scenario is the base document edited at those
+//! paths and then validated as a scenario file is; a path that is not in the document is an
+//! error naming it and the keys that are there. Each result is stored under the SHA-256 of
+//! the run's fully resolved scenario and engine (`points/<key>.json`, written atomically), so
+//! a rerun skips what is done and an edited campaign never reuses a stale result.
+
+pub mod figures;
+pub mod flatten;
+pub mod path;
+pub mod runner;
+pub mod stats;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::num::NonZeroUsize;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{bail, Context, Result};
+use clap::Args;
+use fdi_common::engine::RunSummary;
+use fdi_common::scenario::{self, ClockMode, Resolved};
+use fdi_common::stop::Stop;
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+
+use crate::run::{execute, Engine, Traces};
+use flatten::Cell;
+use path::FieldPath;
+use stats::Stats;
+
+/// What an interrupted campaign kept.
+pub const DURING_THE_CAMPAIGN: &str =
+    "during the campaign: the finished runs are stored, a rerun runs only the others";
+
+#[derive(Debug, Args)]
+pub struct SweepArgs {
+    /// Campaign TOML file: a base scenario and axes (see `scenarios/campaigns/`).
+    pub campaign: PathBuf,
+    /// Runs at a time (default: the number of CPUs).
+    #[arg(long)]
+    pub jobs: Option<NonZeroUsize>,
+    /// The engine of every run: in-process (one thread per run) or ipc (processes per run).
+    #[arg(long, value_enum, default_value_t = Engine::Inproc)]
+    pub engine: Engine,
+    /// The campaign folder; default `runs/campaigns/<name>`.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// What each run keeps: `none` (the summary only; no run directory), `full` (a run
+    /// directory per run under `<out>/runs/`), `decimate=K`.
+    #[arg(long, default_value_t = Traces::None)]
+    pub traces: Traces,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CampaignFile {
+    name: String,
+    #[serde(default)]
+    scenario: Option<PathBuf>,
+    #[serde(default)]
+    mode: Mode,
+    #[serde(default)]
+    set: toml::Table,
+    axes: Vec<AxisFile>,
+    /// Metrics (per robot, without `robot<id>.`) drawn against each axis; default: RMSE, max
+    /// error, deadline misses and each detector's mean time to detect, false alarms, coverage.
+    #[serde(default)]
+    plots: Option<Vec<String>>,
+}
+
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+enum Mode {
+    #[default]
+    Product,
+    Zip,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct AxisFile {
+    path: Option<String>,
+    paths: Option<Vec<String>>,
+    label: Option<String>,
+    values: Option<Vec<toml::Value>>,
+    range: Option<RangeFile>,
+    factors: Option<Vec<f64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RangeFile {
+    start: toml::Value,
+    stop: toml::Value,
+    step: Option<toml::Value>,
+    count: Option<usize>,
+}
+
+/// Most runs a campaign may hold.
+const MAX_RUNS: usize = 100_000;
+
+/// One axis as resolved.
+#[derive(Debug, Clone)]
+struct Axis {
+    label: String,
+    paths: Vec<FieldPath>,
+    /// Where each path is written in the campaign file (`axes[1].path`, `axes[0].paths[2]`).
+    fields: Vec<String>,
+    values: Vec<toml::Value>,
+    /// The values multiply the base value at each path.
+    factors: bool,
+}
+
+impl Axis {
+    fn is_seed(&self) -> bool {
+        self.paths.len() == 1 && self.paths[0].text == "seed"
+    }
+}
+
+/// One run of the campaign.
+#[derive(Debug)]
+struct Job {
+    /// Index of its point (its combination of the axes other than `seed`).
+    point: usize,
+    /// `controller.beta = 10, seed = 2`.
+    label: String,
+    resolved: Resolved,
+    key: String,
+}
+
+/// A point: the values of the non-seed axes.
+#[derive(Debug, Clone)]
+struct Point {
+    values: Vec<(String, toml::Value)>,
+}
+
+/// What `points/<key>.json` holds.
+#[derive(Debug, Serialize, Deserialize)]
+struct Stored {
+    key: String,
+    engine: String,
+    run: String,
+    summary: RunSummary,
+}
+
+fn number(v: &toml::Value, what: &str) -> Result<f64> {
+    match v {
+        toml::Value::Integer(i) => Ok(*i as f64),
+        toml::Value::Float(f) if f.is_finite() => Ok(*f),
+        other => bail!("{what} must be a finite number, not {other}"),
+    }
+}
+
+/// The values of a range; `at` names a field of the range (`start`, `step`, …) with its place
+/// in the campaign file. A range of integers (`start`, `stop` and `step` or the steps of a
+/// `count` all whole) gives integers, computed exactly (a seed near 2⁶³ stays itself); a range
+/// of more values than a campaign may run is refused before any is made, whatever the count
+/// (a step of 1e-300, a span beyond the largest float).
+fn range_values(r: &RangeFile, at: &dyn Fn(&str) -> String) -> Result<Vec<toml::Value>> {
+    let too_many = |n: String| {
+        anyhow::anyhow!(
+            "{}: {n} values, more than the {MAX_RUNS} runs a campaign may hold",
+            at("")
+        )
+    };
+    match (&r.step, r.count) {
+        (Some(step), None) => {
+            if let (toml::Value::Integer(a), toml::Value::Integer(b), toml::Value::Integer(d)) =
+                (&r.start, &r.stop, step)
+            {
+                let (a, b, d) = (i128::from(*a), i128::from(*b), i128::from(*d));
+                if d == 0 || (b - a) * d.signum() < 0 {
+                    bail!("{}: step {d} never goes from {a} to {b}", at("step"));
+                }
+                let n = (b - a) / d + 1;
+                if n > MAX_RUNS as i128 {
+                    return Err(too_many(n.to_string()));
+                }
+                return integer_values((0..n).map(|i| a + i * d), at(""));
+            }
+            let start = number(&r.start, &at("start"))?;
+            let stop = number(&r.stop, &at("stop"))?;
+            let step = number(step, &at("step"))?;
+            if step == 0.0 || (stop - start) * step < 0.0 {
+                bail!(
+                    "{}: step {step} never goes from {start} to {stop}",
+                    at("step")
+                );
+            }
+            // The number of steps; beyond the largest float the span is divided piecewise.
+            let span = stop - start;
+            let steps = if span.is_finite() {
+                span / step
+            } else {
+                stop / step - start / step
+            };
+            let n = (steps + 1e-9).floor() + 1.0;
+            if n.is_nan() || n > MAX_RUNS as f64 {
+                return Err(too_many(if n.is_finite() {
+                    format!("about {n:.1e}")
+                } else {
+                    "more than 10^308".into()
+                }));
+            }
+            // n ≤ MAX_RUNS: exact as an integer.
+            let n = n as usize;
+            finite_values(
+                (0..n).map(|i| {
+                    if span.is_finite() {
+                        start + i as f64 * step
+                    } else {
+                        // i · step may pass the largest float where the value does not.
+                        2.0 * (start / 2.0 + i as f64 * (step / 2.0))
+                    }
+                }),
+                at(""),
+            )
+        }
+        (None, Some(count)) => {
+            if count == 0 || count > MAX_RUNS {
+                bail!(
+                    "{}: must be between 1 and {MAX_RUNS}, not {count}",
+                    at("count")
+                );
+            }
+            if let (toml::Value::Integer(a), toml::Value::Integer(b)) = (&r.start, &r.stop) {
+                let (a, b) = (i128::from(*a), i128::from(*b));
+                let gaps = count as i128 - 1;
+                if gaps == 0 || (b - a) % gaps == 0 {
+                    let d = if gaps == 0 { 0 } else { (b - a) / gaps };
+                    return integer_values((0..count as i128).map(|i| a + i * d), at(""));
+                }
+            }
+            let start = number(&r.start, &at("start"))?;
+            let stop = number(&r.stop, &at("stop"))?;
+            let span = stop - start;
+            finite_values(
+                (0..count).map(|i| {
+                    let t = i as f64 / (count.max(2) - 1) as f64;
+                    if count == 1 {
+                        start
+                    } else if i + 1 == count {
+                        stop
+                    } else if span.is_finite() {
+                        start + span * t
+                    } else {
+                        // The span is beyond the largest float: weigh the ends instead.
+                        start * (1.0 - t) + stop * t
+                    }
+                }),
+                at(""),
+            )
+        }
+        _ => bail!(
+            "{}: takes exactly one of `step` and `count` beside `start` and `stop`",
+            at("")
+        ),
+    }
+}
+
+/// The values as integers of TOML (64-bit), or an error naming `at`.
+fn integer_values(xs: impl Iterator<Item = i128>, at: String) -> Result<Vec<toml::Value>> {
+    xs.map(|x| {
+        i64::try_from(x)
+            .map(toml::Value::Integer)
+            .map_err(|_| anyhow::anyhow!("{at}: gives {x}, beyond the integers of TOML"))
+    })
+    .collect()
+}
+
+/// The values as floats, each finite, or an error naming `at`.
+fn finite_values(xs: impl Iterator<Item = f64>, at: String) -> Result<Vec<toml::Value>> {
+    xs.map(|x| {
+        if x.is_finite() {
+            Ok(toml::Value::Float(x))
+        } else {
+            Err(anyhow::anyhow!(
+                "{at}: gives the value {x}, not a finite number"
+            ))
+        }
+    })
+    .collect()
+}
+
+/// The campaign file's text, to say where in it a field is.
+struct Source<'a> {
+    name: &'a str,
+    text: &'a str,
+}
+
+impl Source<'_> {
+    /// `FILE: FIELD (line L, column C)` of a field path of the campaign file (`axes[1].path`);
+    /// a field the text does not hold is placed at the nearest table above it that it holds,
+    /// and named without a place when it holds nothing of it.
+    fn at(&self, field: &str) -> String {
+        format!("{}: {}", self.name, self.place(field))
+    }
+
+    /// `FIELD (line L, column C)`, as [`Source::at`] without the file.
+    fn place(&self, field: &str) -> String {
+        match scenario::locate(self.text, field) {
+            Some(offset) => {
+                let (line, column) = scenario::line_column(self.text, offset);
+                format!("{field} (line {line}, column {column})")
+            }
+            None => field.to_string(),
+        }
+    }
+}
+
+fn resolve_axes(file: &CampaignFile, src: &Source) -> Result<Vec<Axis>> {
+    if file.axes.is_empty() {
+        bail!("{}: a campaign needs at least one [[axes]]", src.name);
+    }
+    let mut axes = Vec::new();
+    for (i, a) in file.axes.iter().enumerate() {
+        let field = format!("axes[{i}]");
+        let at = src.at(&field);
+        let (paths, fields): (Vec<String>, Vec<String>) = match (&a.path, &a.paths) {
+            (Some(p), None) => (vec![p.clone()], vec![format!("{field}.path")]),
+            (None, Some(ps)) if !ps.is_empty() => (
+                ps.clone(),
+                (0..ps.len())
+                    .map(|j| format!("{field}.paths[{j}]"))
+                    .collect(),
+            ),
+            _ => bail!("{at}: takes exactly one of `path` and `paths` (a non-empty list)"),
+        };
+        let label = match (&a.label, paths.as_slice()) {
+            (Some(l), _) => l.clone(),
+            (None, [one]) => one.clone(),
+            (None, _) => bail!("{at}: an axis over several `paths` needs a `label`"),
+        };
+        let paths = paths
+            .iter()
+            .zip(&fields)
+            .map(|(p, f)| FieldPath::parse(p).with_context(|| src.at(f)))
+            .collect::<Result<Vec<_>>>()?;
+        let range_at = |sub: &str| {
+            if sub.is_empty() {
+                src.at(&format!("{field}.range"))
+            } else {
+                src.at(&format!("{field}.range.{sub}"))
+            }
+        };
+        let (values, factors) = match (&a.values, &a.range, &a.factors) {
+            (Some(v), None, None) => (v.clone(), false),
+            (None, Some(r), None) => (range_values(r, &range_at)?, false),
+            (None, None, Some(f)) => {
+                if let Some(bad) = f.iter().find(|x| !x.is_finite()) {
+                    bail!(
+                        "{}: {bad} is not a finite number",
+                        src.at(&format!("{field}.factors"))
+                    );
+                }
+                (f.iter().map(|x| toml::Value::Float(*x)).collect(), true)
+            }
+            _ => bail!("{at}: takes exactly one of `values`, `range` and `factors`"),
+        };
+        if values.is_empty() {
+            bail!("{at} ({label}) has no values");
+        }
+        axes.push(Axis {
+            label,
+            paths,
+            fields,
+            values,
+            factors,
+        });
+    }
+    let mut labels = BTreeSet::new();
+    for (i, a) in axes.iter().enumerate() {
+        if !labels.insert(a.label.as_str()) {
+            bail!(
+                "{}: two axes are labelled `{}`: give one a `label`",
+                src.at(&format!("axes[{i}]")),
+                a.label
+            );
+        }
+        if a.is_seed() && a.factors {
+            bail!(
+                "{}: the seed axis takes `values` or a `range`, not `factors`",
+                src.at(&format!("axes[{i}]"))
+            );
+        }
+    }
+    refuse_overlaps(&axes, src)?;
+    Ok(axes)
+}
+
+/// The campaign file from its text: a syntax error, an unknown key or a value of the wrong type
+/// is named with its line and column.
+fn parse_campaign(text: &str, name: &str) -> Result<CampaignFile> {
+    // Syntax first, as scenario files are checked.
+    toml::from_str::<toml::Table>(text)
+        .map_err(|e| anyhow::anyhow!("{name}: {}", scenario::toml_syntax_error(text, &e)))?;
+    toml::from_str(text).map_err(|e| {
+        let at = e.span().map_or(String::new(), |span| {
+            let (line, column) = scenario::line_column(text, span.start);
+            format!(" (line {line}, column {column})")
+        });
+        anyhow::anyhow!("{name}{at}: {}", e.message().trim_end())
+    })
+}
+
+/// Refuses a `[set]` edit that an axis overwrites in every run (the axis's path is the edit's
+/// or a table holding it); an axis of `factors` scales the value `[set]` gives, so an edit
+/// under it is meant.
+fn refuse_set_under_axes(
+    set: &[(FieldPath, toml::Value)],
+    axes: &[Axis],
+    src: &Source,
+) -> Result<()> {
+    for (p, _) in set {
+        for a in axes.iter().filter(|a| !a.factors) {
+            for (q, f) in a.paths.iter().zip(&a.fields) {
+                if q.holds(p) {
+                    bail!(
+                        "{}: `{p}` in [set] ({}) is overwritten in every run by axis `{}` ({}): set it in one place",
+                        src.name,
+                        src.place("set"),
+                        a.label,
+                        src.place(f)
+                    );
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Refuses two paths of the axes that reach one value (the same path, `attack.x` and
+/// `attack.profile.x`, or a table and a value inside it): the later one would overwrite the
+/// earlier in every run, which would run one value and report another. Names both axes, the
+/// paths and their places in the campaign file.
+fn refuse_overlaps(axes: &[Axis], src: &Source) -> Result<()> {
+    let all: Vec<(&Axis, &FieldPath, &String)> = axes
+        .iter()
+        .flat_map(|a| a.paths.iter().zip(&a.fields).map(move |(p, f)| (a, p, f)))
+        .collect();
+    for (n, (a, p, f)) in all.iter().enumerate() {
+        for (b, q, g) in &all[n + 1..] {
+            if !p.overlaps(q) {
+                continue;
+            }
+            let what = if p.text == q.text {
+                format!("`{p}`")
+            } else {
+                format!("`{p}` and `{q}`, which reach one value")
+            };
+            if std::ptr::eq(*a, *b) {
+                bail!(
+                    "{}: axis `{}` sets {what} twice, at {} and at {}: each path of an axis must reach a value of its own",
+                    src.name,
+                    a.label,
+                    src.place(f),
+                    src.place(g)
+                );
+            }
+            bail!(
+                "{}: axes `{}` ({}) and `{}` ({}) both set {what}: every run would hold the later axis's value whatever the earlier one's column says; sweep the path on one axis (several values in lockstep: mode = \"zip\"; one value at several paths: `paths`)",
+                src.name,
+                a.label,
+                src.place(f),
+                b.label,
+                src.place(g)
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The combinations of the non-seed axes (indices into each one's values).
+fn combinations(axes: &[&Axis], mode: Mode) -> Result<Vec<Vec<usize>>> {
+    if axes.is_empty() {
+        return Ok(vec![vec![]]);
+    }
+    match mode {
+        Mode::Zip => {
+            let n = axes[0].values.len();
+            if let Some(other) = axes.iter().find(|a| a.values.len() != n) {
+                bail!(
+                    "mode = \"zip\" needs axes of one length: `{}` has {n} values, `{}` has {}",
+                    axes[0].label,
+                    other.label,
+                    other.values.len()
+                );
+            }
+            Ok((0..n).map(|i| vec![i; axes.len()]).collect())
+        }
+        Mode::Product => {
+            let mut out: Vec<Vec<usize>> = vec![vec![]];
+            for a in axes {
+                out = out
+                    .into_iter()
+                    .flat_map(|c| {
+                        (0..a.values.len()).map(move |i| {
+                            let mut c = c.clone();
+                            c.push(i);
+                            c
+                        })
+                    })
+                    .collect();
+                if out.len() > MAX_RUNS {
+                    bail!("more than {MAX_RUNS} points");
+                }
+            }
+            Ok(out)
+        }
+    }
+}
+
+/// The value an axis writes at `path` of `doc`.
+fn axis_value(
+    a: &Axis,
+    p: &FieldPath,
+    v: &toml::Value,
+    doc: &mut toml::Table,
+) -> Result<toml::Value> {
+    if !a.factors {
+        return Ok(v.clone());
+    }
+    let f = number(v, &a.label)?;
+    let base = p.number(doc)?;
+    Ok(toml::Value::Float(base * f))
+}
+
+/// The key of a run: SHA-256 over the launcher's version, the engine and the fully resolved
+/// scenario (attack inlined).
+fn run_key(r: &Resolved, engine: Engine) -> String {
+    let mut h = Sha256::new();
+    h.update(format!(
+        "fdi-launch {}\nengine {}\n",
+        env!("CARGO_PKG_VERSION"),
+        engine.as_str()
+    ));
+    h.update(r.to_toml());
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+fn show(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// The campaign as resolved: its axes, points and runs.
+struct Plan {
+    name: String,
+    axes: Vec<Axis>,
+    points: Vec<Point>,
+    jobs: Vec<Job>,
+    seeds: usize,
+    plots: Option<Vec<String>>,
+}
+
+fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
+    let name_of = campaign.display().to_string();
+    let text = scenario::read_limited(campaign).map_err(anyhow::Error::msg)?;
+    let file = parse_campaign(&text, &name_of)?;
+    let src = Source {
+        name: &name_of,
+        text: &text,
+    };
+    if crate::run_dirs::safe_name(&file.name).is_empty() {
+        bail!(
+            "{}: is empty: the campaign's folder is runs/campaigns/<name>",
+            src.at("name")
+        );
+    }
+    let file_dir = campaign.parent().unwrap_or(Path::new(""));
+    let (base_text, base_name, base_dir) = match &file.scenario {
+        Some(p) => {
+            let path = file_dir.join(p);
+            (
+                scenario::read_limited(&path).map_err(anyhow::Error::msg)?,
+                path.display().to_string(),
+                path.parent().map(Path::to_path_buf),
+            )
+        }
+        None => (
+            scenario::PAPER_SCENARIO.to_string(),
+            "<embedded paper scenario>".to_string(),
+            None,
+        ),
+    };
+    let base = scenario::load_str(&base_text, &base_name, base_dir.as_deref())?;
+    let mut doc: toml::Table =
+        toml::from_str(&base_text).with_context(|| format!("{base_name}: not a TOML document"))?;
+    let axes = resolve_axes(&file, &src)?;
+    let set: Vec<(FieldPath, toml::Value)> = file
+        .set
+        .iter()
+        .map(|(k, v)| {
+            Ok((
+                FieldPath::parse(k).with_context(|| src.at("set"))?,
+                v.clone(),
+            ))
+        })
+        .collect::<Result<_>>()?;
+    refuse_set_under_axes(&set, &axes, &src)?;
+    let touches_attack = set.iter().any(|(p, _)| p.is_in_attack_profile())
+        || axes
+            .iter()
+            .flat_map(|a| &a.paths)
+            .any(FieldPath::is_in_attack_profile);
+    if touches_attack {
+        // Paths into the attack edit its profile, written inline.
+        let mut attack = toml::Table::new();
+        attack.insert(
+            "profile".into(),
+            toml::Value::try_from(&base.attack).context("the base scenario's attack as TOML")?,
+        );
+        doc.insert("attack".into(), toml::Value::Table(attack));
+    }
+    for (p, v) in &set {
+        p.set(&mut doc, v).with_context(|| src.at("set"))?;
+    }
+    let seed_axis = axes.iter().find(|a| a.is_seed()).cloned();
+    let others: Vec<&Axis> = axes.iter().filter(|a| !a.is_seed()).collect();
+    let combos = combinations(&others, file.mode)?;
+    let seeds = seed_axis.as_ref().map_or(1, |a| a.values.len());
+    if combos.len().saturating_mul(seeds) > MAX_RUNS {
+        bail!("{} runs, more than {MAX_RUNS}", combos.len() * seeds);
+    }
+    let mut points = Vec::new();
+    let mut jobs = Vec::new();
+    for (pi, combo) in combos.iter().enumerate() {
+        let mut point_doc = doc.clone();
+        let mut values = Vec::new();
+        for (a, &i) in others.iter().zip(combo) {
+            let v = &a.values[i];
+            for p in &a.paths {
+                let x = axis_value(a, p, v, &mut point_doc)
+                    .with_context(|| format!("axis `{}`", a.label))?;
+                p.set(&mut point_doc, &x)
+                    .with_context(|| format!("axis `{}` = {}", a.label, show(v)))?;
+            }
+            values.push((a.label.clone(), v.clone()));
+        }
+        let seed_values: Vec<Option<&toml::Value>> = match &seed_axis {
+            Some(a) => a.values.iter().map(Some).collect(),
+            None => vec![None],
+        };
+        for sv in seed_values {
+            let mut run_doc = point_doc.clone();
+            let mut label: Vec<String> = values
+                .iter()
+                .map(|(l, v)| format!("{l} = {}", show(v)))
+                .collect();
+            if let (Some(a), Some(v)) = (&seed_axis, sv) {
+                a.paths[0]
+                    .set(&mut run_doc, v)
+                    .with_context(|| format!("axis `seed` = {}", show(v)))?;
+                label.push(format!("seed = {}", show(v)));
+            }
+            let label = label.join(", ");
+            let text = toml::to_string(&run_doc).context("a run's scenario as TOML")?;
+            let resolved = scenario::load_str(
+                &text,
+                &format!("{name_of}: the run {label}"),
+                base_dir.as_deref(),
+            )?;
+            if resolved.scenario.clock == ClockMode::Realtime && engine == Engine::Inproc {
+                bail!("the run {label}: the realtime clock needs --engine ipc");
+            }
+            let key = run_key(&resolved, engine);
+            jobs.push(Job {
+                point: pi,
+                label,
+                resolved,
+                key,
+            });
+        }
+        points.push(Point { values });
+    }
+    Ok(Plan {
+        name: file.name,
+        axes,
+        points,
+        jobs,
+        seeds,
+        plots: file.plots,
+    })
+}
+
+fn stored_path(out: &Path, key: &str) -> PathBuf {
+    out.join("points").join(format!("{}.json", &key[..16]))
+}
+
+/// The stored result of a run, if there is a valid one for exactly this key.
+fn load_stored(out: &Path, key: &str) -> Option<RunSummary> {
+    let p = stored_path(out, key);
+    let text = std::fs::read_to_string(&p).ok()?;
+    match serde_json::from_str::<Stored>(&text) {
+        Ok(s) if s.key == key => Some(s.summary),
+        Ok(_) => None,
+        Err(e) => {
+            eprintln!(
+                "fdi-launch: warning: {} cannot be read ({e}); its run is done again",
+                p.display()
+            );
+            None
+        }
+    }
+}
+
+/// Writes `bytes` to `path` whole or not at all (a temporary file in the same folder, renamed).
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let dir = path.parent().unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut tmp = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("a temporary file in {}", dir.display()))?;
+    tmp.write_all(bytes)
+        .with_context(|| format!("writing {}", path.display()))?;
+    tmp.persist(path)
+        .map_err(|e| anyhow::anyhow!("writing {}: {}", path.display(), e.error))?;
+    Ok(())
+}
+
+/// The folder of a campaign without `--out`: `runs/campaigns/<name>`, the name made one
+/// component of the path by the rule of run folders ([`crate::run_dirs::safe_name`]), so that
+/// `../x` or `/x` stays under `runs/campaigns/` (an empty name is refused by [`plan`]).
+fn default_out(name: &str) -> PathBuf {
+    PathBuf::from("runs")
+        .join("campaigns")
+        .join(crate::run_dirs::safe_name(name))
+}
+
+pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
+    let plan = plan(&args.campaign, args.engine)?;
+    let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
+    if out.exists() && !out.is_dir() {
+        bail!("--out {} is not a folder", out.display());
+    }
+    std::fs::create_dir_all(out.join("points"))
+        .with_context(|| format!("creating {}", out.join("points").display()))?;
+    std::fs::copy(&args.campaign, out.join("campaign.toml"))
+        .with_context(|| format!("copying the campaign into {}", out.display()))?;
+    let mut results: Vec<Option<RunSummary>> = plan
+        .jobs
+        .iter()
+        .map(|j| load_stored(&out, &j.key))
+        .collect();
+    let todo: Vec<usize> = (0..plan.jobs.len())
+        .filter(|&i| results[i].is_none())
+        .collect();
+    let skipped = plan.jobs.len() - todo.len();
+    let jobs = args.jobs.unwrap_or_else(runner::default_jobs);
+    println!(
+        "campaign {}: {} runs ({} points × {} seeds), engine {}, {} jobs: {skipped} already done (skipped), {} to run",
+        plan.name,
+        plan.jobs.len(),
+        plan.points.len(),
+        plan.seeds,
+        args.engine.as_str(),
+        jobs,
+        todo.len()
+    );
+    let mut failed: Vec<String> = Vec::new();
+    let mut ran = 0usize;
+    let mut signal = None;
+    let runs_root = out.join("runs");
+    let outcome = runner::run_parallel(
+        &todo,
+        jobs,
+        &plan.name,
+        stop,
+        |&i| run_one(&plan.jobs[i], &plan.name, args, &runs_root, stop),
+        |n, result| {
+            let job = &plan.jobs[todo[n]];
+            match result {
+                Ok(summary) => {
+                    let stored = Stored {
+                        key: job.key.clone(),
+                        engine: args.engine.as_str().into(),
+                        run: job.label.clone(),
+                        summary,
+                    };
+                    write_atomic(
+                        &stored_path(&out, &job.key),
+                        (serde_json::to_string_pretty(&stored)? + "\n").as_bytes(),
+                    )?;
+                    results[todo[n]] = Some(stored.summary);
+                    ran += 1;
+                }
+                Err(e) => match e.downcast_ref::<fdi_common::stop::Interrupted>() {
+                    Some(i) => signal = Some(i.signal),
+                    None => {
+                        eprintln!(
+                            "fdi-launch: the run {} failed: {}",
+                            job.label,
+                            fdi_report::output::describe_error(&e)
+                        );
+                        failed.push(job.label.clone());
+                    }
+                },
+            }
+            Ok(())
+        },
+    )?;
+    let signal = signal.or(outcome.interrupted);
+    let tables = write_outputs(&plan, &results, &out)?;
+    println!(
+        "skipped {skipped}, ran {ran}, failed {}{}; {} of {} runs in the tables",
+        failed.len(),
+        if outcome.not_started > 0 {
+            format!(", not started {}", outcome.not_started)
+        } else {
+            String::new()
+        },
+        results.iter().filter(|r| r.is_some()).count(),
+        plan.jobs.len()
+    );
+    println!("campaign folder {}", out.display());
+    for t in tables {
+        println!("  {}", t.display());
+    }
+    if let Some(signal) = signal {
+        return Err(fdi_common::stop::Interrupted {
+            signal,
+            phase: DURING_THE_CAMPAIGN,
+        }
+        .into());
+    }
+    if !failed.is_empty() {
+        eprintln!(
+            "fdi-launch: {} runs failed ({}); a rerun runs them again",
+            failed.len(),
+            failed.join("; ")
+        );
+        return Ok(ExitCode::FAILURE);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// One run of the campaign: whole, or an error.
+fn run_one(
+    job: &Job,
+    name: &str,
+    args: &SweepArgs,
+    runs_root: &Path,
+    stop: &Stop,
+) -> Result<RunSummary> {
+    let opts = crate::run::Options::quiet(args.traces, stop);
+    let summary = match args.traces {
+        Traces::None => execute(&job.resolved, args.engine, None, &opts),
+        _ => {
+            let mut named = job.resolved.clone();
+            named.scenario.name = format!("{name}-{}", &job.key[..12]);
+            let dir = crate::run_dirs::create_run_dir(runs_root, &named)?;
+            crate::run_dirs::discard_if_not_started(
+                &dir,
+                execute(&named, args.engine, Some(&dir), &opts),
+            )
+        }
+    };
+    summary
+        .and_then(crate::run::require_whole)
+        .with_context(|| format!("the run {}", job.label))
+}
+
+/// One row of the results table.
+struct Row<'a> {
+    job: &'a Job,
+    seed: u64,
+    cells: Vec<(String, Cell)>,
+}
+
+/// Writes the results and aggregate tables and the figures; returns the tables' paths.
+fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Result<Vec<PathBuf>> {
+    let axis_labels: Vec<&str> = plan
+        .axes
+        .iter()
+        .filter(|a| !a.is_seed())
+        .map(|a| a.label.as_str())
+        .collect();
+    let mut rows = Vec::new();
+    for (job, r) in plan.jobs.iter().zip(results) {
+        let Some(s) = r else { continue };
+        let mut cells: Vec<(String, Cell)> = plan.points[job.point]
+            .values
+            .iter()
+            .map(|(l, v)| (l.clone(), toml_cell(v)))
+            .collect();
+        cells.push(("seed".into(), Cell::Int(i128::from(s.seed))));
+        cells.push(("key".into(), Cell::Text(job.key[..16].to_string())));
+        cells.extend(flatten::flatten(s)?);
+        rows.push(Row {
+            job,
+            seed: s.seed,
+            cells,
+        });
+    }
+    // Every column any row has, in first-seen order.
+    let mut columns: Vec<String> = Vec::new();
+    let mut seen = BTreeSet::new();
+    for r in &rows {
+        for (c, _) in &r.cells {
+            if seen.insert(c.clone()) {
+                columns.push(c.clone());
+            }
+        }
+    }
+    let lookup = |r: &Row, c: &str| {
+        r.cells
+            .iter()
+            .find(|(n, _)| n == c)
+            .map_or(Cell::Empty, |(_, v)| v.clone())
+    };
+    let mut w = csv::Writer::from_writer(Vec::new());
+    w.write_record(&columns)?;
+    for r in &rows {
+        w.write_record(columns.iter().map(|c| lookup(r, c).csv()))?;
+    }
+    let results_csv = out.join("results.csv");
+    write_atomic(&results_csv, &w.into_inner().map_err(|e| e.into_error())?)?;
+    let json_rows: Vec<serde_json::Value> = rows
+        .iter()
+        .map(|r| {
+            let mut m = serde_json::Map::new();
+            m.insert("run".into(), r.job.label.clone().into());
+            for (c, v) in &r.cells {
+                m.insert(c.clone(), v.json());
+            }
+            serde_json::Value::Object(m)
+        })
+        .collect();
+    let results_json = out.join("results.json");
+    write_atomic(
+        &results_json,
+        (serde_json::to_string_pretty(&json_rows)? + "\n").as_bytes(),
+    )?;
+
+    // Aggregate per point over its seeds.
+    let skip: BTreeSet<&str> = axis_labels.iter().copied().chain(["seed", "key"]).collect();
+    let numeric: Vec<&String> = columns
+        .iter()
+        .filter(|c| !skip.contains(c.as_str()))
+        .filter(|c| rows.iter().any(|r| lookup(r, c).num().is_some()))
+        .collect();
+    let mut aggregate = Vec::new();
+    for (pi, point) in plan.points.iter().enumerate() {
+        let members: Vec<&Row> = rows.iter().filter(|r| r.job.point == pi).collect();
+        let mut metrics = BTreeMap::new();
+        for c in &numeric {
+            let xs: Vec<f64> = members
+                .iter()
+                .map(|r| lookup(r, c).num().unwrap_or(f64::NAN))
+                .collect();
+            metrics.insert((*c).clone(), stats::describe(&xs));
+        }
+        aggregate.push(Aggregate {
+            point: point.clone(),
+            runs: members.len(),
+            seeds: members.iter().map(|r| r.seed).collect(),
+            metrics,
+        });
+    }
+    let mut w = csv::Writer::from_writer(Vec::new());
+    let mut header: Vec<&str> = axis_labels.clone();
+    header.extend(["metric", "runs", "n", "mean", "sd", "ci_low", "ci_high"]);
+    w.write_record(&header)?;
+    let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
+    for a in &aggregate {
+        for c in &numeric {
+            let s = a.metrics.get(*c).copied().flatten();
+            let mut rec: Vec<String> = a.point.values.iter().map(|(_, v)| show(v)).collect();
+            rec.push((*c).clone());
+            rec.push(a.runs.to_string());
+            rec.push(s.map_or(0, |s| s.n).to_string());
+            rec.push(opt(s.map(|s| s.mean)));
+            rec.push(opt(s.and_then(|s| s.sd)));
+            rec.push(opt(s.and_then(|s| s.ci_low)));
+            rec.push(opt(s.and_then(|s| s.ci_high)));
+            w.write_record(&rec)?;
+        }
+    }
+    let aggregate_csv = out.join("aggregate.csv");
+    write_atomic(&aggregate_csv, &w.into_inner().map_err(|e| e.into_error())?)?;
+    let aggregate_json = out.join("aggregate.json");
+    let json: Vec<serde_json::Value> = aggregate
+        .iter()
+        .map(|a| {
+            let point: serde_json::Map<String, serde_json::Value> = a
+                .point
+                .values
+                .iter()
+                .map(|(l, v)| (l.clone(), toml_cell(v).json()))
+                .collect();
+            serde_json::json!({
+                "point": point,
+                "runs": a.runs,
+                "seeds": a.seeds,
+                "confidence": stats::LEVEL,
+                "metrics": a.metrics,
+            })
+        })
+        .collect();
+    write_atomic(
+        &aggregate_json,
+        (serde_json::to_string_pretty(&json)? + "\n").as_bytes(),
+    )?;
+
+    let families = plot_families(plan.plots.as_deref(), &numeric)?;
+    let md_path = out.join("aggregate.md");
+    write_atomic(
+        &md_path,
+        aggregate_markdown(plan, &aggregate, &families).as_bytes(),
+    )?;
+    figures::write_all(plan, &aggregate, &families, &out.join("figures"))?;
+    Ok(vec![
+        results_csv,
+        results_json,
+        aggregate_csv,
+        aggregate_json,
+        md_path,
+        out.join("figures"),
+    ])
+}
+
+fn toml_cell(v: &toml::Value) -> Cell {
+    match v {
+        toml::Value::Integer(i) => Cell::Int(i128::from(*i)),
+        toml::Value::Float(f) => Cell::Num(*f),
+        other => Cell::Text(show(other)),
+    }
+}
+
+/// The statistics of one point.
+#[derive(Debug)]
+pub(crate) struct Aggregate {
+    point: Point,
+    runs: usize,
+    /// The seeds of its runs, exact.
+    seeds: Vec<u64>,
+    /// Per column: `None` when no run of the point has a number there.
+    metrics: BTreeMap<String, Option<Stats>>,
+}
+
+/// The robots of a set of columns (`robot<id>.…`), in id order.
+/// The labels of a plan's axes other than the seed, and the robots an aggregate has metrics
+/// of.
+fn labels_and_robots<'p>(plan: &'p Plan, aggregate: &[Aggregate]) -> (Vec<&'p str>, Vec<String>) {
+    let labels = plan
+        .axes
+        .iter()
+        .filter(|a| !a.is_seed())
+        .map(|a| a.label.as_str())
+        .collect();
+    let all: Vec<String> = aggregate
+        .iter()
+        .flat_map(|a| a.metrics.keys().cloned())
+        .collect();
+    let refs: Vec<&String> = all.iter().collect();
+    (labels, robots(&refs))
+}
+
+fn robots(columns: &[&String]) -> Vec<String> {
+    let mut ids: Vec<(u64, String)> = columns
+        .iter()
+        .filter_map(|c| {
+            c.strip_prefix("robot")?
+                .split_once('.')
+                .map(|(id, _)| id.to_string())
+        })
+        .filter_map(|id| id.parse::<u64>().ok().map(|n| (n, id)))
+        .collect();
+    ids.sort();
+    ids.dedup();
+    ids.into_iter().map(|(_, id)| id).collect()
+}
+
+/// The per-robot metrics drawn and tabulated: those asked for (each must exist), or the
+/// default set among those present.
+fn plot_families(asked: Option<&[String]>, numeric: &[&String]) -> Result<Vec<String>> {
+    let present: BTreeSet<String> = numeric
+        .iter()
+        .filter_map(|c| {
+            c.strip_prefix("robot")?
+                .split_once('.')
+                .map(|(_, f)| f.to_string())
+        })
+        .collect();
+    if let Some(asked) = asked {
+        for f in asked {
+            if !present.contains(f) {
+                bail!(
+                    "plots: no per-robot metric `{f}` in the results; the metrics are: {}",
+                    present.iter().cloned().collect::<Vec<_>>().join(", ")
+                );
+            }
+        }
+        return Ok(asked.to_vec());
+    }
+    let mut out: Vec<String> = ["rmse_rad", "max_abs_error_rad", "deadline_misses"]
+        .iter()
+        .map(|s| s.to_string())
+        .collect();
+    let detectors: BTreeSet<&str> = present
+        .iter()
+        .filter_map(|f| {
+            f.strip_prefix("detectors.")?
+                .split_once('.')
+                .map(|(d, _)| d)
+        })
+        .collect();
+    for d in detectors {
+        for m in ["onsets.mean_time_to_detect_s", "false_alarms", "coverage"] {
+            out.push(format!("detectors.{d}.{m}"));
+        }
+    }
+    Ok(out.into_iter().filter(|f| present.contains(f)).collect())
+}
+
+/// `aggregate.md`: per metric, a table of its mean ± CI half-width (n) per point and robot.
+fn aggregate_markdown(plan: &Plan, aggregate: &[Aggregate], families: &[String]) -> String {
+    let (labels, ids) = labels_and_robots(plan, aggregate);
+    let mut md = format!(
+        "# Campaign `{}`\n\nMean ± half-width of the {:.0} % confidence interval (Student t) over the seeds of each point, (n) the runs with a value.\n",
+        plan.name,
+        stats::LEVEL * 100.0
+    );
+    for f in families {
+        let _ = write!(md, "\n## {f}\n\n");
+        let mut cols: Vec<String> = labels.iter().map(|s| s.to_string()).collect();
+        cols.extend(ids.iter().map(|id| format!("robot {id}")));
+        let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
+        md.push_str(&fdi_report::output::md_table_head(&cols));
+        for a in aggregate {
+            let mut cells: Vec<String> = a.point.values.iter().map(|(_, v)| show(v)).collect();
+            for id in &ids {
+                let s = a.metrics.get(&format!("robot{id}.{f}")).copied().flatten();
+                cells.push(match s {
+                    None => "–".into(),
+                    Some(s) => match s.half_width() {
+                        Some(h) => format!("{} ± {} ({})", sig(s.mean), sig(h), s.n),
+                        None => format!("{} ({})", sig(s.mean), s.n),
+                    },
+                });
+            }
+            let _ = writeln!(md, "| {} |", cells.join(" | "));
+        }
+    }
+    md
+}
+
+/// Four significant digits.
+pub(crate) fn sig(x: f64) -> String {
+    if x == 0.0 || !x.is_finite() {
+        return format!("{x}");
+    }
+    if x.abs() < 1e-3 {
+        return format!("{x:.3e}");
+    }
+    let digits = (3 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
+    format!("{x:.digits$}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn r(text: &str) -> RangeFile {
+        toml::from_str::<RangeFile>(text).expect("range")
+    }
+
+    fn values(text: &str) -> Result<Vec<toml::Value>> {
+        range_values(&r(text), &|f: &str| format!("r.{f}"))
+    }
+
+    #[test]
+    fn ranges_by_step_and_by_count() {
+        let ints = values("start = 1\nstop = 4\nstep = 1").expect("values");
+        assert_eq!(ints, (1..=4).map(toml::Value::Integer).collect::<Vec<_>>());
+        let down = values("start = 4\nstop = 0\nstep = -2").expect("values");
+        assert_eq!(down, [4, 2, 0].map(toml::Value::Integer).to_vec());
+        let fl = values("start = 0.0\nstop = 0.3\nstep = 0.1").expect("values");
+        assert_eq!(fl.len(), 4);
+        // Integer ends and whole steps: integers.
+        let c = values("start = 10\nstop = 40\ncount = 4").expect("values");
+        assert_eq!(c, [10, 20, 30, 40].map(toml::Value::Integer).to_vec());
+        let c = values("start = 1\nstop = 2\ncount = 3").expect("values");
+        assert_eq!(c, [1.0, 1.5, 2.0].map(toml::Value::Float).to_vec());
+        let c = values("start = 10.0\nstop = 40.0\ncount = 4").expect("values");
+        assert_eq!(c, [10.0, 20.0, 30.0, 40.0].map(toml::Value::Float).to_vec());
+        for bad in [
+            "start = 1\nstop = 4",
+            "start = 1\nstop = 4\nstep = 1\ncount = 2",
+            "start = 1\nstop = 4\nstep = 0",
+            "start = 4\nstop = 1\nstep = 1",
+            "start = 1.0\nstop = 4.0\nstep = 0.0",
+            "start = 4.0\nstop = 1.0\nstep = 1.0",
+            "start = 1\nstop = 4\ncount = 0",
+            "start = nan\nstop = 4.0\nstep = 1.0",
+        ] {
+            assert!(values(bad).is_err(), "{bad}");
+        }
+    }
+
+    /// A range near 2⁶³ used to be computed in floats: its eight seeds were one
+    /// (9223372036854775807 rounds to 9223372036854775808.0), the campaign ran once and showed
+    /// the seed as 9223372036854776000.
+    #[test]
+    fn seeds_near_2_to_the_63_stay_exact() {
+        let seeds = values("start = 9223372036854775800\nstop = 9223372036854775807\nstep = 1")
+            .expect("values");
+        assert_eq!(
+            seeds,
+            (i64::MAX - 7..=i64::MAX)
+                .map(toml::Value::Integer)
+                .collect::<Vec<_>>()
+        );
+        let by_count = values("start = 9223372036854775800\nstop = 9223372036854775807\ncount = 8")
+            .expect("values");
+        assert_eq!(by_count, seeds);
+
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let file = dir.path().join("seeds.toml");
+        std::fs::write(
+            &file,
+            "name = \"seeds\"\n[set]\nduration_s = 0.1\n[[axes]]\npath = \"seed\"\n\
+             range = { start = 9223372036854775800, stop = 9223372036854775807, step = 1 }\n",
+        )
+        .expect("campaign file");
+        let plan = plan(&file, Engine::Inproc).expect("plan");
+        assert_eq!(plan.jobs.len(), 8);
+        let ran: Vec<u64> = plan.jobs.iter().map(|j| j.resolved.scenario.seed).collect();
+        let want: Vec<u64> = (i64::MAX as u64 - 7..=i64::MAX as u64).collect();
+        assert_eq!(ran, want);
+        let keys: BTreeSet<&str> = plan.jobs.iter().map(|j| j.key.as_str()).collect();
+        assert_eq!(keys.len(), 8, "eight seeds are eight runs");
+        assert_eq!(plan.jobs[7].label, "seed = 9223372036854775807");
+
+        // The tables show each seed as it ran, to the last digit.
+        let results: Vec<Option<RunSummary>> = ran
+            .iter()
+            .map(|&seed| {
+                let mut s = fdi_report::output::sample_summary();
+                s.seed = seed;
+                Some(s)
+            })
+            .collect();
+        let out = dir.path().join("out");
+        write_outputs(&plan, &results, &out).expect("outputs");
+        let csv = std::fs::read_to_string(out.join("results.csv")).expect("results.csv");
+        let mut reader = csv::Reader::from_reader(csv.as_bytes());
+        let column = reader
+            .headers()
+            .expect("header")
+            .iter()
+            .position(|h| h == "seed")
+            .expect("a seed column");
+        let shown: Vec<String> = reader
+            .records()
+            .map(|r| r.expect("row")[column].to_string())
+            .collect();
+        let want_text: Vec<String> = want.iter().map(u64::to_string).collect();
+        assert_eq!(shown, want_text);
+        let json: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("results.json")).expect("results.json"),
+        )
+        .expect("JSON");
+        let json_seeds: Vec<Option<u64>> = json
+            .as_array()
+            .expect("rows")
+            .iter()
+            .map(|r| r["seed"].as_u64())
+            .collect();
+        assert_eq!(
+            json_seeds,
+            want.iter().copied().map(Some).collect::<Vec<_>>()
+        );
+        let aggregate: serde_json::Value = serde_json::from_str(
+            &std::fs::read_to_string(out.join("aggregate.json")).expect("aggregate.json"),
+        )
+        .expect("JSON");
+        assert_eq!(aggregate[0]["seeds"], serde_json::json!(want));
+    }
+
+    /// A step of 1e-300 (or a span beyond the largest float) made the count wrap: "has no
+    /// values". It is the run limit that refuses it, saying so.
+    #[test]
+    fn a_step_of_1e_300_hits_the_run_limit() {
+        for text in [
+            "start = 0.0\nstop = 1.0\nstep = 1e-300",
+            "start = -1e308\nstop = 1e308\nstep = 1.0",
+            "start = -9223372036854775808\nstop = 9223372036854775807\nstep = 1",
+            "start = 0\nstop = 100000\nstep = 1",
+        ] {
+            let e = values(text).expect_err(text).to_string();
+            assert!(
+                e.starts_with("r.: ")
+                    && e.contains(&format!(
+                        "more than the {MAX_RUNS} runs a campaign may hold"
+                    )),
+                "{text}: {e}"
+            );
+        }
+        assert_eq!(
+            values("start = 0\nstop = 99999\nstep = 1")
+                .expect("the limit itself")
+                .len(),
+            MAX_RUNS
+        );
+        // A span beyond the largest float in few steps is a range of finite values.
+        let wide = values("start = -1e308\nstop = 1e308\nstep = 1e307").expect("values");
+        assert_eq!(wide.len(), 21);
+        assert_eq!(wide[20], toml::Value::Float(1e308));
+        let wide = values("start = -1e308\nstop = 1e308\ncount = 3").expect("values");
+        assert_eq!(wide, [-1e308, 0.0, 1e308].map(toml::Value::Float).to_vec());
+    }
+
+    /// Writes `text` as a campaign file and plans it: the error, or a panic if it plans.
+    fn refusal(text: &str) -> String {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let file = dir.path().join("c.toml");
+        std::fs::write(&file, text).expect("campaign file");
+        let e = match plan(&file, Engine::Inproc) {
+            Ok(_) => panic!("planned:\n{text}"),
+            Err(e) => format!("{e:#}"),
+        };
+        let name = file.display().to_string();
+        assert!(e.starts_with(&name), "{e}");
+        e.replacen(&name, "c.toml", 1)
+    }
+
+    /// `a` = controller.beta [10, 20] and `b` = controller.beta [30] ran β = 30 twice and
+    /// reported rows a = 10 and a = 20.
+    #[test]
+    fn two_axes_on_one_path_are_refused() {
+        let e = refusal(
+            "name = \"x\"\n\
+             [[axes]]\nlabel = \"a\"\npath = \"controller.beta\"\nvalues = [10.0, 20.0]\n\
+             [[axes]]\nlabel = \"b\"\npath = \"controller.beta\"\nvalues = [30.0]\n",
+        );
+        assert!(
+            e.starts_with(
+                "c.toml: axes `a` (axes[0].path (line 4, column 1)) and `b` (axes[1].path (line 8, column 1)) both set `controller.beta`"
+            ),
+            "{e}"
+        );
+        // One value reached by two spellings, and a table holding a swept value.
+        let e = refusal(
+            "name = \"x\"\n\
+             [[axes]]\npath = \"attack.channels[0].segments[1].waveform.value\"\nvalues = [1.0]\n\
+             [[axes]]\npath = \"attack.profile.channels\"\nvalues = [[]]\n",
+        );
+        assert!(
+            e.contains("both set `attack.channels[0].segments[1].waveform.value` and `attack.profile.channels`, which reach one value")
+                && e.contains("(line 3, column 1)")
+                && e.contains("(line 6, column 1)"),
+            "{e}"
+        );
+        // One path twice in one axis (with factors, it was scaled twice).
+        let e = refusal(
+            "name = \"x\"\n[[axes]]\nlabel = \"k\"\n\
+             paths = [\"controller.beta\", \"controller.beta\"]\nfactors = [2.0]\n",
+        );
+        assert!(
+            e.contains("axis `k` sets `controller.beta` twice, at axes[0].paths[0] (line 4, column 10) and at axes[0].paths[1] (line 4, column 29)"),
+            "{e}"
+        );
+        // A [set] edit that an axis overwrites in every run.
+        let e = refusal(
+            "name = \"x\"\n[set]\n\"controller.beta\" = 5.0\n\
+             [[axes]]\npath = \"controller\"\nvalues = [{ mode = \"proposed\" }]\n",
+        );
+        assert!(
+            e.contains("`controller.beta` in [set] (set (line 2, column 2)) is overwritten in every run by axis `controller` (axes[0].path (line 5, column 1))"),
+            "{e}"
+        );
+        // An axis of factors scales what [set] gives: meant, and planned.
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let file = dir.path().join("c.toml");
+        std::fs::write(
+            &file,
+            "name = \"x\"\n[set]\n\"controller.beta\" = 5.0\n\
+             [[axes]]\npath = \"controller.beta\"\nfactors = [1.0, 2.0]\n",
+        )
+        .expect("campaign file");
+        let p = plan(&file, Engine::Inproc).expect("plan");
+        let betas: Vec<f64> = p
+            .jobs
+            .iter()
+            .map(|j| j.resolved.scenario.controller.beta)
+            .collect();
+        assert_eq!(betas, [5.0, 10.0]);
+    }
+
+    #[test]
+    fn campaign_toml_syntax_error_has_line_and_column() {
+        let e = refusal("name = \"x\"\n[[axes]]\npath = \"controller.beta\nvalues = [1.0]\n");
+        assert!(
+            e.starts_with("c.toml: TOML syntax at line 3, column "),
+            "{e}"
+        );
+        let e = refusal("name = \"x\"\n[[axes]]\npath = \"controller.beta\"\nvalue = [1.0]\n");
+        assert!(
+            e.starts_with("c.toml (line 4, column 1): unknown field `value`"),
+            "{e}"
+        );
+        let e = refusal(
+            "name = \"x\"\n[[axes]]\npath = \"controller.beta\"\n\
+             range = { start = 1.0, stop = 2.0, step = -1.0 }\n",
+        );
+        assert!(
+            e.starts_with("c.toml: axes[0].range.step (line 4, column 36): step -1 never goes"),
+            "{e}"
+        );
+    }
+
+    /// `name = "../../../x"` or `"/abs/x"` wrote the campaign outside `runs/`, `""` into
+    /// `runs/campaigns/` itself.
+    #[test]
+    fn campaign_names_cannot_leave_the_runs_folder() {
+        let campaigns = Path::new("runs").join("campaigns");
+        for name in [
+            "../../../x",
+            "/abs/x",
+            "..",
+            ".",
+            "a/../../b",
+            "x\0y",
+            "beta-sweep",
+        ] {
+            let out = default_out(name);
+            assert_eq!(out.parent(), Some(campaigns.as_path()), "{name:?}: {out:?}");
+            assert!(
+                matches!(
+                    out.components().next_back(),
+                    Some(std::path::Component::Normal(_))
+                ),
+                "{name:?}: {out:?}"
+            );
+            // The rule of run folders, one function for both.
+            assert_eq!(
+                out.file_name().and_then(|n| n.to_str()),
+                Some(crate::run_dirs::safe_name(name).as_str())
+            );
+        }
+        assert_eq!(default_out("beta-sweep"), campaigns.join("beta-sweep"));
+        assert_eq!(default_out("../../../x"), campaigns.join("_________x"));
+        let e = refusal("name = \"\"\n[[axes]]\npath = \"seed\"\nvalues = [1]\n");
+        assert!(
+            e.starts_with("c.toml: name (line 1, column 1): is empty"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn product_and_zip() {
+        let axis = |n: usize| Axis {
+            label: format!("a{n}"),
+            paths: vec![],
+            fields: vec![],
+            values: (0..n as i64).map(toml::Value::Integer).collect(),
+            factors: false,
+        };
+        let (a, b) = (axis(2), axis(3));
+        assert_eq!(
+            combinations(&[&a, &b], Mode::Product).expect("product"),
+            vec![
+                vec![0, 0],
+                vec![0, 1],
+                vec![0, 2],
+                vec![1, 0],
+                vec![1, 1],
+                vec![1, 2]
+            ]
+        );
+        assert!(combinations(&[&a, &b], Mode::Zip).is_err());
+        let c = axis(3);
+        assert_eq!(
+            combinations(&[&b, &c], Mode::Zip).expect("zip"),
+            vec![vec![0, 0], vec![1, 1], vec![2, 2]]
+        );
+    }
+}

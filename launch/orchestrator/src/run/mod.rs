@@ -1,0 +1,339 @@
+//! Run orchestration: a resolved scenario on an engine. The multi-process runtime (spawn,
+//! supervise, tear down: [`runtime`]), the relay of the children's stderr ([`relay`]), runs
+//! split over hosts ([`hosts`], [`remote`], [`serve`]) and the replay of a recorded attacker
+//! ([`replayer`]); the in-process engine is `fdi_common::engine`, the join of traces into tick
+//! records `fdi_report::join`.
+
+pub mod hosts;
+pub mod program;
+pub mod relay;
+pub mod remote;
+pub mod replayer;
+pub mod runs;
+pub mod runtime;
+pub mod serve;
+pub mod supervisor;
+pub mod tap;
+pub mod volume;
+
+use std::path::Path;
+
+use anyhow::{bail, Context, Result};
+use clap::ValueEnum;
+use fdi_common::engine::{run_inproc_any, Partial, RunSummary};
+use fdi_common::records::TickRecord;
+use fdi_common::run_dir::{Process, RunDir};
+use fdi_common::scenario::{ClockMode, Resolved};
+use fdi_common::trace::{Kept, TraceRecord, TraceWriter};
+
+use fdi_common::stop::{Interrupted, Stop, DURING_THE_RUN};
+use fdi_report::output;
+pub use fdi_report::traces::Traces;
+
+/// Which engine runs the scenario.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum Engine {
+    /// One process per agent, an attacker and a control center over iceoryx2 shared memory.
+    Ipc,
+    /// Everything on one thread, no IPC (the oracle).
+    Inproc,
+}
+
+impl Engine {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Ipc => "ipc",
+            Self::Inproc => "inproc",
+        }
+    }
+}
+
+/// Writes the records of an in-process run as the per-process traces a multi-process run
+/// leaves, so that reports and exports read both alike; with `--traces decimate=K` only the
+/// ticks 0, K, 2K, … (said in each header).
+struct InprocTraces {
+    agents: Vec<(u32, TraceWriter)>,
+    attacker: TraceWriter,
+    center: TraceWriter,
+    kept: Kept,
+}
+
+impl InprocTraces {
+    fn create(dir: &Path, r: &Resolved, kept: Kept) -> Result<Self> {
+        let dir = RunDir::new(dir);
+        let create = |p: Process| {
+            let mut h = fdi_runtime::process::trace_header(&p.to_string(), r);
+            h.kept = kept;
+            TraceWriter::create(&dir.trace(p), &h)
+        };
+        let mut agents = Vec::new();
+        for a in &r.scenario.agents {
+            agents.push((a.id, create(Process::Agent(a.id))?));
+        }
+        Ok(Self {
+            agents,
+            attacker: create(Process::Attacker)?,
+            center: create(Process::Center)?,
+            kept,
+        })
+    }
+
+    fn write(&mut self, rec: &TickRecord) -> Result<()> {
+        let agent = TraceRecord::Agent(rec.agent);
+        if !self.kept.keeps(&agent) {
+            return Ok(());
+        }
+        if let Some((_, w)) = self
+            .agents
+            .iter_mut()
+            .find(|(id, _)| *id == rec.agent.agent)
+        {
+            w.write(&agent)?;
+        }
+        self.attacker.write(&TraceRecord::Attack(rec.attack))?;
+        self.center.write(&TraceRecord::Center(rec.center))?;
+        Ok(())
+    }
+
+    fn flush(mut self) -> Result<()> {
+        for (_, w) in &mut self.agents {
+            w.flush()?;
+        }
+        self.attacker.flush()?;
+        self.center.flush()?;
+        Ok(())
+    }
+}
+
+/// How a run runs and what it keeps: the progress bar, the processes' placement, the traces the
+/// run directory keeps, and the stop that interrupts it.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    pub progress: bool,
+    pub placement: runtime::Placement,
+    pub traces: Traces,
+    pub stop: Stop,
+}
+
+impl Options {
+    /// No progress bar, default placement, `traces` kept, interrupted by `stop`.
+    pub fn quiet(traces: Traces, stop: &Stop) -> Self {
+        Self {
+            progress: false,
+            placement: runtime::Placement::default(),
+            traces,
+            stop: stop.clone(),
+        }
+    }
+}
+
+/// Runs a resolved scenario on an engine. With `run_dir`, traces and the summary go there; an
+/// ipc run without one uses a scratch folder under the system's temporary directory that keeps
+/// no traces and is removed at the end. `opts.traces` says what of the traces the run directory
+/// keeps.
+pub fn execute(
+    r: &Resolved,
+    engine: Engine,
+    run_dir: Option<&Path>,
+    opts: &Options,
+) -> Result<RunSummary> {
+    execute_on(r, engine, run_dir, opts, None)
+}
+
+/// [`execute`], the run split over the hosts of `deployment` (`--hosts FILE`, the ipc engine
+/// with full traces only).
+pub fn execute_on(
+    r: &Resolved,
+    engine: Engine,
+    run_dir: Option<&Path>,
+    opts: &Options,
+    deployment: Option<&hosts::Deployment>,
+) -> Result<RunSummary> {
+    let (progress, placement, traces) = (opts.progress, &opts.placement, opts.traces);
+    if deployment.is_some()
+        && (engine != Engine::Ipc || run_dir.is_none() || traces != Traces::Full)
+    {
+        anyhow::bail!(
+            "a run split over hosts (--hosts) needs the ipc engine and full traces (the remote \
+             traces are fetched whole at the end)"
+        );
+    }
+    if engine == Engine::Inproc && r.has_external_roles() {
+        anyhow::bail!(
+            "the in-process engine cannot run a program that takes a role (`[roles]` of the \
+             scenario): run it with --engine ipc"
+        );
+    }
+    match (engine, run_dir) {
+        (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
+        (Engine::Inproc, Some(dir)) => {
+            let kept = match traces {
+                Traces::Full => Some(Kept::Full),
+                Traces::Decimate(k) => Some(Kept::Decimate { every: k.get() }),
+                Traces::None => None,
+            };
+            let mut writers = match kept {
+                Some(kept) => {
+                    Some(InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?)
+                }
+                None => None,
+            };
+            let mut failure = None;
+            let summary = run_inproc_any(r, |rec| {
+                if let Some(w) = &mut writers {
+                    if let Err(e) = w.write(rec) {
+                        failure.get_or_insert(e);
+                    }
+                }
+            })
+            .context("in-process engine")?;
+            if let Some(e) = failure {
+                return Err(e);
+            }
+            if let Some(w) = writers {
+                w.flush()?;
+            }
+            output::write_run_summary(dir, &summary, traces)?;
+            Ok(summary)
+        }
+        (Engine::Ipc, None) => {
+            // The processes need a folder of their own (the scenario as used, their pipes):
+            // a scratch run directory that keeps no traces, removed after the run.
+            let scratch =
+                crate::run_dirs::create_run_dir(&std::env::temp_dir().join("fdi-mas-runs"), r)?;
+            let scratch_opts = Options {
+                traces: Traces::None,
+                ..opts.clone()
+            };
+            let summary = execute(r, engine, Some(&scratch), &scratch_opts);
+            if let Err(e) = std::fs::remove_dir_all(&scratch) {
+                eprintln!(
+                    "fdi-launch: warning: the scratch run directory {} could not be removed: {e}",
+                    scratch.display()
+                );
+            }
+            summary
+        }
+        (Engine::Ipc, Some(dir)) => {
+            let opts = runtime::IpcOptions {
+                run_dir: dir.to_path_buf(),
+                progress,
+                replay: false,
+                placement: placement.clone(),
+                pipes: traces != Traces::Full,
+                deployment: deployment.cloned(),
+                stop: opts.stop.clone(),
+            };
+            let (outcome, mut joined, write_error) = if traces == Traces::Full {
+                let outcome = runtime::run_ipc(r, &opts)?;
+                let joined = fdi_report::join::join_run(r, dir, outcome.wall_s, |_| {})?;
+                (outcome, joined, None)
+            } else {
+                // Joined online: the processes write into pipes, the launcher keeps what
+                // `traces` says.
+                std::fs::create_dir_all(RunDir::new(dir).traces())
+                    .context("creating the traces folder")
+                    .context(runtime::DidNotStart)?;
+                let tap = tap::Tap::create(r, dir, traces).context(runtime::DidNotStart)?;
+                let (outcome, tapped) = tap.run(r, || runtime::run_ipc(r, &opts));
+                let outcome = outcome?;
+                let joined = tapped
+                    .walked
+                    .context("joining the processes' records")?
+                    .summarize(r, outcome.wall_s);
+                (outcome, joined, tapped.write_error)
+            };
+            joined.summary.lost_agents = outcome.lost;
+            joined.summary.hosts = outcome.hosts;
+            if let Some(signal) = outcome.interrupted {
+                let s = &mut joined.summary;
+                eprintln!(
+                    "fdi-launch: interrupted by {} after {:.3} s of {} s simulated: every process was stopped ({}); the run directory keeps what was recorded",
+                    runtime::signal_name(signal),
+                    s.sim_s,
+                    r.scenario.duration_s,
+                    outcome.exits
+                );
+                s.partial = Some(Partial {
+                    reason: format!("interrupted by {}", runtime::signal_name(signal)),
+                    planned_ticks: r.ticks(),
+                    signal: Some(signal),
+                });
+            }
+            if *placement != runtime::Placement::default() {
+                joined.summary.placement = Some(placement.describe());
+            }
+            for w in &joined.warnings {
+                eprintln!("fdi-launch: warning: {w}");
+            }
+            if !outcome.leftovers.is_empty() {
+                eprintln!(
+                    "fdi-launch: warning: {} shared-memory files of run {} could not be removed",
+                    outcome.leftovers.len(),
+                    outcome.prefix
+                );
+            }
+            output::write_run_summary(dir, &joined.summary, traces)?;
+            if let Some(e) = write_error {
+                bail!("a trace could not be kept: {e}; summary.json covers every tick of the run");
+            }
+            Ok(joined.summary)
+        }
+    }
+}
+
+/// Validates a scenario after command-line overrides (duration, seed, attack, ...) changed
+/// it: every problem with its field path, named as the command line's.
+pub fn check_overrides(r: Resolved) -> Result<Resolved> {
+    let problems = r.scenario.validate();
+    if !problems.is_empty() {
+        bail!(fdi_common::scenario::ScenarioError {
+            source_name: "command-line overrides".into(),
+            problems
+        });
+    }
+    Ok(r)
+}
+
+/// Refuses `--rt-priority` / `--cpus` where they do not apply or are not permitted, before
+/// anything starts (and before a run directory exists).
+pub fn check_placement(r: &Resolved, engine: Engine, placement: &runtime::Placement) -> Result<()> {
+    if *placement == runtime::Placement::default() {
+        return Ok(());
+    }
+    if engine != Engine::Ipc {
+        bail!("--rt-priority and --cpus place the processes of the ipc engine only");
+    }
+    if let Some(priority) = placement.rt_priority {
+        if r.scenario.clock != ClockMode::Realtime {
+            bail!(
+                "--rt-priority {priority} applies to realtime runs only (lockstep processes \
+                 spin before they block: under SCHED_FIFO a spinning process would starve \
+                 everything else on its CPU)"
+            );
+        }
+    }
+    placement.check().map_err(anyhow::Error::msg)
+}
+
+/// Refuses a summary that covers less than its scenario: tables and benchmarks need whole
+/// runs.
+pub fn require_whole(summary: RunSummary) -> Result<RunSummary> {
+    match &summary.partial {
+        Some(Partial {
+            signal: Some(signal),
+            ..
+        }) => Err(Interrupted {
+            signal: *signal,
+            phase: DURING_THE_RUN,
+        }
+        .into()),
+        Some(p) => bail!(
+            "the run ended early ({}): {} of {} ticks",
+            p.reason,
+            summary.ticks,
+            p.planned_ticks
+        ),
+        None => Ok(summary),
+    }
+}

@@ -1,0 +1,529 @@
+//! The coordinating host's side of a split run (`fdi-launch run --hosts FILE`): it reaches
+//! each host's `fdi-launch serve`, asks it to run its share of the processes, bridges the
+//! run's services with its own, supervises the remote processes through what their hosts
+//! report, notices a host that is gone, and at the end fetches the remote traces into the run
+//! directory and releases the hosts (each removes everything the run left there).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use fdi_runtime::ipc::{Shm, Sizing, Wake};
+use fdi_runtime::net::{self, keys, Answering, Bridge, Net, NetConfig, Subscription, Token};
+
+use crate::run::hosts::{
+    wake_word, Deployment, Host, HostCommand, HostEvent, Released, RemoteProcess, RunReply,
+    RunRequest,
+};
+use crate::run::supervisor::{lock, Remote as RemoteChild, RemoteState, Stopper, Supervisor};
+
+/// How long the coordinator waits for each host's serve to be seen when a run begins.
+const REACH_TIMEOUT: Duration = Duration::from_secs(5);
+/// How long a host may take to start its processes (their ports open).
+const START_TIMEOUT: Duration = Duration::from_secs(30);
+/// How long a host may take to send one piece of a trace.
+const TRACE_TIMEOUT: Duration = Duration::from_secs(60);
+/// The pieces a trace is fetched in (Zenoh carries messages of up to 1 GiB; traces may be
+/// larger, and a piece is answered on one of Zenoh's threads).
+pub const TRACE_PIECE: u64 = 4 << 20;
+/// How long every route between the hosts may take to be known before the start.
+const ROUTES_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// One host of the run, as the coordinator follows it.
+struct HostLink {
+    host: Host,
+    /// Its serve's liveliness token is seen (false once it is gone).
+    alive: Arc<AtomicBool>,
+    /// Its loss was acted on.
+    lost_reported: bool,
+    processes: Vec<(RemoteProcess, Wake)>,
+    states: Arc<Mutex<BTreeMap<String, Arc<Mutex<RemoteState>>>>>,
+    reply: Option<RunReply>,
+    /// What the host said made it fail.
+    failed: Arc<Mutex<Option<String>>>,
+    _watch: Subscription,
+    _events: Subscription,
+}
+
+impl HostLink {
+    /// Started, and not lost: a host lost once keeps nothing of the run even if it is heard
+    /// from again (its serve stopped and cleaned up when it lost the coordinator).
+    fn reachable(&self) -> bool {
+        self.reply.is_some() && !self.lost_reported && self.alive.load(Ordering::SeqCst)
+    }
+}
+
+/// The coordinator's link to the other hosts of a run.
+pub struct Remote {
+    pub deployment: Deployment,
+    prefix: String,
+    net: Net,
+    hosts: Vec<HostLink>,
+    bridge: Option<Bridge>,
+    _token: Token,
+    _clock: Answering,
+}
+
+impl std::fmt::Debug for Remote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Remote")
+            .field("prefix", &self.prefix)
+            .finish_non_exhaustive()
+    }
+}
+
+/// A host that is gone, with the processes it ran.
+#[derive(Debug, Clone)]
+pub struct LostHost {
+    pub host: Host,
+    pub labels: Vec<String>,
+    pub agents: Vec<u32>,
+}
+
+impl LostHost {
+    /// The message of a run stopped by it.
+    pub fn message(&self) -> String {
+        format!(
+            "host `{}` ({}) is unreachable: its `fdi-launch serve` died or the network to it \
+             was cut (nothing heard from it for the {:.1} s Zenoh lease); it ran {}",
+            self.host.name,
+            self.host.endpoint,
+            net::LEASE.as_secs_f64(),
+            self.labels.join(", ")
+        )
+    }
+}
+
+impl Remote {
+    /// Opens the coordinator's Zenoh session for the run `prefix` and waits until every
+    /// host's serve is seen; names each host that is not.
+    pub fn connect(deployment: Deployment, prefix: &str) -> Result<Self> {
+        let config = NetConfig {
+            listen: vec![deployment.coordinator.endpoint.clone()],
+            connect: deployment
+                .others
+                .iter()
+                .map(|h| h.endpoint.clone())
+                .collect(),
+        };
+        let net = Net::open(&config).with_context(|| {
+            format!(
+                "host `{}` (the coordinator, {})",
+                deployment.coordinator.name, deployment.source
+            )
+        })?;
+        let token = net.token(&keys::run(prefix, "coordinator"))?;
+        let clock = net.answer_clock(&keys::run(prefix, "clock"))?;
+        let mut hosts = Vec::new();
+        for h in &deployment.others {
+            let alive = Arc::new(AtomicBool::new(false));
+            let a = alive.clone();
+            let watch = net.watch(&keys::host(&h.name), move |up| {
+                a.store(up, Ordering::SeqCst)
+            })?;
+            let states: Arc<Mutex<BTreeMap<String, Arc<Mutex<RemoteState>>>>> = Arc::default();
+            let st = states.clone();
+            let failed: Arc<Mutex<Option<String>>> = Arc::default();
+            let fl = failed.clone();
+            let name = h.name.clone();
+            let events = net.subscribe(
+                &keys::run(prefix, &format!("events/{}", h.name)),
+                move |bytes| match serde_json::from_slice::<HostEvent>(&bytes) {
+                    Ok(HostEvent::Line { text }) => eprintln!("{name}: {text}"),
+                    Ok(HostEvent::Exited { label, raw, ended }) => {
+                        if let Some(s) = lock(&st).get(&label) {
+                            lock(s).exit = Some((raw, ended));
+                        }
+                    }
+                    Ok(HostEvent::Stalled { label, text }) => {
+                        if let Some(s) = lock(&st).get(&label) {
+                            lock(s).stalled = Some(text);
+                        }
+                    }
+                    Ok(HostEvent::Failed { text }) => {
+                        lock(&fl).get_or_insert(text);
+                    }
+                    Err(e) => eprintln!(
+                        "fdi-launch: warning: host `{name}` sent an event that is not one ({e})"
+                    ),
+                },
+            )?;
+            hosts.push(HostLink {
+                host: h.clone(),
+                alive,
+                lost_reported: false,
+                processes: Vec::new(),
+                states,
+                reply: None,
+                failed,
+                _watch: watch,
+                _events: events,
+            });
+        }
+        let began = Instant::now();
+        while hosts.iter().any(|h| !h.alive.load(Ordering::SeqCst)) {
+            if began.elapsed() > REACH_TIMEOUT {
+                let missing: Vec<String> = hosts
+                    .iter()
+                    .filter(|h| !h.alive.load(Ordering::SeqCst))
+                    .map(|h| format!("`{}` ({})", h.host.name, h.host.endpoint))
+                    .collect();
+                bail!(
+                    "no `fdi-launch serve` answers on host {} within {:.0} s (is it running \
+                     there as `fdi-launch serve --name NAME --listen ENDPOINT`, and is its port \
+                     open? docs/multi-host.md)",
+                    missing.join(", "),
+                    REACH_TIMEOUT.as_secs_f64()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        Ok(Self {
+            deployment,
+            prefix: prefix.into(),
+            net,
+            hosts,
+            bridge: None,
+            _token: token,
+            _clock: clock,
+        })
+    }
+
+    /// Starts the coordinator's bridge: before the local processes, so that none of what
+    /// they send to other hosts is lost.
+    pub fn start_bridge(&mut self, sizing: Sizing) -> Result<()> {
+        let plan = net::plan(&self.deployment.layout, &self.deployment.coordinator.name)
+            .map_err(anyhow::Error::msg)?;
+        self.bridge = Some(Bridge::start::<Shm>(
+            &self.net,
+            &self.prefix,
+            &self.prefix,
+            sizing,
+            &plan,
+            0,
+        )?);
+        Ok(())
+    }
+
+    /// Asks each host to run its processes (`procs`: the run's processes that are not on
+    /// this host, with their wake-up events), and adopts them into `procs_sup` once it says
+    /// they are started.
+    pub fn start_hosts<M>(
+        &mut self,
+        scenario: &str,
+        procs: Vec<(RemoteProcess, Wake, M)>,
+        supervisor: &mut Supervisor<M>,
+    ) -> Result<()> {
+        let layout: Vec<(String, String)> = self
+            .deployment
+            .layout
+            .host_of
+            .iter()
+            .map(|(w, h)| (wake_word(*w), h.clone()))
+            .collect();
+        let mut metas: BTreeMap<String, M> = BTreeMap::new();
+        for (p, wake, meta) in procs {
+            let host = self.deployment.host_of(wake).to_string();
+            if let Some(link) = self.hosts.iter_mut().find(|l| l.host.name == host) {
+                metas.insert(p.label.clone(), meta);
+                link.processes.push((p, wake));
+            }
+        }
+        for link in &mut self.hosts {
+            let request = RunRequest {
+                version: env!("CARGO_PKG_VERSION").into(),
+                prefix: self.prefix.clone(),
+                coordinator: self.deployment.coordinator.name.clone(),
+                host: link.host.name.clone(),
+                scenario: scenario.into(),
+                layout: layout.clone(),
+                processes: link.processes.iter().map(|(p, _)| p.clone()).collect(),
+            };
+            for (p, _) in &link.processes {
+                lock(&link.states).insert(p.label.clone(), Arc::default());
+            }
+            let body = serde_json::to_vec(&request).context("encoding a run request")?;
+            let answer = self
+                .net
+                .request(&keys::host_run(&link.host.name), &body, START_TIMEOUT)
+                .with_context(|| {
+                    format!(
+                        "host `{}` ({}) did not start its processes",
+                        link.host.name, link.host.endpoint
+                    )
+                })?;
+            let reply: RunReply = serde_json::from_slice(&answer)
+                .with_context(|| format!("host `{}` answered with no run reply", link.host.name))?;
+            let cmd = Arc::new(
+                self.net
+                    .outbox(&keys::run(&self.prefix, &format!("cmd/{}", link.host.name)))?,
+            );
+            for (p, _) in &link.processes {
+                let pid = reply
+                    .pids
+                    .iter()
+                    .find(|(l, _)| *l == p.label)
+                    .map(|(_, pid)| *pid)
+                    .with_context(|| {
+                        format!(
+                            "host `{}` did not say it started {}",
+                            link.host.name, p.label
+                        )
+                    })?;
+                let state = lock(&link.states)
+                    .get(&p.label)
+                    .cloned()
+                    .unwrap_or_default();
+                let cmd = cmd.clone();
+                let stop = Stopper(Arc::new(move |kill| {
+                    let c = if kill {
+                        HostCommand::Kill
+                    } else {
+                        HostCommand::Term
+                    };
+                    if let Ok(body) = serde_json::to_vec(&c) {
+                        let _ = cmd.put(&body);
+                    }
+                }));
+                let Some(meta) = metas.remove(&p.label) else {
+                    continue;
+                };
+                supervisor.adopt_remote(
+                    p.label.clone(),
+                    meta,
+                    RemoteChild {
+                        host: link.host.name.clone(),
+                        pid,
+                        state,
+                        stop,
+                    },
+                );
+            }
+            link.reply = Some(reply);
+        }
+        Ok(())
+    }
+
+    /// Why the run cannot go on across hosts, if it cannot: the coordinator's bridge stopped, or
+    /// a host said its own did.
+    pub fn failure(&self) -> Option<String> {
+        if let Some(f) = self.bridge.as_ref().and_then(Bridge::failure) {
+            return Some(format!(
+                "host `{}` (the coordinator): {f}",
+                self.deployment.coordinator.name
+            ));
+        }
+        self.hosts.iter().find_map(|l| {
+            lock(&l.failed)
+                .as_ref()
+                .map(|f| format!("host `{}` ({}): {f}", l.host.name, l.host.endpoint))
+        })
+    }
+
+    /// A host that is gone since the last call (each reported once).
+    pub fn lost_host(&mut self) -> Option<LostHost> {
+        let link = self
+            .hosts
+            .iter_mut()
+            .find(|l| !l.lost_reported && !l.alive.load(Ordering::SeqCst))?;
+        link.lost_reported = true;
+        for s in lock(&link.states).values() {
+            lock(s).host_lost = true;
+        }
+        Some(LostHost {
+            host: link.host.clone(),
+            labels: link
+                .processes
+                .iter()
+                .map(|(p, _)| p.label.clone())
+                .collect(),
+            agents: link.processes.iter().filter_map(|(p, _)| p.agent).collect(),
+        })
+    }
+
+    /// The coordinating host's line for the report: the processes it ran.
+    pub fn describe_coordinator(&self) -> String {
+        let here = &self.deployment.coordinator;
+        let procs: Vec<String> = self
+            .deployment
+            .layout
+            .host_of
+            .iter()
+            .filter(|(_, h)| **h == here.name)
+            .map(|(w, _)| match w {
+                Wake::Agent(id) => format!("agent {id}"),
+                Wake::Center => "control-center".into(),
+                w => wake_word(*w),
+            })
+            .collect();
+        format!(
+            "host `{}` ({}, the coordinator): {}",
+            here.name,
+            here.endpoint,
+            procs.join(", ")
+        )
+    }
+
+    /// Lines for the report: each host, its processes and its clock against ours.
+    pub fn describe(&self) -> Vec<String> {
+        self.hosts
+            .iter()
+            .map(|l| {
+                let procs: Vec<&str> = l.processes.iter().map(|(p, _)| p.label.as_str()).collect();
+                match &l.reply {
+                    Some(r) => format!(
+                        "host `{}` ({}): {}; its clock {:+.3} ms from the coordinator's, \
+                         measured in a round trip of {:.3} ms",
+                        l.host.name,
+                        l.host.endpoint,
+                        procs.join(", "),
+                        -(r.offset_ns as f64) / 1e6,
+                        r.rtt_ns as f64 / 1e6
+                    ),
+                    None => format!("host `{}` ({}): not started", l.host.name, l.host.endpoint),
+                }
+            })
+            .collect()
+    }
+
+    /// Fetches the traces of every reachable host into `run_dir/traces`. A host that is gone
+    /// keeps its traces: for each of its agents a `<name>.lost` note says so, which the join
+    /// reads (those agents' ticks count as missing). Problems are returned, one per trace.
+    pub fn fetch_traces(&mut self, run_dir: &Path) -> Vec<String> {
+        // A host gone by now is one lost, whether or not it was noticed during the run.
+        while self.lost_host().is_some() {}
+        let mut problems = Vec::new();
+        for l in &self.hosts {
+            if l.reply.is_none() {
+                continue;
+            }
+            for (p, _) in &l.processes {
+                let path = fdi_common::run_dir::RunDir::new(run_dir).trace_named(&p.name);
+                if !l.reachable() {
+                    let note = format!(
+                        "its trace stayed on host `{}` ({}), which became unreachable during \
+                         the run",
+                        l.host.name, l.host.endpoint
+                    );
+                    let lost = path.with_extension("lost");
+                    if let Err(e) = std::fs::write(&lost, &note) {
+                        problems.push(format!("writing {}: {e}", lost.display()));
+                    }
+                    problems.push(format!("{}: {note}", p.label));
+                    continue;
+                }
+                if let Err(e) = self.fetch_trace(l, &p.name, &path) {
+                    problems.push(format!(
+                        "the trace of {} from host `{}`: {e:#}",
+                        p.label, l.host.name
+                    ));
+                }
+            }
+        }
+        problems
+    }
+
+    /// Fetches the trace `name` of host `l` into `path`, piece by piece.
+    fn fetch_trace(&self, l: &HostLink, name: &str, path: &Path) -> Result<()> {
+        use std::io::Write as _;
+        let key = keys::run(&self.prefix, &format!("traces/{}", l.host.name));
+        let mut file = std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+        );
+        let mut offset = 0u64;
+        loop {
+            let ask = format!("{name} {offset}");
+            let piece = self.net.request(&key, ask.as_bytes(), TRACE_TIMEOUT)?;
+            file.write_all(&piece)
+                .with_context(|| format!("writing {}", path.display()))?;
+            offset += piece.len() as u64;
+            if (piece.len() as u64) < TRACE_PIECE {
+                break;
+            }
+        }
+        file.flush()
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(())
+    }
+
+    /// Waits until every route of the run is known to Zenoh (each host's bridge has a
+    /// subscriber for every key it sends on): a sample sent before would be lost. Names the
+    /// host and the keys still unmatched after [`ROUTES_TIMEOUT`].
+    pub fn await_routes(&self) -> Result<()> {
+        let began = Instant::now();
+        loop {
+            let mut unmatched: Vec<(String, Vec<String>)> = Vec::new();
+            if let Some(b) = &self.bridge {
+                let u = b.unmatched();
+                if !u.is_empty() {
+                    unmatched.push((self.deployment.coordinator.name.clone(), u));
+                }
+            }
+            for l in self.hosts.iter().filter(|l| l.reply.is_some()) {
+                let key = keys::run(&self.prefix, &format!("routes/{}", l.host.name));
+                let u: Vec<String> = self
+                    .net
+                    .request(&key, &[], Duration::from_secs(5))
+                    .map_err(anyhow::Error::from)
+                    .and_then(|b| Ok(serde_json::from_slice(&b)?))
+                    .with_context(|| format!("asking host `{}` for its routes", l.host.name))?;
+                if !u.is_empty() {
+                    unmatched.push((l.host.name.clone(), u));
+                }
+            }
+            if unmatched.is_empty() {
+                return Ok(());
+            }
+            if began.elapsed() > ROUTES_TIMEOUT {
+                let said: Vec<String> = unmatched
+                    .iter()
+                    .map(|(h, keys)| {
+                        format!("host `{h}` sends on {} with no receiver", keys.join(", "))
+                    })
+                    .collect();
+                bail!(
+                    "the hosts do not all reach one another after {:.0} s: {} (can every host \
+                     connect to every other's endpoint? docs/multi-host.md, Ports)",
+                    ROUTES_TIMEOUT.as_secs_f64(),
+                    said.join("; ")
+                );
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+
+    /// Releases every reachable host (each removes what the run left there) and stops the
+    /// bridge. Returns what could not be removed (`host:path`) and problems.
+    pub fn release(mut self) -> (Vec<String>, Vec<String>) {
+        let (mut leftovers, mut problems) = (Vec::new(), Vec::new());
+        for l in self.hosts.iter().filter(|l| l.reachable()) {
+            let key = keys::run(&self.prefix, &format!("release/{}", l.host.name));
+            match self
+                .net
+                .request(&key, &[], Duration::from_secs(10))
+                .map_err(anyhow::Error::from)
+                .and_then(|b| Ok(serde_json::from_slice::<Released>(&b)?))
+            {
+                Ok(r) => {
+                    leftovers.extend(r.leftovers.iter().map(|p| format!("{}:{p}", l.host.name)))
+                }
+                Err(e) => problems.push(format!("releasing host `{}`: {e}", l.host.name)),
+            }
+        }
+        if let Some(b) = self.bridge.take() {
+            if let Err(e) = b.stop() {
+                problems.push(format!("the coordinator's bridge: {e}"));
+            }
+        }
+        // Closing the session waits for its connectors, and one still trying an unreachable
+        // host waits for the network's timeout (seconds): the session is closed aside, the run
+        // has nothing more to say on it.
+        let _ = std::thread::Builder::new()
+            .name("zenoh close".into())
+            .spawn(move || drop(self));
+        (leftovers, problems)
+    }
+}

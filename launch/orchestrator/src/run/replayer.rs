@@ -1,0 +1,278 @@
+//! The replayer process of `run --replay RUN_DIR`: it stands in for the agents and the attacker
+//! and publishes a recorded run's tampered measurements (the attacker trace's `y`, `ẏ` per agent
+//! per tick, in order) to the control center, in lockstep batches: it never runs more than
+//! [`AHEAD`] ticks ahead of the torques it got back, so no buffer overflows. Its `--trace` is
+//! the attacker trace it plays back (read only); it writes no trace of its own.
+
+use std::path::Path;
+use std::process::ExitCode;
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use fdi_common::engine::tick_time;
+use fdi_common::records::{AttackRecord, Delivery};
+use fdi_common::run_dir::{Process, RunDir};
+use fdi_common::scenario::{self, Resolved, MAX_DOF};
+use fdi_common::stop::Stop;
+use fdi_common::trace::{TraceReader, TraceRecord};
+use fdi_runtime::ipc::{
+    Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, TorqueMsg, Transport,
+    Wake, Waker as _,
+};
+use fdi_runtime::process::{self, ProcessArgs, Shutdown, Start};
+
+/// Ticks one agent may be ahead of its last torque (well within every stream's buffer).
+const AHEAD: u64 = 64;
+/// Poll period while waiting for torques (the center rings the agents, not the replayer).
+const POLL: Duration = Duration::from_micros(100);
+
+/// The attack records of `path` per agent of `resolved`, each exactly ticks `0..ticks` in
+/// order; any other content (damage, a missing or extra tick) is refused, naming the file.
+pub fn load_recording(resolved: &Resolved, path: &Path) -> Result<Vec<Vec<AttackRecord>>> {
+    let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
+    if let Some(id) = ids
+        .iter()
+        .find(|id| resolved.attack.attacks_torque_of(**id))
+    {
+        bail!(
+            "{}: the recorded run attacks agent {id}'s torques; a replay stands in for the agents and the attacker on the measurement path only, so it cannot reproduce that run",
+            path.display()
+        );
+    }
+    let ticks = resolved.ticks();
+    let mut per_agent: Vec<Vec<AttackRecord>> = vec![Vec::new(); ids.len()];
+    let mut reader = TraceReader::open(path).context("the recording cannot be replayed")?;
+    while let Some(rec) = reader.next() {
+        let rec = rec.context("the recording cannot be replayed")?;
+        let TraceRecord::Attack(a) = rec else {
+            continue;
+        };
+        let at = reader.last_offset();
+        let Some(i) = ids.iter().position(|id| *id == a.agent) else {
+            bail!(
+                "{}: the record at byte offset {at}: agent {} is not in the recorded scenario",
+                path.display(),
+                a.agent
+            );
+        };
+        let want = per_agent[i].len() as u64;
+        if a.k != want || a.y.as_slice().len() > MAX_DOF {
+            bail!(
+                "{}: the record at byte offset {at}: agent {}: tick {} where tick {want} was expected (only a complete recording can be replayed)",
+                path.display(),
+                a.agent,
+                a.k
+            );
+        }
+        per_agent[i].push(a);
+    }
+    for (id, recs) in ids.iter().zip(&per_agent) {
+        if recs.len() as u64 != ticks {
+            bail!(
+                "{}: agent {id} has {} of {ticks} ticks (only a complete recording can be replayed)",
+                path.display(),
+                recs.len()
+            );
+        }
+    }
+    Ok(per_agent)
+}
+
+fn payload(j: &fdi_common::records::Joints) -> [f64; MAX_DOF] {
+    let mut a = [0.0; MAX_DOF];
+    for (o, x) in a.iter_mut().zip(j.as_slice()) {
+        *o = *x;
+    }
+    a
+}
+
+fn run(args: &ProcessArgs) -> Result<()> {
+    let shutdown = Shutdown::install(args.launcher_pid).context("installing signal handlers")?;
+    let resolved = scenario::load_file(&args.scenario)?;
+    let recording = load_recording(&resolved, &args.trace)?;
+    let conn = process::connect::<Shm>(
+        &args.prefix,
+        Role::Attacker,
+        Wake::Attacker,
+        process::sizing_for(&resolved),
+    )?;
+    let tampered = conn
+        .transport
+        .publisher::<MeasurementMsg>(Stream::Tampered)?;
+    let torques: Vec<_> = resolved
+        .scenario
+        .agents
+        .iter()
+        .map(|a| conn.transport.subscriber::<TorqueMsg>(Stream::Torque(a.id)))
+        .collect::<Result<_, _>>()?;
+    match conn.launcher.ready_and_wait_start(&conn.waker, &shutdown)? {
+        Start::Go { .. } => {}
+        Start::Shutdown => return Ok(()),
+    }
+    // Created once every process is ready, so that it reaches the center's listener.
+    let center = conn.transport.notifier(Wake::Center)?;
+    let dt = resolved.scenario.control_period_s;
+    let ticks = resolved.ticks();
+    let n = recording.len();
+    let (mut sent, mut answered) = (vec![0u64; n], vec![0u64; n]);
+    while answered.iter().any(|a| *a < ticks) {
+        let mut published = false;
+        for (i, recs) in recording.iter().enumerate() {
+            while sent[i] < ticks && sent[i] < answered[i] + AHEAD {
+                let r = &recs[sent[i] as usize];
+                let t = tick_time(r.k, dt);
+                // A tick whose input was missing is a gap marker, as the attacker sent it.
+                let dof = resolved.scenario.agents[i].model.dof() as u32;
+                tampered.send(if r.delivery == Delivery::Delivered {
+                    MeasurementMsg {
+                        seq: r.k,
+                        agent: r.agent,
+                        dof: r.y.as_slice().len() as u32,
+                        t,
+                        y: payload(&r.y),
+                        yd: payload(&r.yd),
+                        agent_sent_ns: 0,
+                        attacker_received_ns: 0,
+                        attacker_sent_ns: 0,
+                        flags: 0,
+                        reserved: 0,
+                    }
+                } else {
+                    MeasurementMsg::gap(r.k, r.agent, dof, t)
+                })?;
+                sent[i] += 1;
+                published = true;
+            }
+        }
+        if published {
+            center.ring()?;
+        }
+        for (i, inbox) in torques.iter().enumerate() {
+            inbox.drain(|m| answered[i] = answered[i].max(m.seq + 1))?;
+        }
+        if answered.iter().all(|a| *a >= ticks) {
+            break;
+        }
+        if shutdown.requested() || conn.launcher.stop_requested()? {
+            return Ok(());
+        }
+        conn.waker.wait_precise(POLL)?;
+    }
+    conn.launcher.done_and_hold(ticks, &conn.waker, &shutdown)?;
+    Ok(())
+}
+
+/// Entry point of `fdi-launch process replayer`.
+pub fn main_with(args: &ProcessArgs) -> ExitCode {
+    match run(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            fdi_runtime::process::print_failure(format_args!("fdi-replayer: {e:#}"));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Checks that every trace of `path` reads to its end, naming the file otherwise.
+fn check_trace(path: &Path) -> Result<()> {
+    let reader = TraceReader::open(path).context("the recording cannot be replayed")?;
+    for rec in reader {
+        rec.context("the recording cannot be replayed")?;
+    }
+    Ok(())
+}
+
+/// Checks the traces of the recorded run `recorded` that a replay reads (the attacker's, played
+/// back, and the agents', copied): every one must read to its end. Returns their paths.
+pub fn check_recording(r: &Resolved, recorded: &Path) -> Result<Vec<std::path::PathBuf>> {
+    fdi_report::traces::require_every_tick(recorded, "run --replay")?;
+    let attacker = RunDir::new(recorded).trace(Process::Attacker);
+    load_recording(r, &attacker)?;
+    let mut copies = vec![attacker];
+    for a in &r.scenario.agents {
+        let p = RunDir::new(recorded).trace(Process::Agent(a.id));
+        check_trace(&p)?;
+        copies.push(p);
+    }
+    Ok(copies)
+}
+
+/// `run --replay RUN_DIR`: re-runs the recorded run's control center on its recorded tampered
+/// measurements in a fresh run directory under `out`, and compares the trace digests.
+pub fn replay_run(recorded: &Path, out: &Path, json: bool, stop: &Stop) -> Result<ExitCode> {
+    let summary_path = RunDir::new(recorded).summary();
+    // Bounded, and only from a regular file, like scenario files.
+    let text = scenario::read_limited(&summary_path).map_err(anyhow::Error::msg)?;
+    let recorded_summary: fdi_common::engine::RunSummary = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not a run summary", summary_path.display()))?;
+    let scenario_path = RunDir::new(recorded).scenario();
+    let mut r = scenario::load_file(&scenario_path)
+        .with_context(|| format!("reading {}", scenario_path.display()))?;
+    // The center is event-driven: the replay is lockstep whatever the recording's clock.
+    r.scenario.clock = scenario::ClockMode::Lockstep;
+    let copies = check_recording(&r, recorded)?;
+    let dir = crate::run_dirs::create_run_dir(out, &r)?;
+    let copied = copies.iter().try_for_each(|from| {
+        let to = RunDir::new(&dir)
+            .traces()
+            .join(from.file_name().unwrap_or_default());
+        std::fs::copy(from, &to)
+            .map(|_| ())
+            .with_context(|| format!("copying {} to {}", from.display(), to.display()))
+            .context(crate::run::runtime::DidNotStart)
+    });
+    let outcome = crate::run_dirs::discard_if_not_started(
+        &dir,
+        copied.and_then(|()| {
+            crate::run::runtime::run_ipc(
+                &r,
+                &crate::run::runtime::IpcOptions {
+                    run_dir: dir.clone(),
+                    progress: !json,
+                    replay: true,
+                    placement: crate::run::runtime::Placement::default(),
+                    pipes: false,
+                    deployment: None,
+                    stop: stop.clone(),
+                },
+            )
+        }),
+    )?;
+    let mut joined = fdi_report::join::join_run(&r, &dir, outcome.wall_s, |_| {})?;
+    joined.summary.engine = "replay".into();
+    for w in &joined.warnings {
+        eprintln!("fdi-launch: warning: {w}");
+    }
+    fdi_report::output::write_summary(&dir, &joined.summary)?;
+    let want = &recorded_summary.trace_digest;
+    let got = &joined.summary.trace_digest;
+    let matches = want == got;
+    if json {
+        let mut v = serde_json::to_value(&joined.summary)?;
+        v["run_dir"] = serde_json::Value::String(dir.display().to_string());
+        v["replay_of"] = serde_json::Value::String(recorded.display().to_string());
+        v["recorded_trace_digest"] = serde_json::Value::String(want.clone());
+        v["digests_match"] = serde_json::Value::Bool(matches);
+        println!("{v}");
+    } else {
+        println!("recorded trace digest {want}");
+        println!("replayed trace digest {got}");
+        println!(
+            "{}",
+            if matches {
+                "digests match"
+            } else {
+                "digests DIFFER"
+            }
+        );
+        println!("run directory {}", dir.display());
+    }
+    if matches {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        eprintln!(
+            "fdi-launch: the replayed control center differs from the recording ({got} ≠ {want})"
+        );
+        Ok(ExitCode::FAILURE)
+    }
+}

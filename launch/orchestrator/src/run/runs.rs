@@ -1,0 +1,469 @@
+//! `fdi-launch runs list|prune`: the run directories of a folder, and removing the older ones.
+//! Only folders that are run directories are ever listed or removed: a folder with a
+//! `scenario.toml` file and a `summary.json` file or a `traces/` folder; anything else in the
+//! folder is left alone.
+//!
+//! Prune first renames a run directory `<name>` to `<name>.pruning` (one atomic rename: the
+//! folder is a run directory or a tombstone, never something in between), then removes that.
+//! What it cannot remove (a file it may not delete, a read-only mount) is named with the cause
+//! and the tombstone stays: `runs list` shows it, the next `runs prune` tries it again, and
+//! prune goes on with the other run directories. A rename that fails leaves the run directory
+//! as it was (and named).
+
+use std::io;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use bytesize::ByteSize;
+
+/// One run directory.
+#[derive(Debug, Clone)]
+pub struct RunDir {
+    pub path: PathBuf,
+    pub name: String,
+    /// Its last modification (of the folder or of its summary), for the order.
+    pub modified: std::time::SystemTime,
+    pub bytes: u64,
+    /// `done`, `partial (…)`, `no summary` or `summary unreadable`.
+    pub status: String,
+}
+
+/// True for a folder that `fdi-launch run` made: `scenario.toml` and `summary.json` or
+/// `traces/`. Symbolic links are not followed.
+pub fn is_run_dir(p: &Path) -> bool {
+    let is = |q: &Path, dir: bool| {
+        std::fs::symlink_metadata(q).is_ok_and(|m| if dir { m.is_dir() } else { m.is_file() })
+    };
+    is(p, true)
+        && is(&p.join("scenario.toml"), false)
+        && (is(&p.join("summary.json"), false) || is(&p.join("traces"), true))
+}
+
+/// Bytes of the files under `p` (symbolic links not followed).
+fn size_of(p: &Path) -> u64 {
+    let Ok(m) = std::fs::symlink_metadata(p) else {
+        return 0;
+    };
+    if !m.is_dir() {
+        return m.len();
+    }
+    std::fs::read_dir(p)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .map(|e| size_of(&e.path()))
+        .sum()
+}
+
+fn status(p: &Path) -> String {
+    let Ok(text) = fdi_common::scenario::read_limited(&p.join("summary.json")) else {
+        return "no summary".into();
+    };
+    let Ok(v) = serde_json::from_str::<serde_json::Value>(&text) else {
+        return "summary unreadable".into();
+    };
+    let traces = v
+        .get("traces")
+        .and_then(|t| t.as_str())
+        .map_or(String::new(), |t| format!(", traces {t}"));
+    match v
+        .get("partial")
+        .and_then(|x| x.get("reason"))
+        .and_then(|r| r.as_str())
+    {
+        Some(reason) => format!("partial ({reason}){traces}"),
+        None => format!("done{traces}"),
+    }
+}
+
+/// The suffix of a run directory that prune renamed before removing it.
+const TOMBSTONE: &str = ".pruning";
+
+/// True for a folder that prune began to remove (`<name>.pruning`, not a symbolic link).
+fn is_tombstone(p: &Path) -> bool {
+    p.file_name()
+        .is_some_and(|n| n.to_string_lossy().ends_with(TOMBSTONE))
+        && std::fs::symlink_metadata(p).is_ok_and(|m| m.is_dir())
+}
+
+/// The folders of `out` that an earlier prune could not remove whole, by name.
+pub fn tombstones(out: &Path) -> Result<Vec<PathBuf>> {
+    let entries = std::fs::read_dir(out)
+        .with_context(|| format!("reading the runs folder {}", out.display()))?;
+    let mut found = Vec::new();
+    for e in entries {
+        let e = e.with_context(|| format!("reading the runs folder {}", out.display()))?;
+        if is_tombstone(&e.path()) {
+            found.push(e.path());
+        }
+    }
+    found.sort();
+    Ok(found)
+}
+
+/// The run directories of `out`, newest first (tombstones left out: [`tombstones`]).
+pub fn list(out: &Path) -> Result<Vec<RunDir>> {
+    let entries = std::fs::read_dir(out)
+        .with_context(|| format!("reading the runs folder {}", out.display()))?;
+    let mut runs = Vec::new();
+    for e in entries {
+        let e = e.with_context(|| format!("reading the runs folder {}", out.display()))?;
+        let path = e.path();
+        if !is_run_dir(&path) || is_tombstone(&path) {
+            continue;
+        }
+        let stamp = |q: &Path| std::fs::metadata(q).and_then(|m| m.modified()).ok();
+        let modified = stamp(&path.join("summary.json"))
+            .or_else(|| stamp(&path.join("scenario.toml")))
+            .or_else(|| stamp(&path))
+            .unwrap_or(std::time::UNIX_EPOCH);
+        runs.push(RunDir {
+            name: e.file_name().to_string_lossy().into_owned(),
+            bytes: size_of(&path),
+            status: status(&path),
+            path,
+            modified,
+        });
+    }
+    // Newest first; names (which start with the UTC time of the run) break ties.
+    runs.sort_by(|a, b| b.modified.cmp(&a.modified).then(b.name.cmp(&a.name)));
+    Ok(runs)
+}
+
+fn date(t: std::time::SystemTime) -> String {
+    jiff::Timestamp::try_from(t)
+        .map(|ts| ts.strftime("%Y-%m-%d %H:%M:%S UTC").to_string())
+        .unwrap_or_else(|_| "?".into())
+}
+
+/// `runs list`: a line per run directory, newest first, then one per tombstone.
+pub fn print_list(out: &Path) -> Result<()> {
+    let runs = list(out)?;
+    for t in tombstones(out)? {
+        println!(
+            "{}  {:>10}  half-removed: an earlier `runs prune` could not remove it whole; the next one tries again",
+            t.file_name().map_or_else(|| t.display().to_string(), |n| n.to_string_lossy().into_owned()),
+            ByteSize::b(size_of(&t)).to_string()
+        );
+    }
+    if runs.is_empty() {
+        println!("no run directories in {}", out.display());
+        return Ok(());
+    }
+    let total: u64 = runs.iter().map(|r| r.bytes).sum();
+    for r in &runs {
+        println!(
+            "{}  {}  {:>10}  {}",
+            r.name,
+            date(r.modified),
+            ByteSize::b(r.bytes).to_string(),
+            r.status
+        );
+    }
+    println!(
+        "{} run directories in {}, {}",
+        runs.len(),
+        out.display(),
+        ByteSize::b(total)
+    );
+    Ok(())
+}
+
+/// What `prune` removed (or would remove, on a dry run), and what it could not.
+#[derive(Debug)]
+pub struct Pruned {
+    pub removed: Vec<RunDir>,
+    pub kept: usize,
+    /// Tombstones of earlier prunes, removed now (or to be, on a dry run).
+    pub cleared: Vec<PathBuf>,
+    /// What could not be removed whole.
+    pub failed: Vec<Unremoved>,
+}
+
+/// A run directory (or the tombstone of one) that prune could not remove whole.
+#[derive(Debug)]
+pub struct Unremoved {
+    /// The run directory as it was listed, or the tombstone of an earlier prune.
+    pub path: PathBuf,
+    /// Where what is left of it stays: the tombstone, or `path` itself when even the rename
+    /// failed (then nothing of it was removed).
+    pub left: PathBuf,
+    /// Each path that could not be removed, and why.
+    pub causes: Vec<(PathBuf, io::Error)>,
+}
+
+/// Removes the tree at `p` (symbolic links are removed, never followed) as far as it can: past a
+/// file it cannot delete it goes on with the others. Each path it could not remove goes to
+/// `causes` with the error (a folder left because something in it stays is not repeated).
+fn remove_tree(p: &Path, causes: &mut Vec<(PathBuf, io::Error)>) -> bool {
+    let meta = match std::fs::symlink_metadata(p) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return true,
+        Err(e) => {
+            causes.push((p.to_path_buf(), e));
+            return false;
+        }
+    };
+    let removed = if meta.is_dir() {
+        let entries = match std::fs::read_dir(p) {
+            Ok(entries) => entries,
+            Err(e) => {
+                causes.push((p.to_path_buf(), e));
+                return false;
+            }
+        };
+        let mut whole = true;
+        for e in entries {
+            match e {
+                Ok(e) => whole &= remove_tree(&e.path(), causes),
+                Err(e) => {
+                    causes.push((p.to_path_buf(), e));
+                    whole = false;
+                }
+            }
+        }
+        if !whole {
+            return false;
+        }
+        std::fs::remove_dir(p)
+    } else {
+        std::fs::remove_file(p)
+    };
+    match removed {
+        Ok(()) => true,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => true,
+        Err(e) => {
+            causes.push((p.to_path_buf(), e));
+            false
+        }
+    }
+}
+
+/// The tombstone name of the run directory `p`: `<name>.pruning`, or `<name>.<i>.pruning` when
+/// an earlier tombstone of the same name is still there.
+fn tombstone_for(p: &Path) -> PathBuf {
+    let name = p
+        .file_name()
+        .map_or_else(|| "run".into(), |n| n.to_string_lossy().into_owned());
+    let mut t = p.with_file_name(format!("{name}{TOMBSTONE}"));
+    let mut i = 1;
+    while std::fs::symlink_metadata(&t).is_ok() {
+        t = p.with_file_name(format!("{name}.{i}{TOMBSTONE}"));
+        i += 1;
+    }
+    t
+}
+
+/// `runs prune`: keeps the `keep` newest run directories of `out`, removes the others (only
+/// run directories) and the tombstones of earlier prunes; `dry_run` removes nothing and says
+/// what it would. One that cannot be removed whole is in [`Pruned::failed`], and the others
+/// are removed all the same.
+pub fn prune(out: &Path, keep: usize, dry_run: bool) -> Result<Pruned> {
+    let runs = list(out)?;
+    let earlier = tombstones(out)?;
+    let kept = runs.len().min(keep);
+    let mut pruned = Pruned {
+        removed: Vec::new(),
+        kept,
+        cleared: Vec::new(),
+        failed: Vec::new(),
+    };
+    for r in runs.into_iter().skip(keep) {
+        // Checked again at the moment of removal: only a run directory goes.
+        if !is_run_dir(&r.path) {
+            continue;
+        }
+        if dry_run {
+            pruned.removed.push(r);
+            continue;
+        }
+        let tomb = tombstone_for(&r.path);
+        if let Err(e) = std::fs::rename(&r.path, &tomb) {
+            pruned.failed.push(Unremoved {
+                left: r.path.clone(),
+                causes: vec![(r.path.clone(), e)],
+                path: r.path,
+            });
+            continue;
+        }
+        let mut causes = Vec::new();
+        if remove_tree(&tomb, &mut causes) {
+            pruned.removed.push(r);
+        } else {
+            pruned.failed.push(Unremoved {
+                path: r.path,
+                left: tomb,
+                causes,
+            });
+        }
+    }
+    for t in earlier {
+        let mut causes = Vec::new();
+        if dry_run || remove_tree(&t, &mut causes) {
+            pruned.cleared.push(t);
+        } else {
+            pruned.failed.push(Unremoved {
+                left: t.clone(),
+                path: t,
+                causes,
+            });
+        }
+    }
+    Ok(pruned)
+}
+
+/// How many causes of one run directory are printed (the rest are counted).
+const CAUSES_SHOWN: usize = 5;
+
+/// `runs prune`, printed. An error at the end when something could not be removed whole (each
+/// named on stderr with its cause).
+pub fn print_prune(out: &Path, keep: usize, dry_run: bool) -> Result<()> {
+    if !out.is_dir() {
+        bail!("{}: not a folder of run directories", out.display());
+    }
+    let p = prune(out, keep, dry_run)?;
+    let verb = if dry_run { "would remove" } else { "removed" };
+    for r in &p.removed {
+        println!(
+            "{verb} {} ({}, {})",
+            r.path.display(),
+            ByteSize::b(r.bytes),
+            r.status
+        );
+    }
+    for t in &p.cleared {
+        println!(
+            "{verb} {} (left half-removed by an earlier prune)",
+            t.display()
+        );
+    }
+    for f in &p.failed {
+        for (path, e) in f.causes.iter().take(CAUSES_SHOWN) {
+            eprintln!(
+                "fdi-launch: could not remove {}: {}",
+                path.display(),
+                fdi_report::io_cause::describe(e)
+            );
+        }
+        if f.causes.len() > CAUSES_SHOWN {
+            eprintln!(
+                "fdi-launch: … and {} more paths under {}",
+                f.causes.len() - CAUSES_SHOWN,
+                f.left.display()
+            );
+        }
+        if f.left == f.path {
+            eprintln!("fdi-launch: {} is left as it was", f.path.display());
+        } else {
+            eprintln!(
+                "fdi-launch: what is left of {} stays as {} (`runs list` shows it, the next `runs prune` tries again)",
+                f.path.display(),
+                f.left.display()
+            );
+        }
+    }
+    let freed: u64 = p.removed.iter().map(|r| r.bytes).sum();
+    println!(
+        "{verb} {} run directories, {} {}; kept the {} newest",
+        p.removed.len(),
+        ByteSize::b(freed),
+        if dry_run { "would be freed" } else { "freed" },
+        p.kept
+    );
+    if !p.failed.is_empty() {
+        let names: Vec<String> = p
+            .failed
+            .iter()
+            .map(|f| f.left.display().to_string())
+            .collect();
+        bail!(
+            "{} run directories could not be removed whole (the paths and causes are above): {}",
+            p.failed.len(),
+            names.join(", ")
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run_dir(root: &Path, name: &str, summary: bool) -> PathBuf {
+        let d = root.join(name);
+        std::fs::create_dir_all(d.join("traces")).expect("mkdir");
+        std::fs::write(d.join("scenario.toml"), "name = \"x\"\n").expect("scenario");
+        std::fs::write(d.join("traces").join("agent-1.trace"), vec![0u8; 1000]).expect("trace");
+        if summary {
+            std::fs::write(d.join("summary.json"), "{}").expect("summary");
+        }
+        d
+    }
+
+    #[test]
+    fn prune_keeps_the_newest_and_never_touches_what_is_not_a_run_directory() {
+        let root = tempfile::tempdir().expect("tmp");
+        let r = root.path();
+        let mut made = Vec::new();
+        for (i, name) in [
+            "20240101-000000-a",
+            "20240102-000000-b",
+            "20240103-000000-c",
+        ]
+        .iter()
+        .enumerate()
+        {
+            let d = run_dir(r, name, i != 1);
+            made.push(d);
+            // Distinct modification times, oldest first.
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        // Not run directories: a folder with a scenario only, one with data, a file.
+        std::fs::create_dir_all(r.join("notes")).expect("mkdir");
+        std::fs::write(r.join("notes").join("scenario.toml"), "x").expect("w");
+        std::fs::create_dir_all(r.join("data/traces")).expect("mkdir");
+        std::fs::write(r.join("README"), "keep me").expect("w");
+
+        let dry = prune(r, 1, true).expect("dry run");
+        assert_eq!(dry.removed.len(), 2);
+        assert!(made.iter().all(|d| d.is_dir()), "a dry run removes nothing");
+
+        let p = prune(r, 1, false).expect("prune");
+        let names: Vec<&str> = p.removed.iter().map(|x| x.name.as_str()).collect();
+        assert_eq!(names, vec!["20240102-000000-b", "20240101-000000-a"]);
+        assert!(p.removed.iter().all(|x| x.bytes >= 1000));
+        assert!(made[2].is_dir() && !made[1].exists() && !made[0].exists());
+        assert!(r.join("notes/scenario.toml").is_file());
+        assert!(r.join("data/traces").is_dir());
+        assert!(r.join("README").is_file());
+        assert_eq!(prune(r, 0, false).expect("all").removed.len(), 1);
+        assert!(r.join("notes").is_dir() && r.join("data").is_dir());
+    }
+
+    /// A tombstone (a run directory an earlier prune renamed and could not remove whole) is no
+    /// run directory, however whole its files: it is listed apart, never counted among the kept,
+    /// and the next prune removes it.
+    #[test]
+    fn a_tombstone_of_an_earlier_prune_is_listed_apart_and_removed_by_the_next() {
+        let root = tempfile::tempdir().expect("tmp");
+        let r = root.path();
+        let run = run_dir(r, "20240102-000000-b", true);
+        let tomb = run_dir(r, "20240101-000000-a.pruning", true);
+        assert!(is_run_dir(&tomb));
+        let runs = list(r).expect("list");
+        assert_eq!(runs.len(), 1);
+        assert_eq!(runs[0].path, run);
+        assert_eq!(tombstones(r).expect("tombstones"), vec![tomb.clone()]);
+        let dry = prune(r, 1, true).expect("dry run");
+        assert_eq!((dry.removed.len(), dry.cleared.len()), (0, 1));
+        assert!(tomb.is_dir(), "a dry run removes nothing");
+        let p = prune(r, 1, false).expect("prune");
+        assert_eq!(p.kept, 1);
+        assert!(p.removed.is_empty() && p.failed.is_empty(), "{p:?}");
+        assert_eq!(p.cleared, vec![tomb.clone()]);
+        assert!(!tomb.exists() && run.is_dir());
+        // A tombstone name already taken gets a number.
+        std::fs::create_dir(r.join("20240102-000000-b.pruning")).expect("mkdir");
+        assert_eq!(tombstone_for(&run), r.join("20240102-000000-b.1.pruning"));
+    }
+}

@@ -1,0 +1,950 @@
+//! The multi-process engine: spawns the agents, the attacker and the control center, supervises
+//! them, and tears everything down (processes and shared memory) however the run ends.
+
+use std::os::unix::process::ExitStatusExt;
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use fdi_common::engine::LostAgent;
+use fdi_common::run_dir::{Process, RunDir};
+use fdi_common::scenario::{ClockMode, Resolved};
+use fdi_common::stop::{Interrupted, Stop, BEFORE_THE_START};
+use fdi_runtime::ipc::{
+    self, monotonic_ns, Bell as _, ControlMsg, Inbox as _, Outbox as _, Role, Shm, StatusMsg,
+    Stream, Transport, Wake, Waker as _,
+};
+use fdi_runtime::process::procfs;
+use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+
+use crate::run::supervisor::{Child, Supervisor};
+
+/// Grace period between SIGTERM and SIGKILL when a run is torn down.
+pub(crate) const GRACE: Duration = Duration::from_secs(2);
+/// How long the end of the children's output is awaited once they are gone (the output of a
+/// program outside the project may be held open by a process that left its group).
+pub(crate) const OUTPUT_WAIT: Duration = Duration::from_secs(1);
+/// How long the processes may take to report ready.
+const READY_TIMEOUT: Duration = Duration::from_secs(30);
+/// A process stopped (SIGSTOP) this long stalls the run: the launcher stops it with a message.
+pub(crate) const STALL_LIMIT: Duration = Duration::from_secs(1);
+/// Realtime runs start this long after the start message, so every process sees it in time.
+const REALTIME_LEAD: Duration = Duration::from_millis(50);
+
+/// What the launcher keeps about each of its children.
+#[derive(Debug)]
+struct Slot {
+    wake: Wake,
+    ready: bool,
+    /// A program outside the project (`[roles]`): how long it may take to be ready, and to be
+    /// done once the run's own processes are.
+    external: Option<Duration>,
+}
+
+type Proc = Child<Slot>;
+
+/// The role binaries: the sibling `fdi-agent` etc. when they are at least as new as this
+/// executable, else this executable in the hidden multi-call mode (`fdi-launch process ROLE`),
+/// which is always consistent with the launcher.
+pub(crate) fn role_command(role: &str) -> Result<Command> {
+    let me = std::env::current_exe().context("locating fdi-launch")?;
+    let sibling = me.with_file_name(format!("fdi-{role}"));
+    let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
+    if let (Some(s), Some(m)) = (modified(&sibling), modified(&me)) {
+        if s >= m {
+            return Ok(Command::new(sibling));
+        }
+    }
+    let mut c = Command::new(me);
+    c.args(["process", role]);
+    Ok(c)
+}
+
+/// `SIGINT`, `SIGKILL`, ...: the name of signal `sig`, or its number.
+pub fn signal_name(sig: i32) -> String {
+    signal_hook::low_level::signal_name(sig).map_or_else(|| format!("signal {sig}"), Into::into)
+}
+
+/// Describes how a child ended, naming the signal.
+pub fn describe_status(status: ExitStatus) -> String {
+    if let Some(sig) = status.signal() {
+        match signal_hook::low_level::signal_name(sig) {
+            Some(name) => format!("was killed by signal {sig} {name}"),
+            None => format!("was killed by signal {sig}"),
+        }
+    } else {
+        format!("exited with status {}", status.code().unwrap_or(-1))
+    }
+}
+
+/// A unique run prefix (short: iceoryx2 puts it into socket paths).
+pub fn new_prefix() -> String {
+    ipc::RunPrefix::fresh().to_string()
+}
+
+/// True while a process of the run `prefix` may still use its files: its launcher `pid` lives,
+/// or some process names the prefix on its command line (a child outliving a killed launcher
+/// for the moment it takes to exit).
+fn run_alive(prefix: &str, pid: u32) -> bool {
+    if procfs::exists(pid) {
+        return true;
+    }
+    let Ok(pids) = procfs::pids() else {
+        return true; // cannot tell: leave it
+    };
+    let needle = prefix.as_bytes();
+    pids.into_iter()
+        .any(|p| procfs::cmdline(p).is_ok_and(|c| c.windows(needle.len()).any(|w| w == needle)))
+}
+
+/// Removes the resources of runs whose launcher is dead (a killed launcher cannot clean up),
+/// wherever iceoryx2 left them. Every command but the runtime's own processes calls it first.
+pub fn reap_stale_runs() -> usize {
+    let mut n = 0;
+    let parse = |name: &str| ipc::RunPrefix::parse_start(name).map(|p| p.to_string());
+    for p in Shm::runs_with_leftovers(parse) {
+        let Some(pid) = ipc::RunPrefix::parse_start(&p).map(|p| p.launcher_pid()) else {
+            continue;
+        };
+        if !run_alive(&p, pid) {
+            n += Shm::remove_leftovers(&p).unwrap_or(0);
+        }
+    }
+    n
+}
+
+/// Marks the error of a run that failed before its start was broadcast: nothing was recorded,
+/// and the caller removes the run directory it made for it (`anyhow::Error::downcast_ref`).
+#[derive(Debug, Clone, Copy)]
+pub struct DidNotStart;
+
+impl std::fmt::Display for DidNotStart {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("the run did not start")
+    }
+}
+
+/// What the caller needs after the processes ended.
+#[derive(Debug)]
+pub struct IpcOutcome {
+    pub wall_s: f64,
+    pub prefix: String,
+    pub leftovers: Vec<PathBuf>,
+    /// Realtime agents that died or fell silent while the run went on.
+    pub lost: Vec<LostAgent>,
+    /// The signal (SIGINT, SIGTERM) that interrupted the run after its start; the traces hold
+    /// the run up to that point.
+    pub interrupted: Option<i32>,
+    /// How the processes ended, when interrupted.
+    pub exits: String,
+    /// A run split over hosts: one line per host (`RunSummary::hosts`).
+    pub hosts: Vec<String>,
+}
+
+/// How the supervision of a started run ended.
+struct Supervised {
+    wall_s: f64,
+    interrupted: Option<i32>,
+}
+
+/// Options of one multi-process run.
+#[derive(Debug, Clone)]
+pub struct IpcOptions {
+    /// The run directory: `scenario.toml` is read from it, traces go to `traces/`.
+    pub run_dir: PathBuf,
+    pub progress: bool,
+    /// Replay mode (`run --replay`): only the control center runs, fed by a replayer process
+    /// that plays back `traces/attacker.trace` of `run_dir` (already copied there).
+    pub replay: bool,
+    /// Where and how the run's processes are scheduled.
+    pub placement: Placement,
+    /// The processes write their traces into the named pipes of [`crate::run::tap`]
+    /// (`traces/<process>.pipe`) instead of the trace files.
+    pub pipes: bool,
+    /// The run is split over hosts (`--hosts FILE`): where each process runs.
+    pub deployment: Option<crate::run::hosts::Deployment>,
+    /// The launcher's stop.
+    pub stop: Stop,
+}
+
+pub use fdi_runtime::process::{Placement, ProcessArgs};
+
+struct Launcher<X: Transport> {
+    realtime: bool,
+    lost: Vec<LostAgent>,
+    procs: Supervisor<Slot>,
+    bells: Vec<X::Bell>,
+    control: X::Outbox<ControlMsg>,
+    status: X::Inbox<StatusMsg>,
+    waker: X::Waker,
+    /// The launcher's stop: raised by SIGINT/SIGTERM (or a library caller).
+    stop: Stop,
+    /// The start was broadcast: from then on the run records.
+    started: bool,
+    /// The other hosts of a split run.
+    remote: Option<crate::run::remote::Remote>,
+}
+
+impl<X: Transport> Launcher<X> {
+    /// The signal (SIGINT, SIGTERM) the launcher received, if any.
+    fn interrupt(&self) -> Option<i32> {
+        self.stop.pending()
+    }
+
+    /// A host of a split run that is gone: before the start or in lockstep it ends the run
+    /// (its message); in a started realtime run its agents are lost and the run goes on.
+    fn host_lost(&mut self, done: &mut [bool], bar: &ProgressBar) -> Option<String> {
+        if let Some(failed) = self.remote.as_ref()?.failure() {
+            return Some(failed);
+        }
+        let lost = self.remote.as_mut()?.lost_host()?;
+        let ran_only_agents = self
+            .procs
+            .iter()
+            .filter(|p| p.host() == Some(lost.host.name.as_str()))
+            .all(|p| matches!(p.meta.wake, Wake::Agent(_)));
+        if !(self.realtime && self.started && ran_only_agents) {
+            return Some(lost.message());
+        }
+        let reason = format!(
+            "host `{}` ({}) unreachable",
+            lost.host.name, lost.host.endpoint
+        );
+        for (i, p) in self.procs.iter().enumerate() {
+            if p.host() == Some(lost.host.name.as_str()) {
+                done[i] = true;
+            }
+        }
+        for &agent in &lost.agents {
+            match self.lost.iter_mut().find(|x| x.agent == agent) {
+                Some(x) => x.reason = reason.clone(),
+                None => self.lost.push(LostAgent {
+                    agent,
+                    t_s: None,
+                    reason: reason.clone(),
+                    rejoined_t_s: None,
+                }),
+            }
+        }
+        let line = format!(
+            "fdi-launch: {}; its agents are lost, the run goes on",
+            lost.message()
+        );
+        if bar.is_hidden() {
+            eprintln!("{line}");
+        } else {
+            bar.println(line);
+        }
+        None
+    }
+
+    /// Reaps exited children; returns the first abnormal exit that ends the run. Once a realtime
+    /// run has started, an agent's abnormal exit does not end the run (the control center keeps controlling the
+    /// others): it is recorded in `self.lost` instead.
+    fn poll_children(&mut self) -> Option<String> {
+        let mut failure = None;
+        for i in self.procs.reap() {
+            let p = &mut self.procs[i];
+            let Some(st) = p.status.filter(|st| !st.success()) else {
+                continue;
+            };
+            let what = p.ended(st);
+            match (self.realtime && self.started, p.meta.wake) {
+                (true, Wake::Agent(id)) => {
+                    // The control center may have reported it silent first: one entry per
+                    // agent, with the exit as its reason.
+                    match self.lost.iter_mut().find(|x| x.agent == id) {
+                        Some(x) => x.reason = what,
+                        None => self.lost.push(LostAgent {
+                            agent: id,
+                            t_s: None,
+                            reason: what,
+                            rejoined_t_s: None,
+                        }),
+                    }
+                }
+                _ => {
+                    failure.get_or_insert(what);
+                }
+            }
+        }
+        failure
+    }
+
+    /// A child stopped (SIGSTOP, or traced) for longer than [`STALL_LIMIT`], named.
+    fn stalled(&mut self) -> Option<String> {
+        self.procs.stalled(STALL_LIMIT)
+    }
+
+    /// How the children ended, e.g. `6 exited 0` or `5 exited 0, agent 2 killed by signal 9`.
+    fn exits(&self) -> String {
+        self.procs.exits()
+    }
+
+    /// Reads the processes' status reports: progress (the control center's), done, agents
+    /// lost and rejoined (realtime).
+    fn take_status(&mut self, done: &mut [bool], bar: &ProgressBar, dt: f64) -> Result<()> {
+        let (mut lost, mut rejoined) = (Vec::new(), Vec::new());
+        let procs = &self.procs;
+        self.status.drain(|m| {
+            if Role::from_code(m.role) == Some(Role::Center) {
+                bar.set_position(m.tick);
+                bar.set_message(format!("{:.1} s", m.tick as f64 * dt));
+            }
+            if m.kind == StatusMsg::DONE {
+                if let Some(i) = procs.iter().position(|p| matches_status(p.meta.wake, &m)) {
+                    done[i] = true;
+                }
+            }
+            if m.kind == StatusMsg::LOST {
+                lost.push((m.agent, m.tick as f64 * dt));
+            }
+            if m.kind == StatusMsg::REJOINED {
+                rejoined.push((m.agent, m.tick as f64 * dt));
+            }
+        })?;
+        let slot = |procs: &Supervisor<Slot>, agent| {
+            procs.iter().position(|p| p.meta.wake == Wake::Agent(agent))
+        };
+        for (agent, t) in lost {
+            if let Some(i) = slot(&self.procs, agent) {
+                done[i] = true; // a lost agent will not report done
+            }
+            match self.lost.iter_mut().find(|x| x.agent == agent) {
+                Some(x) => x.t_s = Some(t),
+                None => self.lost.push(LostAgent {
+                    agent,
+                    t_s: Some(t),
+                    reason: "fell silent".into(),
+                    rejoined_t_s: None,
+                }),
+            }
+            bar.println(format!(
+                "fdi-launch: agent {agent} lost at t = {t:.3} s; the run goes on"
+            ));
+        }
+        for (agent, t) in rejoined {
+            let Some(x) = self.lost.iter_mut().find(|x| x.agent == agent) else {
+                continue;
+            };
+            x.rejoined_t_s = Some(t);
+            // It is controlled again and will report done itself, unless its process ended.
+            if let Some(i) = slot(&self.procs, agent) {
+                done[i] = self.procs[i].status.is_some();
+            }
+            let gap = x.t_s.map_or(String::new(), |from| {
+                format!(" after a gap of {:.3} s", t - from)
+            });
+            bar.println(format!(
+                "fdi-launch: agent {agent} rejoined at t = {t:.3} s{gap}"
+            ));
+        }
+        Ok(())
+    }
+
+    /// A process that exited cleanly without reporting done (SIGTERM sent to it alone) ends the
+    /// run too: its peers would wait for it. Its done may have raced its exit: the reports are
+    /// read once more before deciding. Names it.
+    fn ended_early(&mut self, done: &mut [bool]) -> Result<Option<String>> {
+        let early = |done: &[bool], procs: &[Proc]| {
+            procs
+                .iter()
+                .enumerate()
+                .position(|(i, p)| p.status.is_some_and(|st| st.success()) && !done[i])
+        };
+        if early(done, &self.procs).is_none() {
+            return Ok(None);
+        }
+        let procs = &self.procs;
+        self.status.drain(|m| {
+            if m.kind == StatusMsg::DONE {
+                if let Some(i) = procs.iter().position(|p| matches_status(p.meta.wake, &m)) {
+                    done[i] = true;
+                }
+            }
+        })?;
+        Ok(early(done, &self.procs).map(|i| {
+            let p = &self.procs[i];
+            format!(
+                "{} (pid {}) exited before the end of the run",
+                p.label,
+                p.pid()
+            )
+        }))
+    }
+
+    fn broadcast(&self, msg: ControlMsg) {
+        let _ = self.control.send(msg);
+        for b in &self.bells {
+            let _ = b.ring();
+        }
+    }
+
+    /// Stops every child still running: STOP message, SIGTERM, then SIGKILL after the grace.
+    fn teardown(&mut self) {
+        self.broadcast(ControlMsg {
+            command: ControlMsg::STOP,
+            reserved: 0,
+            epoch_ns: 0,
+        });
+        // A stopped process (SIGSTOP) acts on the SIGTERM only once continued: it then exits on
+        // its own with its trace flushed, not SIGKILLed after the grace.
+        self.procs.signal_term();
+        let began = Instant::now();
+        while self
+            .procs
+            .iter()
+            .any(|p| p.status.is_none() && !p.unreachable())
+            && began.elapsed() < GRACE
+        {
+            self.poll_children();
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        self.procs.kill_rest();
+        // What the programs outside the project started goes with them, named.
+        for line in self.procs.end_programs(GRACE) {
+            eprintln!("fdi-launch: {line}");
+        }
+    }
+}
+
+/// Runs the resolved scenario in `opts.run_dir` (which must already hold `scenario.toml`).
+pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
+    reap_stale_runs();
+    let prefix = new_prefix();
+    let run_dir = RunDir::new(&opts.run_dir);
+    let scenario_path = run_dir.scenario();
+    std::fs::create_dir_all(run_dir.traces()).context("creating the traces folder")?;
+    opts.stop.check(BEFORE_THE_START).context(DidNotStart)?;
+
+    let sizing = fdi_runtime::process::sizing_for(resolved);
+    // A full shared-memory folder, a read-only iceoryx2 folder or a low open-file limit is
+    // named now, with its fix: past this point iceoryx2 reports them as a SIGBUS or an
+    // internal error.
+    let external =
+        resolved.scenario.roles.attacker.is_some() || resolved.scenario.roles.monitor.is_some();
+    ipc::machine::check(sizing, external, &prefix)
+        .context("the machine cannot carry this run")
+        .context(DidNotStart)?;
+
+    let result = {
+        // What a failed node or port creation made is the run's: removed.
+        let opened = Shm::open(&prefix, "launcher", sizing).and_then(|transport| {
+            let ports = (
+                transport.publisher(Stream::Control)?,
+                transport.subscriber(Stream::Status)?,
+                transport.waker(Wake::Launcher)?,
+            );
+            Ok((transport, ports))
+        });
+        let (transport, (control, status, waker)) = match opened {
+            Ok(opened) => opened,
+            Err(e) => {
+                Shm::remove_leftovers(&prefix).ok();
+                return Err(anyhow::Error::new(e).context(DidNotStart));
+            }
+        };
+        let mut launcher = Launcher {
+            realtime: resolved.scenario.clock == ClockMode::Realtime,
+            lost: Vec::new(),
+            procs: Supervisor::default(),
+            bells: Vec::new(),
+            control,
+            status,
+            waker,
+            stop: opts.stop.clone(),
+            started: false,
+            remote: None,
+        };
+        // A failure to reach the other hosts goes the way of every other failure: through the
+        // teardown and the removal of the run's files below.
+        let connected = match &opts.deployment {
+            Some(d) => crate::run::remote::Remote::connect(d.clone(), &prefix)
+                .and_then(|mut r| {
+                    r.start_bridge(fdi_runtime::process::sizing_for(resolved))?;
+                    Ok(r)
+                })
+                .map(|r| launcher.remote = Some(r)),
+            None => Ok(()),
+        };
+        let r = connected.and_then(|()| {
+            spawn_and_supervise(
+                resolved,
+                opts,
+                &prefix,
+                &scenario_path,
+                &transport,
+                &mut launcher,
+            )
+        });
+        launcher.teardown();
+        // Every child has exited: what they printed is relayed whole before we go on, unless
+        // a process that left a program's group still holds its output.
+        for line in launcher.procs.drain_stderr(OUTPUT_WAIT) {
+            eprintln!("fdi-launch: warning: {line}");
+        }
+        let mut remote_left = Vec::new();
+        let mut hosts = Vec::new();
+        if let Some(mut remote) = launcher.remote.take() {
+            hosts.push(remote.describe_coordinator());
+            hosts.extend(remote.describe());
+            if launcher.started {
+                for p in remote.fetch_traces(&opts.run_dir) {
+                    eprintln!("fdi-launch: warning: {p}");
+                }
+            }
+            let (left, problems) = remote.release();
+            for p in problems {
+                eprintln!("fdi-launch: warning: {p}");
+            }
+            remote_left = left;
+        }
+        let r = match r {
+            Err(e) if !launcher.started => Err(e.context(DidNotStart)),
+            r => r,
+        };
+        (
+            r,
+            std::mem::take(&mut launcher.lost),
+            launcher.exits(),
+            remote_left,
+            hosts,
+        )
+        // ports and node dropped here, before the files are removed
+    };
+    let (result, lost, exits, remote_left, hosts) = result;
+    Shm::remove_leftovers(&prefix).ok();
+    let mut leftovers = Shm::leftovers(&prefix);
+    leftovers.extend(remote_left.into_iter().map(PathBuf::from));
+    let Supervised {
+        wall_s,
+        interrupted,
+    } = result?;
+    if interrupted.is_some() {
+        // Acted on: from here on (the join, the report) only a new signal interrupts.
+        opts.stop.take();
+    }
+    Ok(IpcOutcome {
+        wall_s,
+        prefix,
+        leftovers,
+        lost,
+        interrupted,
+        exits,
+        hosts,
+    })
+}
+
+fn spawn_and_supervise<X: Transport>(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    scenario_path: &Path,
+    transport: &X,
+    l: &mut Launcher<X>,
+) -> Result<Supervised> {
+    spawn_roles(resolved, opts, prefix, scenario_path, l)?;
+    await_ready(l)?;
+    spawn_externals(resolved, opts, prefix, scenario_path, l)?;
+    await_ready(l)?;
+    let bar = progress_bar(resolved.ticks(), opts.progress);
+    if let Some(remote) = &l.remote {
+        remote.await_routes()?;
+    }
+    let started = start_run(resolved, transport, l)?;
+    let (wall_s, interrupted) = supervise(resolved, l, &bar, started)?;
+    if interrupted.is_some() {
+        return Ok(Supervised {
+            wall_s,
+            interrupted,
+        });
+    }
+    bar.finish_and_clear();
+    release_and_reap(l)?;
+    Ok(Supervised {
+        wall_s,
+        interrupted: None,
+    })
+}
+
+/// Spawns the run's processes: the control center, the attacker (or the replayer) and the
+/// agents.
+fn spawn_roles<X: Transport>(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    scenario_path: &Path,
+    l: &mut Launcher<X>,
+) -> Result<()> {
+    let mut roles: Vec<(String, Process, Wake, Option<u32>)> =
+        vec![(Process::CENTER.into(), Process::Center, Wake::Center, None)];
+    if opts.replay {
+        // The replayer stands in for the attacker (and the agents); its `--trace` is the
+        // attacker trace it plays back.
+        roles.push(("replayer".into(), Process::Attacker, Wake::Attacker, None));
+    } else {
+        roles.push((
+            Process::ATTACKER.into(),
+            Process::Attacker,
+            Wake::Attacker,
+            None,
+        ));
+        for a in &resolved.scenario.agents {
+            roles.push((
+                "agent".into(),
+                Process::Agent(a.id),
+                Wake::Agent(a.id),
+                Some(a.id),
+            ));
+        }
+    }
+    let run_dir = RunDir::new(&opts.run_dir);
+    let mut remote_procs = Vec::new();
+    for (role, process, wake, agent) in roles {
+        let name = process.to_string();
+        let label = match agent {
+            Some(id) => format!("agent {id}"),
+            None => role.clone(),
+        };
+        if let Some(d) = l.remote.as_ref().map(|r| &r.deployment) {
+            if !d.is_local(wake) {
+                let p = crate::run::hosts::RemoteProcess {
+                    role: role.clone(),
+                    name: name.clone(),
+                    agent,
+                    label: label.clone(),
+                };
+                let slot = Slot {
+                    wake,
+                    ready: false,
+                    external: None,
+                };
+                remote_procs.push((p, wake, slot));
+                continue;
+            }
+        }
+        if let Some(signal) = l.interrupt() {
+            return Err(Interrupted {
+                signal,
+                phase: BEFORE_THE_START,
+            }
+            .into());
+        }
+        let mut cmd = role_command(&role)?;
+        let args = ProcessArgs {
+            prefix: prefix.to_string(),
+            scenario: scenario_path.to_path_buf(),
+            trace: if opts.pipes {
+                run_dir.pipe(process)
+            } else {
+                run_dir.trace(process)
+            },
+            agent,
+            launcher_pid: Some(std::process::id()),
+            placement: opts.placement.clone(),
+        };
+        cmd.args(args.to_args());
+        l.procs.spawn(
+            label,
+            Slot {
+                wake,
+                ready: false,
+                external: None,
+            },
+            cmd,
+        )?;
+    }
+    if let Some(remote) = &mut l.remote {
+        let scenario = std::fs::read_to_string(scenario_path)
+            .with_context(|| format!("reading {}", scenario_path.display()))?;
+        remote.start_hosts(&scenario, remote_procs, &mut l.procs)?;
+        for line in remote.describe() {
+            eprintln!("fdi-launch: {line}");
+        }
+    }
+    Ok(())
+}
+
+/// Spawns the programs that take a role (`[roles]`), once the run's own processes are ready:
+/// every service they open exists by then. Each gets the run's prefix and parameters in its
+/// environment (docs/protocol.md). In replay mode only the monitor runs (the replayer stands in
+/// for the attacker).
+fn spawn_externals<X: Transport>(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    scenario_path: &Path,
+    l: &mut Launcher<X>,
+) -> Result<()> {
+    use fdi_runtime::process::external::{environment, ExternalKind};
+    let roles = &resolved.scenario.roles;
+    let attacker = roles.attacker.as_ref().filter(|_| !opts.replay);
+    for (kind, role, wake, what) in [
+        (
+            ExternalKind::Attacker,
+            attacker,
+            Wake::ExternalAttacker,
+            "external attacker",
+        ),
+        (
+            ExternalKind::Monitor,
+            roles.monitor.as_ref(),
+            Wake::Monitor,
+            "monitor",
+        ),
+    ] {
+        let Some(role) = role else { continue };
+        let label = format!("{what} `{}`", role.label());
+        let Some((program, args)) = role.command.split_first() else {
+            bail!("{label}: `command` names no program");
+        };
+        let mut cmd = Command::new(program);
+        cmd.args(args).envs(environment(
+            kind,
+            prefix,
+            resolved,
+            scenario_path,
+            &opts.run_dir,
+        ));
+        let slot = Slot {
+            wake,
+            ready: false,
+            external: Some(role.timeout()),
+        };
+        l.procs.spawn_external(label, slot, cmd)?;
+    }
+    Ok(())
+}
+
+/// Waits until every process reported ready (its ports exist; only then can nothing sent be
+/// lost), naming the first that fails, stalls or never gets there.
+fn await_ready<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
+    let began = Instant::now();
+    while l.procs.iter().any(|p| !p.meta.ready) {
+        if let Some(signal) = l.interrupt() {
+            return Err(Interrupted {
+                signal,
+                phase: BEFORE_THE_START,
+            }
+            .into());
+        }
+        if let Some(failed) = l.poll_children() {
+            // A signal to the process group reaches the launcher in the same kill() as the
+            // child: if the child died of it, the launcher's flag is set by now.
+            if let Some(signal) = l.interrupt() {
+                return Err(Interrupted {
+                    signal,
+                    phase: BEFORE_THE_START,
+                }
+                .into());
+            }
+            bail!("{failed} before the start");
+        }
+        // A process that ended cleanly before it was ready (SIGTERM sent to it alone) will
+        // never be: named at once, as during the run.
+        if let Some(p) = l
+            .procs
+            .iter()
+            .find(|p| !p.meta.ready && p.status.is_some_and(|st| st.success()))
+        {
+            bail!(
+                "{} (pid {}) exited before it was ready (before the start)",
+                p.label,
+                p.pid()
+            );
+        }
+        if let Some(stall) = l.stalled() {
+            bail!("{stall} (before the start)");
+        }
+        if let Some(lost) = l.host_lost(&mut [], &ProgressBar::hidden()) {
+            bail!("{lost} (before the start)");
+        }
+        // The run's own processes get READY_TIMEOUT; a program outside the project its
+        // role's timeout.
+        let late: Vec<&str> = l
+            .procs
+            .iter()
+            .filter(|p| !p.meta.ready && began.elapsed() > p.meta.external.unwrap_or(READY_TIMEOUT))
+            .map(|p| p.label.as_str())
+            .collect();
+        if !late.is_empty() {
+            let external = l
+                .procs
+                .iter()
+                .any(|p| !p.meta.ready && p.meta.external.is_some());
+            let hint = if external {
+                " (a program that takes a role reports ready on `fdi/status` once its ports are \
+                 open: docs/protocol.md)"
+            } else {
+                ""
+            };
+            bail!(
+                "not ready after {:.1} s: {}{hint}",
+                began.elapsed().as_secs_f64(),
+                late.join(", ")
+            );
+        }
+        l.waker.wait(Duration::from_millis(20))?;
+        let procs = &mut l.procs;
+        l.status.drain(|m| {
+            if m.kind == StatusMsg::READY {
+                if let Some(p) = procs.iter_mut().find(|p| matches_status(p.meta.wake, &m)) {
+                    p.meta.ready = true;
+                }
+            }
+        })?;
+    }
+
+    Ok(())
+}
+
+/// Broadcasts the start (realtime: sim time zero a short lead ahead); returns when.
+fn start_run<X: Transport>(
+    resolved: &Resolved,
+    transport: &X,
+    l: &mut Launcher<X>,
+) -> Result<Instant> {
+    // Notifiers are created once every listener exists: a notifier created earlier may not
+    // reach a listener that appears later, and the start would then wait for a timeout.
+    for p in l.procs.iter() {
+        l.bells.push(transport.notifier(p.meta.wake)?);
+    }
+    let lead = if resolved.scenario.clock == ClockMode::Realtime {
+        REALTIME_LEAD
+    } else {
+        Duration::ZERO
+    };
+    let started = Instant::now();
+    l.started = true;
+    l.broadcast(ControlMsg {
+        command: ControlMsg::START,
+        reserved: 0,
+        epoch_ns: monotonic_ns() + lead.as_nanos() as u64,
+    });
+    Ok(started)
+}
+
+/// Supervises the started run until every process is done (or an interrupt, a failure, a
+/// stall). Returns the run's wall time and the interrupting signal, if any.
+fn supervise<X: Transport>(
+    resolved: &Resolved,
+    l: &mut Launcher<X>,
+    bar: &ProgressBar,
+    started: Instant,
+) -> Result<(f64, Option<i32>)> {
+    let dt = resolved.scenario.control_period_s;
+    let mut done = vec![false; l.procs.len()];
+    // When the run's own processes were all done: the programs taking roles must be done
+    // within their timeout after it.
+    let mut own_done: Option<Instant> = None;
+    let interrupted = |l: &mut Launcher<X>| {
+        l.interrupt().map(|signal| {
+            bar.abandon();
+            l.teardown();
+            (started.elapsed().as_secs_f64(), Some(signal))
+        })
+    };
+    loop {
+        l.waker.wait(Duration::from_millis(50))?;
+        // An interrupt comes first: whatever a child did after it is part of the stop.
+        if let Some(end) = interrupted(l) {
+            return Ok(end);
+        }
+        l.take_status(&mut done, bar, dt)?;
+        if let Some(lost) = l.host_lost(&mut done, bar) {
+            bar.abandon();
+            bail!("run stopped: {lost}");
+        }
+        if let Some(failed) = l.poll_children() {
+            // A child killed by the signal that interrupted the launcher (the same kill() of the
+            // process group) is part of the interrupt, not a failure.
+            if let Some(end) = interrupted(l) {
+                return Ok(end);
+            }
+            bar.abandon();
+            bail!("run stopped: {failed}");
+        }
+        if let Some(early) = l.ended_early(&mut done)? {
+            bar.abandon();
+            bail!("run stopped: {early}");
+        }
+        // The simulation ends when every process has reported done (its trace is flushed by
+        // then); process exit is teardown and not part of the run's wall time.
+        let finished = |i: usize, p: &Proc| done[i] || p.status.is_some_and(|st| !st.success());
+        if l.procs.iter().enumerate().all(|(i, p)| finished(i, p))
+            || l.procs.iter().all(|p| p.status.is_some())
+        {
+            return Ok((started.elapsed().as_secs_f64(), None));
+        }
+        let own = |(i, p): (usize, &Proc)| p.meta.external.is_some() || finished(i, p);
+        if l.procs.iter().enumerate().all(own) {
+            let since = *own_done.get_or_insert_with(Instant::now);
+            if let Some(p) = l.procs.iter().enumerate().find(|(i, p)| {
+                !finished(*i, p) && p.meta.external.is_some_and(|t| since.elapsed() > t)
+            }) {
+                let p = p.1;
+                bar.abandon();
+                bail!(
+                    "run stopped: {} (pid {}) did not report done within {:.1} s after the \
+                     run's other processes (a program that takes a role reports done on \
+                     `fdi/status` after its last message: docs/protocol.md)",
+                    p.label,
+                    p.pid(),
+                    since.elapsed().as_secs_f64()
+                );
+            }
+        }
+        if let Some(stall) = l.stalled() {
+            bar.abandon();
+            l.teardown();
+            bail!("run stalled: {stall} (processes: {})", l.exits());
+        }
+    }
+}
+
+/// Every process is done: the stop lets them go (each keeps its ports until then, so that no
+/// last message leaves with its sender); their exits are reaped, and a process that fails on
+/// its way out still fails the run.
+fn release_and_reap<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
+    l.broadcast(ControlMsg {
+        command: ControlMsg::STOP,
+        reserved: 0,
+        epoch_ns: 0,
+    });
+    let began = Instant::now();
+    while l
+        .procs
+        .iter()
+        .any(|p| p.status.is_none() && !p.unreachable())
+        && began.elapsed() < GRACE
+    {
+        if let Some(failed) = l.poll_children() {
+            bail!("run stopped: {failed}");
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    Ok(())
+}
+
+fn matches_status(wake: Wake, m: &StatusMsg) -> bool {
+    match (wake, Role::from_code(m.role)) {
+        (Wake::Agent(id), Some(Role::Agent)) => id == m.agent,
+        (Wake::Attacker, Some(Role::Attacker))
+        | (Wake::Center, Some(Role::Center))
+        | (Wake::ExternalAttacker, Some(Role::ExternalAttacker))
+        | (Wake::Monitor, Some(Role::Monitor)) => true,
+        _ => false,
+    }
+}
+
+fn progress_bar(ticks: u64, enabled: bool) -> ProgressBar {
+    if !enabled {
+        return ProgressBar::hidden();
+    }
+    let bar = ProgressBar::with_draw_target(Some(ticks), ProgressDrawTarget::stderr());
+    let style = ProgressStyle::with_template("{spinner} [{elapsed_precise}] {bar:30} sim {msg} | {pos}/{len} ticks | {per_sec} | ETA {eta}")
+        .unwrap_or_else(|_| ProgressStyle::default_bar());
+    bar.set_style(style);
+    bar
+}

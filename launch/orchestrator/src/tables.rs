@@ -1,0 +1,1047 @@
+//! The paper's Tables I and II.
+
+use fdi_common::stop::Stop;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use fdi_common::delay::DelayProfile;
+use fdi_common::engine::RunSummary;
+use fdi_common::scenario::{self, ControllerMode, Resolved};
+use serde::Serialize;
+
+use crate::run::{execute, Engine};
+use fdi_report::output::{csv_bytes, md_table_head};
+use fdi_report::plot::{BarChart, PALETTE};
+use plotters::style::RGBColor;
+
+#[derive(Debug, Args)]
+pub struct TableArgs {
+    #[arg(long, value_enum, default_value_t = Engine::Ipc)]
+    pub engine: Engine,
+    /// Base scenario (default: the embedded paper scenario): its robots, gains and numerics. Its
+    /// attack and duration are replaced by the table's (the paper's attack, 40 s), and the header
+    /// names what differs from the paper's calibration.
+    #[arg(long, value_name = "FILE")]
+    pub scenario: Option<PathBuf>,
+    #[command(flatten)]
+    pub numerics: crate::request::NumericsArgs,
+    /// Print JSON instead of markdown.
+    #[arg(long)]
+    pub json: bool,
+    /// Shorten every run to this many seconds (the paper's tables use 40 s).
+    #[arg(long, allow_negative_numbers = true)]
+    pub duration_s: Option<f64>,
+    /// Folder that receives the table's run directories.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+    /// Run every entry with N seeds (the scenario's seed, seed + 1, …, seed + N − 1) and give
+    /// each cell as mean ± 95 % confidence interval (Student t) over them.
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=10_000))]
+    pub seeds: Option<u32>,
+    /// With --seeds: runs at a time (default: the number of CPUs).
+    #[arg(long, requires = "seeds")]
+    pub jobs: Option<std::num::NonZeroUsize>,
+}
+
+/// Table I of the paper: (robot, traditional, proposed) RMSE in rad.
+const PAPER_TABLE1: [(u32, f64, f64); 4] = [
+    (1, 0.028, 0.008),
+    (2, 0.041, 0.013),
+    (3, 0.026, 0.009),
+    (4, 0.015, 0.010),
+];
+
+/// Table II of the paper: (case, delay, RMSE of robot 1 in rad).
+fn paper_table2() -> [(&'static str, DelayProfile, f64); 4] {
+    let sine = |a_ms: f64, rate: f64, off_ms: f64| DelayProfile::Sine {
+        amplitude_s: a_ms * 1e-3,
+        offset_s: off_ms * 1e-3,
+        rate_rad_s: rate,
+    };
+    [
+        ("small-fast", sine(2.0, 0.5, 3.0), 0.0084),
+        ("large-fast", sine(20.0, 0.5, 30.0), 0.0101),
+        ("small-slow", sine(2.0, 0.05, 3.0), 0.0085),
+        ("large-slow", sine(20.0, 0.05, 30.0), 0.0113),
+    ]
+}
+
+#[derive(Debug, Serialize)]
+struct Table1Row {
+    robot: u32,
+    traditional_rmse_rad: f64,
+    proposed_rmse_rad: f64,
+    /// The paper's values, for a robot that is the paper's (same model, trajectory and delay);
+    /// `null` for any other robot.
+    paper_traditional: Option<f64>,
+    paper_proposed: Option<f64>,
+}
+
+#[derive(Debug, Serialize)]
+struct Table2Row {
+    case: &'static str,
+    tau_ms: String,
+    rmse_rad: f64,
+    /// The paper's value, when robot 1 is the paper's robot 1 (model and trajectory).
+    paper_rmse_rad: Option<f64>,
+}
+
+/// How a table was made: its base scenario, what the table replaced in it, and its controller
+/// and numerics options that differ from the paper's calibration. Every table shows it in its
+/// header (markdown), a leading `#` comment (CSV) and a `made_with` field (JSON).
+#[derive(Debug, Clone, Serialize)]
+pub(crate) struct MadeWith {
+    /// `the embedded paper scenario` or the file given.
+    pub scenario: String,
+    /// What the table replaced in the base scenario, e.g. `attack `none` → `paper``.
+    pub replaced: Vec<String>,
+    /// The options that differ from the paper's calibration (empty: the paper's).
+    pub numerics: Vec<fdi_common::numerics::Difference>,
+}
+
+impl MadeWith {
+    /// The base scenario of `args` (file or embedded), with the numerics options applied, and
+    /// how it differs from the paper's.
+    pub fn load(
+        scenario: Option<&Path>,
+        numerics: &crate::request::NumericsArgs,
+    ) -> Result<(Resolved, Self)> {
+        let mut r = crate::request::load(scenario)?;
+        numerics.apply(&mut r.scenario);
+        let r = crate::run::check_overrides(r)?;
+        let made = Self {
+            scenario: scenario.map_or_else(
+                || "the embedded paper scenario".into(),
+                |p| p.display().to_string(),
+            ),
+            replaced: Vec::new(),
+            numerics: fdi_common::numerics::differences_from_paper(
+                &r.scenario,
+                fdi_common::numerics::Compare::WithoutMode,
+            ),
+        };
+        Ok((r, made))
+    }
+
+    /// One line: `scenario X (…replaced…); numerics: …`.
+    pub fn line(&self) -> String {
+        let mut out = format!("scenario: {}", self.scenario);
+        if !self.replaced.is_empty() {
+            let _ = write!(
+                out,
+                " (replaced for this table: {})",
+                self.replaced.join(", ")
+            );
+        }
+        let _ = write!(
+            out,
+            "; numerics: {}",
+            fdi_common::numerics::describe(&self.numerics)
+        );
+        out
+    }
+
+    /// The markdown paragraph under a table's title.
+    pub fn md(&self) -> String {
+        let mut out = format!("Made with {}", self.line());
+        if !self.numerics.is_empty() {
+            out.push_str(
+                ". **These numerics differ from the paper's calibration**: the paper's values are shown for comparison only",
+            );
+        }
+        out.push_str(".\n\n");
+        out
+    }
+
+    /// The CSV's leading comment line (read with `comment='#'` in pandas).
+    pub fn csv_comment(&self) -> Vec<u8> {
+        format!("# made with {}\n", self.line().replace('\n', " ")).into_bytes()
+    }
+}
+
+/// The base scenario of Tables I and II: the given one (or the paper's), under the paper's
+/// attack, for the paper's 40 s unless `--duration-s` says otherwise.
+fn base(args: &TableArgs) -> Result<(Resolved, MadeWith)> {
+    let (mut r, mut made) = MadeWith::load(args.scenario.as_deref(), &args.numerics)?;
+    let paper = scenario::paper()?;
+    if r.attack.name != paper.attack.name {
+        let profile = scenario::attack_from_arg(&paper.attack.name, &r.scenario)?;
+        made.replaced.push(format!(
+            "attack `{}` → `{}`",
+            r.attack.name, paper.attack.name
+        ));
+        r = r.with_attack(profile)?;
+    }
+    let duration = args.duration_s.unwrap_or(paper.scenario.duration_s);
+    if r.scenario.duration_s != duration {
+        made.replaced.push(format!(
+            "duration {} s → {duration} s",
+            r.scenario.duration_s
+        ));
+        r.scenario.duration_s = duration;
+    }
+    Ok((crate::run::check_overrides(r)?, made))
+}
+
+/// True when robot `id` of `r` is the paper's robot `id`: same model and trajectory, and the
+/// same delay where `same_delay` (gains and numerics may differ: the table names them).
+fn is_papers_robot(r: &Resolved, id: u32, same_delay: bool) -> bool {
+    static PAPER: std::sync::OnceLock<Option<Resolved>> = std::sync::OnceLock::new();
+    let Some(paper) = PAPER.get_or_init(|| scenario::paper().ok()) else {
+        return false;
+    };
+    let find = |r: &Resolved| r.scenario.agents.iter().find(|a| a.id == id).cloned();
+    match (find(r), find(paper)) {
+        (Some(a), Some(b)) => {
+            a.model == b.model
+                && a.trajectory == b.trajectory
+                && (!same_delay || a.delay == b.delay)
+        }
+        _ => false,
+    }
+}
+
+/// The paper's Table I values (traditional, proposed) of robot `id` of `r`, when it is the
+/// paper's robot.
+fn paper_table1(r: &Resolved, id: u32) -> Option<(f64, f64)> {
+    PAPER_TABLE1
+        .iter()
+        .find(|(robot, _, _)| *robot == id)
+        .filter(|_| is_papers_robot(r, id, true))
+        .map(|&(_, t, p)| (t, p))
+}
+
+/// `{:.prec$}` of a paper value, `—` where the table has none.
+fn or_dash(v: Option<f64>, prec: usize) -> String {
+    v.map_or_else(|| "—".into(), |v| format!("{v:.prec$}"))
+}
+
+/// A CSV cell of an optional value: empty where there is none.
+fn or_empty(v: Option<f64>) -> String {
+    v.map_or_else(String::new, |v| v.to_string())
+}
+
+/// The robots of a Table I: the base scenario's, in id order.
+fn robots(r: &Resolved) -> Vec<u32> {
+    let mut ids: Vec<u32> = r.scenario.agents.iter().map(|a| a.id).collect();
+    ids.sort_unstable();
+    ids
+}
+
+/// Runs one table entry; ipc runs keep their run directory under the table's folder.
+fn run_case(
+    r: &Resolved,
+    args: &TableArgs,
+    dir: &std::path::Path,
+    case: &str,
+    progress: bool,
+    stop: &Stop,
+) -> Result<RunSummary> {
+    let quiet = crate::run::Options::quiet(crate::run::Traces::Full, stop);
+    match args.engine {
+        Engine::Inproc => execute(r, args.engine, None, &quiet),
+        Engine::Ipc => {
+            let mut named = r.clone();
+            named.scenario.name = case.into();
+            let d = crate::run_dirs::create_run_dir(dir, &named)?;
+            let summary = crate::run_dirs::discard_if_not_started(
+                &d,
+                execute(
+                    r,
+                    args.engine,
+                    Some(&d),
+                    &crate::run::Options { progress, ..quiet },
+                ),
+            )
+            .and_then(crate::run::require_whole)?;
+            if let Err(e) = fdi_report::report::write_report(&d, r, &summary, stop) {
+                if e.downcast_ref::<fdi_common::stop::Interrupted>().is_some() {
+                    return Err(e);
+                }
+                eprintln!(
+                    "fdi-launch: warning: the report of {} could not be made: {}",
+                    d.display(),
+                    fdi_report::output::describe_error(&e)
+                );
+            }
+            Ok(summary)
+        }
+    }
+}
+
+/// The folder of one table: `<out>/<timestamp>-<name>`.
+fn table_dir(args: &TableArgs, name: &str) -> PathBuf {
+    args.out
+        .join(format!("{}-{name}", crate::run_dirs::timestamp()))
+}
+
+/// The RMSE of `robot` in a run, NaN when the run has none.
+fn robot_rmse(s: &RunSummary, robot: u32) -> f64 {
+    s.rmse_rad
+        .get(&robot.to_string())
+        .copied()
+        .unwrap_or(f64::NAN)
+}
+
+pub fn table1(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
+    let (base, made) = base(args)?;
+    let dir = table_dir(args, "table1");
+    if let Some(n) = args.seeds {
+        return seeded::table1(args, &base, &made, &dir, n, stop);
+    }
+    let run_mode = |mode: ControllerMode| {
+        let mut r = base.clone();
+        r.scenario.controller.mode = mode;
+        run_case(&r, args, &dir, mode.as_str(), !args.json, stop)
+    };
+    let traditional = run_mode(ControllerMode::Traditional)?;
+    let proposed = run_mode(ControllerMode::Proposed)?;
+    let rows = table1_rows(&base, &traditional, &proposed);
+    let table = Table {
+        name: "table1",
+        md: table1_markdown(args.engine, &made, &rows),
+        csv: table1_csv(&rows)?,
+        json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows }),
+        chart: table1_chart(args.engine, &rows),
+        made,
+    };
+    table.publish(args.json, &dir)
+}
+
+/// Table I's rows: the base scenario's robots, their RMSE in the two runs beside the paper's.
+fn table1_rows(base: &Resolved, traditional: &RunSummary, proposed: &RunSummary) -> Vec<Table1Row> {
+    robots(base)
+        .into_iter()
+        .map(|robot| {
+            let paper = paper_table1(base, robot);
+            Table1Row {
+                robot,
+                traditional_rmse_rad: robot_rmse(traditional, robot),
+                proposed_rmse_rad: robot_rmse(proposed, robot),
+                paper_traditional: paper.map(|p| p.0),
+                paper_proposed: paper.map(|p| p.1),
+            }
+        })
+        .collect()
+}
+
+/// The title of a Table I.
+fn table1_title(engine: Engine) -> String {
+    format!(
+        "Table I: RMSE of the position tracking error (rad) under the paper's FDI attack, engine {}",
+        engine.as_str()
+    )
+}
+
+/// `table1.md` (without its leading `# `), as printed.
+fn table1_markdown(engine: Engine, made: &MadeWith, rows: &[Table1Row]) -> String {
+    let mut md = format!("{}\n\n{}", table1_title(engine), made.md());
+    md.push_str(&md_table_head(&[
+        "robot",
+        "traditional",
+        "proposed",
+        "ratio",
+        "paper traditional",
+        "paper proposed",
+        "paper ratio",
+    ]));
+    for r in rows {
+        let _ = writeln!(
+            md,
+            "| {} | {:.4} | {:.4} | {:.2} | {} | {} | {} |",
+            r.robot,
+            r.traditional_rmse_rad,
+            r.proposed_rmse_rad,
+            r.traditional_rmse_rad / r.proposed_rmse_rad,
+            or_dash(r.paper_traditional, 3),
+            or_dash(r.paper_proposed, 3),
+            or_dash(ratio(r.paper_traditional, r.paper_proposed), 2)
+        );
+    }
+    md
+}
+
+/// `a / b` of two values that may be missing.
+fn ratio(a: Option<f64>, b: Option<f64>) -> Option<f64> {
+    Some(a? / b?)
+}
+
+/// Table I's bar chart: per robot, each controller's RMSE beside the paper's (the paper's bars
+/// only where every robot has a paper value).
+fn table1_chart(engine: Engine, rows: &[Table1Row]) -> BarChart {
+    let values = |f: fn(&Table1Row) -> f64| -> Vec<f64> { rows.iter().map(f).collect() };
+    let paper =
+        |f: fn(&Table1Row) -> Option<f64>| -> Option<Vec<f64>> { rows.iter().map(f).collect() };
+    let mut series = vec![(
+        "traditional".into(),
+        PALETTE[1],
+        values(|r| r.traditional_rmse_rad),
+    )];
+    if let Some(v) = paper(|r| r.paper_traditional) {
+        series.push(("paper traditional".into(), PAPER_SHADE[1], v));
+    }
+    series.push((
+        "proposed".into(),
+        PALETTE[0],
+        values(|r| r.proposed_rmse_rad),
+    ));
+    if let Some(v) = paper(|r| r.paper_proposed) {
+        series.push(("paper proposed".into(), PAPER_SHADE[0], v));
+    }
+    rmse_chart(
+        format!(
+            "Table I: RMSE per robot, this run ({} engine) beside the paper",
+            engine.as_str()
+        ),
+        rows.iter().map(|r| format!("robot {}", r.robot)).collect(),
+        series,
+    )
+}
+
+/// `table1.csv`: one row per robot.
+fn table1_csv(rows: &[Table1Row]) -> Result<Vec<u8>> {
+    const HEADER: [&str; 5] = [
+        "robot",
+        "traditional_rmse_rad",
+        "proposed_rmse_rad",
+        "paper_traditional_rmse_rad",
+        "paper_proposed_rmse_rad",
+    ];
+    let rows = rows.iter().map(|r| {
+        [
+            r.robot.to_string(),
+            r.traditional_rmse_rad.to_string(),
+            r.proposed_rmse_rad.to_string(),
+            or_empty(r.paper_traditional),
+            or_empty(r.paper_proposed),
+        ]
+    });
+    csv_bytes(&HEADER, rows).context("writing table1.csv")
+}
+
+/// `table2.csv`: one row per delay case.
+fn table2_csv(rows: &[Table2Row]) -> Result<Vec<u8>> {
+    const HEADER: [&str; 4] = ["case", "tau_ms", "rmse_rad", "paper_rmse_rad"];
+    let rows = rows.iter().map(|r| {
+        [
+            r.case.to_string(),
+            r.tau_ms.clone(),
+            r.rmse_rad.to_string(),
+            or_empty(r.paper_rmse_rad),
+        ]
+    });
+    csv_bytes(&HEADER, rows).context("writing table2.csv")
+}
+
+/// Lighter shades of the palette's first two colours, for the paper's values.
+const PAPER_SHADE: [RGBColor; 2] = [RGBColor(140, 190, 225), RGBColor(240, 175, 135)];
+
+/// A bar chart of RMSE values, one group per category.
+pub(crate) fn rmse_chart(
+    title: String,
+    categories: Vec<String>,
+    series: Vec<(String, RGBColor, Vec<f64>)>,
+) -> BarChart {
+    BarChart {
+        title,
+        y_label: "RMSE (rad)".into(),
+        log_y: false,
+        categories,
+        series,
+    }
+}
+
+/// One table as written and printed.
+pub(crate) struct Table {
+    /// File stem: `table1`, `table2`, `attacks`.
+    pub name: &'static str,
+    /// The markdown, without the leading `# ` of its file.
+    pub md: String,
+    /// The CSV's header and rows; the file starts with the [`MadeWith`] comment of `made`.
+    pub csv: Vec<u8>,
+    pub json: serde_json::Value,
+    pub chart: BarChart,
+    /// How the table was made.
+    pub made: MadeWith,
+}
+
+impl Table {
+    /// Writes the table into `dir` and prints it: its JSON with `--json`, else its markdown
+    /// and where it was written.
+    pub fn publish(&self, json: bool, dir: &Path) -> Result<ExitCode> {
+        self.write(dir)?;
+        if json {
+            println!("{}", self.json);
+        } else {
+            print!("{}", self.md);
+            println!("\ntable written to {}", dir.display());
+        }
+        Ok(ExitCode::SUCCESS)
+    }
+
+    /// Writes `<name>.md`, `.csv`, `.json` and the bar chart (`.png`, `.svg`) into `dir`.
+    fn write(&self, dir: &Path) -> Result<()> {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+        let write = |ext: &str, bytes: &[u8]| -> Result<()> {
+            let p = dir.join(format!("{}.{ext}", self.name));
+            std::fs::write(&p, bytes).with_context(|| format!("writing {}", p.display()))
+        };
+        write("md", format!("# {}", self.md).as_bytes())?;
+        let mut csv = self.made.csv_comment();
+        csv.extend_from_slice(&self.csv);
+        write("csv", &csv)?;
+        write(
+            "json",
+            (serde_json::to_string_pretty(&self.json)? + "\n").as_bytes(),
+        )?;
+        // Wider for many categories, so that their labels stay apart.
+        let width =
+            900.max(90 * u32::try_from(self.chart.categories.len()).unwrap_or(u32::MAX / 90));
+        fdi_report::plot::save_bars(&self.chart, &dir.join(self.name), (width, 520))?;
+        Ok(())
+    }
+}
+
+pub fn table2(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
+    let (base, made) = base(args)?;
+    table2_robot(&base, args.scenario.as_deref())?;
+    let dir = table_dir(args, "table2");
+    if let Some(n) = args.seeds {
+        return seeded::table2(args, &base, &made, &dir, n, stop);
+    }
+    let compare = is_papers_robot(&base, 1, false);
+    let mut rows = Vec::new();
+    for (case, delay, paper_rmse) in paper_table2() {
+        let r = table2_case(&base, delay);
+        let summary = run_case(&r, args, &dir, case, !args.json, stop)?;
+        rows.push(Table2Row {
+            case,
+            tau_ms: delay.describe_ms(),
+            rmse_rad: robot_rmse(&summary, 1),
+            paper_rmse_rad: compare.then_some(paper_rmse),
+        });
+    }
+    let table = Table {
+        name: "table2",
+        md: table2_markdown(args.engine, &made, &rows),
+        csv: table2_csv(&rows)?,
+        json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows }),
+        chart: table2_chart(args.engine, &rows),
+        made,
+    };
+    table.publish(args.json, &dir)
+}
+
+/// Table II is robot 1's: a base scenario without an agent 1 is refused, naming the file.
+fn table2_robot(base: &Resolved, file: Option<&Path>) -> Result<()> {
+    if base.scenario.agents.iter().any(|a| a.id == 1) {
+        return Ok(());
+    }
+    anyhow::bail!(
+        "{}: Table II runs robot 1 under four delays, and this scenario has no agent with id 1 (its agents: {:?})",
+        file.map_or_else(|| "the scenario".into(), |p| p.display().to_string()),
+        robots(base)
+    )
+}
+
+/// The scenario of one Table II case: robot 1 alone under `delay`.
+fn table2_case(base: &Resolved, delay: DelayProfile) -> Resolved {
+    let mut r = base.clone().retain_agents(|a| a.id == 1);
+    for a in &mut r.scenario.agents {
+        a.delay = delay;
+    }
+    r
+}
+
+/// The title of a Table II.
+fn table2_title(engine: Engine) -> String {
+    format!(
+        "Table II: RMSE of robot 1 (rad) under time-varying delays, proposed controller, engine {}",
+        engine.as_str()
+    )
+}
+
+/// `table2.md` (without its leading `# `), as printed.
+fn table2_markdown(engine: Engine, made: &MadeWith, rows: &[Table2Row]) -> String {
+    let mut md = format!("{}\n\n{}", table2_title(engine), made.md());
+    md.push_str(&md_table_head(&[
+        "case",
+        "tau(t) (ms)",
+        "RMSE",
+        "paper RMSE",
+    ]));
+    for r in rows {
+        let _ = writeln!(
+            md,
+            "| {} | {} | {:.4} | {} |",
+            r.case,
+            r.tau_ms,
+            r.rmse_rad,
+            or_dash(r.paper_rmse_rad, 4)
+        );
+    }
+    md
+}
+
+/// Table II's bar chart: per delay case, this run's RMSE beside the paper's.
+fn table2_chart(engine: Engine, rows: &[Table2Row]) -> BarChart {
+    rmse_chart(
+        format!(
+            "Table II: RMSE of robot 1 per delay, this run ({} engine) beside the paper",
+            engine.as_str()
+        ),
+        rows.iter().map(|r| r.case.to_string()).collect(),
+        std::iter::once((
+            "this run".into(),
+            PALETTE[0],
+            rows.iter().map(|r| r.rmse_rad).collect(),
+        ))
+        .chain(
+            rows.iter()
+                .map(|r| r.paper_rmse_rad)
+                .collect::<Option<Vec<f64>>>()
+                .map(|v| ("paper".into(), PAPER_SHADE[0], v)),
+        )
+        .collect(),
+    )
+}
+
+/// Tables I and II over seeds (`--seeds N`): each cell the mean ± 95 % confidence interval
+/// over N runs, on the campaigns' parallel runner.
+mod seeded {
+    use super::*;
+    use crate::campaign::runner;
+    use crate::campaign::stats::{self, Stats};
+
+    /// A cell of a seeded table, as its JSON holds it.
+    #[derive(Debug, Serialize)]
+    struct CellStats {
+        mean: f64,
+        sd: Option<f64>,
+        ci_low: Option<f64>,
+        ci_high: Option<f64>,
+        n: usize,
+    }
+
+    impl CellStats {
+        fn of(values: &[f64], what: &str) -> Result<Self> {
+            let Some(Stats {
+                n,
+                mean,
+                sd,
+                ci_low,
+                ci_high,
+            }) = stats::describe(values)
+            else {
+                anyhow::bail!("{what}: no run gave a finite RMSE");
+            };
+            if n != values.len() {
+                anyhow::bail!(
+                    "{what}: {} of {} runs gave no finite RMSE (a robot diverged?)",
+                    values.len() - n,
+                    values.len()
+                );
+            }
+            Ok(Self {
+                mean,
+                sd,
+                ci_low,
+                ci_high,
+                n,
+            })
+        }
+
+        /// `0.0084 ± 0.0001`, or the mean alone for one seed.
+        fn md(&self) -> String {
+            match (self.ci_low, self.ci_high) {
+                (Some(lo), Some(hi)) => format!(
+                    "{:.4} ± {}",
+                    self.mean,
+                    crate::campaign::sig((hi - lo) / 2.0)
+                ),
+                _ => format!("{:.4}", self.mean),
+            }
+        }
+
+        fn csv(&self) -> [String; 5] {
+            let o = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
+            [
+                self.mean.to_string(),
+                o(self.sd),
+                o(self.ci_low),
+                o(self.ci_high),
+                self.n.to_string(),
+            ]
+        }
+    }
+
+    const STAT_COLUMNS: [&str; 5] = ["mean", "sd", "ci_low", "ci_high", "n"];
+
+    /// Runs every (scenario, case name) in parallel; every run must be whole.
+    fn run_all(
+        args: &TableArgs,
+        dir: &Path,
+        cases: &[(Resolved, String)],
+        stop: &Stop,
+    ) -> Result<Vec<RunSummary>> {
+        let workers = args.jobs.unwrap_or_else(runner::default_jobs);
+        let mut out: Vec<Option<RunSummary>> = cases.iter().map(|_| None).collect();
+        let mut first_error = None;
+        let outcome = runner::run_parallel(
+            cases,
+            workers,
+            "runs",
+            stop,
+            |(r, case)| {
+                run_case(r, args, dir, case, false, stop).with_context(|| format!("the run {case}"))
+            },
+            |i, result| {
+                match result {
+                    Ok(s) => out[i] = Some(s),
+                    Err(e) => {
+                        first_error.get_or_insert(e);
+                    }
+                }
+                Ok(())
+            },
+        )?;
+        if let Some(e) = first_error {
+            return Err(e);
+        }
+        if let Some(signal) = outcome.interrupted {
+            return Err(fdi_common::stop::Interrupted {
+                signal,
+                phase: fdi_common::stop::DURING_THE_RUN,
+            }
+            .into());
+        }
+        out.into_iter()
+            .zip(cases)
+            .map(|(s, (_, case))| s.ok_or_else(|| anyhow::anyhow!("the run {case} did not run")))
+            .collect()
+    }
+
+    fn seeds(base: u64, n: u32) -> Result<Vec<u64>> {
+        (0..u64::from(n))
+            .map(|i| {
+                base.checked_add(i)
+                    .ok_or_else(|| anyhow::anyhow!("--seeds {n}: the seed {base} + {i} overflows"))
+            })
+            .collect()
+    }
+
+    fn describe_seeds(seeds: &[u64]) -> String {
+        match seeds {
+            [one] => format!("seed {one}"),
+            [first, .., last] => format!("seeds {first}–{last}"),
+            [] => "no seed".into(),
+        }
+    }
+
+    fn with_seed(r: &Resolved, seed: u64) -> Resolved {
+        let mut r = r.clone();
+        r.scenario.seed = seed;
+        r
+    }
+
+    #[derive(Debug, Serialize)]
+    struct Row1 {
+        robot: u32,
+        traditional_rmse_rad: CellStats,
+        proposed_rmse_rad: CellStats,
+        paper_traditional: Option<f64>,
+        paper_proposed: Option<f64>,
+    }
+
+    pub fn table1(
+        args: &TableArgs,
+        paper: &Resolved,
+        made: &MadeWith,
+        dir: &Path,
+        n: u32,
+        stop: &Stop,
+    ) -> Result<ExitCode> {
+        let seeds = seeds(paper.scenario.seed, n)?;
+        let modes = [ControllerMode::Traditional, ControllerMode::Proposed];
+        let mut cases = Vec::new();
+        for mode in modes {
+            for &seed in &seeds {
+                let mut r = with_seed(paper, seed);
+                r.scenario.controller.mode = mode;
+                cases.push((r, format!("{}-seed{seed}", mode.as_str())));
+            }
+        }
+        let summaries = run_all(args, dir, &cases, stop)?;
+        let (trad, prop) = summaries.split_at(seeds.len());
+        let mut rows = Vec::new();
+        for robot in robots(paper) {
+            let rmse = |runs: &[RunSummary]| -> Vec<f64> {
+                runs.iter().map(|s| robot_rmse(s, robot)).collect()
+            };
+            let values = paper_table1(paper, robot);
+            let (pt, pp) = (values.map(|v| v.0), values.map(|v| v.1));
+            rows.push(Row1 {
+                robot,
+                traditional_rmse_rad: CellStats::of(
+                    &rmse(trad),
+                    &format!("robot {robot}, traditional"),
+                )?,
+                proposed_rmse_rad: CellStats::of(&rmse(prop), &format!("robot {robot}, proposed"))?,
+                paper_traditional: pt,
+                paper_proposed: pp,
+            });
+        }
+        let over = describe_seeds(&seeds);
+        let mut md = format!(
+            "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
+            table1_title(args.engine),
+            made.md()
+        );
+        md.push_str(&md_table_head(&[
+            "robot",
+            "traditional",
+            "proposed",
+            "ratio of means",
+            "paper traditional",
+            "paper proposed",
+            "paper ratio",
+        ]));
+        for r in &rows {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.2} | {} | {} | {} |",
+                r.robot,
+                r.traditional_rmse_rad.md(),
+                r.proposed_rmse_rad.md(),
+                r.traditional_rmse_rad.mean / r.proposed_rmse_rad.mean,
+                or_dash(r.paper_traditional, 3),
+                or_dash(r.paper_proposed, 3),
+                or_dash(ratio(r.paper_traditional, r.paper_proposed), 2)
+            );
+        }
+        let mut header = vec!["robot".to_string()];
+        for what in ["traditional_rmse_rad", "proposed_rmse_rad"] {
+            header.extend(STAT_COLUMNS.iter().map(|c| format!("{what}_{c}")));
+        }
+        header.extend([
+            "paper_traditional_rmse_rad".into(),
+            "paper_proposed_rmse_rad".into(),
+        ]);
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
+        let csv = csv_bytes(
+            &header,
+            rows.iter().map(|r| {
+                let mut rec = vec![r.robot.to_string()];
+                rec.extend(r.traditional_rmse_rad.csv());
+                rec.extend(r.proposed_rmse_rad.csv());
+                rec.push(or_empty(r.paper_traditional));
+                rec.push(or_empty(r.paper_proposed));
+                rec
+            }),
+        )
+        .context("writing table1.csv")?;
+        let plain: Vec<Table1Row> = rows
+            .iter()
+            .map(|r| Table1Row {
+                robot: r.robot,
+                traditional_rmse_rad: r.traditional_rmse_rad.mean,
+                proposed_rmse_rad: r.proposed_rmse_rad.mean,
+                paper_traditional: r.paper_traditional,
+                paper_proposed: r.paper_proposed,
+            })
+            .collect();
+        let chart = table1_chart(args.engine, &plain);
+        publish(
+            args,
+            dir,
+            "table1",
+            (md, csv, chart),
+            made,
+            (&over, &seeds),
+            &rows,
+        )
+    }
+
+    #[derive(Debug, Serialize)]
+    struct Row2 {
+        case: &'static str,
+        tau_ms: String,
+        rmse_rad: CellStats,
+        paper_rmse_rad: Option<f64>,
+    }
+
+    pub fn table2(
+        args: &TableArgs,
+        paper: &Resolved,
+        made: &MadeWith,
+        dir: &Path,
+        n: u32,
+        stop: &Stop,
+    ) -> Result<ExitCode> {
+        let seeds = seeds(paper.scenario.seed, n)?;
+        let compare = is_papers_robot(paper, 1, false);
+        let mut cases = Vec::new();
+        for (case, delay, _) in paper_table2() {
+            let r = table2_case(paper, delay);
+            for &seed in &seeds {
+                cases.push((with_seed(&r, seed), format!("{case}-seed{seed}")));
+            }
+        }
+        let summaries = run_all(args, dir, &cases, stop)?;
+        let mut rows = Vec::new();
+        for ((case, delay, paper_rmse), runs) in paper_table2()
+            .into_iter()
+            .zip(summaries.chunks(seeds.len()))
+        {
+            let rmse: Vec<f64> = runs.iter().map(|s| robot_rmse(s, 1)).collect();
+            rows.push(Row2 {
+                case,
+                tau_ms: delay.describe_ms(),
+                rmse_rad: CellStats::of(&rmse, case)?,
+                paper_rmse_rad: compare.then_some(paper_rmse),
+            });
+        }
+        let over = describe_seeds(&seeds);
+        let mut md = format!(
+            "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
+            table2_title(args.engine),
+            made.md()
+        );
+        md.push_str(&md_table_head(&[
+            "case",
+            "tau(t) (ms)",
+            "RMSE",
+            "paper RMSE",
+        ]));
+        for r in &rows {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} |",
+                r.case,
+                r.tau_ms,
+                r.rmse_rad.md(),
+                or_dash(r.paper_rmse_rad, 4)
+            );
+        }
+        let mut header = vec!["case".to_string(), "tau_ms".into()];
+        header.extend(STAT_COLUMNS.iter().map(|c| format!("rmse_rad_{c}")));
+        header.push("paper_rmse_rad".into());
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
+        let csv = csv_bytes(
+            &header,
+            rows.iter().map(|r| {
+                let mut rec = vec![r.case.to_string(), r.tau_ms.clone()];
+                rec.extend(r.rmse_rad.csv());
+                rec.push(or_empty(r.paper_rmse_rad));
+                rec
+            }),
+        )
+        .context("writing table2.csv")?;
+        let plain: Vec<Table2Row> = rows
+            .iter()
+            .map(|r| Table2Row {
+                case: r.case,
+                tau_ms: r.tau_ms.clone(),
+                rmse_rad: r.rmse_rad.mean,
+                paper_rmse_rad: r.paper_rmse_rad,
+            })
+            .collect();
+        let chart = table2_chart(args.engine, &plain);
+        publish(
+            args,
+            dir,
+            "table2",
+            (md, csv, chart),
+            made,
+            (&over, &seeds),
+            &rows,
+        )
+    }
+
+    /// Writes and prints a seeded table: its chart titled with the seeds (`over`, as words),
+    /// its JSON with the engine, the seeds, the confidence level and the rows.
+    fn publish<R: Serialize>(
+        args: &TableArgs,
+        dir: &Path,
+        name: &'static str,
+        (md, csv, mut chart): (String, Vec<u8>, BarChart),
+        made: &MadeWith,
+        (over, seeds): (&str, &[u64]),
+        rows: &R,
+    ) -> Result<ExitCode> {
+        chart.title = format!("{} (mean over {over})", chart.title);
+        let table = Table {
+            name,
+            md,
+            csv,
+            json: serde_json::json!({
+                "engine": args.engine.as_str(),
+                "made_with": made,
+                "seeds": seeds,
+                "confidence": stats::LEVEL,
+                "rows": rows
+            }),
+            chart,
+            made: made.clone(),
+        };
+        table.publish(args.json, dir)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_csvs_have_a_header_and_a_row_per_entry() {
+        let t1 = table1_csv(&[Table1Row {
+            robot: 2,
+            traditional_rmse_rad: 0.041,
+            proposed_rmse_rad: 1.0 / 3.0,
+            paper_traditional: Some(0.041),
+            paper_proposed: Some(0.013),
+        }])
+        .expect("csv");
+        let mut r = csv::Reader::from_reader(t1.as_slice());
+        assert_eq!(
+            r.headers().expect("header"),
+            vec![
+                "robot",
+                "traditional_rmse_rad",
+                "proposed_rmse_rad",
+                "paper_traditional_rmse_rad",
+                "paper_proposed_rmse_rad"
+            ]
+        );
+        let rows: Vec<csv::StringRecord> = r.records().map(|x| x.expect("row")).collect();
+        assert_eq!(rows.len(), 1);
+        assert_eq!(&rows[0][0], "2");
+        assert_eq!(
+            rows[0][2].parse::<f64>().expect("rmse").to_bits(),
+            (1.0_f64 / 3.0).to_bits()
+        );
+
+        let (case, delay, paper) = paper_table2()[1];
+        let t2 = table2_csv(&[Table2Row {
+            case,
+            tau_ms: delay.describe_ms(),
+            rmse_rad: 0.01,
+            paper_rmse_rad: Some(paper),
+        }])
+        .expect("csv");
+        assert_eq!(
+            std::str::from_utf8(&t2).expect("utf-8"),
+            "case,tau_ms,rmse_rad,paper_rmse_rad\nlarge-fast,20 sin(0.5t) + 30,0.01,0.0101\n"
+        );
+        let mut r = csv::Reader::from_reader(t2.as_slice());
+        assert_eq!(
+            r.headers().expect("header"),
+            vec!["case", "tau_ms", "rmse_rad", "paper_rmse_rad"]
+        );
+        let row = r.records().next().expect("a row").expect("row");
+        assert_eq!(&row[1], "20 sin(0.5t) + 30");
+    }
+}

@@ -1,0 +1,314 @@
+//! `fdi-launch run`: a scenario (or `--replay` of a recorded run) into a run directory, its
+//! report, its summary on stdout and its exit status.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use anyhow::Result;
+use fdi_common::engine::RunSummary;
+use fdi_common::metrics::Onset;
+use fdi_common::stop::{Interrupted, Stop, BEFORE_THE_START, DURING_THE_RUN};
+use fdi_orchestrator::run::{check_placement, hosts::Deployment, volume};
+use fdi_orchestrator::{execute, Engine, RunRequest};
+use fdi_report::output::{self, describe_error};
+use fdi_report::report;
+
+use crate::cli::RunArgs;
+
+/// `run`.
+pub fn run(args: &RunArgs, stop: &Stop) -> Result<ExitCode> {
+    if let Some(recorded) = &args.replay {
+        return fdi_orchestrator::run::replayer::replay_run(recorded, &args.out, args.json, stop);
+    }
+    run_scenario(args, stop).map(|done| done.code)
+}
+
+/// The request of `run`'s flags, checked before anything starts: the overrides, the placement,
+/// the traces' volume, the hosts file.
+fn request(args: &RunArgs) -> Result<RunRequest> {
+    let mut request = RunRequest::new(args.scenario.as_deref(), &args.overrides, args.engine)?;
+    let r = &request.resolved;
+    check_placement(r, args.engine, &args.placement)?;
+    volume::check_volume(
+        r,
+        args.engine == Engine::Ipc,
+        args.traces,
+        &args.out,
+        args.max_trace_size,
+        !args.no_space_check,
+    )?;
+    request.deployment = match &args.hosts {
+        Some(path) => Some(Deployment::load(path, r)?),
+        None => None,
+    };
+    request.traces = args.traces;
+    request.placement = args.placement.clone();
+    request.progress = !args.json;
+    Ok(request)
+}
+
+/// What [`run_scenario`] left: the run directory, and the exit status of the run.
+#[derive(Debug)]
+pub struct RunDone {
+    pub dir: PathBuf,
+    pub code: ExitCode,
+    /// The run was a clean success (exit status 0).
+    pub clean: bool,
+}
+
+/// `run` of a scenario (not `--replay`): runs it, writes the run directory and its report,
+/// prints the summary.
+pub fn run_scenario(args: &RunArgs, stop: &Stop) -> Result<RunDone> {
+    let request = request(args)?;
+    stop.check(BEFORE_THE_START)?;
+    let run_dir = request.create_run_dir(&args.out)?;
+    let summary = execute(&request, &run_dir, stop)?;
+    let (r, dir) = (&request.resolved, run_dir.path().to_path_buf());
+    for lost in &summary.lost_agents {
+        let when = lost
+            .t_s
+            .map_or(String::new(), |t| format!(" after t = {t:.3} s"));
+        let uncontrolled = summary
+            .metrics
+            .get(&lost.agent.to_string())
+            .map_or(String::new(), |m| {
+                format!(
+                    "; it ran uncontrolled for {} of its {} ticks, with {} deadline misses; its metrics cover {}",
+                    m.uncontrolled_ticks,
+                    m.agent_ticks,
+                    m.deadline_misses,
+                    output::coverage(m.ticks, summary.planned_ticks)
+                )
+            });
+        match lost.rejoined_t_s {
+            Some(back) => eprintln!(
+                "fdi-launch: agent {} was lost{when} ({}) and rejoined at t = {back:.3} s{uncontrolled}",
+                lost.agent, lost.reason
+            ),
+            None => eprintln!(
+                "fdi-launch: agent {} was lost{when}: {}{uncontrolled}",
+                lost.agent, lost.reason
+            ),
+        }
+    }
+    // The report is written whole or not at all; an interrupt stops it at once.
+    let report = match report::write_report(&dir, r, &summary, stop) {
+        Err(e) if e.downcast_ref::<Interrupted>().is_some() => return Err(e),
+        other => other,
+    };
+    if args.json {
+        let mut v = serde_json::to_value(&summary)?;
+        v["run_dir"] = serde_json::Value::String(dir.display().to_string());
+        println!("{v}");
+    } else {
+        print_summary(&summary);
+        println!("run directory {}", dir.display());
+        let md = run_dir.report().join("report.md");
+        if md.is_file() {
+            println!("report {}", md.display());
+        }
+    }
+    if let Err(e) = report {
+        eprintln!(
+            "fdi-launch: error: the report of {} could not be made: {}; summary.json, rmse.md and the traces are kept (`fdi-launch report {}` makes it)",
+            dir.display(),
+            describe_error(&e),
+            dir.display()
+        );
+        return Ok(RunDone {
+            dir,
+            code: ExitCode::FAILURE,
+            clean: false,
+        });
+    }
+    let code = exit_code(&summary);
+    if let Some(verdict) = verdict(&summary) {
+        eprintln!("fdi-launch: {verdict}");
+    }
+    let clean = code == ExitCode::SUCCESS;
+    Ok(RunDone { dir, code, clean })
+}
+
+/// What a run that is not a clean success amounts to, in words (printed last), for the exit
+/// codes 5 and 3: which robots ran without control and for how long.
+fn verdict(s: &RunSummary) -> Option<String> {
+    if s.partial.is_some() || s.lost_agents.is_empty() {
+        return None;
+    }
+    // Per robot that was lost: the ticks the center never computed, and the steps the robot
+    // itself found without the command due (late commands after a stall count there).
+    let mut ids: Vec<u32> = s.lost_agents.iter().map(|l| l.agent).collect();
+    ids.sort_unstable();
+    ids.dedup();
+    let robots: Vec<String> = ids
+        .iter()
+        .filter_map(|id| s.metrics.get(&id.to_string()).map(|m| (id, m)))
+        .map(|(id, m)| {
+            format!(
+                "robot {id} {} ticks never controlled and {} deadline misses in {} steps",
+                m.uncontrolled_ticks, m.deadline_misses, m.agent_ticks
+            )
+        })
+        .collect();
+    if s.lost_every_agent() {
+        Some(format!(
+            "run failed (exit 5): the control center lost every robot for good, none was controlled to the end ({})",
+            robots.join("; ")
+        ))
+    } else if s.diverged().is_empty() {
+        Some(format!(
+            "not a clean run (exit 3): {} of {} robots were lost for a while and ran without control meanwhile ({}); the tracking metrics cover only the controlled ticks",
+            ids.len(),
+            s.agents,
+            robots.join("; ")
+        ))
+    } else {
+        None
+    }
+}
+
+/// The exit status of a run that produced a summary: 128 + signal when interrupted, 5 when the
+/// control center lost every robot for good (the run failed: none was controlled to its end),
+/// 4 when a robot diverged, 3 when a realtime run lost a robot for a while, rejoined or not (it
+/// ran uncontrolled meanwhile: not a clean run), else 0.
+pub fn exit_code(summary: &RunSummary) -> ExitCode {
+    if let Some(signal) = summary.partial.as_ref().and_then(|p| p.signal) {
+        ExitCode::from(
+            Interrupted {
+                signal,
+                phase: DURING_THE_RUN,
+            }
+            .exit_code(),
+        )
+    } else if summary.lost_every_agent() {
+        ExitCode::from(5)
+    } else if !summary.diverged().is_empty() {
+        ExitCode::from(4)
+    } else if !summary.lost_agents.is_empty() {
+        ExitCode::from(3)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
+fn print_summary(s: &RunSummary) {
+    println!(
+        "scenario {} | engine {} | clock {} | controller {} | attack {} | {} agents | {:.1} s simulated in {:.2} s wall",
+        s.scenario, s.engine, s.clock, s.controller, s.attack, s.agents, s.sim_s, s.wall_s
+    );
+    println!("numerics: {}", output::numerics_line(s));
+    if let Some(p) = &s.placement {
+        println!("processes: {p}");
+    }
+    if let Some(notice) = output::partial_notice(s) {
+        println!("{}", notice.to_uppercase());
+    }
+    println!("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses | uncontrolled ticks | metrics cover |");
+    println!("|---|---|---|---|---|---|---|---|");
+    for (id, m) in &s.metrics {
+        println!(
+            "| {id} | {} | {:.4} | {} | {} | {} | {} | {} |",
+            output::rmse_cell(m, 4),
+            m.max_abs_error_rad,
+            describe_onsets(&m.onsets),
+            m.false_alarms,
+            m.deadline_misses,
+            m.uncontrolled_ticks,
+            output::coverage(m.ticks, s.planned_ticks)
+        );
+    }
+    for (id, t) in s.diverged() {
+        eprintln!("fdi-launch: robot {id} diverged at t = {t:.3} s (its state left the bound of {} rad or became non-finite): its metrics are not results", fdi_common::metrics::DIVERGENCE_BOUND_RAD);
+    }
+    println!("trace digest {}", s.trace_digest);
+}
+
+/// Onsets as `t: time to detect` (`never` when undetected); a long train is summarised.
+pub fn describe_onsets(onsets: &[Onset]) -> String {
+    let one = |o: &Onset| {
+        format!(
+            "{:.1}: {}",
+            o.t_s,
+            o.time_to_detect_s
+                .map_or("never".into(), |d| format!("{d:.3}"))
+        )
+    };
+    if onsets.len() <= 4 {
+        return onsets.iter().map(one).collect::<Vec<_>>().join(", ");
+    }
+    let mut detected: Vec<f64> = onsets.iter().filter_map(|o| o.time_to_detect_s).collect();
+    detected.sort_by(f64::total_cmp);
+    let median = detected
+        .get(detected.len() / 2)
+        .map_or("-".into(), |d| format!("{d:.3}"));
+    format!(
+        "{} onsets (first {}), {} detected, median {median}",
+        onsets.len(),
+        one(&onsets[0]),
+        detected.len()
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    /// Regression (issue 18): an I/O error that is both the tail of its context's message and
+    /// that context's source was printed twice (`No space left on device (os error 28): No
+    /// space left on device (os error 28)`).
+    #[test]
+    fn an_error_whose_cause_is_already_in_its_message_is_described_once() {
+        #[derive(Debug, thiserror::Error)]
+        #[error("writing report.png: {0}")]
+        struct Writing(#[source] std::io::Error);
+        let io = std::io::Error::from_raw_os_error(28);
+        let e = anyhow::Error::new(Writing(io)).context("figure robot1");
+        let text = fdi_report::output::describe_error(&e);
+        assert_eq!(text.matches("os error 28").count(), 1, "{text}");
+        assert!(
+            text.starts_with("figure robot1: writing report.png: "),
+            "{text}"
+        );
+        let plain = anyhow::anyhow!("a").context("b");
+        assert_eq!(fdi_report::output::describe_error(&plain), "b: a");
+    }
+
+    /// The run directory says what the command line changed, in a fixed order.
+    #[test]
+    fn a_run_is_named_after_its_scenario_and_what_the_command_line_changed() {
+        use clap::Parser;
+        let name = |argv: &[&str]| {
+            let cli = crate::cli::Cli::try_parse_from(argv).expect("parses");
+            let crate::cli::Command::Run(args) = cli.command else {
+                panic!("not a run")
+            };
+            let request = fdi_orchestrator::RunRequest::new(None, &args.overrides, args.engine)
+                .expect("valid overrides");
+            request.name
+        };
+        assert_eq!(name(&["fdi-launch", "run"]), "paper");
+        assert_eq!(
+            name(&[
+                "fdi-launch",
+                "run",
+                "--attack",
+                "freeze",
+                "--controller",
+                "traditional",
+                "--engine",
+                "inproc",
+                "--seed",
+                "3",
+                "--duration-s",
+                "2.5",
+            ]),
+            "paper-attack-freeze-traditional-inproc-seed3-2.5s"
+        );
+        let file = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../scenarios/attacks/sign-flip.toml"
+        );
+        assert_eq!(
+            name(&["fdi-launch", "run", "--attack", file, "--clock", "lockstep"]),
+            "paper-attack-sign-flip-lockstep"
+        );
+    }
+}
