@@ -459,7 +459,7 @@ fn open(args: &ProcessArgs) -> Result<Opened, CenterError> {
     let ports = Ports::open(&args.prefix, &resolved)?;
     let trace = TraceWriter::create(
         &args.trace,
-        &process::trace_header("control-center", &resolved),
+        &process::trace_header(&fdi_common::run_dir::Process::Center.to_string(), &resolved),
     )?;
     Ok((resolved, ports, trace, shutdown))
 }

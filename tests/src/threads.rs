@@ -82,7 +82,7 @@ impl ThreadOutcome {
             }
         }
         let mut centers = vec![Vec::new(); ids.len()];
-        for r in crate::trace_records(&self.trace("control-center")) {
+        for r in crate::trace_records(&self.trace(fdi_common::run_dir::Process::CENTER)) {
             if let TraceRecord::Center(c) = r {
                 centers[slot(c.agent)].push(c);
             }
@@ -322,7 +322,7 @@ fn spawn_roles(
     let mut threads = vec![
         spawn(Box::new(|p, r, d, s| {
             let ports = fdi_control_center::Ports::<Local>::open(p, r).expect("center ports");
-            let mut trace = writer(d, "control-center", r);
+            let mut trace = writer(d, fdi_common::run_dir::Process::CENTER, r);
             fdi_control_center::run_any(r, &ports, s, &mut trace)
                 .map(|_| ())
                 .map_err(|e| format!("control center: {e}"))

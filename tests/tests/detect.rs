@@ -127,7 +127,9 @@ fn detect_sweeps_a_scenarios_run_into_monotone_roc_curves_and_replays_a_run_dire
         "the default output folder is <run dir>/detect"
     );
     let run_dir = detect_dir.parent().expect("run dir").to_path_buf();
-    assert!(run_dir.starts_with(&dir.0) && run_dir.join("traces").is_dir());
+    assert!(
+        run_dir.starts_with(&dir.0) && fdi_common::run_dir::RunDir::new(&run_dir).traces().is_dir()
+    );
     for stem in ["roc", "delay"] {
         let (png, svg) = (
             printed(&out, &format!("{stem}.png")),
@@ -261,14 +263,17 @@ fn a_run_directory_without_traces_and_a_scenario_with_problems_are_refused_by_na
     std::fs::create_dir_all(&bare).expect("bare");
     std::fs::copy(
         repo_path("scenarios/paper.toml"),
-        bare.join("scenario.toml"),
+        fdi_common::run_dir::RunDir::new(&bare).scenario(),
     )
     .expect("copy");
     let out = launch_plain(&["detect", &bare.to_string_lossy()], WATCHDOG);
     assert!(!out.status.success(), "{}", text(&out));
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(
-        stderr.contains(&format!("{}: not found", bare.join("traces").display())),
+        stderr.contains(&format!(
+            "{}: not found",
+            fdi_common::run_dir::RunDir::new(&bare).traces().display()
+        )),
         "{stderr}"
     );
     // A folder that is no run directory at all.

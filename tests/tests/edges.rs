@@ -200,7 +200,10 @@ fn an_interrupt_while_the_report_is_written_stops_it_keeps_the_run_and_exits_128
             "{clock}: {err}"
         );
         let run = entries(&out).pop().expect("the run directory");
-        assert!(run.join("summary.json").is_file() && run.join("rmse.md").is_file());
+        assert!(
+            fdi_common::run_dir::RunDir::new(&run).summary().is_file()
+                && run.join("rmse.md").is_file()
+        );
         let names: Vec<String> = entries(&run)
             .iter()
             .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
@@ -295,7 +298,7 @@ fn a_report_that_fails_leaves_no_partial_report_and_the_run_exits_1_naming_the_c
         "{line}"
     );
     let run = entries(&out).pop().expect("the run directory");
-    assert!(run.join("summary.json").is_file());
+    assert!(fdi_common::run_dir::RunDir::new(&run).summary().is_file());
     let names: Vec<String> = entries(&run)
         .iter()
         .filter_map(|p| p.file_name().map(|n| n.to_string_lossy().into_owned()))
@@ -320,7 +323,7 @@ fn a_summary_that_cannot_be_read_is_said_as_it_is_not_missing() {
     );
     assert_eq!(r.status.code(), Some(0), "{}", stderr_of(&r));
     let run = entries(&out).pop().expect("the run directory");
-    let summary = run.join("summary.json");
+    let summary = fdi_common::run_dir::RunDir::new(&run).summary();
     for (case, make, expected) in [
         (
             "not UTF-8",

@@ -67,7 +67,7 @@ fn with_python(
         }
     }
     edit(&mut doc);
-    let path = dir.join("scenario.toml");
+    let path = fdi_common::run_dir::RunDir::new(dir).scenario();
     std::fs::write(&path, toml::to_string(&doc).expect("TOML out")).expect("writing");
     path
 }
@@ -530,7 +530,7 @@ fn sh_attacker(dir: &Path, name: &str, script: &str) -> String {
     let mut attack = toml::Table::new();
     attack.insert("preset".into(), "none".into());
     doc.insert("attack".into(), toml::Value::Table(attack));
-    let path = dir.join("scenario.toml");
+    let path = fdi_common::run_dir::RunDir::new(dir).scenario();
     std::fs::write(&path, toml::to_string(&doc).expect("TOML out")).expect("writing");
     path.display().to_string()
 }

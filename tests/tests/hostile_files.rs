@@ -46,23 +46,33 @@ fn a_corrupt_string_length_in_a_trace_header_is_an_error_naming_file_and_offset_
         WATCHDOG,
     ));
     let good = run_dir_of(&v);
-    for (n, process) in ["agent-1", "attacker", "control-center"].iter().enumerate() {
+    for (n, process) in ["agent-1", "attacker", fdi_common::run_dir::Process::CENTER]
+        .iter()
+        .enumerate()
+    {
         let damaged = dir.0.join(format!("damaged-{n}"));
-        fs::create_dir_all(damaged.join("traces")).expect("traces/");
-        for f in ["scenario.toml", "summary.json"] {
+        fs::create_dir_all(fdi_common::run_dir::RunDir::new(&damaged).traces()).expect("traces/");
+        for f in [
+            fdi_common::run_dir::RunDir::SCENARIO,
+            fdi_common::run_dir::RunDir::SUMMARY,
+        ] {
             fs::copy(good.join(f), damaged.join(f)).expect("copy");
         }
-        for t in entries(&good.join("traces")) {
+        for t in entries(&fdi_common::run_dir::RunDir::new(&good).traces()) {
             fs::copy(
                 &t,
-                damaged.join("traces").join(t.file_name().expect("name")),
+                fdi_common::run_dir::RunDir::new(&damaged)
+                    .traces()
+                    .join(t.file_name().expect("name")),
             )
             .expect("copy");
         }
         // Byte 17 is the varint length of the header's process name: 0xfd says a u64 follows,
         // and the name's bytes make it about 8e18 (this used to panic with `capacity overflow`
         // or abort with `memory allocation of … bytes failed`).
-        let trace = damaged.join("traces").join(format!("{process}.trace"));
+        let trace = fdi_common::run_dir::RunDir::new(&damaged)
+            .traces()
+            .join(format!("{process}.trace"));
         let mut bytes = fs::read(&trace).expect("read");
         bytes[17] = 0xfd;
         fs::write(&trace, &bytes).expect("write");
@@ -73,7 +83,7 @@ fn a_corrupt_string_length_in_a_trace_header_is_an_error_naming_file_and_offset_
         assert_refused(&report, &fragments, &format!("report, {process}"));
         let export = launch_plain(&["trace", "export", &d], WATCHDOG);
         assert_refused(&export, &fragments, &format!("trace export, {process}"));
-        if *process != "control-center" {
+        if *process != fdi_common::run_dir::Process::CENTER {
             // The replay reads the recorded attacker and agent traces (the center is re-run).
             let out = dir.0.join("replays").to_string_lossy().into_owned();
             let replay = launch_plain(&["run", "--replay", &d, "--out", &out], WATCHDOG);
@@ -242,7 +252,7 @@ fn a_full_disk_is_the_headline_naming_the_trace_and_the_partial_traces_stay_read
         "{headline}"
     );
     let run_dir = entries(&out).pop().expect("the run directory");
-    for t in entries(&run_dir.join("traces")) {
+    for t in entries(&fdi_common::run_dir::RunDir::new(&run_dir).traces()) {
         // Readable up to the last whole frame; a cut frame is named by its offset.
         let reader = fdi_common::trace::TraceReader::open(&t);
         if let Ok(reader) = reader {

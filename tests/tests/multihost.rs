@@ -218,7 +218,9 @@ roles = ["attacker"]
         .expect("a run directory")
         .path();
     for name in ["agent-3", "agent-4", "attacker"] {
-        let t = dir.join("traces").join(format!("{name}.trace"));
+        let t = fdi_common::run_dir::RunDir::new(&dir)
+            .traces()
+            .join(format!("{name}.trace"));
         assert!(
             t.metadata().is_ok_and(|m| m.len() > 0),
             "{} missing",

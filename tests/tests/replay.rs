@@ -40,7 +40,7 @@ fn replaying_a_recorded_run_reproduces_its_trace_digest() {
     }
 
     // A recording whose digest does not match what its center produces: non-zero exit.
-    let summary = rec_dir.join("summary.json");
+    let summary = fdi_common::run_dir::RunDir::new(&rec_dir).summary();
     let mut v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&summary).expect("summary")).expect("json");
     v["trace_digest"] = serde_json::Value::String("0".repeat(64));

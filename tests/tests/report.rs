@@ -382,7 +382,7 @@ fn csv_export_round_trips_every_trace_value_bit_for_bit() {
         "agent-3",
         "agent-4",
         "attacker",
-        "control-center",
+        fdi_common::run_dir::Process::CENTER,
     ] {
         let (recs, err) = read_trace(&run_dir.join(format!("traces/{stem}.trace")));
         assert_eq!(err, None);
@@ -424,7 +424,7 @@ fn truncated_trace_is_exported_up_to_the_damage_then_named_with_its_offset() {
     // The records before the damage are all there, and the other traces whole.
     assert_csv_matches(&run_dir, "attacker", &recs);
     let (recs, _) = read_trace(&run_dir.join("traces/control-center.trace"));
-    assert_csv_matches(&run_dir, "control-center", &recs);
+    assert_csv_matches(&run_dir, fdi_common::run_dir::Process::CENTER, &recs);
 }
 
 #[test]
@@ -618,8 +618,8 @@ fn partial_run_figures_span_only_the_recorded_time() {
         WATCHDOG,
     )));
     // The traces hold 2 s; the scenario now says 6 s: a run stopped a third of the way.
-    let path = run_dir.join("scenario.toml");
-    let text = std::fs::read_to_string(&path).expect("scenario.toml");
+    let path = fdi_common::run_dir::RunDir::new(&run_dir).scenario();
+    let text = std::fs::read_to_string(&path).expect("the scenario file");
     let cut: String = text
         .lines()
         .map(|l| {

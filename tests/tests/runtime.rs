@@ -31,7 +31,7 @@ fn lockstep_ipc_digest_equals_the_in_process_digest() {
     // The run directory holds what SPEC §7 lists.
     let run_dir = std::path::PathBuf::from(ipc["run_dir"].as_str().expect("run_dir"));
     for f in [
-        "scenario.toml",
+        fdi_common::run_dir::RunDir::SCENARIO,
         "summary.json",
         "rmse.md",
         "rmse.csv",
@@ -424,7 +424,10 @@ fn killing_the_attacker_stops_the_run_naming_it() {
 
 #[test]
 fn killing_the_control_center_stops_the_run_naming_it() {
-    killing_a_process_stops_the_run_naming_it("control-center --prefix", "control-center");
+    killing_a_process_stops_the_run_naming_it(
+        "control-center --prefix",
+        fdi_common::run_dir::Process::CENTER,
+    );
 }
 
 #[test]
@@ -564,7 +567,7 @@ fn sigterm_stops_every_process_cleanly() {
         .next()
         .expect("run dir")
         .path();
-    for t in std::fs::read_dir(run_dir.join("traces"))
+    for t in std::fs::read_dir(fdi_common::run_dir::RunDir::new(&run_dir).traces())
         .expect("traces")
         .flatten()
     {
@@ -786,7 +789,9 @@ fn realtime_interrupt_of_the_process_group_is_always_an_interrupt_with_a_partial
             "{ticks:?} of {planned:?}"
         );
         let run_dir = fdi_tests::run_dir_of(&summary);
-        assert!(run_dir.join("summary.json").is_file());
+        assert!(fdi_common::run_dir::RunDir::new(&run_dir)
+            .summary()
+            .is_file());
         assert!(run_dir.join("report").join("report.md").is_file());
         assert_no_leftovers(launcher);
     }

@@ -39,9 +39,9 @@ fn threaded_roles_equal_the_in_process_engine_with_lookahead() {
         );
         assert_eq!(out.digest(&r), expected, "{tag}");
         assert!(
-            out.events("control-center").is_empty(),
+            out.events(fdi_common::run_dir::Process::CENTER).is_empty(),
             "{tag}: {:?}",
-            out.events("control-center")
+            out.events(fdi_common::run_dir::Process::CENTER)
         );
     }
 }
@@ -96,7 +96,7 @@ fn the_center_refuses_duplicated_replayed_and_forged_measurements() {
         assert_eq!(format!("{agent:?}"), format!("{:?}", e.agent));
         assert_eq!(format!("{center:?}"), format!("{:?}", e.center));
     }
-    let events = out.events("control-center");
+    let events = out.events(fdi_common::run_dir::Process::CENTER);
     let summary = format!("{expected_extra} messages refused, 0 measurements rejected");
     assert!(
         events.iter().any(|e| e.starts_with(&summary)),

@@ -37,7 +37,7 @@ fn ticks_of(path: &Path) -> (Kept, BTreeSet<u64>, usize) {
 }
 
 fn trace_files(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir.join("traces"))
+    let mut v: Vec<String> = std::fs::read_dir(fdi_common::run_dir::RunDir::new(dir).traces())
         .map(|d| {
             d.flatten()
                 .map(|e| e.file_name().to_string_lossy().into_owned())
@@ -49,8 +49,10 @@ fn trace_files(dir: &Path) -> Vec<String> {
 }
 
 fn summary_file(dir: &Path) -> serde_json::Value {
-    serde_json::from_str(&std::fs::read_to_string(dir.join("summary.json")).expect("summary"))
-        .expect("json")
+    serde_json::from_str(
+        &std::fs::read_to_string(fdi_common::run_dir::RunDir::new(dir).summary()).expect("summary"),
+    )
+    .expect("json")
 }
 
 #[test]
@@ -90,7 +92,8 @@ fn every_traces_value_on_both_engines_gives_the_digest_and_metrics_of_full() {
             if traces == "decimate=7" {
                 let want: BTreeSet<u64> = (0..1000).step_by(7).collect();
                 for f in &files {
-                    let (kept, ticks, n) = ticks_of(&dir.join("traces").join(f));
+                    let (kept, ticks, n) =
+                        ticks_of(&fdi_common::run_dir::RunDir::new(&dir).traces().join(f));
                     assert_eq!(kept, Kept::Decimate { every: 7 }, "{tag} {f}");
                     assert_eq!(ticks, want, "{tag} {f}: exactly the ticks 0, 7, 14, …");
                     let per_tick = if f.starts_with("agent") { 1 } else { 4 };
@@ -194,7 +197,7 @@ fn runs_prune_keeps_the_newest_and_never_touches_a_folder_that_is_not_a_run() {
         std::thread::sleep(Duration::from_millis(30));
     }
     let other = out.0.join("my-notes");
-    std::fs::create_dir_all(other.join("traces")).expect("mkdir");
+    std::fs::create_dir_all(fdi_common::run_dir::RunDir::new(&other).traces()).expect("mkdir");
     std::fs::write(other.join("notes.txt"), "mine").expect("write");
     let root = out.0.to_string_lossy().into_owned();
     let o = fdi_tests::launch_plain(
@@ -261,8 +264,15 @@ fn on_a_small_disk(
     room: u64,
 ) -> Option<(fdi_tests::mounts::Mount, std::path::PathBuf)> {
     let page = |n: u64| n.div_ceil(4096) * 4096;
-    let mut files = vec![run.join("scenario.toml"), run.join("summary.json")];
-    files.extend(trace_files(run).iter().map(|f| run.join("traces").join(f)));
+    let mut files = vec![
+        fdi_common::run_dir::RunDir::new(run).scenario(),
+        fdi_common::run_dir::RunDir::new(run).summary(),
+    ];
+    files.extend(
+        trace_files(run)
+            .iter()
+            .map(|f| fdi_common::run_dir::RunDir::new(run).traces().join(f)),
+    );
     let used: u64 = files
         .iter()
         .map(|f| page(std::fs::metadata(f).expect("a file of the run").len()))
@@ -275,7 +285,8 @@ fn on_a_small_disk(
         }
     };
     let copy = at.join("run");
-    std::fs::create_dir_all(copy.join("traces")).expect("the copy's folders");
+    std::fs::create_dir_all(fdi_common::run_dir::RunDir::new(&copy).traces())
+        .expect("the copy's folders");
     for f in &files {
         let rel = f.strip_prefix(run).expect("in the run");
         std::fs::copy(f, copy.join(rel)).expect("the run fits on the small disk");
@@ -448,7 +459,10 @@ fn prune_continues_past_a_file_it_cannot_remove() {
         .to_string_lossy()
         .into_owned();
     let tomb = out.0.join(format!("{name}.pruning"));
-    let Some(stubborn) = Stubborn::make(&dirs[1].join("traces"), tomb.join("traces")) else {
+    let Some(stubborn) = Stubborn::make(
+        &fdi_common::run_dir::RunDir::new(&dirs[1]).traces(),
+        fdi_common::run_dir::RunDir::new(&tomb).traces(),
+    ) else {
         return;
     };
     let root = out.0.to_string_lossy().into_owned();
@@ -466,7 +480,10 @@ fn prune_continues_past_a_file_it_cannot_remove() {
         Stubborn::ReadOnly(_) => "permission denied (EACCES)",
     };
     // Each trace file is named (in the order the folder lists them) with the cause.
-    let traces = format!("could not remove {}/", tomb.join("traces").display());
+    let traces = format!(
+        "could not remove {}/",
+        fdi_common::run_dir::RunDir::new(&tomb).traces().display()
+    );
     assert!(
         err.lines()
             .any(|l| l.contains(&traces) && l.ends_with(&format!(".trace: {cause}"))),

@@ -100,12 +100,13 @@ fn fixture() -> PathBuf {
 
 /// The fixture's trace files, sorted.
 fn fixture_traces() -> Vec<PathBuf> {
-    let mut v: Vec<PathBuf> = std::fs::read_dir(fixture().join("traces"))
-        .expect("the fixture's traces")
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.extension().is_some_and(|x| x == "trace"))
-        .collect();
+    let mut v: Vec<PathBuf> =
+        std::fs::read_dir(fdi_common::run_dir::RunDir::new(fixture()).traces())
+            .expect("the fixture's traces")
+            .flatten()
+            .map(|e| e.path())
+            .filter(|p| p.extension().is_some_and(|x| x == "trace"))
+            .collect();
     v.sort();
     v
 }
@@ -121,14 +122,16 @@ fn resolved() -> Resolved {
 /// A copy of the fixture run directory.
 fn copy_fixture() -> tempfile::TempDir {
     let tmp = tempfile::tempdir().expect("a scratch folder");
-    std::fs::create_dir(tmp.path().join("traces")).expect("traces/");
+    std::fs::create_dir(fdi_common::run_dir::RunDir::new(tmp.path()).traces()).expect("traces/");
     std::fs::copy(
-        fixture().join("scenario.toml"),
-        tmp.path().join("scenario.toml"),
+        fdi_common::run_dir::RunDir::new(fixture()).scenario(),
+        fdi_common::run_dir::RunDir::new(tmp.path()).scenario(),
     )
     .expect("copy");
     for t in fixture_traces() {
-        let to = tmp.path().join("traces").join(t.file_name().expect("name"));
+        let to = fdi_common::run_dir::RunDir::new(tmp.path())
+            .traces()
+            .join(t.file_name().expect("name"));
         std::fs::copy(&t, to).expect("copy");
     }
     tmp
@@ -289,7 +292,7 @@ proptest! {
         let dir = copy_fixture();
         let traces = fixture_traces();
         let name = traces[file.index(traces.len())].file_name().expect("name").to_owned();
-        let path = dir.path().join("traces").join(&name);
+        let path = fdi_common::run_dir::RunDir::new(dir.path()).traces().join(&name);
         let mut bytes = std::fs::read(&path).expect("read");
         apply(&mut bytes, &m);
         std::fs::write(&path, &bytes).expect("write");

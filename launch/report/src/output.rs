@@ -56,7 +56,7 @@ pub fn write_run_summary(dir: &Path, s: &RunSummary, traces: crate::traces::Trac
 
 fn write_summary_json(dir: &Path, v: serde_json::Value) -> Result<()> {
     std::fs::write(
-        dir.join("summary.json"),
+        fdi_common::run_dir::RunDir::new(dir).summary(),
         serde_json::to_string_pretty(&v)? + "\n",
     )
     .context("writing summary.json")

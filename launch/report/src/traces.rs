@@ -73,7 +73,9 @@ pub enum Recorded {
 
 /// The `traces` field of a run directory's `summary.json`, if it has one.
 fn summary_says(run_dir: &Path) -> Option<String> {
-    let text = fdi_common::scenario::read_limited(&run_dir.join("summary.json")).ok()?;
+    let text =
+        fdi_common::scenario::read_limited(&fdi_common::run_dir::RunDir::new(run_dir).summary())
+            .ok()?;
     let v: serde_json::Value = serde_json::from_str(&text).ok()?;
     v.get("traces")?.as_str().map(str::to_string)
 }
@@ -85,7 +87,7 @@ pub fn recorded(run_dir: &Path) -> Result<Recorded> {
     if summary_says(run_dir).as_deref() == Some("none") {
         return Ok(Recorded::None);
     }
-    let dir = run_dir.join("traces");
+    let dir = fdi_common::run_dir::RunDir::new(run_dir).traces();
     let Ok(entries) = std::fs::read_dir(&dir) else {
         return Ok(Recorded::Full);
     };

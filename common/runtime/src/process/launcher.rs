@@ -1,5 +1,6 @@
 //! The link to the launcher: opening the transport, the start handshake, status reports.
 
+use fdi_common::run_dir::Process;
 use std::time::Instant;
 
 use super::{ProcessArgs, ProcessError, RoleError, Shutdown, START_TIMEOUT, WAIT_SLICE};
@@ -148,9 +149,9 @@ pub struct Connection<X: Transport> {
 /// The node name of the process behind `wake`.
 pub fn node_name(wake: Wake) -> String {
     match wake {
-        Wake::Agent(id) => format!("agent-{id}"),
-        Wake::Attacker => "attacker".into(),
-        Wake::Center => "control-center".into(),
+        Wake::Agent(id) => Process::Agent(id).to_string(),
+        Wake::Attacker => Process::Attacker.to_string(),
+        Wake::Center => Process::Center.to_string(),
         Wake::Launcher => "launcher".into(),
         Wake::ExternalAttacker => "external-attacker".into(),
         Wake::Monitor => "monitor".into(),

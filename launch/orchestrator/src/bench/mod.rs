@@ -817,7 +817,7 @@ fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize, stop: &Stop) -> Result<
     .and_then(crate::run::require_whole)?;
     if !a.keep_traces {
         for d in [&dir_in, &dir_ipc] {
-            let _ = std::fs::remove_dir_all(d.join("traces"));
+            let _ = std::fs::remove_dir_all(fdi_common::run_dir::RunDir::new(d).traces());
         }
     }
     Ok(LockstepRow {

@@ -56,7 +56,7 @@ pub struct Deployment {
 /// The process roles a deployment can place with `roles`.
 const PLACEABLE: [(&str, Wake); 2] = [
     ("attacker", Wake::Attacker),
-    ("control-center", Wake::Center),
+    (fdi_common::run_dir::Process::CENTER, Wake::Center),
 ];
 
 impl Deployment {
@@ -160,7 +160,7 @@ impl Deployment {
         if resolved.has_external_roles() {
             for (wake, role) in [
                 (Wake::Attacker, "attacker"),
-                (Wake::Center, "control-center"),
+                (Wake::Center, fdi_common::run_dir::Process::CENTER),
             ] {
                 if host_of[&wake] != coordinator {
                     return Err(problem(

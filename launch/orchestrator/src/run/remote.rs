@@ -355,7 +355,7 @@ impl Remote {
             .filter(|(_, h)| **h == here.name)
             .map(|(w, _)| match w {
                 Wake::Agent(id) => format!("agent {id}"),
-                Wake::Center => "control-center".into(),
+                Wake::Center => fdi_common::run_dir::Process::CENTER.into(),
                 w => wake_word(*w),
             })
             .collect();

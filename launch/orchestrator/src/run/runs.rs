@@ -35,8 +35,9 @@ pub fn is_run_dir(p: &Path) -> bool {
         std::fs::symlink_metadata(q).is_ok_and(|m| if dir { m.is_dir() } else { m.is_file() })
     };
     is(p, true)
-        && is(&p.join("scenario.toml"), false)
-        && (is(&p.join("summary.json"), false) || is(&p.join("traces"), true))
+        && is(&fdi_common::run_dir::RunDir::new(p).scenario(), false)
+        && (is(&fdi_common::run_dir::RunDir::new(p).summary(), false)
+            || is(&fdi_common::run_dir::RunDir::new(p).traces(), true))
 }
 
 /// Bytes of the files under `p` (symbolic links not followed).
@@ -56,7 +57,9 @@ fn size_of(p: &Path) -> u64 {
 }
 
 fn status(p: &Path) -> String {
-    let Ok(text) = fdi_common::scenario::read_limited(&p.join("summary.json")) else {
+    let Ok(text) =
+        fdi_common::scenario::read_limited(&fdi_common::run_dir::RunDir::new(p).summary())
+    else {
         return "no summary".into();
     };
     let Ok(v) = serde_json::from_str::<serde_json::Value>(&text) else {
@@ -113,8 +116,8 @@ pub fn list(out: &Path) -> Result<Vec<RunDir>> {
             continue;
         }
         let stamp = |q: &Path| std::fs::metadata(q).and_then(|m| m.modified()).ok();
-        let modified = stamp(&path.join("summary.json"))
-            .or_else(|| stamp(&path.join("scenario.toml")))
+        let modified = stamp(&fdi_common::run_dir::RunDir::new(&path).summary())
+            .or_else(|| stamp(&fdi_common::run_dir::RunDir::new(&path).scenario()))
             .or_else(|| stamp(&path))
             .unwrap_or(std::time::UNIX_EPOCH);
         runs.push(RunDir {
@@ -391,11 +394,21 @@ mod tests {
 
     fn run_dir(root: &Path, name: &str, summary: bool) -> PathBuf {
         let d = root.join(name);
-        std::fs::create_dir_all(d.join("traces")).expect("mkdir");
-        std::fs::write(d.join("scenario.toml"), "name = \"x\"\n").expect("scenario");
-        std::fs::write(d.join("traces").join("agent-1.trace"), vec![0u8; 1000]).expect("trace");
+        std::fs::create_dir_all(fdi_common::run_dir::RunDir::new(&d).traces()).expect("mkdir");
+        std::fs::write(
+            fdi_common::run_dir::RunDir::new(&d).scenario(),
+            "name = \"x\"\n",
+        )
+        .expect("scenario");
+        std::fs::write(
+            fdi_common::run_dir::RunDir::new(&d)
+                .traces()
+                .join("agent-1.trace"),
+            vec![0u8; 1000],
+        )
+        .expect("trace");
         if summary {
-            std::fs::write(d.join("summary.json"), "{}").expect("summary");
+            std::fs::write(fdi_common::run_dir::RunDir::new(&d).summary(), "{}").expect("summary");
         }
         d
     }
@@ -420,7 +433,11 @@ mod tests {
         }
         // Not run directories: a folder with a scenario only, one with data, a file.
         std::fs::create_dir_all(r.join("notes")).expect("mkdir");
-        std::fs::write(r.join("notes").join("scenario.toml"), "x").expect("w");
+        std::fs::write(
+            fdi_common::run_dir::RunDir::new(r.join("notes")).scenario(),
+            "x",
+        )
+        .expect("w");
         std::fs::create_dir_all(r.join("data/traces")).expect("mkdir");
         std::fs::write(r.join("README"), "keep me").expect("w");
 

@@ -4,6 +4,7 @@
 //! processes print and how they end, hands their traces to the coordinator, and removes
 //! everything the run left once it is released, or at once when the coordinator is gone.
 
+use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::stop::Stop;
 use std::os::unix::process::ExitStatusExt;
 use std::path::PathBuf;
@@ -177,9 +178,10 @@ impl HostRun {
             .prefix(&format!("fdi-serve-{}-", r.prefix))
             .tempdir_in(&base)
             .with_context(|| format!("making a run folder in {}", base.display()))?;
-        let scenario = dir.path().join("scenario.toml");
+        let run_dir = RunDir::new(dir.path());
+        let scenario = run_dir.scenario();
         std::fs::write(&scenario, &r.scenario).context("writing the run's scenario")?;
-        std::fs::create_dir_all(dir.path().join("traces")).context("making traces/")?;
+        std::fs::create_dir_all(run_dir.traces()).context("making traces/")?;
         let resolved = fdi_common::scenario::load_file(&scenario)
             .map_err(|e| anyhow::anyhow!("the run's scenario: {e}"))?;
         let mut host_of = std::collections::BTreeMap::new();
@@ -212,7 +214,7 @@ impl HostRun {
             let child = ProcessArgs {
                 prefix: r.prefix.clone(),
                 scenario: scenario.clone(),
-                trace: dir.path().join("traces").join(format!("{}.trace", p.name)),
+                trace: run_dir.trace(p.name.parse::<Process>()?),
                 agent: p.agent,
                 launcher_pid: Some(std::process::id()),
                 placement: Placement::default(),
@@ -297,7 +299,7 @@ impl HostRun {
             }
             a.store(up, Ordering::SeqCst);
         })?;
-        let traces = self.dir.path().join("traces");
+        let traces = fdi_common::run_dir::RunDir::new(self.dir.path()).traces();
         let names = self.names.clone();
         let _traces = net.answer(
             &keys::run(&self.prefix, &format!("traces/{}", args.name)),

@@ -81,7 +81,7 @@ pub fn estimate(r: &Resolved, ipc: bool, traces: Traces) -> Result<Estimate> {
     let mut total = kept.saturating_mul(bytes_per_tick);
     if traces != Traces::None {
         let processes = r.agent_count() as u64 + 2;
-        let header = fdi_runtime::process::trace_header("control-center", r);
+        let header = fdi_runtime::process::trace_header(fdi_common::run_dir::Process::CENTER, r);
         let h = trace::header_bytes(&header)
             .map_err(|e| anyhow::anyhow!("estimating the trace size: {e}"))?;
         total = total.saturating_add(processes * h);

@@ -268,7 +268,7 @@ impl Kind {
         match self {
             Self::Agent => "agent",
             Self::Attack => "attacker",
-            Self::Center => "control-center",
+            Self::Center => fdi_common::run_dir::Process::CENTER,
             Self::Latency => "latency",
             Self::Actuation => "actuation",
             Self::Monitor => "monitor",
@@ -304,7 +304,7 @@ fn main_kind(process: &str) -> Option<Kind> {
         Some(Kind::Agent)
     } else if process == "attacker" {
         Some(Kind::Attack)
-    } else if process == "control-center" {
+    } else if process == fdi_common::run_dir::Process::CENTER {
         Some(Kind::Center)
     } else {
         None

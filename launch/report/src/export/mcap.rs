@@ -921,7 +921,7 @@ fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
     let joined = joined.with_context(|| {
         format!(
             "joining the traces in {} for the detector statistics",
-            run_dir.join("traces").display()
+            fdi_common::run_dir::RunDir::new(run_dir).traces().display()
         )
     })?;
     for warning in &joined.warnings {
@@ -994,10 +994,12 @@ mod tests {
         export(dir.path()).expect("exported");
         let bytes = std::fs::read(dir.path().join("export/run.mcap")).expect("run.mcap");
         let want = expected(dir.path());
-        let dt = fdi_common::scenario::load_file(&dir.path().join("scenario.toml"))
-            .expect("the fixture's scenario")
-            .scenario
-            .control_period_s;
+        let dt = fdi_common::scenario::load_file(
+            &fdi_common::run_dir::RunDir::new(dir.path()).scenario(),
+        )
+        .expect("the fixture's scenario")
+        .scenario
+        .control_period_s;
         assert!(want.len() >= 4 * 12, "{want:?}");
 
         let schemas: BTreeMap<&str, &Schema> = TOPICS.iter().map(|(n, s)| (*n, *s)).collect();

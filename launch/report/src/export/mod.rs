@@ -52,7 +52,7 @@ pub fn export(run_dir: &Path, format: Format) -> Result<()> {
 
 /// The `*.trace` files of `RUN_DIR/traces`, sorted; an error when there are none.
 fn trace_files(run_dir: &Path) -> Result<Vec<PathBuf>> {
-    let traces = run_dir.join("traces");
+    let traces = fdi_common::run_dir::RunDir::new(run_dir).traces();
     let mut files: Vec<PathBuf> = std::fs::read_dir(&traces)
         .with_context(|| format!("reading {}", traces.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -405,13 +405,22 @@ mod tests {
     pub(super) fn fixture_copy() -> tempfile::TempDir {
         let from = Path::new(env!("CARGO_MANIFEST_DIR")).join("testdata/short-run");
         let tmp = tempfile::tempdir().expect("a scratch folder");
-        std::fs::create_dir(tmp.path().join("traces")).expect("traces/");
-        std::fs::copy(from.join("scenario.toml"), tmp.path().join("scenario.toml")).expect("copy");
-        for e in std::fs::read_dir(from.join("traces")).expect("the fixture's traces") {
+        std::fs::create_dir(fdi_common::run_dir::RunDir::new(tmp.path()).traces())
+            .expect("traces/");
+        std::fs::copy(
+            fdi_common::run_dir::RunDir::new(&from).scenario(),
+            fdi_common::run_dir::RunDir::new(tmp.path()).scenario(),
+        )
+        .expect("copy");
+        for e in std::fs::read_dir(fdi_common::run_dir::RunDir::new(&from).traces())
+            .expect("the fixture's traces")
+        {
             let p = e.expect("an entry").path();
             std::fs::copy(
                 &p,
-                tmp.path().join("traces").join(p.file_name().expect("name")),
+                fdi_common::run_dir::RunDir::new(tmp.path())
+                    .traces()
+                    .join(p.file_name().expect("name")),
             )
             .expect("copy");
         }
