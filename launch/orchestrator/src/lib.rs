@@ -5,15 +5,21 @@
 //! ([`tables`], [`attacks`]), campaigns ([`campaign`]) and the
 //! benchmarks ([`bench`]) are built on runs; what they write is made by `fdi-report`.
 //!
-//! The paper's experiment, in-process, its RMSE per robot:
+//! The paper's experiment under another attack, in-process, and its RMSE per robot:
 //!
 //! ```
 //! use fdi_common::stop::Stop;
 //! use fdi_orchestrator::{execute, Engine, Overrides, RunRequest};
 //!
 //! # fn main() -> anyhow::Result<()> {
-//! let overrides = Overrides { duration_s: Some(2.0), ..Overrides::default() };
-//! let request = RunRequest::new(None, &overrides, Engine::Inproc)?;
+//! let overrides = Overrides {
+//!     attack: Some("freeze".into()), // a shipped preset, or a profile file
+//!     duration_s: Some(2.0),
+//!     ..Overrides::default()
+//! };
+//! // `None`: the embedded paper scenario; `Some(path)`: a scenario file.
+//! let request = RunRequest::new(None, &overrides, Engine::Inproc)?
+//!     .edit(|s| s.controller.beta = 8.0)?;
 //! let out = tempfile::tempdir()?;
 //! let dir = request.create_run_dir(out.path())?;
 //! let summary = execute(&request, &dir, &Stop::new())?;
@@ -21,9 +27,15 @@
 //!     println!("robot {robot}: RMSE {:.4} rad", m.rmse_rad);
 //! }
 //! assert_eq!(summary.metrics.len(), 4);
+//! assert!(dir.trace(fdi_common::run_dir::Process::Center).is_file());
 //! # Ok(())
 //! # }
 //! ```
+//!
+//! [`Engine::Ipc`] runs the same request as processes over shared memory; it spawns the role
+//! binaries (`fdi-agent`, `fdi-attacker`, `fdi-control-center`) found beside the running
+//! executable, so a program of your own needs them installed there (`cargo build --release`
+//! puts them in `target/release/`). `examples/gain_study.rs` is a small parameter study.
 
 pub mod attacks;
 pub mod bench;

@@ -256,6 +256,14 @@ impl RunRequest {
         }
     }
 
+    /// Changes the scenario through `edit` and validates it again (every problem named, as the
+    /// command line's overrides are).
+    pub fn edit(mut self, edit: impl FnOnce(&mut fdi_common::scenario::Scenario)) -> Result<Self> {
+        edit(&mut self.resolved.scenario);
+        self.resolved = crate::run::check_overrides(self.resolved)?;
+        Ok(self)
+    }
+
     /// Makes the run's directory under `out` (`<timestamp>-<name>`, the scenario written into
     /// it).
     pub fn create_run_dir(&self, out: &Path) -> Result<RunDir> {

@@ -28,6 +28,7 @@
 pub mod figures;
 pub mod flatten;
 pub mod path;
+pub mod plan;
 pub mod runner;
 pub mod stats;
 
@@ -49,7 +50,7 @@ use sha2::{Digest, Sha256};
 use crate::run::{execute, Engine, Traces};
 use flatten::Cell;
 use path::FieldPath;
-use stats::Stats;
+use plan::{labels_and_robots, show, toml_cell, Aggregate, Axis, Job, Plan, Point};
 
 /// What an interrupted campaign kept.
 pub const DURING_THE_CAMPAIGN: &str =
@@ -121,41 +122,6 @@ struct RangeFile {
 
 /// Most runs a campaign may hold.
 const MAX_RUNS: usize = 100_000;
-
-/// One axis as resolved.
-#[derive(Debug, Clone)]
-struct Axis {
-    label: String,
-    paths: Vec<FieldPath>,
-    /// Where each path is written in the campaign file (`axes[1].path`, `axes[0].paths[2]`).
-    fields: Vec<String>,
-    values: Vec<toml::Value>,
-    /// The values multiply the base value at each path.
-    factors: bool,
-}
-
-impl Axis {
-    fn is_seed(&self) -> bool {
-        self.paths.len() == 1 && self.paths[0].text == "seed"
-    }
-}
-
-/// One run of the campaign.
-#[derive(Debug)]
-struct Job {
-    /// Index of its point (its combination of the axes other than `seed`).
-    point: usize,
-    /// `controller.beta = 10, seed = 2`.
-    label: String,
-    resolved: Resolved,
-    key: String,
-}
-
-/// A point: the values of the non-seed axes.
-#[derive(Debug, Clone)]
-struct Point {
-    values: Vec<(String, toml::Value)>,
-}
 
 /// What `points/<key>.json` holds.
 #[derive(Debug, Serialize, Deserialize)]
@@ -559,23 +525,6 @@ fn run_key(r: &Resolved, engine: Engine) -> String {
     ));
     h.update(r.to_toml());
     h.finalize().iter().map(|b| format!("{b:02x}")).collect()
-}
-
-fn show(v: &toml::Value) -> String {
-    match v {
-        toml::Value::String(s) => s.clone(),
-        other => other.to_string(),
-    }
-}
-
-/// The campaign as resolved: its axes, points and runs.
-struct Plan {
-    name: String,
-    axes: Vec<Axis>,
-    points: Vec<Point>,
-    jobs: Vec<Job>,
-    seeds: usize,
-    plots: Option<Vec<String>>,
 }
 
 fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
@@ -1041,58 +990,6 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
         md_path,
         out.join("figures"),
     ])
-}
-
-fn toml_cell(v: &toml::Value) -> Cell {
-    match v {
-        toml::Value::Integer(i) => Cell::Int(i128::from(*i)),
-        toml::Value::Float(f) => Cell::Num(*f),
-        other => Cell::Text(show(other)),
-    }
-}
-
-/// The statistics of one point.
-#[derive(Debug)]
-pub(crate) struct Aggregate {
-    point: Point,
-    runs: usize,
-    /// The seeds of its runs, exact.
-    seeds: Vec<u64>,
-    /// Per column: `None` when no run of the point has a number there.
-    metrics: BTreeMap<String, Option<Stats>>,
-}
-
-/// The robots of a set of columns (`robot<id>.…`), in id order.
-/// The labels of a plan's axes other than the seed, and the robots an aggregate has metrics
-/// of.
-fn labels_and_robots<'p>(plan: &'p Plan, aggregate: &[Aggregate]) -> (Vec<&'p str>, Vec<String>) {
-    let labels = plan
-        .axes
-        .iter()
-        .filter(|a| !a.is_seed())
-        .map(|a| a.label.as_str())
-        .collect();
-    let all: Vec<String> = aggregate
-        .iter()
-        .flat_map(|a| a.metrics.keys().cloned())
-        .collect();
-    let refs: Vec<&String> = all.iter().collect();
-    (labels, robots(&refs))
-}
-
-fn robots(columns: &[&String]) -> Vec<String> {
-    let mut ids: Vec<(u64, String)> = columns
-        .iter()
-        .filter_map(|c| {
-            c.strip_prefix("robot")?
-                .split_once('.')
-                .map(|(id, _)| id.to_string())
-        })
-        .filter_map(|id| id.parse::<u64>().ok().map(|n| (n, id)))
-        .collect();
-    ids.sort();
-    ids.dedup();
-    ids.into_iter().map(|(_, id)| id).collect()
 }
 
 /// The per-robot metrics drawn and tabulated: those asked for (each must exist), or the

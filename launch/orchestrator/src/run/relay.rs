@@ -11,8 +11,6 @@ use std::io::{BufRead, BufReader, Read, Write};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
-use crate::run::supervisor::lock;
-
 /// Longest line kept as a cause, bytes (the relay passes longer lines on, up to [`MAX_LINE`]).
 const MAX_CAUSE: usize = 2000;
 
@@ -225,6 +223,12 @@ fn relay(
             lock(progress).last = Some(text[..end].to_string());
         }
     }
+}
+
+/// The state behind a lock, even if a thread panicked while holding it (the state is plain
+/// data, consistent at every step).
+pub fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 #[cfg(test)]

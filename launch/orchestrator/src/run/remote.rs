@@ -18,7 +18,8 @@ use crate::run::hosts::{
     wake_word, Deployment, Host, HostCommand, HostEvent, Released, RemoteProcess, RunReply,
     RunRequest,
 };
-use crate::run::supervisor::{lock, Remote as RemoteChild, RemoteState, Stopper, Supervisor};
+use crate::run::relay::lock;
+use crate::run::supervisor::{Remote as RemoteChild, RemoteState, Stopper, Supervisor};
 
 /// How long the coordinator waits for each host's serve to be seen when a run begins.
 const REACH_TIMEOUT: Duration = Duration::from_secs(5);

@@ -1,9 +1,8 @@
 //! The multi-process engine: spawns the agents, the attacker and the control center, supervises
 //! them, and tears everything down (processes and shared memory) however the run ends.
 
-use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitStatus};
+use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
@@ -64,18 +63,6 @@ pub(crate) fn role_command(role: &str) -> Result<Command> {
 /// `SIGINT`, `SIGKILL`, ...: the name of signal `sig`, or its number.
 pub fn signal_name(sig: i32) -> String {
     signal_hook::low_level::signal_name(sig).map_or_else(|| format!("signal {sig}"), Into::into)
-}
-
-/// Describes how a child ended, naming the signal.
-pub fn describe_status(status: ExitStatus) -> String {
-    if let Some(sig) = status.signal() {
-        match signal_hook::low_level::signal_name(sig) {
-            Some(name) => format!("was killed by signal {sig} {name}"),
-            None => format!("was killed by signal {sig}"),
-        }
-    } else {
-        format!("exited with status {}", status.code().unwrap_or(-1))
-    }
 }
 
 /// A unique run prefix (short: iceoryx2 puts it into socket paths).

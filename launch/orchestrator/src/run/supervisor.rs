@@ -15,8 +15,7 @@ use anyhow::{bail, Context, Result};
 use fdi_runtime::process::procfs;
 
 use crate::run::program::{self, Program};
-use crate::run::relay::StderrRelay;
-use crate::run::runtime::describe_status;
+use crate::run::relay::{lock, StderrRelay};
 
 /// One supervised child; `meta` is what its supervisor's user keeps about it.
 #[derive(Debug)]
@@ -449,17 +448,23 @@ impl<M> Supervisor<M> {
 /// gone.
 pub const REMOTE_KILL_WAIT: Duration = Duration::from_secs(3);
 
-/// The state behind a lock, even if a thread panicked while holding it (the state is plain
-/// data, consistent at every step).
-pub fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
 impl<M> Drop for Supervisor<M> {
     fn drop(&mut self) {
         self.kill_rest();
         for program in self.children.iter().filter_map(|c| c.program.as_ref()) {
             program.kill();
         }
+    }
+}
+
+/// Describes how a child ended, naming the signal.
+pub fn describe_status(status: ExitStatus) -> String {
+    if let Some(sig) = status.signal() {
+        match signal_hook::low_level::signal_name(sig) {
+            Some(name) => format!("was killed by signal {sig} {name}"),
+            None => format!("was killed by signal {sig}"),
+        }
+    } else {
+        format!("exited with status {}", status.code().unwrap_or(-1))
     }
 }

@@ -30,7 +30,7 @@ use fdi_common::records::{
 use fdi_common::scenario::MAX_DOF;
 use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
 
-use super::{
+use super::sources::{
     abandoned, failed, read_sorted, scan, stem, trace_files, write_failure, Kind, OutDir, RunInfo,
     Sorted, WriteFailed,
 };

@@ -30,7 +30,7 @@ use fdi_common::records::{true_s, TickRecord};
 use fdi_common::trace::{TraceReader, TraceRecord};
 use serde_json::{json, Map, Value};
 
-use super::{
+use super::sources::{
     abandoned, failed, read_sorted, stem, trace_files, write_failure, OutDir, RunInfo, WriteFailed,
 };
 use crate::join;

@@ -1,0 +1,117 @@
+//! A campaign as resolved — its axes, points and runs ([`Plan`]) — and the statistics of
+//! its points ([`Aggregate`]): what the runner, the tables and the figures share.
+
+use std::collections::BTreeMap;
+
+use fdi_common::scenario::Resolved;
+
+use super::flatten::Cell;
+use super::path::FieldPath;
+use super::stats::Stats;
+
+/// One axis as resolved.
+#[derive(Debug, Clone)]
+pub(super) struct Axis {
+    pub(super) label: String,
+    pub(super) paths: Vec<FieldPath>,
+    /// Where each path is written in the campaign file (`axes[1].path`, `axes[0].paths[2]`).
+    pub(super) fields: Vec<String>,
+    pub(super) values: Vec<toml::Value>,
+    /// The values multiply the base value at each path.
+    pub(super) factors: bool,
+}
+
+impl Axis {
+    pub(super) fn is_seed(&self) -> bool {
+        self.paths.len() == 1 && self.paths[0].text == "seed"
+    }
+}
+
+/// One run of the campaign.
+#[derive(Debug)]
+pub(super) struct Job {
+    /// Index of its point (its combination of the axes other than `seed`).
+    pub(super) point: usize,
+    /// `controller.beta = 10, seed = 2`.
+    pub(super) label: String,
+    pub(super) resolved: Resolved,
+    pub(super) key: String,
+}
+
+/// A point: the values of the non-seed axes.
+#[derive(Debug, Clone)]
+pub(super) struct Point {
+    pub(super) values: Vec<(String, toml::Value)>,
+}
+
+pub(super) fn show(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// The campaign as resolved: its axes, points and runs.
+pub(super) struct Plan {
+    pub(super) name: String,
+    pub(super) axes: Vec<Axis>,
+    pub(super) points: Vec<Point>,
+    pub(super) jobs: Vec<Job>,
+    pub(super) seeds: usize,
+    pub(super) plots: Option<Vec<String>>,
+}
+
+pub(super) fn toml_cell(v: &toml::Value) -> Cell {
+    match v {
+        toml::Value::Integer(i) => Cell::Int(i128::from(*i)),
+        toml::Value::Float(f) => Cell::Num(*f),
+        other => Cell::Text(show(other)),
+    }
+}
+
+/// The statistics of one point.
+#[derive(Debug)]
+pub(super) struct Aggregate {
+    pub(super) point: Point,
+    pub(super) runs: usize,
+    /// The seeds of its runs, exact.
+    pub(super) seeds: Vec<u64>,
+    /// Per column: `None` when no run of the point has a number there.
+    pub(super) metrics: BTreeMap<String, Option<Stats>>,
+}
+
+/// The robots of a set of columns (`robot<id>.…`), in id order.
+/// The labels of a plan's axes other than the seed, and the robots an aggregate has metrics
+/// of.
+pub(super) fn labels_and_robots<'p>(
+    plan: &'p Plan,
+    aggregate: &[Aggregate],
+) -> (Vec<&'p str>, Vec<String>) {
+    let labels = plan
+        .axes
+        .iter()
+        .filter(|a| !a.is_seed())
+        .map(|a| a.label.as_str())
+        .collect();
+    let all: Vec<String> = aggregate
+        .iter()
+        .flat_map(|a| a.metrics.keys().cloned())
+        .collect();
+    let refs: Vec<&String> = all.iter().collect();
+    (labels, robots(&refs))
+}
+
+pub(super) fn robots(columns: &[&String]) -> Vec<String> {
+    let mut ids: Vec<(u64, String)> = columns
+        .iter()
+        .filter_map(|c| {
+            c.strip_prefix("robot")?
+                .split_once('.')
+                .map(|(id, _)| id.to_string())
+        })
+        .filter_map(|id| id.parse::<u64>().ok().map(|n| (n, id)))
+        .collect();
+    ids.sort();
+    ids.dedup();
+    ids.into_iter().map(|(_, id)| id).collect()
+}
