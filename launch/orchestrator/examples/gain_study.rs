@@ -26,20 +26,30 @@ fn main() -> Result<()> {
         controller: Some(Controller::Proposed),
         ..Overrides::default()
     };
-    println!("| beta | robot 1 | robot 2 | robot 3 | robot 4 | (RMSE, rad; {duration_s} s) |");
-    println!("|---|---|---|---|---|---|");
-    for beta in [2.0, 5.0, 10.0, 20.0] {
+    println!(
+        "RMSE (rad) of every robot over {duration_s} s under the paper's attack, in-process\n"
+    );
+    for (i, beta) in [2.0, 5.0, 10.0, 20.0].into_iter().enumerate() {
         let mut request = RunRequest::new(None, &overrides, Engine::Inproc)?
             .edit(|s| s.controller.beta = beta)?;
         request.name = format!("beta-{beta}");
         let dir = request.create_run_dir(out.path())?;
         let summary = execute(&request, &dir, &stop)?;
+        if i == 0 {
+            let robots: Vec<String> = summary
+                .metrics
+                .keys()
+                .map(|id| format!("robot {id}"))
+                .collect();
+            println!("| β | {} |", robots.join(" | "));
+            println!("|---|{}", "---|".repeat(robots.len()));
+        }
         let cells: Vec<String> = summary
             .metrics
             .values()
             .map(|m| format!("{:.4}", m.rmse_rad))
             .collect();
-        println!("| {beta} | {} | |", cells.join(" | "));
+        println!("| {beta} | {} |", cells.join(" | "));
     }
     Ok(())
 }
