@@ -19,10 +19,8 @@ use crate::records::{
 };
 use crate::scenario::Resolved;
 
-/// `t_k = k · Δ`, computed the same way in every process.
-pub fn tick_time(k: u64, control_period_s: f64) -> f64 {
-    k as f64 * control_period_s
-}
+/// The time of tick `k` ([`crate::time`], where the pieces the engine runs take it too).
+pub use crate::time::tick_time;
 
 /// The control center's tick from what reached it: the delivered measurement, or, when the
 /// tick's input is missing, the last good one held ([`CenterAgent::tick_missing`]).

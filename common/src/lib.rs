@@ -24,6 +24,7 @@ pub mod records;
 pub mod rng;
 pub mod roles;
 pub mod scenario;
+pub mod time;
 pub mod trace;
 pub mod trajectory;
 pub mod units;

@@ -7,10 +7,10 @@ use rand_chacha::ChaCha12Rng;
 use rand_distr::{Distribution, Normal};
 
 use crate::delay::{in_force_at, DelayLine, DelayProfile, PushError};
-use crate::engine::tick_time;
 use crate::model::{EulerLagrange, Vector};
 use crate::rng::{stream, Purpose};
 use crate::scenario::{AgentConfig, ModelConfig};
+use crate::time::tick_time;
 use crate::units::AngleUnit;
 use serde::{Deserialize, Serialize};
 

@@ -56,7 +56,7 @@ struct Twin<const N: usize> {
 impl<const N: usize> Twin<N> {
     /// Integrates the steps before `k` that the commands received so far determine.
     fn catch_up(&mut self, k: u64) {
-        let next = crate::engine::tick_time(self.received, self.control_period_s);
+        let next = crate::time::tick_time(self.received, self.control_period_s);
         while self.advanced < k && self.attacked.can_advance_without(self.advanced, next) {
             self.attacked.advance(self.advanced);
             self.nominal.advance(self.advanced);
