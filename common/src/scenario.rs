@@ -14,16 +14,19 @@ pub use crate::control::{
 };
 use crate::delay::DelayProfile;
 pub use crate::detect::DetectorsConfig;
+/// [`crate::files`]: the reader of scenario, attack, campaign and deployment files.
+pub use crate::files::read_limited;
 pub use crate::model::ModelConfig;
 pub use crate::plant::{DisturbanceConfig, DisturbanceLink, NoiseConfig};
 use crate::trajectory::TrajectoryConfig;
 
+/// [`crate::limits`]: the largest robot and the largest input file.
+pub use crate::limits::{MAX_DOF, MAX_FILE_BYTES};
+/// [`crate::problem`]: one problem of the values, with its field path.
+pub use crate::problem::Problem;
+
 /// Largest number of agents a scenario may hold.
 pub const MAX_AGENTS: usize = 256;
-/// Largest scenario or attack file accepted, bytes.
-pub const MAX_FILE_BYTES: u64 = 1 << 20;
-/// Largest number of links a model may have (fixed-size message payloads).
-pub const MAX_DOF: usize = 6;
 /// `validate` warns about a controller gain more than this many times its calibration.
 pub const IMPLAUSIBLE_FACTOR: f64 = 100.0;
 /// `validate` warns about a reference turning more than this per control period, rad.
@@ -305,19 +308,6 @@ pub struct Scenario {
     /// run's own processes take every role).
     #[serde(default, skip_serializing_if = "crate::roles::RolesConfig::is_default")]
     pub roles: crate::roles::RolesConfig,
-}
-
-/// One problem of a scenario, with the path of the field it concerns.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Problem {
-    pub path: String,
-    pub message: String,
-}
-
-impl std::fmt::Display for Problem {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}: {}", self.path, self.message)
-    }
 }
 
 /// Every problem found in a scenario file.
@@ -834,48 +824,6 @@ fn agent_trajectory_problems(i: usize, a: &AgentConfig) -> Vec<Problem> {
         }
     }
     out
-}
-
-/// Reads a TOML file of at most [`MAX_FILE_BYTES`]: a scenario, an attack, a campaign or a
-/// deployment file. Only a regular file is read (a device, a pipe or a directory is refused
-/// without reading from it), and never more than the limit whatever size the file claims
-/// (files in `/proc` claim 0 bytes; a file may grow while read).
-pub fn read_limited(path: &Path) -> Result<String, String> {
-    use std::io::Read;
-    let cannot = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
-    let file = std::fs::File::open(path).map_err(cannot)?;
-    let meta = file.metadata().map_err(cannot)?;
-    if !meta.is_file() {
-        return Err(format!(
-            "{} is not a regular file ({}): scenario, attack, campaign and deployment files must be regular files of at most {MAX_FILE_BYTES} bytes",
-            path.display(),
-            crate::trace::file_kind(meta.file_type()),
-        ));
-    }
-    if meta.len() > MAX_FILE_BYTES {
-        return Err(format!(
-            "{} is {} bytes, larger than the {MAX_FILE_BYTES} byte limit",
-            path.display(),
-            meta.len()
-        ));
-    }
-    let mut bytes = Vec::new();
-    file.take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(cannot)?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(format!(
-            "{} holds more than the {MAX_FILE_BYTES} byte limit",
-            path.display()
-        ));
-    }
-    String::from_utf8(bytes).map_err(|e| {
-        format!(
-            "cannot read {}: not UTF-8 text (byte offset {})",
-            path.display(),
-            e.utf8_error().valid_up_to()
-        )
-    })
 }
 
 /// A TOML syntax error of `text` as `TOML syntax at line L, column C: <what>`.

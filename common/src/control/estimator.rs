@@ -14,7 +14,8 @@ use rand_chacha::ChaCha12Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::model::Vector;
-use crate::scenario::{ControllerConfig, Problem};
+use crate::problem::Problem;
+use crate::scenario::ControllerConfig;
 
 /// Robust modifications of the update laws (37), (38) (beyond the paper): the scenario's
 /// `[controller.update_law]`. Every field defaults to 0, which is the paper's law, bit for bit.

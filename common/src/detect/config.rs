@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::scenario::Problem;
+use crate::problem::Problem;
 
 /// Default length of the calibration window, s.
 pub const DEFAULT_CALIBRATION_S: f64 = 2.0;
