@@ -54,7 +54,7 @@ impl AgentLoop {
 
 fn center_params(r: &Resolved, a: &AgentConfig) -> CenterParams {
     let s = &r.scenario;
-    CenterParams::new(a, s)
+    s.center_params(a)
 }
 
 /// Agent 1's inputs over the whole run: `(t, tampered y, tampered ẏ, torque)` per tick.

@@ -9,7 +9,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::attack::{Injection, Sent, TorqueInjection};
-use crate::control::{CenterAgent, CenterOutput, CenterParams};
+use crate::control::{CenterAgent, CenterOutput};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::Vector;
 use crate::model::{EulerLagrange, ForLinks};
@@ -332,12 +332,12 @@ pub fn run_inproc<const N: usize>(
             })?,
         );
         attacks.push(crate::attack::AgentAttack::for_run(resolved, a.id));
-        centers.push(CenterAgent::<N>::new(CenterParams::new(a, s)).ok_or(
-            EngineError::ModelDof {
+        centers.push(
+            CenterAgent::<N>::new(s.center_params(a)).ok_or(EngineError::ModelDof {
                 agent: a.id,
                 dof: N,
-            },
-        )?);
+            })?,
+        );
     }
     let ticks = resolved.ticks();
     let mut digest = TraceDigest::new();

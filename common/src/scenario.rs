@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::attack::{presets, AttackProfile};
+use crate::control::CenterParams;
 pub use crate::control::{
     ControllerConfig, ControllerMode, DetectionConfig, ObserverInput, UpdateLaw,
 };
@@ -515,6 +516,19 @@ impl Scenario {
     /// Ids and link counts of the agents.
     pub fn agent_dofs(&self) -> BTreeMap<u32, usize> {
         self.agents.iter().map(|a| (a.id, a.model.dof())).collect()
+    }
+
+    /// The control-center side of `agent` in this scenario (its controller, seed and period).
+    pub fn center_params(&self, agent: &AgentConfig) -> CenterParams {
+        CenterParams {
+            agent_id: agent.id,
+            run_seed: self.seed,
+            control_period_s: self.control_period_s,
+            controller: self.controller,
+            model: agent.model,
+            trajectory: agent.trajectory.clone(),
+            delay: agent.delay,
+        }
     }
 
     /// Every problem of the scenario's values (parsing has already checked keys and types), in

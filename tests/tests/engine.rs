@@ -2,7 +2,7 @@
 //! controller, and the paper's qualitative results on a shortened run.
 
 use fdi_common::attack::{presets, AgentAttack};
-use fdi_common::control::{CenterAgent, CenterParams};
+use fdi_common::control::CenterAgent;
 use fdi_common::engine::{run_inproc, tick_time};
 use fdi_common::model::Vector;
 use fdi_common::plant::{Plant, PlantParams};
@@ -79,7 +79,7 @@ fn run_with_oracle(r: &Resolved, oracle: impl Fn(&mut AgentAttack, f64) -> Vecto
     let mut plant = Plant::<2>::new(PlantParams::new(a, s)).expect("2 links");
     let mut attack = AgentAttack::compile(&r.attack, a.id, s.seed);
     let mut oracle_attack = AgentAttack::compile(&r.attack, a.id, s.seed);
-    let mut center = CenterAgent::<2>::new(CenterParams::new(a, s)).expect("2 links");
+    let mut center = CenterAgent::<2>::new(s.center_params(a)).expect("2 links");
     let mut sum_sq = 0.0;
     for k in 0..r.ticks() {
         let t = tick_time(k, s.control_period_s);
