@@ -13,7 +13,7 @@ use crate::control::{CenterAgent, CenterOutput};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::Vector;
 use crate::model::{EulerLagrange, ForLinks};
-use crate::plant::{Measurement, Plant, PlantParams, StepReport};
+use crate::plant::{Measurement, Plant, StepReport};
 use crate::records::{
     ActuationRecord, AgentRecord, AttackRecord, CenterRecord, Joints, TickRecord, TraceDigest,
 };
@@ -326,7 +326,7 @@ pub fn run_inproc<const N: usize>(
     let mut centers = Vec::with_capacity(s.agents.len());
     for a in &s.agents {
         plants.push(
-            Plant::<N>::new(PlantParams::new(a, s)).ok_or(EngineError::ModelDof {
+            Plant::<N>::new(s.plant_params(a)).ok_or(EngineError::ModelDof {
                 agent: a.id,
                 dof: N,
             })?,

@@ -18,6 +18,7 @@ pub use crate::detect::DetectorsConfig;
 /// [`crate::files`]: the reader of scenario, attack, campaign and deployment files.
 pub use crate::files::read_limited;
 pub use crate::model::ModelConfig;
+use crate::plant::PlantParams;
 pub use crate::plant::{DisturbanceConfig, DisturbanceLink, NoiseConfig};
 use crate::trajectory::TrajectoryConfig;
 
@@ -516,6 +517,21 @@ impl Scenario {
     /// Ids and link counts of the agents.
     pub fn agent_dofs(&self) -> BTreeMap<u32, usize> {
         self.agents.iter().map(|a| (a.id, a.model.dof())).collect()
+    }
+
+    /// The plant of `agent` in this scenario (its seed, period, sub-steps, sensor noise and
+    /// disturbance): what the agent process integrates.
+    pub fn plant_params(&self, agent: &AgentConfig) -> PlantParams {
+        PlantParams {
+            agent_id: agent.id,
+            run_seed: self.seed,
+            control_period_s: self.control_period_s,
+            substeps: self.physics_substeps,
+            model: agent.model,
+            delay: agent.delay,
+            noise: self.noise,
+            disturbance: self.disturbance.clone(),
+        }
     }
 
     /// The control-center side of `agent` in this scenario (its controller, seed and period).

@@ -126,7 +126,7 @@ pub(super) fn twins(
     }
     let s = &resolved.scenario;
     let agent = s.agents.iter().find(|a| a.id == agent_id)?;
-    let mut params = PlantParams::new(agent, s);
+    let mut params = s.plant_params(agent);
     params.noise = NoiseConfig {
         position_std_rad: 0.0,
         velocity_std_rad_s: 0.0,

@@ -608,7 +608,7 @@ mod tests {
     use fdi_common::control::center::MAX_ABS_MEASUREMENT;
     use fdi_common::control::CenterAgent;
     use fdi_common::engine::tick_time;
-    use fdi_common::plant::{Plant, PlantParams};
+    use fdi_common::plant::Plant;
     use fdi_common::scenario::{paper, Resolved};
     use proptest::prelude::*;
 
@@ -782,7 +782,7 @@ mod tests {
             let r = paper_scenario();
             let dt = r.scenario.control_period_s;
             let mut plant =
-                Plant::<2>::new(PlantParams::new(&r.scenario.agents[0], &r.scenario)).expect("plant");
+                Plant::<2>::new(r.scenario.plant_params(&r.scenario.agents[0])).expect("plant");
             let mut expected = 0u64;
             for f in &msgs {
                 let seq = f.seq.unwrap_or(expected);
