@@ -34,7 +34,7 @@ impl AgentLoop {
         let s = &r.scenario;
         Self {
             plant: Plant::<2>::new(s.plant_params(a)).expect("two-link plant"),
-            attack: AgentAttack::for_run(r, a.id),
+            attack: r.agent_attack(a.id),
             center: CenterAgent::<2>::new(center_params(r, a)).expect("two-link center"),
         }
     }

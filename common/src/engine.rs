@@ -331,7 +331,7 @@ pub fn run_inproc<const N: usize>(
                 dof: N,
             })?,
         );
-        attacks.push(crate::attack::AgentAttack::for_run(resolved, a.id));
+        attacks.push(resolved.agent_attack(a.id));
         centers.push(
             CenterAgent::<N>::new(s.center_params(a)).ok_or(EngineError::ModelDof {
                 agent: a.id,

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::attack::{presets, AttackProfile};
+use crate::attack::{presets, AgentAttack, AttackProfile};
 use crate::control::CenterParams;
 pub use crate::control::{
     ControllerConfig, ControllerMode, DetectionConfig, ObserverInput, UpdateLaw,
@@ -348,6 +348,21 @@ impl Resolved {
             .agents
             .first()
             .map(|a| a.model.with_links(work))
+    }
+
+    /// The attack on agent `agent_id` of the run: [`AgentAttack::compile`] of its profile, with
+    /// the twins of a covert attack on the agent (which need the scenario: its model, delay and
+    /// disturbance). What the attacker and the in-process engine evaluate.
+    pub fn agent_attack(&self, agent_id: u32) -> AgentAttack {
+        let attack = AgentAttack::compile(&self.attack, agent_id, self.scenario.seed);
+        let entry = self.attack.covert.iter().find(|c| c.agent == agent_id);
+        let agent = self.scenario.agents.iter().find(|a| a.id == agent_id);
+        match (entry, agent) {
+            (Some(entry), Some(agent)) => {
+                attack.with_covert(entry, self.scenario.plant_params(agent))
+            }
+            _ => attack,
+        }
     }
 
     /// Number of agents.
