@@ -151,7 +151,7 @@ pub struct AttackProfile {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub messages: Vec<MessageAttack>,
     /// Covert attacks: the effect of an agent's torque channels hidden from its measurements
-    /// ([`covert`]), at most one per agent.
+    /// ([`covert`](super::covert)), at most one per agent.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub covert: Vec<CovertEntry>,
 }
