@@ -1,8 +1,7 @@
 //! The control center's per-agent pipeline for one tick (SPEC §4, steps 1–10).
 
 use crate::delay::{DelayLine, DelayProfile};
-use crate::model::ModelConfig;
-use crate::model::{EulerLagrange, Matrix, Vector};
+use crate::model::{EulerLagrange, Matrix, ModelConfig, Vector};
 use crate::rng::{stream, Purpose};
 use crate::trajectory::{Reference, TrajectoryConfig};
 
