@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::units::AngleUnit;
 
-use super::covert::CovertEntry;
+use super::covert;
 use super::message::{MessageAttack, Path};
 use super::waveform::Waveform;
 
@@ -151,9 +151,9 @@ pub struct AttackProfile {
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub messages: Vec<MessageAttack>,
     /// Covert attacks: the effect of an agent's torque channels hidden from its measurements
-    /// ([`covert`](super::covert)), at most one per agent.
+    /// ([`covert`]), at most one per agent.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub covert: Vec<CovertEntry>,
+    pub covert: Vec<covert::CovertEntry>,
 }
 
 impl AttackProfile {
