@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use fdi_common::engine::{agent_record, tick_time};
 use fdi_common::model::{EulerLagrange, ForLinks, Vector};
-use fdi_common::plant::{Measurement, Plant, PlantParams};
+use fdi_common::plant::{Measurement, Plant};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{HopStamps, TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::from_vector;
@@ -180,7 +180,7 @@ pub fn run<X: Transport, const N: usize>(
         .iter()
         .find(|a| a.id == agent_id)
         .ok_or(AgentError::NotInScenario(agent_id))?;
-    let mut plant = Plant::<N>::new(PlantParams::new(agent, s)).ok_or(AgentError::Dof(agent_id))?;
+    let mut plant = Plant::<N>::new(s.plant_params(agent)).ok_or(AgentError::Dof(agent_id))?;
     let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?

@@ -121,7 +121,7 @@ impl Target {
             .iter()
             .map(|a| Self {
                 id: a.id,
-                attack: AgentAttack::for_run(resolved, a.id),
+                attack: resolved.agent_attack(a.id),
                 next: 0,
                 routed: resolved.attack.attacks_torque_of(a.id).then(|| {
                     routed += 1;

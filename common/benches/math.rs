@@ -19,7 +19,7 @@ use fdi_common::attack::AgentAttack;
 use fdi_common::control::{CenterAgent, CenterParams};
 use fdi_common::engine::{center_tick, tick_time};
 use fdi_common::model::Vector;
-use fdi_common::plant::{Plant, PlantParams};
+use fdi_common::plant::Plant;
 use fdi_common::scenario::{self, AgentConfig, Resolved};
 
 /// One agent's pieces, fresh at `t = 0`.
@@ -33,8 +33,8 @@ impl AgentLoop {
     fn new(r: &Resolved, a: &AgentConfig) -> Self {
         let s = &r.scenario;
         Self {
-            plant: Plant::<2>::new(PlantParams::new(a, s)).expect("two-link plant"),
-            attack: AgentAttack::for_run(r, a.id),
+            plant: Plant::<2>::new(s.plant_params(a)).expect("two-link plant"),
+            attack: r.agent_attack(a.id),
             center: CenterAgent::<2>::new(center_params(r, a)).expect("two-link center"),
         }
     }
@@ -54,7 +54,7 @@ impl AgentLoop {
 
 fn center_params(r: &Resolved, a: &AgentConfig) -> CenterParams {
     let s = &r.scenario;
-    CenterParams::new(a, s)
+    s.center_params(a)
 }
 
 /// Agent 1's inputs over the whole run: `(t, tampered y, tampered ẏ, torque)` per tick.
@@ -146,7 +146,7 @@ fn benches(c: &mut Criterion) {
             replay(
                 iters,
                 ticks,
-                || Plant::<2>::new(PlantParams::new(a1, &r.scenario)).expect("two-link plant"),
+                || Plant::<2>::new(r.scenario.plant_params(a1)).expect("two-link plant"),
                 |plant, k| {
                     let _ = plant.receive(black_box(rec.t[k]), black_box(rec.u[k]));
                     black_box(plant.advance(k as u64));

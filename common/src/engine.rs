@@ -9,20 +9,18 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::attack::{Injection, Sent, TorqueInjection};
-use crate::control::{CenterAgent, CenterOutput, CenterParams};
+use crate::control::{CenterAgent, CenterOutput};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::Vector;
 use crate::model::{EulerLagrange, ForLinks};
-use crate::plant::{Measurement, Plant, PlantParams, StepReport};
+use crate::plant::{Measurement, Plant, StepReport};
 use crate::records::{
     ActuationRecord, AgentRecord, AttackRecord, CenterRecord, Joints, TickRecord, TraceDigest,
 };
 use crate::scenario::Resolved;
 
-/// `t_k = k · Δ`, computed the same way in every process.
-pub fn tick_time(k: u64, control_period_s: f64) -> f64 {
-    k as f64 * control_period_s
-}
+/// The time of tick `k` ([`crate::time`], where the pieces the engine runs take it too).
+pub use crate::time::tick_time;
 
 /// The control center's tick from what reached it: the delivered measurement, or, when the
 /// tick's input is missing, the last good one held ([`CenterAgent::tick_missing`]).
@@ -328,18 +326,18 @@ pub fn run_inproc<const N: usize>(
     let mut centers = Vec::with_capacity(s.agents.len());
     for a in &s.agents {
         plants.push(
-            Plant::<N>::new(PlantParams::new(a, s)).ok_or(EngineError::ModelDof {
+            Plant::<N>::new(s.plant_params(a)).ok_or(EngineError::ModelDof {
                 agent: a.id,
                 dof: N,
             })?,
         );
-        attacks.push(crate::attack::AgentAttack::for_run(resolved, a.id));
-        centers.push(CenterAgent::<N>::new(CenterParams::new(a, s)).ok_or(
-            EngineError::ModelDof {
+        attacks.push(resolved.agent_attack(a.id));
+        centers.push(
+            CenterAgent::<N>::new(s.center_params(a)).ok_or(EngineError::ModelDof {
                 agent: a.id,
                 dof: N,
-            },
-        )?);
+            })?,
+        );
     }
     let ticks = resolved.ticks();
     let mut digest = TraceDigest::new();

@@ -8,24 +8,30 @@
 //! ([`delay`]).
 //!
 //! Pure: no transport, no processes, no signals. The only I/O is on files named by the caller:
-//! [`scenario`] reads scenario files and [`trace`] writes and reads trace files. The process
-//! side (transport, process shell) is the `fdi-runtime` crate.
+//! [`scenario`] reads scenario files (through [`files`]) and [`trace`] writes and reads trace
+//! files; [`run_dir`] names the files of a run directory and [`stop`] is the value a caller
+//! raises to stop a run (signal handlers are the caller's). The process side (transport,
+//! process shell) is the `fdi-runtime` crate.
 
 pub mod attack;
 pub mod control;
 pub mod delay;
 pub mod detect;
 pub mod engine;
+pub mod files;
+pub mod limits;
 pub mod metrics;
 pub mod model;
 pub mod numerics;
 pub mod plant;
+pub mod problem;
 pub mod records;
 pub mod rng;
 pub mod roles;
 pub mod run_dir;
 pub mod scenario;
 pub mod stop;
+pub mod time;
 pub mod trace;
 pub mod trajectory;
 pub mod units;

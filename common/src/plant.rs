@@ -7,14 +7,14 @@ use rand_chacha::ChaCha12Rng;
 use rand_distr::{Distribution, Normal};
 
 use crate::delay::{in_force_at, DelayLine, DelayProfile, PushError};
-use crate::engine::tick_time;
-use crate::model::{EulerLagrange, Vector};
+use crate::model::{EulerLagrange, ModelConfig, Vector};
 use crate::rng::{stream, Purpose};
-use crate::scenario::{AgentConfig, ModelConfig};
+use crate::time::tick_time;
 use crate::units::AngleUnit;
 use serde::{Deserialize, Serialize};
 
-/// Everything that configures one agent's plant.
+/// Everything that configures one agent's plant ([`crate::scenario::Scenario::plant_params`] takes
+/// it from a scenario).
 #[derive(Debug, Clone)]
 pub struct PlantParams {
     pub agent_id: u32,
@@ -25,21 +25,6 @@ pub struct PlantParams {
     pub delay: DelayProfile,
     pub noise: NoiseConfig,
     pub disturbance: DisturbanceConfig,
-}
-
-impl PlantParams {
-    pub fn new(agent: &AgentConfig, scenario: &crate::scenario::Scenario) -> Self {
-        Self {
-            agent_id: agent.id,
-            run_seed: scenario.seed,
-            control_period_s: scenario.control_period_s,
-            substeps: scenario.physics_substeps,
-            model: agent.model,
-            delay: agent.delay,
-            noise: scenario.noise,
-            disturbance: scenario.disturbance.clone(),
-        }
-    }
 }
 
 /// A measurement as the sensor produced it (before any attack).
@@ -318,158 +303,4 @@ impl DisturbanceConfig {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::scenario::paper;
-
-    const DT: f64 = 1e-3;
-
-    /// Robot 1 of the paper's scenario (τ = 2 sin(t/2) + 3 ms), with `substeps` per period.
-    fn robot1(substeps: u32) -> Plant<2> {
-        let r = paper().expect("the embedded paper scenario is valid");
-        let s = &r.scenario;
-        let mut p = PlantParams::new(&s.agents[0], s);
-        p.substeps = substeps;
-        assert_eq!(p.control_period_s, DT);
-        Plant::<2>::new(p).expect("a two-link model")
-    }
-
-    /// A torque that changes every tick.
-    fn u(k: u64) -> Vector<2> {
-        let t = tick_time(k, DT);
-        Vector::<2>::new(2.0 * (9.0 * t).sin() + 0.5, -1.5 * (4.0 * t).cos())
-    }
-
-    /// Whether the command stamped `t_gap` (the next one stamped one period later) is in force
-    /// at some query of step `k`: the step needs it.
-    fn needs(p: &Plant<2>, k: u64, t_gap: f64) -> bool {
-        p.boundaries(k).any(|b| {
-            let q = p.query(b);
-            in_force_at(t_gap, q) && !in_force_at(t_gap + DT, q)
-        })
-    }
-
-    /// Runs ticks `0..n` as the engines do (the command of tick `k`, then step `k`), `feed`
-    /// delivering each command; the states and reports after every step.
-    fn run(
-        p: &mut Plant<2>,
-        n: u64,
-        mut feed: impl FnMut(&mut Plant<2>, u64),
-    ) -> Vec<(Vector<2>, Vector<2>, StepReport<2>)> {
-        (0..n)
-            .map(|k| {
-                feed(p, k);
-                let r = p.advance(k);
-                (p.q, p.qd, r)
-            })
-            .collect()
-    }
-
-    #[test]
-    fn a_missing_command_is_counted_and_the_steps_that_need_it_report_a_miss() {
-        let gap = 200u64;
-        let t_gap = tick_time(gap, DT);
-        for substeps in [1, 3] {
-            let mut holed = robot1(substeps);
-            let mut expected = Vec::new();
-            let mut states = Vec::new();
-            for k in 0..400 {
-                let command = (k != gap).then(|| (u(k), 0.0));
-                holed
-                    .take_command(tick_time(k, DT), command)
-                    .expect("a finite command in order");
-                if needs(&holed, k, t_gap) {
-                    expected.push(k);
-                }
-                let r = holed.advance(k);
-                assert_eq!(r.missed, expected.last() == Some(&k), "step {k}");
-                states.push((holed.q, holed.qd, r.u_applied));
-            }
-            assert!(!expected.is_empty(), "some step needs the missing command");
-            assert!(expected.iter().all(|&k| k > gap), "{expected:?}");
-            assert_eq!(holed.missing_commands, 1);
-            assert_eq!(holed.deadline_misses, expected.len() as u64);
-            assert_eq!(holed.refused_commands, 0);
-
-            // The command before the missing one stays in force: the same states, to the bit,
-            // as a plant that simply never got it, which reports no miss.
-            let mut absent = robot1(substeps);
-            let quiet = run(&mut absent, 400, |p, k| {
-                if k != gap {
-                    p.receive(tick_time(k, DT), u(k)).expect("in order");
-                }
-            });
-            for (k, (s, q)) in states.iter().zip(&quiet).enumerate() {
-                assert_eq!(*s, (q.0, q.1, q.2.u_applied), "step {k}");
-                assert!(!q.2.missed, "step {k}");
-            }
-            assert_eq!((absent.deadline_misses, absent.missing_commands), (0, 0));
-            // And the missing command mattered.
-            let mut full = robot1(substeps);
-            let all = run(&mut full, 400, |p, k| {
-                p.take_command(tick_time(k, DT), Some((u(k), 0.0)))
-                    .expect("in order");
-            });
-            assert_ne!(all.last().map(|s| s.0), quiet.last().map(|s| s.0));
-            assert_eq!(full.deadline_misses + full.missing_commands, 0);
-        }
-    }
-
-    #[test]
-    fn a_command_held_back_takes_effect_that_much_later_bit_for_bit() {
-        let held = |k: u64| 0.0025 + 0.001 * (7.0 * tick_time(k, DT)).sin();
-        for substeps in [1, 4] {
-            let mut taken = robot1(substeps);
-            let a = run(&mut taken, 500, |p, k| {
-                p.take_command(tick_time(k, DT), Some((u(k), held(k))))
-                    .expect("in order");
-            });
-            let mut pushed = robot1(substeps);
-            let b = run(&mut pushed, 500, |p, k| {
-                p.receive(tick_time(k, DT) + held(k), u(k))
-                    .expect("in order");
-            });
-            assert_eq!(a, b, "{substeps} substeps");
-            assert_eq!(taken.missing_commands, 0);
-            assert_eq!(taken.newest_command_stamp(), pushed.newest_command_stamp());
-            // Not the same as without the hold.
-            let mut now = robot1(substeps);
-            let c = run(&mut now, 500, |p, k| {
-                p.take_command(tick_time(k, DT), Some((u(k), 0.0)))
-                    .expect("in order");
-            });
-            assert_ne!(a.last().map(|s| s.0), c.last().map(|s| s.0));
-        }
-    }
-
-    #[test]
-    fn a_refused_command_counts_as_missing_and_acts_as_one() {
-        let gap = 150u64;
-        let nan = Vector::<2>::new(f64::NAN, 0.0);
-        let inf = Vector::<2>::new(0.0, f64::NEG_INFINITY);
-        let refused: [(Vector<2>, f64); 4] = [
-            (nan, 0.0),
-            (inf, 0.0),
-            (u(gap), f64::INFINITY),
-            // A stamp not after the newest one.
-            (u(gap), -1.5 * DT),
-        ];
-        let mut dropped = robot1(1);
-        let want = run(&mut dropped, 300, |p, k| {
-            let command = (k != gap).then(|| (u(k), 0.0));
-            p.take_command(tick_time(k, DT), command).expect("in order");
-        });
-        assert!(want.iter().any(|s| s.2.missed));
-        for bad in refused {
-            let mut p = robot1(1);
-            let got = run(&mut p, 300, |p, k| {
-                let command = if k == gap { bad } else { (u(k), 0.0) };
-                let r = p.take_command(tick_time(k, DT), Some(command));
-                assert_eq!(r.is_err(), k == gap, "tick {k}: {r:?}");
-            });
-            assert_eq!(got, want, "{bad:?}");
-            assert_eq!((p.missing_commands, p.refused_commands), (1, 1), "{bad:?}");
-            assert_eq!(p.deadline_misses, dropped.deadline_misses);
-        }
-    }
-}
+mod tests;

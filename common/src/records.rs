@@ -5,8 +5,8 @@
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
+use crate::limits::MAX_DOF;
 use crate::model::Vector;
-use crate::scenario::MAX_DOF;
 
 /// A joint-space vector of up to [`MAX_DOF`] entries, stored without heap allocation and
 /// serialized as a sequence of its `len` entries.

@@ -10,7 +10,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::scenario::Problem;
+use crate::problem::Problem;
 
 /// Default longest wait in lockstep for an external role's next message, s.
 pub const DEFAULT_TIMEOUT_S: f64 = 10.0;

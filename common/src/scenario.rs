@@ -8,22 +8,27 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::attack::{presets, AttackProfile};
+use crate::attack::{presets, AgentAttack, AttackProfile};
+use crate::control::CenterParams;
 pub use crate::control::{
     ControllerConfig, ControllerMode, DetectionConfig, ObserverInput, UpdateLaw,
 };
 use crate::delay::DelayProfile;
 pub use crate::detect::DetectorsConfig;
+/// [`crate::files`]: the reader of scenario, attack, campaign and deployment files.
+pub use crate::files::read_limited;
 pub use crate::model::ModelConfig;
+use crate::plant::PlantParams;
 pub use crate::plant::{DisturbanceConfig, DisturbanceLink, NoiseConfig};
 use crate::trajectory::TrajectoryConfig;
 
+/// [`crate::limits`]: the largest robot and the largest input file.
+pub use crate::limits::{MAX_DOF, MAX_FILE_BYTES};
+/// [`crate::problem`]: one problem of the values, with its field path.
+pub use crate::problem::Problem;
+
 /// Largest number of agents a scenario may hold.
 pub const MAX_AGENTS: usize = 256;
-/// Largest scenario or attack file accepted, bytes.
-pub const MAX_FILE_BYTES: u64 = 1 << 20;
-/// Largest number of links a model may have (fixed-size message payloads).
-pub const MAX_DOF: usize = 6;
 /// `validate` warns about a controller gain more than this many times its calibration.
 pub const IMPLAUSIBLE_FACTOR: f64 = 100.0;
 /// `validate` warns about a reference turning more than this per control period, rad.
@@ -307,19 +312,6 @@ pub struct Scenario {
     pub roles: crate::roles::RolesConfig,
 }
 
-/// One problem of a scenario, with the path of the field it concerns.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Problem {
-    pub path: String,
-    pub message: String,
-}
-
-impl std::fmt::Display for Problem {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}: {}", self.path, self.message)
-    }
-}
-
 /// Every problem found in a scenario file.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("{source_name}: {} problem(s):\n{}", problems.len(), problems.iter().map(|p| format!("  - {p}")).collect::<Vec<_>>().join("\n"))]
@@ -356,6 +348,21 @@ impl Resolved {
             .agents
             .first()
             .map(|a| a.model.with_links(work))
+    }
+
+    /// The attack on agent `agent_id` of the run: [`AgentAttack::compile`] of its profile, with
+    /// the twins of a covert attack on the agent (which need the scenario: its model, delay and
+    /// disturbance). What the attacker and the in-process engine evaluate.
+    pub fn agent_attack(&self, agent_id: u32) -> AgentAttack {
+        let attack = AgentAttack::compile(&self.attack, agent_id, self.scenario.seed);
+        let entry = self.attack.covert.iter().find(|c| c.agent == agent_id);
+        let agent = self.scenario.agents.iter().find(|a| a.id == agent_id);
+        match (entry, agent) {
+            (Some(entry), Some(agent)) => {
+                attack.with_covert(entry, self.scenario.plant_params(agent))
+            }
+            _ => attack,
+        }
     }
 
     /// Number of agents.
@@ -525,6 +532,34 @@ impl Scenario {
     /// Ids and link counts of the agents.
     pub fn agent_dofs(&self) -> BTreeMap<u32, usize> {
         self.agents.iter().map(|a| (a.id, a.model.dof())).collect()
+    }
+
+    /// The plant of `agent` in this scenario (its seed, period, sub-steps, sensor noise and
+    /// disturbance): what the agent process integrates.
+    pub fn plant_params(&self, agent: &AgentConfig) -> PlantParams {
+        PlantParams {
+            agent_id: agent.id,
+            run_seed: self.seed,
+            control_period_s: self.control_period_s,
+            substeps: self.physics_substeps,
+            model: agent.model,
+            delay: agent.delay,
+            noise: self.noise,
+            disturbance: self.disturbance.clone(),
+        }
+    }
+
+    /// The control-center side of `agent` in this scenario (its controller, seed and period).
+    pub fn center_params(&self, agent: &AgentConfig) -> CenterParams {
+        CenterParams {
+            agent_id: agent.id,
+            run_seed: self.seed,
+            control_period_s: self.control_period_s,
+            controller: self.controller,
+            model: agent.model,
+            trajectory: agent.trajectory.clone(),
+            delay: agent.delay,
+        }
     }
 
     /// Every problem of the scenario's values (parsing has already checked keys and types), in
@@ -834,48 +869,6 @@ fn agent_trajectory_problems(i: usize, a: &AgentConfig) -> Vec<Problem> {
         }
     }
     out
-}
-
-/// Reads a TOML file of at most [`MAX_FILE_BYTES`]: a scenario, an attack, a campaign or a
-/// deployment file. Only a regular file is read (a device, a pipe or a directory is refused
-/// without reading from it), and never more than the limit whatever size the file claims
-/// (files in `/proc` claim 0 bytes; a file may grow while read).
-pub fn read_limited(path: &Path) -> Result<String, String> {
-    use std::io::Read;
-    let cannot = |e: std::io::Error| format!("cannot read {}: {e}", path.display());
-    let file = std::fs::File::open(path).map_err(cannot)?;
-    let meta = file.metadata().map_err(cannot)?;
-    if !meta.is_file() {
-        return Err(format!(
-            "{} is not a regular file ({}): scenario, attack, campaign and deployment files must be regular files of at most {MAX_FILE_BYTES} bytes",
-            path.display(),
-            crate::trace::file_kind(meta.file_type()),
-        ));
-    }
-    if meta.len() > MAX_FILE_BYTES {
-        return Err(format!(
-            "{} is {} bytes, larger than the {MAX_FILE_BYTES} byte limit",
-            path.display(),
-            meta.len()
-        ));
-    }
-    let mut bytes = Vec::new();
-    file.take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(cannot)?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(format!(
-            "{} holds more than the {MAX_FILE_BYTES} byte limit",
-            path.display()
-        ));
-    }
-    String::from_utf8(bytes).map_err(|e| {
-        format!(
-            "cannot read {}: not UTF-8 text (byte offset {})",
-            path.display(),
-            e.utf8_error().valid_up_to()
-        )
-    })
 }
 
 /// A TOML syntax error of `text` as `TOML syntax at line L, column C: <what>`.

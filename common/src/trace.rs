@@ -21,6 +21,10 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+/// What a file that is not a regular one is ([`crate::files`], where the input files' reader
+/// takes it too).
+pub use crate::files::file_kind;
+use crate::limits::MAX_FILE_BYTES;
 use crate::records::{ActuationRecord, AgentRecord, AttackRecord, CenterRecord, MonitorRecord};
 
 /// First bytes of every trace file.
@@ -29,8 +33,8 @@ pub const MAGIC: &[u8; 8] = b"FDITRACE";
 /// [`TraceHeader::kept`].
 pub const FORMAT_VERSION: u32 = 4;
 /// Largest header frame written or read: the scenario as used (at most
-/// [`crate::scenario::MAX_FILE_BYTES`]) and a few names.
-pub const MAX_HEADER_BYTES: u32 = (crate::scenario::MAX_FILE_BYTES as u32) + (1 << 16);
+/// [`MAX_FILE_BYTES`]) and a few names.
+pub const MAX_HEADER_BYTES: u32 = (MAX_FILE_BYTES as u32) + (1 << 16);
 /// Largest record frame written or read (the largest record, an event with its message, is a
 /// few hundred bytes).
 pub const MAX_RECORD_BYTES: u32 = 1 << 16;
@@ -262,26 +266,6 @@ fn describe_decode(e: &bincode::error::DecodeError) -> String {
             format!("it ends {additional} bytes before its content does")
         }
         other => other.to_string(),
-    }
-}
-
-/// What a file that is not a regular one is, for messages.
-pub fn file_kind(t: std::fs::FileType) -> &'static str {
-    use std::os::unix::fs::FileTypeExt;
-    if t.is_dir() {
-        "a directory"
-    } else if t.is_char_device() {
-        "a character device"
-    } else if t.is_block_device() {
-        "a block device"
-    } else if t.is_fifo() {
-        "a named pipe"
-    } else if t.is_socket() {
-        "a socket"
-    } else if t.is_file() {
-        "a regular file"
-    } else {
-        "a special file"
     }
 }
 
@@ -941,7 +925,7 @@ mod tests {
         // a varint length as 8 bytes against the limit, so a frame needs more than its length.
         let p = tmp("sizes");
         let mut sizes: Vec<usize> = vec![0, 1, 100, 4000, 4095, 4096, 8192, 65_536, 131_072];
-        sizes.push(crate::scenario::MAX_FILE_BYTES as usize);
+        sizes.push(MAX_FILE_BYTES as usize);
         for n in sizes {
             let mut h = header();
             h.scenario_toml = "x".repeat(n);

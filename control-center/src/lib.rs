@@ -10,7 +10,7 @@ pub mod monitor;
 
 use monitor::{Monitor, MonitorPorts};
 
-use fdi_common::control::{CenterAgent, CenterParams};
+use fdi_common::control::CenterAgent;
 use fdi_common::engine::{center_record, center_tick, tick_time};
 use fdi_common::model::{EulerLagrange, ForLinks};
 use fdi_common::plant::Measurement;
@@ -308,7 +308,7 @@ pub fn run<X: Transport, const N: usize>(
         .agents
         .iter()
         .map(|a| {
-            CenterAgent::<N>::new(CenterParams::new(a, s))
+            CenterAgent::<N>::new(s.center_params(a))
                 .map(|center| Slot { center, next: 0 })
                 .ok_or(CenterError::Dof(a.id))
         })

@@ -2,10 +2,10 @@
 //! controller, and the paper's qualitative results on a shortened run.
 
 use fdi_common::attack::{presets, AgentAttack};
-use fdi_common::control::{CenterAgent, CenterParams};
+use fdi_common::control::CenterAgent;
 use fdi_common::engine::{run_inproc, tick_time};
 use fdi_common::model::Vector;
-use fdi_common::plant::{Plant, PlantParams};
+use fdi_common::plant::Plant;
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 
@@ -76,10 +76,10 @@ fn different_seed_gives_different_noise_and_digest() {
 fn run_with_oracle(r: &Resolved, oracle: impl Fn(&mut AgentAttack, f64) -> Vector<2>) -> f64 {
     let s = &r.scenario;
     let a = &s.agents[0];
-    let mut plant = Plant::<2>::new(PlantParams::new(a, s)).expect("2 links");
+    let mut plant = Plant::<2>::new(s.plant_params(a)).expect("2 links");
     let mut attack = AgentAttack::compile(&r.attack, a.id, s.seed);
     let mut oracle_attack = AgentAttack::compile(&r.attack, a.id, s.seed);
-    let mut center = CenterAgent::<2>::new(CenterParams::new(a, s)).expect("2 links");
+    let mut center = CenterAgent::<2>::new(s.center_params(a)).expect("2 links");
     let mut sum_sq = 0.0;
     for k in 0..r.ticks() {
         let t = tick_time(k, s.control_period_s);

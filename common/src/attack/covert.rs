@@ -13,7 +13,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::model::{EulerLagrange, ForLinks, Vector};
 use crate::plant::{Measurement, NoiseConfig, Plant, PlantParams};
-use crate::scenario::Resolved;
 
 /// `[[covert]]` of a profile: from `from_s` on, hide the effect of agent `agent`'s torque
 /// channels from its measurements.
@@ -56,7 +55,7 @@ struct Twin<const N: usize> {
 impl<const N: usize> Twin<N> {
     /// Integrates the steps before `k` that the commands received so far determine.
     fn catch_up(&mut self, k: u64) {
-        let next = crate::engine::tick_time(self.received, self.control_period_s);
+        let next = crate::time::tick_time(self.received, self.control_period_s);
         while self.advanced < k && self.attacked.can_advance_without(self.advanced, next) {
             self.attacked.advance(self.advanced);
             self.nominal.advance(self.advanced);
@@ -98,13 +97,9 @@ impl<const N: usize> Twins for Twin<N> {
     }
 }
 
-/// The twins of agent `agent_id` of `resolved` for `entry`; `None` when the agent is not in the
-/// scenario.
-pub(super) fn twins(
-    resolved: &Resolved,
-    agent_id: u32,
-    entry: &CovertEntry,
-) -> Option<Box<dyn Twins>> {
+/// The twins for `entry` of the agent whose plant `params` configures (its sensor noise left
+/// out); `None` when its model cannot be built.
+pub(super) fn twins(mut params: PlantParams, entry: &CovertEntry) -> Option<Box<dyn Twins>> {
     struct Build<'a> {
         params: PlantParams,
         entry: &'a CovertEntry,
@@ -124,14 +119,12 @@ pub(super) fn twins(
             Some(Box::new(twin))
         }
     }
-    let s = &resolved.scenario;
-    let agent = s.agents.iter().find(|a| a.id == agent_id)?;
-    let mut params = PlantParams::new(agent, s);
     params.noise = NoiseConfig {
         position_std_rad: 0.0,
         velocity_std_rad_s: 0.0,
     };
-    agent.model.with_links(Build { params, entry })
+    let model = params.model;
+    model.with_links(Build { params, entry })
 }
 
 /// The correction for a measurement of `N` links, as vectors.

@@ -16,364 +16,22 @@
 pub mod covert;
 pub mod message;
 pub mod presets;
+pub mod profile;
 pub mod waveform;
 
-use std::collections::BTreeMap;
-
 use rand_chacha::ChaCha12Rng;
-use serde::{Deserialize, Serialize};
 
 use crate::model::Vector;
-use crate::plant::Measurement;
+use crate::plant::{Measurement, PlantParams};
 use crate::records::Joints;
 use crate::rng::{stream, Purpose};
-use crate::scenario::Resolved;
-use crate::units::AngleUnit;
 
 pub use covert::CovertEntry;
 pub use message::{Effect, MessageAttack, MessageSegment, Path, Sent};
+pub use profile::{AttackProfile, Channel, Segment, Signal, ValueUnit};
 pub use waveform::Waveform;
 
 use message::MessageLine;
-
-/// Which measured signal a channel tampers with.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize, Deserialize, schemars::JsonSchema,
-)]
-#[serde(rename_all = "kebab-case")]
-pub enum Signal {
-    /// `y = q + S1`.
-    Position,
-    /// `ẏ = q̇ + S2`.
-    Velocity,
-    /// The torque command `u` on its way to the agent (actuator FDI), N·m.
-    Torque,
-}
-
-impl Signal {
-    /// The path the signal travels on.
-    pub fn path(self) -> Path {
-        match self {
-            Self::Position | Self::Velocity => Path::Measurement,
-            Self::Torque => Path::Torque,
-        }
-    }
-}
-
-/// Units of a channel's values.
-///
-/// A position channel takes `deg` or `rad`, a velocity channel `deg/s` or `rad/s` (or, as the
-/// shipped profiles long wrote them, `deg` and `rad` standing for deg/s and rad/s), a torque
-/// channel `N·m` (also spelled `Nm` or `N*m`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub enum ValueUnit {
-    /// deg (positions; on a velocity channel it stands for deg/s).
-    #[serde(rename = "deg")]
-    Deg,
-    /// rad (positions; on a velocity channel it stands for rad/s).
-    #[serde(rename = "rad")]
-    Rad,
-    /// deg/s (velocities).
-    #[serde(rename = "deg/s")]
-    DegPerS,
-    /// rad/s (velocities).
-    #[serde(rename = "rad/s")]
-    RadPerS,
-    /// N·m (torques).
-    #[serde(rename = "N·m", alias = "Nm", alias = "N*m")]
-    NewtonMetre,
-}
-
-/// Every spelling `Deserialize` accepts (the derive would leave out the aliases of N·m).
-impl schemars::JsonSchema for ValueUnit {
-    fn schema_name() -> std::borrow::Cow<'static, str> {
-        "ValueUnit".into()
-    }
-
-    fn json_schema(_: &mut schemars::SchemaGenerator) -> schemars::Schema {
-        schemars::json_schema!({
-            "description": "Units of the channel's values: \"deg\" or \"rad\" for a position channel; \"deg/s\" or \"rad/s\" for a velocity channel (\"deg\" and \"rad\" are accepted there too and mean deg/s and rad/s); \"N·m\" (or \"Nm\", \"N*m\") for a torque channel.",
-            "type": "string",
-            "enum": ["deg", "rad", "deg/s", "rad/s", "N·m", "Nm", "N*m"]
-        })
-    }
-}
-
-impl ValueUnit {
-    /// Factor that converts a value in these units to the runtime's (rad, rad/s, N·m).
-    pub fn factor(self) -> f64 {
-        match self {
-            Self::Deg | Self::DegPerS => AngleUnit::Deg.to_rad(),
-            Self::Rad | Self::RadPerS => AngleUnit::Rad.to_rad(),
-            Self::NewtonMetre => 1.0,
-        }
-    }
-
-    /// Whether values of `signal` can be in these units.
-    fn fits(self, signal: Signal) -> bool {
-        match signal {
-            Signal::Position => matches!(self, Self::Deg | Self::Rad),
-            Signal::Velocity => {
-                matches!(self, Self::Deg | Self::Rad | Self::DegPerS | Self::RadPerS)
-            }
-            Signal::Torque => self == Self::NewtonMetre,
-        }
-    }
-
-    /// The units as a file spells them.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Deg => "deg",
-            Self::Rad => "rad",
-            Self::DegPerS => "deg/s",
-            Self::RadPerS => "rad/s",
-            Self::NewtonMetre => "N·m",
-        }
-    }
-}
-
-/// One segment of a schedule.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct Segment {
-    /// Start time of the segment, s.
-    pub from_s: f64,
-    /// What is injected: `{ kind = "…", … }`.
-    pub waveform: Waveform,
-}
-
-/// One attacked channel.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct Channel {
-    /// Agent id (as in the scenario's `[[agents]] id`).
-    pub agent: u32,
-    /// `"position"`, `"velocity"` or `"torque"`.
-    pub signal: Signal,
-    /// 1-based link numbers this schedule is added to.
-    pub links: Vec<u32>,
-    /// Units of the waveform values: `deg` or `rad` for positions, `deg/s` or `rad/s` for
-    /// velocities (`deg` and `rad` mean deg/s and rad/s there), `N·m` for torques.
-    pub units: ValueUnit,
-    /// Segments in increasing `from_s`; before the first one nothing is injected.
-    pub segments: Vec<Segment>,
-}
-
-/// A whole attack profile: what a `--attack FILE` holds, or a scenario's `[attack]` inline.
-#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(deny_unknown_fields)]
-pub struct AttackProfile {
-    /// Name of the profile (shown in summaries and reports).
-    #[serde(default)]
-    pub name: String,
-    /// Free text.
-    #[serde(default)]
-    pub description: String,
-    /// `[[channels]]`: value attacks, each on one agent, signal and set of links.
-    #[serde(default)]
-    pub channels: Vec<Channel>,
-    /// Whole-message attacks, at most one per agent and path.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub messages: Vec<MessageAttack>,
-    /// Covert attacks: the effect of an agent's torque channels hidden from its measurements
-    /// ([`covert`]), at most one per agent.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub covert: Vec<CovertEntry>,
-}
-
-impl AttackProfile {
-    /// The profile without the channels of agents not in `agent_dofs` (used for presets, which
-    /// are written for the paper's four robots, in scenarios with fewer agents).
-    pub fn for_agents(mut self, agent_dofs: &BTreeMap<u32, usize>) -> Self {
-        self.channels.retain(|c| agent_dofs.contains_key(&c.agent));
-        self.messages.retain(|m| agent_dofs.contains_key(&m.agent));
-        self.covert.retain(|c| agent_dofs.contains_key(&c.agent));
-        self
-    }
-
-    /// Whether the profile attacks agent `agent`'s torque commands: then they travel control
-    /// center → attacker → agent; otherwise straight to the agent.
-    pub fn attacks_torque_of(&self, agent: u32) -> bool {
-        self.channels
-            .iter()
-            .any(|c| c.agent == agent && c.signal == Signal::Torque)
-            || self
-                .messages
-                .iter()
-                .any(|m| m.agent == agent && m.path == Path::Torque)
-    }
-
-    /// Every problem [`Self::problems`] finds without a scenario: each agent the profile names
-    /// is taken to exist with as many links as the profile names (what needs a scenario, that
-    /// the agents and links exist, is left unchecked; link 0 is still refused).
-    pub fn problems_alone(&self) -> Vec<(String, String)> {
-        let agents = self
-            .channels
-            .iter()
-            .map(|c| c.agent)
-            .chain(self.messages.iter().map(|m| m.agent))
-            .chain(self.covert.iter().map(|c| c.agent));
-        self.problems(&agents.map(|a| (a, usize::MAX)).collect())
-    }
-
-    /// The agents the profile names, in increasing order, each once.
-    pub fn agents(&self) -> Vec<u32> {
-        let mut out: Vec<u32> = self
-            .channels
-            .iter()
-            .map(|c| c.agent)
-            .chain(self.messages.iter().map(|m| m.agent))
-            .chain(self.covert.iter().map(|c| c.agent))
-            .collect();
-        out.sort_unstable();
-        out.dedup();
-        out
-    }
-
-    /// Every problem of the profile, as `(field path relative to the profile, message)`.
-    /// `agent_dofs` maps each agent id of the scenario to its number of links.
-    pub fn problems(&self, agent_dofs: &BTreeMap<u32, usize>) -> Vec<(String, String)> {
-        let mut out = Vec::new();
-        let unknown = |agent: u32| {
-            format!(
-                "agent {agent} is not in the scenario (its agents: {})",
-                agent_dofs
-                    .keys()
-                    .map(u32::to_string)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
-        };
-        for (i, c) in self.covert.iter().enumerate() {
-            let at = |f: &str| format!("covert[{i}].{f}");
-            if !agent_dofs.contains_key(&c.agent) {
-                out.push((at("agent"), unknown(c.agent)));
-            } else if !self
-                .channels
-                .iter()
-                .any(|ch| ch.agent == c.agent && ch.signal == Signal::Torque)
-            {
-                out.push((
-                    at("agent"),
-                    format!(
-                        "a covert attack hides a torque injection, and agent {} has no torque \
-                         channel",
-                        c.agent
-                    ),
-                ));
-            }
-            if self.covert[..i].iter().any(|o| o.agent == c.agent) {
-                out.push((at("agent"), format!("agent {} is covered twice", c.agent)));
-            }
-            if !c.from_s.is_finite() || c.from_s < 0.0 {
-                out.push((
-                    at("from_s"),
-                    format!("must be finite and ≥ 0, got {}", c.from_s),
-                ));
-            }
-        }
-        for (m, msg) in self.messages.iter().enumerate() {
-            if !agent_dofs.contains_key(&msg.agent) {
-                out.push((format!("messages[{m}].agent"), unknown(msg.agent)));
-            }
-            if let Some(first) = self.messages[..m]
-                .iter()
-                .position(|o| o.agent == msg.agent && o.path == msg.path)
-            {
-                out.push((
-                    format!("messages[{m}].path"),
-                    format!(
-                        "agent {}'s {} path is already attacked by messages[{first}]: put \
-                         both schedules' segments in one entry",
-                        msg.agent,
-                        msg.path.as_str()
-                    ),
-                ));
-            }
-            for (field, problem) in msg.problems() {
-                out.push((format!("messages[{m}].{field}"), problem));
-            }
-        }
-        for (c, ch) in self.channels.iter().enumerate() {
-            let at = |f: &str| format!("channels[{c}].{f}");
-            let dof = agent_dofs.get(&ch.agent).copied();
-            if dof.is_none() {
-                out.push((at("agent"), unknown(ch.agent)));
-            }
-            if !ch.units.fits(ch.signal) {
-                out.push((
-                    at("units"),
-                    match ch.signal {
-                        Signal::Torque => format!(
-                            "a torque channel's units are \"N·m\", got \"{}\"",
-                            ch.units.as_str()
-                        ),
-                        Signal::Position => format!(
-                            "a position channel's units are \"deg\" or \"rad\", got \"{}\"",
-                            ch.units.as_str()
-                        ),
-                        Signal::Velocity => format!(
-                            "a velocity channel's units are \"deg/s\" or \"rad/s\" (\"deg\" \
-                             and \"rad\" also mean deg/s and rad/s there), got \"{}\"",
-                            ch.units.as_str()
-                        ),
-                    },
-                ));
-            }
-            if ch.links.is_empty() {
-                out.push((at("links"), "must name at least one link".into()));
-            }
-            for (l, &link) in ch.links.iter().enumerate() {
-                let message = match dof {
-                    _ if link == 0 => Some("link 0 does not exist (links are 1-based)".to_string()),
-                    Some(d) if link as usize > d => Some(format!(
-                        "link {link} does not exist (links are 1-based, agent {} has {d} links)",
-                        ch.agent
-                    )),
-                    _ => None,
-                };
-                if let Some(message) = message {
-                    out.push((at(&format!("links[{l}]")), message));
-                }
-            }
-            if ch.segments.is_empty() {
-                out.push((at("segments"), "must hold at least one segment".into()));
-            }
-            let mut prev = f64::NEG_INFINITY;
-            for (s, seg) in ch.segments.iter().enumerate() {
-                if !seg.from_s.is_finite() || seg.from_s < 0.0 {
-                    out.push((
-                        at(&format!("segments[{s}].from_s")),
-                        format!("must be finite and ≥ 0, got {}", seg.from_s),
-                    ));
-                } else if seg.from_s <= prev {
-                    out.push((
-                        at(&format!("segments[{s}].from_s")),
-                        format!("must increase: {} after {prev}", seg.from_s),
-                    ));
-                }
-                prev = seg.from_s;
-                for (field, msg) in seg.waveform.problems() {
-                    out.push((at(&format!("segments[{s}].waveform.{field}")), msg));
-                }
-                if let Some((_, end)) = seg.waveform.replay_window() {
-                    if seg.from_s < end {
-                        out.push((
-                            at(&format!("segments[{s}].from_s")),
-                            format!(
-                                "a replay must start at or after the end of its recording \
-                                 (record_from_s + record_for_s = {end}), got {}: it cannot play \
-                                 back what is not recorded yet",
-                                seg.from_s
-                            ),
-                        ));
-                    }
-                }
-            }
-        }
-        out
-    }
-}
 
 /// A channel ready to evaluate: one link, one signal, values scaled to rad, rad/s or N·m.
 #[derive(Debug, Clone)]
@@ -506,7 +164,7 @@ pub struct AgentAttack {
     channels: Vec<LinkChannel>,
     measurements: Option<MessageLine<(Joints, Joints)>>,
     torques: Option<MessageLine<Joints>>,
-    /// The twins of a covert attack ([`Self::for_run`]).
+    /// The twins of a covert attack ([`Self::with_covert`]).
     covert: Option<Box<dyn covert::Twins>>,
 }
 
@@ -546,18 +204,13 @@ impl AgentAttack {
         }
     }
 
-    /// The attack on agent `agent_id` of the run `resolved`: [`Self::compile`] of its profile,
-    /// with the twins of a covert attack on the agent (which need the scenario: its model,
-    /// delay and disturbance). What the attacker and the in-process engine evaluate.
-    pub fn for_run(resolved: &Resolved, agent_id: u32) -> Self {
-        let mut attack = Self::compile(&resolved.attack, agent_id, resolved.scenario.seed);
-        attack.covert = resolved
-            .attack
-            .covert
-            .iter()
-            .find(|c| c.agent == agent_id)
-            .and_then(|c| covert::twins(resolved, agent_id, c));
-        attack
+    /// This attack with the twins of the covert attack `entry` on the agent: noise-free copies
+    /// of its plant as `plant` configures it (its model, delay and disturbance; none when the
+    /// model cannot be built). [`crate::scenario::Resolved::agent_attack`] adds them from the
+    /// run's scenario.
+    pub fn with_covert(mut self, entry: &CovertEntry, plant: PlantParams) -> Self {
+        self.covert = covert::twins(plant, entry);
+        self
     }
 
     /// Shows the attacker the clean measurement of time `t`, before [`Self::injection`] of the
@@ -733,6 +386,8 @@ fn map_sent<P, Q>(sent: Sent<P>, f: impl Fn(P) -> Q) -> Sent<Q> {
 
 #[cfg(test)]
 mod tests {
+    use std::collections::BTreeMap;
+
     use super::*;
 
     fn dofs() -> BTreeMap<u32, usize> {

@@ -1,7 +1,7 @@
 //! Attack profiles shipped with the tool, selectable by name (`--attack paper`). They are the
 //! files in `scenarios/attacks/`, embedded at build time so the binary works from anywhere.
 
-use super::AttackProfile;
+use super::profile::AttackProfile;
 
 /// `(name, TOML text)` of every preset.
 pub const PRESETS: &[(&str, &str)] = &[
@@ -81,12 +81,4 @@ pub fn preset(name: &str) -> Option<AttackProfile> {
 }
 
 #[cfg(test)]
-mod tests {
-    #[test]
-    fn every_preset_parses() {
-        for (name, text) in super::PRESETS {
-            let parsed: Result<super::AttackProfile, _> = toml::from_str(text);
-            assert!(parsed.is_ok(), "preset {name}: {parsed:?}");
-        }
-    }
-}
+mod tests;

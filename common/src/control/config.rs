@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::UpdateLaw;
+use crate::problem::Problem;
 
 /// Controller variant (SPEC §4.8).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
@@ -118,4 +118,77 @@ pub struct ControllerConfig {
     /// of the observer's input `u_τ` ([`ObserverInput`]).
     #[serde(default, skip_serializing_if = "ObserverInput::is_default")]
     pub observer_input: ObserverInput,
+}
+
+/// Robust modifications of the update laws (37), (38) (beyond the paper): the scenario's
+/// `[controller.update_law]`. Every field defaults to 0, which is the paper's law, bit for bit.
+///
+/// With `T = innovation_time_constant_s` and `λ = leakage_w_per_s`, the estimator learns from
+/// `Ψ2 − b` instead of `Ψ2`, where `b` is the part of the innovation `Ψ2 + Ŝ` (what the observer
+/// cannot explain) older than about `T`:
+/// `ḃ = (Ψ2 + Ŝ − b) / T`, `b(0) = 0` (`b ≡ 0` when `T = 0`),
+/// `Ŵ̇ = Γ1 L1 σ (Ψ2 − b)ᵀ − λ Ŵ` ((37) with σ-modification) and
+/// `V̂̇ = Γ2 L1 δ ((Ψ2 − b)ᵀ Ŵᵀ σ')` ((38)).
+/// `T > 0` makes `Ŝ` forget a persistent innovation over `T` instead of absorbing it for ever
+/// (docs/model.md, "Long horizons"); `λ > 0` bounds `Ŵ` under a persistent bias.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct UpdateLaw {
+    /// `T`, s: time over which a persistent innovation is attributed to model mismatch rather
+    /// than to an attack. 0 = off (the paper). Typical 20–120 s (the shipped
+    /// `paper-long-horizon.toml`: 120 s); must be 0 or ≥ the control period.
+    pub innovation_time_constant_s: f64,
+    /// `λ`, 1/s: leakage rate of `Ŵ` towards 0. In steady state a constant `S` is then
+    /// compensated to `1 / (1 + λ / (Γ1 L1))` of its value (`Γ1 L1 = 50 1/s` in the
+    /// calibration). 0 = off (the paper). Typical 5–20 1/s (`paper-long-horizon.toml`: 20);
+    /// `λ Δ` must stay below 1.
+    pub leakage_w_per_s: f64,
+    /// `ε`, rad/s: dead zone on the learning signal. The laws learn from
+    /// `e · max(0, 1 − ε/‖e‖)` (`e = Ψ2`, or `Ψ2 − b`): nothing while `‖e‖ ≤ ε`, only the part
+    /// beyond ε otherwise (continuous in e). An innovation smaller than ε is left to the
+    /// measurement feedback instead of being absorbed by `Ŝ`. 0 = off (the paper). The sensor
+    /// noise puts `‖Ψ2‖` at ~0.0045 rad/s RMS in the calibration; ε must be finite and ≥ 0.
+    pub dead_zone_rad_s: f64,
+}
+
+impl UpdateLaw {
+    /// All modifications off: the paper's (37), (38).
+    pub fn is_paper(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Every problem of the values, with field paths below `at`, for a control period
+    /// `control_period_s` (s).
+    pub fn problems(&self, at: &str, control_period_s: f64) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |name: &str, message: String| {
+            out.push(Problem {
+                path: format!("{at}.{name}"),
+                message,
+            })
+        };
+        let (t, l) = (self.innovation_time_constant_s, self.leakage_w_per_s);
+        for (name, v) in [
+            ("innovation_time_constant_s", t),
+            ("leakage_w_per_s", l),
+            ("dead_zone_rad_s", self.dead_zone_rad_s),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                push(name, format!("must be finite and ≥ 0, got {v}"));
+            }
+        }
+        if t > 0.0 && t < control_period_s {
+            push(
+                "innovation_time_constant_s",
+                format!("must be 0 (off) or ≥ control_period_s ({control_period_s} s), got {t}"),
+            );
+        }
+        if l.is_finite() && l * control_period_s >= 1.0 {
+            push(
+                "leakage_w_per_s",
+                format!("leakage_w_per_s × control_period_s must stay below 1 (one Euler step must not overshoot zero), got {l} × {control_period_s}"),
+            );
+        }
+        out
+    }
 }

@@ -14,7 +14,7 @@ use nalgebra::DVector;
 
 use crate::records::{CenterRecord, TickRecord};
 
-use super::ResidualKind;
+use super::config::ResidualKind;
 
 /// Why no residual could be formed for a tick.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -11,7 +11,7 @@
 //! restarts the hold.
 //!
 //! To reproduce the center's alarm bit for bit, feed the tick times the center used
-//! ([`crate::engine::tick_time`] of `CenterRecord::k`) and `‖Ŝ‖` of `CenterRecord::s_hat`
+//! ([`crate::time::tick_time`] of `CenterRecord::k`) and `‖Ŝ‖` of `CenterRecord::s_hat`
 //! ([`norm`], the same arithmetic as the center's), every record of the robot in order.
 
 use std::collections::VecDeque;
@@ -105,7 +105,7 @@ mod tests {
                 } else if rng.random_bool(0.001) {
                     norm = f64::INFINITY;
                 }
-                let t = crate::engine::tick_time(k, dt);
+                let t = crate::time::tick_time(k, dt);
                 let want = d.update(t, norm);
                 let got = exceeds(h.push(t, norm), threshold);
                 assert_eq!(got, want, "hold {hold_s}, tick {k}");

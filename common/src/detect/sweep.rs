@@ -20,9 +20,9 @@
 
 use std::collections::BTreeMap;
 
-use crate::engine::tick_time;
 use crate::records::TickRecord;
 use crate::scenario::Resolved;
+use crate::time::tick_time;
 
 use super::s_hat::{self, HeldNorm};
 use super::{in_force, RobotDetectors, Verdict, CHI2, CUSUM, S_HAT_NORM};

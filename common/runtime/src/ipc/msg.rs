@@ -606,9 +606,9 @@ impl SequenceTracker {
 mod tests {
     use super::*;
     use fdi_common::control::center::MAX_ABS_MEASUREMENT;
-    use fdi_common::control::{CenterAgent, CenterParams};
+    use fdi_common::control::CenterAgent;
     use fdi_common::engine::tick_time;
-    use fdi_common::plant::{Plant, PlantParams};
+    use fdi_common::plant::Plant;
     use fdi_common::scenario::{paper, Resolved};
     use proptest::prelude::*;
 
@@ -619,7 +619,7 @@ mod tests {
     /// The control center's pipeline of agent 1 of the paper's scenario.
     fn center(r: &Resolved) -> CenterAgent<2> {
         let s = &r.scenario;
-        CenterAgent::<2>::new(CenterParams::new(&s.agents[0], s)).expect("a two-link model")
+        CenterAgent::<2>::new(s.center_params(&s.agents[0])).expect("a two-link model")
     }
 
     /// Any f64 bit pattern, with NaN, the infinities, subnormals, the rejection boundary and
@@ -782,7 +782,7 @@ mod tests {
             let r = paper_scenario();
             let dt = r.scenario.control_period_s;
             let mut plant =
-                Plant::<2>::new(PlantParams::new(&r.scenario.agents[0], &r.scenario)).expect("plant");
+                Plant::<2>::new(r.scenario.plant_params(&r.scenario.agents[0])).expect("plant");
             let mut expected = 0u64;
             for f in &msgs {
                 let seq = f.seq.unwrap_or(expected);
