@@ -194,7 +194,7 @@ impl AlarmTally {
         self.prev_alarm = alarm;
     }
 
-    /// A verdict of the χ² or CUSUM detector.
+    /// A verdict of a residual detector.
     fn push_verdict(&mut self, t: f64, active: bool, v: Verdict) {
         self.non_finite += u64::from(v == Verdict::NonFinite);
         self.missing += u64::from(v == Verdict::Missing);
@@ -238,12 +238,12 @@ impl AlarmTally {
     }
 }
 
-/// The χ² and CUSUM detectors of one robot, with their tallies.
+/// The residual detectors of one robot ([`detect::RESIDUAL`]), with their tallies.
 #[derive(Debug, Clone)]
 struct Detectors {
     detectors: RobotDetectors,
-    chi2: AlarmTally,
-    cusum: AlarmTally,
+    /// One per detector of [`detect::RESIDUAL`].
+    tallies: Vec<AlarmTally>,
     /// Ticks of the calibration window with the attack in force.
     calibration_attacked: u64,
     window_s: f64,
@@ -380,8 +380,7 @@ impl Evaluator {
         for acc in self.agents.values_mut() {
             acc.detectors = Some(Detectors {
                 detectors: RobotDetectors::new(config, control_period_s, beta, acc.links),
-                chi2: AlarmTally::default(),
-                cusum: AlarmTally::default(),
+                tallies: vec![AlarmTally::default(); detect::RESIDUAL.len()],
                 calibration_attacked: 0,
                 window_s: config.calibration_s(),
             });
@@ -402,9 +401,10 @@ impl Evaluator {
         let active = detect::in_force(r);
         acc.s_hat_norm.push(t, active, r.center.alarm, true);
         if let Some(d) = &mut acc.detectors {
-            let v = d.detectors.push(r);
-            d.chi2.push_verdict(t, active, v.chi2);
-            d.cusum.push_verdict(t, active, v.cusum);
+            let verdicts = d.detectors.push(r);
+            for (tally, v) in d.tallies.iter_mut().zip(verdicts) {
+                tally.push_verdict(t, active, *v);
+            }
             if active && r.center.k < d.detectors.calibration_ticks() {
                 d.calibration_attacked += 1;
             }
@@ -478,7 +478,7 @@ impl Evaluator {
     }
 }
 
-/// The three detectors' metrics of one agent, by name.
+/// Every detector's metrics of one agent, by name.
 fn detector_metrics(
     a: &Acc,
     d: &Detectors,
@@ -494,25 +494,22 @@ fn detector_metrics(
         residual_rms: cal.rms,
         failed: cal.failed,
     };
-    [
-        (
-            detect::S_HAT_NORM,
-            a.s_hat_norm.metrics(dt, s_hat_threshold, None),
-        ),
-        (
-            detect::CHI2,
-            d.chi2.metrics(
-                dt,
-                d.detectors.chi2_threshold().ok(),
-                Some(calibration.clone()),
-            ),
-        ),
-        (
-            detect::CUSUM,
-            d.cusum
-                .metrics(dt, Some(d.detectors.cusum_threshold()), Some(calibration)),
-        ),
-    ]
+    let residual = detect::RESIDUAL
+        .iter()
+        .zip(&d.tallies)
+        .enumerate()
+        .map(|(i, (k, tally))| {
+            let threshold = d.detectors.threshold(i).ok();
+            (
+                k.name,
+                tally.metrics(dt, threshold, Some(calibration.clone())),
+            )
+        });
+    std::iter::once((
+        detect::S_HAT_NORM,
+        a.s_hat_norm.metrics(dt, s_hat_threshold, None),
+    ))
+    .chain(residual)
     .into_iter()
     .map(|(name, m)| (name.to_string(), m))
     .collect()

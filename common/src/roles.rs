@@ -46,7 +46,7 @@ impl RolesConfig {
             }
         }
         if let Some(name) = self.monitor.as_ref().and_then(|m| m.name.as_deref()) {
-            if crate::detect::NAMES.contains(&name) {
+            if crate::detect::names().contains(&name) {
                 out.push(Problem {
                     path: format!("{at}.monitor.name"),
                     message: format!(

@@ -11,6 +11,9 @@ use fdi_common::engine::{run_inproc_any, RunSummary};
 use fdi_common::records::CenterRecord;
 use fdi_common::scenario::{load_file, Resolved};
 
+/// The χ² detector's place in [`fdi_common::detect::RESIDUAL`].
+const CHI2_INDEX: usize = 0;
+
 /// The shipped scenario.
 fn shipped() -> Resolved {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/stealthy-bias.toml");
@@ -85,7 +88,7 @@ fn run(r: &Resolved) -> Run {
     };
     for rec in &ticks {
         let i = index(rec.center.agent);
-        if let Verdict::Watched { statistic, .. } = dets[i].push(rec).chi2 {
+        if let Verdict::Watched { statistic, .. } = dets[i].push(rec)[CHI2_INDEX] {
             let m = if rec.attack.active {
                 &mut out.max_chi2_attacked[i]
             } else {
@@ -129,7 +132,7 @@ fn stealthy_scenario_watches_psi2_with_the_threshold_the_bias_is_tuned_to() {
         r.scenario.controller.beta,
         2,
     );
-    let tau = d.chi2_threshold().expect("a χ² threshold");
+    let tau = d.threshold(CHI2_INDEX).expect("a χ² threshold");
     assert!(
         threshold <= tau && threshold > tau - 1e-3,
         "the profile's threshold {threshold} against the detector's {tau}"

@@ -14,6 +14,20 @@
 
 use nalgebra::DVector;
 
+use super::kind::{Kind, ResidualDetector};
+
+/// The CUSUM: `cusum` in every table.
+pub const KIND: Kind = Kind {
+    name: "cusum",
+    title: "CUSUM",
+    phrase: "a CUSUM",
+    statistic: "CUSUM statistic of the whitened residual",
+    threshold_doc: "its configured threshold",
+    describe: |d| format!("CUSUM (ν = {}, h = {})", d.cusum.drift, d.cusum.threshold),
+    threshold: |d, _| Ok(d.cusum.threshold),
+    build: |d, dim| Box::new(Cusum::new(dim, d.cusum.drift, d.cusum.threshold)),
+};
+
 #[derive(Debug, Clone)]
 pub struct Cusum {
     pos: Vec<f64>,
@@ -46,5 +60,15 @@ impl Cusum {
             top = top.max(*p).max(*n);
         }
         top
+    }
+}
+
+impl ResidualDetector for Cusum {
+    fn push(&mut self, z: &DVector<f64>) -> Option<f64> {
+        Some(Cusum::push(self, z))
+    }
+
+    fn boxed_clone(&self) -> Box<dyn ResidualDetector> {
+        Box::new(self.clone())
     }
 }

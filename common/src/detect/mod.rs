@@ -2,8 +2,8 @@
 //!
 //! They run per robot, tick by tick, on what the control center has: the tampered measurement
 //! it received and its observer's state, read from the joined [`TickRecord`]s (so an
-//! in-process and a lockstep IPC run give the same verdicts). Three detectors, by the names
-//! every table uses:
+//! in-process and a lockstep IPC run give the same verdicts). The detectors, by the names
+//! every table uses (the residual ones listed in [`RESIDUAL`]):
 //!
 //! * `s_hat_norm`: the paper's alarm, `‖Ŝ‖` above a threshold for a hold time
 //!   ([`crate::control::Detector`], read from `CenterRecord::alarm`, unchanged; [`s_hat`]
@@ -22,6 +22,7 @@ pub mod chi2;
 pub mod config;
 pub mod cusum;
 pub mod gamma;
+pub mod kind;
 pub mod residual;
 pub mod s_hat;
 pub mod sweep;
@@ -33,17 +34,35 @@ use crate::records::{CenterRecord, TickRecord};
 pub use config::{Chi2Config, CusumConfig, DetectorsConfig, ResidualKind};
 
 use calibration::{Accumulator, Whitener};
-use chi2::Chi2;
-use cusum::Cusum;
+pub use kind::{Kind, ResidualDetector};
+
+/// The detectors on the observer's residual, in the order of every table, export and figure.
+/// A new detector: its own file with its [`Kind`], and one entry here.
+pub const RESIDUAL: &[Kind] = &[chi2::KIND, cusum::KIND];
 
 /// The paper's alarm.
 pub const S_HAT_NORM: &str = "s_hat_norm";
+/// Its title in tables and figure legends.
+pub const S_HAT_NORM_TITLE: &str = "‖Ŝ‖";
 /// The χ² test on the residual.
-pub const CHI2: &str = "chi2";
+pub const CHI2: &str = chi2::KIND.name;
 /// The CUSUM on the whitened residual.
-pub const CUSUM: &str = "cusum";
-/// The detectors in the order of every table.
-pub const NAMES: [&str; 3] = [S_HAT_NORM, CHI2, CUSUM];
+pub const CUSUM: &str = cusum::KIND.name;
+
+/// Every detector's name in the order of every table: the paper's alarm, then [`RESIDUAL`].
+pub fn names() -> Vec<&'static str> {
+    std::iter::once(S_HAT_NORM)
+        .chain(RESIDUAL.iter().map(|k| k.name))
+        .collect()
+}
+
+/// The title of the detector `name` in tables and figure legends (`‖Ŝ‖`, `χ²`, …).
+pub fn title(name: &str) -> Option<&'static str> {
+    if name == S_HAT_NORM {
+        return Some(S_HAT_NORM_TITLE);
+    }
+    RESIDUAL.iter().find(|k| k.name == name).map(|k| k.title)
+}
 
 /// Whether an attack is in force at this tick, on either path (the measurement, or the torque
 /// when the run routes the agent's torques through the attacker): the ground truth of every
@@ -104,19 +123,6 @@ impl Verdict {
     }
 }
 
-/// The verdicts of the χ² and CUSUM detectors on one tick.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Verdicts {
-    pub chi2: Verdict,
-    pub cusum: Verdict,
-}
-
-impl Verdicts {
-    fn both(v: Verdict) -> Self {
-        Self { chi2: v, cusum: v }
-    }
-}
-
 #[derive(Debug, Clone)]
 enum Phase {
     Calibrating(Accumulator),
@@ -139,7 +145,7 @@ pub struct CalibrationState {
     pub failed: Option<String>,
 }
 
-/// The χ² and CUSUM detectors of one robot.
+/// The residual detectors of one robot ([`RESIDUAL`], in that order).
 #[derive(Debug, Clone)]
 pub struct RobotDetectors {
     kind: ResidualKind,
@@ -149,9 +155,10 @@ pub struct RobotDetectors {
     calibration_ticks: u64,
     prev: Option<CenterRecord>,
     phase: Phase,
-    chi2: Chi2,
-    chi2_threshold: Result<f64, String>,
-    cusum: Cusum,
+    detectors: Vec<Box<dyn ResidualDetector>>,
+    thresholds: Vec<Result<f64, String>>,
+    /// The verdicts of the last tick, one per detector.
+    verdicts: Vec<Verdict>,
     calibration_non_finite: u64,
     calibration_missing: u64,
     calibration_samples: u64,
@@ -162,20 +169,6 @@ impl RobotDetectors {
     /// residual); `control_period_s`: Δ (the calibration window in ticks).
     pub fn new(config: &DetectorsConfig, control_period_s: f64, beta: f64, links: usize) -> Self {
         let dim = config.residual.dimension(links);
-        let c = config.chi2;
-        let w = c.window_ticks.max(1);
-        let chi2_threshold = match c.threshold {
-            Some(t) => Ok(t),
-            None => {
-                gamma::chi2_quantile_upper(dim * w, c.false_alarm_probability).ok_or_else(|| {
-                    format!(
-                        "no χ² quantile for {} degrees of freedom at probability {}",
-                        dim * w,
-                        c.false_alarm_probability
-                    )
-                })
-            }
-        };
         Self {
             kind: config.residual,
             links,
@@ -184,9 +177,12 @@ impl RobotDetectors {
             calibration_ticks: config.calibration_ticks(control_period_s),
             prev: None,
             phase: Phase::Calibrating(Accumulator::new(dim)),
-            chi2: Chi2::new(w),
-            chi2_threshold,
-            cusum: Cusum::new(dim, config.cusum.drift, config.cusum.threshold),
+            detectors: RESIDUAL.iter().map(|k| (k.build)(config, dim)).collect(),
+            thresholds: RESIDUAL
+                .iter()
+                .map(|k| (k.threshold)(config, dim))
+                .collect(),
+            verdicts: vec![Verdict::Calibrating; RESIDUAL.len()],
             calibration_non_finite: 0,
             calibration_missing: 0,
             calibration_samples: 0,
@@ -198,17 +194,12 @@ impl RobotDetectors {
         self.calibration_ticks
     }
 
-    /// The χ² threshold in use, or why there is none.
-    pub fn chi2_threshold(&self) -> Result<f64, &str> {
-        self.chi2_threshold
-            .as_ref()
-            .copied()
-            .map_err(String::as_str)
-    }
-
-    /// The CUSUM threshold `h`.
-    pub fn cusum_threshold(&self) -> f64 {
-        self.cusum.threshold()
+    /// The threshold in use of the `i`-th detector of [`RESIDUAL`], or why there is none.
+    pub fn threshold(&self, i: usize) -> Result<f64, &str> {
+        match self.thresholds.get(i) {
+            Some(t) => t.as_ref().copied().map_err(String::as_str),
+            None => Err("no such detector"),
+        }
     }
 
     /// The calibration as it stands.
@@ -235,8 +226,36 @@ impl RobotDetectors {
         }
     }
 
-    /// Feeds the joined record of the robot's next tick (its ticks in order).
-    pub fn push(&mut self, r: &TickRecord) -> Verdicts {
+    /// Feeds the joined record of the robot's next tick (its ticks in order); the verdict of
+    /// every detector of [`RESIDUAL`] on it, in that order.
+    pub fn push(&mut self, r: &TickRecord) -> &[Verdict] {
+        match self.whitened(r) {
+            Ok(z) => {
+                for ((d, t), v) in self
+                    .detectors
+                    .iter_mut()
+                    .zip(&self.thresholds)
+                    .zip(&mut self.verdicts)
+                {
+                    *v = match (t, d.push(&z)) {
+                        (Err(_), _) => Verdict::Uncalibrated,
+                        (Ok(_), None) => Verdict::Calibrating,
+                        (Ok(_), Some(s)) if !s.is_finite() => Verdict::NonFinite,
+                        (Ok(t), Some(s)) => Verdict::Watched {
+                            statistic: s,
+                            threshold: *t,
+                        },
+                    };
+                }
+            }
+            Err(all) => self.verdicts.fill(all),
+        }
+        &self.verdicts
+    }
+
+    /// The whitened residual of the tick, or the verdict every detector gives without one
+    /// (calibrating, uncalibrated, missing, non-finite).
+    fn whitened(&mut self, r: &TickRecord) -> Result<DVector<f64>, Verdict> {
         let res = residual::residual(self.kind, self.links, self.beta, self.prev.as_ref(), r);
         self.prev = Some(r.center);
         let finite = |v: &DVector<f64>| v.iter().all(|x| x.is_finite());
@@ -246,7 +265,7 @@ impl RobotDetectors {
                 (_, Ok(_)) => self.calibration_non_finite += 1,
                 (_, Err(_)) => self.calibration_missing += 1,
             }
-            return Verdicts::both(Verdict::Calibrating);
+            return Err(Verdict::Calibrating);
         }
         if let Phase::Calibrating(acc) = &self.phase {
             self.calibration_samples = acc.samples();
@@ -256,32 +275,18 @@ impl RobotDetectors {
             };
         }
         let Phase::Ready(whitener) = &self.phase else {
-            return Verdicts::both(Verdict::Uncalibrated);
+            return Err(Verdict::Uncalibrated);
         };
         let Ok(res) = res else {
-            return Verdicts::both(Verdict::Missing);
+            return Err(Verdict::Missing);
         };
         let Some(z) = whitener.whiten(&res).filter(|_| finite(&res)) else {
-            return Verdicts::both(Verdict::NonFinite);
+            return Err(Verdict::NonFinite);
         };
-        let q = z.dot(&z);
-        if !q.is_finite() {
-            return Verdicts::both(Verdict::NonFinite);
+        if !z.dot(&z).is_finite() {
+            return Err(Verdict::NonFinite);
         }
-        let chi2 = match (&self.chi2_threshold, self.chi2.push(q)) {
-            (Err(_), _) => Verdict::Uncalibrated,
-            (Ok(_), None) => Verdict::Calibrating,
-            (Ok(_), Some(sum)) if !sum.is_finite() => Verdict::NonFinite,
-            (Ok(t), Some(sum)) => Verdict::Watched {
-                statistic: sum,
-                threshold: *t,
-            },
-        };
-        let cusum = Verdict::Watched {
-            statistic: self.cusum.push(&z),
-            threshold: self.cusum.threshold(),
-        };
-        Verdicts { chi2, cusum }
+        Ok(z)
     }
 }
 

@@ -25,7 +25,7 @@ use crate::scenario::Resolved;
 use crate::time::tick_time;
 
 use super::s_hat::{self, HeldNorm};
-use super::{in_force, RobotDetectors, Verdict, CHI2, CUSUM, S_HAT_NORM};
+use super::{in_force, RobotDetectors, Verdict, RESIDUAL, S_HAT_NORM};
 
 /// One tick of one detector on one robot.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -179,7 +179,7 @@ pub fn thresholds<'a>(
 /// One detector's series on every robot of a run.
 #[derive(Debug, Clone, PartialEq)]
 pub struct DetectorSeries {
-    /// `s_hat_norm`, `chi2` or `cusum` ([`super::NAMES`]).
+    /// `s_hat_norm` or a detector of [`super::RESIDUAL`] ([`super::names`]).
     pub name: &'static str,
     /// Its configured threshold; `None` when it has none (no χ² quantile could be had).
     pub configured: Option<f64>,
@@ -192,7 +192,7 @@ pub struct DetectorSeries {
 pub struct Recorded {
     /// Δ, s.
     pub control_period_s: f64,
-    /// The detectors in the order of [`super::NAMES`].
+    /// The detectors in the order of [`super::names`].
     pub detectors: Vec<DetectorSeries>,
     /// Per robot, the ticks at which `s_hat_norm` replayed at its configured threshold differs
     /// from the center's recorded alarm (`CenterRecord::alarm`): 0 unless the records are not
@@ -211,9 +211,8 @@ impl Recorded {
 struct Robot {
     detectors: RobotDetectors,
     held: HeldNorm,
-    s_hat: Vec<Sample>,
-    chi2: Vec<Sample>,
-    cusum: Vec<Sample>,
+    /// Per detector of [`super::names`], its samples.
+    series: Vec<Vec<Sample>>,
     mismatches: u64,
 }
 
@@ -222,8 +221,8 @@ struct Robot {
 pub struct Recorder {
     control_period_s: f64,
     s_hat_threshold: f64,
-    chi2_threshold: Option<f64>,
-    cusum_threshold: f64,
+    /// Per detector of [`super::RESIDUAL`], its configured threshold.
+    residual_thresholds: Vec<Option<f64>>,
     robots: BTreeMap<u32, Robot>,
 }
 
@@ -242,9 +241,7 @@ impl Recorder {
                 let robot = Robot {
                     detectors,
                     held: HeldNorm::new(detection.hold_s),
-                    s_hat: Vec::new(),
-                    chi2: Vec::new(),
-                    cusum: Vec::new(),
+                    series: vec![Vec::new(); 1 + RESIDUAL.len()],
                     mismatches: 0,
                 };
                 (a.id, robot)
@@ -254,8 +251,14 @@ impl Recorder {
         Self {
             control_period_s: dt,
             s_hat_threshold: detection.threshold,
-            chi2_threshold: first.and_then(|d| d.chi2_threshold().ok()),
-            cusum_threshold: first.map_or(s.detectors.cusum.threshold, |d| d.cusum_threshold()),
+            residual_thresholds: RESIDUAL
+                .iter()
+                .enumerate()
+                .map(|(i, k)| match first {
+                    Some(d) => d.threshold(i).ok(),
+                    None => (k.threshold)(&s.detectors, 0).ok(),
+                })
+                .collect(),
             robots,
         }
     }
@@ -268,29 +271,29 @@ impl Recorder {
         let Some(robot) = self.robots.get_mut(&r.agent.agent) else {
             return;
         };
-        for (series, sample) in [&mut robot.s_hat, &mut robot.chi2, &mut robot.cusum]
-            .into_iter()
-            .zip(samples)
-        {
+        for (series, sample) in robot.series.iter_mut().zip(samples) {
             series.push(sample);
         }
     }
 
-    /// Every detector's configured threshold, in the order of [`super::NAMES`] (`None`: χ²
-    /// has none when no quantile could be had).
-    pub fn configured(&self) -> [(&'static str, Option<f64>); 3] {
-        [
-            (S_HAT_NORM, Some(self.s_hat_threshold)),
-            (CHI2, self.chi2_threshold),
-            (CUSUM, Some(self.cusum_threshold)),
-        ]
+    /// Every detector's configured threshold, in the order of [`super::names`] (`None`: a
+    /// detector without one, as χ² when no quantile could be had).
+    pub fn configured(&self) -> Vec<(&'static str, Option<f64>)> {
+        std::iter::once((S_HAT_NORM, Some(self.s_hat_threshold)))
+            .chain(
+                RESIDUAL
+                    .iter()
+                    .map(|k| k.name)
+                    .zip(self.residual_thresholds.iter().copied()),
+            )
+            .collect()
     }
 
     /// Feeds one joined tick record as [`Self::push`] does, and returns the tick's sample of
-    /// every detector (in the order of [`super::NAMES`]) without keeping it: memory stays the
+    /// every detector (in the order of [`super::names`]) without keeping it: memory stays the
     /// same however long the run (the MCAP export writes them as they come). `None` for an
     /// agent the scenario does not have.
-    pub fn observe(&mut self, r: &TickRecord) -> Option<[Sample; 3]> {
+    pub fn observe(&mut self, r: &TickRecord) -> Option<Vec<Sample>> {
         let robot = self.robots.get_mut(&r.agent.agent)?;
         let (t, active) = (r.agent.t, in_force(r));
         let held = robot.held.push(
@@ -302,44 +305,39 @@ impl Recorder {
             threshold: self.s_hat_threshold,
         };
         robot.mismatches += u64::from(s_hat.alarm(false) != r.center.alarm);
-        let v = robot.detectors.push(r);
-        Some([s_hat, v.chi2, v.cusum].map(|verdict| Sample {
-            t,
-            in_force: active,
-            verdict,
-        }))
+        let residual = robot.detectors.push(r);
+        Some(
+            std::iter::once(&s_hat)
+                .chain(residual)
+                .map(|&verdict| Sample {
+                    t,
+                    in_force: active,
+                    verdict,
+                })
+                .collect(),
+        )
     }
 
     pub fn finish(self) -> Recorded {
-        let mut s_hat = BTreeMap::new();
-        let mut chi2 = BTreeMap::new();
-        let mut cusum = BTreeMap::new();
+        let configured = self.configured();
+        let mut detectors: Vec<DetectorSeries> = configured
+            .iter()
+            .map(|&(name, configured)| DetectorSeries {
+                name,
+                configured,
+                robots: BTreeMap::new(),
+            })
+            .collect();
         let mut s_hat_mismatches = BTreeMap::new();
         for (id, r) in self.robots {
-            s_hat.insert(id, r.s_hat);
-            chi2.insert(id, r.chi2);
-            cusum.insert(id, r.cusum);
+            for (d, series) in detectors.iter_mut().zip(r.series) {
+                d.robots.insert(id, series);
+            }
             s_hat_mismatches.insert(id, r.mismatches);
         }
         Recorded {
             control_period_s: self.control_period_s,
-            detectors: vec![
-                DetectorSeries {
-                    name: S_HAT_NORM,
-                    configured: Some(self.s_hat_threshold),
-                    robots: s_hat,
-                },
-                DetectorSeries {
-                    name: CHI2,
-                    configured: self.chi2_threshold,
-                    robots: chi2,
-                },
-                DetectorSeries {
-                    name: CUSUM,
-                    configured: Some(self.cusum_threshold),
-                    robots: cusum,
-                },
-            ],
+            detectors,
             s_hat_mismatches,
         }
     }

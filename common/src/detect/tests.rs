@@ -99,12 +99,34 @@ fn residuals(
     })
 }
 
+/// The verdicts of the χ² and CUSUM detectors on one tick (the first two of [`RESIDUAL`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Verdicts {
+    chi2: Verdict,
+    cusum: Verdict,
+}
+
+impl Verdicts {
+    fn of(v: &[Verdict]) -> Self {
+        assert_eq!(RESIDUAL[0].name, CHI2);
+        assert_eq!(RESIDUAL[1].name, CUSUM);
+        Self {
+            chi2: v[0],
+            cusum: v[1],
+        }
+    }
+
+    fn both(v: Verdict) -> Self {
+        Self { chi2: v, cusum: v }
+    }
+}
+
 /// Runs the detectors; returns the verdicts of the ticks after the calibration window.
 fn run(c: &DetectorsConfig, stream: impl Iterator<Item = (u64, Vector4<f64>)>) -> Vec<Verdicts> {
     let mut d = RobotDetectors::new(c, DT, 30.0, 2);
     let mut out = Vec::new();
     for (k, r) in stream {
-        let v = d.push(&record(k, r));
+        let v = Verdicts::of(d.push(&record(k, r)));
         if k >= CAL_TICKS {
             out.push(v);
         }
@@ -297,7 +319,7 @@ fn a_singular_covariance_is_regularised_or_fails_the_calibration_when_told_not_t
     let mut d = RobotDetectors::new(&off, DT, 30.0, 2);
     let mut last = None;
     for (k, r) in stream() {
-        last = Some(d.push(&record(k, r)));
+        last = Some(Verdicts::of(d.push(&record(k, r))));
     }
     assert_eq!(last, Some(Verdicts::both(Verdict::Uncalibrated)));
     let failed = d.calibration().failed.expect("failed");
@@ -318,7 +340,10 @@ fn a_gap_in_the_records_is_a_counted_miss_and_a_short_record_says_it_never_calib
 
     let mut d = RobotDetectors::new(&config(1, 1e-6), DT, 30.0, 2);
     for (k, r) in residuals(4, 500, |_| Vector4::zeros()) {
-        assert_eq!(d.push(&record(k, r)), Verdicts::both(Verdict::Calibrating));
+        assert_eq!(
+            Verdicts::of(d.push(&record(k, r))),
+            Verdicts::both(Verdict::Calibrating)
+        );
     }
     let failed = d.calibration().failed.expect("not calibrated");
     assert!(

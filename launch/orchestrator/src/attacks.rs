@@ -355,7 +355,7 @@ struct Row {
     traditional_cell: String,
     #[serde(skip)]
     proposed_cell: String,
-    /// Per detector of [`detect::NAMES`] the run has, under the proposed controller.
+    /// Per detector of [`detect::names()`] the run has, under the proposed controller.
     detectors: BTreeMap<&'static str, Detection>,
     /// Proposed run: ticks the center found its measurement missing.
     missing_inputs: u64,
@@ -404,9 +404,9 @@ fn rows_of(
                 proposed_diverged_at_s: p.diverged_at_s,
                 traditional_cell: rmse_cell(t, 4),
                 proposed_cell: rmse_cell(p, 4),
-                detectors: detect::NAMES
-                    .iter()
-                    .filter_map(|&n| Some((n, Detection::of(p.detectors.get(n)?))))
+                detectors: detect::names()
+                    .into_iter()
+                    .filter_map(|n| Some((n, Detection::of(p.detectors.get(n)?))))
                     .collect(),
                 missing_inputs: proposed.missing_inputs.get(&robot).copied().unwrap_or(0),
                 deadline_misses: p.deadline_misses,
@@ -414,9 +414,6 @@ fn rows_of(
         })
         .collect()
 }
-
-/// Column titles of the detectors, in [`detect::NAMES`] order.
-const DETECTOR_TITLES: [&str; 3] = ["‖Ŝ‖", "χ²", "CUSUM"];
 
 /// `attacks.md` (without its leading `# `), as printed.
 fn markdown(rows: &[Row], duration_s: Option<f64>, made: &MadeWith) -> String {
@@ -430,8 +427,9 @@ fn markdown(rows: &[Row], duration_s: Option<f64>, made: &MadeWith) -> String {
         made.md()
     );
     let mut head = vec!["class", "robot", "RMSE traditional", "RMSE proposed"];
-    let titles: Vec<String> = DETECTOR_TITLES
-        .iter()
+    let titles: Vec<String> = detect::names()
+        .into_iter()
+        .filter_map(detect::title)
         .flat_map(|t| {
             [
                 format!("{t} detected"),
@@ -449,7 +447,7 @@ fn markdown(rows: &[Row], duration_s: Option<f64>, made: &MadeWith) -> String {
             "| {} | {} | {} | {} |",
             r.class, r.robot, r.traditional_cell, r.proposed_cell
         );
-        for n in detect::NAMES {
+        for n in detect::names() {
             match r.detectors.get(n) {
                 Some(d) => {
                     let _ = write!(
@@ -528,7 +526,7 @@ fn csv(rows: &[Row]) -> Result<Vec<u8>> {
     ]
     .map(String::from)
     .to_vec();
-    for n in detect::NAMES {
+    for n in detect::names() {
         for f in [
             "onsets",
             "detected",
@@ -551,7 +549,7 @@ fn csv(rows: &[Row]) -> Result<Vec<u8>> {
             opt(r.traditional_diverged_at_s),
             opt(r.proposed_diverged_at_s),
         ];
-        for n in detect::NAMES {
+        for n in detect::names() {
             match r.detectors.get(n) {
                 Some(d) => f.extend([
                     d.onsets.to_string(),

@@ -3,7 +3,7 @@
 //! diamond. Drawn by [`crate::plot`], as every figure of the launcher.
 
 use fdi_common::detect::sweep::{Point, Tally};
-use fdi_common::detect::{CHI2, CUSUM, S_HAT_NORM};
+use fdi_common::detect::{self, S_HAT_NORM};
 use plotters::style::RGBColor;
 
 use crate::plot::{Figure, Line, Panel, PanelKind, PALETTE};
@@ -28,11 +28,10 @@ const X_RANGE: (f64, f64) = (-0.02, 1.02);
 
 /// The legend name of a detector.
 fn label(name: &str) -> String {
-    match name {
-        S_HAT_NORM => "‖Ŝ‖ held (s_hat_norm)".into(),
-        CHI2 => "χ² (chi2)".into(),
-        CUSUM => "CUSUM (cusum)".into(),
-        other => other.into(),
+    match (name, detect::title(name)) {
+        (S_HAT_NORM, _) => "‖Ŝ‖ held (s_hat_norm)".into(),
+        (_, Some(title)) => format!("{title} ({name})"),
+        (other, None) => other.into(),
     }
 }
 

@@ -115,17 +115,30 @@ fn write_tables(dir: &Path, s: &RunSummary) -> Result<()> {
     Ok(())
 }
 
-/// The detectors of a robot's metrics in table order: the built-in ones ([`detect::NAMES`]),
+/// The detectors of a robot's metrics in table order: the built-in ones ([`detect::names`]),
 /// then a monitor program's (`[roles.monitor]`, under its own name).
 pub fn detector_names(m: &AgentMetrics) -> Vec<&str> {
-    let mut names: Vec<&str> = detect::NAMES.to_vec();
+    let mut names: Vec<&str> = detect::names();
+    let built_in = names.clone();
     names.extend(
         m.detectors
             .keys()
             .map(String::as_str)
-            .filter(|n| !detect::NAMES.contains(n)),
+            .filter(|n| !built_in.contains(n)),
     );
     names
+}
+
+/// `a`, `a and b`, `a, b and c`.
+pub fn join_words<S: AsRef<str>>(words: &[S]) -> String {
+    match words {
+        [] => String::new(),
+        [one] => one.as_ref().to_string(),
+        [init @ .., last] => {
+            let init: Vec<&str> = init.iter().map(AsRef::as_ref).collect();
+            format!("{} and {}", init.join(", "), last.as_ref())
+        }
+    }
 }
 
 /// The detectors side by side (`rmse.md`, `report.md`): per robot a table with a column per
@@ -138,20 +151,23 @@ pub fn detector_tables(s: &RunSummary, level: usize) -> String {
     }
     let (h, h_robot) = ("#".repeat(level), "#".repeat(level + 1));
     let _ = writeln!(md, "\n{h} Detectors side by side\n");
-    md.push_str(
-        "The paper's alarm (`s_hat_norm`: ‖Ŝ‖ above its threshold for its hold time) beside a χ² test \
-         and a CUSUM on the observer's residual, calibrated at the start of the run \
+    let phrases: Vec<&str> = detect::RESIDUAL.iter().map(|k| k.phrase).collect();
+    let _ = write!(
+        md,
+        "The paper's alarm (`s_hat_norm`: ‖Ŝ‖ above its threshold for its hold time) beside {} \
+         on the observer's residual, calibrated at the start of the run \
          (docs/detectors.md). Times to detect in s from each onset; `already on`: the alarm was on at \
          the tick before the onset (no detection of its own); `missed`: no alarm while that \
          attack was in force; `not watched`: it ended before the detector started watching. \
          False alarms count alarm rising edges while no attack was in force, per minute of the \
          attack-free time the detector watched.\n",
+        join_words(&phrases)
     );
     let monitors: std::collections::BTreeSet<&str> = s
         .metrics
         .values()
         .flat_map(|m| m.detectors.keys().map(String::as_str))
-        .filter(|n| !detect::NAMES.contains(n))
+        .filter(|n| detect::title(n).is_none())
         .collect();
     for n in &monitors {
         let _ = writeln!(
@@ -246,7 +262,12 @@ fn calibration_line(md: &mut String, cols: &[Option<&DetectorMetrics>]) {
         }
         match &c.failed {
             Some(why) => {
-                let _ = writeln!(md, ". **The χ² and CUSUM detectors never watched: {why}.**");
+                let titles: Vec<&str> = detect::RESIDUAL.iter().map(|k| k.title).collect();
+                let _ = writeln!(
+                    md,
+                    ". **The {} detectors never watched: {why}.**",
+                    join_words(&titles)
+                );
             }
             None => md.push_str(".\n"),
         }

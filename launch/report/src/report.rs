@@ -1007,14 +1007,13 @@ fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 13] {
         (
             "detectors",
             format!(
-                "χ² over {} tick(s) ({}) and CUSUM (ν = {}, h = {}) on the `{}` residual, calibrated over the first {} s",
-                d.chi2.window_ticks,
-                d.chi2.threshold.map_or_else(
-                    || format!("false-alarm probability {:e} per tick", d.chi2.false_alarm_probability),
-                    |t| format!("threshold {t}")
+                "{} on the `{}` residual, calibrated over the first {} s",
+                crate::output::join_words(
+                    &fdi_common::detect::RESIDUAL
+                        .iter()
+                        .map(|k| (k.describe)(d))
+                        .collect::<Vec<_>>()
                 ),
-                d.cusum.drift,
-                d.cusum.threshold,
                 d.residual.as_str(),
                 d.calibration_s()
             ),

@@ -1,5 +1,5 @@
 use super::*;
-use crate::detect::NAMES;
+use crate::detect::names;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -224,7 +224,7 @@ fn the_configured_thresholds_reproduce_the_metrics_and_the_centers_alarm() {
         recorded.s_hat_mismatches
     );
     let mut compared = 0;
-    for name in NAMES {
+    for name in names() {
         let d = recorded.detector(name).expect("detector");
         let configured = d.configured.expect("a configured threshold");
         let points = sweep(d, 8);
@@ -267,14 +267,14 @@ fn the_configured_thresholds_reproduce_the_metrics_and_the_centers_alarm() {
 }
 
 /// The MCAP export writes each tick's statistics as they come: `observe` gives the very samples
-/// `push` keeps, in the order of `NAMES`, and keeps none of them (memory does not grow with the
+/// `push` keeps, in the order of `names()`, and keeps none of them (memory does not grow with the
 /// run), with the thresholds `finish` reports.
 #[test]
 fn observe_gives_the_samples_push_keeps_and_keeps_none() {
     let mut r = crate::scenario::paper().expect("paper");
     r.scenario.duration_s = 1.0;
     let (mut kept, mut streamed) = (Recorder::for_scenario(&r), Recorder::for_scenario(&r));
-    let mut seen: BTreeMap<u32, Vec<[Sample; 3]>> = BTreeMap::new();
+    let mut seen: BTreeMap<u32, Vec<Vec<Sample>>> = BTreeMap::new();
     crate::engine::run_inproc_any(&r, |t| {
         kept.push(t);
         let s = streamed.observe(t).expect("an agent of the scenario");
@@ -284,7 +284,7 @@ fn observe_gives_the_samples_push_keeps_and_keeps_none() {
     let configured = streamed.configured();
     let (kept, streamed) = (kept.finish(), streamed.finish());
     assert_eq!(seen.len(), 4);
-    for (i, name) in NAMES.iter().enumerate() {
+    for (i, name) in names().iter().enumerate() {
         let d = kept.detector(name).expect("detector");
         assert_eq!(configured[i], (*name, d.configured));
         for (id, series) in &d.robots {

@@ -1,7 +1,7 @@
 //! MCAP export: the whole run as `RUN_DIR/export/run.mcap`, for Foxglove and PlotJuggler.
 //!
 //! One topic per agent and stream (`/agent<id>/state`, `/agent<id>/attack`, …, listed in
-//! [`TOPICS`] and docs/traces.md), JSON messages (`json` encoding) with a `jsonschema` schema
+//! [`topics`] and docs/traces.md), JSON messages (`json` encoding) with a `jsonschema` schema
 //! record per message type, log time = publish time = the simulated time of the tick in ns
 //! (from [`fdi_common::engine::tick_time`]). Each message also carries its tick `k` and `t_s`.
 //! The records of each trace are written per kind in (tick, agent) order; a metadata record
@@ -22,10 +22,11 @@ use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
+use std::sync::LazyLock;
 
 use anyhow::{bail, Context, Result};
 use fdi_common::detect::sweep::Recorder;
-use fdi_common::detect::Verdict;
+use fdi_common::detect::{self, Verdict};
 use fdi_common::records::{true_s, TickRecord};
 use fdi_common::trace::{TraceReader, TraceRecord};
 use serde_json::{json, Map, Value};
@@ -231,22 +232,56 @@ schema!(
         ),
     ]
 );
-schema!(DETECTORS, "fdi_mas.Detectors", "Per-tick statistic of each detector, as `fdi-launch detect` computes it from the joined traces (docs/detectors.md).", [
-    K, T,
-    ("in_force", Ty::Bool, "an attack was in force on the measurement or the torque"),
-    ("s_hat_norm", Ty::Num, "‖Ŝ‖ held over the hold time, rad/s (null without a verdict)"),
-    ("s_hat_norm_threshold", Ty::Num, "its configured threshold, rad/s"),
-    ("s_hat_norm_verdict", Ty::Str, "watched, calibrating, non-finite, missing or uncalibrated"),
-    ("s_hat_norm_alarm", Ty::Bool, "its alarm at the configured threshold"),
-    ("chi2", Ty::Num, "windowed χ² sum of the whitened residual (null without a verdict)"),
-    ("chi2_threshold", Ty::Num, "its configured threshold (null when none could be had)"),
-    ("chi2_verdict", Ty::Str, "watched, calibrating, non-finite, missing or uncalibrated"),
-    ("chi2_alarm", Ty::Bool, "its alarm at the configured threshold"),
-    ("cusum", Ty::Num, "CUSUM statistic of the whitened residual (null without a verdict)"),
-    ("cusum_threshold", Ty::Num, "its configured threshold"),
-    ("cusum_verdict", Ty::Str, "watched, calibrating, non-finite, missing or uncalibrated"),
-    ("cusum_alarm", Ty::Bool, "its alarm at the configured threshold"),
-]);
+/// The per-tick statistic of each detector: the paper's alarm, then every detector of
+/// [`detect::RESIDUAL`] with its own fields (made once, from the list).
+pub(crate) static DETECTORS: LazyLock<Schema> = LazyLock::new(|| {
+    const VERDICT: &str = "watched, calibrating, non-finite, missing or uncalibrated";
+    const ALARM: &str = "its alarm at the configured threshold";
+    let mut fields: Vec<Field> = vec![
+        K,
+        T,
+        (
+            "in_force",
+            Ty::Bool,
+            "an attack was in force on the measurement or the torque",
+        ),
+        (
+            "s_hat_norm",
+            Ty::Num,
+            "‖Ŝ‖ held over the hold time, rad/s (null without a verdict)",
+        ),
+        (
+            "s_hat_norm_threshold",
+            Ty::Num,
+            "its configured threshold, rad/s",
+        ),
+        ("s_hat_norm_verdict", Ty::Str, VERDICT),
+        ("s_hat_norm_alarm", Ty::Bool, ALARM),
+    ];
+    // Made once per process: the names and descriptions live as long as the schema.
+    let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
+    for k in detect::RESIDUAL {
+        fields.extend([
+            (
+                k.name,
+                Ty::Num,
+                leak(format!("{} (null without a verdict)", k.statistic)),
+            ),
+            (
+                leak(format!("{}_threshold", k.name)),
+                Ty::Num,
+                k.threshold_doc,
+            ),
+            (leak(format!("{}_verdict", k.name)), Ty::Str, VERDICT),
+            (leak(format!("{}_alarm", k.name)), Ty::Bool, ALARM),
+        ]);
+    }
+    Schema {
+        name: "fdi_mas.Detectors",
+        description: "Per-tick statistic of each detector, as `fdi-launch detect` computes it from the joined traces (docs/detectors.md).",
+        fields: Vec::leak(fields),
+    }
+});
 schema!(LATENCY, "fdi_mas.Latency", "Monotonic-clock stamps of the torque message of the tick, ns (0 = not stamped; realtime runs).", [
     K, T,
     ("agent_sent_ns", Ty::Int, "agent sent the measurement"),
@@ -324,23 +359,25 @@ schema!(
 /// Every per-agent topic (`/agent<id>/<name>`) and its message type; `/events` is the one
 /// topic of the whole run ([`EVENT`]).
 #[cfg(test)]
-pub(crate) const TOPICS: [(&str, &Schema); 15] = [
-    ("state", &STATE),
-    ("desired", &DESIRED),
-    ("tracking_error", &TRACKING),
-    ("measurement/clean", &CLEAN),
-    ("measurement/tampered", &TAMPERED),
-    ("attack", &ATTACK),
-    ("estimate", &ESTIMATE),
-    ("torque/sent", &SENT),
-    ("torque/applied", &APPLIED),
-    ("delay", &DELAY),
-    ("alarm", &ALARM),
-    ("detectors", &DETECTORS),
-    ("latency", &LATENCY),
-    ("actuation", &ACTUATION),
-    ("monitor", &MONITOR),
-];
+pub(crate) fn topics() -> [(&'static str, &'static Schema); 15] {
+    [
+        ("state", &STATE),
+        ("desired", &DESIRED),
+        ("tracking_error", &TRACKING),
+        ("measurement/clean", &CLEAN),
+        ("measurement/tampered", &TAMPERED),
+        ("attack", &ATTACK),
+        ("estimate", &ESTIMATE),
+        ("torque/sent", &SENT),
+        ("torque/applied", &APPLIED),
+        ("delay", &DELAY),
+        ("alarm", &ALARM),
+        ("detectors", &*DETECTORS),
+        ("latency", &LATENCY),
+        ("actuation", &ACTUATION),
+        ("monitor", &MONITOR),
+    ]
+}
 
 /// The topic name of `name` for agent `agent`.
 pub(crate) fn topic(agent: u32, name: &str) -> String {
@@ -864,7 +901,7 @@ fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
     let mut recorder = Recorder::for_scenario(&info.resolved);
     let configured = recorder.configured();
     // Per robot, each detector's alarm at its configured threshold so far.
-    let mut alarms: BTreeMap<u32, [bool; 3]> = BTreeMap::new();
+    let mut alarms: BTreeMap<u32, Vec<bool>> = BTreeMap::new();
     let mut n = 0;
     // The first write that failed: it stops the join and is the error.
     let mut failure: Option<anyhow::Error> = None;
@@ -882,7 +919,9 @@ fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
             };
             let (id, k) = (r.agent.agent, r.center.k);
             let t = info.t(k);
-            let alarms = alarms.entry(id).or_default();
+            let alarms = alarms
+                .entry(id)
+                .or_insert_with(|| vec![false; configured.len()]);
             let mut msg = Map::new();
             msg.insert("k".into(), Value::from(k));
             msg.insert("t_s".into(), Value::from(t));
@@ -900,7 +939,7 @@ fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
                 msg.insert(format!("{name}_verdict"), Value::from(state));
                 msg.insert(format!("{name}_alarm"), Value::from(*alarm));
             }
-            match w.write(id, "detectors", &DETECTORS, t, &Value::Object(msg)) {
+            match w.write(id, "detectors", &*DETECTORS, t, &Value::Object(msg)) {
                 Ok(()) => n += 1,
                 Err(e) => {
                     failure = Some(e);
@@ -1002,7 +1041,7 @@ mod tests {
         .control_period_s;
         assert!(want.len() >= 4 * 12, "{want:?}");
 
-        let schemas: BTreeMap<&str, &Schema> = TOPICS.iter().map(|(n, s)| (*n, *s)).collect();
+        let schemas: BTreeMap<&str, &Schema> = topics().iter().map(|(n, s)| (*n, *s)).collect();
         let mut got: BTreeMap<String, u64> = BTreeMap::new();
         let mut last: BTreeMap<String, u64> = BTreeMap::new();
         for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
@@ -1098,7 +1137,7 @@ mod tests {
 
     #[test]
     fn every_schema_lists_each_field_once_and_requires_it() {
-        for (name, s) in TOPICS.iter().chain([&("events", &EVENT)]) {
+        for (name, s) in topics().iter().chain([&("events", &EVENT)]) {
             let v = json_schema(s);
             let props = v["properties"].as_object().expect("properties");
             assert_eq!(props.len(), s.fields.len(), "{name}: a field named twice");
