@@ -344,8 +344,7 @@ pub fn run<X: Transport, const N: usize>(
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
 ) -> Result<u64, AttackerError> {
-    let s = &resolved.scenario;
-    let mut targets = Target::all(resolved);
+    let targets = Target::all(resolved);
     let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?
@@ -353,40 +352,113 @@ pub fn run<X: Transport, const N: usize>(
         Start::Go { epoch_ns } => epoch_ns,
         Start::Shutdown => return Ok(0),
     };
-    let ticks = resolved.ticks();
-    let dt = s.control_period_s;
-    let mut refused = 0u64;
-    let mut failure = None;
-    let strategy = WaitStrategy::for_clock(s.clock);
-    let realtime = s.clock == ClockMode::Realtime;
-    // Realtime: relaying ends when every agent has finished or fell silent (lost).
-    let mut liveness = Liveness::new(targets.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
-    let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
-    let mut sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
-    let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
-    let mut external = match (&s.roles.attacker, &ports.external) {
-        (Some(role), Some(_)) => Some(External::new(role, &ids, N, dt, realtime)),
-        _ => None,
-    };
+    let mut relay = Relay::new::<N>(resolved, ports, targets, epoch_ns);
     loop {
+        let (relayed, forwarded) = relay.take_measurements::<N>(trace)?;
+        relay.pass_on(relayed, forwarded, trace)?;
+        relay.take_torques::<N>(trace)?;
+        if relay.settled() {
+            break;
+        }
+        if shutdown.requested() || ports.launcher.stop_requested()? {
+            return Ok(relay.refused);
+        }
+        relay.wait()?;
+    }
+    relay.finish(trace, shutdown)
+}
+
+/// The attacker over a run: the agents it relays for, what it refused, the checks of what
+/// arrives, the program that takes its role (if any), and the run's timing.
+struct Relay<'a, X: Transport> {
+    resolved: &'a Resolved,
+    ports: &'a Ports<X>,
+    targets: Vec<Target>,
+    /// Messages refused so far.
+    refused: u64,
+    sequence: SequenceTracker,
+    /// Realtime: relaying ends when every agent has finished or fell silent (lost).
+    liveness: Liveness,
+    external: Option<External>,
+    strategy: WaitStrategy,
+    ticks: u64,
+    dt: f64,
+    realtime: bool,
+    end_ns: u64,
+}
+
+impl<'a, X: Transport> Relay<'a, X> {
+    /// The state of a run started at `epoch_ns`, for agents of `N` links.
+    fn new<const N: usize>(
+        resolved: &'a Resolved,
+        ports: &'a Ports<X>,
+        targets: Vec<Target>,
+        epoch_ns: u64,
+    ) -> Self {
+        let s = &resolved.scenario;
+        let ticks = resolved.ticks();
+        let dt = s.control_period_s;
+        let strategy = WaitStrategy::for_clock(s.clock);
+        let realtime = s.clock == ClockMode::Realtime;
+        let liveness = Liveness::new(targets.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
+        let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
+        let sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
+        let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
+        let external = match (&s.roles.attacker, &ports.external) {
+            (Some(role), Some(_)) => Some(External::new(role, &ids, N, dt, realtime)),
+            _ => None,
+        };
+        Self {
+            resolved,
+            ports,
+            targets,
+            refused: 0,
+            sequence,
+            liveness,
+            external,
+            strategy,
+            ticks,
+            dt,
+            realtime,
+            end_ns,
+        }
+    }
+
+    /// Admits every measurement waiting and relays it (or hands it to the program that takes
+    /// the attacker role). Returns how many were relayed to the center and how many handed over.
+    fn take_measurements<const N: usize>(
+        &mut self,
+        trace: &mut TraceWriter,
+    ) -> Result<(usize, usize), AttackerError> {
+        let Self {
+            ports,
+            targets,
+            refused,
+            sequence,
+            liveness,
+            external,
+            dt,
+            ..
+        } = self;
+        let (ports, dt) = (*ports, *dt);
         let mut relayed = 0;
         let mut forwarded = 0;
+        let mut failure = None;
         ports.measurement.drain(|m| {
             let received = monotonic_ns();
             let Some(i) = targets.iter().position(|t| t.id == m.agent) else {
-                refused += 1;
+                *refused += 1;
                 return;
             };
             // A gap marker or forged stamp from elsewhere is relayed as the tick's message:
             // the attack acts on what the agent sent, and the center judges it again.
-            if process::admit_measurement(&m, N, &mut sequence, dt, trace)
-                == process::Admission::Refused
+            if process::admit_measurement(&m, N, sequence, dt, trace) == process::Admission::Refused
             {
-                refused += 1;
+                *refused += 1;
                 return;
             }
             liveness.seen(i, received);
-            let result = match (&mut external, &ports.external) {
+            let result = match (&mut *external, &ports.external) {
                 (Some(x), Some(p)) => {
                     targets[i].next = m.seq + 1;
                     forwarded += 1;
@@ -401,10 +473,23 @@ pub fn run<X: Transport, const N: usize>(
                 failure.get_or_insert(e);
             }
         })?;
-        if let Some(e) = failure.take() {
+        if let Some(e) = failure {
             return Err(e);
         }
-        if let (Some(x), Some(p)) = (&mut external, &ports.external) {
+        Ok((relayed, forwarded))
+    }
+
+    /// Rings the program that takes the attacker role when it was handed measurements, relays
+    /// its answers (and, in realtime, gap markers past its deadline), and rings the center when
+    /// anything went to it.
+    fn pass_on(
+        &mut self,
+        mut relayed: usize,
+        forwarded: usize,
+        trace: &mut TraceWriter,
+    ) -> Result<(), AttackerError> {
+        let ports = self.ports;
+        if let (Some(x), Some(p)) = (&mut self.external, &ports.external) {
             if forwarded > 0 {
                 p.ring(&ports.transport)?;
             }
@@ -414,25 +499,54 @@ pub fn run<X: Transport, const N: usize>(
         if relayed > 0 {
             ports.center.ring()?;
         }
-        if let Some(actuation) = &ports.actuation {
-            refused += relay_torques::<X, N>(&mut targets, actuation, (ticks, dt, s.clock), trace)?;
+        Ok(())
+    }
+
+    /// Relays the torques waiting on the actuation path, when the run attacks some.
+    fn take_torques<const N: usize>(
+        &mut self,
+        trace: &mut TraceWriter,
+    ) -> Result<(), AttackerError> {
+        if let Some(actuation) = &self.ports.actuation {
+            let clock = self.resolved.scenario.clock;
+            self.refused += relay_torques::<X, N>(
+                &mut self.targets,
+                actuation,
+                (self.ticks, self.dt, clock),
+                trace,
+            )?;
         }
+        Ok(())
+    }
+
+    /// Whether relaying is over: every agent finished (and answered, with a program in the
+    /// role) or lost past the run's end. Realtime: marks the agents fallen silent first.
+    fn settled(&mut self) -> bool {
+        let Self {
+            targets,
+            liveness,
+            external,
+            ticks,
+            realtime,
+            end_ns,
+            ..
+        } = self;
+        let (ticks, end_ns) = (*ticks, *end_ns);
         let now = monotonic_ns();
-        if realtime {
+        if *realtime {
             liveness.newly_lost(now, |i| targets[i].next >= ticks);
         }
         // A lost agent may rejoin until the run's wall-clock end: relaying goes on till then.
         let answered = |i: usize| external.as_ref().is_none_or(|x| x.finished(i, ticks));
-        if targets
+        targets
             .iter()
             .enumerate()
             .all(|(i, t)| liveness.settled(i, t.finished(ticks) && answered(i), now, end_ns))
-        {
-            break;
-        }
-        if shutdown.requested() || ports.launcher.stop_requested()? {
-            return Ok(refused);
-        }
+    }
+
+    /// Waits for the next input (or, in realtime with answers due, the earliest deadline).
+    fn wait(&self) -> Result<(), AttackerError> {
+        let ports = self.ports;
         let has_input = || {
             Ok(ports.measurement.has_messages()?
                 || match &ports.actuation {
@@ -444,37 +558,50 @@ pub fn run<X: Transport, const N: usize>(
                     None => false,
                 })
         };
-        match external
+        match self
+            .external
             .as_ref()
             .and_then(|x| x.next_deadline_in(monotonic_ns()))
         {
             // Realtime with answers due: wake at the earliest deadline at the latest.
-            Some(due) if realtime => {
+            Some(due) if self.realtime => {
                 ports
                     .waker
                     .wait_precise(due.min(fdi_runtime::process::LIVENESS_CHECK))?;
             }
             _ => {
-                strategy.wait_for_input(s.clock, &ports.waker, has_input)?;
+                self.strategy.wait_for_input(
+                    self.resolved.scenario.clock,
+                    &ports.waker,
+                    has_input,
+                )?;
             }
         }
+        Ok(())
     }
-    let mut notes = Vec::new();
-    if refused > 0 {
-        notes.push(format!("{refused} measurement messages refused"));
+
+    /// Closes the trace with a note of what was refused and what the program did, and tells
+    /// the launcher. Returns the messages refused.
+    fn finish(self, trace: &mut TraceWriter, shutdown: &Shutdown) -> Result<u64, AttackerError> {
+        let refused = self.refused;
+        let mut notes = Vec::new();
+        if refused > 0 {
+            notes.push(format!("{refused} measurement messages refused"));
+        }
+        if let Some(x) = &self.external {
+            notes.push(x.summary());
+        }
+        let note =
+            (!notes.is_empty()).then(|| (self.resolved.scenario.duration_s, notes.join("; ")));
+        process::finish(
+            trace,
+            note,
+            self.ticks,
+            (&self.ports.launcher, &self.ports.waker),
+            shutdown,
+        )?;
+        Ok(refused)
     }
-    if let Some(x) = &external {
-        notes.push(x.summary());
-    }
-    let note = (!notes.is_empty()).then(|| (s.duration_s, notes.join("; ")));
-    process::finish(
-        trace,
-        note,
-        ticks,
-        (&ports.launcher, &ports.waker),
-        shutdown,
-    )?;
-    Ok(refused)
 }
 
 /// [`run`] with the number of links of the run's agents.

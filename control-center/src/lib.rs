@@ -304,7 +304,7 @@ pub fn run<X: Transport, const N: usize>(
     trace: &mut TraceWriter,
 ) -> Result<u64, CenterError> {
     let s = &resolved.scenario;
-    let mut slots = s
+    let slots = s
         .agents
         .iter()
         .map(|a| {
@@ -313,7 +313,6 @@ pub fn run<X: Transport, const N: usize>(
                 .ok_or(CenterError::Dof(a.id))
         })
         .collect::<Result<Vec<_>, _>>()?;
-    let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
     let epoch_ns = match ports
         .launcher
         .ready_and_wait_start(&ports.waker, shutdown)?
@@ -321,72 +320,17 @@ pub fn run<X: Transport, const N: usize>(
         Start::Go { epoch_ns } => epoch_ns,
         Start::Shutdown => return Ok(0),
     };
-    let ticks = resolved.ticks();
-    let dt = s.control_period_s;
-    let mut reported = 0;
     let strategy = WaitStrategy::for_clock(s.clock);
-    let realtime = s.clock == ClockMode::Realtime;
-    let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
-    let mut intake = Intake::new(&ids, ticks, monotonic_ns().max(epoch_ns));
-    let mut monitor = match (&s.roles.monitor, &ports.monitor) {
-        (Some(role), Some(_)) => Some(Monitor::new(role, &ids, dt, !realtime, epoch_ns)),
-        _ => None,
-    };
-    let mut ready = Vec::new();
+    let mut center = Center::new(resolved, ports, slots, epoch_ns);
     loop {
-        // With a monitor, it is rung whenever measurements came: it taps them too, and in
-        // lockstep the center may be waiting for its verdicts on them.
-        let mut arrived = 0;
-        match (&mut monitor, &ports.monitor) {
-            (Some(mon), Some(mp)) => {
-                arrived = ports.tampered.drain(|m| mon.admit(m, &mut ready))?;
-                mon.take_verdicts(mp, trace, &mut ready)?;
-                for m in ready.drain(..) {
-                    intake.take(&m, &mut slots, ports, dt, trace);
-                }
-            }
-            _ => {
-                ports
-                    .tampered
-                    .drain(|m| intake.take(&m, &mut slots, ports, dt, trace))?;
-            }
-        }
-        if let Some(e) = intake.failure.take() {
-            return Err(e);
-        }
-        let computed = intake.answered.iter().any(|a| *a);
-        ports.ring(&mut intake.answered)?;
-        if let Some(mp) = &ports.monitor {
-            if computed || arrived > 0 {
-                mp.ring(&ports.transport)?;
-            }
-        }
-        let liveness = &mut intake.liveness;
-        for (i, silent, k) in intake.rejoined.drain(..) {
-            announce_rejoined(slots[i].center.agent_id(), silent, k, dt, ports, trace)?;
-        }
-        let now = monotonic_ns();
-        if realtime {
-            declare_lost(&slots, liveness, now, ticks, dt, ports, trace)?;
-        }
-        report_progress(&slots, liveness, &mut reported, ticks, ports)?;
-        // The end once every agent finished, or is lost past the run's wall-clock end (until
-        // then a lost agent may rejoin).
-        let controlled = slots
-            .iter()
-            .enumerate()
-            .all(|(i, x)| liveness.settled(i, x.next >= ticks, now, end_ns));
-        // With a monitor, the end waits for its last verdicts too: in lockstep all of them
-        // (within its timeout), in realtime for its deadline and a little more.
-        let judged = match &mut monitor {
-            None => true,
-            Some(mon) => mon.judged(ticks, controlled)?,
-        };
-        if controlled && judged {
+        let arrived = center.take_measurements(trace)?;
+        center.ring(arrived)?;
+        let now = center.follow_agents(trace)?;
+        if center.done(now)? {
             break;
         }
         if shutdown.requested() || ports.launcher.stop_requested()? {
-            return Ok(intake.refused);
+            return Ok(center.intake.refused);
         }
         strategy.wait_for_input(s.clock, &ports.waker, || {
             Ok(ports.tampered.has_messages()?
@@ -396,31 +340,184 @@ pub fn run<X: Transport, const N: usize>(
                 })
         })?;
     }
-    let (refused, rejected, missing) = (
-        intake.refused,
-        slots.iter().map(|x| x.center.rejected_inputs).sum::<u64>(),
-        slots.iter().map(|x| x.center.missing_inputs).sum::<u64>(),
-    );
-    let mut notes = Vec::new();
-    if refused > 0 || rejected > 0 || missing > 0 {
-        notes.push(format!(
-            "{refused} messages refused, {rejected} measurements rejected as non-finite or \
-             absurd, {missing} ticks without a measurement (gap markers, forged stamps; the last \
-             good one held)"
-        ));
+    center.finish(trace, shutdown)
+}
+
+/// The control center over a run: an agent controller per agent, the intake, the monitor (if
+/// any) and the run's timing.
+struct Center<'a, X: Transport, const N: usize> {
+    resolved: &'a Resolved,
+    ports: &'a Ports<X>,
+    slots: Vec<Slot<N>>,
+    intake: Intake,
+    monitor: Option<Monitor>,
+    /// Measurements the monitor let through, to be controlled.
+    ready: Vec<MeasurementMsg>,
+    /// The tick last reported to the launcher.
+    reported: u64,
+    ticks: u64,
+    dt: f64,
+    realtime: bool,
+    end_ns: u64,
+}
+
+impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
+    /// The state of a run started at `epoch_ns`.
+    fn new(
+        resolved: &'a Resolved,
+        ports: &'a Ports<X>,
+        slots: Vec<Slot<N>>,
+        epoch_ns: u64,
+    ) -> Self {
+        let s = &resolved.scenario;
+        let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
+        let ticks = resolved.ticks();
+        let dt = s.control_period_s;
+        let realtime = s.clock == ClockMode::Realtime;
+        let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
+        let intake = Intake::new(&ids, ticks, monotonic_ns().max(epoch_ns));
+        let monitor = match (&s.roles.monitor, &ports.monitor) {
+            (Some(role), Some(_)) => Some(Monitor::new(role, &ids, dt, !realtime, epoch_ns)),
+            _ => None,
+        };
+        Self {
+            resolved,
+            ports,
+            slots,
+            intake,
+            monitor,
+            ready: Vec::new(),
+            reported: 0,
+            ticks,
+            dt,
+            realtime,
+            end_ns,
+        }
     }
-    if let Some(mon) = &monitor {
-        notes.push(mon.summary(ticks));
+
+    /// Takes every measurement waiting (through the monitor, when there is one) and controls
+    /// its agent. Returns how many measurements the monitor was handed.
+    fn take_measurements(&mut self, trace: &mut TraceWriter) -> Result<usize, CenterError> {
+        let Self {
+            ports,
+            slots,
+            intake,
+            monitor,
+            ready,
+            dt,
+            ..
+        } = self;
+        let (ports, dt) = (*ports, *dt);
+        // With a monitor, it is rung whenever measurements came: it taps them too, and in
+        // lockstep the center may be waiting for its verdicts on them.
+        let mut arrived = 0;
+        match (monitor, &ports.monitor) {
+            (Some(mon), Some(mp)) => {
+                arrived = ports.tampered.drain(|m| mon.admit(m, ready))?;
+                mon.take_verdicts(mp, trace, ready)?;
+                for m in ready.drain(..) {
+                    intake.take(&m, slots, ports, dt, trace);
+                }
+            }
+            _ => {
+                ports
+                    .tampered
+                    .drain(|m| intake.take(&m, slots, ports, dt, trace))?;
+            }
+        }
+        if let Some(e) = intake.failure.take() {
+            return Err(e);
+        }
+        Ok(arrived)
     }
-    let note = (!notes.is_empty()).then(|| (s.duration_s, notes.join("; ")));
-    process::finish(
-        trace,
-        note,
-        ticks,
-        (&ports.launcher, &ports.waker),
-        shutdown,
-    )?;
-    Ok(refused)
+
+    /// Rings every agent that got a torque, and the monitor when measurements came (`arrived`)
+    /// or torques went.
+    fn ring(&mut self, arrived: usize) -> Result<(), CenterError> {
+        let ports = self.ports;
+        let computed = self.intake.answered.iter().any(|a| *a);
+        ports.ring(&mut self.intake.answered)?;
+        if let Some(mp) = &ports.monitor {
+            if computed || arrived > 0 {
+                mp.ring(&ports.transport)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Announces the agents that rejoined, declares the agents fallen silent lost (realtime)
+    /// and reports progress. Returns the time it looked at the agents.
+    fn follow_agents(&mut self, trace: &mut TraceWriter) -> Result<u64, CenterError> {
+        let (ports, dt, ticks) = (self.ports, self.dt, self.ticks);
+        let slots = &self.slots;
+        let liveness = &mut self.intake.liveness;
+        for (i, silent, k) in self.intake.rejoined.drain(..) {
+            announce_rejoined(slots[i].center.agent_id(), silent, k, dt, ports, trace)?;
+        }
+        let now = monotonic_ns();
+        if self.realtime {
+            declare_lost(slots, liveness, now, ticks, dt, ports, trace)?;
+        }
+        report_progress(slots, liveness, &mut self.reported, ticks, ports)?;
+        Ok(now)
+    }
+
+    /// Whether the run is over: every agent finished, or is lost past the run's wall-clock
+    /// end (until then a lost agent may rejoin), and the monitor gave its last verdicts.
+    fn done(&mut self, now: u64) -> Result<bool, CenterError> {
+        let (ticks, end_ns) = (self.ticks, self.end_ns);
+        let liveness = &self.intake.liveness;
+        let controlled = self
+            .slots
+            .iter()
+            .enumerate()
+            .all(|(i, x)| liveness.settled(i, x.next >= ticks, now, end_ns));
+        // With a monitor, the end waits for its last verdicts too: in lockstep all of them
+        // (within its timeout), in realtime for its deadline and a little more.
+        let judged = match &mut self.monitor {
+            None => true,
+            Some(mon) => mon.judged(ticks, controlled)?,
+        };
+        Ok(controlled && judged)
+    }
+
+    /// Closes the trace with a note of what was refused, rejected or missing and what the
+    /// monitor did, and tells the launcher. Returns the messages refused.
+    fn finish(self, trace: &mut TraceWriter, shutdown: &Shutdown) -> Result<u64, CenterError> {
+        let ticks = self.ticks;
+        let (refused, rejected, missing) = (
+            self.intake.refused,
+            self.slots
+                .iter()
+                .map(|x| x.center.rejected_inputs)
+                .sum::<u64>(),
+            self.slots
+                .iter()
+                .map(|x| x.center.missing_inputs)
+                .sum::<u64>(),
+        );
+        let mut notes = Vec::new();
+        if refused > 0 || rejected > 0 || missing > 0 {
+            notes.push(format!(
+                "{refused} messages refused, {rejected} measurements rejected as non-finite or \
+                 absurd, {missing} ticks without a measurement (gap markers, forged stamps; the last \
+                 good one held)"
+            ));
+        }
+        if let Some(mon) = &self.monitor {
+            notes.push(mon.summary(ticks));
+        }
+        let note =
+            (!notes.is_empty()).then(|| (self.resolved.scenario.duration_s, notes.join("; ")));
+        process::finish(
+            trace,
+            note,
+            ticks,
+            (&self.ports.launcher, &self.ports.waker),
+            shutdown,
+        )?;
+        Ok(refused)
+    }
 }
 
 /// [`run`] with the number of links of the run's agents.

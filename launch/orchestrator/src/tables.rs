@@ -756,6 +756,7 @@ mod seeded {
         paper_proposed: Option<f64>,
     }
 
+    /// Table I over seeds: each robot's RMSE, traditional and proposed, over `n` seeds.
     pub fn table1(
         args: &TableArgs,
         paper: &Resolved,
@@ -765,84 +766,13 @@ mod seeded {
         stop: &Stop,
     ) -> Result<ExitCode> {
         let seeds = seeds(paper.scenario.seed, n)?;
-        let modes = [ControllerMode::Traditional, ControllerMode::Proposed];
-        let mut cases = Vec::new();
-        for mode in modes {
-            for &seed in &seeds {
-                let mut r = with_seed(paper, seed);
-                r.scenario.controller.mode = mode;
-                cases.push((r, format!("{}-seed{seed}", mode.as_str())));
-            }
-        }
+        let cases = cases1(paper, &seeds);
         let summaries = run_all(args, dir, &cases, stop)?;
         let (trad, prop) = summaries.split_at(seeds.len());
-        let mut rows = Vec::new();
-        for robot in robots(paper) {
-            let rmse = |runs: &[RunSummary]| -> Vec<f64> {
-                runs.iter().map(|s| robot_rmse(s, robot)).collect()
-            };
-            let values = paper_table1(paper, robot);
-            let (pt, pp) = (values.map(|v| v.0), values.map(|v| v.1));
-            rows.push(Row1 {
-                robot,
-                traditional_rmse_rad: CellStats::of(
-                    &rmse(trad),
-                    &format!("robot {robot}, traditional"),
-                )?,
-                proposed_rmse_rad: CellStats::of(&rmse(prop), &format!("robot {robot}, proposed"))?,
-                paper_traditional: pt,
-                paper_proposed: pp,
-            });
-        }
+        let rows = rows1(paper, trad, prop)?;
         let over = describe_seeds(&seeds);
-        let mut md = format!(
-            "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
-            table1_title(args.engine),
-            made.md()
-        );
-        md.push_str(&md_table_head(&[
-            "robot",
-            "traditional",
-            "proposed",
-            "ratio of means",
-            "paper traditional",
-            "paper proposed",
-            "paper ratio",
-        ]));
-        for r in &rows {
-            let _ = writeln!(
-                md,
-                "| {} | {} | {} | {:.2} | {} | {} | {} |",
-                r.robot,
-                r.traditional_rmse_rad.md(),
-                r.proposed_rmse_rad.md(),
-                r.traditional_rmse_rad.mean / r.proposed_rmse_rad.mean,
-                or_dash(r.paper_traditional, 3),
-                or_dash(r.paper_proposed, 3),
-                or_dash(ratio(r.paper_traditional, r.paper_proposed), 2)
-            );
-        }
-        let mut header = vec!["robot".to_string()];
-        for what in ["traditional_rmse_rad", "proposed_rmse_rad"] {
-            header.extend(STAT_COLUMNS.iter().map(|c| format!("{what}_{c}")));
-        }
-        header.extend([
-            "paper_traditional_rmse_rad".into(),
-            "paper_proposed_rmse_rad".into(),
-        ]);
-        let header: Vec<&str> = header.iter().map(String::as_str).collect();
-        let csv = csv_bytes(
-            &header,
-            rows.iter().map(|r| {
-                let mut rec = vec![r.robot.to_string()];
-                rec.extend(r.traditional_rmse_rad.csv());
-                rec.extend(r.proposed_rmse_rad.csv());
-                rec.push(or_empty(r.paper_traditional));
-                rec.push(or_empty(r.paper_proposed));
-                rec
-            }),
-        )
-        .context("writing table1.csv")?;
+        let md = markdown1(args.engine, made, &over, n, &rows);
+        let csv = csv1(&rows)?;
         let plain: Vec<Table1Row> = rows
             .iter()
             .map(|r| Table1Row {
@@ -865,6 +795,100 @@ mod seeded {
         )
     }
 
+    /// The runs of Table I: every seed in traditional mode, then every seed in proposed mode.
+    fn cases1(paper: &Resolved, seeds: &[u64]) -> Vec<(Resolved, String)> {
+        let modes = [ControllerMode::Traditional, ControllerMode::Proposed];
+        let mut cases = Vec::new();
+        for mode in modes {
+            for &seed in seeds {
+                let mut r = with_seed(paper, seed);
+                r.scenario.controller.mode = mode;
+                cases.push((r, format!("{}-seed{seed}", mode.as_str())));
+            }
+        }
+        cases
+    }
+
+    /// A row of Table I per robot: its RMSE over the traditional and the proposed runs.
+    fn rows1(paper: &Resolved, trad: &[RunSummary], prop: &[RunSummary]) -> Result<Vec<Row1>> {
+        let mut rows = Vec::new();
+        for robot in robots(paper) {
+            let rmse = |runs: &[RunSummary]| -> Vec<f64> {
+                runs.iter().map(|s| robot_rmse(s, robot)).collect()
+            };
+            let values = paper_table1(paper, robot);
+            let (pt, pp) = (values.map(|v| v.0), values.map(|v| v.1));
+            rows.push(Row1 {
+                robot,
+                traditional_rmse_rad: CellStats::of(
+                    &rmse(trad),
+                    &format!("robot {robot}, traditional"),
+                )?,
+                proposed_rmse_rad: CellStats::of(&rmse(prop), &format!("robot {robot}, proposed"))?,
+                paper_traditional: pt,
+                paper_proposed: pp,
+            });
+        }
+        Ok(rows)
+    }
+
+    /// `table1.md` over seeds (`over`, as words; `n` of them).
+    fn markdown1(engine: Engine, made: &MadeWith, over: &str, n: u32, rows: &[Row1]) -> String {
+        let mut md = format!(
+            "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
+            table1_title(engine),
+            made.md()
+        );
+        md.push_str(&md_table_head(&[
+            "robot",
+            "traditional",
+            "proposed",
+            "ratio of means",
+            "paper traditional",
+            "paper proposed",
+            "paper ratio",
+        ]));
+        for r in rows {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {:.2} | {} | {} | {} |",
+                r.robot,
+                r.traditional_rmse_rad.md(),
+                r.proposed_rmse_rad.md(),
+                r.traditional_rmse_rad.mean / r.proposed_rmse_rad.mean,
+                or_dash(r.paper_traditional, 3),
+                or_dash(r.paper_proposed, 3),
+                or_dash(ratio(r.paper_traditional, r.paper_proposed), 2)
+            );
+        }
+        md
+    }
+
+    /// `table1.csv` over seeds: the statistics of each cell in columns of their own.
+    fn csv1(rows: &[Row1]) -> Result<Vec<u8>> {
+        let mut header = vec!["robot".to_string()];
+        for what in ["traditional_rmse_rad", "proposed_rmse_rad"] {
+            header.extend(STAT_COLUMNS.iter().map(|c| format!("{what}_{c}")));
+        }
+        header.extend([
+            "paper_traditional_rmse_rad".into(),
+            "paper_proposed_rmse_rad".into(),
+        ]);
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
+        csv_bytes(
+            &header,
+            rows.iter().map(|r| {
+                let mut rec = vec![r.robot.to_string()];
+                rec.extend(r.traditional_rmse_rad.csv());
+                rec.extend(r.proposed_rmse_rad.csv());
+                rec.push(or_empty(r.paper_traditional));
+                rec.push(or_empty(r.paper_proposed));
+                rec
+            }),
+        )
+        .context("writing table1.csv")
+    }
+
     #[derive(Debug, Serialize)]
     struct Row2 {
         case: &'static str,
@@ -873,6 +897,8 @@ mod seeded {
         paper_rmse_rad: Option<f64>,
     }
 
+    /// Table II over seeds: robot 1's RMSE under each of the paper's delay cases, over `n`
+    /// seeds.
     pub fn table2(
         args: &TableArgs,
         paper: &Resolved,
@@ -891,55 +917,10 @@ mod seeded {
             }
         }
         let summaries = run_all(args, dir, &cases, stop)?;
-        let mut rows = Vec::new();
-        for ((case, delay, paper_rmse), runs) in paper_table2()
-            .into_iter()
-            .zip(summaries.chunks(seeds.len()))
-        {
-            let rmse: Vec<f64> = runs.iter().map(|s| robot_rmse(s, 1)).collect();
-            rows.push(Row2 {
-                case,
-                tau_ms: delay.describe_ms(),
-                rmse_rad: CellStats::of(&rmse, case)?,
-                paper_rmse_rad: compare.then_some(paper_rmse),
-            });
-        }
+        let rows = rows2(&summaries, seeds.len(), compare)?;
         let over = describe_seeds(&seeds);
-        let mut md = format!(
-            "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
-            table2_title(args.engine),
-            made.md()
-        );
-        md.push_str(&md_table_head(&[
-            "case",
-            "tau(t) (ms)",
-            "RMSE",
-            "paper RMSE",
-        ]));
-        for r in &rows {
-            let _ = writeln!(
-                md,
-                "| {} | {} | {} | {} |",
-                r.case,
-                r.tau_ms,
-                r.rmse_rad.md(),
-                or_dash(r.paper_rmse_rad, 4)
-            );
-        }
-        let mut header = vec!["case".to_string(), "tau_ms".into()];
-        header.extend(STAT_COLUMNS.iter().map(|c| format!("rmse_rad_{c}")));
-        header.push("paper_rmse_rad".into());
-        let header: Vec<&str> = header.iter().map(String::as_str).collect();
-        let csv = csv_bytes(
-            &header,
-            rows.iter().map(|r| {
-                let mut rec = vec![r.case.to_string(), r.tau_ms.clone()];
-                rec.extend(r.rmse_rad.csv());
-                rec.push(or_empty(r.paper_rmse_rad));
-                rec
-            }),
-        )
-        .context("writing table2.csv")?;
+        let md = markdown2(args.engine, made, &over, n, &rows);
+        let csv = csv2(&rows)?;
         let plain: Vec<Table2Row> = rows
             .iter()
             .map(|r| Table2Row {
@@ -959,6 +940,68 @@ mod seeded {
             (&over, &seeds),
             &rows,
         )
+    }
+
+    /// A row of Table II per delay case: robot 1's RMSE over the case's runs (`per_case` of
+    /// them, in the order of the cases), with the paper's value when `compare`.
+    fn rows2(summaries: &[RunSummary], per_case: usize, compare: bool) -> Result<Vec<Row2>> {
+        let mut rows = Vec::new();
+        for ((case, delay, paper_rmse), runs) in
+            paper_table2().into_iter().zip(summaries.chunks(per_case))
+        {
+            let rmse: Vec<f64> = runs.iter().map(|s| robot_rmse(s, 1)).collect();
+            rows.push(Row2 {
+                case,
+                tau_ms: delay.describe_ms(),
+                rmse_rad: CellStats::of(&rmse, case)?,
+                paper_rmse_rad: compare.then_some(paper_rmse),
+            });
+        }
+        Ok(rows)
+    }
+
+    /// `table2.md` over seeds (`over`, as words; `n` of them).
+    fn markdown2(engine: Engine, made: &MadeWith, over: &str, n: u32, rows: &[Row2]) -> String {
+        let mut md = format!(
+            "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
+            table2_title(engine),
+            made.md()
+        );
+        md.push_str(&md_table_head(&[
+            "case",
+            "tau(t) (ms)",
+            "RMSE",
+            "paper RMSE",
+        ]));
+        for r in rows {
+            let _ = writeln!(
+                md,
+                "| {} | {} | {} | {} |",
+                r.case,
+                r.tau_ms,
+                r.rmse_rad.md(),
+                or_dash(r.paper_rmse_rad, 4)
+            );
+        }
+        md
+    }
+
+    /// `table2.csv` over seeds: the statistics of each cell in columns of their own.
+    fn csv2(rows: &[Row2]) -> Result<Vec<u8>> {
+        let mut header = vec!["case".to_string(), "tau_ms".into()];
+        header.extend(STAT_COLUMNS.iter().map(|c| format!("rmse_rad_{c}")));
+        header.push("paper_rmse_rad".into());
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
+        csv_bytes(
+            &header,
+            rows.iter().map(|r| {
+                let mut rec = vec![r.case.to_string(), r.tau_ms.clone()];
+                rec.extend(r.rmse_rad.csv());
+                rec.push(or_empty(r.paper_rmse_rad));
+                rec
+            }),
+        )
+        .context("writing table2.csv")
     }
 
     /// Writes and prints a seeded table: its chart titled with the seeds (`over`, as words),

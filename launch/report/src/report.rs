@@ -91,13 +91,44 @@ pub const FIGURES: [(&str, &str); 6] = [
 /// `fdi-launch report RUN_DIR`: joins the traces again and recomputes the summary; the engine
 /// and the wall time, which the traces do not hold, come from `summary.json` when it is there.
 pub fn report(run_dir: &Path, stop: &Stop) -> Result<()> {
-    let report_interrupted = || interrupted(stop);
     let scenario_path = RunDir::new(run_dir).scenario();
     let resolved = scenario::load_file(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
     let mut warnings = Vec::new();
     let summary_path = RunDir::new(run_dir).summary();
-    let stored = match std::fs::read_to_string(&summary_path) {
+    let stored = read_stored_summary(&summary_path, &mut warnings);
+    let kept = crate::traces::recorded(run_dir)?;
+    if kept != Recorded::Full {
+        // Decimated or no traces: only the run's summary covers every tick.
+        let Some(s) = stored else {
+            bail!(
+                "{}: needed: the traces of run {} do not hold every tick ({}), so only its summary has the run's metrics",
+                summary_path.display(),
+                run_dir.display(),
+                kept_words(kept)
+            );
+        };
+        let (series, joined) = gather(run_dir, &resolved, kept, stop)?;
+        warnings.extend(joined);
+        let gathered = Gathered {
+            series,
+            warnings: &warnings,
+            kept,
+        };
+        return write_and_name(run_dir, (&resolved, &s), gathered, stop);
+    }
+    let (series, summary) = rejoin(run_dir, &resolved, stored.as_ref(), &mut warnings, stop)?;
+    let gathered = Gathered {
+        series,
+        warnings: &warnings,
+        kept,
+    };
+    write_and_name(run_dir, (&resolved, &summary), gathered, stop)
+}
+
+/// The run's `summary.json`, if it can be read; why not is pushed onto `warnings`.
+fn read_stored_summary(summary_path: &Path, warnings: &mut Vec<String>) -> Option<RunSummary> {
+    match std::fs::read_to_string(summary_path) {
         Ok(text) => match serde_json::from_str::<RunSummary>(&text) {
             Ok(s) => Some(s),
             Err(e) => {
@@ -128,47 +159,30 @@ pub fn report(run_dir: &Path, stop: &Stop) -> Result<()> {
             ));
             None
         }
-    };
-    let kept = crate::traces::recorded(run_dir)?;
-    if kept != Recorded::Full {
-        // Decimated or no traces: only the run's summary covers every tick.
-        let Some(s) = stored else {
-            bail!(
-                "{}: needed: the traces of run {} do not hold every tick ({}), so only its summary has the run's metrics",
-                summary_path.display(),
-                run_dir.display(),
-                kept_words(kept)
-            );
-        };
-        let (series, joined) = gather(run_dir, &resolved, kept, stop)?;
-        warnings.extend(joined);
-        for w in &warnings {
-            eprintln!("fdi-launch: warning: {w}");
-        }
-        let md = write(
-            run_dir,
-            (&resolved, &s),
-            Gathered {
-                series,
-                warnings: &warnings,
-                kept,
-            },
-            stop,
-        )?;
-        println!("report {}", md.display());
-        return Ok(());
     }
-    let mut series = RunSeries::new(&resolved);
+}
+
+/// Joins a run's full traces again: the figures' series and the summary recomputed, with
+/// what only the stored summary knows (engine, placement, hosts, lost robots, early end).
+fn rejoin(
+    run_dir: &Path,
+    resolved: &Resolved,
+    stored: Option<&RunSummary>,
+    warnings: &mut Vec<String>,
+    stop: &Stop,
+) -> Result<(RunSeries, RunSummary)> {
+    let report_interrupted = || interrupted(stop);
+    let mut series = RunSeries::new(resolved);
     let joined = join::join_run_until(
-        &resolved,
+        resolved,
         run_dir,
-        stored.as_ref().map_or(f64::NAN, |s| s.wall_s),
+        stored.map_or(f64::NAN, |s| s.wall_s),
         |r| series.push(r),
         report_interrupted,
     )?;
     warnings.extend(joined.warnings);
     let mut summary = joined.summary;
-    match &stored {
+    match stored {
         Some(s) => {
             summary.engine.clone_from(&s.engine);
             summary.placement.clone_from(&s.placement);
@@ -185,19 +199,20 @@ pub fn report(run_dir: &Path, stop: &Stop) -> Result<()> {
         }
         None => summary.engine = "unknown".into(),
     }
-    for w in &warnings {
+    Ok((series, summary))
+}
+
+/// Prints the report's warnings, writes it, and names its `report.md`.
+fn write_and_name(
+    run_dir: &Path,
+    run: (&Resolved, &RunSummary),
+    gathered: Gathered<'_>,
+    stop: &Stop,
+) -> Result<()> {
+    for w in gathered.warnings {
         eprintln!("fdi-launch: warning: {w}");
     }
-    let md = write(
-        run_dir,
-        (&resolved, &summary),
-        Gathered {
-            series,
-            warnings: &warnings,
-            kept,
-        },
-        stop,
-    )?;
+    let md = write(run_dir, run, gathered, stop)?;
     println!("report {}", md.display());
     Ok(())
 }

@@ -146,105 +146,136 @@ fn number(v: &toml::Value, what: &str) -> Result<f64> {
 /// of more values than a campaign may run is refused before any is made, whatever the count
 /// (a step of 1e-300, a span beyond the largest float).
 fn range_values(r: &RangeFile, at: &dyn Fn(&str) -> String) -> Result<Vec<toml::Value>> {
-    let too_many = |n: String| {
-        anyhow::anyhow!(
-            "{}: {n} values, more than the {MAX_RUNS} runs a campaign may hold",
-            at("")
-        )
-    };
     match (&r.step, r.count) {
-        (Some(step), None) => {
-            if let (toml::Value::Integer(a), toml::Value::Integer(b), toml::Value::Integer(d)) =
-                (&r.start, &r.stop, step)
-            {
-                let (a, b, d) = (i128::from(*a), i128::from(*b), i128::from(*d));
-                if d == 0 || (b - a) * d.signum() < 0 {
-                    bail!("{}: step {d} never goes from {a} to {b}", at("step"));
-                }
-                let n = (b - a) / d + 1;
-                if n > MAX_RUNS as i128 {
-                    return Err(too_many(n.to_string()));
-                }
-                return integer_values((0..n).map(|i| a + i * d), at(""));
-            }
-            let start = number(&r.start, &at("start"))?;
-            let stop = number(&r.stop, &at("stop"))?;
-            let step = number(step, &at("step"))?;
-            if step == 0.0 || (stop - start) * step < 0.0 {
-                bail!(
-                    "{}: step {step} never goes from {start} to {stop}",
-                    at("step")
-                );
-            }
-            // The number of steps; beyond the largest float the span is divided piecewise.
-            let span = stop - start;
-            let steps = if span.is_finite() {
-                span / step
-            } else {
-                stop / step - start / step
-            };
-            let n = (steps + 1e-9).floor() + 1.0;
-            if n.is_nan() || n > MAX_RUNS as f64 {
-                return Err(too_many(if n.is_finite() {
-                    format!("about {n:.1e}")
-                } else {
-                    "more than 10^308".into()
-                }));
-            }
-            // n ≤ MAX_RUNS: exact as an integer.
-            let n = n as usize;
-            finite_values(
-                (0..n).map(|i| {
-                    if span.is_finite() {
-                        start + i as f64 * step
-                    } else {
-                        // i · step may pass the largest float where the value does not.
-                        2.0 * (start / 2.0 + i as f64 * (step / 2.0))
-                    }
-                }),
-                at(""),
-            )
-        }
-        (None, Some(count)) => {
-            if count == 0 || count > MAX_RUNS {
-                bail!(
-                    "{}: must be between 1 and {MAX_RUNS}, not {count}",
-                    at("count")
-                );
-            }
-            if let (toml::Value::Integer(a), toml::Value::Integer(b)) = (&r.start, &r.stop) {
-                let (a, b) = (i128::from(*a), i128::from(*b));
-                let gaps = count as i128 - 1;
-                if gaps == 0 || (b - a) % gaps == 0 {
-                    let d = if gaps == 0 { 0 } else { (b - a) / gaps };
-                    return integer_values((0..count as i128).map(|i| a + i * d), at(""));
-                }
-            }
-            let start = number(&r.start, &at("start"))?;
-            let stop = number(&r.stop, &at("stop"))?;
-            let span = stop - start;
-            finite_values(
-                (0..count).map(|i| {
-                    let t = i as f64 / (count.max(2) - 1) as f64;
-                    if count == 1 {
-                        start
-                    } else if i + 1 == count {
-                        stop
-                    } else if span.is_finite() {
-                        start + span * t
-                    } else {
-                        // The span is beyond the largest float: weigh the ends instead.
-                        start * (1.0 - t) + stop * t
-                    }
-                }),
-                at(""),
-            )
-        }
+        (Some(step), None) => range_by_step(r, step, at),
+        (None, Some(count)) => range_by_count(r, count, at),
         _ => bail!(
             "{}: takes exactly one of `step` and `count` beside `start` and `stop`",
             at("")
         ),
     }
+}
+
+/// The refusal of a range of `n` values, more than a campaign may run.
+fn too_many(at: &dyn Fn(&str) -> String, n: String) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{}: {n} values, more than the {MAX_RUNS} runs a campaign may hold",
+        at("")
+    )
+}
+
+/// The values of a range given by `step`: integers when `start`, `stop` and `step` are all
+/// integers, floats otherwise.
+fn range_by_step(
+    r: &RangeFile,
+    step: &toml::Value,
+    at: &dyn Fn(&str) -> String,
+) -> Result<Vec<toml::Value>> {
+    if let (toml::Value::Integer(a), toml::Value::Integer(b), toml::Value::Integer(d)) =
+        (&r.start, &r.stop, step)
+    {
+        let (a, b, d) = (i128::from(*a), i128::from(*b), i128::from(*d));
+        if d == 0 || (b - a) * d.signum() < 0 {
+            bail!("{}: step {d} never goes from {a} to {b}", at("step"));
+        }
+        let n = (b - a) / d + 1;
+        if n > MAX_RUNS as i128 {
+            return Err(too_many(at, n.to_string()));
+        }
+        return integer_values((0..n).map(|i| a + i * d), at(""));
+    }
+    float_range_by_step(r, step, at)
+}
+
+/// The values of a range of floats given by `step`; a span beyond the largest float is
+/// stepped through piecewise.
+fn float_range_by_step(
+    r: &RangeFile,
+    step: &toml::Value,
+    at: &dyn Fn(&str) -> String,
+) -> Result<Vec<toml::Value>> {
+    let start = number(&r.start, &at("start"))?;
+    let stop = number(&r.stop, &at("stop"))?;
+    let step = number(step, &at("step"))?;
+    if step == 0.0 || (stop - start) * step < 0.0 {
+        bail!(
+            "{}: step {step} never goes from {start} to {stop}",
+            at("step")
+        );
+    }
+    // The number of steps; beyond the largest float the span is divided piecewise.
+    let span = stop - start;
+    let steps = if span.is_finite() {
+        span / step
+    } else {
+        stop / step - start / step
+    };
+    let n = (steps + 1e-9).floor() + 1.0;
+    if n.is_nan() || n > MAX_RUNS as f64 {
+        return Err(too_many(
+            at,
+            if n.is_finite() {
+                format!("about {n:.1e}")
+            } else {
+                "more than 10^308".into()
+            },
+        ));
+    }
+    // n ≤ MAX_RUNS: exact as an integer.
+    let n = n as usize;
+    finite_values(
+        (0..n).map(|i| {
+            if span.is_finite() {
+                start + i as f64 * step
+            } else {
+                // i · step may pass the largest float where the value does not.
+                2.0 * (start / 2.0 + i as f64 * (step / 2.0))
+            }
+        }),
+        at(""),
+    )
+}
+
+/// The `count` values of a range from `start` to `stop`: integers when the ends are integers
+/// an integer step apart, floats otherwise.
+fn range_by_count(
+    r: &RangeFile,
+    count: usize,
+    at: &dyn Fn(&str) -> String,
+) -> Result<Vec<toml::Value>> {
+    if count == 0 || count > MAX_RUNS {
+        bail!(
+            "{}: must be between 1 and {MAX_RUNS}, not {count}",
+            at("count")
+        );
+    }
+    if let (toml::Value::Integer(a), toml::Value::Integer(b)) = (&r.start, &r.stop) {
+        let (a, b) = (i128::from(*a), i128::from(*b));
+        let gaps = count as i128 - 1;
+        if gaps == 0 || (b - a) % gaps == 0 {
+            let d = if gaps == 0 { 0 } else { (b - a) / gaps };
+            return integer_values((0..count as i128).map(|i| a + i * d), at(""));
+        }
+    }
+    let start = number(&r.start, &at("start"))?;
+    let stop = number(&r.stop, &at("stop"))?;
+    let span = stop - start;
+    finite_values(
+        (0..count).map(|i| {
+            let t = i as f64 / (count.max(2) - 1) as f64;
+            if count == 1 {
+                start
+            } else if i + 1 == count {
+                stop
+            } else if span.is_finite() {
+                start + span * t
+            } else {
+                // The span is beyond the largest float: weigh the ends instead.
+                start * (1.0 - t) + stop * t
+            }
+        }),
+        at(""),
+    )
 }
 
 /// The values as integers of TOML (64-bit), or an error naming `at`.
@@ -527,6 +558,8 @@ fn run_key(r: &Resolved, engine: Engine) -> String {
     h.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }
 
+/// Reads the campaign file and expands it into its points and runs, each run's scenario
+/// resolved and keyed.
 fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
     let name_of = campaign.display().to_string();
     let text = scenario::read_limited(campaign).map_err(anyhow::Error::msg)?;
@@ -541,8 +574,49 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
             src.at("name")
         );
     }
+    let (base_text, base_name, base_dir) = read_base(campaign, &file)?;
+    let base = scenario::load_str(&base_text, &base_name, base_dir.as_deref())?;
+    let mut doc: toml::Table =
+        toml::from_str(&base_text).with_context(|| format!("{base_name}: not a TOML document"))?;
+    let axes = resolve_axes(&file, &src)?;
+    let set = parse_set(&file, &src)?;
+    refuse_set_under_axes(&set, &axes, &src)?;
+    apply_set(&mut doc, &set, &axes, &base, &src)?;
+    let seed_axis = axes.iter().find(|a| a.is_seed()).cloned();
+    let others: Vec<&Axis> = axes.iter().filter(|a| !a.is_seed()).collect();
+    let combos = combinations(&others, file.mode)?;
+    let seeds = seed_axis.as_ref().map_or(1, |a| a.values.len());
+    if combos.len().saturating_mul(seeds) > MAX_RUNS {
+        bail!("{} runs, more than {MAX_RUNS}", combos.len() * seeds);
+    }
+    let expansion = Expansion {
+        doc: &doc,
+        others: &others,
+        seed_axis: seed_axis.as_ref(),
+        name: &name_of,
+        base_dir: base_dir.as_deref(),
+        engine,
+    };
+    let mut points = Vec::new();
+    let mut jobs = Vec::new();
+    for (pi, combo) in combos.iter().enumerate() {
+        points.push(expansion.point(pi, combo, &mut jobs)?);
+    }
+    Ok(Plan {
+        name: file.name,
+        axes,
+        points,
+        jobs,
+        seeds,
+        plots: file.plots,
+    })
+}
+
+/// The base scenario of a campaign: its text, its name for messages and its folder (the
+/// embedded paper scenario when the campaign names none).
+fn read_base(campaign: &Path, file: &CampaignFile) -> Result<(String, String, Option<PathBuf>)> {
     let file_dir = campaign.parent().unwrap_or(Path::new(""));
-    let (base_text, base_name, base_dir) = match &file.scenario {
+    Ok(match &file.scenario {
         Some(p) => {
             let path = file_dir.join(p);
             (
@@ -556,13 +630,12 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
             "<embedded paper scenario>".to_string(),
             None,
         ),
-    };
-    let base = scenario::load_str(&base_text, &base_name, base_dir.as_deref())?;
-    let mut doc: toml::Table =
-        toml::from_str(&base_text).with_context(|| format!("{base_name}: not a TOML document"))?;
-    let axes = resolve_axes(&file, &src)?;
-    let set: Vec<(FieldPath, toml::Value)> = file
-        .set
+    })
+}
+
+/// The edits of the campaign's `[set]`, each path parsed.
+fn parse_set(file: &CampaignFile, src: &Source) -> Result<Vec<(FieldPath, toml::Value)>> {
+    file.set
         .iter()
         .map(|(k, v)| {
             Ok((
@@ -570,8 +643,18 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
                 v.clone(),
             ))
         })
-        .collect::<Result<_>>()?;
-    refuse_set_under_axes(&set, &axes, &src)?;
+        .collect::<Result<_>>()
+}
+
+/// Applies `[set]` to the base document, with the base attack written inline first when `[set]`
+/// or an axis edits the attack's profile.
+fn apply_set(
+    doc: &mut toml::Table,
+    set: &[(FieldPath, toml::Value)],
+    axes: &[Axis],
+    base: &Resolved,
+    src: &Source,
+) -> Result<()> {
     let touches_attack = set.iter().any(|(p, _)| p.is_in_attack_profile())
         || axes
             .iter()
@@ -586,22 +669,31 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
         );
         doc.insert("attack".into(), toml::Value::Table(attack));
     }
-    for (p, v) in &set {
-        p.set(&mut doc, v).with_context(|| src.at("set"))?;
+    for (p, v) in set {
+        p.set(doc, v).with_context(|| src.at("set"))?;
     }
-    let seed_axis = axes.iter().find(|a| a.is_seed()).cloned();
-    let others: Vec<&Axis> = axes.iter().filter(|a| !a.is_seed()).collect();
-    let combos = combinations(&others, file.mode)?;
-    let seeds = seed_axis.as_ref().map_or(1, |a| a.values.len());
-    if combos.len().saturating_mul(seeds) > MAX_RUNS {
-        bail!("{} runs, more than {MAX_RUNS}", combos.len() * seeds);
-    }
-    let mut points = Vec::new();
-    let mut jobs = Vec::new();
-    for (pi, combo) in combos.iter().enumerate() {
-        let mut point_doc = doc.clone();
+    Ok(())
+}
+
+/// What the points and runs of a campaign are made from: the base document (`[set]` applied),
+/// the axes other than the seed, the seed axis, and what each run's scenario is loaded with.
+struct Expansion<'a> {
+    doc: &'a toml::Table,
+    others: &'a [&'a Axis],
+    seed_axis: Option<&'a Axis>,
+    /// The campaign file's name, for messages.
+    name: &'a str,
+    base_dir: Option<&'a Path>,
+    engine: Engine,
+}
+
+impl Expansion<'_> {
+    /// Point `pi` (the combination `combo` of the other axes); its runs, one per seed, are
+    /// pushed onto `jobs`.
+    fn point(&self, pi: usize, combo: &[usize], jobs: &mut Vec<Job>) -> Result<Point> {
+        let mut point_doc = self.doc.clone();
         let mut values = Vec::new();
-        for (a, &i) in others.iter().zip(combo) {
+        for (a, &i) in self.others.iter().zip(combo) {
             let v = &a.values[i];
             for p in &a.paths {
                 let x = axis_value(a, p, v, &mut point_doc)
@@ -611,50 +703,54 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
             }
             values.push((a.label.clone(), v.clone()));
         }
-        let seed_values: Vec<Option<&toml::Value>> = match &seed_axis {
+        let seed_values: Vec<Option<&toml::Value>> = match self.seed_axis {
             Some(a) => a.values.iter().map(Some).collect(),
             None => vec![None],
         };
         for sv in seed_values {
-            let mut run_doc = point_doc.clone();
-            let mut label: Vec<String> = values
-                .iter()
-                .map(|(l, v)| format!("{l} = {}", show(v)))
-                .collect();
-            if let (Some(a), Some(v)) = (&seed_axis, sv) {
-                a.paths[0]
-                    .set(&mut run_doc, v)
-                    .with_context(|| format!("axis `seed` = {}", show(v)))?;
-                label.push(format!("seed = {}", show(v)));
-            }
-            let label = label.join(", ");
-            let text = toml::to_string(&run_doc).context("a run's scenario as TOML")?;
-            let resolved = scenario::load_str(
-                &text,
-                &format!("{name_of}: the run {label}"),
-                base_dir.as_deref(),
-            )?;
-            if resolved.scenario.clock == ClockMode::Realtime && engine == Engine::Inproc {
-                bail!("the run {label}: the realtime clock needs --engine ipc");
-            }
-            let key = run_key(&resolved, engine);
-            jobs.push(Job {
-                point: pi,
-                label,
-                resolved,
-                key,
-            });
+            jobs.push(self.job(pi, &point_doc, &values, sv)?);
         }
-        points.push(Point { values });
+        Ok(Point { values })
     }
-    Ok(Plan {
-        name: file.name,
-        axes,
-        points,
-        jobs,
-        seeds,
-        plots: file.plots,
-    })
+
+    /// The run of point `pi` (its document and axis values) with seed `sv`: its label, its
+    /// resolved scenario and its key.
+    fn job(
+        &self,
+        pi: usize,
+        point_doc: &toml::Table,
+        values: &[(String, toml::Value)],
+        sv: Option<&toml::Value>,
+    ) -> Result<Job> {
+        let mut run_doc = point_doc.clone();
+        let mut label: Vec<String> = values
+            .iter()
+            .map(|(l, v)| format!("{l} = {}", show(v)))
+            .collect();
+        if let (Some(a), Some(v)) = (self.seed_axis, sv) {
+            a.paths[0]
+                .set(&mut run_doc, v)
+                .with_context(|| format!("axis `seed` = {}", show(v)))?;
+            label.push(format!("seed = {}", show(v)));
+        }
+        let label = label.join(", ");
+        let text = toml::to_string(&run_doc).context("a run's scenario as TOML")?;
+        let resolved = scenario::load_str(
+            &text,
+            &format!("{}: the run {label}", self.name),
+            self.base_dir,
+        )?;
+        if resolved.scenario.clock == ClockMode::Realtime && self.engine == Engine::Inproc {
+            bail!("the run {label}: the realtime clock needs --engine ipc");
+        }
+        let key = run_key(&resolved, self.engine);
+        Ok(Job {
+            point: pi,
+            label,
+            resolved,
+            key,
+        })
+    }
 }
 
 fn stored_path(out: &Path, key: &str) -> PathBuf {
@@ -700,17 +796,11 @@ fn default_out(name: &str) -> PathBuf {
         .join(crate::run_dirs::safe_name(name))
 }
 
+/// Runs a campaign (`fdi-launch sweep`): the runs not stored yet, then its tables and figures.
 pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
     let plan = plan(&args.campaign, args.engine)?;
-    let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
-    if out.exists() && !out.is_dir() {
-        bail!("--out {} is not a folder", out.display());
-    }
-    std::fs::create_dir_all(out.join("points"))
-        .with_context(|| format!("creating {}", out.join("points").display()))?;
-    std::fs::copy(&args.campaign, out.join("campaign.toml"))
-        .with_context(|| format!("copying the campaign into {}", out.display()))?;
-    let mut results: Vec<Option<RunSummary>> = plan
+    let out = prepare_out(args, &plan)?;
+    let results: Vec<Option<RunSummary>> = plan
         .jobs
         .iter()
         .map(|j| load_stored(&out, &j.key))
@@ -730,9 +820,15 @@ pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
         jobs,
         todo.len()
     );
-    let mut failed: Vec<String> = Vec::new();
-    let mut ran = 0usize;
-    let mut signal = None;
+    let mut tally = Tally {
+        plan: &plan,
+        out: &out,
+        engine: args.engine,
+        results,
+        failed: Vec::new(),
+        ran: 0,
+        signal: None,
+    };
     let runs_root = out.join("runs");
     let outcome = runner::run_parallel(
         &todo,
@@ -740,55 +836,91 @@ pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
         &plan.name,
         stop,
         |&i| run_one(&plan.jobs[i], &plan.name, args, &runs_root, stop),
-        |n, result| {
-            let job = &plan.jobs[todo[n]];
-            match result {
-                Ok(summary) => {
-                    let stored = Stored {
-                        key: job.key.clone(),
-                        engine: args.engine.as_str().into(),
-                        run: job.label.clone(),
-                        summary,
-                    };
-                    write_atomic(
-                        &stored_path(&out, &job.key),
-                        (serde_json::to_string_pretty(&stored)? + "\n").as_bytes(),
-                    )?;
-                    results[todo[n]] = Some(stored.summary);
-                    ran += 1;
-                }
-                Err(e) => match e.downcast_ref::<fdi_common::stop::Interrupted>() {
-                    Some(i) => signal = Some(i.signal),
-                    None => {
-                        eprintln!(
-                            "fdi-launch: the run {} failed: {}",
-                            job.label,
-                            fdi_report::output::describe_error(&e)
-                        );
-                        failed.push(job.label.clone());
-                    }
-                },
-            }
-            Ok(())
-        },
+        |n, result| tally.record(todo[n], result),
     )?;
-    let signal = signal.or(outcome.interrupted);
-    let tables = write_outputs(&plan, &results, &out)?;
+    let signal = tally.signal.or(outcome.interrupted);
+    let tables = write_outputs(&plan, &tally.results, &out)?;
     println!(
-        "skipped {skipped}, ran {ran}, failed {}{}; {} of {} runs in the tables",
-        failed.len(),
+        "skipped {skipped}, ran {}, failed {}{}; {} of {} runs in the tables",
+        tally.ran,
+        tally.failed.len(),
         if outcome.not_started > 0 {
             format!(", not started {}", outcome.not_started)
         } else {
             String::new()
         },
-        results.iter().filter(|r| r.is_some()).count(),
+        tally.results.iter().filter(|r| r.is_some()).count(),
         plan.jobs.len()
     );
     println!("campaign folder {}", out.display());
     for t in tables {
         println!("  {}", t.display());
     }
+    campaign_end(signal, &tally.failed)
+}
+
+/// The campaign folder (`--out` or the default), made, with a copy of the campaign file.
+fn prepare_out(args: &SweepArgs, plan: &Plan) -> Result<PathBuf> {
+    let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
+    if out.exists() && !out.is_dir() {
+        bail!("--out {} is not a folder", out.display());
+    }
+    std::fs::create_dir_all(out.join("points"))
+        .with_context(|| format!("creating {}", out.join("points").display()))?;
+    std::fs::copy(&args.campaign, out.join("campaign.toml"))
+        .with_context(|| format!("copying the campaign into {}", out.display()))?;
+    Ok(out)
+}
+
+/// What the runs of a campaign gave so far: each job's result, the runs that failed, how
+/// many ran, and the signal that interrupted one.
+struct Tally<'a> {
+    plan: &'a Plan,
+    out: &'a Path,
+    engine: Engine,
+    results: Vec<Option<RunSummary>>,
+    failed: Vec<String>,
+    ran: usize,
+    signal: Option<i32>,
+}
+
+impl Tally<'_> {
+    /// Records the end of job `i`: a summary is stored in `points/`, a failure named.
+    fn record(&mut self, i: usize, result: Result<RunSummary>) -> Result<()> {
+        let job = &self.plan.jobs[i];
+        match result {
+            Ok(summary) => {
+                let stored = Stored {
+                    key: job.key.clone(),
+                    engine: self.engine.as_str().into(),
+                    run: job.label.clone(),
+                    summary,
+                };
+                write_atomic(
+                    &stored_path(self.out, &job.key),
+                    (serde_json::to_string_pretty(&stored)? + "\n").as_bytes(),
+                )?;
+                self.results[i] = Some(stored.summary);
+                self.ran += 1;
+            }
+            Err(e) => match e.downcast_ref::<fdi_common::stop::Interrupted>() {
+                Some(interrupted) => self.signal = Some(interrupted.signal),
+                None => {
+                    eprintln!(
+                        "fdi-launch: the run {} failed: {}",
+                        job.label,
+                        fdi_report::output::describe_error(&e)
+                    );
+                    self.failed.push(job.label.clone());
+                }
+            },
+        }
+        Ok(())
+    }
+}
+
+/// How a campaign ends: interrupted by `signal`, failed when some runs did, else success.
+fn campaign_end(signal: Option<i32>, failed: &[String]) -> Result<ExitCode> {
     if let Some(signal) = signal {
         return Err(fdi_common::stop::Interrupted {
             signal,
@@ -848,6 +980,40 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
         .filter(|a| !a.is_seed())
         .map(|a| a.label.as_str())
         .collect();
+    let rows = result_rows(plan, results)?;
+    let columns = columns_of(&rows);
+    let (results_csv, results_json) = write_results(&rows, &columns, out)?;
+
+    // Aggregate per point over its seeds.
+    let skip: BTreeSet<&str> = axis_labels.iter().copied().chain(["seed", "key"]).collect();
+    let numeric: Vec<&String> = columns
+        .iter()
+        .filter(|c| !skip.contains(c.as_str()))
+        .filter(|c| rows.iter().any(|r| lookup(r, c).num().is_some()))
+        .collect();
+    let aggregate = aggregate_points(plan, &rows, &numeric);
+    let aggregate_csv = write_aggregate_csv(&aggregate, &numeric, &axis_labels, out)?;
+    let aggregate_json = write_aggregate_json(&aggregate, out)?;
+
+    let families = plot_families(plan.plots.as_deref(), &numeric)?;
+    let md_path = out.join("aggregate.md");
+    write_atomic(
+        &md_path,
+        aggregate_markdown(plan, &aggregate, &families).as_bytes(),
+    )?;
+    figures::write_all(plan, &aggregate, &families, &out.join("figures"))?;
+    Ok(vec![
+        results_csv,
+        results_json,
+        aggregate_csv,
+        aggregate_json,
+        md_path,
+        out.join("figures"),
+    ])
+}
+
+/// A row per run with a result: its point's axis values, its seed and key, and its metrics.
+fn result_rows<'a>(plan: &'a Plan, results: &[Option<RunSummary>]) -> Result<Vec<Row<'a>>> {
     let mut rows = Vec::new();
     for (job, r) in plan.jobs.iter().zip(results) {
         let Some(s) = r else { continue };
@@ -865,25 +1031,36 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
             cells,
         });
     }
-    // Every column any row has, in first-seen order.
+    Ok(rows)
+}
+
+/// Every column any row has, in first-seen order.
+fn columns_of(rows: &[Row]) -> Vec<String> {
     let mut columns: Vec<String> = Vec::new();
     let mut seen = BTreeSet::new();
-    for r in &rows {
+    for r in rows {
         for (c, _) in &r.cells {
             if seen.insert(c.clone()) {
                 columns.push(c.clone());
             }
         }
     }
-    let lookup = |r: &Row, c: &str| {
-        r.cells
-            .iter()
-            .find(|(n, _)| n == c)
-            .map_or(Cell::Empty, |(_, v)| v.clone())
-    };
+    columns
+}
+
+/// The cell of row `r` in column `c` (empty when the row has none).
+fn lookup(r: &Row, c: &str) -> Cell {
+    r.cells
+        .iter()
+        .find(|(n, _)| n == c)
+        .map_or(Cell::Empty, |(_, v)| v.clone())
+}
+
+/// Writes `results.csv` and `results.json`; returns their paths.
+fn write_results(rows: &[Row], columns: &[String], out: &Path) -> Result<(PathBuf, PathBuf)> {
     let mut w = csv::Writer::from_writer(Vec::new());
-    w.write_record(&columns)?;
-    for r in &rows {
+    w.write_record(columns)?;
+    for r in rows {
         w.write_record(columns.iter().map(|c| lookup(r, c).csv()))?;
     }
     let results_csv = out.join("results.csv");
@@ -904,19 +1081,16 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
         &results_json,
         (serde_json::to_string_pretty(&json_rows)? + "\n").as_bytes(),
     )?;
+    Ok((results_csv, results_json))
+}
 
-    // Aggregate per point over its seeds.
-    let skip: BTreeSet<&str> = axis_labels.iter().copied().chain(["seed", "key"]).collect();
-    let numeric: Vec<&String> = columns
-        .iter()
-        .filter(|c| !skip.contains(c.as_str()))
-        .filter(|c| rows.iter().any(|r| lookup(r, c).num().is_some()))
-        .collect();
+/// Per point, the statistics of each numeric column over the point's runs.
+fn aggregate_points(plan: &Plan, rows: &[Row], numeric: &[&String]) -> Vec<Aggregate> {
     let mut aggregate = Vec::new();
     for (pi, point) in plan.points.iter().enumerate() {
         let members: Vec<&Row> = rows.iter().filter(|r| r.job.point == pi).collect();
         let mut metrics = BTreeMap::new();
-        for c in &numeric {
+        for c in numeric {
             let xs: Vec<f64> = members
                 .iter()
                 .map(|r| lookup(r, c).num().unwrap_or(f64::NAN))
@@ -930,13 +1104,23 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
             metrics,
         });
     }
+    aggregate
+}
+
+/// Writes `aggregate.csv`: a line per point and metric; returns its path.
+fn write_aggregate_csv(
+    aggregate: &[Aggregate],
+    numeric: &[&String],
+    axis_labels: &[&str],
+    out: &Path,
+) -> Result<PathBuf> {
     let mut w = csv::Writer::from_writer(Vec::new());
-    let mut header: Vec<&str> = axis_labels.clone();
+    let mut header: Vec<&str> = axis_labels.to_vec();
     header.extend(["metric", "runs", "n", "mean", "sd", "ci_low", "ci_high"]);
     w.write_record(&header)?;
     let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
-    for a in &aggregate {
-        for c in &numeric {
+    for a in aggregate {
+        for c in numeric {
             let s = a.metrics.get(*c).copied().flatten();
             let mut rec: Vec<String> = a.point.values.iter().map(|(_, v)| show(v)).collect();
             rec.push((*c).clone());
@@ -951,6 +1135,12 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
     }
     let aggregate_csv = out.join("aggregate.csv");
     write_atomic(&aggregate_csv, &w.into_inner().map_err(|e| e.into_error())?)?;
+    Ok(aggregate_csv)
+}
+
+/// Writes `aggregate.json`: per point, its axis values, runs, seeds and metrics; returns its
+/// path.
+fn write_aggregate_json(aggregate: &[Aggregate], out: &Path) -> Result<PathBuf> {
     let aggregate_json = out.join("aggregate.json");
     let json: Vec<serde_json::Value> = aggregate
         .iter()
@@ -974,22 +1164,7 @@ fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Res
         &aggregate_json,
         (serde_json::to_string_pretty(&json)? + "\n").as_bytes(),
     )?;
-
-    let families = plot_families(plan.plots.as_deref(), &numeric)?;
-    let md_path = out.join("aggregate.md");
-    write_atomic(
-        &md_path,
-        aggregate_markdown(plan, &aggregate, &families).as_bytes(),
-    )?;
-    figures::write_all(plan, &aggregate, &families, &out.join("figures"))?;
-    Ok(vec![
-        results_csv,
-        results_json,
-        aggregate_csv,
-        aggregate_json,
-        md_path,
-        out.join("figures"),
-    ])
+    Ok(aggregate_json)
 }
 
 /// The per-robot metrics drawn and tabulated: those asked for (each must exist), or the

@@ -73,110 +73,26 @@ impl Deployment {
         Self::check(file, &source, resolved)
     }
 
+    /// Checks a parsed deployment file against the scenario and lays out every process.
     fn check(file: DeploymentFile, source: &str, resolved: &Resolved) -> Result<Self> {
-        let problem = |field: String, what: String| anyhow::anyhow!("{source}: `{field}`: {what}");
-        if !file.hosts.contains_key(&file.coordinator) {
-            return Err(problem(
-                "coordinator".into(),
-                format!(
-                    "names `{}`, which is not one of the hosts ({})",
-                    file.coordinator,
-                    file.hosts.keys().cloned().collect::<Vec<_>>().join(", ")
-                ),
-            ));
-        }
-        if file.hosts.len() < 2 {
-            return Err(problem(
-                "hosts".into(),
-                "names one host: a run on one host needs no deployment file".into(),
-            ));
-        }
+        check_hosts_named(&file, source)?;
         let scenario_agents: BTreeSet<u32> =
             resolved.scenario.agents.iter().map(|a| a.id).collect();
         let mut host_of: BTreeMap<Wake, String> = BTreeMap::new();
         let mut endpoints: BTreeMap<&str, &str> = BTreeMap::new();
         for (name, h) in &file.hosts {
-            check_host_name(name).map_err(|e| problem(format!("hosts.{name}"), e))?;
-            check_endpoint(&h.endpoint)
-                .map_err(|e| problem(format!("hosts.{name}.endpoint"), e))?;
-            if let Some(other) = endpoints.insert(&h.endpoint, name) {
-                return Err(problem(
-                    format!("hosts.{name}.endpoint"),
-                    format!("`{}` is also the endpoint of host `{other}`", h.endpoint),
-                ));
-            }
-            for (i, id) in h.agents.iter().enumerate() {
-                let field = format!("hosts.{name}.agents[{i}]");
-                if !scenario_agents.contains(id) {
-                    return Err(problem(
-                        field,
-                        format!(
-                            "agent {id} is not an agent of the scenario (its agents: {})",
-                            scenario_agents
-                                .iter()
-                                .map(u32::to_string)
-                                .collect::<Vec<_>>()
-                                .join(", ")
-                        ),
-                    ));
-                }
-                if let Some(other) = host_of.insert(Wake::Agent(*id), name.clone()) {
-                    return Err(problem(
-                        field,
-                        format!("agent {id} is placed on `{other}` too"),
-                    ));
-                }
-            }
-            for (i, role) in h.roles.iter().enumerate() {
-                let field = format!("hosts.{name}.roles[{i}]");
-                let Some((_, wake)) = PLACEABLE.iter().find(|(n, _)| n == role) else {
-                    return Err(problem(
-                        field,
-                        format!("`{role}` is not a role that can be placed (`attacker`, `control-center`)"),
-                    ));
-                };
-                if let Some(other) = host_of.insert(*wake, name.clone()) {
-                    return Err(problem(
-                        field,
-                        format!("`{role}` is placed on `{other}` too"),
-                    ));
-                }
-            }
+            check_host(name, h, &mut endpoints, source)?;
+            place_agents(name, h, &scenario_agents, &mut host_of, source)?;
+            place_roles(name, h, &mut host_of, source)?;
         }
         // What is not placed runs on the coordinating host, with the launcher.
         let coordinator = file.coordinator.clone();
-        let mut all = vec![Wake::Launcher, Wake::Center, Wake::Attacker];
-        all.extend(scenario_agents.iter().map(|&id| Wake::Agent(id)));
-        let roles = &resolved.scenario.roles;
-        if roles.attacker.is_some() {
-            all.push(Wake::ExternalAttacker);
-        }
-        if roles.monitor.is_some() {
-            all.push(Wake::Monitor);
-        }
-        for w in all {
-            host_of.entry(w).or_insert_with(|| coordinator.clone());
-        }
-        if resolved.has_external_roles() {
-            for (wake, role) in [
-                (Wake::Attacker, "attacker"),
-                (Wake::Center, fdi_common::run_dir::Process::CENTER),
-            ] {
-                if host_of[&wake] != coordinator {
-                    return Err(problem(
-                        format!("hosts.{}.roles", host_of[&wake]),
-                        format!(
-                            "the scenario has `[roles]` (programs that take a role run on the \
-                             coordinating host, beside the attacker and the control center): \
-                             `{role}` must stay on `{coordinator}`"
-                        ),
-                    ));
-                }
-            }
-        }
+        place_the_rest(&coordinator, &scenario_agents, resolved, &mut host_of);
+        check_external_roles_stay(&coordinator, &host_of, resolved, source)?;
         let layout = Layout::new(host_of, resolved);
         for name in file.hosts.keys() {
-            fdi_runtime::net::plan(&layout, name).map_err(|e| problem("hosts".into(), e))?;
+            fdi_runtime::net::plan(&layout, name)
+                .map_err(|e| problem(source, "hosts".into(), e))?;
         }
         let host = |name: &String| Host {
             name: name.clone(),
@@ -188,14 +104,7 @@ impl Deployment {
             .filter(|n| **n != coordinator)
             .map(host)
             .collect();
-        for h in &others {
-            if !layout.host_of.values().any(|v| *v == h.name) {
-                return Err(problem(
-                    format!("hosts.{}", h.name),
-                    "runs nothing: give it `agents` or `roles`, or leave it out".into(),
-                ));
-            }
-        }
+        check_hosts_run_something(&others, &layout, source)?;
         Ok(Self {
             source: source.into(),
             coordinator: host(&coordinator),
@@ -216,6 +125,178 @@ impl Deployment {
     pub fn is_local(&self, wake: Wake) -> bool {
         self.host_of(wake) == self.coordinator.name
     }
+}
+
+/// A problem of the deployment file `source`, naming its `field`.
+fn problem(source: &str, field: String, what: String) -> anyhow::Error {
+    anyhow::anyhow!("{source}: `{field}`: {what}")
+}
+
+/// Checks that the coordinator is one of the hosts and that there are at least two hosts.
+fn check_hosts_named(file: &DeploymentFile, source: &str) -> Result<()> {
+    if !file.hosts.contains_key(&file.coordinator) {
+        return Err(problem(
+            source,
+            "coordinator".into(),
+            format!(
+                "names `{}`, which is not one of the hosts ({})",
+                file.coordinator,
+                file.hosts.keys().cloned().collect::<Vec<_>>().join(", ")
+            ),
+        ));
+    }
+    if file.hosts.len() < 2 {
+        return Err(problem(
+            source,
+            "hosts".into(),
+            "names one host: a run on one host needs no deployment file".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Checks host `name`'s name and endpoint, and that no other host has the same endpoint.
+fn check_host<'a>(
+    name: &'a str,
+    h: &'a HostFile,
+    endpoints: &mut BTreeMap<&'a str, &'a str>,
+    source: &str,
+) -> Result<()> {
+    check_host_name(name).map_err(|e| problem(source, format!("hosts.{name}"), e))?;
+    check_endpoint(&h.endpoint)
+        .map_err(|e| problem(source, format!("hosts.{name}.endpoint"), e))?;
+    if let Some(other) = endpoints.insert(&h.endpoint, name) {
+        return Err(problem(
+            source,
+            format!("hosts.{name}.endpoint"),
+            format!("`{}` is also the endpoint of host `{other}`", h.endpoint),
+        ));
+    }
+    Ok(())
+}
+
+/// Places host `name`'s agents, each an agent of the scenario placed on no other host.
+fn place_agents(
+    name: &str,
+    h: &HostFile,
+    scenario_agents: &BTreeSet<u32>,
+    host_of: &mut BTreeMap<Wake, String>,
+    source: &str,
+) -> Result<()> {
+    for (i, id) in h.agents.iter().enumerate() {
+        let field = format!("hosts.{name}.agents[{i}]");
+        if !scenario_agents.contains(id) {
+            return Err(problem(
+                source,
+                field,
+                format!(
+                    "agent {id} is not an agent of the scenario (its agents: {})",
+                    scenario_agents
+                        .iter()
+                        .map(u32::to_string)
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
+        }
+        if let Some(other) = host_of.insert(Wake::Agent(*id), name.to_string()) {
+            return Err(problem(
+                source,
+                field,
+                format!("agent {id} is placed on `{other}` too"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Places host `name`'s roles, each a placeable role placed on no other host.
+fn place_roles(
+    name: &str,
+    h: &HostFile,
+    host_of: &mut BTreeMap<Wake, String>,
+    source: &str,
+) -> Result<()> {
+    for (i, role) in h.roles.iter().enumerate() {
+        let field = format!("hosts.{name}.roles[{i}]");
+        let Some((_, wake)) = PLACEABLE.iter().find(|(n, _)| n == role) else {
+            return Err(problem(
+                source,
+                field,
+                format!("`{role}` is not a role that can be placed (`attacker`, `control-center`)"),
+            ));
+        };
+        if let Some(other) = host_of.insert(*wake, name.to_string()) {
+            return Err(problem(
+                source,
+                field,
+                format!("`{role}` is placed on `{other}` too"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Places every process of the run not placed yet on the coordinating host.
+fn place_the_rest(
+    coordinator: &str,
+    scenario_agents: &BTreeSet<u32>,
+    resolved: &Resolved,
+    host_of: &mut BTreeMap<Wake, String>,
+) {
+    let mut all = vec![Wake::Launcher, Wake::Center, Wake::Attacker];
+    all.extend(scenario_agents.iter().map(|&id| Wake::Agent(id)));
+    let roles = &resolved.scenario.roles;
+    if roles.attacker.is_some() {
+        all.push(Wake::ExternalAttacker);
+    }
+    if roles.monitor.is_some() {
+        all.push(Wake::Monitor);
+    }
+    for w in all {
+        host_of.entry(w).or_insert_with(|| coordinator.to_string());
+    }
+}
+
+/// With `[roles]` in the scenario, checks that the attacker and the control center stay on
+/// the coordinating host.
+fn check_external_roles_stay(
+    coordinator: &str,
+    host_of: &BTreeMap<Wake, String>,
+    resolved: &Resolved,
+    source: &str,
+) -> Result<()> {
+    if resolved.has_external_roles() {
+        for (wake, role) in [
+            (Wake::Attacker, "attacker"),
+            (Wake::Center, fdi_common::run_dir::Process::CENTER),
+        ] {
+            if host_of[&wake] != coordinator {
+                return Err(problem(
+                    source,
+                    format!("hosts.{}.roles", host_of[&wake]),
+                    format!(
+                        "the scenario has `[roles]` (programs that take a role run on the coordinating host, beside the attacker and the control center): `{role}` must stay on `{coordinator}`"
+                    ),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks that every host other than the coordinator runs at least one process.
+fn check_hosts_run_something(others: &[Host], layout: &Layout, source: &str) -> Result<()> {
+    for h in others {
+        if !layout.host_of.values().any(|v| *v == h.name) {
+            return Err(problem(
+                source,
+                format!("hosts.{}", h.name),
+                "runs nothing: give it `agents` or `roles`, or leave it out".into(),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// A process's wake-up event as a word of the messages: `agent/3`, `attacker`, ...

@@ -404,103 +404,27 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     let scenario_path = run_dir.scenario();
     std::fs::create_dir_all(run_dir.traces()).context("creating the traces folder")?;
     opts.stop.check(BEFORE_THE_START).context(DidNotStart)?;
+    let sizing = check_machine(resolved, &prefix)?;
 
-    let sizing = fdi_runtime::process::sizing_for(resolved);
-    // A full shared-memory folder, a read-only iceoryx2 folder or a low open-file limit is
-    // named now, with its fix: past this point iceoryx2 reports them as a SIGBUS or an
-    // internal error.
-    let external =
-        resolved.scenario.roles.attacker.is_some() || resolved.scenario.roles.monitor.is_some();
-    ipc::machine::check(sizing, external, &prefix)
-        .context("the machine cannot carry this run")
-        .context(DidNotStart)?;
-
-    let result = {
-        // What a failed node or port creation made is the run's: removed.
-        let opened = Shm::open(&prefix, "launcher", sizing).and_then(|transport| {
-            let ports = (
-                transport.publisher(Stream::Control)?,
-                transport.subscriber(Stream::Status)?,
-                transport.waker(Wake::Launcher)?,
-            );
-            Ok((transport, ports))
-        });
-        let (transport, (control, status, waker)) = match opened {
-            Ok(opened) => opened,
-            Err(e) => {
-                Shm::remove_leftovers(&prefix).ok();
-                return Err(anyhow::Error::new(e).context(DidNotStart));
-            }
-        };
-        let mut launcher = Launcher {
-            realtime: resolved.scenario.clock == ClockMode::Realtime,
-            lost: Vec::new(),
-            procs: Supervisor::default(),
-            bells: Vec::new(),
-            control,
-            status,
-            waker,
-            stop: opts.stop.clone(),
-            started: false,
-            remote: None,
-        };
-        // A failure to reach the other hosts goes the way of every other failure: through the
-        // teardown and the removal of the run's files below.
-        let connected = match &opts.deployment {
-            Some(d) => crate::run::remote::Remote::connect(d.clone(), &prefix)
-                .and_then(|mut r| {
-                    r.start_bridge(fdi_runtime::process::sizing_for(resolved))?;
-                    Ok(r)
-                })
-                .map(|r| launcher.remote = Some(r)),
-            None => Ok(()),
-        };
-        let r = connected.and_then(|()| {
-            spawn_and_supervise(
-                resolved,
-                opts,
-                &prefix,
-                &scenario_path,
-                &transport,
-                &mut launcher,
-            )
-        });
-        launcher.teardown();
-        // Every child has exited: what they printed is relayed whole before we go on, unless
-        // a process that left a program's group still holds its output.
-        for line in launcher.procs.drain_stderr(OUTPUT_WAIT) {
-            eprintln!("fdi-launch: warning: {line}");
-        }
-        let mut remote_left = Vec::new();
-        let mut hosts = Vec::new();
-        if let Some(mut remote) = launcher.remote.take() {
-            hosts.push(remote.describe_coordinator());
-            hosts.extend(remote.describe());
-            if launcher.started {
-                for p in remote.fetch_traces(&opts.run_dir) {
-                    eprintln!("fdi-launch: warning: {p}");
-                }
-            }
-            let (left, problems) = remote.release();
-            for p in problems {
-                eprintln!("fdi-launch: warning: {p}");
-            }
-            remote_left = left;
-        }
-        let r = match r {
-            Err(e) if !launcher.started => Err(e.context(DidNotStart)),
-            r => r,
-        };
-        (
-            r,
-            std::mem::take(&mut launcher.lost),
-            launcher.exits(),
-            remote_left,
-            hosts,
+    let ended = {
+        let (transport, mut launcher) = open_launcher(resolved, opts, &prefix, sizing)?;
+        run_and_tear_down(
+            resolved,
+            opts,
+            &prefix,
+            &scenario_path,
+            &transport,
+            &mut launcher,
         )
         // ports and node dropped here, before the files are removed
     };
-    let (result, lost, exits, remote_left, hosts) = result;
+    let Ended {
+        result,
+        lost,
+        exits,
+        remote_left,
+        hosts,
+    } = ended;
     Shm::remove_leftovers(&prefix).ok();
     let mut leftovers = Shm::leftovers(&prefix);
     leftovers.extend(remote_left.into_iter().map(PathBuf::from));
@@ -523,6 +447,150 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
     })
 }
 
+/// The sizing of the run's services, once the machine is known to carry them.
+fn check_machine(resolved: &Resolved, prefix: &str) -> Result<ipc::Sizing> {
+    let sizing = fdi_runtime::process::sizing_for(resolved);
+    // A full shared-memory folder, a read-only iceoryx2 folder or a low open-file limit is
+    // named now, with its fix: past this point iceoryx2 reports them as a SIGBUS or an
+    // internal error.
+    let external =
+        resolved.scenario.roles.attacker.is_some() || resolved.scenario.roles.monitor.is_some();
+    ipc::machine::check(sizing, external, prefix)
+        .context("the machine cannot carry this run")
+        .context(DidNotStart)?;
+    Ok(sizing)
+}
+
+/// Opens the launcher's node and ports, and makes the launcher that owns them.
+fn open_launcher(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    sizing: ipc::Sizing,
+) -> Result<(Shm, Launcher<Shm>)> {
+    // What a failed node or port creation made is the run's: removed.
+    let opened = Shm::open(prefix, "launcher", sizing).and_then(|transport| {
+        let ports = (
+            transport.publisher(Stream::Control)?,
+            transport.subscriber(Stream::Status)?,
+            transport.waker(Wake::Launcher)?,
+        );
+        Ok((transport, ports))
+    });
+    let (transport, (control, status, waker)) = match opened {
+        Ok(opened) => opened,
+        Err(e) => {
+            Shm::remove_leftovers(prefix).ok();
+            return Err(anyhow::Error::new(e).context(DidNotStart));
+        }
+    };
+    let launcher = Launcher {
+        realtime: resolved.scenario.clock == ClockMode::Realtime,
+        lost: Vec::new(),
+        procs: Supervisor::default(),
+        bells: Vec::new(),
+        control,
+        status,
+        waker,
+        stop: opts.stop.clone(),
+        started: false,
+        remote: None,
+    };
+    Ok((transport, launcher))
+}
+
+/// How a run ended, once its processes are torn down.
+struct Ended {
+    result: Result<Supervised>,
+    lost: Vec<LostAgent>,
+    exits: String,
+    /// Files of the run left on the other hosts.
+    remote_left: Vec<String>,
+    /// One line per host of a split run.
+    hosts: Vec<String>,
+}
+
+/// Connects the other hosts (if any), spawns and supervises the run, and tears it down
+/// however it ended.
+fn run_and_tear_down<X: Transport>(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    scenario_path: &Path,
+    transport: &X,
+    launcher: &mut Launcher<X>,
+) -> Ended {
+    // A failure to reach the other hosts goes the way of every other failure: through the
+    // teardown and the removal of the run's files below.
+    let connected = connect_remote(resolved, opts, prefix, launcher);
+    let r = connected.and_then(|()| {
+        spawn_and_supervise(resolved, opts, prefix, scenario_path, transport, launcher)
+    });
+    launcher.teardown();
+    // Every child has exited: what they printed is relayed whole before we go on, unless
+    // a process that left a program's group still holds its output.
+    for line in launcher.procs.drain_stderr(OUTPUT_WAIT) {
+        eprintln!("fdi-launch: warning: {line}");
+    }
+    let (remote_left, hosts) = release_remote(opts, launcher);
+    let r = match r {
+        Err(e) if !launcher.started => Err(e.context(DidNotStart)),
+        r => r,
+    };
+    Ended {
+        result: r,
+        lost: std::mem::take(&mut launcher.lost),
+        exits: launcher.exits(),
+        remote_left,
+        hosts,
+    }
+}
+
+/// Reaches the other hosts of a split run and starts the bridge to them.
+fn connect_remote<X: Transport>(
+    resolved: &Resolved,
+    opts: &IpcOptions,
+    prefix: &str,
+    launcher: &mut Launcher<X>,
+) -> Result<()> {
+    match &opts.deployment {
+        Some(d) => crate::run::remote::Remote::connect(d.clone(), prefix)
+            .and_then(|mut r| {
+                r.start_bridge(fdi_runtime::process::sizing_for(resolved))?;
+                Ok(r)
+            })
+            .map(|r| launcher.remote = Some(r)),
+        None => Ok(()),
+    }
+}
+
+/// Describes the other hosts, fetches their traces (of a started run) and releases them:
+/// the files left on them, and one line per host.
+fn release_remote<X: Transport>(
+    opts: &IpcOptions,
+    launcher: &mut Launcher<X>,
+) -> (Vec<String>, Vec<String>) {
+    let mut remote_left = Vec::new();
+    let mut hosts = Vec::new();
+    if let Some(mut remote) = launcher.remote.take() {
+        hosts.push(remote.describe_coordinator());
+        hosts.extend(remote.describe());
+        if launcher.started {
+            for p in remote.fetch_traces(&opts.run_dir) {
+                eprintln!("fdi-launch: warning: {p}");
+            }
+        }
+        let (left, problems) = remote.release();
+        for p in problems {
+            eprintln!("fdi-launch: warning: {p}");
+        }
+        remote_left = left;
+    }
+    (remote_left, hosts)
+}
+
+/// Spawns the processes, waits until they are ready, starts the run and supervises it to
+/// its end.
 fn spawn_and_supervise<X: Transport>(
     resolved: &Resolved,
     opts: &IpcOptions,
@@ -555,6 +623,14 @@ fn spawn_and_supervise<X: Transport>(
     })
 }
 
+/// One process of the run's own: its role binary, its name, its wake-up event, its agent.
+struct RoleProcess {
+    role: String,
+    process: Process,
+    wake: Wake,
+    agent: Option<u32>,
+}
+
 /// Spawns the run's processes: the control center, the attacker (or the replayer) and the
 /// agents.
 fn spawn_roles<X: Transport>(
@@ -564,83 +640,30 @@ fn spawn_roles<X: Transport>(
     scenario_path: &Path,
     l: &mut Launcher<X>,
 ) -> Result<()> {
-    let mut roles: Vec<(String, Process, Wake, Option<u32>)> =
-        vec![(Process::CENTER.into(), Process::Center, Wake::Center, None)];
-    if opts.replay {
-        // The replayer stands in for the attacker (and the agents); its `--trace` is the
-        // attacker trace it plays back.
-        roles.push(("replayer".into(), Process::Attacker, Wake::Attacker, None));
-    } else {
-        roles.push((
-            Process::ATTACKER.into(),
-            Process::Attacker,
-            Wake::Attacker,
-            None,
-        ));
-        for a in &resolved.scenario.agents {
-            roles.push((
-                "agent".into(),
-                Process::Agent(a.id),
-                Wake::Agent(a.id),
-                Some(a.id),
-            ));
-        }
-    }
-    let run_dir = RunDir::new(&opts.run_dir);
     let mut remote_procs = Vec::new();
-    for (role, process, wake, agent) in roles {
-        let name = process.to_string();
-        let label = match agent {
+    for rp in roles_of_run(resolved, opts) {
+        let label = match rp.agent {
             Some(id) => format!("agent {id}"),
-            None => role.clone(),
+            None => rp.role.clone(),
         };
         if let Some(d) = l.remote.as_ref().map(|r| &r.deployment) {
-            if !d.is_local(wake) {
+            if !d.is_local(rp.wake) {
                 let p = crate::run::hosts::RemoteProcess {
-                    role: role.clone(),
-                    name: name.clone(),
-                    agent,
+                    role: rp.role.clone(),
+                    name: rp.process.to_string(),
+                    agent: rp.agent,
                     label: label.clone(),
                 };
                 let slot = Slot {
-                    wake,
+                    wake: rp.wake,
                     ready: false,
                     external: None,
                 };
-                remote_procs.push((p, wake, slot));
+                remote_procs.push((p, rp.wake, slot));
                 continue;
             }
         }
-        if let Some(signal) = l.interrupt() {
-            return Err(Interrupted {
-                signal,
-                phase: BEFORE_THE_START,
-            }
-            .into());
-        }
-        let mut cmd = role_command(&role)?;
-        let args = ProcessArgs {
-            prefix: prefix.to_string(),
-            scenario: scenario_path.to_path_buf(),
-            trace: if opts.pipes {
-                run_dir.pipe(process)
-            } else {
-                run_dir.trace(process)
-            },
-            agent,
-            launcher_pid: Some(std::process::id()),
-            placement: opts.placement.clone(),
-        };
-        cmd.args(args.to_args());
-        l.procs.spawn(
-            label,
-            Slot {
-                wake,
-                ready: false,
-                external: None,
-            },
-            cmd,
-        )?;
+        spawn_local(&rp, label, opts, prefix, scenario_path, l)?;
     }
     if let Some(remote) = &mut l.remote {
         let scenario = std::fs::read_to_string(scenario_path)
@@ -650,6 +673,82 @@ fn spawn_roles<X: Transport>(
             eprintln!("fdi-launch: {line}");
         }
     }
+    Ok(())
+}
+
+/// The run's own processes: the control center, then the attacker and the agents, or the
+/// replayer alone in replay mode.
+fn roles_of_run(resolved: &Resolved, opts: &IpcOptions) -> Vec<RoleProcess> {
+    let role = |role: &str, process: Process, wake: Wake, agent: Option<u32>| RoleProcess {
+        role: role.into(),
+        process,
+        wake,
+        agent,
+    };
+    let mut roles = vec![role(Process::CENTER, Process::Center, Wake::Center, None)];
+    if opts.replay {
+        // The replayer stands in for the attacker (and the agents); its `--trace` is the
+        // attacker trace it plays back.
+        roles.push(role("replayer", Process::Attacker, Wake::Attacker, None));
+    } else {
+        roles.push(role(
+            Process::ATTACKER,
+            Process::Attacker,
+            Wake::Attacker,
+            None,
+        ));
+        for a in &resolved.scenario.agents {
+            roles.push(role(
+                "agent",
+                Process::Agent(a.id),
+                Wake::Agent(a.id),
+                Some(a.id),
+            ));
+        }
+    }
+    roles
+}
+
+/// Spawns one of the run's own processes on this host, unless the launcher was interrupted.
+fn spawn_local<X: Transport>(
+    rp: &RoleProcess,
+    label: String,
+    opts: &IpcOptions,
+    prefix: &str,
+    scenario_path: &Path,
+    l: &mut Launcher<X>,
+) -> Result<()> {
+    if let Some(signal) = l.interrupt() {
+        return Err(Interrupted {
+            signal,
+            phase: BEFORE_THE_START,
+        }
+        .into());
+    }
+    let run_dir = RunDir::new(&opts.run_dir);
+    let mut cmd = role_command(&rp.role)?;
+    let args = ProcessArgs {
+        prefix: prefix.to_string(),
+        scenario: scenario_path.to_path_buf(),
+        trace: if opts.pipes {
+            run_dir.pipe(rp.process)
+        } else {
+            run_dir.trace(rp.process)
+        },
+        agent: rp.agent,
+        launcher_pid: Some(std::process::id()),
+        placement: opts.placement.clone(),
+    };
+    cmd.args(args.to_args());
+    l.procs.spawn(
+        label,
+        Slot {
+            wake: rp.wake,
+            ready: false,
+            external: None,
+        },
+        cmd,
+    )?;
     Ok(())
 }
 

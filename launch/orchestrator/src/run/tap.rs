@@ -168,15 +168,6 @@ impl Tap {
     /// Runs `run` (the processes, writing into the pipes) while the readers and the join go on;
     /// returns its result once every pipe ended, with what the join gathered.
     pub fn run<T>(self, r: &Resolved, run: impl FnOnce() -> T) -> (T, Tapped) {
-        // The queues never push back on a process: a process blocked on its trace would stall
-        // its peers, and a record it still buffers (a writer flushes every 100 ms or 64 KiB)
-        // could be the one the join waits for. What they hold stays bounded in lockstep all the
-        // same: the processes cannot run further apart than their lookahead plus what a
-        // writer buffers.
-        let channel = || -> (Tx, Feed) {
-            let (tx, rx) = mpsc::channel();
-            (Tx(tx), Box::new(rx.into_iter()))
-        };
         let Self {
             pipes,
             kept,
@@ -184,92 +175,139 @@ impl Tap {
             run_dir,
             ..
         } = self;
-        let mut agents = Vec::new();
-        let mut routes = Vec::new();
-        let (mut attacker, mut actuation, mut center, mut monitor) = (None, None, None, None);
-        for p in &pipes {
-            let (tx, feed) = channel();
-            let mut route = Route {
-                main: tx,
-                side: None,
-            };
-            if p.process == Process::Attacker {
-                attacker = Some(feed);
-                if routed {
-                    let (tx, feed) = channel();
-                    route.side = Some(tx);
-                    actuation = Some(feed);
-                }
-            } else if p.process == Process::Center {
-                center = Some(feed);
-                if r.scenario.roles.monitor.is_some() {
-                    let (tx, feed) = channel();
-                    route.side = Some(tx);
-                    monitor = Some(feed);
-                }
-            } else {
-                let id = p
-                    .process
-                    .agent()
-                    .filter(|id| r.scenario.agents.iter().any(|a| a.id == *id));
-                if let Some(id) = id {
-                    agents.push((id, feed));
-                }
-            }
-            routes.push(route);
-        }
-        let (Some(attacker), Some(center)) = (attacker, center) else {
-            unreachable!("the tap makes an attacker and a control-center pipe");
-        };
-        let sources = Sources::from_feeds(agents, attacker, actuation, center, monitor);
+        let (routes, sources) = route_pipes(&pipes, routed, r);
         let mut holds = Vec::new();
         let mut readers = Vec::new();
         for (p, route) in pipes.into_iter().zip(routes) {
             holds.push(p.hold);
             let out = kept.map(|k| (RunDir::new(&run_dir).trace(p.process), k));
-            readers.push((p.read, p.fifo, out, route));
+            readers.push(Reader {
+                read: p.read,
+                fifo: p.fifo,
+                out,
+                route,
+            });
         }
-        let (result, tapped) = std::thread::scope(|s| {
-            let join = s.spawn(move || fdi_report::join::walk(r, sources, 1, |_| {}, || Ok(())));
-            let readers: Vec<_> = readers
-                .into_iter()
-                .map(|(read, fifo, out, route)| {
-                    s.spawn(move || read_process(read, &fifo, out.as_ref(), &route))
-                })
-                .collect();
-            let result = run();
-            // Every process has exited: the pipes end once the launcher lets go of them.
-            drop(holds);
-            let mut write_error = None;
-            for h in readers {
-                let e = h
-                    .join()
-                    .unwrap_or_else(|_| Some("a trace reader thread panicked".into()));
-                if write_error.is_none() {
-                    write_error = e;
-                }
-            }
-            let walked = join
-                .join()
-                .unwrap_or_else(|_| Err(anyhow::anyhow!("the online join thread panicked")));
-            (
-                result,
-                Tapped {
-                    walked,
-                    write_error,
-                },
-            )
-        });
-        for p in std::fs::read_dir(RunDir::new(&run_dir).traces())
-            .into_iter()
-            .flatten()
-            .flatten()
-        {
-            if p.path().extension().is_some_and(|e| e == RunDir::PIPE_EXT) {
-                let _ = std::fs::remove_file(p.path());
-            }
-        }
+        let (result, tapped) = read_while(r, sources, readers, holds, run);
+        remove_pipe_files(&run_dir);
         (result, tapped)
+    }
+}
+
+/// A queue from a reader thread to the join.
+///
+/// The queues never push back on a process: a process blocked on its trace would stall
+/// its peers, and a record it still buffers (a writer flushes every 100 ms or 64 KiB)
+/// could be the one the join waits for. What they hold stays bounded in lockstep all the
+/// same: the processes cannot run further apart than their lookahead plus what a
+/// writer buffers.
+fn channel() -> (Tx, Feed) {
+    let (tx, rx) = mpsc::channel();
+    (Tx(tx), Box::new(rx.into_iter()))
+}
+
+/// The route of each pipe's records (in the order of `pipes`) and the join's sources they feed.
+fn route_pipes(pipes: &[Pipe], routed: bool, r: &Resolved) -> (Vec<Route>, Sources) {
+    let mut agents = Vec::new();
+    let mut routes = Vec::new();
+    let (mut attacker, mut actuation, mut center, mut monitor) = (None, None, None, None);
+    for p in pipes {
+        let (tx, feed) = channel();
+        let mut route = Route {
+            main: tx,
+            side: None,
+        };
+        if p.process == Process::Attacker {
+            attacker = Some(feed);
+            if routed {
+                let (tx, feed) = channel();
+                route.side = Some(tx);
+                actuation = Some(feed);
+            }
+        } else if p.process == Process::Center {
+            center = Some(feed);
+            if r.scenario.roles.monitor.is_some() {
+                let (tx, feed) = channel();
+                route.side = Some(tx);
+                monitor = Some(feed);
+            }
+        } else {
+            let id = p
+                .process
+                .agent()
+                .filter(|id| r.scenario.agents.iter().any(|a| a.id == *id));
+            if let Some(id) = id {
+                agents.push((id, feed));
+            }
+        }
+        routes.push(route);
+    }
+    let (Some(attacker), Some(center)) = (attacker, center) else {
+        unreachable!("the tap makes an attacker and a control-center pipe");
+    };
+    let sources = Sources::from_feeds(agents, attacker, actuation, center, monitor);
+    (routes, sources)
+}
+
+/// What a reader thread needs: the read end of a pipe, its path, where and what it keeps, and
+/// where its records go.
+struct Reader {
+    read: File,
+    fifo: PathBuf,
+    out: Option<(PathBuf, Kept)>,
+    route: Route,
+}
+
+/// Runs `run` while a thread per pipe reads it and a thread joins what they read; lets go of
+/// the pipes' write ends (`holds`) once `run` returned, and waits for every thread.
+fn read_while<T>(
+    r: &Resolved,
+    sources: Sources,
+    readers: Vec<Reader>,
+    holds: Vec<File>,
+    run: impl FnOnce() -> T,
+) -> (T, Tapped) {
+    std::thread::scope(|s| {
+        let join = s.spawn(move || fdi_report::join::walk(r, sources, 1, |_| {}, || Ok(())));
+        let readers: Vec<_> = readers
+            .into_iter()
+            .map(|rd| s.spawn(move || read_process(rd.read, &rd.fifo, rd.out.as_ref(), &rd.route)))
+            .collect();
+        let result = run();
+        // Every process has exited: the pipes end once the launcher lets go of them.
+        drop(holds);
+        let mut write_error = None;
+        for h in readers {
+            let e = h
+                .join()
+                .unwrap_or_else(|_| Some("a trace reader thread panicked".into()));
+            if write_error.is_none() {
+                write_error = e;
+            }
+        }
+        let walked = join
+            .join()
+            .unwrap_or_else(|_| Err(anyhow::anyhow!("the online join thread panicked")));
+        (
+            result,
+            Tapped {
+                walked,
+                write_error,
+            },
+        )
+    })
+}
+
+/// Removes the named pipes left in the run's traces folder.
+fn remove_pipe_files(run_dir: &Path) {
+    for p in std::fs::read_dir(RunDir::new(run_dir).traces())
+        .into_iter()
+        .flatten()
+        .flatten()
+    {
+        if p.path().extension().is_some_and(|e| e == RunDir::PIPE_EXT) {
+            let _ = std::fs::remove_file(p.path());
+        }
     }
 }
 
