@@ -510,7 +510,6 @@ fn detector_metrics(
         a.s_hat_norm.metrics(dt, s_hat_threshold, None),
     ))
     .chain(residual)
-    .into_iter()
     .map(|(name, m)| (name.to_string(), m))
     .collect()
 }

@@ -152,7 +152,7 @@ pub fn detector_tables(s: &RunSummary, level: usize) -> String {
     let (h, h_robot) = ("#".repeat(level), "#".repeat(level + 1));
     let _ = writeln!(md, "\n{h} Detectors side by side\n");
     let phrases: Vec<&str> = detect::RESIDUAL.iter().map(|k| k.phrase).collect();
-    let _ = write!(
+    let _ = writeln!(
         md,
         "The paper's alarm (`s_hat_norm`: ‖Ŝ‖ above its threshold for its hold time) beside {} \
          on the observer's residual, calibrated at the start of the run \
@@ -160,7 +160,7 @@ pub fn detector_tables(s: &RunSummary, level: usize) -> String {
          the tick before the onset (no detection of its own); `missed`: no alarm while that \
          attack was in force; `not watched`: it ended before the detector started watching. \
          False alarms count alarm rising edges while no attack was in force, per minute of the \
-         attack-free time the detector watched.\n",
+         attack-free time the detector watched.",
         join_words(&phrases)
     );
     let monitors: std::collections::BTreeSet<&str> = s

@@ -939,7 +939,7 @@ fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<u64> {
                 msg.insert(format!("{name}_verdict"), Value::from(state));
                 msg.insert(format!("{name}_alarm"), Value::from(*alarm));
             }
-            match w.write(id, "detectors", &*DETECTORS, t, &Value::Object(msg)) {
+            match w.write(id, "detectors", &DETECTORS, t, &Value::Object(msg)) {
                 Ok(()) => n += 1,
                 Err(e) => {
                     failure = Some(e);
