@@ -28,8 +28,6 @@ const SHIPPED: [(&str, &[&str]); 15] = [
     ("stealthy-bias", &["1"]),
 ];
 
-const DETECTORS: [&str; 3] = ["s_hat_norm", "chi2", "cusum"];
-
 /// The markdown cells of a time to detect that has no value.
 const NO_VALUE: [&str; 3] = ["missed", "no onset", "—"];
 
@@ -111,7 +109,7 @@ fn attacks_table_has_a_row_per_class_and_marks_what_is_undefined() {
 
     // Without an attack there is no onset: nothing detected, no time to detect (not 0).
     let none = rows.iter().find(|r| r[0] == "none").expect("the none row");
-    for d in DETECTORS {
+    for d in fdi_common::detect::names() {
         assert_eq!(none[col(&format!("{d}_onsets"))], "0", "{d}");
         assert_eq!(none[col(&format!("{d}_detected"))], "0", "{d}");
         assert_eq!(none[col(&format!("{d}_mean_time_to_detect_s"))], "", "{d}");
@@ -150,7 +148,7 @@ fn attacks_table_has_a_row_per_class_and_marks_what_is_undefined() {
                 assert_eq!(cell, format!("{x:.4}"), "{} {mode}", r[0]);
             }
         }
-        for (j, d) in DETECTORS.iter().enumerate() {
+        for (j, d) in fdi_common::detect::names().iter().enumerate() {
             let (detected, time) = (cells[4 + 3 * j], cells[5 + 3 * j]);
             let onsets = r[col(&format!("{d}_onsets"))];
             if onsets == "0" {

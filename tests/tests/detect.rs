@@ -10,7 +10,6 @@ use fdi_tests::{launch_plain, repo_path, Scratch};
 
 const WATCHDOG: Duration = Duration::from_secs(300);
 const HEADER: &str = "detector,agent,threshold,configured,tpr,fpr,false_alarms_per_min,mean_delay_s,detected_onsets,onsets,alarm_on_at_onset,in_force_ticks,attack_free_ticks,no_verdict_ticks,note";
-const DETECTORS: [&str; 3] = ["s_hat_norm", "chi2", "cusum"];
 const AGENTS: [&str; 5] = ["all", "1", "2", "3", "4"];
 
 fn text(out: &Output) -> String {
@@ -139,7 +138,7 @@ fn detect_sweeps_a_scenarios_run_into_monotone_roc_curves_and_replays_a_run_dire
         assert_drawn(&png, &svg);
     }
     let stderr = String::from_utf8_lossy(&out.stderr);
-    for d in DETECTORS {
+    for d in fdi_common::detect::names() {
         assert!(
             stderr.contains(&format!("detect: {d}: ")) && stderr.contains("at its threshold"),
             "{d} summarized:\n{stderr}"
@@ -147,7 +146,7 @@ fn detect_sweeps_a_scenarios_run_into_monotone_roc_curves_and_replays_a_run_dire
     }
 
     let rows = rows(&csv);
-    for d in DETECTORS {
+    for d in fdi_common::detect::names() {
         for a in AGENTS {
             let c = curve(&rows, d, a);
             assert!(c.len() >= 3, "{d}/{a}: {} rows", c.len());

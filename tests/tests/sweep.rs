@@ -152,7 +152,7 @@ fn a_small_campaign_matches_single_runs_and_resumes() {
             assert_eq!(got.to_bits(), want.to_bits(), "robot {robot} {col}");
         }
         // A value the run leaves null (nothing to measure in so short a run) is an empty cell.
-        for det in ["s_hat_norm", "chi2", "cusum"] {
+        for det in fdi_common::detect::names() {
             let want = &m["detectors"][det]["coverage"];
             let got = &row[format!("robot{robot}.detectors.{det}.coverage")];
             match want.as_f64() {
