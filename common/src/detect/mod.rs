@@ -26,6 +26,7 @@ pub mod kind;
 pub mod residual;
 pub mod s_hat;
 pub mod sweep;
+pub mod window_mean;
 
 use nalgebra::DVector;
 
@@ -38,7 +39,7 @@ pub use kind::{Kind, ResidualDetector};
 
 /// The detectors on the observer's residual, in the order of every table, export and figure.
 /// A new detector: its own file with its [`Kind`], and one entry here.
-pub const RESIDUAL: &[Kind] = &[chi2::KIND, cusum::KIND];
+pub const RESIDUAL: &[Kind] = &[chi2::KIND, cusum::KIND, window_mean::KIND];
 
 /// The paper's alarm.
 pub const S_HAT_NORM: &str = "s_hat_norm";
