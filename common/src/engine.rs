@@ -2,13 +2,17 @@
 //! pieces ([`Plant`], [`crate::attack::AgentAttack`], [`CenterAgent`]) and the same order of
 //! floating-point operations as the multi-process runtime. It is the oracle for tests and the
 //! floor for the IPC overhead benchmark.
+//!
+//! The attacker is a value: [`run_inproc`] and [`run_inproc_any`] run the scenario's attack
+//! profile ([`crate::attack::ProfileAttacker`]); [`run_inproc_with`] and
+//! [`run_inproc_any_with`] run any [`Attacker`] a caller supplies.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
-use crate::attack::{Injection, Sent, TorqueInjection};
+use crate::attack::{Attacker, Injection, Sent, TorqueInjection};
 use crate::control::{CenterAgent, CenterOutput};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::Vector;
@@ -298,31 +302,59 @@ pub fn run_inproc_any(
     resolved: &Resolved,
     sink: impl FnMut(&TickRecord),
 ) -> Result<RunSummary, EngineError> {
-    struct Run<'a, F> {
+    run_inproc_any_with(resolved, &mut resolved.profile_attacker(), sink)
+}
+
+/// [`run_inproc_with`] with the number of links of the run's agents: runs `resolved` with
+/// `attacker` in place of the scenario's attack profile (whose `attack` is then ignored).
+pub fn run_inproc_any_with<A: Attacker>(
+    resolved: &Resolved,
+    attacker: &mut A,
+    sink: impl FnMut(&TickRecord),
+) -> Result<RunSummary, EngineError> {
+    struct Run<'a, A, F> {
         resolved: &'a Resolved,
+        attacker: &'a mut A,
         sink: F,
     }
-    impl<F: FnMut(&TickRecord)> ForLinks for Run<'_, F> {
+    impl<A: Attacker, F: FnMut(&TickRecord)> ForLinks for Run<'_, A, F> {
         type Output = Result<RunSummary, EngineError>;
         fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            run_inproc::<N>(self.resolved, self.sink)
+            run_inproc_with::<N, A>(self.resolved, self.attacker, self.sink)
         }
     }
     resolved
-        .with_links(Run { resolved, sink })
+        .with_links(Run {
+            resolved,
+            attacker,
+            sink,
+        })
         .ok_or(EngineError::NoAgents)?
 }
 
 /// Runs `resolved` to the end on this thread; `sink` sees every joined tick record in digest
-/// order (tick, then agent order of the scenario).
+/// order (tick, then agent order of the scenario). The attacker is the scenario's attack
+/// profile ([`Resolved::profile_attacker`]).
 pub fn run_inproc<const N: usize>(
     resolved: &Resolved,
+    sink: impl FnMut(&TickRecord),
+) -> Result<RunSummary, EngineError> {
+    run_inproc_with::<N, _>(resolved, &mut resolved.profile_attacker(), sink)
+}
+
+/// [`run_inproc`] with `attacker` in place of the scenario's attack profile: at each tick and
+/// for each agent, in the scenario's agent order, the engine asks it for the measurement the
+/// control center receives, then, when it sits on the agent's torque path, for the torque the
+/// robot receives ([`Attacker`] says what its answers must say). The summary's `attack` is
+/// [`Attacker::name`].
+pub fn run_inproc_with<const N: usize, A: Attacker>(
+    resolved: &Resolved,
+    attacker: &mut A,
     mut sink: impl FnMut(&TickRecord),
 ) -> Result<RunSummary, EngineError> {
     let started = Instant::now();
     let s = &resolved.scenario;
     let mut plants = Vec::with_capacity(s.agents.len());
-    let mut attacks = Vec::with_capacity(s.agents.len());
     let mut centers = Vec::with_capacity(s.agents.len());
     for a in &s.agents {
         plants.push(
@@ -331,7 +363,6 @@ pub fn run_inproc<const N: usize>(
                 dof: N,
             })?,
         );
-        attacks.push(resolved.agent_attack(a.id));
         centers.push(
             CenterAgent::<N>::new(s.center_params(a)).ok_or(EngineError::ModelDof {
                 agent: a.id,
@@ -344,15 +375,15 @@ pub fn run_inproc<const N: usize>(
     let mut evaluator = evaluator_for(resolved);
     for k in 0..ticks {
         let t = tick_time(k, s.control_period_s);
-        for ((plant, attack), center) in plants.iter_mut().zip(&mut attacks).zip(&mut centers) {
+        for (plant, center) in plants.iter_mut().zip(&mut centers) {
             let id = plant.agent_id();
             let (q, qd) = (plant.q, plant.qd);
             let m = plant.measure();
-            let (sent, inj) = attack.measurement::<N>(k, t, &m);
+            let (sent, inj) = attacker.measurement::<N>(id, k, t, &m);
             let out = center_tick(center, t, sent.usable().map(|(m, _)| m));
             // A refused or missing command is counted by the plant; the run goes on.
-            let actuation = if resolved.attack.attacks_torque_of(id) {
-                let (sent, tinj) = attack.torque::<N>(k, t, &out.u);
+            let actuation = if attacker.on_torque_path(id) {
+                let (sent, tinj) = attacker.torque::<N>(id, k, t, &out.u);
                 let _ = plant.take_command(t, sent.usable().map(|(u, h)| (*u, h)));
                 Some(actuation_record(k, id, &sent, &tinj))
             } else {
@@ -372,12 +403,14 @@ pub fn run_inproc<const N: usize>(
             sink(&rec);
         }
     }
-    Ok(summarize(
+    let mut summary = summarize(
         resolved,
         "inproc",
         ticks,
         started.elapsed().as_secs_f64(),
         digest,
         evaluator,
-    ))
+    );
+    summary.attack = attacker.name().to_owned();
+    Ok(summary)
 }

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
-use crate::attack::{presets, AgentAttack, AttackProfile};
+use crate::attack::{presets, AgentAttack, AttackProfile, ProfileAttacker};
 use crate::control::CenterParams;
 pub use crate::control::{
     ControllerConfig, ControllerMode, DetectionConfig, ObserverInput, UpdateLaw,
@@ -363,6 +363,22 @@ impl Resolved {
             }
             _ => attack,
         }
+    }
+
+    /// The attacker of the run's attack profile: [`Self::agent_attack`] of every agent, in the
+    /// scenario's agent order, on the torque path of the agents whose torques the profile
+    /// attacks. What the in-process engine runs by default.
+    pub fn profile_attacker(&self) -> ProfileAttacker {
+        ProfileAttacker::new(
+            self.attack.name.clone(),
+            self.scenario.agents.iter().map(|a| {
+                (
+                    a.id,
+                    self.agent_attack(a.id),
+                    self.attack.attacks_torque_of(a.id),
+                )
+            }),
+        )
     }
 
     /// Number of agents.

@@ -195,3 +195,62 @@ fn constant_delays_on_the_tick_grid_equal_the_same_delay_plus_a_hair() {
         }
     }
 }
+
+/// Relays every message unchanged, and says so.
+struct Relay;
+
+impl fdi_common::attack::Attacker for Relay {
+    fn name(&self) -> &str {
+        "relay"
+    }
+
+    fn measurement<const N: usize>(
+        &mut self,
+        _agent: u32,
+        _k: u64,
+        _t: f64,
+        clean: &fdi_common::plant::Measurement<N>,
+    ) -> (
+        fdi_common::attack::Sent<fdi_common::plant::Measurement<N>>,
+        fdi_common::attack::Injection<N>,
+    ) {
+        (
+            fdi_common::attack::Sent::Delivered {
+                payload: *clean,
+                held_s: 0.0,
+            },
+            fdi_common::attack::Injection::none(),
+        )
+    }
+}
+
+#[test]
+fn execute_with_writes_the_run_directory_of_a_supplied_attacker_on_the_inproc_engine_only() {
+    use fdi_common::run_dir::Process;
+    use fdi_orchestrator::{execute_with, Engine, Overrides, RunRequest, Stop};
+    let out = std::env::temp_dir().join(format!("fdi-execute-with-{}", std::process::id()));
+    let overrides = Overrides {
+        duration_s: Some(0.5),
+        ..Overrides::default()
+    };
+    let request = RunRequest::new(None, &overrides, Engine::Inproc).expect("request");
+    let dir = request.create_run_dir(&out).expect("run directory");
+    let summary = execute_with(&request, &dir, &Stop::new(), &mut Relay).expect("runs");
+    assert_eq!(summary.attack, "relay");
+    let written: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.summary()).expect("summary.json"))
+            .expect("JSON");
+    assert_eq!(written["attack"], "relay");
+    assert_eq!(written["trace_digest"], summary.trace_digest.as_str());
+    assert!(dir.trace(Process::Attacker).is_file());
+
+    let ipc = RunRequest::new(None, &overrides, Engine::Ipc).expect("request");
+    let dir = ipc.create_run_dir(&out).expect("run directory");
+    let e = execute_with(&ipc, &dir, &Stop::new(), &mut Relay).expect_err("refused");
+    assert!(e.to_string().contains("ipc engine"), "{e:#}");
+    assert!(
+        !dir.path().exists(),
+        "a refused run leaves no run directory"
+    );
+    let _ = std::fs::remove_dir_all(&out);
+}

@@ -12,8 +12,14 @@
 //! commands through the attacker ([`AttackProfile::attacks_torque_of`]); the others keep the
 //! direct path. Whole-message attacks (denial of service, delay, stamp forgery, replay with the
 //! original header) are the profile's `[[messages]]` ([`message`]).
+//!
+//! What an attacker does at each tick, for each agent, is the [`Attacker`] trait
+//! ([`attacker`]); the attacker of a profile is [`ProfileAttacker`], the [`AgentAttack`] of
+//! each agent. The in-process engine runs any [`Attacker`] a caller supplies.
 
+pub mod attacker;
 pub mod covert;
+pub mod injection;
 pub mod message;
 pub mod presets;
 pub mod profile;
@@ -26,7 +32,9 @@ use crate::plant::{Measurement, PlantParams};
 use crate::records::Joints;
 use crate::rng::{stream, Purpose};
 
+pub use attacker::Attacker;
 pub use covert::CovertEntry;
+pub use injection::{Injection, TorqueInjection};
 pub use message::{Effect, MessageAttack, MessageSegment, Path, Sent};
 pub use profile::{AttackProfile, Channel, Segment, Signal, ValueUnit};
 pub use waveform::Waveform;
@@ -112,49 +120,6 @@ impl LinkChannel {
             w => self.scale * w.value(t, seg.from_s, &mut self.rng),
         };
         Some((v, seg.waveform.transforms()))
-    }
-}
-
-/// Injected values `α` at one tick, in rad and rad/s.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Injection<const N: usize> {
-    pub position: Vector<N>,
-    pub velocity: Vector<N>,
-    /// A transforming segment (scale, sign flip, freeze) is in force on some link.
-    pub transforming: bool,
-    /// A whole-message attack other than `pass` is in force on the path.
-    pub message: bool,
-}
-
-impl<const N: usize> Injection<N> {
-    /// The attack is in force: the injected value is non-zero on some link of either signal, or
-    /// a transforming segment or a message attack is in force. Every rising edge of this is an
-    /// attack onset (a pulse train has one per pulse).
-    pub fn in_force(&self) -> bool {
-        self.transforming
-            || self.message
-            || self
-                .position
-                .iter()
-                .chain(self.velocity.iter())
-                .any(|x| *x != 0.0)
-    }
-}
-
-/// Injected torque `α_u` at one tick, N·m.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TorqueInjection<const N: usize> {
-    pub u: Vector<N>,
-    /// A transforming segment (scale, sign flip, freeze) is in force on some link.
-    pub transforming: bool,
-    /// A whole-message attack other than `pass` is in force on the torque path.
-    pub message: bool,
-}
-
-impl<const N: usize> TorqueInjection<N> {
-    /// The attack on the torque path is in force (as [`Injection::in_force`]).
-    pub fn in_force(&self) -> bool {
-        self.transforming || self.message || self.u.iter().any(|x| *x != 0.0)
     }
 }
 
@@ -342,6 +307,90 @@ impl AgentAttack {
             .any(|ch| ch.segment_at(t).is_some_and(|s| !s.waveform.is_none()))
             || self.measurements.as_ref().is_some_and(|l| l.in_force(t))
             || self.torques.as_ref().is_some_and(|l| l.in_force(t))
+    }
+}
+
+/// The attacker of a scenario's attack profile: the [`AgentAttack`] of each agent, and whether
+/// the profile attacks its torques ([`AttackProfile::attacks_torque_of`]). What the in-process
+/// engine runs unless given another [`Attacker`];
+/// [`crate::scenario::Resolved::profile_attacker`] builds it for a run.
+#[derive(Debug)]
+pub struct ProfileAttacker {
+    name: String,
+    /// `(agent id, its attack, the profile attacks its torques)`, in the scenario's order.
+    agents: Vec<(u32, AgentAttack, bool)>,
+}
+
+impl ProfileAttacker {
+    /// The attacker called `name` (the profile's) of `agents`: `(agent id, its attack, the
+    /// profile attacks its torques)`, in the scenario's agent order.
+    pub fn new(
+        name: impl Into<String>,
+        agents: impl IntoIterator<Item = (u32, AgentAttack, bool)>,
+    ) -> Self {
+        Self {
+            name: name.into(),
+            agents: agents.into_iter().collect(),
+        }
+    }
+
+    /// The attack on agent `id`, if it is one of this attacker's agents.
+    pub fn agent(&self, id: u32) -> Option<&AgentAttack> {
+        self.agents.iter().find(|a| a.0 == id).map(|a| &a.1)
+    }
+
+    fn agent_mut(&mut self, id: u32) -> Option<&mut AgentAttack> {
+        self.agents.iter_mut().find(|a| a.0 == id).map(|a| &mut a.1)
+    }
+}
+
+/// Each call is the [`AgentAttack`] call of the agent; an agent the attacker does not know gets
+/// its messages unchanged.
+impl Attacker for ProfileAttacker {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn measurement<const N: usize>(
+        &mut self,
+        agent: u32,
+        k: u64,
+        t: f64,
+        clean: &Measurement<N>,
+    ) -> (Sent<Measurement<N>>, Injection<N>) {
+        match self.agent_mut(agent) {
+            Some(attack) => attack.measurement::<N>(k, t, clean),
+            None => (
+                Sent::Delivered {
+                    payload: *clean,
+                    held_s: 0.0,
+                },
+                Injection::none(),
+            ),
+        }
+    }
+
+    fn on_torque_path(&self, agent: u32) -> bool {
+        self.agents.iter().any(|a| a.0 == agent && a.2)
+    }
+
+    fn torque<const N: usize>(
+        &mut self,
+        agent: u32,
+        k: u64,
+        t: f64,
+        u: &Vector<N>,
+    ) -> (Sent<Vector<N>>, TorqueInjection<N>) {
+        match self.agent_mut(agent) {
+            Some(attack) => attack.torque::<N>(k, t, u),
+            None => (
+                Sent::Delivered {
+                    payload: *u,
+                    held_s: 0.0,
+                },
+                TorqueInjection::none(),
+            ),
+        }
     }
 }
 

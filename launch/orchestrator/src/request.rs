@@ -5,6 +5,7 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, ValueEnum};
+use fdi_common::attack::Attacker;
 use fdi_common::engine::RunSummary;
 use fdi_common::run_dir::RunDir;
 use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
@@ -294,5 +295,44 @@ pub fn execute(request: &RunRequest, dir: &RunDir, stop: &Stop) -> Result<RunSum
                 request.deployment.as_ref(),
             )
         });
+    crate::run_dirs::discard_if_not_started(dir.path(), run)
+}
+
+/// [`execute`] with `attacker` in place of the scenario's attack profile
+/// ([`fdi_common::attack::Attacker`]), on the in-process engine only: the request's engine must
+/// be [`Engine::Inproc`] and it must not be split over hosts (a request that asks otherwise is
+/// refused before the start, and `dir` removed). The run directory holds what [`execute`]
+/// writes for an in-process run; the summary's `attack` is the attacker's name. The
+/// in-process engine runs to the end: a raised `stop` stops it only before its start.
+pub fn execute_with<A: Attacker>(
+    request: &RunRequest,
+    dir: &RunDir,
+    stop: &Stop,
+    attacker: &mut A,
+) -> Result<RunSummary> {
+    let run = if request.engine != Engine::Inproc || request.deployment.is_some() {
+        Err(anyhow::anyhow!(DidNotStart).context(format!(
+            "a run with an attacker of its own needs the in-process engine on one host, not \
+             the {} engine{}",
+            request.engine.as_str(),
+            if request.deployment.is_some() {
+                " over hosts"
+            } else {
+                ""
+            }
+        )))
+    } else {
+        stop.check(BEFORE_THE_START)
+            .map_err(anyhow::Error::from)
+            .context(DidNotStart)
+            .and_then(|()| {
+                crate::run::execute_inproc_with(
+                    &request.resolved,
+                    dir.path(),
+                    request.traces,
+                    attacker,
+                )
+            })
+    };
     crate::run_dirs::discard_if_not_started(dir.path(), run)
 }

@@ -20,7 +20,8 @@ use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
-use fdi_common::engine::{run_inproc_any, Partial, RunSummary};
+use fdi_common::attack::Attacker;
+use fdi_common::engine::{run_inproc_any, run_inproc_any_with, Partial, RunSummary};
 use fdi_common::records::TickRecord;
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
@@ -127,6 +128,56 @@ impl Options {
     }
 }
 
+/// Refuses a scenario the in-process engine cannot run.
+fn inproc_runs(r: &Resolved) -> Result<()> {
+    if r.has_external_roles() {
+        bail!(
+            "the in-process engine cannot run a program that takes a role (`[roles]` of the \
+             scenario): run it with --engine ipc"
+        );
+    }
+    Ok(())
+}
+
+/// Runs `r` on the in-process engine with `attacker` in place of the scenario's attack profile
+/// ([`fdi_common::engine::run_inproc_any_with`]), into the run directory `dir`: the traces
+/// `traces` says and `summary.json`, as [`execute`] writes them for an in-process run (which
+/// is this with the profile's attacker).
+pub fn execute_inproc_with<A: Attacker>(
+    r: &Resolved,
+    dir: &Path,
+    traces: Traces,
+    attacker: &mut A,
+) -> Result<RunSummary> {
+    inproc_runs(r)?;
+    let kept = match traces {
+        Traces::Full => Some(Kept::Full),
+        Traces::Decimate(k) => Some(Kept::Decimate { every: k.get() }),
+        Traces::None => None,
+    };
+    let mut writers = match kept {
+        Some(kept) => Some(InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?),
+        None => None,
+    };
+    let mut failure = None;
+    let summary = run_inproc_any_with(r, attacker, |rec| {
+        if let Some(w) = &mut writers {
+            if let Err(e) = w.write(rec) {
+                failure.get_or_insert(e);
+            }
+        }
+    })
+    .context("in-process engine")?;
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    if let Some(w) = writers {
+        w.flush()?;
+    }
+    output::write_run_summary(dir, &summary, traces)?;
+    Ok(summary)
+}
+
 /// Runs a resolved scenario on an engine. With `run_dir`, traces and the summary go there; an
 /// ipc run without one uses a scratch folder under the system's temporary directory that keeps
 /// no traces and is removed at the end. `opts.traces` says what of the traces the run directory
@@ -158,43 +209,13 @@ pub fn execute_on(
              traces are fetched whole at the end)"
         );
     }
-    if engine == Engine::Inproc && r.has_external_roles() {
-        anyhow::bail!(
-            "the in-process engine cannot run a program that takes a role (`[roles]` of the \
-             scenario): run it with --engine ipc"
-        );
+    if engine == Engine::Inproc {
+        inproc_runs(r)?;
     }
     match (engine, run_dir) {
         (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
         (Engine::Inproc, Some(dir)) => {
-            let kept = match traces {
-                Traces::Full => Some(Kept::Full),
-                Traces::Decimate(k) => Some(Kept::Decimate { every: k.get() }),
-                Traces::None => None,
-            };
-            let mut writers = match kept {
-                Some(kept) => {
-                    Some(InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?)
-                }
-                None => None,
-            };
-            let mut failure = None;
-            let summary = run_inproc_any(r, |rec| {
-                if let Some(w) = &mut writers {
-                    if let Err(e) = w.write(rec) {
-                        failure.get_or_insert(e);
-                    }
-                }
-            })
-            .context("in-process engine")?;
-            if let Some(e) = failure {
-                return Err(e);
-            }
-            if let Some(w) = writers {
-                w.flush()?;
-            }
-            output::write_run_summary(dir, &summary, traces)?;
-            Ok(summary)
+            execute_inproc_with(r, dir, traces, &mut r.profile_attacker())
         }
         (Engine::Ipc, None) => {
             // The processes need a folder of their own (the scenario as used, their pipes):
