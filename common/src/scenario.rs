@@ -53,11 +53,26 @@ pub enum ClockMode {
 }
 
 impl ClockMode {
+    /// Every clock, in the order the help lists them.
+    pub const ALL: [Self; 2] = [Self::Lockstep, Self::Realtime];
+
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Lockstep => "lockstep",
             Self::Realtime => "realtime",
         }
+    }
+}
+
+impl std::str::FromStr for ClockMode {
+    type Err = String;
+
+    /// The names of a scenario file: `lockstep` or `realtime`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|c| c.as_str() == s)
+            .ok_or_else(|| format!("`{s}` is not a clock: lockstep or realtime"))
     }
 }
 

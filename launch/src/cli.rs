@@ -2,16 +2,15 @@
 
 use std::path::PathBuf;
 
-use clap::{Args, Parser, Subcommand, ValueEnum};
+use clap::{Parser, Subcommand, ValueEnum};
 use fdi_orchestrator::attacks::AttacksArgs;
 use fdi_orchestrator::bench::BenchCommand;
 use fdi_orchestrator::campaign::SweepArgs;
-use fdi_orchestrator::run::runtime::Placement;
 use fdi_orchestrator::run::serve::ServeArgs;
 use fdi_orchestrator::tables::TableArgs;
-use fdi_orchestrator::{Engine, Overrides};
+
+use crate::commands::{detect::DetectArgs, run::RunArgs, validate::SchemaFormat};
 use fdi_report::export;
-use fdi_report::traces::Traces;
 use fdi_runtime::process::ProcessArgs;
 
 /// Testbed for false-data-injection attacks on a multi-agent robot system (Sargolzaei et al.).
@@ -121,15 +120,6 @@ pub enum RunsCommand {
     },
 }
 
-/// A file format that `schema` describes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum SchemaFormat {
-    /// A scenario file (`scenarios/*.toml`).
-    Scenario,
-    /// An attack-profile file (`scenarios/attacks/*.toml`).
-    Attack,
-}
-
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ProcessRole {
     Agent,
@@ -140,95 +130,46 @@ pub enum ProcessRole {
     Replayer,
 }
 
-/// `run`: a scenario, its overrides, the engine and what the run directory keeps.
-#[derive(Debug, Args)]
-pub struct RunArgs {
-    /// Scenario TOML file; without it the embedded paper scenario runs.
-    pub scenario: Option<PathBuf>,
-    #[arg(long, value_enum, default_value_t = Engine::Ipc)]
-    pub engine: Engine,
-    #[command(flatten)]
-    pub overrides: Overrides,
-    /// Folder that receives the run directory.
-    #[arg(long, default_value = "runs")]
-    pub out: PathBuf,
-    /// Print one JSON object instead of the table.
-    #[arg(long)]
-    pub json: bool,
-    /// What the run directory keeps of the traces: `full`, `decimate=K` (every K-th tick) or
-    /// `none`; the summary's metrics and digest cover every tick either way.
-    #[arg(long, default_value_t = Traces::Full)]
-    pub traces: Traces,
-    /// Largest trace size a run may write (what `--traces` keeps, estimated before the start):
-    /// `500MB`, `2GiB`, ...; a run over it, or over the free space of `--out`, is refused.
-    #[arg(long, default_value = "10GB")]
-    pub max_trace_size: bytesize::ByteSize,
-    /// Start even when the estimated traces exceed the free space of `--out` (space that will
-    /// be freed meanwhile; a full disk then stops the run naming the trace). The
-    /// `--max-trace-size` limit still holds.
-    #[arg(long)]
-    pub no_space_check: bool,
-    #[command(flatten)]
-    pub placement: Placement,
-    /// Split the run over hosts: a deployment file naming each host, its Zenoh endpoint and
-    /// the processes it runs (docs/multi-host.md). Each other host runs `fdi-launch serve`.
-    #[arg(long, value_name = "FILE")]
-    pub hosts: Option<PathBuf>,
-    /// Golden regression: re-run the control center of a recorded run directory on its recorded
-    /// tampered measurements and compare the trace digest with the recording's (exit status 1
-    /// when they differ). The scenario comes from RUN_DIR.
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts", "observer_input", "leakage_w_per_s", "dead_zone_rad_s", "innovation_time_constant_s"])]
-    pub replay: Option<PathBuf>,
-}
-
-/// `detect`: a run directory, or a scenario run first as `run` runs it.
-#[derive(Debug, Args)]
-pub struct DetectArgs {
-    /// A run directory (its recorded traces are replayed) or a scenario TOML file (run once as
-    /// `run` does, then its run directory is swept).
-    pub target: PathBuf,
-    /// Folder that receives the outputs; default: `<run dir>/detect`.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Log-spaced thresholds per detector over the range of its statistic in the run (0 and the
-    /// configured threshold are added).
-    #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=100_000))]
-    pub points: u32,
-    /// A scenario TARGET: the engine of its run (as `run --engine`; default ipc).
-    #[arg(long, value_enum)]
-    pub engine: Option<Engine>,
-    /// A scenario TARGET: its overrides (as `run`).
-    #[command(flatten)]
-    pub overrides: Overrides,
-    /// A scenario TARGET: the folder that receives its run directory (as `run --out`).
-    #[arg(long, default_value = "runs")]
-    pub runs: PathBuf,
-}
-
-impl DetectArgs {
-    /// The flags that only a scenario TARGET takes, by name, when given.
-    pub fn run_flags(&self) -> Vec<&'static str> {
-        self.engine
-            .map(|_| "--engine")
-            .into_iter()
-            .chain(self.overrides.given())
-            .collect()
-    }
-
-    /// The `run` of a scenario TARGET, with these flags.
-    pub fn run_args(&self) -> RunArgs {
-        RunArgs {
-            scenario: Some(self.target.clone()),
-            engine: self.engine.unwrap_or(Engine::Ipc),
-            overrides: self.overrides.clone(),
-            out: self.runs.clone(),
-            json: false,
-            traces: Traces::Full,
-            max_trace_size: bytesize::ByteSize::gb(10),
-            no_space_check: false,
-            hosts: None,
-            placement: Placement::default(),
-            replay: None,
-        }
+#[cfg(test)]
+mod tests {
+    /// The run directory says what the command line changed, in a fixed order.
+    #[test]
+    fn a_run_is_named_after_its_scenario_and_what_the_command_line_changed() {
+        use clap::Parser;
+        let name = |argv: &[&str]| {
+            let cli = super::Cli::try_parse_from(argv).expect("parses");
+            let super::Command::Run(args) = cli.command else {
+                panic!("not a run")
+            };
+            let request = fdi_orchestrator::RunRequest::new(None, &args.overrides, args.engine)
+                .expect("valid overrides");
+            request.name
+        };
+        assert_eq!(name(&["fdi-launch", "run"]), "paper");
+        assert_eq!(
+            name(&[
+                "fdi-launch",
+                "run",
+                "--attack",
+                "freeze",
+                "--controller",
+                "traditional",
+                "--engine",
+                "inproc",
+                "--seed",
+                "3",
+                "--duration-s",
+                "2.5",
+            ]),
+            "paper-attack-freeze-traditional-inproc-seed3-2.5s"
+        );
+        let file = concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../scenarios/attacks/sign-flip.toml"
+        );
+        assert_eq!(
+            name(&["fdi-launch", "run", "--attack", file, "--clock", "lockstep"]),
+            "paper-attack-sign-flip-lockstep"
+        );
     }
 }

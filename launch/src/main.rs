@@ -8,11 +8,17 @@ mod commands;
 
 use clap::Parser;
 use fdi_common::stop::{Interrupted, Stop, SIGINT, SIGTERM};
+use std::process::ExitCode;
 
-fn main() -> std::process::ExitCode {
+use anyhow::Result;
+use cli::{Command, ProcessRole, RunsCommand, TraceCommand};
+use fdi_orchestrator::{attacks, bench, campaign, run::runs, run::serve, tables};
+use fdi_report::{export, report};
+
+fn main() -> ExitCode {
     let cli = cli::Cli::parse();
     let stop = Stop::new();
-    if commands::handles_interrupts(&cli.command) {
+    if handles_interrupts(&cli.command) {
         for sig in [SIGINT, SIGTERM] {
             // Registering only fails for a forbidden signal (SIGKILL, ...); these are not.
             let number = usize::try_from(sig).unwrap_or(1);
@@ -24,11 +30,11 @@ fn main() -> std::process::ExitCode {
     // What runs killed outright left (SIGKILL of their launcher) goes at the next command.
     if !matches!(
         cli.command,
-        cli::Command::Process { .. } | cli::Command::BenchPeer { .. }
+        Command::Process { .. } | Command::BenchPeer { .. }
     ) {
         fdi_orchestrator::run::runtime::reap_stale_runs();
     }
-    match commands::dispatch(cli.command, &stop) {
+    match dispatch(cli.command, &stop) {
         Ok(code) => code,
         Err(e) => {
             eprintln!(
@@ -36,9 +42,60 @@ fn main() -> std::process::ExitCode {
                 fdi_report::output::describe_error(&e)
             );
             match e.downcast_ref::<Interrupted>() {
-                Some(i) => std::process::ExitCode::from(i.exit_code()),
-                None => std::process::ExitCode::FAILURE,
+                Some(i) => ExitCode::from(i.exit_code()),
+                None => ExitCode::FAILURE,
             }
         }
     }
+}
+
+/// Runs `command`; `stop` is raised by SIGINT/SIGTERM for the commands that run or report
+/// ([`handles_interrupts`]).
+fn dispatch(command: Command, stop: &Stop) -> Result<ExitCode> {
+    let done = |r: Result<()>| r.map(|()| ExitCode::SUCCESS);
+    match command {
+        Command::Run(args) => commands::run::run(&args, stop),
+        Command::Serve(args) => serve::serve(&args, stop),
+        Command::Validate { scenario } => commands::validate::validate(&scenario),
+        Command::Sweep(args) => campaign::sweep(&args, stop),
+        Command::Schema { format } => commands::validate::schema(format),
+        Command::Table1(args) => tables::table1(&args, stop),
+        Command::Table2(args) => tables::table2(&args, stop),
+        Command::Attacks(args) => attacks::attacks(&args, stop),
+        Command::Report { run_dir } => done(report::report(&run_dir, stop)),
+        Command::Detect(args) => commands::detect::detect(&args, stop),
+        Command::Trace(TraceCommand::Export { run_dir, format }) => {
+            done(export::export(&run_dir, format))
+        }
+        Command::Runs(RunsCommand::List { out }) => done(runs::print_list(&out)),
+        Command::Runs(RunsCommand::Prune { keep, out, dry_run }) => {
+            done(runs::print_prune(&out, keep, dry_run))
+        }
+        Command::Bench(b) => bench::bench(&b, stop),
+        Command::BenchPeer { args } => done(bench::floor::peer_main(&args)),
+        Command::Process { role, args } => Ok(match role {
+            ProcessRole::Agent => fdi_agent::main_with(args),
+            ProcessRole::Attacker => fdi_attacker::main_with(args),
+            ProcessRole::ControlCenter => fdi_control_center::main_with(args),
+            ProcessRole::Replayer => fdi_orchestrator::run::replayer::main_with(&args),
+        }),
+    }
+}
+
+/// True for the commands that run or report: they handle SIGINT/SIGTERM from the first
+/// moment (every phase checks the stop, so an interrupt stops at once, keeps what is done and
+/// says so).
+fn handles_interrupts(command: &Command) -> bool {
+    matches!(
+        command,
+        Command::Run(_)
+            | Command::Sweep(_)
+            | Command::Report { .. }
+            | Command::Detect(_)
+            | Command::Table1(_)
+            | Command::Table2(_)
+            | Command::Attacks(_)
+            | Command::Serve(_)
+            | Command::Bench(_)
+    )
 }

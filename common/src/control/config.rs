@@ -15,11 +15,26 @@ pub enum ControllerMode {
 }
 
 impl ControllerMode {
+    /// Every mode, in the order the help lists them.
+    pub const ALL: [Self; 2] = [Self::Proposed, Self::Traditional];
+
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Proposed => "proposed",
             Self::Traditional => "traditional",
         }
+    }
+}
+
+impl std::str::FromStr for ControllerMode {
+    type Err = String;
+
+    /// The names of a scenario file: `proposed` or `traditional`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|c| c.as_str() == s)
+            .ok_or_else(|| format!("`{s}` is not a controller mode: proposed or traditional"))
     }
 }
 

@@ -9,8 +9,9 @@
 //! `fdi-launch sweep` does the same with statistics over seeds, resumably, from a campaign file.
 
 use anyhow::{Context, Result};
+use fdi_common::scenario::ControllerMode;
 use fdi_common::stop::Stop;
-use fdi_orchestrator::{execute, Controller, Engine, Overrides, RunRequest};
+use fdi_orchestrator::{execute, Engine, Overrides, RunRequest};
 
 fn main() -> Result<()> {
     let duration_s: f64 = match std::env::args().nth(1) {
@@ -23,7 +24,7 @@ fn main() -> Result<()> {
     let stop = Stop::new();
     let overrides = Overrides {
         duration_s: Some(duration_s),
-        controller: Some(Controller::Proposed),
+        controller: Some(ControllerMode::Proposed),
         ..Overrides::default()
     };
     println!(

@@ -4,7 +4,8 @@
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, ValueEnum};
+use clap::builder::{PossibleValuesParser, TypedValueParser};
+use clap::Args;
 use fdi_common::attack::Attacker;
 use fdi_common::engine::RunSummary;
 use fdi_common::run_dir::RunDir;
@@ -15,36 +16,16 @@ use crate::run::hosts::Deployment;
 use crate::run::runtime::{DidNotStart, Placement};
 use crate::run::{Engine, Traces};
 
-/// The scenario's clock, as the command line names it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Clock {
-    Lockstep,
-    Realtime,
+/// `--clock`: the scenario's clock modes by their names, listed in the help.
+fn clock_parser() -> impl TypedValueParser<Value = ClockMode> {
+    PossibleValuesParser::new(ClockMode::ALL.map(ClockMode::as_str))
+        .try_map(|s| s.parse::<ClockMode>())
 }
 
-impl From<Clock> for ClockMode {
-    fn from(c: Clock) -> Self {
-        match c {
-            Clock::Lockstep => Self::Lockstep,
-            Clock::Realtime => Self::Realtime,
-        }
-    }
-}
-
-/// The controller's mode, as the command line names it.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum Controller {
-    Proposed,
-    Traditional,
-}
-
-impl From<Controller> for ControllerMode {
-    fn from(c: Controller) -> Self {
-        match c {
-            Controller::Proposed => Self::Proposed,
-            Controller::Traditional => Self::Traditional,
-        }
-    }
+/// `--controller`: the controller's modes by their names, listed in the help.
+fn controller_parser() -> impl TypedValueParser<Value = ControllerMode> {
+    PossibleValuesParser::new(ControllerMode::ALL.map(ControllerMode::as_str))
+        .try_map(|s| s.parse::<ControllerMode>())
 }
 
 /// The controller's numerics options of the command line: each replaces the scenario's value
@@ -105,15 +86,15 @@ impl NumericsArgs {
 #[derive(Debug, Clone, Default, Args)]
 pub struct Overrides {
     /// Replace the scenario's clock (realtime needs the ipc engine).
-    #[arg(long, value_enum)]
-    pub clock: Option<Clock>,
+    #[arg(long, value_parser = clock_parser())]
+    pub clock: Option<ClockMode>,
     /// Replace the scenario's attack: a preset (the profiles in scenarios/attacks/, see
     /// docs/attacks.md; an unknown name lists them) or a profile file.
     #[arg(long)]
     pub attack: Option<String>,
     /// Replace the scenario's controller mode.
-    #[arg(long, value_enum)]
-    pub controller: Option<Controller>,
+    #[arg(long, value_parser = controller_parser())]
+    pub controller: Option<ControllerMode>,
     /// Replace the scenario's duration, s.
     #[arg(long, allow_negative_numbers = true)]
     pub duration_s: Option<f64>,
@@ -133,7 +114,7 @@ impl Overrides {
             r = r.with_attack(profile)?;
         }
         if let Some(c) = self.controller {
-            r.scenario.controller.mode = c.into();
+            r.scenario.controller.mode = c;
         }
         if let Some(d) = self.duration_s {
             r.scenario.duration_s = d;
@@ -143,7 +124,7 @@ impl Overrides {
         }
         self.numerics.apply(&mut r.scenario);
         if let Some(c) = self.clock {
-            r.scenario.clock = c.into();
+            r.scenario.clock = c;
         }
         if r.scenario.clock == ClockMode::Realtime && engine == Engine::Inproc {
             bail!(
@@ -184,7 +165,7 @@ impl Overrides {
             parts.push(format!("attack-{stem}"));
         }
         if let Some(c) = self.controller {
-            parts.push(ControllerMode::from(c).as_str().into());
+            parts.push(c.as_str().into());
         }
         if engine == Engine::Inproc {
             parts.push("inproc".into());

@@ -2,18 +2,61 @@
 //! report, its summary on stdout and its exit status.
 
 use std::path::PathBuf;
+
+use clap::Args;
 use std::process::ExitCode;
 
 use anyhow::Result;
 use fdi_common::engine::RunSummary;
 use fdi_common::metrics::Onset;
 use fdi_common::stop::{Interrupted, Stop, BEFORE_THE_START, DURING_THE_RUN};
+use fdi_orchestrator::run::runtime::Placement;
 use fdi_orchestrator::run::{check_placement, hosts::Deployment, volume};
-use fdi_orchestrator::{execute, Engine, RunRequest};
+use fdi_orchestrator::{execute, Engine, Overrides, RunRequest};
 use fdi_report::output::{self, describe_error};
 use fdi_report::report;
+use fdi_report::traces::Traces;
 
-use crate::cli::RunArgs;
+/// `run`: a scenario, its overrides, the engine and what the run directory keeps.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Scenario TOML file; without it the embedded paper scenario runs.
+    pub scenario: Option<PathBuf>,
+    #[arg(long, value_enum, default_value_t = Engine::Ipc)]
+    pub engine: Engine,
+    #[command(flatten)]
+    pub overrides: Overrides,
+    /// Folder that receives the run directory.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+    /// Print one JSON object instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// What the run directory keeps of the traces: `full`, `decimate=K` (every K-th tick) or
+    /// `none`; the summary's metrics and digest cover every tick either way.
+    #[arg(long, default_value_t = Traces::Full)]
+    pub traces: Traces,
+    /// Largest trace size a run may write (what `--traces` keeps, estimated before the start):
+    /// `500MB`, `2GiB`, ...; a run over it, or over the free space of `--out`, is refused.
+    #[arg(long, default_value = "10GB")]
+    pub max_trace_size: bytesize::ByteSize,
+    /// Start even when the estimated traces exceed the free space of `--out` (space that will
+    /// be freed meanwhile; a full disk then stops the run naming the trace). The
+    /// `--max-trace-size` limit still holds.
+    #[arg(long)]
+    pub no_space_check: bool,
+    #[command(flatten)]
+    pub placement: Placement,
+    /// Split the run over hosts: a deployment file naming each host, its Zenoh endpoint and
+    /// the processes it runs (docs/multi-host.md). Each other host runs `fdi-launch serve`.
+    #[arg(long, value_name = "FILE")]
+    pub hosts: Option<PathBuf>,
+    /// Golden regression: re-run the control center of a recorded run directory on its recorded
+    /// tampered measurements and compare the trace digest with the recording's (exit status 1
+    /// when they differ). The scenario comes from RUN_DIR.
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts", "observer_input", "leakage_w_per_s", "dead_zone_rad_s", "innovation_time_constant_s"])]
+    pub replay: Option<PathBuf>,
+}
 
 /// `run`.
 pub fn run(args: &RunArgs, stop: &Stop) -> Result<ExitCode> {
@@ -269,46 +312,5 @@ mod tests {
         );
         let plain = anyhow::anyhow!("a").context("b");
         assert_eq!(fdi_report::output::describe_error(&plain), "b: a");
-    }
-
-    /// The run directory says what the command line changed, in a fixed order.
-    #[test]
-    fn a_run_is_named_after_its_scenario_and_what_the_command_line_changed() {
-        use clap::Parser;
-        let name = |argv: &[&str]| {
-            let cli = crate::cli::Cli::try_parse_from(argv).expect("parses");
-            let crate::cli::Command::Run(args) = cli.command else {
-                panic!("not a run")
-            };
-            let request = fdi_orchestrator::RunRequest::new(None, &args.overrides, args.engine)
-                .expect("valid overrides");
-            request.name
-        };
-        assert_eq!(name(&["fdi-launch", "run"]), "paper");
-        assert_eq!(
-            name(&[
-                "fdi-launch",
-                "run",
-                "--attack",
-                "freeze",
-                "--controller",
-                "traditional",
-                "--engine",
-                "inproc",
-                "--seed",
-                "3",
-                "--duration-s",
-                "2.5",
-            ]),
-            "paper-attack-freeze-traditional-inproc-seed3-2.5s"
-        );
-        let file = concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/../scenarios/attacks/sign-flip.toml"
-        );
-        assert_eq!(
-            name(&["fdi-launch", "run", "--attack", file, "--clock", "lockstep"]),
-            "paper-attack-sign-flip-lockstep"
-        );
     }
 }

@@ -6,7 +6,16 @@ use std::process::ExitCode;
 use anyhow::Result;
 use fdi_common::scenario;
 
-use crate::cli::SchemaFormat;
+use clap::ValueEnum;
+
+/// A file format that `schema` describes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum SchemaFormat {
+    /// A scenario file (`scenarios/*.toml`).
+    Scenario,
+    /// An attack-profile file (`scenarios/attacks/*.toml`).
+    Attack,
+}
 
 /// `schema`: the JSON Schema of `format`, pretty-printed, on stdout.
 pub fn schema(format: SchemaFormat) -> Result<ExitCode> {
