@@ -14,8 +14,9 @@ def strip(src):
     # comments and string/char literals out (roughly, enough for paths)
     src = re.sub(r'//[^\n]*', '', src)
     src = re.sub(r'/\*.*?\*/', '', src, flags=re.S)
-    src = re.sub(r'r#*"(?:.|\n)*?"#*', '""', src)
+    src = re.sub(r'(?<![\w"])b?r(#*)"(?:.|\n)*?"\1', '""', src)
     src = re.sub(r'"(?:\\.|[^"\\])*"', '""', src)
+    src = re.sub(r"'(?:\\.|[^'\\])'", "' '", src)
     return src
 
 def modules(src_dir):

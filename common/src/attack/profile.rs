@@ -209,16 +209,15 @@ impl AttackProfile {
     /// `agent_dofs` maps each agent id of the scenario to its number of links.
     pub fn problems(&self, agent_dofs: &BTreeMap<u32, usize>) -> Vec<(String, String)> {
         let mut out = Vec::new();
-        let unknown = |agent: u32| {
-            format!(
-                "agent {agent} is not in the scenario (its agents: {})",
-                agent_dofs
-                    .keys()
-                    .map(u32::to_string)
-                    .collect::<Vec<_>>()
-                    .join(", ")
-            )
-        };
+        self.covert_problems(agent_dofs, &mut out);
+        self.message_problems(agent_dofs, &mut out);
+        self.channel_problems(agent_dofs, &mut out);
+        out
+    }
+
+    /// The problems of `covert`.
+    fn covert_problems(&self, agent_dofs: &BTreeMap<u32, usize>, out: &mut Vec<(String, String)>) {
+        let unknown = |agent: u32| unknown_agent(agent, agent_dofs);
         for (i, c) in self.covert.iter().enumerate() {
             let at = |f: &str| format!("covert[{i}].{f}");
             if !agent_dofs.contains_key(&c.agent) {
@@ -247,6 +246,11 @@ impl AttackProfile {
                 ));
             }
         }
+    }
+
+    /// The problems of `messages`.
+    fn message_problems(&self, agent_dofs: &BTreeMap<u32, usize>, out: &mut Vec<(String, String)>) {
+        let unknown = |agent: u32| unknown_agent(agent, agent_dofs);
         for (m, msg) in self.messages.iter().enumerate() {
             if !agent_dofs.contains_key(&msg.agent) {
                 out.push((format!("messages[{m}].agent"), unknown(msg.agent)));
@@ -269,6 +273,11 @@ impl AttackProfile {
                 out.push((format!("messages[{m}].{field}"), problem));
             }
         }
+    }
+
+    /// The problems of `channels`.
+    fn channel_problems(&self, agent_dofs: &BTreeMap<u32, usize>, out: &mut Vec<(String, String)>) {
+        let unknown = |agent: u32| unknown_agent(agent, agent_dofs);
         for (c, ch) in self.channels.iter().enumerate() {
             let at = |f: &str| format!("channels[{c}].{f}");
             let dof = agent_dofs.get(&ch.agent).copied();
@@ -346,6 +355,17 @@ impl AttackProfile {
                 }
             }
         }
-        out
     }
+}
+
+/// `agent N is not in the scenario (its agents: …)`.
+fn unknown_agent(agent: u32, agent_dofs: &BTreeMap<u32, usize>) -> String {
+    format!(
+        "agent {agent} is not in the scenario (its agents: {})",
+        agent_dofs
+            .keys()
+            .map(u32::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    )
 }

@@ -293,55 +293,7 @@ impl Waveform {
                     ("record_for_s", record_for_s),
                 ]
             }
-            Self::StealthyBias {
-                threshold,
-                noise_peak,
-                window_ticks,
-                shifted_entries,
-                residual_std,
-                sensitivity,
-                bias,
-            } => {
-                if threshold <= 0.0 {
-                    out.push(("threshold", format!("must be > 0, got {threshold}")));
-                }
-                if noise_peak < 0.0 {
-                    out.push(("noise_peak", format!("must be ≥ 0, got {noise_peak}")));
-                } else if noise_peak >= threshold && threshold.is_finite() {
-                    out.push((
-                        "noise_peak",
-                        format!(
-                            "must be below threshold ({threshold}), got {noise_peak}: the \
-                             attack-free statistic leaves no room under the threshold"
-                        ),
-                    ));
-                }
-                if window_ticks == 0 {
-                    out.push(("window_ticks", "must be ≥ 1, got 0".into()));
-                }
-                if shifted_entries == 0 {
-                    out.push(("shifted_entries", "must be ≥ 1, got 0".into()));
-                }
-                if residual_std <= 0.0 {
-                    out.push(("residual_std", format!("must be > 0, got {residual_std}")));
-                }
-                if sensitivity <= 0.0 {
-                    out.push(("sensitivity", format!("must be > 0, got {sensitivity}")));
-                }
-                if bias == 0.0 {
-                    out.push((
-                        "bias",
-                        "must be non-zero: a zero bias injects nothing".into(),
-                    ));
-                }
-                vec![
-                    ("threshold", threshold),
-                    ("noise_peak", noise_peak),
-                    ("residual_std", residual_std),
-                    ("sensitivity", sensitivity),
-                    ("bias", bias),
-                ]
-            }
+            Self::StealthyBias { .. } => self.stealthy_bias_problems(&mut out),
             Self::Gaussian { std, mean } => {
                 if std < 0.0 {
                     out.push(("std", format!("must be ≥ 0, got {std}")));
@@ -355,6 +307,64 @@ impl Waveform {
             }
         }
         out
+    }
+
+    /// The problems and the parameters of a `stealthy-bias` waveform (nothing for another).
+    fn stealthy_bias_problems(
+        &self,
+        out: &mut Vec<(&'static str, String)>,
+    ) -> Vec<(&'static str, f64)> {
+        let Self::StealthyBias {
+            threshold,
+            noise_peak,
+            window_ticks,
+            shifted_entries,
+            residual_std,
+            sensitivity,
+            bias,
+        } = *self
+        else {
+            return vec![];
+        };
+        if threshold <= 0.0 {
+            out.push(("threshold", format!("must be > 0, got {threshold}")));
+        }
+        if noise_peak < 0.0 {
+            out.push(("noise_peak", format!("must be ≥ 0, got {noise_peak}")));
+        } else if noise_peak >= threshold && threshold.is_finite() {
+            out.push((
+                "noise_peak",
+                format!(
+                    "must be below threshold ({threshold}), got {noise_peak}: the \
+                     attack-free statistic leaves no room under the threshold"
+                ),
+            ));
+        }
+        if window_ticks == 0 {
+            out.push(("window_ticks", "must be ≥ 1, got 0".into()));
+        }
+        if shifted_entries == 0 {
+            out.push(("shifted_entries", "must be ≥ 1, got 0".into()));
+        }
+        if residual_std <= 0.0 {
+            out.push(("residual_std", format!("must be > 0, got {residual_std}")));
+        }
+        if sensitivity <= 0.0 {
+            out.push(("sensitivity", format!("must be > 0, got {sensitivity}")));
+        }
+        if bias == 0.0 {
+            out.push((
+                "bias",
+                "must be non-zero: a zero bias injects nothing".into(),
+            ));
+        }
+        vec![
+            ("threshold", threshold),
+            ("noise_peak", noise_peak),
+            ("residual_std", residual_std),
+            ("sensitivity", sensitivity),
+            ("bias", bias),
+        ]
     }
 }
 
