@@ -33,7 +33,11 @@ pub fn launcher() -> PathBuf {
             let dir = profile_dir();
             let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
             let mut cmd = Command::new(cargo);
-            cmd.args(["build", "--quiet", "--workspace", "--bins"]);
+            // With `--tests`, the binaries are built with the features the test build already
+            // resolved (dev-dependencies unify features): the libraries the tests compiled are
+            // reused, and only the binaries are compiled and linked. Without it, every crate
+            // whose features differ (serde, zenoh, …) and all above it would be built twice.
+            cmd.args(["build", "--quiet", "--workspace", "--bins", "--tests"]);
             if dir.file_name().is_some_and(|n| n == "release") {
                 cmd.arg("--release");
             }
