@@ -131,12 +131,6 @@ pub trait Attacker {
         u: &Vector<N>,
     ) -> (Sent<Vector<N>>, TorqueInjection<N>) {
         let _ = (agent, k, t);
-        (
-            Sent::Delivered {
-                payload: *u,
-                held_s: 0.0,
-            },
-            TorqueInjection::none(),
-        )
+        (Sent::on_time(*u), TorqueInjection::none())
     }
 }

@@ -262,6 +262,14 @@ pub enum Sent<P> {
 }
 
 impl<P> Sent<P> {
+    /// `payload` delivered on time, as it is.
+    pub fn on_time(payload: P) -> Self {
+        Self::Delivered {
+            payload,
+            held_s: 0.0,
+        }
+    }
+
     /// What the record says about it.
     pub fn delivery(&self) -> Delivery {
         match self {

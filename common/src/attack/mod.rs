@@ -240,13 +240,7 @@ impl AgentAttack {
             yd: clean.yd + inj.velocity,
         };
         let Some(line) = &mut self.measurements else {
-            return (
-                Sent::Delivered {
-                    payload: out,
-                    held_s: 0.0,
-                },
-                inj,
-            );
+            return (Sent::on_time(out), inj);
         };
         let sent = line.send(k, t, (Joints::from(&out.y), Joints::from(&out.yd)));
         (
@@ -287,13 +281,7 @@ impl AgentAttack {
             twins.receive(k, t, u.as_slice(), out.as_slice());
         }
         let Some(line) = &mut self.torques else {
-            return (
-                Sent::Delivered {
-                    payload: out,
-                    held_s: 0.0,
-                },
-                inj,
-            );
+            return (Sent::on_time(out), inj);
         };
         let sent = line.send(k, t, Joints::from(&out));
         (map_sent(sent, |u| u.to_vector::<N>()), inj)
@@ -360,13 +348,7 @@ impl Attacker for ProfileAttacker {
     ) -> (Sent<Measurement<N>>, Injection<N>) {
         match self.agent_mut(agent) {
             Some(attack) => attack.measurement::<N>(k, t, clean),
-            None => (
-                Sent::Delivered {
-                    payload: *clean,
-                    held_s: 0.0,
-                },
-                Injection::none(),
-            ),
+            None => (Sent::on_time(*clean), Injection::none()),
         }
     }
 
@@ -383,13 +365,7 @@ impl Attacker for ProfileAttacker {
     ) -> (Sent<Vector<N>>, TorqueInjection<N>) {
         match self.agent_mut(agent) {
             Some(attack) => attack.torque::<N>(k, t, u),
-            None => (
-                Sent::Delivered {
-                    payload: *u,
-                    held_s: 0.0,
-                },
-                TorqueInjection::none(),
-            ),
+            None => (Sent::on_time(*u), TorqueInjection::none()),
         }
     }
 }
@@ -883,10 +859,7 @@ mod tests {
                     shift_s: 0.004,
                 }
             } else {
-                Sent::Delivered {
-                    payload: m_want,
-                    held_s: 0.0,
-                }
+                Sent::on_time(m_want)
             };
             assert_eq!(sent, want, "tick {k}");
             assert_eq!(inj.message, late, "tick {k}");

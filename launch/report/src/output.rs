@@ -119,12 +119,11 @@ fn write_tables(dir: &Path, s: &RunSummary) -> Result<()> {
 /// then a monitor program's (`[roles.monitor]`, under its own name).
 pub fn detector_names(m: &AgentMetrics) -> Vec<&str> {
     let mut names: Vec<&str> = detect::names();
-    let built_in = names.clone();
     names.extend(
         m.detectors
             .keys()
             .map(String::as_str)
-            .filter(|n| !built_in.contains(n)),
+            .filter(|n| detect::title(n).is_none()),
     );
     names
 }
