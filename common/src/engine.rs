@@ -352,30 +352,82 @@ pub fn run_inproc_with<const N: usize, A: Attacker>(
     attacker: &mut A,
     mut sink: impl FnMut(&TickRecord),
 ) -> Result<RunSummary, EngineError> {
-    let started = Instant::now();
-    let s = &resolved.scenario;
-    let mut plants = Vec::with_capacity(s.agents.len());
-    let mut centers = Vec::with_capacity(s.agents.len());
-    for a in &s.agents {
-        plants.push(
-            Plant::<N>::new(s.plant_params(a)).ok_or(EngineError::ModelDof {
+    let mut run = Lockstep::<N>::new(resolved)?;
+    while run.tick(attacker, &mut sink) {}
+    Ok(run.finish(resolved, attacker.name()))
+}
+
+/// The in-process engine one tick at a time: what [`run_inproc_with`] runs to the end, for a
+/// caller that decides between ticks (an environment whose agent acts every few ticks).
+/// Ticking it to the end and finishing it is, record for record and digest for digest,
+/// [`run_inproc_with`].
+#[derive(Debug)]
+pub struct Lockstep<const N: usize> {
+    plants: Vec<Plant<N>>,
+    centers: Vec<CenterAgent<N>>,
+    control_period_s: f64,
+    k: u64,
+    ticks: u64,
+    digest: TraceDigest,
+    evaluator: Evaluator,
+    started: Instant,
+}
+
+impl<const N: usize> Lockstep<N> {
+    /// The run of `resolved` at its start (tick 0 next).
+    pub fn new(resolved: &Resolved) -> Result<Self, EngineError> {
+        let s = &resolved.scenario;
+        let mut plants = Vec::with_capacity(s.agents.len());
+        let mut centers = Vec::with_capacity(s.agents.len());
+        for a in &s.agents {
+            let dof = || EngineError::ModelDof {
                 agent: a.id,
                 dof: N,
-            })?,
-        );
-        centers.push(
-            CenterAgent::<N>::new(s.center_params(a)).ok_or(EngineError::ModelDof {
-                agent: a.id,
-                dof: N,
-            })?,
-        );
+            };
+            plants.push(Plant::<N>::new(s.plant_params(a)).ok_or_else(dof)?);
+            centers.push(CenterAgent::<N>::new(s.center_params(a)).ok_or_else(dof)?);
+        }
+        Ok(Self {
+            plants,
+            centers,
+            control_period_s: s.control_period_s,
+            k: 0,
+            ticks: resolved.ticks(),
+            digest: TraceDigest::new(),
+            evaluator: evaluator_for(resolved),
+            started: Instant::now(),
+        })
     }
-    let ticks = resolved.ticks();
-    let mut digest = TraceDigest::new();
-    let mut evaluator = evaluator_for(resolved);
-    for k in 0..ticks {
-        let t = tick_time(k, s.control_period_s);
-        for (plant, center) in plants.iter_mut().zip(&mut centers) {
+
+    /// The next tick to run.
+    pub fn k(&self) -> u64 {
+        self.k
+    }
+
+    /// Ticks of the run as planned.
+    pub fn ticks(&self) -> u64 {
+        self.ticks
+    }
+
+    /// The metrics so far (and, through them, each detector's alarm after the last tick).
+    pub fn evaluator(&self) -> &Evaluator {
+        &self.evaluator
+    }
+
+    /// Runs the next tick of every agent, in the scenario's agent order, with `attacker`
+    /// ([`run_inproc_with`] says how it is asked); `sink` sees each agent's record. False, and
+    /// nothing run, once every tick has run.
+    pub fn tick<A: Attacker>(
+        &mut self,
+        attacker: &mut A,
+        mut sink: impl FnMut(&TickRecord),
+    ) -> bool {
+        if self.k >= self.ticks {
+            return false;
+        }
+        let k = self.k;
+        let t = tick_time(k, self.control_period_s);
+        for (plant, center) in self.plants.iter_mut().zip(&mut self.centers) {
             let id = plant.agent_id();
             let (q, qd) = (plant.q, plant.qd);
             let m = plant.measure();
@@ -398,19 +450,81 @@ pub fn run_inproc_with<const N: usize, A: Attacker>(
                 actuation,
                 monitor: None,
             };
-            digest.push(&rec);
-            evaluator.push(&rec);
+            self.digest.push(&rec);
+            self.evaluator.push(&rec);
             sink(&rec);
         }
+        self.k += 1;
+        true
     }
-    let mut summary = summarize(
-        resolved,
-        "inproc",
-        ticks,
-        started.elapsed().as_secs_f64(),
-        digest,
-        evaluator,
-    );
-    summary.attack = attacker.name().to_owned();
-    Ok(summary)
+
+    /// The summary of the ticks run (all of them, or the first [`Self::k`] when it stopped
+    /// early: `ticks` then says how many), under the attack name `attack`.
+    pub fn finish(self, resolved: &Resolved, attack: &str) -> RunSummary {
+        let mut summary = summarize(
+            resolved,
+            "inproc",
+            self.k,
+            self.started.elapsed().as_secs_f64(),
+            self.digest,
+            self.evaluator,
+        );
+        summary.attack = attack.to_owned();
+        summary
+    }
+}
+
+/// A [`Lockstep`] whatever the number of links of its robots ([`lockstep_any`]), driven by an
+/// attacker of type `A`: what a caller that does not know `N` holds (an environment over any
+/// scenario). Each method is [`Lockstep`]'s.
+pub trait AnyLockstep<A: Attacker>: Send + std::fmt::Debug {
+    /// Links of every robot of the run.
+    fn links(&self) -> usize;
+    /// [`Lockstep::k`].
+    fn k(&self) -> u64;
+    /// [`Lockstep::ticks`].
+    fn ticks(&self) -> u64;
+    /// [`Lockstep::evaluator`].
+    fn evaluator(&self) -> &Evaluator;
+    /// [`Lockstep::tick`].
+    fn tick(&mut self, attacker: &mut A, sink: &mut dyn FnMut(&TickRecord)) -> bool;
+    /// [`Lockstep::finish`].
+    fn finish(self: Box<Self>, resolved: &Resolved, attack: &str) -> RunSummary;
+}
+
+impl<const N: usize, A: Attacker> AnyLockstep<A> for Lockstep<N> {
+    fn links(&self) -> usize {
+        N
+    }
+    fn k(&self) -> u64 {
+        Lockstep::k(self)
+    }
+    fn ticks(&self) -> u64 {
+        Lockstep::ticks(self)
+    }
+    fn evaluator(&self) -> &Evaluator {
+        Lockstep::evaluator(self)
+    }
+    fn tick(&mut self, attacker: &mut A, sink: &mut dyn FnMut(&TickRecord)) -> bool {
+        Lockstep::tick(self, attacker, sink)
+    }
+    fn finish(self: Box<Self>, resolved: &Resolved, attack: &str) -> RunSummary {
+        Lockstep::finish(*self, resolved, attack)
+    }
+}
+
+/// The [`Lockstep`] of `resolved` with its robots' number of links, at its start.
+pub fn lockstep_any<A: Attacker + 'static>(
+    resolved: &Resolved,
+) -> Result<Box<dyn AnyLockstep<A>>, EngineError> {
+    struct Make<'a, A>(&'a Resolved, std::marker::PhantomData<A>);
+    impl<A: Attacker + 'static> ForLinks for Make<'_, A> {
+        type Output = Result<Box<dyn AnyLockstep<A>>, EngineError>;
+        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
+            Ok(Box::new(Lockstep::<N>::new(self.0)?))
+        }
+    }
+    resolved
+        .with_links(Make(resolved, std::marker::PhantomData))
+        .ok_or(EngineError::NoAgents)?
 }

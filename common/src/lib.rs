@@ -23,6 +23,7 @@ pub mod limits;
 pub mod metrics;
 pub mod model;
 pub mod numerics;
+pub mod overrides;
 pub mod plant;
 pub mod problem;
 pub mod records;

@@ -275,6 +275,8 @@ struct Acc {
     agent_ticks: u64,
     uncontrolled: u64,
     diverged_at: Option<f64>,
+    /// `‖q_d − q‖` of the last tick, rad.
+    last_error: f64,
 }
 
 impl Acc {
@@ -285,15 +287,18 @@ impl Acc {
         let qd = self.trajectory.reference::<N>(t).q;
         let q = r.agent.q.to_vector::<N>();
         let mut diverged = r.agent.qd.as_slice().iter().any(|x| !x.is_finite());
+        let mut tick_sq = 0.0;
         for i in 0..N {
             let e = qd[i] - q[i];
             self.sum_sq += e * e;
+            tick_sq += e * e;
             diverged |= e.is_nan() || e.abs() > DIVERGENCE_BOUND_RAD;
             self.max_abs = self.max_abs.max(e.abs());
         }
         if diverged && self.diverged_at.is_none() {
             self.diverged_at = Some(t);
         }
+        self.last_error = tick_sq.sqrt();
         self.count += N as u64;
     }
 }
@@ -344,6 +349,7 @@ impl Evaluator {
                         agent_ticks: 0,
                         uncontrolled: 0,
                         diverged_at: None,
+                        last_error: 0.0,
                     },
                 )
             })
@@ -421,6 +427,26 @@ impl Evaluator {
         acc.history_misses += u64::from(r.center.history_miss);
         acc.missed += u64::from(r.agent.missed);
         acc.agent_ticks += 1;
+    }
+
+    /// Whether detector `detector` of agent `agent` is alarming after the last tick pushed: the
+    /// index is the detector's in [`detect::names`] (the paper's `s_hat_norm`, then
+    /// [`detect::RESIDUAL`]). `None` for an agent or a detector the evaluator does not have
+    /// (the residual detectors need [`Self::with_detectors`]).
+    pub fn alarm(&self, agent: u32, detector: usize) -> Option<bool> {
+        let acc = self.agents.get(&agent)?;
+        match detector.checked_sub(1) {
+            None => Some(acc.s_hat_norm.prev_alarm),
+            Some(i) => acc.detectors.as_ref()?.tallies.get(i).map(|t| t.prev_alarm),
+        }
+    }
+
+    /// Agent `agent`'s tracking error `‖q_d − q‖` at the last tick pushed, rad, and whether it
+    /// has diverged (at that tick or before; [`DIVERGENCE_BOUND_RAD`]). `None` for an agent
+    /// the evaluator does not have.
+    pub fn tracking(&self, agent: u32) -> Option<(f64, bool)> {
+        let acc = self.agents.get(&agent)?;
+        Some((acc.last_error, acc.diverged_at.is_some()))
     }
 
     /// Feeds a tick the robot recorded that has no control-center record: it ran uncontrolled.

@@ -254,3 +254,59 @@ fn execute_with_writes_the_run_directory_of_a_supplied_attacker_on_the_inproc_en
     );
     let _ = std::fs::remove_dir_all(&out);
 }
+
+/// The engine ticked one tick at a time from outside (what the Python environments do) is
+/// the whole run, record for record: same digest, same metrics; and the evaluator's per-tick
+/// alarm of the paper's detector is the control center's recorded alarm. On a two-link and a
+/// three-link scenario.
+#[test]
+fn the_engine_ticked_from_outside_is_the_whole_run_and_its_alarms_are_the_records() {
+    use fdi_common::engine::{lockstep_any, run_inproc_any};
+    let three = scenario::load_file(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/three-link.toml"),
+    )
+    .expect("the three-link scenario is valid");
+    for mut r in [paper(1.5), three] {
+        r.scenario.duration_s = 1.5;
+        let mut whole = Vec::new();
+        let expected = run_inproc_any(&r, |rec| whole.push(*rec)).expect("runs");
+        let mut attacker = r.profile_attacker();
+        let mut engine = lockstep_any(&r).expect("an engine");
+        let mut stepped = Vec::new();
+        let mut alarms = 0u64;
+        let mut ticks = 0u64;
+        while engine.tick(&mut attacker, &mut |rec| stepped.push(*rec)) {
+            ticks += 1;
+            for a in &r.scenario.agents {
+                let on = engine.evaluator().alarm(a.id, 0).expect("a known agent");
+                alarms += u64::from(on);
+                let (error, diverged) = engine.evaluator().tracking(a.id).expect("known");
+                assert!(error.is_finite() && !diverged);
+            }
+        }
+        assert_eq!(ticks, r.ticks());
+        assert_eq!(engine.k(), r.ticks());
+        assert!(
+            !engine.tick(&mut attacker, &mut |_| {}),
+            "nothing runs after the end"
+        );
+        let got = engine.finish(&r, "paper");
+        assert_eq!(got.trace_digest, expected.trace_digest);
+        assert_eq!(got.metrics, expected.metrics);
+        assert_eq!(stepped.len(), whole.len());
+        let recorded = whole.iter().filter(|rec| rec.center.alarm).count() as u64;
+        assert_eq!(alarms, recorded);
+        let unknown = engine_unknown(&r);
+        assert_eq!(unknown, (None, None));
+    }
+}
+
+/// The evaluator's answers for an agent and a detector it does not have.
+fn engine_unknown(r: &Resolved) -> (Option<bool>, Option<(f64, bool)>) {
+    let engine = fdi_common::engine::lockstep_any::<fdi_common::attack::ProfileAttacker>(r)
+        .expect("an engine");
+    let ev = engine.evaluator();
+    let detectors = fdi_common::detect::names().len();
+    assert_eq!(ev.alarm(r.scenario.agents[0].id, detectors), None);
+    (ev.alarm(999, 0), ev.tracking(999))
+}

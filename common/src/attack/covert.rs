@@ -26,7 +26,7 @@ pub struct CovertEntry {
 }
 
 /// The twins of one agent, whatever its number of links.
-pub(super) trait Twins: std::fmt::Debug {
+pub(super) trait Twins: std::fmt::Debug + Send {
     /// The correction to add to the measurement of tick `k` at `t` (position then velocity,
     /// `2N` entries into `out`), given the clean measurement `y`, `ẏ` (`2N` entries): zero
     /// before `from_s`; at the first tick from then on the twins start at the measurement.

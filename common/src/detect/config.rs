@@ -28,7 +28,22 @@ pub enum ResidualKind {
     Psi2,
 }
 
+impl std::str::FromStr for ResidualKind {
+    type Err = String;
+
+    /// The names of a scenario file: `innovation` or `psi2`.
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|c| c.as_str() == s)
+            .ok_or_else(|| format!("`{s}` is not a residual: innovation or psi2"))
+    }
+}
+
 impl ResidualKind {
+    /// Every residual, in the order of the docs.
+    pub const ALL: [Self; 2] = [Self::Innovation, Self::Psi2];
+
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Innovation => "innovation",

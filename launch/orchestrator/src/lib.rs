@@ -49,5 +49,5 @@ pub mod tables;
 mod damage_tests;
 
 pub use fdi_common::stop::Stop;
-pub use request::{execute, execute_with, NumericsArgs, Overrides, RunRequest};
+pub use request::{execute, execute_with, NumericsArgs, Overrides, OverridesOn, RunRequest};
 pub use run::Engine;

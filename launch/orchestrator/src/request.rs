@@ -4,155 +4,41 @@
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use clap::builder::{PossibleValuesParser, TypedValueParser};
-use clap::Args;
 use fdi_common::attack::Attacker;
 use fdi_common::engine::RunSummary;
+pub use fdi_common::overrides::{NumericsArgs, Overrides};
 use fdi_common::run_dir::RunDir;
-use fdi_common::scenario::{self, ClockMode, ControllerMode, Resolved};
+use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::stop::{Stop, BEFORE_THE_START};
 
 use crate::run::hosts::Deployment;
 use crate::run::runtime::{DidNotStart, Placement};
 use crate::run::{Engine, Traces};
 
-/// `--clock`: the scenario's clock modes by their names, listed in the help.
-fn clock_parser() -> impl TypedValueParser<Value = ClockMode> {
-    PossibleValuesParser::new(ClockMode::ALL.map(ClockMode::as_str))
-        .try_map(|s| s.parse::<ClockMode>())
-}
-
-/// `--controller`: the controller's modes by their names, listed in the help.
-fn controller_parser() -> impl TypedValueParser<Value = ControllerMode> {
-    PossibleValuesParser::new(ControllerMode::ALL.map(ControllerMode::as_str))
-        .try_map(|s| s.parse::<ControllerMode>())
-}
-
-/// The controller's numerics options of the command line: each replaces the scenario's value
-/// (`[controller]`; docs/model.md, "Numerics of the delayed input" and "Long horizons").
-#[derive(Debug, Clone, Default, Args)]
-pub struct NumericsArgs {
-    /// Replace `controller.observer_input`: `sample` (the paper's default, SPEC §4.6) or
-    /// `step-mean`.
-    #[arg(long, value_name = "INPUT")]
-    pub observer_input: Option<fdi_common::control::ObserverInput>,
-    /// Replace `controller.update_law.leakage_w_per_s` (1/s; 0 = the paper's law).
-    #[arg(long, value_name = "PER_S", allow_negative_numbers = true)]
-    pub leakage_w_per_s: Option<f64>,
-    /// Replace `controller.update_law.dead_zone_rad_s` (rad/s; 0 = the paper's law).
-    #[arg(long, value_name = "RAD_S", allow_negative_numbers = true)]
-    pub dead_zone_rad_s: Option<f64>,
-    /// Replace `controller.update_law.innovation_time_constant_s` (s; 0 = the paper's law).
-    #[arg(long, value_name = "S", allow_negative_numbers = true)]
-    pub innovation_time_constant_s: Option<f64>,
-}
-
-impl NumericsArgs {
-    /// Writes the given options into the scenario (validated by the caller).
-    pub fn apply(&self, s: &mut fdi_common::scenario::Scenario) {
-        let c = &mut s.controller;
-        if let Some(v) = self.observer_input {
-            c.observer_input = v;
-        }
-        if let Some(v) = self.leakage_w_per_s {
-            c.update_law.leakage_w_per_s = v;
-        }
-        if let Some(v) = self.dead_zone_rad_s {
-            c.update_law.dead_zone_rad_s = v;
-        }
-        if let Some(v) = self.innovation_time_constant_s {
-            c.update_law.innovation_time_constant_s = v;
-        }
-    }
-
-    /// The flags given, by name.
-    pub fn given(&self) -> Vec<&'static str> {
-        [
-            ("--observer-input", self.observer_input.is_some()),
-            ("--leakage-w-per-s", self.leakage_w_per_s.is_some()),
-            ("--dead-zone-rad-s", self.dead_zone_rad_s.is_some()),
-            (
-                "--innovation-time-constant-s",
-                self.innovation_time_constant_s.is_some(),
-            ),
-        ]
-        .into_iter()
-        .filter_map(|(name, given)| given.then_some(name))
-        .collect()
-    }
-}
-
-/// What the command line changes in a scenario: one struct for `run`, `detect` and the API.
-#[derive(Debug, Clone, Default, Args)]
-pub struct Overrides {
-    /// Replace the scenario's clock (realtime needs the ipc engine).
-    #[arg(long, value_parser = clock_parser())]
-    pub clock: Option<ClockMode>,
-    /// Replace the scenario's attack: a preset (the profiles in scenarios/attacks/, see
-    /// docs/attacks.md; an unknown name lists them) or a profile file.
-    #[arg(long)]
-    pub attack: Option<String>,
-    /// Replace the scenario's controller mode.
-    #[arg(long, value_parser = controller_parser())]
-    pub controller: Option<ControllerMode>,
-    /// Replace the scenario's duration, s.
-    #[arg(long, allow_negative_numbers = true)]
-    pub duration_s: Option<f64>,
-    /// Replace the scenario's seed.
-    #[arg(long, allow_negative_numbers = true)]
-    pub seed: Option<u64>,
-    #[command(flatten)]
-    pub numerics: NumericsArgs,
-}
-
-impl Overrides {
+/// The command line's overrides on an engine: [`Overrides::apply`], and a name for the run.
+pub trait OverridesOn {
     /// Applies the overrides to `r` and re-validates it (every problem named as the command
-    /// line's).
-    pub fn apply(&self, mut r: Resolved, engine: Engine) -> Result<Resolved> {
-        if let Some(a) = &self.attack {
-            let profile = scenario::attack_from_arg(a, &r.scenario)?;
-            r = r.with_attack(profile)?;
-        }
-        if let Some(c) = self.controller {
-            r.scenario.controller.mode = c;
-        }
-        if let Some(d) = self.duration_s {
-            r.scenario.duration_s = d;
-        }
-        if let Some(s) = self.seed {
-            r.scenario.seed = s;
-        }
-        self.numerics.apply(&mut r.scenario);
-        if let Some(c) = self.clock {
-            r.scenario.clock = c;
-        }
+    /// line's), then refuses what `engine` cannot run (the realtime clock in-process).
+    fn apply_on(&self, r: Resolved, engine: Engine) -> Result<Resolved>;
+
+    /// The name of a run's directory: the scenario's, then what the overrides changed —
+    /// `attack-<preset or file stem>`, the controller, the engine (in-process), the clock, the
+    /// seed, the duration — so that runs of one scenario tell apart in `runs/`.
+    fn run_name(&self, r: &Resolved, engine: Engine) -> String;
+}
+
+impl OverridesOn for Overrides {
+    fn apply_on(&self, r: Resolved, engine: Engine) -> Result<Resolved> {
+        let r = self.apply(r)?;
         if r.scenario.clock == ClockMode::Realtime && engine == Engine::Inproc {
             bail!(
                 "the realtime clock needs the ipc engine (the in-process engine is lockstep only)"
             );
         }
-        crate::run::check_overrides(r)
+        Ok(r)
     }
 
-    /// The flags given, by name.
-    pub fn given(&self) -> Vec<&'static str> {
-        [
-            ("--clock", self.clock.is_some()),
-            ("--attack", self.attack.is_some()),
-            ("--controller", self.controller.is_some()),
-            ("--duration-s", self.duration_s.is_some()),
-            ("--seed", self.seed.is_some()),
-        ]
-        .into_iter()
-        .filter_map(|(name, given)| given.then_some(name))
-        .chain(self.numerics.given())
-        .collect()
-    }
-
-    /// The name of a run's directory: the scenario's, then what the overrides changed —
-    /// `attack-<preset or file stem>`, the controller, the engine (in-process), the clock, the
-    /// seed, the duration — so that runs of one scenario tell apart in `runs/`.
-    pub fn run_name(&self, r: &Resolved, engine: Engine) -> String {
+    fn run_name(&self, r: &Resolved, engine: Engine) -> String {
         let mut parts = vec![r.scenario.name.clone()];
         if let Some(a) = &self.attack {
             let path = Path::new(a);
@@ -175,6 +61,9 @@ impl Overrides {
         }
         if let Some(seed) = self.seed {
             parts.push(format!("seed{seed}"));
+        }
+        if let Some(k) = self.residual {
+            parts.push(format!("residual-{}", k.as_str()));
         }
         if let Some(d) = self.duration_s {
             parts.push(format!("{d}s"));
@@ -220,7 +109,7 @@ impl RunRequest {
     /// The scenario at `path` (the embedded paper scenario without one) with `overrides`, on
     /// `engine`, keeping full traces.
     pub fn new(path: Option<&Path>, overrides: &Overrides, engine: Engine) -> Result<Self> {
-        let resolved = overrides.apply(load(path)?, engine)?;
+        let resolved = overrides.apply_on(load(path)?, engine)?;
         let name = overrides.run_name(&resolved, engine);
         Ok(Self::of(resolved, name, engine))
     }

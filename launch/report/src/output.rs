@@ -39,6 +39,53 @@ pub fn coverage(ticks: u64, planned: u64) -> String {
     )
 }
 
+/// The table of a run's metrics the command line prints after a run (one row per robot: RMSE,
+/// maximum error, onsets and their time to detect, false alarms, deadline misses, uncontrolled
+/// ticks, coverage), as markdown, each line ending in a newline.
+pub fn metrics_table(s: &RunSummary) -> String {
+    let mut t = String::from("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses | uncontrolled ticks | metrics cover |\n|---|---|---|---|---|---|---|---|\n");
+    for (id, m) in &s.metrics {
+        let _ = writeln!(
+            t,
+            "| {id} | {} | {:.4} | {} | {} | {} | {} | {} |",
+            rmse_cell(m, 4),
+            m.max_abs_error_rad,
+            describe_onsets(&m.onsets),
+            m.false_alarms,
+            m.deadline_misses,
+            m.uncontrolled_ticks,
+            coverage(m.ticks, s.planned_ticks)
+        );
+    }
+    t
+}
+
+/// Onsets as `t: time to detect` (`never` when undetected); a long train is summarised.
+pub fn describe_onsets(onsets: &[fdi_common::metrics::Onset]) -> String {
+    let one = |o: &fdi_common::metrics::Onset| {
+        format!(
+            "{:.1}: {}",
+            o.t_s,
+            o.time_to_detect_s
+                .map_or("never".into(), |d| format!("{d:.3}"))
+        )
+    };
+    if onsets.len() <= 4 {
+        return onsets.iter().map(one).collect::<Vec<_>>().join(", ");
+    }
+    let mut detected: Vec<f64> = onsets.iter().filter_map(|o| o.time_to_detect_s).collect();
+    detected.sort_by(f64::total_cmp);
+    let median = detected
+        .get(detected.len() / 2)
+        .map_or("-".into(), |d| format!("{d:.3}"));
+    format!(
+        "{} onsets (first {}), {} detected, median {median}",
+        onsets.len(),
+        one(&onsets[0]),
+        detected.len()
+    )
+}
+
 /// Writes `summary.json`, `rmse.md` and `rmse.csv`.
 pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
     write_summary_json(dir, serde_json::to_value(s)?)?;

@@ -8,7 +8,6 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use fdi_common::engine::RunSummary;
-use fdi_common::metrics::Onset;
 use fdi_common::stop::{Interrupted, Stop, BEFORE_THE_START, DURING_THE_RUN};
 use fdi_orchestrator::run::runtime::Placement;
 use fdi_orchestrator::run::{check_placement, hosts::Deployment, volume};
@@ -246,50 +245,11 @@ fn print_summary(s: &RunSummary) {
     if let Some(notice) = output::partial_notice(s) {
         println!("{}", notice.to_uppercase());
     }
-    println!("| robot | RMSE (rad) | max abs error (rad) | onsets: time to detect (s) | false alarms | deadline misses | uncontrolled ticks | metrics cover |");
-    println!("|---|---|---|---|---|---|---|---|");
-    for (id, m) in &s.metrics {
-        println!(
-            "| {id} | {} | {:.4} | {} | {} | {} | {} | {} |",
-            output::rmse_cell(m, 4),
-            m.max_abs_error_rad,
-            describe_onsets(&m.onsets),
-            m.false_alarms,
-            m.deadline_misses,
-            m.uncontrolled_ticks,
-            output::coverage(m.ticks, s.planned_ticks)
-        );
-    }
+    print!("{}", output::metrics_table(s));
     for (id, t) in s.diverged() {
         eprintln!("fdi-launch: robot {id} diverged at t = {t:.3} s (its state left the bound of {} rad or became non-finite): its metrics are not results", fdi_common::metrics::DIVERGENCE_BOUND_RAD);
     }
     println!("trace digest {}", s.trace_digest);
-}
-
-/// Onsets as `t: time to detect` (`never` when undetected); a long train is summarised.
-pub fn describe_onsets(onsets: &[Onset]) -> String {
-    let one = |o: &Onset| {
-        format!(
-            "{:.1}: {}",
-            o.t_s,
-            o.time_to_detect_s
-                .map_or("never".into(), |d| format!("{d:.3}"))
-        )
-    };
-    if onsets.len() <= 4 {
-        return onsets.iter().map(one).collect::<Vec<_>>().join(", ");
-    }
-    let mut detected: Vec<f64> = onsets.iter().filter_map(|o| o.time_to_detect_s).collect();
-    detected.sort_by(f64::total_cmp);
-    let median = detected
-        .get(detected.len() / 2)
-        .map_or("-".into(), |d| format!("{d:.3}"));
-    format!(
-        "{} onsets (first {}), {} detected, median {median}",
-        onsets.len(),
-        one(&onsets[0]),
-        detected.len()
-    )
 }
 
 #[cfg(test)]

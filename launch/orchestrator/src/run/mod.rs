@@ -306,14 +306,7 @@ pub fn execute_on(
 /// Validates a scenario after command-line overrides (duration, seed, attack, ...) changed
 /// it: every problem with its field path, named as the command line's.
 pub fn check_overrides(r: Resolved) -> Result<Resolved> {
-    let problems = r.scenario.validate();
-    if !problems.is_empty() {
-        bail!(fdi_common::scenario::ScenarioError {
-            source_name: "command-line overrides".into(),
-            problems
-        });
-    }
-    Ok(r)
+    Ok(fdi_common::overrides::validated(r)?)
 }
 
 /// Refuses `--rt-priority` / `--cpus` where they do not apply or are not permitted, before

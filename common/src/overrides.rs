@@ -1,0 +1,186 @@
+//! What the command line changes in a scenario (`--attack`, `--seed`, …): one struct for the
+//! command line (with the `clap` feature, its flags), the Rust API and the Python package's
+//! keyword arguments, applied and validated in one place ([`Overrides::apply`]).
+
+use crate::control::ObserverInput;
+use crate::detect::ResidualKind;
+use crate::scenario::{self, ClockMode, ControllerMode, Resolved, Scenario, ScenarioError};
+
+/// The name the problems of overrides are reported under.
+pub const SOURCE_NAME: &str = "command-line overrides";
+
+#[cfg(feature = "clap")]
+mod parsers {
+    use clap::builder::{PossibleValuesParser, TypedValueParser};
+
+    use crate::detect::ResidualKind;
+    use crate::scenario::{ClockMode, ControllerMode};
+
+    /// `--clock`: the scenario's clock modes by their names, listed in the help.
+    pub(super) fn clock() -> impl TypedValueParser<Value = ClockMode> {
+        PossibleValuesParser::new(ClockMode::ALL.map(ClockMode::as_str))
+            .try_map(|s| s.parse::<ClockMode>())
+    }
+
+    /// `--residual`: the detectors' residuals by their names, listed in the help.
+    pub(super) fn residual() -> impl TypedValueParser<Value = ResidualKind> {
+        PossibleValuesParser::new(ResidualKind::ALL.map(ResidualKind::as_str))
+            .try_map(|s| s.parse::<ResidualKind>())
+    }
+
+    /// `--controller`: the controller's modes by their names, listed in the help.
+    pub(super) fn controller() -> impl TypedValueParser<Value = ControllerMode> {
+        PossibleValuesParser::new(ControllerMode::ALL.map(ControllerMode::as_str))
+            .try_map(|s| s.parse::<ControllerMode>())
+    }
+}
+
+/// The controller's numerics options of the command line: each replaces the scenario's value
+/// (`[controller]`; docs/model.md, "Numerics of the delayed input" and "Long horizons").
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct NumericsArgs {
+    /// Replace `controller.observer_input`: `sample` (the paper's default, SPEC §4.6) or
+    /// `step-mean`.
+    #[cfg_attr(feature = "clap", arg(long, value_name = "INPUT"))]
+    pub observer_input: Option<ObserverInput>,
+    /// Replace `controller.update_law.leakage_w_per_s` (1/s; 0 = the paper's law).
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, value_name = "PER_S", allow_negative_numbers = true)
+    )]
+    pub leakage_w_per_s: Option<f64>,
+    /// Replace `controller.update_law.dead_zone_rad_s` (rad/s; 0 = the paper's law).
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, value_name = "RAD_S", allow_negative_numbers = true)
+    )]
+    pub dead_zone_rad_s: Option<f64>,
+    /// Replace `controller.update_law.innovation_time_constant_s` (s; 0 = the paper's law).
+    #[cfg_attr(
+        feature = "clap",
+        arg(long, value_name = "S", allow_negative_numbers = true)
+    )]
+    pub innovation_time_constant_s: Option<f64>,
+}
+
+impl NumericsArgs {
+    /// Writes the given options into the scenario (validated by the caller).
+    pub fn apply(&self, s: &mut Scenario) {
+        let c = &mut s.controller;
+        if let Some(v) = self.observer_input {
+            c.observer_input = v;
+        }
+        if let Some(v) = self.leakage_w_per_s {
+            c.update_law.leakage_w_per_s = v;
+        }
+        if let Some(v) = self.dead_zone_rad_s {
+            c.update_law.dead_zone_rad_s = v;
+        }
+        if let Some(v) = self.innovation_time_constant_s {
+            c.update_law.innovation_time_constant_s = v;
+        }
+    }
+
+    /// The flags given, by name.
+    pub fn given(&self) -> Vec<&'static str> {
+        [
+            ("--observer-input", self.observer_input.is_some()),
+            ("--leakage-w-per-s", self.leakage_w_per_s.is_some()),
+            ("--dead-zone-rad-s", self.dead_zone_rad_s.is_some()),
+            (
+                "--innovation-time-constant-s",
+                self.innovation_time_constant_s.is_some(),
+            ),
+        ]
+        .into_iter()
+        .filter_map(|(name, given)| given.then_some(name))
+        .collect()
+    }
+}
+
+/// What the command line changes in a scenario: one struct for `run`, `detect`, the API and
+/// the Python package.
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct Overrides {
+    /// Replace the scenario's clock (realtime needs the ipc engine).
+    #[cfg_attr(feature = "clap", arg(long, value_parser = parsers::clock()))]
+    pub clock: Option<ClockMode>,
+    /// Replace the scenario's attack: a preset (the profiles in scenarios/attacks/, see
+    /// docs/attacks.md; an unknown name lists them) or a profile file.
+    #[cfg_attr(feature = "clap", arg(long))]
+    pub attack: Option<String>,
+    /// Replace the scenario's controller mode.
+    #[cfg_attr(feature = "clap", arg(long, value_parser = parsers::controller()))]
+    pub controller: Option<ControllerMode>,
+    /// Replace the scenario's duration, s.
+    #[cfg_attr(feature = "clap", arg(long, allow_negative_numbers = true))]
+    pub duration_s: Option<f64>,
+    /// Replace the scenario's seed.
+    #[cfg_attr(feature = "clap", arg(long, allow_negative_numbers = true))]
+    pub seed: Option<u64>,
+    /// Replace `detectors.residual`, the residual the χ², CUSUM and windowed-mean detectors
+    /// test (docs/detectors.md).
+    #[cfg_attr(feature = "clap", arg(long, value_parser = parsers::residual()))]
+    pub residual: Option<ResidualKind>,
+    #[cfg_attr(feature = "clap", command(flatten))]
+    pub numerics: NumericsArgs,
+}
+
+impl Overrides {
+    /// Applies the overrides to `r` and validates the result: every problem of the scenario
+    /// as changed, named under [`SOURCE_NAME`].
+    pub fn apply(&self, mut r: Resolved) -> Result<Resolved, ScenarioError> {
+        if let Some(a) = &self.attack {
+            let profile = scenario::attack_from_arg(a, &r.scenario)?;
+            r = r.with_attack(profile)?;
+        }
+        if let Some(c) = self.controller {
+            r.scenario.controller.mode = c;
+        }
+        if let Some(d) = self.duration_s {
+            r.scenario.duration_s = d;
+        }
+        if let Some(s) = self.seed {
+            r.scenario.seed = s;
+        }
+        if let Some(k) = self.residual {
+            r.scenario.detectors.residual = k;
+        }
+        self.numerics.apply(&mut r.scenario);
+        if let Some(c) = self.clock {
+            r.scenario.clock = c;
+        }
+        validated(r)
+    }
+
+    /// The flags given, by name.
+    pub fn given(&self) -> Vec<&'static str> {
+        [
+            ("--clock", self.clock.is_some()),
+            ("--attack", self.attack.is_some()),
+            ("--controller", self.controller.is_some()),
+            ("--duration-s", self.duration_s.is_some()),
+            ("--seed", self.seed.is_some()),
+            ("--residual", self.residual.is_some()),
+        ]
+        .into_iter()
+        .filter_map(|(name, given)| given.then_some(name))
+        .chain(self.numerics.given())
+        .collect()
+    }
+}
+
+/// `r` when its scenario is valid; otherwise every problem, named under [`SOURCE_NAME`].
+pub fn validated(r: Resolved) -> Result<Resolved, ScenarioError> {
+    let problems = r.scenario.validate();
+    if problems.is_empty() {
+        Ok(r)
+    } else {
+        Err(ScenarioError {
+            source_name: SOURCE_NAME.into(),
+            problems,
+        })
+    }
+}

@@ -1,0 +1,77 @@
+"""The package's speed, measured (docs/python.md reports it): ``python -m fdi_mas.bench``.
+
+One env-step is one control tick of every robot of one environment (``decision_period=1``).
+Three rates on the paper's scenario, in one process, one build:
+
+* the in-process engine alone (``fdi_mas.run``, no ticks kept), on one core;
+* one :class:`~fdi_mas.envs.AttackerEnv` stepped from Python (an action of zeros made once);
+* the :class:`~fdi_mas.envs.VectorAttackerEnv` of ``--envs`` environments, on every core.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import numpy as np
+
+import fdi_mas
+from fdi_mas.envs import AttackerEnv, VectorAttackerEnv
+
+
+def engine_rate(scenario: fdi_mas.Scenario) -> float:
+    """Ticks per second of the engine (its own wall time)."""
+    r = fdi_mas.run(scenario, ticks=False)
+    return r.summary["ticks"] / r.summary["wall_s"]
+
+
+def env_rate(scenario: fdi_mas.Scenario) -> float:
+    """Steps per second of one environment stepped from Python over one episode."""
+    env = AttackerEnv(scenario)
+    zero = np.zeros(env.action_space.shape)
+    env.reset(seed=0)
+    steps = 0
+    start = time.perf_counter()
+    while True:
+        _, _, terminated, truncated, _ = env.step(zero)
+        steps += 1
+        if terminated or truncated:
+            break
+    return steps / (time.perf_counter() - start)
+
+
+def vector_rate(scenario: fdi_mas.Scenario, envs: int, steps: int) -> float:
+    """Env-steps per second of the vector environment (``envs`` × its steps per second)."""
+    vec = VectorAttackerEnv(envs, scenario)
+    zero = np.zeros(vec.action_space.shape)
+    vec.reset(seed=0)
+    start = time.perf_counter()
+    for _ in range(steps):
+        vec.step(zero)
+    elapsed = time.perf_counter() - start
+    vec.close()
+    return envs * steps / elapsed
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--duration-s", type=float, default=20.0, help="episode length (default 20 s)")
+    p.add_argument("--envs", type=int, default=64, help="environments of the vector one (default 64)")
+    p.add_argument("--repeat", type=int, default=3, help="measurements of each rate (default 3): the best is kept")
+    a = p.parse_args()
+    scenario = fdi_mas.Scenario.paper(duration_s=a.duration_s, residual="psi2")
+    engine = max(engine_rate(scenario) for _ in range(a.repeat))
+    single = max(env_rate(scenario) for _ in range(a.repeat))
+    vector = max(vector_rate(scenario, a.envs, min(scenario.ticks, 2000)) for _ in range(a.repeat))
+    cores = os.cpu_count()
+    print(f"paper scenario, {a.duration_s:g} s episodes, best of {a.repeat}, {cores} cores")
+    print("| what | env-steps/s | vs the engine on one core |")
+    print("|---|---|---|")
+    print(f"| in-process engine (`fdi_mas.run`), one core | {engine:,.0f} | 1.00 |")
+    print(f"| one `AttackerEnv` stepped from Python | {single:,.0f} | {single / engine:.2f} |")
+    print(f"| `VectorAttackerEnv`, {a.envs} envs, every core | {vector:,.0f} | {vector / engine:.2f} |")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,119 @@
+"""What the environments share: their arguments checked, the episode built, actions checked."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from fdi_mas import _core
+
+CHANNELS = ("position", "velocity", "torque")
+UNITS = {"position": "rad", "velocity": "rad/s", "torque": "N·m"}
+#: The injection an action of 1 gives, per channel, unless the constructor says otherwise:
+#: 0.05 rad, 0.5 rad/s, 5 N·m.
+DEFAULT_BUDGET = {"position": 0.05, "velocity": 0.5, "torque": 5.0}
+#: The detectors whose alarms cost the attacker, unless the constructor says otherwise.
+DEFAULT_DETECTORS = ("s_hat_norm", "chi2", "cusum")
+
+
+def default_scenario() -> _core.Scenario:
+    """The environments' scenario unless given one: the paper's, its detectors on the ``psi2``
+    residual. On the default ``innovation`` residual the χ² and CUSUM detectors alarm on most
+    ticks of the paper's run without any attack (docs/python.md), which would make every
+    stealth penalty noise."""
+    return _core.Scenario.paper(residual="psi2")
+
+
+def scenario_of(scenario: _core.Scenario | None, attack: str | None) -> _core.Scenario:
+    """The scenario (:func:`default_scenario` when ``None``) with ``attack`` as its attack
+    profile (``None`` keeps its own)."""
+    s = scenario if scenario is not None else default_scenario()
+    if not isinstance(s, _core.Scenario):
+        raise TypeError(f"scenario: expected fdi_mas.Scenario, got {type(s).__name__}")
+    return s if attack is None else s.replace(attack=attack)
+
+
+def budget_of(budget: float | Mapping[str, float] | None) -> list[float]:
+    """Per channel of :data:`CHANNELS`, the largest injection."""
+    out = dict(DEFAULT_BUDGET)
+    if budget is None:
+        pass
+    elif isinstance(budget, Mapping):
+        unknown = sorted(set(budget) - set(CHANNELS))
+        if unknown:
+            raise ValueError(f"budget: no channel {unknown[0]!r}; the channels are {CHANNELS}")
+        out.update({k: float(v) for k, v in budget.items()})
+    else:
+        out = {c: float(budget) for c in CHANNELS}
+    for c, v in out.items():
+        if not np.isfinite(v) or v < 0:
+            raise ValueError(f"budget: {c} must be finite and >= 0 ({UNITS[c]}), got {v}")
+    return [out[c] for c in CHANNELS]
+
+
+def names_of(values: Sequence[str] | str, known: Sequence[str], what: str) -> list[str]:
+    """``values`` as a list, each one of ``known``."""
+    if isinstance(values, str):
+        values = [values]
+    out = list(values)
+    for v in out:
+        if v not in known:
+            raise ValueError(f"{what}: no {what[:-1]} {v!r}; the {what} are {tuple(known)}")
+    return out
+
+
+def robots_of(robots: Sequence[int] | int | None, scenario: _core.Scenario) -> list[int]:
+    """The robots (ids) an action injects into: every robot of the scenario by default."""
+    if robots is None:
+        return list(scenario.agents)
+    if isinstance(robots, (int, np.integer)):
+        robots = [int(robots)]
+    out = [int(r) for r in robots]
+    for r in out:
+        if r not in scenario.agents:
+            raise ValueError(f"robots: {r} is not a robot of the scenario (its robots are {scenario.agents})")
+    if len(set(out)) != len(out):
+        raise ValueError(f"robots: {out} names a robot twice")
+    return out
+
+
+def checked_action(action: Any, shape: tuple[int, ...]) -> bytes:
+    """The action as bytes of float64, after its shape is checked (values are checked by the
+    engine: finite, inside [-1, 1])."""
+    a = np.asarray(action, dtype=np.float64)
+    if a.shape != shape:
+        raise ValueError(f"action: expected shape {shape}, got {a.shape}")
+    return a.tobytes()
+
+
+def views(core_out: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The attacker's and the center's views of a step's outcome."""
+    return (
+        np.frombuffer(core_out[6], dtype=np.float64).copy(),
+        np.frombuffer(core_out[7], dtype=np.float64).copy(),
+    )
+
+
+def observation_names(agents: Sequence[int], links: int, parts: Sequence[str]) -> list[str]:
+    """Names of a view's entries: ``t_s``, then per robot and part, per link."""
+    names = ["t_s"]
+    for a in agents:
+        for p in parts:
+            names.extend(f"robot{a}.{p}{i}" for i in range(1, links + 1))
+    return names
+
+
+ATTACKER_PARTS = ("y", "y_dot", "u")
+CENTER_PARTS = ("y", "y_dot", "s_hat", "r", "r_dot")
+
+
+class ClosedEnvironmentError(RuntimeError):
+    """An environment was used after ``close()``."""
+
+
+def check_open(episode: Any) -> None:
+    """Raises :class:`ClosedEnvironmentError` for a closed episode."""
+    if episode.closed:
+        raise ClosedEnvironmentError("the environment is closed: make a new one")

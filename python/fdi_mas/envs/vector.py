@@ -1,0 +1,135 @@
+"""A vector of :class:`~fdi_mas.envs.AttackerEnv` stepped inside Rust, on every core."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from fdi_mas import _core
+from fdi_mas.envs import _common
+
+
+class VectorAttackerEnv(VectorEnv):
+    """``num_envs`` :class:`~fdi_mas.envs.AttackerEnv` of one configuration, stepped together
+    in Rust on ``threads`` threads (every core by default) with the interpreter released:
+    numpy arrays in and out, no Python loop per environment.
+
+    Spaces, reward and episodes are :class:`~fdi_mas.envs.AttackerEnv`'s (same arguments),
+    batched. Autoreset is Gymnasium's next-step mode: the step after an environment's episode
+    ended resets it (its action is ignored, its reward is 0). ``digests()`` gives each
+    environment's last ended episode's trace digest.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(
+        self,
+        num_envs: int,
+        scenario: _core.Scenario | None = None,
+        *,
+        attack: str | None = "none",
+        robots: Sequence[int] | int | None = None,
+        channels: Sequence[str] | str = ("position",),
+        budget: float | Mapping[str, float] | None = None,
+        detectors: Sequence[str] | str = _common.DEFAULT_DETECTORS,
+        damage_weight: float = 1.0,
+        stealth_weight: float = 1.0,
+        decision_period: int = 1,
+        threads: int | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        if render_mode is not None:
+            raise ValueError(f"render_mode: this environment does not render, got {render_mode!r}")
+        if int(num_envs) < 1:
+            raise ValueError(f"num_envs: at least 1, got {num_envs}")
+        self.num_envs = int(num_envs)
+        self.scenario = _common.scenario_of(scenario, attack)
+        self.robots = _common.robots_of(robots, self.scenario)
+        self.channels = _common.names_of(channels, _common.CHANNELS, "channels")
+        self.detectors = _common.names_of(detectors, _core.detectors(), "detectors")
+        self.budget = _common.budget_of(budget)
+        self.damage_weight = float(damage_weight)
+        self.stealth_weight = float(stealth_weight)
+        if int(decision_period) < 1:
+            raise ValueError(f"decision_period: at least 1 tick, got {decision_period}")
+        self._batch = _core.Batch(
+            self.scenario,
+            self.num_envs,
+            self.robots,
+            self.channels,
+            self.budget,
+            self.detectors,
+            int(decision_period),
+            threads,
+        )
+        agents, links, _ = self._batch.shape()
+        self.observation_names = _common.observation_names(agents, links, _common.ATTACKER_PARTS)
+        self.single_observation_space = spaces.Box(
+            -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
+        )
+        self._action_shape = (len(self.robots), len(self.channels), links)
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float64)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._autoreset = np.zeros(self.num_envs, dtype=np.uint8)
+        self._started = False
+        self._closed = False
+
+    def reset(
+        self, *, seed: int | Sequence[int] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Every environment back to its start (the engine draws nothing: ``seed`` seeds the
+        spaces only)."""
+        self._check_open()
+        if seed is not None:
+            first = seed if isinstance(seed, int) else seed[0]
+            self.action_space.seed(first)
+            self.observation_space.seed(first)
+        obs = np.frombuffer(self._batch.reset(), dtype=np.float64).reshape(self.num_envs, -1)
+        self._autoreset[:] = 0
+        self._started = True
+        return obs.copy(), {}
+
+    def step(
+        self, actions: Any
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        self._check_open()
+        if not self._started:
+            raise gym.error.ResetNeeded("call reset() before step()")
+        a = np.asarray(actions, dtype=np.float64)
+        want = (self.num_envs, *self._action_shape)
+        if a.shape != want:
+            raise ValueError(f"actions: expected shape {want}, got {a.shape}")
+        obs, damage, alarms, term, trunc = self._batch.step(a.tobytes(), self._autoreset.tobytes())
+        obs = np.frombuffer(obs, dtype=np.float64).reshape(self.num_envs, -1).copy()
+        damage = np.frombuffer(damage, dtype=np.float64)
+        alarms = np.frombuffer(alarms, dtype=np.float64)
+        terminated = np.frombuffer(term, dtype=np.uint8).astype(bool)
+        truncated = np.frombuffer(trunc, dtype=np.uint8).astype(bool)
+        rewards = self.damage_weight * damage - self.stealth_weight * alarms
+        self._autoreset = (terminated | truncated).astype(np.uint8)
+        return obs, rewards, terminated, truncated, {}
+
+    def digests(self) -> list[str | None]:
+        """Each environment's last ended episode's trace digest (``None`` while none ended)."""
+        self._check_open()
+        return self._batch.digests()
+
+    @property
+    def threads(self) -> int:
+        return self._batch.threads
+
+    def _check_open(self) -> None:
+        if self._closed:
+            raise _common.ClosedEnvironmentError("the environment is closed: make a new one")
+
+    def close_extras(self, **kwargs: Any) -> None:
+        if not self._closed:
+            self._batch.close()
+            self._closed = True

@@ -1,0 +1,423 @@
+//! An episode of the environments: the in-process engine ([`fdi_common::engine::Lockstep`]),
+//! ticked a decision period at a time, with an attacker that adds the learning agent's
+//! injection to the scenario's own attack profile. Pure Rust: the Python classes wrap it.
+
+use fdi_common::attack::{Attacker, Injection, ProfileAttacker, Sent, TorqueInjection};
+use fdi_common::engine::{lockstep_any, AnyLockstep, RunSummary};
+use fdi_common::model::Vector;
+use fdi_common::plant::Measurement;
+use fdi_common::records::TickRecord;
+use fdi_common::scenario::Resolved;
+
+/// The channels an action injects into, in the order of an action's middle axis.
+pub const CHANNELS: [&str; 3] = ["position", "velocity", "torque"];
+/// Index of the torque channel in [`CHANNELS`].
+const TORQUE: usize = 2;
+
+/// What the learning agent acts on and how an episode is scored.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Spec {
+    /// The robots (ids) an action injects into, in the action's order.
+    pub robots: Vec<u32>,
+    /// The channels (indexes into [`CHANNELS`]) an action injects into, in its order.
+    pub channels: Vec<usize>,
+    /// The largest injection per channel of [`CHANNELS`]: rad, rad/s, N·m. An action of 1
+    /// injects the budget.
+    pub budget: [f64; 3],
+    /// The detectors (indexes into `fdi_common::detect::names()`) whose alarms are counted.
+    pub detectors: Vec<usize>,
+    /// Ticks per step.
+    pub decision_period: u64,
+}
+
+/// The attacker of an episode: the scenario's attack profile, plus the action's injection on
+/// the chosen robots and channels (added to what the profile delivers, and recorded as
+/// injected).
+#[derive(Debug)]
+pub struct EnvAttacker {
+    base: ProfileAttacker,
+    name: String,
+    links: usize,
+    /// Per chosen robot: its id and its injection, `[position…, velocity…, torque…]`
+    /// (`3 × links` entries, in rad, rad/s, N·m).
+    injections: Vec<(u32, Vec<f64>)>,
+    /// The action injects into torques.
+    torque: bool,
+}
+
+impl EnvAttacker {
+    fn new(resolved: &Resolved, spec: &Spec, links: usize) -> Self {
+        let base = resolved.profile_attacker();
+        let name = if spec.robots.is_empty() || spec.channels.is_empty() {
+            base.name().to_owned()
+        } else {
+            format!("{} + the environment's actions", base.name())
+        };
+        Self {
+            base,
+            name,
+            links,
+            injections: spec
+                .robots
+                .iter()
+                .map(|id| (*id, vec![0.0; 3 * links]))
+                .collect(),
+            torque: spec.channels.contains(&TORQUE),
+        }
+    }
+
+    fn injection(&self, agent: u32) -> Option<&[f64]> {
+        self.injections
+            .iter()
+            .find(|(id, _)| *id == agent)
+            .map(|(_, v)| v.as_slice())
+    }
+}
+
+/// Adds `add` to the delivered payload's entries and to the recorded `alpha`, where non-zero
+/// (a zero adds nothing, not even a change of a zero's sign: an action of zeros leaves the run
+/// bit for bit as the profile's).
+fn add<const N: usize>(payload: &mut Vector<N>, alpha: &mut Vector<N>, add: &[f64]) {
+    for (i, a) in add.iter().enumerate().take(N) {
+        if *a != 0.0 {
+            payload[i] += *a;
+            alpha[i] += *a;
+        }
+    }
+}
+
+impl Attacker for EnvAttacker {
+    fn name(&self) -> &str {
+        &self.name
+    }
+
+    fn measurement<const N: usize>(
+        &mut self,
+        agent: u32,
+        k: u64,
+        t: f64,
+        clean: &Measurement<N>,
+    ) -> (Sent<Measurement<N>>, Injection<N>) {
+        let (mut sent, mut inj) = self.base.measurement::<N>(agent, k, t, clean);
+        let l = self.links;
+        if let (Some(a), Sent::Delivered { payload, .. }) = (self.injection(agent), &mut sent) {
+            add(&mut payload.y, &mut inj.position, &a[..l]);
+            add(&mut payload.yd, &mut inj.velocity, &a[l..2 * l]);
+        }
+        (sent, inj)
+    }
+
+    fn on_torque_path(&self, agent: u32) -> bool {
+        self.base.on_torque_path(agent) || (self.torque && self.injection(agent).is_some())
+    }
+
+    fn torque<const N: usize>(
+        &mut self,
+        agent: u32,
+        k: u64,
+        t: f64,
+        u: &Vector<N>,
+    ) -> (Sent<Vector<N>>, TorqueInjection<N>) {
+        let (mut sent, mut inj) = if self.base.on_torque_path(agent) {
+            self.base.torque::<N>(agent, k, t, u)
+        } else {
+            (Sent::on_time(*u), TorqueInjection::none())
+        };
+        let l = self.links;
+        if let (true, Some(a), Sent::Delivered { payload, .. }) =
+            (self.torque, self.injection(agent), &mut sent)
+        {
+            add(payload, &mut inj.u, &a[2 * l..3 * l]);
+        }
+        (sent, inj)
+    }
+}
+
+/// What one step did.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Outcome {
+    /// Ticks run.
+    pub ticks: u64,
+    /// Σ over the ticks of the mean tracking error `‖q_d − q‖` (rad) of the chosen robots.
+    pub damage: f64,
+    /// Ticks at whose end some chosen detector of some robot was alarming.
+    pub alarm_ticks: u64,
+    /// Per robot (scenario order): ticks with an attack in force on it (the ground truth).
+    pub attacked: Vec<u64>,
+    /// A robot diverged (its state left the bound or became non-finite).
+    pub terminated: bool,
+    /// The scenario's horizon was reached.
+    pub truncated: bool,
+}
+
+/// The latest values each observer has seen, per robot in the scenario's order.
+#[derive(Debug, Clone)]
+struct Seen {
+    t: f64,
+    /// The attacker's view: per robot the clean `y`, `ẏ`, and the center's command `u` where
+    /// the attacker sits on the torque path (zeros elsewhere): `3 × links`.
+    attacker: Vec<f64>,
+    /// The control center's view: per robot the received `y`, `ẏ`, `Ŝ`, and the observer's
+    /// residuals `y − q̂`, `ẏ − q̂̇`: `5 × links`.
+    center: Vec<f64>,
+}
+
+/// An episode of a scenario.
+#[derive(Debug)]
+pub struct Episode {
+    resolved: Resolved,
+    spec: Spec,
+    links: usize,
+    agents: Vec<u32>,
+    engine: Option<Box<dyn AnyLockstep<EnvAttacker>>>,
+    attacker: EnvAttacker,
+    seen: Seen,
+    summary: Option<RunSummary>,
+}
+
+/// Whether the spec's robots are robots of the scenario and its channels and detectors exist.
+fn check(resolved: &Resolved, spec: &Spec) -> Result<(), String> {
+    let agents: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
+    if let Some(r) = spec.robots.iter().find(|r| !agents.contains(r)) {
+        return Err(format!(
+            "robots: {r} is not a robot of the scenario (its robots are {agents:?})"
+        ));
+    }
+    if spec.channels.iter().any(|c| *c >= CHANNELS.len()) {
+        return Err(format!("channels: the channels are {CHANNELS:?}"));
+    }
+    let names = fdi_common::detect::names();
+    if spec.detectors.iter().any(|d| *d >= names.len()) {
+        return Err(format!("detectors: the detectors are {names:?}"));
+    }
+    if let Some(b) = spec.budget.iter().find(|b| !(b.is_finite() && **b >= 0.0)) {
+        return Err(format!(
+            "budget: every channel's budget must be finite and ≥ 0, got {b}"
+        ));
+    }
+    if spec.decision_period == 0 {
+        return Err("decision_period: at least 1 tick".into());
+    }
+    Ok(())
+}
+
+impl Episode {
+    /// An episode of `resolved` at its start.
+    pub fn new(resolved: Resolved, spec: Spec) -> Result<Self, String> {
+        check(&resolved, &spec)?;
+        let engine = lockstep_any::<EnvAttacker>(&resolved).map_err(|e| e.to_string())?;
+        let links = engine.links();
+        let agents: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
+        let attacker = EnvAttacker::new(&resolved, &spec, links);
+        let n = agents.len();
+        Ok(Self {
+            seen: Seen {
+                t: 0.0,
+                attacker: vec![0.0; n * 3 * links],
+                center: vec![0.0; n * 5 * links],
+            },
+            resolved,
+            spec,
+            links,
+            agents,
+            engine: Some(engine),
+            attacker,
+            summary: None,
+        })
+    }
+
+    /// The episode again from its start, of `resolved` when given (same robots and links).
+    pub fn reset(&mut self, resolved: Option<Resolved>) -> Result<(), String> {
+        let resolved = resolved.unwrap_or_else(|| self.resolved.clone());
+        let fresh = Self::new(resolved, self.spec.clone())?;
+        if fresh.agents != self.agents || fresh.links != self.links {
+            return Err(format!(
+                "the new scenario's robots ({:?}, {} links) are not the episode's ({:?}, {} links)",
+                fresh.agents, fresh.links, self.agents, self.links
+            ));
+        }
+        *self = fresh;
+        Ok(())
+    }
+
+    pub fn links(&self) -> usize {
+        self.links
+    }
+
+    pub fn agents(&self) -> &[u32] {
+        &self.agents
+    }
+
+    /// Entries of an action: robots × channels × links.
+    pub fn action_size(&self) -> usize {
+        self.spec.robots.len() * self.spec.channels.len() * self.links
+    }
+
+    /// The next tick to run, and the ticks of the horizon.
+    pub fn progress(&self) -> (u64, u64) {
+        match &self.engine {
+            Some(e) => (e.k(), e.ticks()),
+            None => {
+                let t = self.resolved.ticks();
+                (self.summary.as_ref().map_or(t, |s| s.ticks), t)
+            }
+        }
+    }
+
+    /// The summary of the episode, once it ended.
+    pub fn summary(&self) -> Option<&RunSummary> {
+        self.summary.as_ref()
+    }
+
+    /// The attacker's view after the last tick: `[t, per robot y…, ẏ…, u…]`.
+    pub fn attacker_view(&self, out: &mut Vec<f64>) {
+        out.push(self.seen.t);
+        out.extend_from_slice(&self.seen.attacker);
+    }
+
+    /// The control center's view after the last tick: `[t, per robot y…, ẏ…, Ŝ…, y − q̂…,
+    /// ẏ − q̂̇…]` (what it received).
+    pub fn center_view(&self, out: &mut Vec<f64>) {
+        out.push(self.seen.t);
+        out.extend_from_slice(&self.seen.center);
+    }
+
+    /// Sets the injection of the next steps from `action` (robots × channels × links, each in
+    /// [−1, 1], scaled by the channel's budget). Refused, and the injection unchanged, when it
+    /// has another length, a non-finite entry or an entry outside [−1, 1].
+    pub fn act(&mut self, action: &[f64]) -> Result<(), String> {
+        let l = self.links;
+        let want = self.action_size();
+        if action.len() != want {
+            return Err(format!(
+                "an action has {want} entries ({} robots × {} channels × {l} links), got {}",
+                self.spec.robots.len(),
+                self.spec.channels.len(),
+                action.len()
+            ));
+        }
+        if let Some((i, a)) = action.iter().enumerate().find(|(_, a)| !a.is_finite()) {
+            return Err(format!(
+                "action entry {i} is {a}: every entry must be finite"
+            ));
+        }
+        if let Some((i, a)) = action.iter().enumerate().find(|(_, a)| a.abs() > 1.0) {
+            return Err(format!(
+                "action entry {i} is {a}: outside [-1, 1] (1 injects the channel's budget)"
+            ));
+        }
+        let per_robot = self.spec.channels.len() * l;
+        for ((_, inj), a) in self
+            .attacker
+            .injections
+            .iter_mut()
+            .zip(action.chunks(per_robot.max(1)))
+        {
+            for (c, values) in self.spec.channels.iter().zip(a.chunks(l.max(1))) {
+                let budget = self.spec.budget[*c];
+                for (dst, v) in inj[c * l..(c + 1) * l].iter_mut().zip(values) {
+                    *dst = v * budget;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs one decision period (fewer at the horizon, or when a robot diverges). An episode
+    /// that ended runs nothing.
+    pub fn step(&mut self) -> Outcome {
+        let mut out = Outcome {
+            attacked: vec![0; self.agents.len()],
+            ..Outcome::default()
+        };
+        let Some(engine) = self.engine.as_mut() else {
+            out.truncated = self.summary.as_ref().is_some_and(|s| s.partial.is_none());
+            return out;
+        };
+        let (l, agents) = (self.links, &self.agents);
+        let seen = &mut self.seen;
+        let mut attacked = vec![0u64; agents.len()];
+        for _ in 0..self.spec.decision_period {
+            let mut i = 0;
+            let ran = engine.tick(&mut self.attacker, &mut |r: &TickRecord| {
+                seen_record(seen, l, i, r);
+                attacked[i] += u64::from(fdi_common::detect::in_force(r));
+                i += 1;
+            });
+            if !ran {
+                break;
+            }
+            out.ticks += 1;
+            let ev = engine.evaluator();
+            let mut errors = 0.0;
+            for id in &self.spec.robots {
+                errors += ev.tracking(*id).map_or(f64::NAN, |(e, _)| e);
+            }
+            if !self.spec.robots.is_empty() {
+                out.damage += errors / self.spec.robots.len() as f64;
+            }
+            let alarm = agents.iter().any(|id| {
+                self.spec
+                    .detectors
+                    .iter()
+                    .any(|d| ev.alarm(*id, *d).unwrap_or(false))
+            });
+            out.alarm_ticks += u64::from(alarm);
+            if agents
+                .iter()
+                .any(|id| ev.tracking(*id).is_none_or(|(_, diverged)| diverged))
+            {
+                out.terminated = true;
+                break;
+            }
+        }
+        out.attacked = attacked;
+        let (k, ticks) = (engine.k(), engine.ticks());
+        out.truncated = !out.terminated && k >= ticks;
+        if out.terminated || out.truncated {
+            if let Some(engine) = self.engine.take() {
+                self.summary = Some(engine.finish(&self.resolved, self.attacker.name()));
+            }
+        }
+        out
+    }
+}
+
+/// Stores what robot `i`'s record of a tick shows each observer.
+fn seen_record(seen: &mut Seen, l: usize, i: usize, r: &TickRecord) {
+    seen.t = r.agent.t;
+    let a = &mut seen.attacker[i * 3 * l..(i + 1) * 3 * l];
+    copy(&mut a[..l], r.agent.y.as_slice());
+    copy(&mut a[l..2 * l], r.agent.yd.as_slice());
+    match &r.actuation {
+        Some(_) => copy(&mut a[2 * l..], r.center.u.as_slice()),
+        None => a[2 * l..].fill(0.0),
+    }
+    let c = &mut seen.center[i * 5 * l..(i + 1) * 5 * l];
+    let (y, yd) = (r.attack.y.as_slice(), r.attack.yd.as_slice());
+    copy(&mut c[..l], y);
+    copy(&mut c[l..2 * l], yd);
+    copy(&mut c[2 * l..3 * l], r.center.s_hat.as_slice());
+    for (j, (dst, q)) in c[3 * l..4 * l]
+        .iter_mut()
+        .zip(r.center.q_hat.as_slice())
+        .enumerate()
+    {
+        *dst = y.get(j).map_or(0.0, |y| y - q);
+    }
+    for (j, (dst, q)) in c[4 * l..5 * l]
+        .iter_mut()
+        .zip(r.center.qd_hat.as_slice())
+        .enumerate()
+    {
+        *dst = yd.get(j).map_or(0.0, |y| y - q);
+    }
+}
+
+/// `src` into `dst` entry by entry; entries `src` lacks are zero (a measurement that never
+/// arrived).
+fn copy(dst: &mut [f64], src: &[f64]) {
+    for (i, d) in dst.iter_mut().enumerate() {
+        *d = src.get(i).copied().unwrap_or(0.0);
+    }
+}

@@ -1,0 +1,96 @@
+"""The engine from Python: the same numbers as the command line, and clear errors."""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+import pytest
+
+import fdi_mas
+from conftest import cli_run
+
+
+def test_a_run_is_the_command_line_s_in_process_run(fdi_launch, tmp_path):
+    summary, _ = cli_run(fdi_launch, tmp_path, "--duration-s", "2")
+    result = fdi_mas.run(fdi_mas.Scenario.paper(duration_s=2.0))
+    assert result.digest == summary["trace_digest"]
+    assert result.summary["rmse_rad"] == summary["rmse_rad"]
+    assert result.summary["metrics"] == summary["metrics"]
+    assert dict(result.rmse) == {int(k): v for k, v in summary["rmse_rad"].items()}
+    # Printed, the RMSE table is the command line's metrics table.
+    assert str(result.rmse).startswith("| robot | RMSE (rad) |")
+    assert len(str(result.rmse).splitlines()) == 2 + len(summary["rmse_rad"])
+
+
+def test_overrides_are_the_command_line_s(fdi_launch, tmp_path):
+    summary, _ = cli_run(
+        fdi_launch, tmp_path, "--duration-s", "1", "--attack", "stealthy-bias", "--seed", "7"
+    )
+    s = fdi_mas.Scenario.paper(duration_s=1.0, attack="stealthy-bias", seed=7)
+    assert (s.attack, s.seed, s.ticks) == ("stealthy-bias", 7, 1000)
+    assert fdi_mas.run(s, ticks=False).digest == summary["trace_digest"]
+
+
+def test_open_run_reads_a_command_line_run_as_run_gives_it(fdi_launch, tmp_path):
+    summary, run_dir = cli_run(fdi_launch, tmp_path, "--duration-s", "0.5")
+    opened = fdi_mas.open_run(run_dir)
+    assert opened.digest == summary["trace_digest"]
+    assert opened.warnings == []
+    assert opened.run_dir == str(run_dir)
+    here = fdi_mas.run(fdi_mas.Scenario.paper(duration_s=0.5))
+    assert opened.ticks is not None and here.ticks is not None
+    assert list(opened.ticks) == list(here.ticks)
+    for name, column in here.ticks.items():
+        np.testing.assert_array_equal(opened.ticks[name], column, err_msg=name)
+
+
+def test_every_tick_is_a_column_of_one_row_per_robot_and_tick():
+    r = fdi_mas.run(fdi_mas.Scenario.paper(duration_s=0.25))
+    assert r.ticks is not None
+    rows = 250 * 4
+    assert all(len(c) == rows for c in r.ticks.values())
+    assert r.ticks["k"][:8].tolist() == [0, 0, 0, 0, 1, 1, 1, 1]
+    assert r.ticks["agent"][:4].tolist() == [1, 2, 3, 4]
+    assert r.ticks["alarm"].dtype == np.bool_
+    # The RMSE of the summary is the one of the columns.
+    mine = r.ticks["agent"] == 2
+    err = np.concatenate(
+        [r.ticks[f"q{i}_des_rad"][mine] - r.ticks[f"q{i}_rad"][mine] for i in (1, 2)]
+    )
+    assert np.sqrt(np.mean(err**2)) == pytest.approx(r.rmse[2], rel=1e-12)
+    frame = r.frame()
+    assert frame.shape == (rows, len(r.ticks))
+
+
+def test_scenario_errors_name_every_field():
+    with pytest.raises(fdi_mas.ScenarioError) as e:
+        fdi_mas.Scenario.paper(duraton_s=1.0, controller="nope", seed=-1)
+    paths = sorted(p for p, _ in e.value.problems)
+    assert paths == ["controller", "duraton_s", "seed"], e.value.problems
+    with pytest.raises(fdi_mas.ScenarioError) as e:
+        fdi_mas.Scenario.paper(duration_s=-1.0)
+    assert "duration_s" in [p for p, _ in e.value.problems]
+    with pytest.raises(fdi_mas.ScenarioError, match="realtime"):
+        fdi_mas.Scenario.paper(clock="realtime")
+    with pytest.raises(fdi_mas.ScenarioError, match="no-such-attack"):
+        fdi_mas.Scenario.paper(attack="no-such-attack")
+    with pytest.raises(fdi_mas.ScenarioError, match="expected a number"):
+        fdi_mas.Scenario.paper(duration_s="long")
+
+
+def test_a_scenario_file_s_errors_give_line_and_column(tmp_path: pathlib.Path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('name = "bad"\nduration_s = 1.0\nduraton_s = 2.0\n')
+    with pytest.raises(fdi_mas.ScenarioError) as e:
+        fdi_mas.Scenario.load(bad)
+    assert "duraton_s" in str(e.value) and "line 3" in str(e.value), str(e.value)
+    with pytest.raises(fdi_mas.ScenarioError):
+        fdi_mas.Scenario.load(tmp_path / "missing.toml")
+
+
+def test_a_rust_panic_is_an_exception_not_an_abort():
+    with pytest.raises(BaseException, match="on purpose"):
+        fdi_mas._core.panic_for_test()
+    # The interpreter goes on.
+    assert fdi_mas.run(fdi_mas.Scenario.paper(duration_s=0.01), ticks=False).summary["ticks"] == 10

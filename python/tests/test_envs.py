@@ -1,0 +1,164 @@
+"""The environments: Gymnasium's and PettingZoo's own checks, bit-exactness with the command
+line, and clear errors for bad input."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+from pettingzoo.test import parallel_api_test
+
+import fdi_mas
+from conftest import cli_run
+from fdi_mas.envs import AttackerEnv, DetectorEnv, VectorAttackerEnv, attack_defend_v0
+from fdi_mas.envs._common import ClosedEnvironmentError
+
+SHORT = fdi_mas.Scenario.paper(duration_s=0.3)
+
+
+def run_episode(env, action):
+    env.reset(seed=0)
+    total, steps = 0.0, 0
+    while True:
+        _, reward, terminated, truncated, info = env.step(action)
+        total += reward
+        steps += 1
+        if terminated or truncated:
+            return total, steps, info
+
+
+def test_gymnasium_s_checker_passes_on_both_environments():
+    check_env(AttackerEnv(SHORT), skip_render_check=True)
+    check_env(DetectorEnv(SHORT), skip_render_check=True)
+    check_env(AttackerEnv(SHORT, channels=("position", "velocity", "torque"), decision_period=10))
+
+
+def test_pettingzoo_s_parallel_api_test_passes():
+    parallel_api_test(attack_defend_v0.parallel_env(scenario=SHORT), num_cycles=400)
+    parallel_api_test(
+        attack_defend_v0.parallel_env(scenario=SHORT, attacks=("none", "paper"), decision_period=25),
+        num_cycles=100,
+    )
+
+
+def test_the_registered_ids_make_the_environments():
+    env = gym.make("fdi_mas/Attacker-v0", scenario=SHORT)
+    assert isinstance(env.unwrapped, AttackerEnv)
+    env = gym.make("fdi_mas/Detector-v0", scenario=SHORT)
+    assert isinstance(env.unwrapped, DetectorEnv)
+    vec = gym.make_vec("fdi_mas/Attacker-v0", num_envs=3, vectorization_mode="vector_entry_point", scenario=SHORT)
+    assert vec.num_envs == 3
+
+
+@pytest.mark.parametrize("period", [1, 7])
+def test_zero_actions_on_the_scenario_s_attack_give_the_command_line_s_digest(fdi_launch, tmp_path, period):
+    summary, _ = cli_run(fdi_launch, tmp_path, "--duration-s", "2")
+    env = AttackerEnv(fdi_mas.Scenario.paper(duration_s=2.0), attack=None, decision_period=period)
+    _, steps, info = run_episode(env, np.zeros(env.action_space.shape))
+    assert steps == -(-2000 // period)
+    assert info["digest"] == summary["trace_digest"]
+    assert info["summary"]["rmse_rad"] == summary["rmse_rad"]
+
+
+def test_the_vector_environment_gives_each_episode_the_single_one_s_digest():
+    scenario = fdi_mas.Scenario.paper(duration_s=0.2)
+    single = AttackerEnv(scenario, attack="paper")
+    _, steps, info = run_episode(single, np.zeros(single.action_space.shape))
+    vec = VectorAttackerEnv(5, scenario, attack="paper", threads=2)
+    obs, _ = vec.reset(seed=0)
+    assert obs.shape == (5, single.observation_space.shape[0])
+    for i in range(steps):
+        obs, rewards, term, trunc, _ = vec.step(np.zeros(vec.action_space.shape))
+        assert rewards.shape == (5,)
+        assert trunc.all() == (i == steps - 1)
+    assert vec.digests() == [info["digest"]] * 5
+    # Next-step autoreset: the step after the end starts new episodes.
+    obs, rewards, term, trunc, _ = vec.step(np.zeros(vec.action_space.shape))
+    assert not trunc.any() and (rewards == 0).all() and (obs == 0).all()
+    vec.close()
+    with pytest.raises(ClosedEnvironmentError):
+        vec.step(np.zeros(vec.action_space.shape))
+
+
+def test_an_injection_does_damage_and_detectors_see_a_large_one():
+    scenario = fdi_mas.Scenario.paper(duration_s=3.0, residual="psi2")
+    env = AttackerEnv(scenario, robots=[2], budget={"position": 0.2}, stealth_weight=0.0)
+    clean, _, info_clean = run_episode(env, np.zeros(env.action_space.shape))
+    full, _, info_full = run_episode(env, np.ones(env.action_space.shape))
+    assert info_full["summary"]["rmse_rad"]["2"] > 2 * info_clean["summary"]["rmse_rad"]["2"]
+    assert info_full["summary"]["rmse_rad"]["1"] == info_clean["summary"]["rmse_rad"]["1"]
+    assert info_full["summary"]["metrics"]["2"]["attacked_ticks"] == 3000
+    assert info_clean["summary"]["metrics"]["2"]["attacked_ticks"] == 0
+    # Weights: all damage, then all stealth.
+    assert full > clean
+    # Stealth only: the detectors (ψ2 residual) stay silent without an injection, and alarm
+    # on the large one.
+    loud = AttackerEnv(scenario, robots=[2], budget={"position": 0.2}, damage_weight=0.0)
+    assert run_episode(loud, np.zeros(loud.action_space.shape))[0] == 0
+    assert run_episode(loud, np.ones(loud.action_space.shape))[0] < 0
+
+
+@pytest.mark.parametrize(
+    "action, message",
+    [
+        (np.full((4, 1, 2), np.nan), "finite"),
+        (np.zeros((4, 2)), "shape"),
+        (np.full((4, 1, 2), 1.5), r"outside \[-1, 1\]"),
+        ([[0.0]], "shape"),
+    ],
+)
+def test_bad_actions_raise_value_error_and_change_nothing(action, message):
+    env = AttackerEnv(SHORT)
+    env.reset()
+    with pytest.raises(ValueError, match=message):
+        env.step(action)
+    # The episode goes on.
+    _, _, _, _, info = env.step(np.zeros(env.action_space.shape))
+    assert info["ticks"] == 1
+
+
+def test_bad_arguments_and_misuse_raise_clear_errors():
+    with pytest.raises(ValueError, match="not a robot"):
+        AttackerEnv(SHORT, robots=[9])
+    with pytest.raises(ValueError, match="no detector"):
+        AttackerEnv(SHORT, detectors=("chi3",))
+    with pytest.raises(ValueError, match="no channel"):
+        AttackerEnv(SHORT, channels=("voltage",))
+    with pytest.raises(ValueError, match="budget"):
+        AttackerEnv(SHORT, budget={"position": -1.0})
+    with pytest.raises(fdi_mas.ScenarioError):
+        AttackerEnv(SHORT, attack="nope")
+    with pytest.raises(ValueError, match="attacks"):
+        DetectorEnv(SHORT, attacks=("nope",))
+    env = AttackerEnv(SHORT)
+    with pytest.raises(gym.error.ResetNeeded):
+        env.step(np.zeros(env.action_space.shape))
+    env.reset()
+    env.close()
+    with pytest.raises(ClosedEnvironmentError):
+        env.step(np.zeros(env.action_space.shape))
+    with pytest.raises(ClosedEnvironmentError):
+        env.reset()
+    det = DetectorEnv(SHORT)
+    det.reset(seed=1)
+    with pytest.raises(ValueError, match="0 or 1"):
+        det.step(np.array([0, 1, 2, 0]))
+    with pytest.raises(ValueError, match="shape"):
+        det.step(np.array([0, 1]))
+
+
+def test_the_detector_environment_draws_its_attack_from_its_seed_and_scores_alarms():
+    env = DetectorEnv(fdi_mas.Scenario.paper(duration_s=0.2), attacks=("none", "paper"), decision_period=20)
+    drawn = [env.reset(seed=s)[1]["attack"] for s in range(12)]
+    assert set(drawn) == {"none", "paper"}
+    assert drawn == [env.reset(seed=s)[1]["attack"] for s in range(12)]
+    env.reset(options={"attack": "none"})
+    # No attack: an alarm costs a false alarm per tick, silence costs nothing.
+    _, r_on, *_ = env.step(np.ones(4, dtype=np.int8))
+    _, r_off, *_ = env.step(np.zeros(4, dtype=np.int8))
+    assert r_on == -4 * 20 and r_off == 0
+    env.reset(options={"attack": "paper"})
+    _, r_on, _, _, info = env.step(np.ones(4, dtype=np.int8))
+    attacked = sum(info["attacked_ticks"])
+    assert attacked > 0 and r_on == attacked - (4 * 20 - attacked)
