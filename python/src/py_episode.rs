@@ -221,6 +221,7 @@ impl Episode {
 pub struct Batch {
     inner: Mutex<Option<Envs>>,
     threads: usize,
+    pool: rayon::ThreadPool,
 }
 
 /// The episodes of a batch, and each one's last ended episode's digest.
@@ -264,12 +265,19 @@ impl Batch {
             .collect::<Result<Vec<_>, _>>()
             .map_err(PyValueError::new_err)?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let threads = threads.unwrap_or(cores).clamp(1, n);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("fdi-mas-vec-{i}"))
+            .build()
+            .map_err(engine_error)?;
         Ok(Self {
             inner: Mutex::new(Some(Envs {
                 digests: vec![None; episodes.len()],
                 episodes,
             })),
-            threads: threads.unwrap_or(cores).clamp(1, n),
+            threads,
+            pool,
         })
     }
 
@@ -314,8 +322,8 @@ impl Batch {
                     .map_err(|m| PyValueError::new_err(format!("environment {i}: {m}")))?;
             }
         }
-        let threads = self.threads;
-        let outcomes = py.detach(|| step_all(eps, reset, threads))?;
+        let pool = &self.pool;
+        let outcomes = py.detach(|| step_all(pool, eps, reset))?;
         let mut view = Vec::new();
         let (mut damage, mut alarms) = (Vec::with_capacity(n), Vec::with_capacity(n));
         let (mut term, mut trunc) = (Vec::with_capacity(n), Vec::with_capacity(n));
@@ -374,11 +382,15 @@ impl Batch {
     }
 }
 
-/// Steps (or resets) every episode, `threads` at a time; a panic in a thread is an error.
-fn step_all(eps: &mut [episode::Episode], reset: &[u8], threads: usize) -> PyResult<Vec<Outcome>> {
-    let chunk = eps.len().div_ceil(threads.max(1)).max(1);
-    let one = |e: &mut episode::Episode, r: u8| -> Result<Outcome, String> {
-        if r != 0 {
+/// Steps (or resets) every episode on the pool's threads; a panic in a thread is an error.
+fn step_all(
+    pool: &rayon::ThreadPool,
+    eps: &mut [episode::Episode],
+    reset: &[u8],
+) -> PyResult<Vec<Outcome>> {
+    use rayon::prelude::*;
+    let one = |(e, r): (&mut episode::Episode, &u8)| -> Result<Outcome, String> {
+        if *r != 0 {
             e.reset(None)?;
             Ok(Outcome {
                 attacked: vec![0; e.agents().len()],
@@ -388,32 +400,20 @@ fn step_all(eps: &mut [episode::Episode], reset: &[u8], threads: usize) -> PyRes
             Ok(e.step())
         }
     };
-    let results: Vec<std::thread::Result<Result<Vec<Outcome>, String>>> = std::thread::scope(|s| {
-        let handles: Vec<_> = eps
-            .chunks_mut(chunk)
-            .zip(reset.chunks(chunk))
-            .map(|(es, rs)| {
-                s.spawn(move || {
-                    es.iter_mut()
-                        .zip(rs)
-                        .map(|(e, r)| one(e, *r))
-                        .collect::<Result<Vec<_>, String>>()
-                })
-            })
-            .collect();
-        handles.into_iter().map(|h| h.join()).collect()
+    let run = std::panic::AssertUnwindSafe(|| {
+        pool.install(|| {
+            eps.par_iter_mut()
+                .zip(reset.par_iter())
+                .with_min_len(1)
+                .map(one)
+                .collect::<Result<Vec<_>, String>>()
+        })
     });
-    let mut out = Vec::with_capacity(eps.len());
-    for r in results {
-        match r {
-            Ok(Ok(v)) => out.extend(v),
-            Ok(Err(m)) => return Err(PyValueError::new_err(m)),
-            Err(_) => {
-                return Err(engine_error(
-                    "a panic inside the engine while stepping the batch",
-                ))
-            }
-        }
+    match std::panic::catch_unwind(run) {
+        Ok(Ok(v)) => Ok(v),
+        Ok(Err(m)) => Err(PyValueError::new_err(m)),
+        Err(_) => Err(engine_error(
+            "a panic inside the engine while stepping the batch",
+        )),
     }
-    Ok(out)
 }
