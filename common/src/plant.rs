@@ -196,17 +196,18 @@ impl<const N: usize> Plant<N> {
 
     /// One classic RK4 step of length `len` from `t` with the delayed input held at `u`.
     fn rk4(&mut self, t: f64, len: f64, u: &Vector<N>) -> Vector<N> {
-        let acc = |t: f64, q: &Vector<N>, qd: &Vector<N>| {
-            self.model.acceleration(q, qd, u, &self.disturbance(t))
-        };
+        let acc =
+            |d: &Vector<N>, q: &Vector<N>, qd: &Vector<N>| self.model.acceleration(q, qd, u, d);
         let (q, qd) = (self.q, self.qd);
-        let a1 = acc(t, &q, &qd);
+        // The disturbance at the midpoint serves the two midpoint stages (one evaluation).
+        let mid = self.disturbance(t + len / 2.0);
+        let a1 = acc(&self.disturbance(t), &q, &qd);
         let (q2, qd2) = (q + qd * (len / 2.0), qd + a1 * (len / 2.0));
-        let a2 = acc(t + len / 2.0, &q2, &qd2);
+        let a2 = acc(&mid, &q2, &qd2);
         let (q3, qd3) = (q + qd2 * (len / 2.0), qd + a2 * (len / 2.0));
-        let a3 = acc(t + len / 2.0, &q3, &qd3);
+        let a3 = acc(&mid, &q3, &qd3);
         let (q4, qd4) = (q + qd3 * len, qd + a3 * len);
-        let a4 = acc(t + len, &q4, &qd4);
+        let a4 = acc(&self.disturbance(t + len), &q4, &qd4);
         self.q = q + (qd + qd2 * 2.0 + qd3 * 2.0 + qd4) * (len / 6.0);
         self.qd = qd + (a1 + a2 * 2.0 + a3 * 2.0 + a4) * (len / 6.0);
         a1

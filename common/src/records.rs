@@ -17,11 +17,13 @@ pub struct Joints {
 }
 
 impl Joints {
+    #[inline]
     pub fn as_slice(&self) -> &[f64] {
         &self.v[..usize::from(self.len)]
     }
 
     /// The first `N` entries as a vector (missing entries are zero).
+    #[inline]
     pub fn to_vector<const N: usize>(&self) -> Vector<N> {
         let mut out = Vector::<N>::zeros();
         for (o, v) in out.iter_mut().zip(self.as_slice()) {
@@ -30,6 +32,7 @@ impl Joints {
         out
     }
 
+    #[inline]
     pub fn from_slice(s: &[f64]) -> Self {
         let mut j = Self::default();
         let n = s.len().min(MAX_DOF);
@@ -40,12 +43,14 @@ impl Joints {
 }
 
 impl<const N: usize> From<&Vector<N>> for Joints {
+    #[inline]
     fn from(v: &Vector<N>) -> Self {
         Self::from_slice(v.as_slice())
     }
 }
 
 impl<const N: usize> From<Vector<N>> for Joints {
+    #[inline]
     fn from(v: Vector<N>) -> Self {
         Self::from(&v)
     }

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import statistics
 import time
 
 import numpy as np
@@ -58,19 +59,30 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--duration-s", type=float, default=20.0, help="episode length (default 20 s)")
     p.add_argument("--envs", type=int, default=64, help="environments of the vector one (default 64)")
-    p.add_argument("--repeat", type=int, default=3, help="measurements of each rate (default 3): the best is kept")
+    p.add_argument(
+        "--repeat", type=int, default=5, help="rounds, each measuring the three in turn (default 5)"
+    )
     a = p.parse_args()
     scenario = fdi_mas.Scenario.paper(duration_s=a.duration_s, residual="psi2")
-    engine = max(engine_rate(scenario) for _ in range(a.repeat))
-    single = max(env_rate(scenario) for _ in range(a.repeat))
-    vector = max(vector_rate(scenario, a.envs, min(scenario.ticks, 2000)) for _ in range(a.repeat))
-    cores = os.cpu_count()
-    print(f"paper scenario, {a.duration_s:g} s episodes, best of {a.repeat}, {cores} cores")
+    rates: dict[str, list[float]] = {"engine": [], "single": [], "vector": []}
+    for _ in range(a.repeat):
+        rates["engine"].append(engine_rate(scenario))
+        rates["single"].append(env_rate(scenario))
+        rates["vector"].append(vector_rate(scenario, a.envs, min(scenario.ticks, 2000)))
+    med = {k: statistics.median(v) for k, v in rates.items()}
+    print(
+        f"paper scenario (psi2 residual), {a.duration_s:g} s episodes, {a.repeat} rounds "
+        f"(median, min-max), {os.cpu_count()} cores"
+    )
     print("| what | env-steps/s | vs the engine on one core |")
     print("|---|---|---|")
-    print(f"| in-process engine (`fdi_mas.run`), one core | {engine:,.0f} | 1.00 |")
-    print(f"| one `AttackerEnv` stepped from Python | {single:,.0f} | {single / engine:.2f} |")
-    print(f"| `VectorAttackerEnv`, {a.envs} envs, every core | {vector:,.0f} | {vector / engine:.2f} |")
+    for key, label in (
+        ("engine", "in-process engine (`fdi_mas.run`), one core"),
+        ("single", "one `AttackerEnv` stepped from Python"),
+        ("vector", f"`VectorAttackerEnv`, {a.envs} envs, every core"),
+    ):
+        lo, hi = min(rates[key]), max(rates[key])
+        print(f"| {label} | {med[key]:,.0f} ({lo:,.0f}-{hi:,.0f}) | {med[key] / med['engine']:.2f} |")
 
 
 if __name__ == "__main__":

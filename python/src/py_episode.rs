@@ -266,8 +266,9 @@ impl Batch {
             .map_err(PyValueError::new_err)?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let threads = threads.unwrap_or(cores).clamp(1, n);
+        // The calling thread steps one share itself: the pool has the others' threads.
         let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
+            .num_threads((threads - 1).max(1))
             .thread_name(|i| format!("fdi-mas-vec-{i}"))
             .build()
             .map_err(engine_error)?;
@@ -322,8 +323,8 @@ impl Batch {
                     .map_err(|m| PyValueError::new_err(format!("environment {i}: {m}")))?;
             }
         }
-        let pool = &self.pool;
-        let outcomes = py.detach(|| step_all(pool, eps, reset))?;
+        let (pool, threads) = (&self.pool, self.threads);
+        let outcomes = py.detach(|| step_all(pool, threads, eps, reset))?;
         let mut view = Vec::new();
         let (mut damage, mut alarms) = (Vec::with_capacity(n), Vec::with_capacity(n));
         let (mut term, mut trunc) = (Vec::with_capacity(n), Vec::with_capacity(n));
@@ -382,38 +383,76 @@ impl Batch {
     }
 }
 
-/// Steps (or resets) every episode on the pool's threads; a panic in a thread is an error.
+/// Steps (or resets) one episode.
+fn step_one(e: &mut episode::Episode, reset: u8) -> Result<Outcome, String> {
+    if reset != 0 {
+        e.reset(None)?;
+        Ok(Outcome {
+            attacked: vec![0; e.agents().len()],
+            ..Outcome::default()
+        })
+    } else {
+        Ok(e.step())
+    }
+}
+
+/// Steps (or resets) every episode, in small chunks taken in turn by the calling thread and
+/// the pool's threads (a thread that wakes late takes fewer; which thread steps an episode
+/// changes nothing in it). A panic is an error.
 fn step_all(
     pool: &rayon::ThreadPool,
+    threads: usize,
     eps: &mut [episode::Episode],
     reset: &[u8],
 ) -> PyResult<Vec<Outcome>> {
-    use rayon::prelude::*;
-    let one = |(e, r): (&mut episode::Episode, &u8)| -> Result<Outcome, String> {
-        if *r != 0 {
-            e.reset(None)?;
-            Ok(Outcome {
-                attacked: vec![0; e.agents().len()],
-                ..Outcome::default()
-            })
-        } else {
-            Ok(e.step())
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    const CHUNK: usize = 4;
+    type Chunk<'a> = (
+        &'a mut [episode::Episode],
+        &'a [u8],
+        Result<Vec<Outcome>, String>,
+    );
+    let n = eps.len();
+    let chunks: Vec<Mutex<Chunk<'_>>> = eps
+        .chunks_mut(CHUNK)
+        .zip(reset.chunks(CHUNK))
+        .map(|(es, rs)| Mutex::new((es, rs, Ok(Vec::new()))))
+        .collect();
+    let next = AtomicUsize::new(0);
+    let work = || loop {
+        let i = next.fetch_add(1, Ordering::Relaxed);
+        let Some(chunk) = chunks.get(i) else {
+            break;
+        };
+        // A chunk is taken by one thread only (the counter hands each index out once).
+        if let Ok(mut c) = chunk.lock() {
+            let (es, rs, out) = &mut *c;
+            *out = es
+                .iter_mut()
+                .zip(rs.iter())
+                .map(|(e, r)| step_one(e, *r))
+                .collect();
         }
     };
     let run = std::panic::AssertUnwindSafe(|| {
-        pool.install(|| {
-            eps.par_iter_mut()
-                .zip(reset.par_iter())
-                .with_min_len(1)
-                .map(one)
-                .collect::<Result<Vec<_>, String>>()
+        pool.in_place_scope(|scope| {
+            for _ in 1..threads {
+                scope.spawn(|_| work());
+            }
+            work();
         })
     });
-    match std::panic::catch_unwind(run) {
-        Ok(Ok(v)) => Ok(v),
-        Ok(Err(m)) => Err(PyValueError::new_err(m)),
-        Err(_) => Err(engine_error(
+    if std::panic::catch_unwind(run).is_err() {
+        return Err(engine_error(
             "a panic inside the engine while stepping the batch",
-        )),
+        ));
     }
+    let mut out = Vec::with_capacity(n);
+    for chunk in chunks {
+        let (_, _, r) = chunk
+            .into_inner()
+            .map_err(|_| engine_error("a panic inside the engine while stepping the batch"))?;
+        out.extend(r.map_err(PyValueError::new_err)?);
+    }
+    Ok(out)
 }

@@ -162,3 +162,17 @@ def test_the_detector_environment_draws_its_attack_from_its_seed_and_scores_alar
     _, r_on, _, _, info = env.step(np.ones(4, dtype=np.int8))
     attacked = sum(info["attacked_ticks"])
     assert attacked > 0 and r_on == attacked - (4 * 20 - attacked)
+
+
+def test_the_vector_environment_names_the_environment_of_a_bad_action():
+    vec = VectorAttackerEnv(3, SHORT, threads=2)
+    vec.reset()
+    actions = np.zeros(vec.action_space.shape)
+    actions[1, 0, 0] = np.nan
+    with pytest.raises(ValueError, match="environment 1: .*finite"):
+        vec.step(actions)
+    with pytest.raises(ValueError, match="shape"):
+        vec.step(np.zeros((2, 4, 1, 2)))
+    # Nothing ran: the next good step is every environment's first tick.
+    obs, *_ = vec.step(np.zeros(vec.action_space.shape))
+    assert (obs[:, 0] == 0.0).all()
