@@ -1,0 +1,27 @@
+//! The integration tests, one module per file of this folder, in one test binary: one link
+//! instead of one per file (CI's build time). Run one file's tests with
+//! `cargo nextest run --release -p fdi-tests -E 'test(/^faults::/)'`.
+
+mod attacks_table;
+mod detect;
+mod diverged_report;
+mod docs;
+mod edges;
+mod engine;
+mod external;
+mod faults;
+mod hostile_files;
+mod interrupted_counts;
+mod long_horizon;
+mod machine;
+mod multihost;
+mod paper;
+mod protocol;
+mod replay;
+mod report;
+mod runtime;
+mod scenarios;
+mod schema;
+mod sweep;
+mod threads;
+mod traces;
