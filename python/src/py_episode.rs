@@ -454,5 +454,11 @@ fn step_all(
             .map_err(|_| engine_error("a panic inside the engine while stepping the batch"))?;
         out.extend(r.map_err(PyValueError::new_err)?);
     }
+    if out.len() != n {
+        return Err(engine_error(format!(
+            "{} outcomes for {n} environments (a bug)",
+            out.len()
+        )));
+    }
     Ok(out)
 }
