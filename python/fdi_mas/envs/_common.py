@@ -117,3 +117,16 @@ def check_open(episode: Any) -> None:
     """Raises :class:`ClosedEnvironmentError` for a closed episode."""
     if episode.closed:
         raise ClosedEnvironmentError("the environment is closed: make a new one")
+
+
+def no_render(render_mode: str | None) -> None:
+    """The environments do not render: any mode but ``None`` is refused."""
+    if render_mode is not None:
+        raise ValueError(f"render_mode: this environment does not render, got {render_mode!r}")
+
+
+def period_of(decision_period: int) -> int:
+    """Ticks per step, at least 1."""
+    if int(decision_period) < 1:
+        raise ValueError(f"decision_period: at least 1 tick, got {decision_period}")
+    return int(decision_period)

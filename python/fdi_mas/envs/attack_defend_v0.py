@@ -63,8 +63,7 @@ class AttackDefendEnv(ParallelEnv):
         decision_period: int = 1,
         render_mode: str | None = None,
     ) -> None:
-        if render_mode is not None:
-            raise ValueError(f"render_mode: this environment does not render, got {render_mode!r}")
+        _common.no_render(render_mode)
         base = _common.scenario_of(scenario, None)
         self.attacks = _common.names_of(list(attacks), _core.presets(), "attacks")
         if not self.attacks:
@@ -75,8 +74,7 @@ class AttackDefendEnv(ParallelEnv):
         self.robots = _common.robots_of(robots, first)
         self.channels = _common.names_of(channels, _common.CHANNELS, "channels")
         self.detectors = _common.names_of(detectors, _core.detectors(), "detectors")
-        if int(decision_period) < 1:
-            raise ValueError(f"decision_period: at least 1 tick, got {decision_period}")
+        decision_period = _common.period_of(decision_period)
         self._episode = _core.Episode(
             first,
             self.robots,

@@ -61,8 +61,7 @@ class AttackerEnv(gym.Env):
         decision_period: int = 1,
         render_mode: str | None = None,
     ) -> None:
-        if render_mode is not None:
-            raise ValueError(f"render_mode: this environment does not render, got {render_mode!r}")
+        _common.no_render(render_mode)
         self.scenario = _common.scenario_of(scenario, attack)
         self.robots = _common.robots_of(robots, self.scenario)
         self.channels = _common.names_of(channels, _common.CHANNELS, "channels")
@@ -70,9 +69,7 @@ class AttackerEnv(gym.Env):
         self.budget = _common.budget_of(budget)
         self.damage_weight = float(damage_weight)
         self.stealth_weight = float(stealth_weight)
-        if int(decision_period) < 1:
-            raise ValueError(f"decision_period: at least 1 tick, got {decision_period}")
-        self.decision_period = int(decision_period)
+        self.decision_period = _common.period_of(decision_period)
         self._episode = _core.Episode(
             self.scenario,
             self.robots,

@@ -81,8 +81,7 @@ class DetectorEnv(gym.Env):
         decision_period: int = 1,
         render_mode: str | None = None,
     ) -> None:
-        if render_mode is not None:
-            raise ValueError(f"render_mode: this environment does not render, got {render_mode!r}")
+        _common.no_render(render_mode)
         self.base = _common.scenario_of(scenario, None)
         self.attacks = _common.names_of(list(attacks), _core.presets(), "attacks")
         if not self.attacks:
@@ -91,9 +90,7 @@ class DetectorEnv(gym.Env):
         self._scenarios = {a: self.base.replace(attack=a) for a in self.attacks}
         self.vary_seed = bool(vary_seed)
         self.weights = (float(detect_reward), float(false_alarm_penalty), float(miss_penalty))
-        if int(decision_period) < 1:
-            raise ValueError(f"decision_period: at least 1 tick, got {decision_period}")
-        self.decision_period = int(decision_period)
+        self.decision_period = _common.period_of(decision_period)
         self._episode = _core.Episode(
             self._scenarios[self.attacks[0]], [], [], [0.0, 0.0, 0.0], [], self.decision_period
         )

@@ -44,8 +44,7 @@ class VectorAttackerEnv(VectorEnv):
         threads: int | None = None,
         render_mode: str | None = None,
     ) -> None:
-        if render_mode is not None:
-            raise ValueError(f"render_mode: this environment does not render, got {render_mode!r}")
+        _common.no_render(render_mode)
         if int(num_envs) < 1:
             raise ValueError(f"num_envs: at least 1, got {num_envs}")
         self.num_envs = int(num_envs)
@@ -56,8 +55,7 @@ class VectorAttackerEnv(VectorEnv):
         self.budget = _common.budget_of(budget)
         self.damage_weight = float(damage_weight)
         self.stealth_weight = float(stealth_weight)
-        if int(decision_period) < 1:
-            raise ValueError(f"decision_period: at least 1 tick, got {decision_period}")
+        decision_period = _common.period_of(decision_period)
         self._batch = _core.Batch(
             self.scenario,
             self.num_envs,
