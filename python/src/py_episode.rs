@@ -241,6 +241,15 @@ type BatchOut<'py> = (
     Bound<'py, PyBytes>,
 );
 
+impl Batch {
+    /// The batch's environments, locked.
+    fn guard(&self) -> PyResult<std::sync::MutexGuard<'_, Option<Envs>>> {
+        self.inner
+            .lock()
+            .map_err(|_| engine_error("the batch failed earlier (a panic inside the engine)"))
+    }
+}
+
 #[pymethods]
 impl Batch {
     #[new]
@@ -284,10 +293,7 @@ impl Batch {
 
     /// Every environment back to its start; their attacker views.
     fn reset<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
-        let mut guard = self
-            .inner
-            .lock()
-            .map_err(|_| engine_error("the batch failed earlier (a panic inside the engine)"))?;
+        let mut guard = self.guard()?;
         let eps = &mut guard.as_mut().ok_or_else(closed)?.episodes;
         let mut view = Vec::new();
         for e in eps.iter_mut() {
@@ -302,10 +308,7 @@ impl Batch {
     /// their outcome is zero): the next-step autoreset of Gymnasium's vector environments.
     fn step<'py>(&self, py: Python<'py>, actions: &[u8], reset: &[u8]) -> PyResult<BatchOut<'py>> {
         let actions = floats(actions, "actions")?;
-        let mut guard = self
-            .inner
-            .lock()
-            .map_err(|_| engine_error("the batch failed earlier (a panic inside the engine)"))?;
+        let mut guard = self.guard()?;
         let envs = guard.as_mut().ok_or_else(closed)?;
         let eps = &mut envs.episodes;
         let n = eps.len();
@@ -349,19 +352,13 @@ impl Batch {
 
     /// Each environment's last ended episode's trace digest, or `None` while none ended.
     fn digests(&self) -> PyResult<Vec<Option<String>>> {
-        let guard = self
-            .inner
-            .lock()
-            .map_err(|_| engine_error("the batch failed earlier (a panic inside the engine)"))?;
+        let guard = self.guard()?;
         Ok(guard.as_ref().ok_or_else(closed)?.digests.clone())
     }
 
     /// Robot ids (scenario order), links, entries of one environment's action.
     fn shape(&self) -> PyResult<(Vec<u32>, usize, usize)> {
-        let guard = self
-            .inner
-            .lock()
-            .map_err(|_| engine_error("the batch failed earlier (a panic inside the engine)"))?;
+        let guard = self.guard()?;
         let envs = guard.as_ref().ok_or_else(closed)?;
         let e = envs.episodes.first().ok_or_else(closed)?;
         Ok((e.agents().to_vec(), e.links(), e.action_size()))
@@ -369,10 +366,7 @@ impl Batch {
 
     /// Frees every engine; any later call raises.
     fn close(&self) -> PyResult<()> {
-        let mut guard = self
-            .inner
-            .lock()
-            .map_err(|_| engine_error("the batch failed earlier (a panic inside the engine)"))?;
+        let mut guard = self.guard()?;
         *guard = None;
         Ok(())
     }
