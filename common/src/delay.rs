@@ -80,14 +80,21 @@ impl DelayProfile {
     /// The instant `c ∈ [a, b]` at which the query `c − τ(c)` reaches `stamp`, given the queries
     /// `qa`, `qb` at `a`, `b` with `qa < stamp < qb`: where the command stamped `stamp` takes
     /// over inside an integration step. `c − τ(c)` increases (`|τ̇| < 1`), so Newton's method
-    /// from the linear interpolation converges; a fixed iteration count keeps it deterministic.
+    /// from the linear interpolation converges; at most four iterations, ended early at a fixed point
+    /// (where the rest would repeat the same bits), keep it deterministic.
     pub fn takeover_time(&self, stamp: f64, (a, qa): (f64, f64), (b, qb): (f64, f64)) -> f64 {
         let c = match *self {
             Self::Constant { value_s } => stamp + value_s,
             Self::Sine { .. } => {
                 let mut c = a + (b - a) * ((stamp - qa) / (qb - qa));
                 for _ in 0..4 {
-                    c -= (c - self.tau(c) - stamp) / (1.0 - self.rate(c));
+                    let next = c - (c - self.tau(c) - stamp) / (1.0 - self.rate(c));
+                    // A fixed point: every further iteration would compute these same bits.
+                    let fixed = next.to_bits() == c.to_bits();
+                    c = next;
+                    if fixed {
+                        break;
+                    }
                 }
                 c
             }

@@ -20,6 +20,7 @@ pub mod detect;
 pub mod engine;
 pub mod files;
 pub mod limits;
+pub mod memo;
 pub mod metrics;
 pub mod model;
 pub mod numerics;

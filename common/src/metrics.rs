@@ -284,7 +284,7 @@ impl Acc {
     /// magnitude into the maximum, and divergence (non-finite state, or beyond the bound).
     fn track<const N: usize>(&mut self, r: &TickRecord) {
         let t = r.agent.t;
-        let qd = self.trajectory.reference::<N>(t).q;
+        let qd = self.trajectory.position::<N>(t);
         let q = r.agent.q.to_vector::<N>();
         let mut diverged = r.agent.qd.as_slice().iter().any(|x| !x.is_finite());
         let mut tick_sq = 0.0;

@@ -7,6 +7,7 @@ use rand_chacha::ChaCha12Rng;
 use rand_distr::{Distribution, Normal};
 
 use crate::delay::{in_force_at, DelayLine, DelayProfile, PushError};
+use crate::memo::Recent;
 use crate::model::{EulerLagrange, ModelConfig, Vector};
 use crate::rng::{stream, Purpose};
 use crate::time::tick_time;
@@ -68,6 +69,10 @@ pub struct Plant<const N: usize> {
     pub refused_commands: u64,
     /// Ticks whose command never came (dropped, forged, replayed) or was refused.
     pub missing_commands: u64,
+    /// `τ(t)` and `d(t)` at the instants the last steps evaluated them: a step's end is the next
+    /// step's start, and a piece's end the next piece's start ([`Recent`]: same bits).
+    recent_tau: Recent<f64, 4>,
+    recent_disturbance: Recent<Vector<N>, 4>,
 }
 
 impl<const N: usize> Plant<N> {
@@ -88,6 +93,8 @@ impl<const N: usize> Plant<N> {
             deadline_misses: 0,
             refused_commands: 0,
             missing_commands: 0,
+            recent_tau: Recent::default(),
+            recent_disturbance: Recent::default(),
         })
     }
 }
@@ -150,10 +157,13 @@ impl<const N: usize> Plant<N> {
         self.commands.newest_stamp()
     }
 
-    fn disturbance(&self, t: f64) -> Vector<N> {
-        let mut d = Vector::<N>::zeros();
-        self.params.disturbance.value_into(t, d.as_mut_slice());
-        d
+    fn disturbance(&mut self, t: f64) -> Vector<N> {
+        let config = &self.params.disturbance;
+        self.recent_disturbance.get_or(t, |t| {
+            let mut d = Vector::<N>::zeros();
+            config.value_into(t, d.as_mut_slice());
+            d
+        })
     }
 
     /// The delay line's query for time `t`: `t − τ(t)`. Every use (the integration, the
@@ -162,8 +172,19 @@ impl<const N: usize> Plant<N> {
         t - self.params.delay.tau(t)
     }
 
+    /// `τ(t)` as the steps evaluate it (remembered, [`Recent`]).
+    fn tau(&mut self, t: f64) -> f64 {
+        let delay = &self.params.delay;
+        self.recent_tau.get_or(t, |t| delay.tau(t))
+    }
+
+    /// [`Self::query`] for the step under way (its `τ` remembered).
+    fn step_query(&mut self, t: f64) -> f64 {
+        t - self.tau(t)
+    }
+
     /// The sub-step boundaries of step `k`: `t_k + s·h` for `s = 0 ..= substeps`.
-    fn boundaries(&self, k: u64) -> impl Iterator<Item = f64> {
+    fn boundaries(&self, k: u64) -> impl Iterator<Item = f64> + use<N> {
         let t_k = tick_time(k, self.params.control_period_s);
         let m = self.params.substeps.max(1);
         let h = self.params.control_period_s / f64::from(m);
@@ -194,20 +215,30 @@ impl<const N: usize> Plant<N> {
             .fold(f64::INFINITY, f64::min)
     }
 
+    /// [`Self::earliest_query`] as the step under way computes it (`τ` remembered).
+    fn earliest_step_query(&mut self, k: u64) -> f64 {
+        let mut earliest = f64::INFINITY;
+        for t in self.boundaries(k) {
+            earliest = earliest.min(self.step_query(t));
+        }
+        earliest
+    }
+
     /// One classic RK4 step of length `len` from `t` with the delayed input held at `u`.
     fn rk4(&mut self, t: f64, len: f64, u: &Vector<N>) -> Vector<N> {
+        // The disturbance at the midpoint serves the two midpoint stages (one evaluation).
+        let mid = self.disturbance(t + len / 2.0);
+        let (start, end) = (self.disturbance(t), self.disturbance(t + len));
         let acc =
             |d: &Vector<N>, q: &Vector<N>, qd: &Vector<N>| self.model.acceleration(q, qd, u, d);
         let (q, qd) = (self.q, self.qd);
-        // The disturbance at the midpoint serves the two midpoint stages (one evaluation).
-        let mid = self.disturbance(t + len / 2.0);
-        let a1 = acc(&self.disturbance(t), &q, &qd);
+        let a1 = acc(&start, &q, &qd);
         let (q2, qd2) = (q + qd * (len / 2.0), qd + a1 * (len / 2.0));
         let a2 = acc(&mid, &q2, &qd2);
         let (q3, qd3) = (q + qd2 * (len / 2.0), qd + a2 * (len / 2.0));
         let a3 = acc(&mid, &q3, &qd3);
         let (q4, qd4) = (q + qd3 * len, qd + a3 * len);
-        let a4 = acc(&self.disturbance(t + len), &q4, &qd4);
+        let a4 = acc(&end, &q4, &qd4);
         self.q = q + (qd + qd2 * 2.0 + qd3 * 2.0 + qd4) * (len / 6.0);
         self.qd = qd + (a1 + a2 * 2.0 + a3 * 2.0 + a4) * (len / 6.0);
         a1
@@ -228,7 +259,7 @@ impl<const N: usize> Plant<N> {
         let mut missed = false;
         for s in 0..m {
             let (a, b) = (t_k + f64::from(s) * h, t_k + f64::from(s + 1) * h);
-            let (qa, qb) = (self.query(a), self.query(b));
+            let (qa, qb) = (self.step_query(a), self.step_query(b));
             let start = self.commands.lookup(qa, period);
             missed |= start.missed || self.commands.lookup(qb, period).missed;
             let (mut from, mut from_query, mut u) = (a, qa, start.value);
@@ -249,12 +280,13 @@ impl<const N: usize> Plant<N> {
             self.deadline_misses += 1;
         }
         // Prune at the very instant the next step's first query computes.
-        self.commands.prune_before(self.earliest_query(k + 1));
+        let next = self.earliest_step_query(k + 1);
+        self.commands.prune_before(next);
         let (u_applied, qdd) = report.unwrap_or((Vector::<N>::zeros(), Vector::<N>::zeros()));
         StepReport {
             u_applied,
             qdd,
-            tau: self.params.delay.tau(t_k),
+            tau: self.tau(t_k),
             missed,
         }
     }

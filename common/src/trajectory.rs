@@ -48,6 +48,25 @@ pub enum LinkTrajectory {
 
 impl LinkTrajectory {
     /// `(f, ḟ, f̈)` at `t`, in the trajectory's units.
+    /// `f(t)` alone: [`Self::eval`]'s first value to the bit (`sin_cos` is `sin` and `cos`).
+    fn value(&self, t: f64) -> f64 {
+        match *self {
+            Self::Cosine {
+                amplitude,
+                omega_rad_s: w,
+                phase_rad,
+                offset,
+            } => amplitude * (w * t + phase_rad).cos() + offset,
+            Self::Sine {
+                amplitude,
+                omega_rad_s: w,
+                phase_rad,
+                offset,
+            } => amplitude * (w * t + phase_rad).sin() + offset,
+            Self::Constant { value } => value,
+        }
+    }
+
     fn eval(&self, t: f64) -> (f64, f64, f64) {
         match *self {
             Self::Cosine {
@@ -128,6 +147,23 @@ pub struct Reference<const N: usize> {
 
 impl TrajectoryConfig {
     /// `q_d, q̇_d, q̈_d` at `t`. Links beyond `links.len()` stay at zero (validation forbids it).
+    /// `q_d(t)` alone, what [`Self::reference`] gives as `q` (the same operations), without
+    /// the derivatives: what the metrics compare the true state with every tick.
+    pub fn position<const N: usize>(&self, t: f64) -> Vector<N> {
+        let scale = self.units.to_rad();
+        let g = if self.ramp_rate > 0.0 {
+            let c = self.ramp_rate;
+            1.0 - (-c * t * t * t).exp()
+        } else {
+            1.0
+        };
+        let mut q = Vector::<N>::zeros();
+        for (i, link) in self.links.iter().take(N).enumerate() {
+            q[i] = scale * (link.value(t) * g);
+        }
+        q
+    }
+
     pub fn reference<const N: usize>(&self, t: f64) -> Reference<N> {
         let scale = self.units.to_rad();
         let (g, gd, gdd) = if self.ramp_rate > 0.0 {
@@ -215,6 +251,34 @@ mod tests {
                 let (p, m) = (traj.reference::<2>(t + h), traj.reference::<2>(t - h));
                 assert_relative_eq!(r.qd, (p.q - m.q) / (2.0 * h), epsilon = 1e-7);
                 assert_relative_eq!(r.qdd, (p.qd - m.qd) / (2.0 * h), epsilon = 1e-6);
+            }
+        }
+    }
+
+    proptest::proptest! {
+        /// The metrics' `position` is the controller's `reference().q` to the bit, whatever the
+        /// shape, phase, offset, ramp and time (arguments far beyond `[−π, π]` included).
+        #[test]
+        fn position_is_the_reference_s_q_to_the_bit(
+            t in 0.0..5000.0f64,
+            amplitude in -100.0..100.0f64,
+            w in -20.0..20.0f64,
+            phase in -7.0..7.0f64,
+            offset in -50.0..50.0f64,
+            ramp in proptest::prop_oneof![proptest::strategy::Just(0.0), 0.0..1.0f64],
+        ) {
+            let traj = TrajectoryConfig {
+                units: AngleUnit::Deg,
+                ramp_rate: ramp,
+                links: vec![
+                    LinkTrajectory::Cosine { amplitude, omega_rad_s: w, phase_rad: phase, offset },
+                    LinkTrajectory::Sine { amplitude, omega_rad_s: w, phase_rad: phase, offset },
+                    LinkTrajectory::Constant { value: offset },
+                ],
+            };
+            let (p, r) = (traj.position::<3>(t), traj.reference::<3>(t).q);
+            for i in 0..3 {
+                proptest::prop_assert_eq!(p[i].to_bits(), r[i].to_bits());
             }
         }
     }

@@ -81,8 +81,18 @@ impl Accumulator {
 impl Whitener {
     /// `L⁻¹ r`; `None` when it is not finite.
     pub fn whiten(&self, r: &DVector<f64>) -> Option<DVector<f64>> {
-        self.l
-            .solve_lower_triangular(r)
-            .filter(|z| z.iter().all(|x| x.is_finite()))
+        let mut z = r.clone();
+        self.whiten_into(r, &mut z).then_some(z)
+    }
+
+    /// [`Self::whiten`] into `z` (resized to `r`'s length when it is not), without allocating:
+    /// whether `z` is finite.
+    pub fn whiten_into(&self, r: &DVector<f64>, z: &mut DVector<f64>) -> bool {
+        if z.len() == r.len() {
+            z.copy_from(r);
+        } else {
+            *z = r.clone();
+        }
+        self.l.solve_lower_triangular_mut(z) && z.iter().all(|x| x.is_finite())
     }
 }

@@ -160,6 +160,9 @@ pub struct RobotDetectors {
     thresholds: Vec<Result<f64, String>>,
     /// The verdicts of the last tick, one per detector.
     verdicts: Vec<Verdict>,
+    /// The tick's residual and its whitening: buffers reused every tick.
+    residual: DVector<f64>,
+    whitened: DVector<f64>,
     calibration_non_finite: u64,
     calibration_missing: u64,
     calibration_samples: u64,
@@ -184,6 +187,8 @@ impl RobotDetectors {
                 .map(|k| (k.threshold)(config, dim))
                 .collect(),
             verdicts: vec![Verdict::Calibrating; RESIDUAL.len()],
+            residual: DVector::zeros(dim),
+            whitened: DVector::zeros(dim),
             calibration_non_finite: 0,
             calibration_missing: 0,
             calibration_samples: 0,
@@ -230,15 +235,15 @@ impl RobotDetectors {
     /// Feeds the joined record of the robot's next tick (its ticks in order); the verdict of
     /// every detector of [`RESIDUAL`] on it, in that order.
     pub fn push(&mut self, r: &TickRecord) -> &[Verdict] {
-        match self.whitened(r) {
-            Ok(z) => {
+        match self.whiten(r) {
+            Ok(()) => {
                 for ((d, t), v) in self
                     .detectors
                     .iter_mut()
                     .zip(&self.thresholds)
                     .zip(&mut self.verdicts)
                 {
-                    *v = match (t, d.push(&z)) {
+                    *v = match (t, d.push(&self.whitened)) {
                         (Err(_), _) => Verdict::Uncalibrated,
                         (Ok(_), None) => Verdict::Calibrating,
                         (Ok(_), Some(s)) if !s.is_finite() => Verdict::NonFinite,
@@ -254,16 +259,25 @@ impl RobotDetectors {
         &self.verdicts
     }
 
-    /// The whitened residual of the tick, or the verdict every detector gives without one
-    /// (calibrating, uncalibrated, missing, non-finite).
-    fn whitened(&mut self, r: &TickRecord) -> Result<DVector<f64>, Verdict> {
-        let res = residual::residual(self.kind, self.links, self.beta, self.prev.as_ref(), r);
+    /// The whitened residual of the tick into `self.whitened`, or the verdict every detector
+    /// gives without one (calibrating, uncalibrated, missing, non-finite).
+    fn whiten(&mut self, r: &TickRecord) -> Result<(), Verdict> {
+        let res = residual::residual_into(
+            self.kind,
+            self.links,
+            self.beta,
+            self.prev.as_ref(),
+            r,
+            &mut self.residual,
+        );
         self.prev = Some(r.center);
         let finite = |v: &DVector<f64>| v.iter().all(|x| x.is_finite());
         if r.center.k < self.calibration_ticks {
             match (&mut self.phase, res) {
-                (Phase::Calibrating(acc), Ok(v)) if finite(&v) => acc.push(&v),
-                (_, Ok(_)) => self.calibration_non_finite += 1,
+                (Phase::Calibrating(acc), Ok(())) if finite(&self.residual) => {
+                    acc.push(&self.residual)
+                }
+                (_, Ok(())) => self.calibration_non_finite += 1,
                 (_, Err(_)) => self.calibration_missing += 1,
             }
             return Err(Verdict::Calibrating);
@@ -278,16 +292,16 @@ impl RobotDetectors {
         let Phase::Ready(whitener) = &self.phase else {
             return Err(Verdict::Uncalibrated);
         };
-        let Ok(res) = res else {
+        if res.is_err() {
             return Err(Verdict::Missing);
-        };
-        let Some(z) = whitener.whiten(&res).filter(|_| finite(&res)) else {
-            return Err(Verdict::NonFinite);
-        };
-        if !z.dot(&z).is_finite() {
+        }
+        if !(whitener.whiten_into(&self.residual, &mut self.whitened) && finite(&self.residual)) {
             return Err(Verdict::NonFinite);
         }
-        Ok(z)
+        if !self.whitened.dot(&self.whitened).is_finite() {
+            return Err(Verdict::NonFinite);
+        }
+        Ok(())
     }
 }
 

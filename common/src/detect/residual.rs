@@ -35,6 +35,20 @@ pub fn residual(
     prev: Option<&CenterRecord>,
     cur: &TickRecord,
 ) -> Result<DVector<f64>, Missing> {
+    let mut out = DVector::zeros(kind.dimension(links));
+    residual_into(kind, links, beta, prev, cur, &mut out).map(|()| out)
+}
+
+/// [`residual`] written into `out` (resized to the residual's dimension when it is not): what
+/// the detectors use every tick without allocating. `out` is left as it was when there is none.
+pub fn residual_into(
+    kind: ResidualKind,
+    links: usize,
+    beta: f64,
+    prev: Option<&CenterRecord>,
+    cur: &TickRecord,
+    out: &mut DVector<f64>,
+) -> Result<(), Missing> {
     let prev = prev
         .filter(|p| p.agent == cur.center.agent && p.k.checked_add(1) == Some(cur.center.k))
         .ok_or(Missing::NoPrevious)?;
@@ -44,17 +58,20 @@ pub fn residual(
     if [y, yd, q, qd, s_hat].iter().any(|v| v.len() != links) {
         return Err(Missing::Length);
     }
-    Ok(match kind {
-        ResidualKind::Innovation => DVector::from_iterator(
-            2 * links,
-            (0..links)
-                .map(|i| y[i] - q[i])
-                .chain((0..links).map(|i| yd[i] - qd[i])),
-        ),
-        // The observer's own order of operations: ẏ + β y − q̂̇ − β q̂ − Ŝ.
-        ResidualKind::Psi2 => DVector::from_iterator(
-            links,
-            (0..links).map(|i| yd[i] + y[i] * beta - qd[i] - q[i] * beta - s_hat[i]),
-        ),
-    })
+    let dim = kind.dimension(links);
+    if out.len() != dim {
+        *out = DVector::zeros(dim);
+    }
+    for i in 0..links {
+        match kind {
+            ResidualKind::Innovation => {
+                out[i] = y[i] - q[i];
+                out[links + i] = yd[i] - qd[i];
+            }
+            ResidualKind::Psi2 => {
+                out[i] = yd[i] + y[i] * beta - qd[i] - q[i] * beta - s_hat[i];
+            }
+        }
+    }
+    Ok(())
 }

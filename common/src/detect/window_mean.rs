@@ -72,13 +72,22 @@ impl ResidualDetector for WindowMean {
         if z.len() != self.sum.len() {
             return None;
         }
+        // The oldest entry's buffer takes the newest residual (no allocation per tick).
+        let mut slot = None;
         if self.window.len() == WINDOW_TICKS {
             if let Some(old) = self.window.pop_front() {
-                self.sum -= old;
+                self.sum -= &old;
+                slot = Some(old);
             }
         }
         self.sum += z;
-        self.window.push_back(z.clone());
+        self.window.push_back(match slot {
+            Some(mut old) => {
+                old.copy_from(z);
+                old
+            }
+            None => z.clone(),
+        });
         self.since_fresh += 1;
         if self.since_fresh >= WINDOW_TICKS {
             self.sum = self.window.iter().sum();

@@ -94,30 +94,17 @@ impl TwoLink {
     pub fn new(params: TwoLinkParams) -> Self {
         Self { params }
     }
-}
 
-impl EulerLagrange<2> for TwoLink {
-    fn problems(&self) -> Vec<(&'static str, String)> {
-        self.params.problems()
-    }
-
-    fn inertia(&self, q: &Vector<2>) -> Matrix<2> {
+    /// `M(q)` from `c2 = cos q2`.
+    fn inertia_at(&self, c2: f64) -> Matrix<2> {
         let TwoLinkParams { p1, p2, p3, .. } = self.params;
-        let c2 = q[1].cos();
         let off = p2 + p3 * c2;
         Matrix::<2>::new(p1 + 2.0 * p3 * c2, off, off, p2)
     }
 
-    fn inertia_rate(&self, q: &Vector<2>, qd: &Vector<2>) -> Matrix<2> {
+    /// `V(q, q̇)` from `s2 = sin q2`.
+    fn coriolis_at(&self, s2: f64, qd: &Vector<2>) -> Matrix<2> {
         let p3 = self.params.p3;
-        let s2 = q[1].sin();
-        let off = -p3 * s2 * qd[1];
-        Matrix::<2>::new(2.0 * off, off, off, 0.0)
-    }
-
-    fn coriolis(&self, q: &Vector<2>, qd: &Vector<2>) -> Matrix<2> {
-        let p3 = self.params.p3;
-        let s2 = q[1].sin();
         Matrix::<2>::new(
             -p3 * s2 * qd[1],
             -p3 * s2 * (qd[0] + qd[1]),
@@ -126,17 +113,9 @@ impl EulerLagrange<2> for TwoLink {
         )
     }
 
-    fn gravity(&self, _q: &Vector<2>) -> Vector<2> {
-        Vector::<2>::zeros()
-    }
-
-    fn friction(&self, qd: &Vector<2>) -> Vector<2> {
-        Vector::<2>::new(self.params.fd1 * qd[0], self.params.fd2 * qd[1])
-    }
-
-    fn inverse_inertia(&self, q: &Vector<2>) -> Matrix<2> {
-        // Closed form keeps the operation order fixed and avoids pivoting logic.
-        let m = self.inertia(q);
+    /// The inverse of an inertia matrix, in closed form: the operation order is fixed and there
+    /// is no pivoting logic. Zeros for a singular or non-finite one.
+    fn invert(m: Matrix<2>) -> Matrix<2> {
         let det = m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)];
         if det == 0.0 || !det.is_finite() {
             return Matrix::<2>::zeros();
@@ -148,6 +127,67 @@ impl EulerLagrange<2> for TwoLink {
             -m[(1, 0)] * inv,
             m[(0, 0)] * inv,
         )
+    }
+
+    /// `V q̇ + G + F` from `s2 = sin q2`: the trait's `bias_forces`, term for term.
+    fn bias_at(&self, s2: f64, q: &Vector<2>, qd: &Vector<2>) -> Vector<2> {
+        self.coriolis_at(s2, qd) * qd + self.gravity(q) + self.friction(qd)
+    }
+}
+
+/// `sin q2` and `cos q2` are computed once per call of `acceleration` and `drift` (the hot paths
+/// of the plant and the observer); every other operation is the trait's default, in its order,
+/// so the results are the same to the bit.
+impl EulerLagrange<2> for TwoLink {
+    fn problems(&self) -> Vec<(&'static str, String)> {
+        self.params.problems()
+    }
+
+    fn inertia(&self, q: &Vector<2>) -> Matrix<2> {
+        self.inertia_at(q[1].cos())
+    }
+
+    fn inertia_rate(&self, q: &Vector<2>, qd: &Vector<2>) -> Matrix<2> {
+        let p3 = self.params.p3;
+        let s2 = q[1].sin();
+        let off = -p3 * s2 * qd[1];
+        Matrix::<2>::new(2.0 * off, off, off, 0.0)
+    }
+
+    fn coriolis(&self, q: &Vector<2>, qd: &Vector<2>) -> Matrix<2> {
+        self.coriolis_at(q[1].sin(), qd)
+    }
+
+    fn gravity(&self, _q: &Vector<2>) -> Vector<2> {
+        Vector::<2>::zeros()
+    }
+
+    fn friction(&self, qd: &Vector<2>) -> Vector<2> {
+        Vector::<2>::new(self.params.fd1 * qd[0], self.params.fd2 * qd[1])
+    }
+
+    fn inverse_inertia(&self, q: &Vector<2>) -> Matrix<2> {
+        Self::invert(self.inertia(q))
+    }
+
+    fn bias_forces(&self, q: &Vector<2>, qd: &Vector<2>) -> Vector<2> {
+        self.bias_at(q[1].sin(), q, qd)
+    }
+
+    fn drift(&self, q: &Vector<2>, qd: &Vector<2>) -> Vector<2> {
+        let (s2, c2) = q[1].sin_cos();
+        -(Self::invert(self.inertia_at(c2)) * self.bias_at(s2, q, qd))
+    }
+
+    fn acceleration(
+        &self,
+        q: &Vector<2>,
+        qd: &Vector<2>,
+        torque: &Vector<2>,
+        disturbance: &Vector<2>,
+    ) -> Vector<2> {
+        let (s2, c2) = q[1].sin_cos();
+        Self::invert(self.inertia_at(c2)) * (torque - self.bias_at(s2, q, qd) - disturbance)
     }
 }
 

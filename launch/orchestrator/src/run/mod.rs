@@ -155,27 +155,93 @@ pub fn execute_inproc_with<A: Attacker>(
         Traces::Decimate(k) => Some(Kept::Decimate { every: k.get() }),
         Traces::None => None,
     };
-    let mut writers = match kept {
-        Some(kept) => Some(InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?),
+    let mut writer = match kept {
+        Some(kept) => Some(TraceThread::start(
+            InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?,
+        )?),
         None => None,
     };
-    let mut failure = None;
-    let summary = run_inproc_any_with(r, attacker, |rec| {
-        if let Some(w) = &mut writers {
-            if let Err(e) = w.write(rec) {
-                failure.get_or_insert(e);
-            }
+    let mut summary = run_inproc_any_with(r, attacker, |rec| {
+        if let Some(w) = &mut writer {
+            w.push(rec);
         }
     })
     .context("in-process engine")?;
-    if let Some(e) = failure {
-        return Err(e);
-    }
-    if let Some(w) = writers {
-        w.flush()?;
+    if let Some(w) = writer {
+        // The run ends when its traces are written: the wait for the writer counts.
+        let waited = std::time::Instant::now();
+        w.finish()?;
+        summary.wall_s += waited.elapsed().as_secs_f64();
     }
     output::write_run_summary(dir, &summary, traces)?;
     Ok(summary)
+}
+
+/// The traces of an in-process run, written on a thread of their own: the engine hands its
+/// records over in batches and ticks on (encoding and writing them took a quarter of the
+/// engine's thread). At most [`TraceThread::QUEUED`] batches wait, so memory stays bounded
+/// when the disk is slower than the engine. A write error stops the writer; the run goes on to
+/// its end, as it did when it wrote the traces itself, and [`TraceThread::finish`] reports it.
+struct TraceThread {
+    batch: Vec<TickRecord>,
+    to_writer: Option<std::sync::mpsc::SyncSender<Vec<TickRecord>>>,
+    writer: std::thread::JoinHandle<Result<()>>,
+}
+
+impl TraceThread {
+    /// Records per batch.
+    const BATCH: usize = 1024;
+    /// Batches that may wait for the writer.
+    const QUEUED: usize = 4;
+
+    fn start(mut traces: InprocTraces) -> Result<Self> {
+        let (to_writer, batches) = std::sync::mpsc::sync_channel::<Vec<TickRecord>>(Self::QUEUED);
+        let writer = std::thread::Builder::new()
+            .name("traces".into())
+            .spawn(move || {
+                for batch in batches {
+                    for rec in &batch {
+                        traces.write(rec)?;
+                    }
+                }
+                traces.flush()
+            })
+            .context("starting the thread that writes the traces")?;
+        Ok(Self {
+            batch: Vec::with_capacity(Self::BATCH),
+            to_writer: Some(to_writer),
+            writer,
+        })
+    }
+
+    fn push(&mut self, rec: &TickRecord) {
+        self.batch.push(*rec);
+        if self.batch.len() >= Self::BATCH {
+            self.send();
+        }
+    }
+
+    fn send(&mut self) {
+        let batch = std::mem::replace(&mut self.batch, Vec::with_capacity(Self::BATCH));
+        // A writer that stopped on an error takes no more: `finish` reports its error.
+        if let Some(to) = &self.to_writer {
+            if to.send(batch).is_err() {
+                self.to_writer = None;
+            }
+        }
+    }
+
+    /// Hands over the last records, waits for the writer to write and flush everything, and
+    /// returns its first error.
+    fn finish(mut self) -> Result<()> {
+        if !self.batch.is_empty() {
+            self.send();
+        }
+        drop(self.to_writer.take());
+        self.writer
+            .join()
+            .map_err(|_| anyhow::anyhow!("the thread that writes the traces panicked"))?
+    }
 }
 
 /// Runs a resolved scenario on an engine. With `run_dir`, traces and the summary go there; an
