@@ -249,6 +249,9 @@ impl TraceDigest {
     }
 
     pub fn push(&mut self, r: &TickRecord) {
+        // The record's bytes in one update (the same byte stream as one update per value).
+        let mut bytes = [0u8; 5 * MAX_DOF * 8];
+        let mut len = 0;
         for j in [
             &r.agent.q,
             &r.agent.qd,
@@ -257,9 +260,11 @@ impl TraceDigest {
             &r.center.u,
         ] {
             for x in j.as_slice() {
-                self.hasher.update(x.to_bits().to_le_bytes());
+                bytes[len..len + 8].copy_from_slice(&x.to_bits().to_le_bytes());
+                len += 8;
             }
         }
+        self.hasher.update(&bytes[..len]);
     }
 
     /// Lower-case hex.

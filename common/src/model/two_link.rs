@@ -117,16 +117,20 @@ impl TwoLink {
     /// is no pivoting logic. Zeros for a singular or non-finite one.
     fn invert(m: Matrix<2>) -> Matrix<2> {
         let det = m[(0, 0)] * m[(1, 1)] - m[(0, 1)] * m[(1, 0)];
-        if det == 0.0 || !det.is_finite() {
-            return Matrix::<2>::zeros();
-        }
+        // Computed whatever `det`, then chosen: no branch, so the callers' `sin q2` and
+        // `cos q2` stay side by side and are evaluated together.
         let inv = 1.0 / det;
-        Matrix::<2>::new(
+        let inverse = Matrix::<2>::new(
             m[(1, 1)] * inv,
             -m[(0, 1)] * inv,
             -m[(1, 0)] * inv,
             m[(0, 0)] * inv,
-        )
+        );
+        if det == 0.0 || !det.is_finite() {
+            Matrix::<2>::zeros()
+        } else {
+            inverse
+        }
     }
 
     /// `V q̇ + G + F` from `s2 = sin q2`: the trait's `bias_forces`, term for term.
