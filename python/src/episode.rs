@@ -282,17 +282,16 @@ impl Episode {
         out.extend_from_slice(&self.seen.center);
     }
 
-    /// Sets the injection of the next steps from `action` (robots × channels × links, each in
-    /// [−1, 1], scaled by the channel's budget). Refused, and the injection unchanged, when it
-    /// has another length, a non-finite entry or an entry outside [−1, 1].
-    pub fn act(&mut self, action: &[f64]) -> Result<(), String> {
-        let l = self.links;
+    /// Why `action` cannot be an action of this episode, if it cannot: another length than
+    /// robots × channels × links, a non-finite entry, an entry outside [−1, 1].
+    pub fn check_action(&self, action: &[f64]) -> Result<(), String> {
         let want = self.action_size();
         if action.len() != want {
             return Err(format!(
-                "an action has {want} entries ({} robots × {} channels × {l} links), got {}",
+                "an action has {want} entries ({} robots × {} channels × {} links), got {}",
                 self.spec.robots.len(),
                 self.spec.channels.len(),
+                self.links,
                 action.len()
             ));
         }
@@ -306,6 +305,21 @@ impl Episode {
                 "action entry {i} is {a}: outside [-1, 1] (1 injects the channel's budget)"
             ));
         }
+        Ok(())
+    }
+
+    /// Sets the injection of the next steps from `action` (robots × channels × links, each in
+    /// [−1, 1], scaled by the channel's budget). Refused, and the injection unchanged, when
+    /// [`Self::check_action`] refuses it.
+    pub fn act(&mut self, action: &[f64]) -> Result<(), String> {
+        self.check_action(action)?;
+        self.apply_action(action);
+        Ok(())
+    }
+
+    /// [`Self::act`] for an action [`Self::check_action`] accepted.
+    pub fn apply_action(&mut self, action: &[f64]) {
+        let l = self.links;
         let per_robot = self.spec.channels.len() * l;
         for ((_, inj), a) in self
             .attacker
@@ -320,7 +334,6 @@ impl Episode {
                 }
             }
         }
-        Ok(())
     }
 
     /// Runs one decision period (fewer at the horizon, or when a robot diverges). An episode

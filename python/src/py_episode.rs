@@ -2,15 +2,16 @@
 //! native-endian `f64` (numpy's `frombuffer` / `tobytes`), the interpreter released while the
 //! engine runs.
 
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex, PoisonError, RwLock};
 
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyBytes;
+use pyo3::types::{PyByteArray, PyBytes};
 
 use crate::episode::{self, Outcome, Spec, CHANNELS};
 use crate::errors::engine_error;
 use crate::py_scenario::Scenario;
+use crate::team::Team;
 
 /// `f64`s from native-endian bytes.
 fn floats(bytes: &[u8], what: &str) -> PyResult<Vec<f64>> {
@@ -215,45 +216,121 @@ impl Episode {
     }
 }
 
+/// Environments per chunk of a batch's work.
+const CHUNK: usize = 4;
+
+/// One environment of a batch: its episode and what its last step gave.
+#[derive(Debug)]
+struct Slot {
+    episode: episode::Episode,
+    /// Its episode ended at the last step: the next step resets it (next-step autoreset).
+    ended: bool,
+    reward: f64,
+    terminated: bool,
+    truncated: bool,
+    /// The attacker's view after the step.
+    view: Vec<f64>,
+    /// The trace digest of the episode that ended at this step.
+    ended_digest: Option<String>,
+    /// Why the step failed (a reset refused).
+    error: Option<String>,
+}
+
+/// What the batch's threads share: the environments, the step's actions, the reward's weights.
+#[derive(Debug)]
+struct Envs {
+    slots: Vec<Mutex<Slot>>,
+    actions: RwLock<Vec<f64>>,
+    /// Entries of one environment's action.
+    per: usize,
+    /// `(damage_weight, stealth_weight)`.
+    weights: (f64, f64),
+}
+
+impl Envs {
+    /// Steps (or, when its episode ended at the step before, resets) the environments of chunk
+    /// `c`, each with its action.
+    fn step_chunk(&self, c: usize) {
+        let actions = self.actions.read().unwrap_or_else(PoisonError::into_inner);
+        for i in c * CHUNK..((c + 1) * CHUNK).min(self.slots.len()) {
+            let Ok(mut slot) = self.slots[i].lock() else {
+                continue; // a panic before: `step` reports the poisoned slot
+            };
+            let action = actions.get(i * self.per..(i + 1) * self.per).unwrap_or(&[]);
+            step_slot(&mut slot, action, self.weights);
+        }
+    }
+}
+
+/// One environment's step: the reward `damage_weight · damage − stealth_weight · alarm ticks`
+/// (zero for a reset), its end, its view.
+fn step_slot(slot: &mut Slot, action: &[f64], (damage_weight, stealth_weight): (f64, f64)) {
+    let o = if slot.ended {
+        slot.ended = false;
+        if let Err(e) = slot.episode.reset(None) {
+            slot.error = Some(e);
+        }
+        Outcome::default()
+    } else {
+        slot.episode.apply_action(action);
+        slot.episode.step()
+    };
+    slot.reward = damage_weight * o.damage - stealth_weight * o.alarm_ticks as f64;
+    (slot.terminated, slot.truncated) = (o.terminated, o.truncated);
+    slot.ended_digest = None;
+    if o.terminated || o.truncated {
+        slot.ended = true;
+        slot.ended_digest = slot.episode.summary().map(|s| s.trace_digest.clone());
+    }
+    slot.view.clear();
+    slot.episode.attacker_view(&mut slot.view);
+}
+
 /// Many episodes of one spec stepped together on every core: the vector environment's engine.
 #[pyclass(module = "fdi_mas._core")]
 #[derive(Debug)]
 pub struct Batch {
-    inner: Mutex<Option<Envs>>,
+    inner: Mutex<Option<Stepping>>,
     threads: usize,
-    pool: rayon::ThreadPool,
 }
 
-/// The episodes of a batch, and each one's last ended episode's digest.
+/// An open batch: its environments, the threads that step them, each environment's last ended
+/// episode's digest.
 #[derive(Debug)]
-struct Envs {
-    episodes: Vec<episode::Episode>,
+struct Stepping {
+    envs: Arc<Envs>,
+    team: Team,
     digests: Vec<Option<String>>,
 }
 
-/// What a batch step returns: every env's attacker view, then per env damage, alarm ticks,
-/// terminated, truncated (bytes of float64 / uint8).
+/// What a batch step returns, each a bytearray: every env's attacker view, then per env the
+/// reward (float64), terminated, truncated (bool).
 type BatchOut<'py> = (
-    Bound<'py, PyBytes>,
-    Bound<'py, PyBytes>,
-    Bound<'py, PyBytes>,
-    Bound<'py, PyBytes>,
-    Bound<'py, PyBytes>,
+    Bound<'py, PyByteArray>,
+    Bound<'py, PyByteArray>,
+    Bound<'py, PyByteArray>,
+    Bound<'py, PyByteArray>,
 );
 
+fn failed_earlier() -> PyErr {
+    engine_error("the batch failed earlier (a panic inside the engine)")
+}
+
+fn float_bytes(v: &[f64]) -> Vec<u8> {
+    v.iter().flat_map(|x| x.to_ne_bytes()).collect()
+}
+
 impl Batch {
-    /// The batch's environments, locked.
-    fn guard(&self) -> PyResult<std::sync::MutexGuard<'_, Option<Envs>>> {
-        self.inner
-            .lock()
-            .map_err(|_| engine_error("the batch failed earlier (a panic inside the engine)"))
+    /// The open batch, locked.
+    fn guard(&self) -> PyResult<std::sync::MutexGuard<'_, Option<Stepping>>> {
+        self.inner.lock().map_err(|_| failed_earlier())
     }
 }
 
 #[pymethods]
 impl Batch {
     #[new]
-    #[pyo3(signature = (scenario, n, robots, channels, budget, detectors, decision_period, threads = None))]
+    #[pyo3(signature = (scenario, n, robots, channels, budget, detectors, decision_period, damage_weight, stealth_weight, threads = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scenario: &Scenario,
@@ -263,90 +340,134 @@ impl Batch {
         budget: [f64; 3],
         detectors: Vec<String>,
         decision_period: u64,
+        damage_weight: f64,
+        stealth_weight: f64,
         threads: Option<usize>,
     ) -> PyResult<Self> {
         if n == 0 {
             return Err(PyValueError::new_err("n: at least one environment"));
+        }
+        if !(damage_weight.is_finite() && stealth_weight.is_finite()) {
+            return Err(PyValueError::new_err(format!(
+                "damage_weight and stealth_weight must be finite, got {damage_weight} and {stealth_weight}"
+            )));
         }
         let spec = spec(robots, channels, budget, detectors, decision_period)?;
         let episodes = (0..n)
             .map(|_| episode::Episode::new(scenario.resolved.clone(), spec.clone()))
             .collect::<Result<Vec<_>, _>>()
             .map_err(PyValueError::new_err)?;
+        let per = episodes.first().map_or(0, |e| e.action_size());
+        let envs = Arc::new(Envs {
+            slots: episodes
+                .into_iter()
+                .map(|episode| {
+                    Mutex::new(Slot {
+                        episode,
+                        ended: false,
+                        reward: 0.0,
+                        terminated: false,
+                        truncated: false,
+                        view: Vec::new(),
+                        ended_digest: None,
+                        error: None,
+                    })
+                })
+                .collect(),
+            actions: RwLock::new(vec![0.0; n * per]),
+            per,
+            weights: (damage_weight, stealth_weight),
+        });
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let threads = threads.unwrap_or(cores).clamp(1, n);
-        // The calling thread steps one share itself: the pool has the others' threads.
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads((threads - 1).max(1))
-            .thread_name(|i| format!("fdi-mas-vec-{i}"))
-            .build()
+        let chunks = n.div_ceil(CHUNK);
+        let threads = threads.unwrap_or(cores).clamp(1, chunks);
+        let work = Arc::clone(&envs);
+        let team = Team::new(threads, chunks, Box::new(move |c| work.step_chunk(c)))
             .map_err(engine_error)?;
         Ok(Self {
-            inner: Mutex::new(Some(Envs {
-                digests: vec![None; episodes.len()],
-                episodes,
+            inner: Mutex::new(Some(Stepping {
+                envs,
+                team,
+                digests: vec![None; n],
             })),
             threads,
-            pool,
         })
     }
 
     /// Every environment back to its start; their attacker views.
     fn reset<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
-        let mut guard = self.guard()?;
-        let eps = &mut guard.as_mut().ok_or_else(closed)?.episodes;
+        let guard = self.guard()?;
+        let stepping = guard.as_ref().ok_or_else(closed)?;
         let mut view = Vec::new();
-        for e in eps.iter_mut() {
-            e.reset(None).map_err(PyValueError::new_err)?;
-            e.attacker_view(&mut view);
+        for slot in &stepping.envs.slots {
+            let mut slot = slot.lock().map_err(|_| failed_earlier())?;
+            slot.episode.reset(None).map_err(PyValueError::new_err)?;
+            slot.ended = false;
+            slot.episode.attacker_view(&mut view);
         }
         Ok(to_bytes(py, &view))
     }
 
-    /// Steps every environment with its action (bytes of float64, n × action entries), or
-    /// resets those `reset` marks (bytes, one per environment; their action is ignored and
-    /// their outcome is zero): the next-step autoreset of Gymnasium's vector environments.
-    fn step<'py>(&self, py: Python<'py>, actions: &[u8], reset: &[u8]) -> PyResult<BatchOut<'py>> {
+    /// Steps every environment with its action (bytes of float64, n × action entries); an
+    /// environment whose episode ended at the step before is reset instead (its action is
+    /// ignored, its reward 0, its end false): the next-step autoreset of Gymnasium's vector
+    /// environments. A bad action of a stepped environment is refused, naming it, before any
+    /// environment steps.
+    fn step<'py>(&self, py: Python<'py>, actions: &[u8]) -> PyResult<BatchOut<'py>> {
         let actions = floats(actions, "actions")?;
         let mut guard = self.guard()?;
-        let envs = guard.as_mut().ok_or_else(closed)?;
-        let eps = &mut envs.episodes;
-        let n = eps.len();
-        let per = eps.first().map_or(0, |e| e.action_size());
-        if actions.len() != n * per || reset.len() != n {
+        let stepping = guard.as_mut().ok_or_else(closed)?;
+        let envs = &stepping.envs;
+        let (n, per) = (envs.slots.len(), envs.per);
+        if actions.len() != n * per {
             return Err(PyValueError::new_err(format!(
-                "actions: {n} environments × {per} entries expected, got {} (and {} reset flags)",
-                actions.len(),
-                reset.len()
+                "actions: {n} environments × {per} entries expected, got {}",
+                actions.len()
             )));
         }
-        for (i, (e, a)) in eps.iter_mut().zip(actions.chunks(per.max(1))).enumerate() {
-            if reset[i] == 0 {
-                e.act(a)
+        for (i, (slot, a)) in envs
+            .slots
+            .iter()
+            .zip(actions.chunks(per.max(1)))
+            .enumerate()
+        {
+            let slot = slot.lock().map_err(|_| failed_earlier())?;
+            if !slot.ended {
+                slot.episode
+                    .check_action(a)
                     .map_err(|m| PyValueError::new_err(format!("environment {i}: {m}")))?;
             }
         }
-        let (pool, threads) = (&self.pool, self.threads);
-        let outcomes = py.detach(|| step_all(pool, threads, eps, reset))?;
+        envs.actions
+            .write()
+            .map_err(|_| failed_earlier())?
+            .copy_from_slice(&actions);
+        let team = &stepping.team;
+        py.detach(|| team.round()).map_err(engine_error)?;
         let mut view = Vec::new();
-        let (mut damage, mut alarms) = (Vec::with_capacity(n), Vec::with_capacity(n));
-        let (mut term, mut trunc) = (Vec::with_capacity(n), Vec::with_capacity(n));
-        for ((e, o), digest) in eps.iter().zip(&outcomes).zip(&mut envs.digests) {
-            if o.terminated || o.truncated {
-                *digest = e.summary().map(|s| s.trace_digest.clone());
+        let (mut rewards, mut term, mut trunc) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        for (slot, digest) in envs.slots.iter().zip(&mut stepping.digests) {
+            let mut slot = slot.lock().map_err(|_| failed_earlier())?;
+            if let Some(e) = slot.error.take() {
+                return Err(PyValueError::new_err(e));
             }
-            e.attacker_view(&mut view);
-            damage.push(o.damage);
-            alarms.push(o.alarm_ticks as f64);
-            term.push(u8::from(o.terminated));
-            trunc.push(u8::from(o.truncated));
+            if let Some(d) = slot.ended_digest.take() {
+                *digest = Some(d);
+            }
+            view.extend_from_slice(&slot.view);
+            rewards.push(slot.reward);
+            term.push(u8::from(slot.terminated));
+            trunc.push(u8::from(slot.truncated));
         }
         Ok((
-            to_bytes(py, &view),
-            to_bytes(py, &damage),
-            to_bytes(py, &alarms),
-            PyBytes::new(py, &term),
-            PyBytes::new(py, &trunc),
+            PyByteArray::new(py, &float_bytes(&view)),
+            PyByteArray::new(py, &float_bytes(&rewards)),
+            PyByteArray::new(py, &term),
+            PyByteArray::new(py, &trunc),
         ))
     }
 
@@ -359,12 +480,14 @@ impl Batch {
     /// Robot ids (scenario order), links, entries of one environment's action.
     fn shape(&self) -> PyResult<(Vec<u32>, usize, usize)> {
         let guard = self.guard()?;
-        let envs = guard.as_ref().ok_or_else(closed)?;
-        let e = envs.episodes.first().ok_or_else(closed)?;
+        let stepping = guard.as_ref().ok_or_else(closed)?;
+        let slot = stepping.envs.slots.first().ok_or_else(closed)?;
+        let slot = slot.lock().map_err(|_| failed_earlier())?;
+        let e = &slot.episode;
         Ok((e.agents().to_vec(), e.links(), e.action_size()))
     }
 
-    /// Frees every engine; any later call raises.
+    /// Frees every engine and stops the threads; any later call raises.
     fn close(&self) -> PyResult<()> {
         let mut guard = self.guard()?;
         *guard = None;
@@ -375,84 +498,4 @@ impl Batch {
     fn threads(&self) -> usize {
         self.threads
     }
-}
-
-/// Steps (or resets) one episode.
-fn step_one(e: &mut episode::Episode, reset: u8) -> Result<Outcome, String> {
-    if reset != 0 {
-        e.reset(None)?;
-        Ok(Outcome {
-            attacked: vec![0; e.agents().len()],
-            ..Outcome::default()
-        })
-    } else {
-        Ok(e.step())
-    }
-}
-
-/// Steps (or resets) every episode, in small chunks taken in turn by the calling thread and
-/// the pool's threads (a thread that wakes late takes fewer; which thread steps an episode
-/// changes nothing in it). A panic is an error.
-fn step_all(
-    pool: &rayon::ThreadPool,
-    threads: usize,
-    eps: &mut [episode::Episode],
-    reset: &[u8],
-) -> PyResult<Vec<Outcome>> {
-    use std::sync::atomic::{AtomicUsize, Ordering};
-    const CHUNK: usize = 4;
-    type Chunk<'a> = (
-        &'a mut [episode::Episode],
-        &'a [u8],
-        Result<Vec<Outcome>, String>,
-    );
-    let n = eps.len();
-    let chunks: Vec<Mutex<Chunk<'_>>> = eps
-        .chunks_mut(CHUNK)
-        .zip(reset.chunks(CHUNK))
-        .map(|(es, rs)| Mutex::new((es, rs, Ok(Vec::new()))))
-        .collect();
-    let next = AtomicUsize::new(0);
-    let work = || loop {
-        let i = next.fetch_add(1, Ordering::Relaxed);
-        let Some(chunk) = chunks.get(i) else {
-            break;
-        };
-        // A chunk is taken by one thread only (the counter hands each index out once).
-        if let Ok(mut c) = chunk.lock() {
-            let (es, rs, out) = &mut *c;
-            *out = es
-                .iter_mut()
-                .zip(rs.iter())
-                .map(|(e, r)| step_one(e, *r))
-                .collect();
-        }
-    };
-    let run = std::panic::AssertUnwindSafe(|| {
-        pool.in_place_scope(|scope| {
-            for _ in 1..threads {
-                scope.spawn(|_| work());
-            }
-            work();
-        })
-    });
-    if std::panic::catch_unwind(run).is_err() {
-        return Err(engine_error(
-            "a panic inside the engine while stepping the batch",
-        ));
-    }
-    let mut out = Vec::with_capacity(n);
-    for chunk in chunks {
-        let (_, _, r) = chunk
-            .into_inner()
-            .map_err(|_| engine_error("a panic inside the engine while stepping the batch"))?;
-        out.extend(r.map_err(PyValueError::new_err)?);
-    }
-    if out.len() != n {
-        return Err(engine_error(format!(
-            "{} outcomes for {n} environments (a bug)",
-            out.len()
-        )));
-    }
-    Ok(out)
 }

@@ -64,6 +64,8 @@ class VectorAttackerEnv(VectorEnv):
             self.budget,
             self.detectors,
             int(decision_period),
+            self.damage_weight,
+            self.stealth_weight,
             threads,
         )
         agents, links, _ = self._batch.shape()
@@ -75,7 +77,6 @@ class VectorAttackerEnv(VectorEnv):
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float64)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._autoreset = np.zeros(self.num_envs, dtype=np.uint8)
         self._started = False
         self._closed = False
 
@@ -90,7 +91,6 @@ class VectorAttackerEnv(VectorEnv):
             self.action_space.seed(first)
             self.observation_space.seed(first)
         obs = np.frombuffer(self._batch.reset(), dtype=np.float64).reshape(self.num_envs, -1)
-        self._autoreset[:] = 0
         self._started = True
         return obs.copy(), {}
 
@@ -104,15 +104,16 @@ class VectorAttackerEnv(VectorEnv):
         want = (self.num_envs, *self._action_shape)
         if a.shape != want:
             raise ValueError(f"actions: expected shape {want}, got {a.shape}")
-        obs, damage, alarms, term, trunc = self._batch.step(a.tobytes(), self._autoreset.tobytes())
-        obs = np.frombuffer(obs, dtype=np.float64).reshape(self.num_envs, -1).copy()
-        damage = np.frombuffer(damage, dtype=np.float64)
-        alarms = np.frombuffer(alarms, dtype=np.float64)
-        terminated = np.frombuffer(term, dtype=np.uint8).astype(bool)
-        truncated = np.frombuffer(trunc, dtype=np.uint8).astype(bool)
-        rewards = self.damage_weight * damage - self.stealth_weight * alarms
-        self._autoreset = (terminated | truncated).astype(np.uint8)
-        return obs, rewards, terminated, truncated, {}
+        # Rewards, ends and the next step's autoreset are the batch's (in Rust); the arrays are
+        # numpy views of fresh, writable buffers.
+        obs, rewards, term, trunc = self._batch.step(a.tobytes())
+        return (
+            np.frombuffer(obs, dtype=np.float64).reshape(self.num_envs, -1),
+            np.frombuffer(rewards, dtype=np.float64),
+            np.frombuffer(term, dtype=np.bool_),
+            np.frombuffer(trunc, dtype=np.bool_),
+            {},
+        )
 
     def digests(self) -> list[str | None]:
         """Each environment's last ended episode's trace digest (``None`` while none ended)."""
