@@ -357,23 +357,64 @@ pub fn run_inproc_with<const N: usize, A: Attacker>(
     Ok(run.finish(resolved, attacker.name()))
 }
 
-/// The in-process engine one tick at a time: what [`run_inproc_with`] runs to the end, for a
-/// caller that decides between ticks (an environment whose agent acts every few ticks).
-/// Ticking it to the end and finishing it is, record for record and digest for digest,
-/// [`run_inproc_with`].
+/// The books of a run: the trace digest and the metrics of every joined tick record, in
+/// digest order. [`Lockstep`] keeps them as it ticks; a caller of [`tick_inproc_any_with`]
+/// keeps them from the records its sink sees (on another thread, say), to the same bits.
 #[derive(Debug)]
-pub struct Lockstep<const N: usize> {
+pub struct Books {
+    digest: TraceDigest,
+    evaluator: Evaluator,
+}
+
+impl Books {
+    /// Empty books for the run of `resolved`.
+    pub fn new(resolved: &Resolved) -> Self {
+        Self {
+            digest: TraceDigest::new(),
+            evaluator: evaluator_for(resolved),
+        }
+    }
+
+    /// Enters the next record (digest order).
+    pub fn push(&mut self, rec: &TickRecord) {
+        self.digest.push(rec);
+        self.evaluator.push(rec);
+    }
+
+    /// The metrics so far.
+    pub fn evaluator(&self) -> &Evaluator {
+        &self.evaluator
+    }
+
+    /// The summary of an in-process run of `ticks` ticks in `wall_s`, under the attack name
+    /// `attack`.
+    pub fn summary(self, resolved: &Resolved, ticks: u64, wall_s: f64, attack: &str) -> RunSummary {
+        let mut summary = summarize(
+            resolved,
+            "inproc",
+            ticks,
+            wall_s,
+            self.digest,
+            self.evaluator,
+        );
+        summary.attack = attack.to_owned();
+        summary
+    }
+}
+
+/// The in-process engine's ticking alone: every agent's plant, attacker and control center,
+/// tick by tick, each joined record handed to a sink. [`Lockstep`] is this with its [`Books`].
+#[derive(Debug)]
+pub struct Ticker<const N: usize> {
     plants: Vec<Plant<N>>,
     centers: Vec<CenterAgent<N>>,
     control_period_s: f64,
     k: u64,
     ticks: u64,
-    digest: TraceDigest,
-    evaluator: Evaluator,
     started: Instant,
 }
 
-impl<const N: usize> Lockstep<N> {
+impl<const N: usize> Ticker<N> {
     /// The run of `resolved` at its start (tick 0 next).
     pub fn new(resolved: &Resolved) -> Result<Self, EngineError> {
         let s = &resolved.scenario;
@@ -393,8 +434,6 @@ impl<const N: usize> Lockstep<N> {
             control_period_s: s.control_period_s,
             k: 0,
             ticks: resolved.ticks(),
-            digest: TraceDigest::new(),
-            evaluator: evaluator_for(resolved),
             started: Instant::now(),
         })
     }
@@ -409,9 +448,9 @@ impl<const N: usize> Lockstep<N> {
         self.ticks
     }
 
-    /// The metrics so far (and, through them, each detector's alarm after the last tick).
-    pub fn evaluator(&self) -> &Evaluator {
-        &self.evaluator
+    /// Seconds since the start.
+    pub fn wall_s(&self) -> f64 {
+        self.started.elapsed().as_secs_f64()
     }
 
     /// Runs the next tick of every agent, in the scenario's agent order, with `attacker`
@@ -443,35 +482,113 @@ impl<const N: usize> Lockstep<N> {
                 None
             };
             let step = plant.advance(k);
-            let rec = TickRecord {
+            sink(&TickRecord {
                 agent: agent_record(k, id, t, (&q, &qd), &m, &step),
                 attack: attack_record(k, id, &sent, &inj),
                 center: center_record(k, id, &out),
                 actuation,
                 monitor: None,
-            };
-            self.digest.push(&rec);
-            self.evaluator.push(&rec);
-            sink(&rec);
+            });
         }
         self.k += 1;
         true
+    }
+}
+
+/// The in-process engine one tick at a time: what [`run_inproc_with`] runs to the end, for a
+/// caller that decides between ticks (an environment whose agent acts every few ticks).
+/// Ticking it to the end and finishing it is, record for record and digest for digest,
+/// [`run_inproc_with`].
+#[derive(Debug)]
+pub struct Lockstep<const N: usize> {
+    ticker: Ticker<N>,
+    books: Books,
+}
+
+impl<const N: usize> Lockstep<N> {
+    /// The run of `resolved` at its start (tick 0 next).
+    pub fn new(resolved: &Resolved) -> Result<Self, EngineError> {
+        Ok(Self {
+            ticker: Ticker::new(resolved)?,
+            books: Books::new(resolved),
+        })
+    }
+
+    /// The next tick to run.
+    pub fn k(&self) -> u64 {
+        self.ticker.k()
+    }
+
+    /// Ticks of the run as planned.
+    pub fn ticks(&self) -> u64 {
+        self.ticker.ticks()
+    }
+
+    /// The metrics so far (and, through them, each detector's alarm after the last tick).
+    pub fn evaluator(&self) -> &Evaluator {
+        self.books.evaluator()
+    }
+
+    /// [`Ticker::tick`], each record entered in the books before `sink` sees it.
+    pub fn tick<A: Attacker>(
+        &mut self,
+        attacker: &mut A,
+        mut sink: impl FnMut(&TickRecord),
+    ) -> bool {
+        let books = &mut self.books;
+        self.ticker.tick(attacker, |rec| {
+            books.push(rec);
+            sink(rec);
+        })
     }
 
     /// The summary of the ticks run (all of them, or the first [`Self::k`] when it stopped
     /// early: `ticks` then says how many), under the attack name `attack`.
     pub fn finish(self, resolved: &Resolved, attack: &str) -> RunSummary {
-        let mut summary = summarize(
-            resolved,
-            "inproc",
-            self.k,
-            self.started.elapsed().as_secs_f64(),
-            self.digest,
-            self.evaluator,
-        );
-        summary.attack = attack.to_owned();
-        summary
+        let (ticks, wall_s) = (self.ticker.k(), self.ticker.wall_s());
+        self.books.summary(resolved, ticks, wall_s, attack)
     }
+}
+
+/// What [`tick_inproc_any_with`] ran: its ticks and its wall time, s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ticked {
+    pub ticks: u64,
+    pub wall_s: f64,
+}
+
+/// [`run_inproc_any_with`] without its books: `sink` sees every record, in digest order, and
+/// the caller keeps the [`Books`] from them (on another thread, say: the command line's run
+/// digests, evaluates and writes the records there while this thread ticks). [`Books::summary`]
+/// of those books is [`run_inproc_any_with`]'s summary, to the bit.
+pub fn tick_inproc_any_with<A: Attacker>(
+    resolved: &Resolved,
+    attacker: &mut A,
+    sink: impl FnMut(&TickRecord),
+) -> Result<Ticked, EngineError> {
+    struct Run<'a, A, F> {
+        resolved: &'a Resolved,
+        attacker: &'a mut A,
+        sink: F,
+    }
+    impl<A: Attacker, F: FnMut(&TickRecord)> ForLinks for Run<'_, A, F> {
+        type Output = Result<Ticked, EngineError>;
+        fn call<const N: usize>(mut self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
+            let mut ticker = Ticker::<N>::new(self.resolved)?;
+            while ticker.tick(self.attacker, &mut self.sink) {}
+            Ok(Ticked {
+                ticks: ticker.k(),
+                wall_s: ticker.wall_s(),
+            })
+        }
+    }
+    resolved
+        .with_links(Run {
+            resolved,
+            attacker,
+            sink,
+        })
+        .ok_or(EngineError::NoAgents)?
 }
 
 /// A [`Lockstep`] whatever the number of links of its robots ([`lockstep_any`]), driven by an

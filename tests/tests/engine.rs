@@ -301,6 +301,40 @@ fn the_engine_ticked_from_outside_is_the_whole_run_and_its_alarms_are_the_record
     }
 }
 
+/// The engine's ticking with its books kept elsewhere (the command line's in-process run keeps
+/// them on another thread, from the records it is handed) gives the whole run's summary: the
+/// same ticks, digest and metrics, and the same records in the same order. On a two-link and a
+/// three-link scenario, the second under the psi2 residual's detectors.
+#[test]
+fn books_kept_from_the_records_are_the_whole_run_s() {
+    use fdi_common::engine::{run_inproc_any, tick_inproc_any_with, Books};
+    let three = scenario::load_file(
+        &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/three-link.toml"),
+    )
+    .expect("the three-link scenario is valid");
+    let mut psi2 = three;
+    psi2.scenario.detectors.residual = fdi_common::detect::config::ResidualKind::Psi2;
+    for mut r in [paper(2.5), psi2] {
+        r.scenario.duration_s = 2.5;
+        let mut whole = Vec::new();
+        let expected = run_inproc_any(&r, |rec| whole.push(*rec)).expect("runs");
+        let mut books = Books::new(&r);
+        let mut handed = Vec::new();
+        let mut attacker = r.profile_attacker();
+        let ticked = tick_inproc_any_with(&r, &mut attacker, |rec| {
+            books.push(rec);
+            handed.push(*rec);
+        })
+        .expect("runs");
+        assert_eq!(ticked.ticks, r.ticks());
+        let got = books.summary(&r, ticked.ticks, ticked.wall_s, "paper");
+        assert_eq!(got.ticks, expected.ticks);
+        assert_eq!(got.trace_digest, expected.trace_digest);
+        assert_eq!(got.metrics, expected.metrics);
+        assert!(handed == whole, "the same records in the same order");
+    }
+}
+
 /// The evaluator's answers for an agent and a detector it does not have.
 fn engine_unknown(r: &Resolved) -> (Option<bool>, Option<(f64, bool)>) {
     let engine = fdi_common::engine::lockstep_any::<fdi_common::attack::ProfileAttacker>(r)

@@ -21,7 +21,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use fdi_common::attack::Attacker;
-use fdi_common::engine::{run_inproc_any, run_inproc_any_with, Partial, RunSummary};
+use fdi_common::engine::{run_inproc_any, tick_inproc_any_with, Books, Partial, RunSummary};
 use fdi_common::records::TickRecord;
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
@@ -155,62 +155,71 @@ pub fn execute_inproc_with<A: Attacker>(
         Traces::Decimate(k) => Some(Kept::Decimate { every: k.get() }),
         Traces::None => None,
     };
-    let mut writer = match kept {
-        Some(kept) => Some(TraceThread::start(
-            InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?,
-        )?),
+    let writers = match kept {
+        Some(kept) => Some(InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?),
         None => None,
     };
-    let mut summary = run_inproc_any_with(r, attacker, |rec| {
-        if let Some(w) = &mut writer {
-            w.push(rec);
-        }
-    })
-    .context("in-process engine")?;
-    if let Some(w) = writer {
-        // The run ends when its traces are written: the wait for the writer counts.
-        let waited = std::time::Instant::now();
-        w.finish()?;
-        summary.wall_s += waited.elapsed().as_secs_f64();
-    }
+    let mut records = RecordThread::start(Books::new(r), writers)?;
+    let ticked =
+        tick_inproc_any_with(r, attacker, |rec| records.push(rec)).context("in-process engine")?;
+    // The run ends when its records are entered and written: the wait for that counts.
+    let waited = std::time::Instant::now();
+    let books = records.finish()?;
+    let wall_s = ticked.wall_s + waited.elapsed().as_secs_f64();
+    let summary = books.summary(r, ticked.ticks, wall_s, attacker.name());
     output::write_run_summary(dir, &summary, traces)?;
     Ok(summary)
 }
 
-/// The traces of an in-process run, written on a thread of their own: the engine hands its
-/// records over in batches and ticks on (encoding and writing them took a quarter of the
-/// engine's thread). At most [`TraceThread::QUEUED`] batches wait, so memory stays bounded
-/// when the disk is slower than the engine. A write error stops the writer; the run goes on to
-/// its end, as it did when it wrote the traces itself, and [`TraceThread::finish`] reports it.
-struct TraceThread {
+/// The records of an in-process run entered in its books (digest, metrics) and written to its
+/// traces on a thread of their own: the engine hands them over in batches and ticks on (the
+/// books and the traces took two fifths of the engine's thread). At most
+/// [`RecordThread::QUEUED`] batches wait, so memory stays bounded when the disk is slower than
+/// the engine. A write error stops the writing (the books go on); the run goes on to its end,
+/// as it did when it wrote the traces itself, and [`RecordThread::finish`] reports it.
+struct RecordThread {
     batch: Vec<TickRecord>,
-    to_writer: Option<std::sync::mpsc::SyncSender<Vec<TickRecord>>>,
-    writer: std::thread::JoinHandle<Result<()>>,
+    to_thread: std::sync::mpsc::SyncSender<Vec<TickRecord>>,
+    /// The thread's emptied batches, filled again (fresh ones cost a page fault per page).
+    emptied: std::sync::mpsc::Receiver<Vec<TickRecord>>,
+    thread: std::thread::JoinHandle<(Books, Result<()>)>,
 }
 
-impl TraceThread {
+impl RecordThread {
     /// Records per batch.
     const BATCH: usize = 1024;
-    /// Batches that may wait for the writer.
+    /// Batches that may wait for the thread.
     const QUEUED: usize = 4;
 
-    fn start(mut traces: InprocTraces) -> Result<Self> {
-        let (to_writer, batches) = std::sync::mpsc::sync_channel::<Vec<TickRecord>>(Self::QUEUED);
-        let writer = std::thread::Builder::new()
-            .name("traces".into())
+    fn start(mut books: Books, mut traces: Option<InprocTraces>) -> Result<Self> {
+        let (to_thread, batches) = std::sync::mpsc::sync_channel::<Vec<TickRecord>>(Self::QUEUED);
+        let (give_back, emptied) = std::sync::mpsc::sync_channel(Self::QUEUED + 1);
+        let thread = std::thread::Builder::new()
+            .name("records".into())
             .spawn(move || {
-                for batch in batches {
+                let mut written = Ok(());
+                for mut batch in batches {
                     for rec in &batch {
-                        traces.write(rec)?;
+                        books.push(rec);
+                        if let (Some(w), Ok(())) = (&mut traces, &written) {
+                            written = w.write(rec);
+                        }
                     }
+                    batch.clear();
+                    // Never waits: a batch that finds no room is dropped.
+                    let _ = give_back.try_send(batch);
                 }
-                traces.flush()
+                if let (Some(w), Ok(())) = (traces, &written) {
+                    written = w.flush();
+                }
+                (books, written)
             })
-            .context("starting the thread that writes the traces")?;
+            .context("starting the thread that keeps the run's records")?;
         Ok(Self {
             batch: Vec::with_capacity(Self::BATCH),
-            to_writer: Some(to_writer),
-            writer,
+            to_thread,
+            emptied,
+            thread,
         })
     }
 
@@ -222,25 +231,29 @@ impl TraceThread {
     }
 
     fn send(&mut self) {
-        let batch = std::mem::replace(&mut self.batch, Vec::with_capacity(Self::BATCH));
-        // A writer that stopped on an error takes no more: `finish` reports its error.
-        if let Some(to) = &self.to_writer {
-            if to.send(batch).is_err() {
-                self.to_writer = None;
-            }
-        }
+        let next = self
+            .emptied
+            .try_recv()
+            .unwrap_or_else(|_| Vec::with_capacity(Self::BATCH));
+        let batch = std::mem::replace(&mut self.batch, next);
+        // The thread takes every batch until `finish` (it stops only by panicking, which
+        // `finish` reports).
+        let _ = self.to_thread.send(batch);
     }
 
-    /// Hands over the last records, waits for the writer to write and flush everything, and
-    /// returns its first error.
-    fn finish(mut self) -> Result<()> {
+    /// Hands over the last records, waits for the thread to enter, write and flush them all,
+    /// and returns the books, or the first write error.
+    fn finish(mut self) -> Result<Books> {
         if !self.batch.is_empty() {
             self.send();
         }
-        drop(self.to_writer.take());
-        self.writer
+        drop(self.to_thread);
+        let (books, written) = self
+            .thread
             .join()
-            .map_err(|_| anyhow::anyhow!("the thread that writes the traces panicked"))?
+            .map_err(|_| anyhow::anyhow!("the thread that keeps the run's records panicked"))?;
+        written?;
+        Ok(books)
     }
 }
 
