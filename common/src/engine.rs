@@ -310,26 +310,15 @@ pub fn run_inproc_any(
 pub fn run_inproc_any_with<A: Attacker>(
     resolved: &Resolved,
     attacker: &mut A,
-    sink: impl FnMut(&TickRecord),
+    mut sink: impl FnMut(&TickRecord),
 ) -> Result<RunSummary, EngineError> {
-    struct Run<'a, A, F> {
-        resolved: &'a Resolved,
-        attacker: &'a mut A,
-        sink: F,
-    }
-    impl<A: Attacker, F: FnMut(&TickRecord)> ForLinks for Run<'_, A, F> {
-        type Output = Result<RunSummary, EngineError>;
-        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            run_inproc_with::<N, A>(self.resolved, self.attacker, self.sink)
-        }
-    }
-    resolved
-        .with_links(Run {
-            resolved,
-            attacker,
-            sink,
-        })
-        .ok_or(EngineError::NoAgents)?
+    // What `Lockstep` does tick by tick: each record into the books, then to the sink.
+    let mut books = Books::new(resolved);
+    let ticked = tick_inproc_any_with(resolved, attacker, |rec| {
+        books.push(rec);
+        sink(rec);
+    })?;
+    Ok(books.summary(resolved, ticked.ticks, ticked.wall_s, attacker.name()))
 }
 
 /// Runs `resolved` to the end on this thread; `sink` sees every joined tick record in digest
