@@ -175,6 +175,9 @@ pub struct RunSummary {
     /// A run split over hosts (`--hosts`): one line per host, its processes and its clock.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub hosts: Vec<String>,
+    /// A run split over hosts: how its network path was secured and what it refused.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub network: Option<NetworkPath>,
     /// Set when the run ended before its scenario's end (interrupted): every metric covers the
     /// `ticks` recorded, not the `planned_ticks`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -183,6 +186,23 @@ pub struct RunSummary {
     /// calibration (empty: the paper's); [`crate::numerics`].
     #[serde(default)]
     pub numerics: Vec<crate::numerics::Difference>,
+}
+
+/// The network path of a run split over hosts.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct NetworkPath {
+    /// TLS with mutual authentication and per-host access control between the hosts; false:
+    /// plain TCP, which anyone on the network could read and write (the deployment file said
+    /// `insecure = true`).
+    pub authenticated: bool,
+    /// Frames the hosts' bridges refused on the run's keys: from a host that does not send that
+    /// stream in the run, or out of order (forged, duplicated or replayed). Any: the run's data
+    /// may have been altered outside the attacker process, and its results cannot be
+    /// attributed to its attack (exit 6).
+    pub refused_frames: u64,
+    /// Per host that refused any: how many and the first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub refusals: Vec<String>,
 }
 
 /// What a run that ended early covers.
@@ -267,6 +287,7 @@ pub fn summarize(
         lost_agents: Vec::new(),
         placement: None,
         hosts: Vec::new(),
+        network: None,
         partial: None,
         numerics: crate::numerics::differences_from_paper(s, crate::numerics::Compare::WithMode),
     }

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 use fdi_orchestrator::attacks::AttacksArgs;
 use fdi_orchestrator::bench::BenchCommand;
 use fdi_orchestrator::campaign::SweepArgs;
+use fdi_orchestrator::run::certs::CertsArgs;
 use fdi_orchestrator::run::serve::ServeArgs;
 use fdi_orchestrator::tables::TableArgs;
 
@@ -70,6 +71,10 @@ pub enum Command {
     /// --hosts FILE`, run the processes it places here, bridge them over Zenoh, hand it their
     /// traces (docs/multi-host.md).
     Serve(ServeArgs),
+    /// Make the lab's certificates for the hosts of a deployment file: a CA (or the one
+    /// there) and, for each host, a certificate and key for the TLS between hosts
+    /// (docs/security.md).
+    Certs(CertsArgs),
     /// Internal: a peer process of `bench transport`.
     #[command(hide = true)]
     BenchPeer {

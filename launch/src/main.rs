@@ -56,6 +56,7 @@ fn dispatch(command: Command, stop: &Stop) -> Result<ExitCode> {
     match command {
         Command::Run(args) => commands::run::run(&args, stop),
         Command::Serve(args) => serve::serve(&args, stop),
+        Command::Certs(args) => done(fdi_orchestrator::run::certs::certs(&args)),
         Command::Validate { scenario } => commands::validate::validate(&scenario),
         Command::Sweep(args) => campaign::sweep(&args, stop),
         Command::Schema { format } => commands::validate::schema(format),

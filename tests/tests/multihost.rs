@@ -14,11 +14,12 @@ use std::time::{Duration, Instant};
 use fdi_tests::netns::{self, Hosts};
 use fdi_tests::{launcher, wait_with_watchdog, Scratch};
 
-/// A few hosts, their serves and a scratch folder.
+/// A few hosts, their serves, a scratch folder and the deployment file.
 struct Lab {
     hosts: Hosts,
     serves: Vec<(Child, PathBuf)>,
     scratch: Scratch,
+    file: Option<PathBuf>,
 }
 
 impl Lab {
@@ -29,6 +30,7 @@ impl Lab {
                 hosts,
                 serves: Vec::new(),
                 scratch: Scratch::new(tag),
+                file: None,
             }),
             Err(e) => {
                 eprintln!("{}", netns::skip_reason(&e));
@@ -37,16 +39,30 @@ impl Lab {
         }
     }
 
-    /// Starts `fdi-launch serve --name NAME` on host `i` and waits until it listens.
+    /// Starts `fdi-launch serve --hosts FILE --name NAME` on host `i` (the deployment file
+    /// written first) and waits until it listens.
     fn serve(&mut self, i: usize, name: &str) -> usize {
         let log = self.scratch.0.join(format!("serve-{name}.log"));
         let file = std::fs::File::create(&log).expect("serve log");
+        let hosts = self
+            .file
+            .clone()
+            .expect("the deployment file is written first");
+        let work = self.scratch.0.join(format!("work-{name}"));
         let child = self
             .hosts
             .command(
                 i,
                 &launcher(),
-                &["serve", "--name", name, "--listen", &netns::endpoint(i)],
+                &[
+                    "serve",
+                    "--hosts",
+                    &hosts.display().to_string(),
+                    "--name",
+                    name,
+                    "--work-dir",
+                    &work.display().to_string(),
+                ],
             )
             .stdin(Stdio::null())
             .stdout(Stdio::null())
@@ -77,10 +93,23 @@ impl Lab {
         }
     }
 
-    /// Writes a deployment file.
-    fn deployment(&self, text: &str) -> String {
+    /// Writes the deployment file and, when it names `certs`, makes the lab's certificates
+    /// with `fdi-launch certs`.
+    fn deployment(&mut self, text: &str) -> String {
         let p = self.scratch.0.join("hosts.toml");
         std::fs::write(&p, text).expect("deployment file");
+        if text.contains("certs = ") {
+            let out = std::process::Command::new(launcher())
+                .args(["certs", "--hosts", &p.display().to_string()])
+                .output()
+                .expect("fdi-launch certs");
+            assert!(
+                out.status.success(),
+                "{}",
+                String::from_utf8_lossy(&out.stderr)
+            );
+        }
+        self.file = Some(p.clone());
         p.display().to_string()
     }
 
@@ -109,6 +138,12 @@ impl Drop for Lab {
         for (child, _) in &mut self.serves {
             let _ = child.kill();
             let _ = child.wait();
+        }
+        // A failed test shows what the serves said.
+        if std::thread::panicking() {
+            for k in 0..self.serves.len() {
+                eprintln!("serve {k}:\n{}", self.log(k));
+            }
         }
     }
 }
@@ -143,12 +178,20 @@ fn inproc_digest(args: &[&str]) -> String {
 
 const TWO_HOSTS: &str = r#"
 coordinator = "control"
+certs = "certs"
 [hosts.control]
-endpoint = "tcp/10.77.0.1:7447"
+endpoint = "quic/10.77.0.1:7447"
 [hosts.cell]
-endpoint = "tcp/10.77.0.2:7447"
+endpoint = "quic/10.77.0.2:7447"
 agents = [3, 4]
 "#;
+
+/// [`TWO_HOSTS`] over plain TCP.
+fn insecure_two_hosts() -> String {
+    TWO_HOSTS
+        .replace("certs = \"certs\"", "insecure = true")
+        .replace("quic/", "tcp/")
+}
 
 #[test]
 fn lockstep_over_three_hosts_equals_the_in_process_engine() {
@@ -157,21 +200,22 @@ fn lockstep_over_three_hosts_equals_the_in_process_engine() {
     };
     // The agents 3 and 4 on a cell, the attacker on a host of its own: every stream of the
     // run crosses the network at least once.
-    let cell = lab.serve(1, "cell");
-    let adversary = lab.serve(2, "adversary");
     let file = lab.deployment(
         r#"
 coordinator = "control"
+certs = "certs"
 [hosts.control]
-endpoint = "tcp/10.77.0.1:7447"
+endpoint = "quic/10.77.0.1:7447"
 [hosts.cell]
-endpoint = "tcp/10.77.0.2:7447"
+endpoint = "quic/10.77.0.2:7447"
 agents = [3, 4]
 [hosts.adversary]
-endpoint = "tcp/10.77.0.3:7447"
+endpoint = "quic/10.77.0.3:7447"
 roles = ["attacker"]
 "#,
     );
+    let cell = lab.serve(1, "cell");
+    let adversary = lab.serve(2, "adversary");
     // An attack on the torques too: the attacker, on its host, forges them for the agents.
     let out = lab.run(&[
         "run",
@@ -198,12 +242,17 @@ roles = ["attacker"]
     );
     let err = stderr(&out);
     assert!(
-        err.contains("host `cell` (tcp/10.77.0.2:7447): agent 3, agent 4"),
+        err.contains("host `cell` (quic/10.77.0.2:7447): agent 3, agent 4"),
         "{err}"
     );
     assert!(
-        err.contains("host `adversary` (tcp/10.77.0.3:7447): attacker"),
+        err.contains("host `adversary` (quic/10.77.0.3:7447): attacker"),
         "{err}"
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("network path: TLS with mutual authentication and per-host access control; no frame refused"),
+        "{text}"
     );
     assert!(!err.contains("could not be removed"), "{err}");
     for k in [cell, adversary] {
@@ -245,8 +294,8 @@ fn a_cut_network_stops_a_lockstep_run_naming_the_host_and_the_next_run_is_clean(
     let Some(mut lab) = Lab::new(2, "multihost-cut") else {
         return;
     };
-    let cell = lab.serve(1, "cell");
     let file = lab.deployment(TWO_HOSTS);
+    let cell = lab.serve(1, "cell");
     // Long enough to be cut in the middle: 40 simulated seconds take seconds across hosts.
     let (out, after) = cut_mid_run(
         &lab,
@@ -258,7 +307,7 @@ fn a_cut_network_stops_a_lockstep_run_naming_the_host_and_the_next_run_is_clean(
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
         err.contains(
-            "run stopped: host `cell` (tcp/10.77.0.2:7447) is unreachable: its `fdi-launch \
+            "run stopped: host `cell` (quic/10.77.0.2:7447) is unreachable: its `fdi-launch \
              serve` died or the network to it was cut"
         ),
         "{err}"
@@ -293,8 +342,8 @@ fn a_cut_network_in_realtime_loses_the_hosts_agents_and_the_others_finish() {
     let Some(mut lab) = Lab::new(2, "multihost-rt-cut") else {
         return;
     };
-    let cell = lab.serve(1, "cell");
     let file = lab.deployment(TWO_HOSTS);
+    let cell = lab.serve(1, "cell");
     let (out, _) = cut_mid_run(
         &lab,
         &[
@@ -313,7 +362,7 @@ fn a_cut_network_in_realtime_loses_the_hosts_agents_and_the_others_finish() {
     eprintln!("{err}");
     assert_eq!(out.status.code(), Some(3), "lost agents: exit 3\n{err}");
     assert!(
-        err.contains("host `cell` (tcp/10.77.0.2:7447) is unreachable")
+        err.contains("host `cell` (quic/10.77.0.2:7447) is unreachable")
             && err.contains("its agents are lost, the run goes on"),
         "{err}"
     );
@@ -353,8 +402,8 @@ fn a_serve_that_dies_stops_a_lockstep_run_naming_its_host() {
     let Some(mut lab) = Lab::new(2, "multihost-serve-dies") else {
         return;
     };
-    lab.serve(1, "cell");
     let file = lab.deployment(TWO_HOSTS);
+    lab.serve(1, "cell");
     let mut child = lab.start(&["run", "--hosts", &file, "--duration-s", "400"]);
     std::thread::sleep(Duration::from_secs(2));
     let (serve, _) = &mut lab.serves[0];
@@ -368,15 +417,23 @@ fn a_serve_that_dies_stops_a_lockstep_run_naming_its_host() {
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
-        err.contains("host `cell` (tcp/10.77.0.2:7447) is unreachable")
+        err.contains("host `cell` (quic/10.77.0.2:7447) is unreachable")
             || err.contains("on host `cell`"),
         "the host is named:\n{err}"
     );
+    // The killed serve left its run's work folder; the next serve removes it at its start.
+    let work = lab.scratch.0.join("work-cell");
+    let left = || std::fs::read_dir(&work).map(|d| d.count()).unwrap_or(0);
+    assert_eq!(left(), 1, "the killed serve's run folder");
+    let k = lab.serve(1, "cell");
+    let log = lab.log(k);
+    assert!(log.contains("left by a serve that is gone"), "{log}");
+    assert_eq!(left(), 0, "removed:\n{log}");
 }
 
 #[test]
 fn a_host_without_a_serve_is_named_before_anything_starts() {
-    let Some(lab) = Lab::new(2, "multihost-no-serve") else {
+    let Some(mut lab) = Lab::new(2, "multihost-no-serve") else {
         return;
     };
     let file = lab.deployment(TWO_HOSTS);
@@ -384,11 +441,395 @@ fn a_host_without_a_serve_is_named_before_anything_starts() {
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
-        err.contains("no `fdi-launch serve` answers on host `cell` (tcp/10.77.0.2:7447)"),
+        err.contains("no `fdi-launch serve` answers on host `cell` (quic/10.77.0.2:7447)"),
         "{err}"
     );
     // Nothing started, nothing recorded: no run directory is left.
     let runs = lab.scratch.0.join("runs");
     let left = std::fs::read_dir(&runs).map(|d| d.count()).unwrap_or(0);
     assert_eq!(left, 0, "no run directory for a run that did not start");
+}
+
+/// The rogue test peer (`tests/src/bin/fdi-rogue.rs`), built beside the launcher.
+fn rogue() -> PathBuf {
+    launcher().with_file_name("fdi-rogue")
+}
+
+impl Lab {
+    /// Runs the rogue on host `i` to its end; its stdout.
+    fn rogue(&self, i: usize, args: &[&str]) -> String {
+        let child = self
+            .hosts
+            .command(i, &rogue(), args)
+            .current_dir(&self.scratch.0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawning fdi-rogue");
+        let out = wait_with_watchdog(child, Duration::from_secs(60));
+        assert!(out.status.success(), "fdi-rogue {args:?}: {}", stderr(&out));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    /// Starts the rogue on host `i`; it is waited for with [`wait_rogue`].
+    fn start_rogue(&self, i: usize, args: &[&str]) -> Child {
+        self.hosts
+            .command(i, &rogue(), args)
+            .current_dir(&self.scratch.0)
+            .stdin(Stdio::null())
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("spawning fdi-rogue")
+    }
+
+    /// The prefixes of the runs serve `k` started so far (from its log).
+    fn started(&self, k: usize) -> Vec<String> {
+        self.log(k)
+            .lines()
+            .filter_map(|l| {
+                l.strip_prefix("fdi-launch serve: run ")
+                    .filter(|rest| rest.contains(": started "))
+                    .and_then(|rest| rest.split(' ').next())
+                    .map(str::to_string)
+            })
+            .collect()
+    }
+
+    /// The prefix of the next run serve `k` starts, after the `before` it started already.
+    fn next_run_prefix(&self, k: usize, before: usize) -> String {
+        let began = Instant::now();
+        loop {
+            if let Some(p) = self.started(k).get(before) {
+                return p.clone();
+            }
+            assert!(
+                began.elapsed() < Duration::from_secs(60),
+                "serve {k} started no run:\n{}",
+                self.log(k)
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+fn wait_rogue(child: Child) -> String {
+    let out = wait_with_watchdog(child, Duration::from_secs(60));
+    assert!(out.status.success(), "fdi-rogue: {}", stderr(&out));
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// With QUIC and the lab's certificates (the default), a rogue peer on a third host gets
+/// nowhere: without a certificate it cannot connect, with a certificate of another CA it is
+/// refused, and with a valid certificate of a host that is not in the lab everything it
+/// sends is denied; 200 sockets spraying garbage datagrams at the serve's port change
+/// nothing. The run, fed by none of it, equals the in-process engine.
+#[test]
+fn quic_keeps_rogue_peers_out_and_the_run_equals_the_in_process_engine() {
+    let Some(mut lab) = Lab::new(3, "multihost-rogues") else {
+        return;
+    };
+    let file = lab.deployment(TWO_HOSTS);
+    // A certificate of the lab's CA for a host the lab does not list, and one of another CA
+    // that claims to be `cell`.
+    for (name, text) in [
+        (
+            "rogue.toml",
+            "coordinator = \"control\"\ncerts = \"certs\"\n[hosts.control]\nendpoint = \
+             \"quic/10.77.0.1:7447\"\n[hosts.rogue]\nendpoint = \"quic/10.77.0.3:7447\"\n",
+        ),
+        (
+            "other.toml",
+            "coordinator = \"control\"\ncerts = \"other\"\n[hosts.control]\nendpoint = \
+             \"quic/10.77.0.1:7447\"\n[hosts.cell]\nendpoint = \"quic/10.77.0.2:7447\"\n",
+        ),
+    ] {
+        let p = lab.scratch.0.join(name);
+        std::fs::write(&p, text).expect("a deployment file");
+        let out = std::process::Command::new(launcher())
+            .args(["certs", "--hosts", &p.display().to_string()])
+            .output()
+            .expect("fdi-launch certs");
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let cell = lab.serve(1, "cell");
+    let mut spray = lab.start_rogue(2, &["hold", "200", "10.77.0.2:7447", "20", "udp"]);
+    let run = lab.start(&["run", "--hosts", &file, "--duration-s", "30"]);
+    let prefix = lab.next_run_prefix(cell, 0);
+    let rogues = [
+        lab.start_rogue(2, &["no-cert", "certs/ca.pem", "quic/10.77.0.2:7447", "3"]),
+        lab.start_rogue(
+            2,
+            &[
+                "--tls",
+                "other/ca.pem",
+                "other/cell.pem",
+                "other/cell.key",
+                "quic/10.77.0.2:7447",
+                "impersonate",
+                "cell",
+                &prefix,
+                "3",
+            ],
+        ),
+        lab.start_rogue(
+            2,
+            &[
+                "--tls",
+                "certs/ca.pem",
+                "certs/rogue.pem",
+                "certs/rogue.key",
+                "quic/10.77.0.1:7447,quic/10.77.0.2:7447",
+                "impersonate",
+                "cell",
+                &prefix,
+                "3",
+            ],
+        ),
+    ];
+    let said: Vec<String> = rogues.into_iter().map(wait_rogue).collect();
+    assert!(said[0].contains("a serve seen: false"), "{}", said[0]);
+    for s in &said[1..] {
+        assert!(s.contains("the serve of `cell` seen: false"), "{s}");
+        assert!(!s.starts_with("put 0 frames"), "{s}");
+    }
+    let out = wait_with_watchdog(run, Duration::from_secs(120));
+    assert_eq!(
+        digest(&out),
+        inproc_digest(&["--duration-s", "30"]),
+        "{}",
+        stderr(&out)
+    );
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("network path: TLS with mutual authentication and per-host access control; no frame refused"),
+        "{text}"
+    );
+    let _ = spray.kill();
+    let _ = spray.wait();
+    // The positive control: the same rogue with `cell`'s own key is let in (which is why a
+    // host's key stays on that host).
+    let s = lab.rogue(
+        2,
+        &[
+            "--tls",
+            "certs/ca.pem",
+            "certs/cell.pem",
+            "certs/cell.key",
+            "quic/10.77.0.2:7447",
+            "impersonate",
+            "cell",
+            "none",
+            "1",
+        ],
+    );
+    assert!(s.contains("the serve of `cell` seen: true"), "{s}");
+}
+
+/// A run request as JSON, with `edit` applied to it.
+fn request_file(lab: &Lab, name: &str, edit: impl FnOnce(&mut serde_json::Value)) -> String {
+    let scenario = fdi_common::scenario::PAPER_SCENARIO.to_string();
+    let mut v = serde_json::json!({
+        "version": env!("CARGO_PKG_VERSION"),
+        "prefix": "rogue1",
+        "coordinator": "control",
+        "host": "cell",
+        "scenario": scenario,
+        "layout": [
+            ["launcher", "control"], ["center", "control"], ["attacker", "control"],
+            ["agent/1", "control"], ["agent/2", "control"], ["agent/3", "cell"],
+            ["agent/4", "cell"]
+        ],
+    });
+    edit(&mut v);
+    let p = lab.scratch.0.join(name);
+    std::fs::write(&p, serde_json::to_vec(&v).expect("JSON")).expect("request file");
+    name.to_string()
+}
+
+/// Over plain TCP (said so by the file), what a rogue peer sends is refused, counted and
+/// named: run requests that carry paths, programs, processes no run has or sizes no run needs
+/// are refused before anything is written, a trace asked by a path is refused, 200 idle or
+/// half-open connections do not keep a run out, a forged frame numbered ahead stops a lockstep
+/// run within the stall timeout, naming the refused frames, and a realtime run whose stream
+/// was biased by 1200 forged frames refuses them, says so in its summary and exits 6.
+#[test]
+fn an_insecure_run_refuses_names_and_counts_what_a_rogue_peer_sends() {
+    let Some(mut lab) = Lab::new(3, "multihost-insecure") else {
+        return;
+    };
+    let text =
+        insecure_two_hosts().replace("insecure = true", "insecure = true\nstall_timeout_s = 3");
+    let file = lab.deployment(&text);
+    let cell = lab.serve(1, "cell");
+    let to_cell = "tcp/10.77.0.2:7447";
+    // Run requests: each refused, with why.
+    let big = "#".repeat(2 << 20);
+    for (name, edit, why) in [
+        (
+            "paths.json",
+            Box::new(|v: &mut serde_json::Value| {
+                v["processes"] =
+                    serde_json::json!([{"role": "launch", "name": "../../../../tmp/x"}]);
+            }) as Box<dyn FnOnce(&mut serde_json::Value)>,
+            "unknown field `processes`",
+        ),
+        (
+            "word.json",
+            Box::new(|v: &mut serde_json::Value| {
+                v["layout"][6] = serde_json::json!(["../../tmp/x", "cell"]);
+            }),
+            "names no process of a run",
+        ),
+        (
+            "launcher.json",
+            Box::new(|v: &mut serde_json::Value| {
+                v["layout"][0] = serde_json::json!(["launcher", "cell"]);
+            }),
+            "does not put the launcher on its coordinator",
+        ),
+        (
+            "many.json",
+            Box::new(|v: &mut serde_json::Value| {
+                let layout = v["layout"].as_array_mut().expect("layout");
+                for id in 5..45 {
+                    layout.push(serde_json::json!([format!("agent/{id}"), "cell"]));
+                }
+            }),
+            "agent 5 is not an agent of the run's scenario",
+        ),
+        (
+            "big.json",
+            Box::new(move |v: &mut serde_json::Value| {
+                v["scenario"] = serde_json::json!(big);
+            }),
+            "a run request of",
+        ),
+        (
+            "stranger.json",
+            Box::new(|v: &mut serde_json::Value| {
+                v["coordinator"] = serde_json::json!("elsewhere");
+            }),
+            "only a host of",
+        ),
+    ] {
+        let f = request_file(&lab, name, edit);
+        let s = lab.rogue(2, &[to_cell, "request", "cell", "control", &f]);
+        assert!(s.starts_with("refused:") && s.contains(why), "{name}: {s}");
+    }
+    // Nothing was written: the serve's work folder holds no run.
+    let work = lab.scratch.0.join("work-cell");
+    let runs = std::fs::read_dir(&work).map(|d| d.count()).unwrap_or(0);
+    assert_eq!(
+        runs,
+        0,
+        "a refused request leaves nothing in {}",
+        work.display()
+    );
+    // 200 connections held on the serve's port, half of them half-closed: a run gets through.
+    let mut held = lab.start_rogue(2, &["hold", "200", "10.77.0.2:7447", "30"]);
+    std::thread::sleep(Duration::from_secs(1));
+    let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
+    assert_eq!(
+        digest(&out),
+        inproc_digest(&["--duration-s", "1"]),
+        "{}",
+        stderr(&out)
+    );
+    let _ = held.kill();
+    let _ = held.wait();
+    // A long lockstep run: its traces are asked for by paths (refused), then one forged frame
+    // numbered far ahead stops it, named, within the stall timeout.
+    let before = lab.started(cell).len();
+    let run = lab.start(&["run", "--hosts", &file, "--duration-s", "400"]);
+    let prefix = lab.next_run_prefix(cell, before);
+    for ask in [
+        "../../../../etc/passwd 0",
+        "/etc/passwd 0",
+        "agent-1 0",
+        "agent-3.trace 0",
+    ] {
+        let s = lab.rogue(
+            2,
+            &[to_cell, "ask", "cell", "control", &prefix, "traces", ask],
+        );
+        assert!(
+            s.contains("refused:") && s.contains("no process"),
+            "{ask}: {s}"
+        );
+    }
+    let s = lab.rogue(
+        2,
+        &[
+            to_cell,
+            "ask",
+            "cell",
+            "control",
+            &prefix,
+            "traces",
+            "agent-3 0",
+        ],
+    );
+    assert!(
+        s.starts_with("answered"),
+        "the run's own trace is served: {s}"
+    );
+    let s = lab.rogue(
+        2,
+        &[
+            "tcp/10.77.0.1:7447,tcp/10.77.0.2:7447",
+            "forge-ahead",
+            "1000",
+            "5",
+        ],
+    );
+    assert!(s.starts_with("forged 1 frames"), "{s}");
+    let out = wait_with_watchdog(run, Duration::from_secs(60));
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("run stalled: no progress for")
+            && err.contains("refused")
+            && err.contains("for agent"),
+        "{err}"
+    );
+    // Realtime: the rogue biases agent 3's measurements; every forged frame comes after the
+    // honest one of its number, and is refused and counted.
+    let before = lab.started(cell).len();
+    let run = lab.start(&[
+        "run",
+        "--hosts",
+        &file,
+        "--clock",
+        "realtime",
+        "--duration-s",
+        "6",
+        "--json",
+    ]);
+    let _ = lab.next_run_prefix(cell, before);
+    let s = lab.rogue(
+        2,
+        &[
+            "tcp/10.77.0.1:7447,tcp/10.77.0.2:7447",
+            "bias",
+            "3",
+            "0.5",
+            "1200",
+            "4",
+        ],
+    );
+    assert!(s.starts_with("forged 1200 frames"), "{s}");
+    let out = wait_with_watchdog(run, Duration::from_secs(60));
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(6), "{err}");
+    let text = String::from_utf8_lossy(&out.stdout);
+    let line = text
+        .lines()
+        .rev()
+        .find(|l| l.starts_with('{'))
+        .expect("JSON");
+    let v: serde_json::Value = serde_json::from_str(line).expect("JSON");
+    assert_eq!(v["network"]["authenticated"], false, "{v}");
+    assert_eq!(v["network"]["refused_frames"], 1200, "{v}");
 }

@@ -15,10 +15,11 @@
 //! deterministic. A cut network is noticed through Zenoh's liveliness tokens, which vanish when
 //! the session's lease ([`LEASE`]) runs out.
 //!
-//! Keys (all built in [`keys`]), under `fdi-mas/`: `host/<name>` (a serve's liveliness),
-//! `host/<name>/run` (its run requests), and per run `run/<prefix>/...`: `s/<service>` (the
-//! services), `coordinator` (the launcher's liveliness), `clock`, `events/<host>`,
-//! `cmd/<host>`, `traces/<host>`.
+//! Keys (all built in [`keys`]), under `fdi-mas/`, name who may use them: what host `h` says
+//! (puts, liveliness) is under `p/<h>/...`, what it asks host `t` (queries) under
+//! `q/<t>/<h>/...`. With TLS (the default), Zenoh's access control lets a host's certificate
+//! put only under its own `p/<h>/`, ask only as `q/*/<h>/`, and answer only under `q/<h>/`
+//! ([`NetConfig`]), so a key says truly who sent on it.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -80,11 +81,26 @@ pub fn check_host_name(name: &str) -> Result<(), String> {
     Ok(())
 }
 
-/// Checks a Zenoh endpoint of a host: `tcp/<address>:<port>` (the only transport built in).
-pub fn check_endpoint(endpoint: &str) -> Result<(), String> {
-    let Some(rest) = endpoint.strip_prefix("tcp/") else {
+/// The transport of an endpoint.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Link {
+    /// QUIC (over UDP): TLS 1.3 with mutual authentication (`quic/<address>:<port>`).
+    Quic,
+    /// Plain TCP, neither encrypted nor authenticated (`tcp/<address>:<port>`).
+    Tcp,
+}
+
+/// Checks a Zenoh endpoint of a host, `quic/<address>:<port>` or `tcp/<address>:<port>`, and
+/// says which.
+pub fn check_endpoint(endpoint: &str) -> Result<Link, String> {
+    let (link, rest) = if let Some(rest) = endpoint.strip_prefix("quic/") {
+        (Link::Quic, rest)
+    } else if let Some(rest) = endpoint.strip_prefix("tcp/") {
+        (Link::Tcp, rest)
+    } else {
         return Err(format!(
-            "endpoint `{endpoint}` must be `tcp/<address>:<port>` (only TCP is built in)"
+            "endpoint `{endpoint}` must be `quic/<address>:<port>` (or `tcp/<address>:<port>` \
+             in a deployment that says `insecure = true`)"
         ));
     };
     let Some((host, port)) = rest.rsplit_once(':') else {
@@ -92,44 +108,177 @@ pub fn check_endpoint(endpoint: &str) -> Result<(), String> {
     };
     if host.is_empty() || port.parse::<u16>().map_or(true, |p| p == 0) {
         return Err(format!(
-            "endpoint `{endpoint}` must be `tcp/<address>:<port>` with a port in 1..=65535"
+            "endpoint `{endpoint}` must be `<quic|tcp>/<address>:<port>` with a port in \
+             1..=65535"
         ));
     }
-    Ok(())
+    Ok(link)
 }
 
-/// The keys of the network side, built in one place.
+/// The address part of an endpoint (`10.0.0.2` of `quic/10.0.0.2:7447`, without brackets).
+pub fn endpoint_address(endpoint: &str) -> Option<&str> {
+    let rest = endpoint.split_once('/')?.1;
+    let host = rest.rsplit_once(':')?.0;
+    Some(host.trim_start_matches('[').trim_end_matches(']'))
+}
+
+/// The keys of the network side, built in one place. `p/<h>/...`: what host `h` says;
+/// `q/<t>/<h>/...`: what host `h` asks host `t`.
 pub mod keys {
     use crate::ipc::Stream;
 
     /// Liveliness token of the serve of host `name`.
-    pub fn host(name: &str) -> String {
-        format!("fdi-mas/host/{name}")
+    pub fn serve(name: &str) -> String {
+        format!("fdi-mas/p/{name}/serve")
     }
 
-    /// Where the serve of host `name` takes run requests.
-    pub fn host_run(name: &str) -> String {
-        format!("fdi-mas/host/{name}/run")
+    /// A run request of host `from` to the serve of host `to`.
+    pub fn run_request(to: &str, from: &str) -> String {
+        format!("fdi-mas/q/{to}/{from}/run")
     }
 
-    /// A key of the run `prefix`: `coordinator`, `clock`, `events/<host>`, ...
-    pub fn run(prefix: &str, what: &str) -> String {
-        format!("fdi-mas/run/{prefix}/{what}")
+    /// Where the serve of host `to` takes run requests (from any host).
+    pub fn run_requests(to: &str) -> String {
+        format!("fdi-mas/q/{to}/*/run")
     }
 
-    /// The service `stream` of the run `prefix`.
-    pub fn stream(prefix: &str, stream: Stream) -> String {
-        format!("fdi-mas/run/{prefix}/s/{}", stream.service_name())
+    /// What host `from` says in the run `prefix`: `coordinator`, `events`, `cmd/<host>`, ...
+    pub fn said(from: &str, prefix: &str, what: &str) -> String {
+        format!("fdi-mas/p/{from}/run/{prefix}/{what}")
+    }
+
+    /// What host `from` asks host `to` in the run `prefix`: `clock`, `traces`, `routes`,
+    /// `release`.
+    pub fn asked(to: &str, from: &str, prefix: &str, what: &str) -> String {
+        format!("fdi-mas/q/{to}/{from}/run/{prefix}/{what}")
+    }
+
+    /// The service `stream` of the run `prefix` as host `from` sends it.
+    pub fn stream(from: &str, prefix: &str, stream: Stream) -> String {
+        said(from, prefix, &format!("s/{}", stream.service_name()))
+    }
+
+    /// The service `stream` of the run `prefix` as any host sends it.
+    pub fn stream_any(prefix: &str, service: Stream) -> String {
+        stream("*", prefix, service)
+    }
+
+    /// The host that says what is on `key` (`p/<h>/...`) or asks it (`q/<t>/<h>/...`).
+    pub fn sender(key: &str) -> Option<&str> {
+        let mut parts = key.strip_prefix("fdi-mas/")?.split('/');
+        match parts.next()? {
+            "p" => parts.next(),
+            "q" => parts.nth(1),
+            _ => None,
+        }
     }
 }
 
-/// The Zenoh session of a host: where it listens, whom it connects to.
+/// How the hosts of a run authenticate one another.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Security {
+    /// TLS with mutual authentication: every host shows a certificate of the lab's CA whose
+    /// common name is its host name, and Zenoh's access control lets each host of `lab` send
+    /// only under its own keys; a certificate of no host of `lab` may do nothing.
+    Tls {
+        /// The lab's CA certificate (PEM).
+        ca: std::path::PathBuf,
+        /// This host's certificate and private key (PEM).
+        cert: std::path::PathBuf,
+        key: std::path::PathBuf,
+        /// The hosts of the lab (the deployment file's): their certificates' common names.
+        lab: Vec<String>,
+    },
+    /// Plain TCP: anyone on the network can connect, listen and send (said so by the
+    /// deployment file, and in every run's summary).
+    Insecure,
+}
+
+/// The Zenoh session of a host: where it listens, whom it connects to, how.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct NetConfig {
-    /// Endpoints this host listens on (`tcp/10.0.0.2:7447`).
+    /// Endpoints this host listens on (`tls/10.0.0.2:7447`).
     pub listen: Vec<String>,
     /// Endpoints of the hosts it connects to.
     pub connect: Vec<String>,
+    pub security: Security,
+}
+
+/// How long a connection may take to become a session (its TLS and Zenoh handshakes): a peer
+/// that opens a connection and says nothing is dropped then.
+pub const ACCEPT_TIMEOUT: Duration = Duration::from_secs(2);
+/// The largest message a session takes from a peer.
+pub const MAX_MESSAGE_BYTES: usize = 16 << 20;
+/// How many connections may be in their handshake at once (Zenoh's default: 100); more are
+/// refused until some finish or time out.
+pub const ACCEPT_PENDING: usize = 2048;
+
+/// The access control of a TLS session: each host of `lab` (by its certificate's common
+/// name) may put and hold liveliness tokens only under `fdi-mas/p/<h>/`, declare queryables and
+/// reply only under `fdi-mas/q/<h>/`, ask only as `fdi-mas/q/*/<h>/`, and subscribe to
+/// anything of fdi-mas; whatever else comes in is denied, and nothing goes out to a peer that
+/// is not a host of `lab`.
+pub fn access_control(lab: &[String]) -> String {
+    use serde_json::json;
+    let all = [
+        "put",
+        "delete",
+        "declare_subscriber",
+        "query",
+        "declare_queryable",
+        "reply",
+        "liveliness_token",
+        "declare_liveliness_subscriber",
+        "liveliness_query",
+    ];
+    let rule = |id: String, messages: &[&str], flow: &str, keys: Vec<String>| {
+        json!({"id": id, "messages": messages, "flows": [flow], "permission": "allow",
+               "key_exprs": keys})
+    };
+    let mut rules = vec![
+        rule(
+            "listen".into(),
+            &[
+                "declare_subscriber",
+                "declare_liveliness_subscriber",
+                "liveliness_query",
+            ],
+            "ingress",
+            vec!["fdi-mas/**".into()],
+        ),
+        rule("out".into(), &all, "egress", vec!["**".into()]),
+    ];
+    let (mut subjects, mut policies) = (Vec::new(), Vec::new());
+    for (i, h) in lab.iter().enumerate() {
+        let own = [
+            rule(
+                format!("says{i}"),
+                &["put", "delete", "liveliness_token", "reply"],
+                "ingress",
+                vec![format!("fdi-mas/p/{h}/**")],
+            ),
+            rule(
+                format!("answers{i}"),
+                &["declare_queryable", "reply"],
+                "ingress",
+                vec![format!("fdi-mas/q/{h}/**")],
+            ),
+            rule(
+                format!("asks{i}"),
+                &["query"],
+                "ingress",
+                vec![format!("fdi-mas/q/*/{h}/**")],
+            ),
+        ];
+        let mut ids = vec![json!("listen"), json!("out")];
+        ids.extend(own.iter().map(|r| r["id"].clone()));
+        rules.extend(own);
+        subjects.push(json!({"id": format!("host{i}"), "cert_common_names": [h]}));
+        policies.push(json!({"rules": ids, "subjects": [format!("host{i}")]}));
+    }
+    json!({"enabled": true, "default_permission": "deny", "rules": rules,
+           "subjects": subjects, "policies": policies})
+    .to_string()
 }
 
 impl NetConfig {
@@ -138,7 +287,7 @@ impl NetConfig {
         let set = |c: &mut zenoh::Config, key: &str, value: String| {
             c.insert_json5(key, &value)
                 .map_err(|source| NetError::Session {
-                    what: format!("setting `{key}` to {value}"),
+                    what: format!("setting `{key}`"),
                     source,
                 })
         };
@@ -146,6 +295,7 @@ impl NetConfig {
             let items: Vec<String> = v.iter().map(|e| format!("\"{e}{suffix}\"")).collect();
             format!("[{}]", items.join(", "))
         };
+        let quoted = |p: &std::path::Path| serde_json::json!(p.display().to_string()).to_string();
         set(&mut c, "mode", "\"peer\"".into())?;
         // Only the endpoints named: no multicast scouting on a lab network.
         set(&mut c, "scouting/multicast/enabled", "false".into())?;
@@ -164,7 +314,51 @@ impl NetConfig {
             "transport/link/tx/lease",
             LEASE.as_millis().to_string(),
         )?;
+        // The door stays open: a connection that does not finish its handshakes in time is
+        // dropped, and many may be in them at once.
+        set(
+            &mut c,
+            "transport/unicast/accept_timeout",
+            ACCEPT_TIMEOUT.as_millis().to_string(),
+        )?;
+        set(
+            &mut c,
+            "transport/unicast/accept_pending",
+            ACCEPT_PENDING.to_string(),
+        )?;
+        // What one peer can make this session hold for one message (Zenoh's default: 1 GiB);
+        // a run's largest are the pieces of traces.
+        set(
+            &mut c,
+            "transport/link/rx/max_message_size",
+            MAX_MESSAGE_BYTES.to_string(),
+        )?;
         set(&mut c, "adminspace/enabled", "false".into())?;
+        match &self.security {
+            Security::Insecure => {
+                set(&mut c, "transport/link/protocols", "[\"tcp\"]".into())?;
+            }
+            Security::Tls { ca, cert, key, lab } => {
+                // QUIC only (TLS 1.3, mutual authentication): nothing else is accepted. Zenoh's
+                // TLS over TCP is not used: its link reads and writes one TLS stream from two
+                // tasks at once, which rustls does not support, and under traffic both ways
+                // the link fails ("handshake not complete") within a second.
+                set(&mut c, "transport/link/protocols", "[\"quic\"]".into())?;
+                let tls = "transport/link/tls";
+                set(&mut c, &format!("{tls}/root_ca_certificate"), quoted(ca))?;
+                set(&mut c, &format!("{tls}/listen_certificate"), quoted(cert))?;
+                set(&mut c, &format!("{tls}/listen_private_key"), quoted(key))?;
+                set(&mut c, &format!("{tls}/connect_certificate"), quoted(cert))?;
+                set(&mut c, &format!("{tls}/connect_private_key"), quoted(key))?;
+                set(&mut c, &format!("{tls}/enable_mtls"), "true".into())?;
+                set(
+                    &mut c,
+                    &format!("{tls}/verify_name_on_connect"),
+                    "true".into(),
+                )?;
+                set(&mut c, "access_control", access_control(lab))?;
+            }
+        }
         Ok(c)
     }
 }
@@ -243,6 +437,11 @@ impl Request {
         query_body(&self.0)
     }
 
+    /// The host that asks: the sender named in the request's key (with TLS, its certificate's).
+    pub fn asker(&self) -> Option<String> {
+        keys::sender(self.0.key_expr().as_str()).map(str::to_string)
+    }
+
     /// Answers with `Ok(body)` or refuses with a message.
     pub fn answer(self, answer: Result<Vec<u8>, String>) -> Result<(), NetError> {
         reply(&self.0, answer).map_err(|source| NetError::Key {
@@ -271,6 +470,8 @@ fn reply(query: &zenoh::query::Query, answer: Result<Vec<u8>, String>) -> Result
 impl Net {
     /// Opens the session; fails naming the endpoint that cannot be listened on.
     pub fn open(config: &NetConfig) -> Result<Self, NetError> {
+        // Zenoh's own log, when asked for with RUST_LOG (docs/multi-host.md, Troubleshooting).
+        zenoh::try_init_log_from_env();
         let session = zenoh::open(config.zenoh()?)
             .wait()
             .map_err(|source| NetError::Session {
@@ -350,15 +551,21 @@ impl Net {
         })
     }
 
-    /// Hands every payload put on `key` to `f` (on a Zenoh thread: keep it short).
+    /// Hands every payload put on `key` (a key expression) to `f` with the key it came on (on a
+    /// Zenoh thread: keep it short).
     pub fn subscribe(
         &self,
         key: &str,
-        f: impl Fn(Vec<u8>) + Send + Sync + 'static,
+        f: impl Fn(&str, Vec<u8>) + Send + Sync + 'static,
     ) -> Result<Subscription, NetError> {
         self.session
             .declare_subscriber(key.to_string())
-            .callback(move |sample| f(sample.payload().to_bytes().into_owned()))
+            .callback(move |sample| {
+                f(
+                    sample.key_expr().as_str(),
+                    sample.payload().to_bytes().into_owned(),
+                )
+            })
             .wait()
             .map(Subscription)
             .map_err(Self::key_error(key))
@@ -502,9 +709,18 @@ pub struct HostPlan {
     pub outbound: Vec<Stream>,
     /// The wake-up events of those processes: the bridge listens on them in their place.
     pub remote_wakes: Vec<Wake>,
-    /// Streams published elsewhere for processes here, with the local wake-up events rung
-    /// after each arrival.
-    pub inbound: Vec<(Stream, Vec<Wake>)>,
+    /// Streams published elsewhere for processes here.
+    pub inbound: Vec<Inbound>,
+}
+
+/// A stream that comes into a host.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Inbound {
+    pub stream: Stream,
+    /// The local wake-up events rung after each arrival.
+    pub ring: Vec<Wake>,
+    /// The hosts that send it: a frame on its key from any other is refused.
+    pub from: Vec<String>,
 }
 
 impl HostPlan {
@@ -604,8 +820,18 @@ pub fn plan(layout: &Layout, here: &str) -> Result<HostPlan, String> {
             remote.extend(cons.iter().copied().filter(|c| !on(c, here)));
         }
         if inb {
-            let local: Vec<Wake> = cons.iter().copied().filter(|c| on(c, here)).collect();
-            plan.inbound.push((stream, local));
+            let ring: Vec<Wake> = cons.iter().copied().filter(|c| on(c, here)).collect();
+            let from: BTreeSet<String> = pubs
+                .iter()
+                .filter_map(|p| layout.host_of.get(p))
+                .filter(|h| *h != here)
+                .cloned()
+                .collect();
+            plan.inbound.push(Inbound {
+                stream,
+                ring,
+                from: from.into_iter().collect(),
+            });
         }
     }
     plan.remote_wakes = remote.into_iter().collect();
@@ -617,6 +843,12 @@ pub fn plan(layout: &Layout, here: &str) -> Result<HostPlan, String> {
 trait Carried: Payload + IntoBytes + FromBytes + Immutable + KnownLayout {
     /// Adds `by` ns to every stamp that is set (non-zero).
     fn shift_clock(&mut self, by: i64);
+
+    /// (agent, sequence number) of a payload whose sender numbers them in increasing order,
+    /// per agent: the bridge refuses one that does not come after the last it let in.
+    fn order(&self) -> Option<(u32, u64)> {
+        None
+    }
 }
 
 fn shifted(ns: &mut u64, by: i64) {
@@ -626,6 +858,10 @@ fn shifted(ns: &mut u64, by: i64) {
 }
 
 impl Carried for MeasurementMsg {
+    fn order(&self) -> Option<(u32, u64)> {
+        Some((self.agent, self.seq))
+    }
+
     fn shift_clock(&mut self, by: i64) {
         for ns in [
             &mut self.agent_sent_ns,
@@ -638,6 +874,10 @@ impl Carried for MeasurementMsg {
 }
 
 impl Carried for TorqueMsg {
+    fn order(&self) -> Option<(u32, u64)> {
+        Some((self.agent, self.seq))
+    }
+
     fn shift_clock(&mut self, by: i64) {
         for ns in [
             &mut self.agent_sent_ns,
@@ -662,6 +902,10 @@ impl Carried for StatusMsg {
 }
 
 impl Carried for AlarmMsg {
+    fn order(&self) -> Option<(u32, u64)> {
+        Some((self.agent, self.seq))
+    }
+
     fn shift_clock(&mut self, by: i64) {
         shifted(&mut self.monitor_sent_ns, by);
     }
@@ -695,6 +939,31 @@ pub struct BridgeCounts {
     pub sent: u64,
     /// Payloads received and published locally.
     pub received: u64,
+    /// Frames refused: sent on a run's key by a host that does not send that stream in the
+    /// run, or out of order (a sequence number not after the last let in for its agent: a
+    /// forged, duplicated or replayed frame, or the honest frame a forged one overtook).
+    pub refused: u64,
+}
+
+/// The last sequence number let in per (port, agent), for [`Carried::order`].
+type Admitted = BTreeMap<(usize, u32), u64>;
+
+/// Frames refused by a bridge: how many, and the first, described.
+#[derive(Debug, Default)]
+struct Refusals {
+    count: AtomicU64,
+    first: std::sync::Mutex<Option<String>>,
+}
+
+impl Refusals {
+    fn note(&self, what: impl FnOnce() -> String) {
+        if self.count.fetch_add(1, Ordering::Relaxed) == 0 {
+            *self
+                .first
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner) = Some(what());
+        }
+    }
 }
 
 /// The network publishers of a bridge.
@@ -784,15 +1053,56 @@ impl<X: Transport> InPort<X> {
         })
     }
 
-    fn publish(&self, key: &str, bytes: &[u8], by: i64) -> Result<(), NetError> {
-        match self {
-            Self::Measurement(p) => p.send(decode(key, bytes, by)?)?,
-            Self::Torque(p) => p.send(decode(key, bytes, by)?)?,
-            Self::Control(p) => p.send(decode(key, bytes, by)?)?,
-            Self::Status(p) => p.send(decode(key, bytes, by)?)?,
-            Self::Alarm(p) => p.send(decode(key, bytes, by)?)?,
+    /// Publishes the frame `bytes` of port `i` locally, unless it is out of order (then it
+    /// says why, and nothing is published). A frame of the wrong size is an error.
+    fn publish(
+        &self,
+        (i, key): (usize, &str),
+        bytes: &[u8],
+        by: i64,
+        admitted: &mut Admitted,
+    ) -> Result<Option<String>, NetError> {
+        fn admit<T: Carried>(
+            (i, key): (usize, &str),
+            bytes: &[u8],
+            by: i64,
+            admitted: &mut Admitted,
+        ) -> Result<Result<T, String>, NetError> {
+            let value: T = decode(key, bytes, by)?;
+            if let Some((agent, seq)) = value.order() {
+                match admitted.entry((i, agent)) {
+                    std::collections::btree_map::Entry::Occupied(mut last) => {
+                        if seq <= *last.get() {
+                            return Ok(Err(format!(
+                                "a frame on `{key}` for agent {agent} numbered {seq}, not after \
+                                 the last let in ({})",
+                                last.get()
+                            )));
+                        }
+                        last.insert(seq);
+                    }
+                    std::collections::btree_map::Entry::Vacant(v) => {
+                        v.insert(seq);
+                    }
+                }
+            }
+            Ok(Ok(value))
+        }
+        let at = (i, key);
+        let refused = match self {
+            Self::Measurement(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
+            Self::Torque(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
+            Self::Control(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
+            Self::Status(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
+            Self::Alarm(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
         };
-        Ok(())
+        match refused {
+            Ok(sent) => {
+                sent?;
+                Ok(None)
+            }
+            Err(why) => Ok(Some(why)),
+        }
     }
 }
 
@@ -812,6 +1122,7 @@ pub struct Bridge {
     threads: Vec<JoinHandle<Result<(), NetError>>>,
     sent: Arc<AtomicU64>,
     received: Arc<AtomicU64>,
+    refusals: Arc<Refusals>,
     _subscriptions: Vec<Subscription>,
 }
 
@@ -824,8 +1135,7 @@ impl Bridge {
     /// local processes may be started then, and none of what they send is lost.
     pub fn start<X: Transport + 'static>(
         net: &Net,
-        prefix: &str,
-        run: &str,
+        (prefix, run, here): (&str, &str, &str),
         sizing: Sizing,
         plan: &HostPlan,
         offset_ns: i64,
@@ -834,6 +1144,7 @@ impl Bridge {
         let failure: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
         let sent = Arc::new(AtomicU64::new(0));
         let received = Arc::new(AtomicU64::new(0));
+        let refusals = Arc::new(Refusals::default());
         let mut threads = Vec::new();
         let mut subscriptions = Vec::new();
         let mut routes = Vec::new();
@@ -842,7 +1153,7 @@ impl Bridge {
             let outboxes: Vec<(Stream, Arc<NetOutbox>)> = plan
                 .outbound
                 .iter()
-                .map(|&s| Ok((s, Arc::new(net.outbox(&keys::stream(run, s))?))))
+                .map(|&s| Ok((s, Arc::new(net.outbox(&keys::stream(here, run, s))?))))
                 .collect::<Result<_, NetError>>()?;
             routes.extend(outboxes.iter().map(|(_, o)| o.clone()));
             let (ready_tx, ready_rx) = mpsc::channel();
@@ -897,13 +1208,26 @@ impl Bridge {
         }
 
         if !plan.inbound.is_empty() {
-            let (tx, rx) = mpsc::channel::<(usize, Vec<u8>)>();
+            let (tx, rx) = mpsc::channel::<(usize, u8, Vec<u8>)>();
             let (ready_tx, ready_rx) = mpsc::channel();
             let inbound = plan.inbound.clone();
-            let keys: Vec<String> = inbound.iter().map(|(s, _)| keys::stream(run, *s)).collect();
-            let thread_keys = keys.clone();
+            let keys: Vec<String> = inbound
+                .iter()
+                .map(|i| keys::stream_any(run, i.stream))
+                .collect();
+            // The key of each (port, sending host), for what is said of a frame.
+            let sent_on: Vec<Vec<String>> = inbound
+                .iter()
+                .map(|i| {
+                    i.from
+                        .iter()
+                        .map(|h| keys::stream(h, run, i.stream))
+                        .collect()
+                })
+                .collect();
             let thread_prefix = prefix.to_string();
             let (stop, received, fail) = (stop.clone(), received.clone(), failure.clone());
+            let refused = refusals.clone();
             let thread = std::thread::Builder::new()
                 .name("bridge in".into())
                 .spawn(move || {
@@ -912,7 +1236,7 @@ impl Bridge {
                             let t = X::open(&thread_prefix, "bridge-in", sizing)?;
                             let ports = inbound
                                 .iter()
-                                .map(|(s, _)| InPort::<X>::open(&t, *s))
+                                .map(|i| InPort::<X>::open(&t, i.stream))
                                 .collect::<Result<Vec<_>, IpcError>>()?;
                             Ok::<_, IpcError>((t, ports))
                         })();
@@ -924,20 +1248,27 @@ impl Bridge {
                         // ready).
                         let mut bells: BTreeMap<Wake, X::Bell> = BTreeMap::new();
                         let mut due: BTreeSet<Wake> = BTreeSet::new();
+                        let mut admitted = Admitted::new();
                         loop {
                             let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
                                 Ok(frame) => Some(frame),
                                 Err(mpsc::RecvTimeoutError::Timeout) => None,
                                 Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
                             };
-                            for (i, bytes) in first.into_iter().chain(rx.try_iter()) {
-                                ports[i].publish(
-                                    &thread_keys[i],
+                            for (i, from, bytes) in first.into_iter().chain(rx.try_iter()) {
+                                let key = &sent_on[i][usize::from(from)];
+                                match ports[i].publish(
+                                    (i, key),
                                     &bytes,
                                     offset_ns.wrapping_neg(),
-                                )?;
-                                received.fetch_add(1, Ordering::Relaxed);
-                                due.extend(inbound[i].1.iter().copied());
+                                    &mut admitted,
+                                )? {
+                                    None => {
+                                        received.fetch_add(1, Ordering::Relaxed);
+                                        due.extend(inbound[i].ring.iter().copied());
+                                    }
+                                    Some(why) => refused.note(|| why),
+                                }
                             }
                             for wake in std::mem::take(&mut due) {
                                 if let std::collections::btree_map::Entry::Vacant(e) =
@@ -960,8 +1291,26 @@ impl Bridge {
             wait_ready(&ready_rx, "in")?;
             for (i, key) in keys.iter().enumerate() {
                 let tx = tx.clone();
-                subscriptions.push(net.subscribe(key, move |bytes| {
-                    let _ = tx.send((i, bytes));
+                let (from, service) = (
+                    plan.inbound[i].from.clone(),
+                    plan.inbound[i].stream.service_name(),
+                );
+                let refused = refusals.clone();
+                subscriptions.push(net.subscribe(key, move |on, bytes| {
+                    let sender = keys::sender(on);
+                    match sender.and_then(|h| from.iter().position(|f| f == h)) {
+                        // A run has a handful of hosts: the index fits.
+                        Some(k) if k <= usize::from(u8::MAX) => {
+                            let _ = tx.send((i, k as u8, bytes));
+                        }
+                        _ => refused.note(|| {
+                            format!(
+                                "a frame on `{on}` from host `{}`, which does not send \
+                                 `{service}` in this run",
+                                sender.unwrap_or("?")
+                            )
+                        }),
+                    }
                 })?);
             }
         }
@@ -972,8 +1321,18 @@ impl Bridge {
             threads,
             sent,
             received,
+            refusals,
             _subscriptions: subscriptions,
         })
+    }
+
+    /// The first frame it refused, described ([`BridgeCounts::refused`] counts them all).
+    pub fn first_refusal(&self) -> Option<String> {
+        self.refusals
+            .first
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone()
     }
 
     /// Why a thread of the bridge ended early, if one did: the run cannot go on without it.
@@ -1000,6 +1359,7 @@ impl Bridge {
         BridgeCounts {
             sent: self.sent.load(Ordering::Relaxed),
             received: self.received.load(Ordering::Relaxed),
+            refused: self.refusals.count.load(Ordering::Relaxed),
         }
     }
 
@@ -1127,15 +1487,17 @@ mod tests {
                     );
                     let inbound = &plans[hc.as_str()].inbound;
                     assert!(
-                        inbound.iter().any(|(s, w)| *s == stream && w.contains(c)),
-                        "{stream:?} into {hc} rings {c:?}"
+                        inbound.iter().any(|i| i.stream == stream
+                            && i.ring.contains(c)
+                            && i.from.contains(hp)),
+                        "{stream:?} into {hc} rings {c:?}, from {hp}"
                     );
                 }
             }
         }
         // Nothing crosses where nothing needs to.
         let cell_b = &plans["cell-b"];
-        assert!(!cell_b.inbound.iter().any(|(s, _)| *s == Stream::Torque(1)));
+        assert!(!cell_b.inbound.iter().any(|i| i.stream == Stream::Torque(1)));
         assert!(!plans["control"].outbound.contains(&Stream::Torque(4)));
         assert_eq!(cell_b.remote_wakes, vec![Wake::Attacker, Wake::Launcher]);
     }
@@ -1156,7 +1518,7 @@ mod tests {
         let mut l = split();
         l.host_of.insert(Wake::Attacker, "adversary".into());
         let p = plan(&l, "adversary").expect("plan");
-        let inbound: Vec<Stream> = p.inbound.iter().map(|(s, _)| *s).collect();
+        let inbound: Vec<Stream> = p.inbound.iter().map(|i| i.stream).collect();
         assert!(inbound.contains(&Stream::Measurement));
         assert!(inbound.contains(&Stream::Actuation));
         assert!(inbound.contains(&Stream::Control));
@@ -1174,10 +1536,9 @@ mod tests {
             .outbound
             .contains(&Stream::Torque(3)));
         let cell_b = plan(&l, "cell-b").expect("plan");
-        assert!(cell_b
-            .inbound
-            .iter()
-            .any(|(s, w)| *s == Stream::Torque(3) && w == &[Wake::Agent(3)]));
+        assert!(cell_b.inbound.iter().any(|i| i.stream == Stream::Torque(3)
+            && i.ring == [Wake::Agent(3)]
+            && i.from == ["adversary"]));
     }
 
     #[test]
@@ -1226,11 +1587,13 @@ mod tests {
         let control_net = Net::open(&NetConfig {
             listen: vec![endpoint.clone()],
             connect: Vec::new(),
+            security: Security::Insecure,
         })
         .expect("control session");
         let cell_net = Net::open(&NetConfig {
             listen: Vec::new(),
             connect: vec![endpoint],
+            security: Security::Insecure,
         })
         .expect("cell session");
         let l = layout(&[
@@ -1244,8 +1607,7 @@ mod tests {
         let (pc, pa) = (format!("{run}c"), format!("{run}a"));
         let control = Bridge::start::<Local>(
             &control_net,
-            &pc,
-            &run,
+            (&pc, &run, "control"),
             sizing,
             &plan(&l, "control").expect("plan"),
             0,
@@ -1253,8 +1615,7 @@ mod tests {
         .expect("control bridge");
         let cell = Bridge::start::<Local>(
             &cell_net,
-            &pa,
-            &run,
+            (&pa, &run, "cell"),
             sizing,
             &plan(&l, "cell").expect("plan"),
             250,
@@ -1327,8 +1688,41 @@ mod tests {
         assert_eq!(last.attacker_received_ns, 0, "an unset stamp stays unset");
         assert!(cell.counts().sent >= 200 && control.counts().received >= 200);
         assert_eq!(control.failure(), None);
+        assert_eq!(control.counts().refused, 0);
+        // A frame numbered before the last let in (a replay), and one on the key of a host
+        // that does not send measurements in this run: refused, counted, nothing published.
+        let received = control.counts().received;
+        let stale = encode(msg(150), 0);
+        let own = keys::stream("cell", &run, Stream::Measurement);
+        cell_net
+            .outbox(&own)
+            .expect("raw")
+            .put(&stale)
+            .expect("put");
+        let other = keys::stream("elsewhere", &run, Stream::Measurement);
+        cell_net
+            .outbox(&other)
+            .expect("raw")
+            .put(&encode(msg(500), 0))
+            .expect("put");
+        let began = std::time::Instant::now();
+        while control.counts().refused < 2 {
+            assert!(
+                began.elapsed() < Duration::from_secs(10),
+                "refused: {:?}",
+                control.counts()
+            );
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        assert_eq!(control.counts().received, received, "nothing let in");
+        let first = control.first_refusal().expect("described");
+        assert!(
+            first.contains("numbered 150") || first.contains("host `elsewhere`"),
+            "{first}"
+        );
+        inbox.drain(|m| panic!("let in: {m:?}")).expect("drain");
         // A frame of another shape on the run's key: the receiving bridge stops, naming it.
-        let key = keys::stream(&run, Stream::Measurement);
+        let key = own;
         cell_net
             .outbox(&key)
             .expect("raw")
@@ -1357,8 +1751,21 @@ mod tests {
         assert!(check_host_name("cell-a").is_ok());
         assert!(check_host_name("cell a").is_err());
         assert!(check_host_name("").is_err());
-        assert!(check_endpoint("tcp/10.0.0.2:7447").is_ok());
+        assert_eq!(check_endpoint("tcp/10.0.0.2:7447"), Ok(Link::Tcp));
+        assert_eq!(check_endpoint("quic/10.0.0.2:7447"), Ok(Link::Quic));
+        assert!(check_endpoint("tls/10.0.0.2:7447").is_err());
         assert!(check_endpoint("tcp/[::1]:7447").is_ok());
+        assert_eq!(endpoint_address("quic/[::1]:7447"), Some("::1"));
+        assert_eq!(endpoint_address("quic/10.0.0.2:7447"), Some("10.0.0.2"));
+        assert_eq!(
+            keys::sender("fdi-mas/p/cell/run/x/s/fdi/torque/3"),
+            Some("cell")
+        );
+        assert_eq!(
+            keys::sender("fdi-mas/q/cell/control/run/x/release"),
+            Some("control")
+        );
+        assert_eq!(keys::sender("other/p/cell"), None);
         assert!(check_endpoint("udp/10.0.0.2:7447").is_err());
         assert!(check_endpoint("tcp/10.0.0.2").is_err());
         assert!(check_endpoint("tcp/10.0.0.2:0").is_err());

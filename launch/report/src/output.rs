@@ -109,6 +109,27 @@ fn write_summary_json(dir: &Path, v: serde_json::Value) -> Result<()> {
     .context("writing summary.json")
 }
 
+/// The network path of a run split over hosts, in a line (None on one host): whether it was
+/// authenticated, and the frames refused on it.
+pub fn network_line(s: &RunSummary) -> Option<String> {
+    let n = s.network.as_ref()?;
+    let how = if n.authenticated {
+        "TLS with mutual authentication and per-host access control"
+    } else {
+        "plain TCP, NOT authenticated: anyone on the network could read and write it (the \
+         deployment file says `insecure = true`)"
+    };
+    let refused = match n.refused_frames {
+        0 => "no frame refused".to_string(),
+        k => format!(
+            "{k} frames REFUSED on the run's keys ({}): the run's data may have been altered \
+             outside the attacker process, its results cannot be attributed to its attack",
+            n.refusals.join("; ")
+        ),
+    };
+    Some(format!("network path: {how}; {refused}"))
+}
+
 /// The controller and numerics options of a run beyond its mode (which its header names):
 /// `the paper's calibration (SPEC §4)` or each difference with the paper's value.
 pub fn numerics_line(s: &RunSummary) -> String {

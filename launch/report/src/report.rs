@@ -187,6 +187,7 @@ fn rejoin(
             summary.engine.clone_from(&s.engine);
             summary.placement.clone_from(&s.placement);
             summary.hosts.clone_from(&s.hosts);
+            summary.network.clone_from(&s.network);
             // What only the run knew: which robots were lost, and why it ended early.
             summary.lost_agents.clone_from(&s.lost_agents);
             summary.partial.clone_from(&s.partial);
@@ -976,6 +977,9 @@ fn run_section(md: &mut String, run_dir: &Path, r: &Resolved, s: &RunSummary) {
     }
     if !s.hosts.is_empty() {
         let _ = writeln!(md, "| hosts | {} |", s.hosts.join("<br>"));
+    }
+    if let Some(line) = crate::output::network_line(s) {
+        let _ = writeln!(md, "| {} |", line.replacen(": ", " | ", 1));
     }
 }
 

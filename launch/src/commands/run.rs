@@ -209,7 +209,9 @@ fn verdict(s: &RunSummary) -> Option<String> {
     }
 }
 
-/// The exit status of a run that produced a summary: 128 + signal when interrupted, 5 when the
+/// The exit status of a run that produced a summary: 128 + signal when interrupted, 6 when the
+/// bridges between hosts refused frames on the run's keys (its data may have been altered
+/// outside the attacker: its results cannot be attributed), 5 when the
 /// control center lost every robot for good (the run failed: none was controlled to its end),
 /// 4 when a robot diverged, 3 when a realtime run lost a robot for a while, rejoined or not (it
 /// ran uncontrolled meanwhile: not a clean run), else 0.
@@ -222,6 +224,12 @@ pub fn exit_code(summary: &RunSummary) -> ExitCode {
             }
             .exit_code(),
         )
+    } else if summary
+        .network
+        .as_ref()
+        .is_some_and(|n| n.refused_frames > 0)
+    {
+        ExitCode::from(6)
     } else if summary.lost_every_agent() {
         ExitCode::from(5)
     } else if !summary.diverged().is_empty() {
@@ -241,6 +249,9 @@ fn print_summary(s: &RunSummary) {
     println!("numerics: {}", output::numerics_line(s));
     if let Some(p) = &s.placement {
         println!("processes: {p}");
+    }
+    if let Some(line) = output::network_line(s) {
+        println!("{line}");
     }
     if let Some(notice) = output::partial_notice(s) {
         println!("{}", notice.to_uppercase());

@@ -4,12 +4,12 @@
 //! `fdi_runtime::net`). docs/multi-host.md is the user's guide.
 
 use std::collections::{BTreeMap, BTreeSet};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 use fdi_common::scenario::{self, Resolved};
 use fdi_runtime::ipc::Wake;
-use fdi_runtime::net::{check_endpoint, check_host_name, Layout};
+use fdi_runtime::net::{check_endpoint, check_host_name, Layout, Link, Security};
 use serde::{Deserialize, Serialize};
 
 /// The deployment file as written.
@@ -18,13 +18,22 @@ use serde::{Deserialize, Serialize};
 struct DeploymentFile {
     /// The host `fdi-launch run` runs on: the launcher, and whatever is not placed elsewhere.
     coordinator: String,
+    /// The folder of the lab's certificates (`fdi-launch certs`), relative to the file.
+    #[serde(default)]
+    certs: Option<String>,
+    /// Plain TCP between the hosts, neither encrypted nor authenticated: only when said.
+    #[serde(default)]
+    insecure: bool,
+    /// How long a run may make no progress before it is stopped, named (s).
+    #[serde(default)]
+    stall_timeout_s: Option<f64>,
     hosts: BTreeMap<String, HostFile>,
 }
 
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct HostFile {
-    /// Zenoh endpoint the host listens on: `tcp/<address>:<port>`.
+    /// Zenoh endpoint the host listens on: `quic/<address>:<port>` (`tcp/` when insecure).
     endpoint: String,
     /// Agents that run on this host.
     #[serde(default)]
@@ -41,16 +50,170 @@ pub struct Host {
     pub endpoint: String,
 }
 
+/// How the hosts of a deployment reach one another.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum LabSecurity {
+    /// TLS with mutual authentication, the certificates in this folder: `ca.pem`, and
+    /// `<host>.pem` with `<host>.key` for each host (`fdi-launch certs`).
+    Tls { certs: PathBuf },
+    /// Plain TCP (`insecure = true`).
+    Insecure,
+}
+
+/// The hosts of a deployment file and how they reach one another: what a serve reads of it.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Lab {
+    /// The file it was read from (for messages).
+    pub source: String,
+    pub coordinator: String,
+    pub hosts: Vec<Host>,
+    pub security: LabSecurity,
+}
+
+impl Lab {
+    /// Reads the hosts of the deployment file `path` (its placements are not looked at).
+    pub fn load(path: &Path) -> Result<Self> {
+        Ok(Self::read(path)?.0)
+    }
+
+    fn read(path: &Path) -> Result<(Self, DeploymentFile)> {
+        let text = scenario::read_limited(path)
+            .map_err(|e| anyhow::anyhow!("the deployment file (--hosts): {e}"))?;
+        let source = path.display().to_string();
+        let file: DeploymentFile =
+            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        let lab = Self::check(&file, &source, base)?;
+        Ok((lab, file))
+    }
+
+    /// Checks host names, endpoints and the security of `file`.
+    fn check(file: &DeploymentFile, source: &str, base: &Path) -> Result<Self> {
+        check_hosts_named(file, source)?;
+        let mut endpoints: BTreeMap<&str, &str> = BTreeMap::new();
+        let want = if file.insecure { Link::Tcp } else { Link::Quic };
+        for (name, h) in &file.hosts {
+            check_host(name, h, &mut endpoints, source)?;
+            let link = check_endpoint(&h.endpoint)
+                .map_err(|e| problem(source, format!("hosts.{name}.endpoint"), e))?;
+            if link != want {
+                let why = if file.insecure {
+                    "the file says `insecure = true`: endpoints are `tcp/<address>:<port>`"
+                } else {
+                    "hosts talk over QUIC with mutual TLS authentication unless the file says \
+                     `insecure = true` (docs/security.md): endpoints are `quic/<address>:<port>`"
+                };
+                return Err(problem(
+                    source,
+                    format!("hosts.{name}.endpoint"),
+                    format!("`{}`: {why}", h.endpoint),
+                ));
+            }
+        }
+        let security = match (&file.certs, file.insecure) {
+            (Some(_), true) => {
+                return Err(problem(
+                    source,
+                    "insecure".into(),
+                    "the file names `certs` and says `insecure = true`: choose one".into(),
+                ))
+            }
+            (None, true) => LabSecurity::Insecure,
+            (Some(dir), false) => LabSecurity::Tls {
+                certs: base.join(dir),
+            },
+            (None, false) => {
+                return Err(problem(
+                    source,
+                    "certs".into(),
+                    format!(
+                        "missing: the hosts authenticate one another with the lab's \
+                         certificates; make them with `fdi-launch certs --hosts {source}` and \
+                         write `certs = \"certs\"`, or write `insecure = true` to run over plain \
+                         TCP (docs/security.md)"
+                    ),
+                ))
+            }
+        };
+        Ok(Self {
+            source: source.into(),
+            coordinator: file.coordinator.clone(),
+            hosts: file
+                .hosts
+                .iter()
+                .map(|(name, h)| Host {
+                    name: name.clone(),
+                    endpoint: h.endpoint.clone(),
+                })
+                .collect(),
+            security,
+        })
+    }
+
+    /// The host `name` of the file, or an error naming the file.
+    pub fn host(&self, name: &str) -> Result<&Host> {
+        self.hosts.iter().find(|h| h.name == name).ok_or_else(|| {
+            anyhow::anyhow!(
+                "{}: names no host `{name}` (its hosts: {})",
+                self.source,
+                self.hosts
+                    .iter()
+                    .map(|h| h.name.as_str())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        })
+    }
+
+    /// How host `name` opens its Zenoh session: with TLS, its certificate and key, the lab's
+    /// CA, and the lab's hosts (checked to exist, named otherwise).
+    pub fn security_of(&self, name: &str) -> Result<Security> {
+        match &self.security {
+            LabSecurity::Insecure => Ok(Security::Insecure),
+            LabSecurity::Tls { certs } => {
+                let files = crate::run::certs::CertFiles::new(certs, name);
+                for p in [&files.ca, &files.cert, &files.key] {
+                    if !p.is_file() {
+                        bail!(
+                            "{}: `certs`: {} is missing on this host (make the lab's \
+                             certificates with `fdi-launch certs --hosts {}` and copy the CA's \
+                             and this host's to it: docs/security.md)",
+                            self.source,
+                            p.display(),
+                            self.source
+                        );
+                    }
+                }
+                Ok(Security::Tls {
+                    ca: files.ca,
+                    cert: files.cert,
+                    key: files.key,
+                    lab: self.hosts.iter().map(|h| h.name.clone()).collect(),
+                })
+            }
+        }
+    }
+
+    /// Whether the hosts authenticate one another.
+    pub fn authenticated(&self) -> bool {
+        matches!(self.security, LabSecurity::Tls { .. })
+    }
+}
+
 /// Where the processes of a split run are, checked against the scenario.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Deployment {
     /// The file it was read from (for messages).
     pub source: String,
+    /// Its hosts and how they reach one another.
+    pub lab: Lab,
     pub coordinator: Host,
     /// The other hosts, each with a `fdi-launch serve`.
     pub others: Vec<Host>,
     /// Every process of the run (and the launcher) with its host.
     pub layout: Layout,
+    /// How long the run may make no progress before it is stopped, named.
+    pub stall_timeout: std::time::Duration,
 }
 
 /// The process roles a deployment can place with `roles`.
@@ -65,23 +228,17 @@ impl Deployment {
     /// regular file of at most [`scenario::MAX_FILE_BYTES`], refused otherwise without reading
     /// beyond the limit.
     pub fn load(path: &Path, resolved: &Resolved) -> Result<Self> {
-        let text = scenario::read_limited(path)
-            .map_err(|e| anyhow::anyhow!("the deployment file (--hosts): {e}"))?;
-        let source = path.display().to_string();
-        let file: DeploymentFile =
-            toml::from_str(&text).map_err(|e| anyhow::anyhow!("{source}: {e}"))?;
-        Self::check(file, &source, resolved)
+        let (lab, file) = Lab::read(path)?;
+        Self::check(file, lab, resolved)
     }
 
     /// Checks a parsed deployment file against the scenario and lays out every process.
-    fn check(file: DeploymentFile, source: &str, resolved: &Resolved) -> Result<Self> {
-        check_hosts_named(&file, source)?;
+    fn check(file: DeploymentFile, lab: Lab, resolved: &Resolved) -> Result<Self> {
+        let source = lab.source.as_str();
         let scenario_agents: BTreeSet<u32> =
             resolved.scenario.agents.iter().map(|a| a.id).collect();
         let mut host_of: BTreeMap<Wake, String> = BTreeMap::new();
-        let mut endpoints: BTreeMap<&str, &str> = BTreeMap::new();
         for (name, h) in &file.hosts {
-            check_host(name, h, &mut endpoints, source)?;
             place_agents(name, h, &scenario_agents, &mut host_of, source)?;
             place_roles(name, h, &mut host_of, source)?;
         }
@@ -105,9 +262,24 @@ impl Deployment {
             .map(host)
             .collect();
         check_hosts_run_something(&others, &layout, source)?;
+        let stall_timeout = match file.stall_timeout_s {
+            None => crate::run::runtime::STALL_TIMEOUT,
+            Some(t) if t.is_finite() && (1.0..=3600.0).contains(&t) => {
+                std::time::Duration::from_secs_f64(t)
+            }
+            Some(t) => {
+                return Err(problem(
+                    source,
+                    "stall_timeout_s".into(),
+                    format!("must be 1 to 3600 s, got {t}"),
+                ))
+            }
+        };
         Ok(Self {
             source: source.into(),
             coordinator: host(&coordinator),
+            lab: lab.clone(),
+            stall_timeout,
             others,
             layout,
         })
@@ -163,8 +335,6 @@ fn check_host<'a>(
     source: &str,
 ) -> Result<()> {
     check_host_name(name).map_err(|e| problem(source, format!("hosts.{name}"), e))?;
-    check_endpoint(&h.endpoint)
-        .map_err(|e| problem(source, format!("hosts.{name}.endpoint"), e))?;
     if let Some(other) = endpoints.insert(&h.endpoint, name) {
         return Err(problem(
             source,
@@ -334,20 +504,46 @@ pub fn put_json(outbox: &fdi_runtime::net::NetOutbox, value: &impl Serialize) {
     }
 }
 
-/// One process a serve is to run.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+/// One process a serve runs: what both ends know it by, derived from its [`Process`] (never
+/// taken from a request as a string).
+///
+/// [`Process`]: fdi_common::run_dir::Process
+#[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RemoteProcess {
+    pub process: fdi_common::run_dir::Process,
     /// `agent`, `attacker` or `control-center` (the role binary).
-    pub role: String,
-    /// Its trace's name: `agent-3`, ...
-    pub name: String,
-    pub agent: Option<u32>,
+    pub role: &'static str,
     /// How messages name it: `agent 3`, ...
     pub label: String,
 }
 
-/// Coordinator → serve: run these processes of run `prefix`.
+impl RemoteProcess {
+    /// The process of a run that wakes on `wake`, if that process may run on a host other than
+    /// the coordinating one (an agent, the attacker, the control center).
+    pub fn of(wake: Wake) -> Option<Self> {
+        use fdi_common::run_dir::Process;
+        let (process, role) = match wake {
+            Wake::Agent(id) => (Process::Agent(id), "agent"),
+            Wake::Attacker => (Process::Attacker, Process::ATTACKER),
+            Wake::Center => (Process::Center, Process::CENTER),
+            Wake::Launcher | Wake::ExternalAttacker | Wake::Monitor => return None,
+        };
+        let label = match process {
+            Process::Agent(id) => format!("agent {id}"),
+            _ => role.to_string(),
+        };
+        Some(Self {
+            process,
+            role,
+            label,
+        })
+    }
+}
+
+/// Coordinator → serve: run your share of the run `prefix`. The serve derives which processes
+/// are its share from `layout` (every process with its host).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct RunRequest {
     /// The fdi-mas version of the coordinator: both ends must run the same layouts.
     pub version: String,
@@ -359,7 +555,6 @@ pub struct RunRequest {
     pub scenario: String,
     /// Every process of the run with its host ([`wake_word`], host name).
     pub layout: Vec<(String, String)>,
-    pub processes: Vec<RemoteProcess>,
 }
 
 /// Serve → coordinator: the processes are started, their ports open on that host.
@@ -387,6 +582,8 @@ pub enum HostEvent {
     Stalled { label: String, text: String },
     /// The host cannot go on with the run (its bridge stopped).
     Failed { text: String },
+    /// Its bridge refused `count` frames so far; the first is described.
+    Refused { count: u64, first: String },
 }
 
 /// Coordinator → serve, during the run.
@@ -408,6 +605,9 @@ pub struct Released {
     /// Payloads its bridge sent and received.
     pub sent: u64,
     pub received: u64,
+    /// Frames its bridge refused, and the first, described.
+    pub refused: u64,
+    pub first_refusal: Option<String>,
 }
 
 #[cfg(test)]
@@ -420,11 +620,13 @@ mod tests {
 
     fn check(text: &str) -> Result<Deployment> {
         let file: DeploymentFile = toml::from_str(text)?;
-        Deployment::check(file, "hosts.toml", &paper())
+        let lab = Lab::check(&file, "hosts.toml", Path::new("lab"))?;
+        Deployment::check(file, lab, &paper())
     }
 
     const SPLIT: &str = r#"
         coordinator = "control"
+        insecure = true
         [hosts.control]
         endpoint = "tcp/10.0.0.1:7447"
         [hosts.cell-a]
@@ -474,6 +676,24 @@ mod tests {
                 "`hosts.cell-b.roles[0]`",
             ),
             (SPLIT.replace("agents = [3, 4]", ""), "`hosts.cell-b`"),
+            (
+                SPLIT.replace("tcp/10.0.0.3:7447", "quic/10.0.0.3:7447"),
+                "`hosts.cell-b.endpoint`",
+            ),
+            (
+                SPLIT
+                    .replace("insecure = true", "")
+                    .replace("tcp/", "quic/"),
+                "`certs`: missing",
+            ),
+            (
+                SPLIT.replace("insecure = true", "certs = \"c\"\ninsecure = true"),
+                "`insecure`",
+            ),
+            (
+                SPLIT.replace("insecure = true", "insecure = true\nstall_timeout_s = 0.1"),
+                "`stall_timeout_s`",
+            ),
         ] {
             let e = check(&text).expect_err(&text).to_string();
             assert!(e.contains(field), "{field} in {e}");
@@ -513,6 +733,39 @@ mod tests {
                 scenario::MAX_FILE_BYTES
             )),
             "{e}"
+        );
+    }
+
+    #[test]
+    fn tls_is_the_default_and_each_host_finds_its_certificates_in_the_folder() {
+        let text = SPLIT
+            .replace("insecure = true", "certs = \"lab-certs\"")
+            .replace("tcp/", "quic/");
+        let d = check(&text).expect("valid");
+        assert!(d.lab.authenticated());
+        assert_eq!(
+            d.lab.security,
+            LabSecurity::Tls {
+                certs: PathBuf::from("lab/lab-certs")
+            }
+        );
+        // Not made yet: named with the command that makes them.
+        let e = d
+            .lab
+            .security_of("cell-a")
+            .expect_err("no files")
+            .to_string();
+        assert!(
+            e.contains("lab/lab-certs/ca.pem is missing") && e.contains("fdi-launch certs"),
+            "{e}"
+        );
+        assert_eq!(
+            check(SPLIT)
+                .expect("insecure")
+                .lab
+                .security_of("cell-a")
+                .expect("insecure"),
+            Security::Insecure
         );
     }
 

@@ -4,6 +4,7 @@
 //! ([`replayer`]); the in-process engine is `fdi_common::engine`, the join of traces into tick
 //! records `fdi_report::join`.
 
+pub mod certs;
 pub mod hosts;
 pub mod program;
 pub mod relay;
@@ -345,6 +346,7 @@ pub fn execute_on(
             };
             joined.summary.lost_agents = outcome.lost;
             joined.summary.hosts = outcome.hosts;
+            joined.summary.network = outcome.network;
             if let Some(signal) = outcome.interrupted {
                 let s = &mut joined.summary;
                 eprintln!(

@@ -45,6 +45,8 @@ struct HostLink {
     reply: Option<RunReply>,
     /// What the host said made it fail.
     failed: Arc<Mutex<Option<String>>>,
+    /// Frames its bridge refused, and the first, as it last said.
+    refused: Arc<Mutex<(u64, String)>>,
     _watch: Subscription,
     _events: Subscription,
 }
@@ -76,6 +78,15 @@ impl std::fmt::Debug for Remote {
     }
 }
 
+/// What the release of the hosts left.
+#[derive(Debug)]
+pub struct Releasing {
+    /// Files that could not be removed, `host:path`.
+    pub leftovers: Vec<String>,
+    pub problems: Vec<String>,
+    pub network: fdi_common::engine::NetworkPath,
+}
+
 /// A host that is gone, with the processes it ran.
 #[derive(Debug, Clone)]
 pub struct LostHost {
@@ -102,6 +113,7 @@ impl Remote {
     /// Opens the coordinator's Zenoh session for the run `prefix` and waits until every
     /// host's serve is seen; names each host that is not.
     pub fn connect(deployment: Deployment, prefix: &str) -> Result<Self> {
+        let me = deployment.coordinator.name.clone();
         let config = NetConfig {
             listen: vec![deployment.coordinator.endpoint.clone()],
             connect: deployment
@@ -109,6 +121,7 @@ impl Remote {
                 .iter()
                 .map(|h| h.endpoint.clone())
                 .collect(),
+            security: deployment.lab.security_of(&me)?,
         };
         let net = Net::open(&config).with_context(|| {
             format!(
@@ -116,42 +129,47 @@ impl Remote {
                 deployment.coordinator.name, deployment.source
             )
         })?;
-        let token = net.token(&keys::run(prefix, "coordinator"))?;
-        let clock = net.answer_clock(&keys::run(prefix, "clock"))?;
+        let token = net.token(&keys::said(&me, prefix, "coordinator"))?;
+        let clock = net.answer_clock(&keys::asked(&me, "*", prefix, "clock"))?;
         let mut hosts = Vec::new();
         for h in &deployment.others {
             let alive = Arc::new(AtomicBool::new(false));
             let a = alive.clone();
-            let watch = net.watch(&keys::host(&h.name), move |up| {
+            let watch = net.watch(&keys::serve(&h.name), move |up| {
                 a.store(up, Ordering::SeqCst)
             })?;
             let states: Arc<Mutex<BTreeMap<String, Arc<Mutex<RemoteState>>>>> = Arc::default();
             let st = states.clone();
             let failed: Arc<Mutex<Option<String>>> = Arc::default();
             let fl = failed.clone();
+            let refused: Arc<Mutex<(u64, String)>> = Arc::default();
+            let rf = refused.clone();
             let name = h.name.clone();
-            let events = net.subscribe(
-                &keys::run(prefix, &format!("events/{}", h.name)),
-                move |bytes| match serde_json::from_slice::<HostEvent>(&bytes) {
-                    Ok(HostEvent::Line { text }) => eprintln!("{name}: {text}"),
-                    Ok(HostEvent::Exited { label, raw, ended }) => {
-                        if let Some(s) = lock(&st).get(&label) {
-                            lock(s).exit = Some((raw, ended));
+            let events =
+                net.subscribe(&keys::said(&h.name, prefix, "events"), move |_, bytes| {
+                    match serde_json::from_slice::<HostEvent>(&bytes) {
+                        Ok(HostEvent::Line { text }) => eprintln!("{name}: {text}"),
+                        Ok(HostEvent::Exited { label, raw, ended }) => {
+                            if let Some(s) = lock(&st).get(&label) {
+                                lock(s).exit = Some((raw, ended));
+                            }
                         }
-                    }
-                    Ok(HostEvent::Stalled { label, text }) => {
-                        if let Some(s) = lock(&st).get(&label) {
-                            lock(s).stalled = Some(text);
+                        Ok(HostEvent::Stalled { label, text }) => {
+                            if let Some(s) = lock(&st).get(&label) {
+                                lock(s).stalled = Some(text);
+                            }
                         }
-                    }
-                    Ok(HostEvent::Failed { text }) => {
-                        lock(&fl).get_or_insert(text);
-                    }
-                    Err(e) => eprintln!(
+                        Ok(HostEvent::Failed { text }) => {
+                            lock(&fl).get_or_insert(text);
+                        }
+                        Ok(HostEvent::Refused { count, first }) => {
+                            *lock(&rf) = (count, first);
+                        }
+                        Err(e) => eprintln!(
                         "fdi-launch: warning: host `{name}` sent an event that is not one ({e})"
                     ),
-                },
-            )?;
+                    }
+                })?;
             hosts.push(HostLink {
                 host: h.clone(),
                 alive,
@@ -160,6 +178,7 @@ impl Remote {
                 states,
                 reply: None,
                 failed,
+                refused,
                 _watch: watch,
                 _events: events,
             });
@@ -174,8 +193,9 @@ impl Remote {
                     .collect();
                 bail!(
                     "no `fdi-launch serve` answers on host {} within {:.0} s (is it running \
-                     there as `fdi-launch serve --name NAME --listen ENDPOINT`, and is its port \
-                     open? docs/multi-host.md)",
+                     there as `fdi-launch serve --hosts FILE --name NAME` with this deployment \
+                     file and the same lab's certificates, and is its port open (UDP for \
+                     `quic/`, TCP for `tcp/`)? docs/multi-host.md)",
                     missing.join(", "),
                     REACH_TIMEOUT.as_secs_f64()
                 );
@@ -193,6 +213,11 @@ impl Remote {
         })
     }
 
+    /// The key the coordinator asks `what` of `host` on.
+    fn ask(&self, host: &str, what: &str) -> String {
+        keys::asked(host, &self.deployment.coordinator.name, &self.prefix, what)
+    }
+
     /// Starts the coordinator's bridge: before the local processes, so that none of what
     /// they send to other hosts is lost.
     pub fn start_bridge(&mut self, sizing: Sizing) -> Result<()> {
@@ -200,8 +225,11 @@ impl Remote {
             .map_err(anyhow::Error::msg)?;
         self.bridge = Some(Bridge::start::<Shm>(
             &self.net,
-            &self.prefix,
-            &self.prefix,
+            (
+                &self.prefix,
+                &self.prefix,
+                &self.deployment.coordinator.name,
+            ),
             sizing,
             &plan,
             0,
@@ -241,7 +269,6 @@ impl Remote {
                 host: link.host.name.clone(),
                 scenario: scenario.into(),
                 layout: layout.clone(),
-                processes: link.processes.iter().map(|(p, _)| p.clone()).collect(),
             };
             for (p, _) in &link.processes {
                 lock(&link.states).insert(p.label.clone(), Arc::default());
@@ -249,7 +276,11 @@ impl Remote {
             let body = serde_json::to_vec(&request).context("encoding a run request")?;
             let answer = self
                 .net
-                .request(&keys::host_run(&link.host.name), &body, START_TIMEOUT)
+                .request(
+                    &keys::run_request(&link.host.name, &self.deployment.coordinator.name),
+                    &body,
+                    START_TIMEOUT,
+                )
                 .with_context(|| {
                     format!(
                         "host `{}` ({}) did not start its processes",
@@ -258,10 +289,11 @@ impl Remote {
                 })?;
             let reply: RunReply = serde_json::from_slice(&answer)
                 .with_context(|| format!("host `{}` answered with no run reply", link.host.name))?;
-            let cmd = Arc::new(
-                self.net
-                    .outbox(&keys::run(&self.prefix, &format!("cmd/{}", link.host.name)))?,
-            );
+            let cmd = Arc::new(self.net.outbox(&keys::said(
+                &self.deployment.coordinator.name,
+                &self.prefix,
+                &format!("cmd/{}", link.host.name),
+            ))?);
             for (p, _) in &link.processes {
                 let pid = reply
                     .pids
@@ -324,6 +356,29 @@ impl Remote {
         })
     }
 
+    /// The frames refused so far on the network path, per host that refused any: (host,
+    /// count, the first described).
+    pub fn refusals(&self) -> Vec<(String, u64, String)> {
+        let mut all = Vec::new();
+        if let Some(b) = &self.bridge {
+            let n = b.counts().refused;
+            if n > 0 {
+                all.push((
+                    self.deployment.coordinator.name.clone(),
+                    n,
+                    b.first_refusal().unwrap_or_default(),
+                ));
+            }
+        }
+        for l in &self.hosts {
+            let (n, first) = lock(&l.refused).clone();
+            if n > 0 {
+                all.push((l.host.name.clone(), n, first));
+            }
+        }
+        all
+    }
+
     /// A host that is gone since the last call (each reported once).
     pub fn lost_host(&mut self) -> Option<LostHost> {
         let link = self
@@ -341,7 +396,11 @@ impl Remote {
                 .iter()
                 .map(|(p, _)| p.label.clone())
                 .collect(),
-            agents: link.processes.iter().filter_map(|(p, _)| p.agent).collect(),
+            agents: link
+                .processes
+                .iter()
+                .filter_map(|(p, _)| p.process.agent())
+                .collect(),
         })
     }
 
@@ -402,7 +461,7 @@ impl Remote {
                 continue;
             }
             for (p, _) in &l.processes {
-                let path = fdi_common::run_dir::RunDir::new(run_dir).trace_named(&p.name);
+                let path = fdi_common::run_dir::RunDir::new(run_dir).trace(p.process);
                 if !l.reachable() {
                     let note = format!(
                         "its trace stayed on host `{}` ({}), which became unreachable during \
@@ -416,7 +475,7 @@ impl Remote {
                     problems.push(format!("{}: {note}", p.label));
                     continue;
                 }
-                if let Err(e) = self.fetch_trace(l, &p.name, &path) {
+                if let Err(e) = self.fetch_trace(l, &p.process.to_string(), &path) {
                     problems.push(format!(
                         "the trace of {} from host `{}`: {e:#}",
                         p.label, l.host.name
@@ -430,7 +489,7 @@ impl Remote {
     /// Fetches the trace `name` of host `l` into `path`, piece by piece.
     fn fetch_trace(&self, l: &HostLink, name: &str, path: &Path) -> Result<()> {
         use std::io::Write as _;
-        let key = keys::run(&self.prefix, &format!("traces/{}", l.host.name));
+        let key = self.ask(&l.host.name, "traces");
         let mut file = std::io::BufWriter::new(
             std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
         );
@@ -464,7 +523,7 @@ impl Remote {
                 }
             }
             for l in self.hosts.iter().filter(|l| l.reply.is_some()) {
-                let key = keys::run(&self.prefix, &format!("routes/{}", l.host.name));
+                let key = self.ask(&l.host.name, "routes");
                 let u: Vec<String> = self
                     .net
                     .request(&key, &[], Duration::from_secs(5))
@@ -497,11 +556,12 @@ impl Remote {
     }
 
     /// Releases every reachable host (each removes what the run left there) and stops the
-    /// bridge. Returns what could not be removed (`host:path`) and problems.
-    pub fn release(mut self) -> (Vec<String>, Vec<String>) {
+    /// bridge. Returns what could not be removed (`host:path`), problems, and the run's
+    /// network path.
+    pub fn release(mut self) -> Releasing {
         let (mut leftovers, mut problems) = (Vec::new(), Vec::new());
         for l in self.hosts.iter().filter(|l| l.reachable()) {
-            let key = keys::run(&self.prefix, &format!("release/{}", l.host.name));
+            let key = self.ask(&l.host.name, "release");
             match self
                 .net
                 .request(&key, &[], Duration::from_secs(10))
@@ -509,22 +569,37 @@ impl Remote {
                 .and_then(|b| Ok(serde_json::from_slice::<Released>(&b)?))
             {
                 Ok(r) => {
-                    leftovers.extend(r.leftovers.iter().map(|p| format!("{}:{p}", l.host.name)))
+                    leftovers.extend(r.leftovers.iter().map(|p| format!("{}:{p}", l.host.name)));
+                    *lock(&l.refused) = (r.refused, r.first_refusal.unwrap_or_default());
                 }
                 Err(e) => problems.push(format!("releasing host `{}`: {e}", l.host.name)),
             }
         }
+        // Counted before the bridge stops (its counts go with it).
+        let refusals = self.refusals();
         if let Some(b) = self.bridge.take() {
             if let Err(e) = b.stop() {
                 problems.push(format!("the coordinator's bridge: {e}"));
             }
         }
+        let network = fdi_common::engine::NetworkPath {
+            authenticated: self.deployment.lab.authenticated(),
+            refused_frames: refusals.iter().map(|(_, n, _)| n).sum(),
+            refusals: refusals
+                .iter()
+                .map(|(h, n, first)| format!("host `{h}` refused {n} frames, the first: {first}"))
+                .collect(),
+        };
         // Closing the session waits for its connectors, and one still trying an unreachable
         // host waits for the network's timeout (seconds): the session is closed aside, the run
         // has nothing more to say on it.
         let _ = std::thread::Builder::new()
             .name("zenoh close".into())
             .spawn(move || drop(self));
-        (leftovers, problems)
+        Releasing {
+            leftovers,
+            problems,
+            network,
+        }
     }
 }

@@ -28,6 +28,10 @@ pub(crate) const OUTPUT_WAIT: Duration = Duration::from_secs(1);
 const READY_TIMEOUT: Duration = Duration::from_secs(30);
 /// A process stopped (SIGSTOP) this long stalls the run: the launcher stops it with a message.
 pub(crate) const STALL_LIMIT: Duration = Duration::from_secs(1);
+/// A started run that makes no progress for this long (no report of the control center, which
+/// reports every 500 ticks, and no process done) is stopped, named: whatever holds it (a lost
+/// or forged frame between hosts, a process that waits for what never comes).
+pub const STALL_TIMEOUT: Duration = Duration::from_secs(10);
 /// Realtime runs start this long after the start message, so every process sees it in time.
 const REALTIME_LEAD: Duration = Duration::from_millis(50);
 
@@ -127,6 +131,8 @@ pub struct IpcOutcome {
     pub exits: String,
     /// A run split over hosts: one line per host (`RunSummary::hosts`).
     pub hosts: Vec<String>,
+    /// A run split over hosts: its network path (`RunSummary::network`).
+    pub network: Option<fdi_common::engine::NetworkPath>,
 }
 
 /// How the supervision of a started run ended.
@@ -171,6 +177,8 @@ struct Launcher<X: Transport> {
     started: bool,
     /// The other hosts of a split run.
     remote: Option<crate::run::remote::Remote>,
+    /// The last tick the control center reported, and when it came (or the start).
+    progress: (u64, Instant),
 }
 
 impl<X: Transport> Launcher<X> {
@@ -259,6 +267,41 @@ impl<X: Transport> Launcher<X> {
         failure
     }
 
+    /// The run has made no progress (no report of the control center, no process done) for
+    /// `timeout`: says where it stopped and what the network path refused, if anything.
+    fn no_progress(&self, resolved: &Resolved, timeout: Duration) -> Option<String> {
+        let (tick, at) = self.progress;
+        if at.elapsed() <= timeout {
+            return None;
+        }
+        let refusals = self
+            .remote
+            .as_ref()
+            .map(crate::run::remote::Remote::refusals)
+            .unwrap_or_default();
+        let network = if self.remote.is_none() {
+            String::new()
+        } else if refusals.is_empty() {
+            "; no frame was refused on the network path".into()
+        } else {
+            let said: Vec<String> = refusals
+                .iter()
+                .map(|(h, n, first)| format!("host `{h}` refused {n} frames, the first: {first}"))
+                .collect();
+            format!(
+                "; frames were refused on the network path ({}): a forged, duplicated or \
+                 reordered frame stops a lockstep run",
+                said.join("; ")
+            )
+        };
+        Some(format!(
+            "no progress for {:.1} s (the stall timeout): the control center reported tick {tick} \
+             of {} last{network}",
+            at.elapsed().as_secs_f64(),
+            resolved.ticks()
+        ))
+    }
+
     /// A child stopped (SIGSTOP, or traced) for longer than [`STALL_LIMIT`], named.
     fn stalled(&mut self) -> Option<String> {
         self.procs.stalled(STALL_LIMIT)
@@ -274,7 +317,11 @@ impl<X: Transport> Launcher<X> {
     fn take_status(&mut self, done: &mut [bool], bar: &ProgressBar, dt: f64) -> Result<()> {
         let (mut lost, mut rejoined) = (Vec::new(), Vec::new());
         let procs = &self.procs;
+        let progress = &mut self.progress;
         self.status.drain(|m| {
+            if m.kind == StatusMsg::DONE || Role::from_code(m.role) == Some(Role::Center) {
+                *progress = (progress.0.max(m.tick), Instant::now());
+            }
             if Role::from_code(m.role) == Some(Role::Center) {
                 bar.set_position(m.tick);
                 bar.set_message(format!("{:.1} s", m.tick as f64 * dt));
@@ -424,6 +471,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         exits,
         remote_left,
         hosts,
+        network,
     } = ended;
     Shm::remove_leftovers(&prefix).ok();
     let mut leftovers = Shm::leftovers(&prefix);
@@ -444,6 +492,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
         interrupted,
         exits,
         hosts,
+        network,
     })
 }
 
@@ -495,6 +544,7 @@ fn open_launcher(
         stop: opts.stop.clone(),
         started: false,
         remote: None,
+        progress: (0, Instant::now()),
     };
     Ok((transport, launcher))
 }
@@ -508,6 +558,7 @@ struct Ended {
     remote_left: Vec<String>,
     /// One line per host of a split run.
     hosts: Vec<String>,
+    network: Option<fdi_common::engine::NetworkPath>,
 }
 
 /// Connects the other hosts (if any), spawns and supervises the run, and tears it down
@@ -532,7 +583,7 @@ fn run_and_tear_down<X: Transport>(
     for line in launcher.procs.drain_stderr(OUTPUT_WAIT) {
         eprintln!("fdi-launch: warning: {line}");
     }
-    let (remote_left, hosts) = release_remote(opts, launcher);
+    let (remote_left, hosts, network) = release_remote(opts, launcher);
     let r = match r {
         Err(e) if !launcher.started => Err(e.context(DidNotStart)),
         r => r,
@@ -543,6 +594,7 @@ fn run_and_tear_down<X: Transport>(
         exits: launcher.exits(),
         remote_left,
         hosts,
+        network,
     }
 }
 
@@ -569,9 +621,14 @@ fn connect_remote<X: Transport>(
 fn release_remote<X: Transport>(
     opts: &IpcOptions,
     launcher: &mut Launcher<X>,
-) -> (Vec<String>, Vec<String>) {
+) -> (
+    Vec<String>,
+    Vec<String>,
+    Option<fdi_common::engine::NetworkPath>,
+) {
     let mut remote_left = Vec::new();
     let mut hosts = Vec::new();
+    let mut network = None;
     if let Some(mut remote) = launcher.remote.take() {
         hosts.push(remote.describe_coordinator());
         hosts.extend(remote.describe());
@@ -580,13 +637,14 @@ fn release_remote<X: Transport>(
                 eprintln!("fdi-launch: warning: {p}");
             }
         }
-        let (left, problems) = remote.release();
-        for p in problems {
+        let released = remote.release();
+        for p in released.problems {
             eprintln!("fdi-launch: warning: {p}");
         }
-        remote_left = left;
+        remote_left = released.leftovers;
+        network = Some(released.network);
     }
-    (remote_left, hosts)
+    (remote_left, hosts, network)
 }
 
 /// Spawns the processes, waits until they are ready, starts the run and supervises it to
@@ -648,12 +706,9 @@ fn spawn_roles<X: Transport>(
         };
         if let Some(d) = l.remote.as_ref().map(|r| &r.deployment) {
             if !d.is_local(rp.wake) {
-                let p = crate::run::hosts::RemoteProcess {
-                    role: rp.role.clone(),
-                    name: rp.process.to_string(),
-                    agent: rp.agent,
-                    label: label.clone(),
-                };
+                let p = crate::run::hosts::RemoteProcess::of(rp.wake).with_context(|| {
+                    format!("{label} cannot run on a host other than the coordinating one")
+                })?;
                 let slot = Slot {
                     wake: rp.wake,
                     ready: false,
@@ -920,6 +975,8 @@ fn supervise<X: Transport>(
     started: Instant,
 ) -> Result<(f64, Option<i32>)> {
     let dt = resolved.scenario.control_period_s;
+    let stall_timeout = stall_timeout_of(resolved, l.remote.as_ref());
+    l.progress = (0, started);
     let mut done = vec![false; l.procs.len()];
     // When the run's own processes were all done: the programs taking roles must be done
     // within their timeout after it.
@@ -986,7 +1043,25 @@ fn supervise<X: Transport>(
             l.teardown();
             bail!("run stalled: {stall} (processes: {})", l.exits());
         }
+        if let Some(stall) = l.no_progress(resolved, stall_timeout) {
+            bar.abandon();
+            l.teardown();
+            bail!("run stalled: {stall} (processes: {})", l.exits());
+        }
     }
+}
+
+/// How long a started run may go without progress before it is stopped as stalled: the
+/// deployment's `stall_timeout_s` (split runs) or [`STALL_TIMEOUT`], and never less than what a
+/// program that takes a role may take to answer, plus a second.
+fn stall_timeout_of(resolved: &Resolved, remote: Option<&crate::run::remote::Remote>) -> Duration {
+    let roles = &resolved.scenario.roles;
+    let base = remote.map_or(STALL_TIMEOUT, |r| r.deployment.stall_timeout);
+    [roles.attacker.as_ref(), roles.monitor.as_ref()]
+        .into_iter()
+        .flatten()
+        .map(|r| r.timeout() + Duration::from_secs(1))
+        .fold(base, Duration::max)
 }
 
 /// Every process is done: the stop lets them go (each keeps its ports until then, so that no

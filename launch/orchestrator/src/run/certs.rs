@@ -1,0 +1,221 @@
+//! `fdi-launch certs`: the lab's certificate authority and a certificate per host of a
+//! deployment file, for the mutually authenticated TLS between the hosts of a split run
+//! (docs/security.md). A host's certificate has its host name as common name (what Zenoh's
+//! access control knows it by) and its endpoint's address as subject alternative name (what
+//! the hosts connecting to it check).
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+use rcgen::{
+    BasicConstraints, CertificateParams, DistinguishedName, DnType, ExtendedKeyUsagePurpose, IsCa,
+    Issuer, KeyPair, KeyUsagePurpose,
+};
+
+use crate::run::hosts::{Lab, LabSecurity};
+
+/// `fdi-launch certs`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct CertsArgs {
+    /// The deployment file: a certificate for each of its hosts.
+    #[arg(long)]
+    pub hosts: PathBuf,
+    /// Where to write them (default: the file's `certs` folder). A CA already there signs the
+    /// new certificates; no file is ever overwritten.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// The files of a host in a certificates folder.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CertFiles {
+    pub ca: PathBuf,
+    pub cert: PathBuf,
+    pub key: PathBuf,
+}
+
+impl CertFiles {
+    /// `ca.pem`, `<host>.pem` and `<host>.key` of `dir`.
+    pub fn new(dir: &Path, host: &str) -> Self {
+        Self {
+            ca: dir.join("ca.pem"),
+            cert: dir.join(format!("{host}.pem")),
+            key: dir.join(format!("{host}.key")),
+        }
+    }
+}
+
+/// The CA's private key in a certificates folder (kept off the hosts but the one that makes
+/// certificates).
+fn ca_key(dir: &Path) -> PathBuf {
+    dir.join("ca.key")
+}
+
+/// Writes `text` to the new file `path` (never over an existing one), readable by its owner
+/// only when it is a private key.
+fn write_new(path: &Path, text: &str, private: bool) -> Result<()> {
+    use std::os::unix::fs::OpenOptionsExt as _;
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .mode(if private { 0o600 } else { 0o644 })
+        .open(path)
+        .with_context(|| format!("creating {}", path.display()))?;
+    f.write_all(text.as_bytes())
+        .and_then(|()| f.sync_all())
+        .with_context(|| format!("writing {}", path.display()))
+}
+
+/// The lab's CA in `dir`: the one there, or a new one.
+fn authority(dir: &Path, made: &mut Vec<PathBuf>) -> Result<Issuer<'static, KeyPair>> {
+    let (cert, key) = (dir.join("ca.pem"), ca_key(dir));
+    match (cert.is_file(), key.is_file()) {
+        (true, true) => {
+            let read = |p: &Path| {
+                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))
+            };
+            let key_pair = KeyPair::from_pem(&read(&key)?)
+                .with_context(|| format!("{}: not a private key in PEM", key.display()))?;
+            Issuer::from_ca_cert_pem(&read(&cert)?, key_pair)
+                .with_context(|| format!("{}: not a CA certificate in PEM", cert.display()))
+        }
+        (false, false) => {
+            let mut params = CertificateParams::new(Vec::<String>::new())?;
+            let mut name = DistinguishedName::new();
+            name.push(DnType::CommonName, "fdi-mas lab CA");
+            params.distinguished_name = name;
+            params.is_ca = IsCa::Ca(BasicConstraints::Constrained(0));
+            params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::CrlSign];
+            let key_pair = KeyPair::generate()?;
+            let ca = params.self_signed(&key_pair)?;
+            write_new(&key, &key_pair.serialize_pem(), true)?;
+            write_new(&cert, &ca.pem(), false)?;
+            made.extend([cert, key]);
+            Ok(Issuer::new(params, key_pair))
+        }
+        _ => bail!(
+            "{} holds one of `ca.pem` and `ca.key` without the other: a CA needs both (or \
+             neither, to make a new one)",
+            dir.display()
+        ),
+    }
+}
+
+/// Makes what is missing in `out` for the hosts of `lab`: the CA, and each host's certificate
+/// and key. Returns the files made.
+pub fn make(lab: &Lab, out: &Path) -> Result<Vec<PathBuf>> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut made = Vec::new();
+    let ca = authority(out, &mut made)?;
+    for h in &lab.hosts {
+        let files = CertFiles::new(out, &h.name);
+        match (files.cert.is_file(), files.key.is_file()) {
+            (true, true) => continue,
+            (false, false) => {}
+            _ => bail!(
+                "{} holds one of {} and {} without the other: remove it to make both again",
+                out.display(),
+                files.cert.display(),
+                files.key.display()
+            ),
+        }
+        let address = fdi_runtime::net::endpoint_address(&h.endpoint)
+            .with_context(|| format!("host `{}`: endpoint `{}`", h.name, h.endpoint))?;
+        let mut params = CertificateParams::new(vec![address.to_string(), h.name.clone()])
+            .with_context(|| format!("host `{}`: the names {address}, {}", h.name, h.name))?;
+        let mut name = DistinguishedName::new();
+        name.push(DnType::CommonName, h.name.clone());
+        params.distinguished_name = name;
+        params.use_authority_key_identifier_extension = true;
+        params.key_usages = vec![KeyUsagePurpose::DigitalSignature];
+        params.extended_key_usages = vec![
+            ExtendedKeyUsagePurpose::ServerAuth,
+            ExtendedKeyUsagePurpose::ClientAuth,
+        ];
+        let key_pair = KeyPair::generate()?;
+        let cert = params.signed_by(&key_pair, &ca)?;
+        write_new(&files.key, &key_pair.serialize_pem(), true)?;
+        write_new(&files.cert, &cert.pem(), false)?;
+        made.extend([files.cert, files.key]);
+    }
+    Ok(made)
+}
+
+/// `fdi-launch certs`: makes the lab's certificates and says which files go to which host.
+pub fn certs(args: &CertsArgs) -> Result<()> {
+    let lab = Lab::load(&args.hosts)?;
+    let out = match (&args.out, &lab.security) {
+        (Some(out), _) => out.clone(),
+        (None, LabSecurity::Tls { certs }) => certs.clone(),
+        (None, LabSecurity::Insecure) => bail!(
+            "{} says `insecure = true` and names no `certs` folder: give --out",
+            lab.source
+        ),
+    };
+    let made = make(&lab, &out)?;
+    if made.is_empty() {
+        println!("{}: every host has its certificate already", out.display());
+    }
+    for p in &made {
+        println!("made {}", p.display());
+    }
+    println!(
+        "Copy to each host `ca.pem` and its own `<host>.pem` and `<host>.key` (into the folder \
+         its deployment file names); keep `ca.key` on this machine only."
+    );
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::run::hosts::Host;
+
+    fn lab(names: &[&str]) -> Lab {
+        Lab {
+            source: "hosts.toml".into(),
+            coordinator: names[0].into(),
+            hosts: names
+                .iter()
+                .enumerate()
+                .map(|(i, n)| Host {
+                    name: (*n).into(),
+                    endpoint: format!("quic/10.0.0.{}:7447", i + 1),
+                })
+                .collect(),
+            security: LabSecurity::Tls {
+                certs: PathBuf::from("certs"),
+            },
+        }
+    }
+
+    #[test]
+    fn a_lab_s_certificates_are_made_once_and_new_hosts_signed_by_its_ca() {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        let made = make(&lab(&["control", "cell"]), dir.path()).expect("made");
+        assert_eq!(made.len(), 6, "{made:?}");
+        let ca = std::fs::read_to_string(dir.path().join("ca.pem")).expect("ca");
+        use std::os::unix::fs::PermissionsExt as _;
+        let mode = std::fs::metadata(dir.path().join("cell.key"))
+            .expect("key")
+            .permissions()
+            .mode();
+        assert_eq!(mode & 0o077, 0, "a private key is its owner's only");
+        // Again, with one more host: only its files are made, the CA is the same.
+        let made = make(&lab(&["control", "cell", "adversary"]), dir.path()).expect("made");
+        assert_eq!(
+            made,
+            vec![
+                dir.path().join("adversary.pem"),
+                dir.path().join("adversary.key")
+            ]
+        );
+        let again = std::fs::read_to_string(dir.path().join("ca.pem")).expect("ca");
+        assert_eq!(ca, again);
+        // Half a pair is refused, not completed over.
+        std::fs::remove_file(dir.path().join("cell.key")).expect("rm");
+        let e = make(&lab(&["control", "cell"]), dir.path()).expect_err("half a pair");
+        assert!(e.to_string().contains("without the other"), "{e}");
+    }
+}
