@@ -15,7 +15,7 @@ def strip(src):
     src = re.sub(r'//[^\n]*', '', src)
     src = re.sub(r'/\*.*?\*/', '', src, flags=re.S)
     src = re.sub(r'(?<![\w"])b?r(#*)"(?:.|\n)*?"\1', '""', src)
-    src = re.sub(r'"(?:\\.|[^"\\])*"', '""', src)
+    src = re.sub(r'"(?:\\[\s\S]|[^"\\])*"', '""', src)
     src = re.sub(r"'(?:\\.|[^'\\])'", "' '", src)
     return src
 

@@ -1114,25 +1114,41 @@ const BRIDGE_POLL: Duration = Duration::from_millis(20);
 /// carrying the other hosts' in.
 #[derive(Debug)]
 pub struct Bridge {
-    stop: Arc<AtomicBool>,
-    /// The first error a thread met (it ended there).
-    failure: Arc<std::sync::Mutex<Option<String>>>,
+    shared: Shared,
     /// Its publishers on the network, for [`Bridge::unmatched`].
     routes: Vec<Arc<NetOutbox>>,
     threads: Vec<JoinHandle<Result<(), NetError>>>,
+    _subscriptions: Vec<Subscription>,
+}
+
+/// What a bridge's threads and callbacks share: the stop, the first failure, the counts.
+#[derive(Debug, Clone, Default)]
+struct Shared {
+    stop: Arc<AtomicBool>,
+    /// The first error a thread met (it ended there).
+    failure: Arc<std::sync::Mutex<Option<String>>>,
     sent: Arc<AtomicU64>,
     received: Arc<AtomicU64>,
     refusals: Arc<Refusals>,
-    _subscriptions: Vec<Subscription>,
+}
+
+/// Where a bridge's threads run: the run's prefix on this host's transport, the run on the
+/// network, the sizing of its services, and this host's clock against the coordinator's.
+#[derive(Debug, Clone, Copy)]
+struct Place<'a> {
+    prefix: &'a str,
+    run: &'a str,
+    sizing: Sizing,
+    offset_ns: i64,
 }
 
 impl Bridge {
     /// Starts the bridge of `plan` for the run `prefix` on this host's transport `X` (the run
     /// is `run` on the network: the same prefix, except in tests that put two "hosts" in one
-    /// process, each with a prefix of its own). Stamps
-    /// travel in the coordinating host's clock, which is ours + `offset_ns` (0 on that host):
-    /// ours are moved to it on the way out, and back to ours on the way in. Returns once its wakers and ports exist: the
-    /// local processes may be started then, and none of what they send is lost.
+    /// process, each with a prefix of its own). Stamps travel in the coordinating host's
+    /// clock, which is ours + `offset_ns` (0 on that host): ours are moved to it on the way out,
+    /// and back to ours on the way in. Returns once its wakers and ports exist: the local
+    /// processes may be started then, and none of what they send is lost.
     pub fn start<X: Transport + 'static>(
         net: &Net,
         (prefix, run, here): (&str, &str, &str),
@@ -1140,195 +1156,51 @@ impl Bridge {
         plan: &HostPlan,
         offset_ns: i64,
     ) -> Result<Self, NetError> {
-        let stop = Arc::new(AtomicBool::new(false));
-        let failure: Arc<std::sync::Mutex<Option<String>>> = Arc::default();
-        let sent = Arc::new(AtomicU64::new(0));
-        let received = Arc::new(AtomicU64::new(0));
-        let refusals = Arc::new(Refusals::default());
-        let mut threads = Vec::new();
-        let mut subscriptions = Vec::new();
-        let mut routes = Vec::new();
-
+        let place = Place {
+            prefix,
+            run,
+            sizing,
+            offset_ns,
+        };
+        let shared = Shared::default();
+        let mut bridge = Self {
+            shared: shared.clone(),
+            routes: Vec::new(),
+            threads: Vec::new(),
+            _subscriptions: Vec::new(),
+        };
         if !plan.outbound.is_empty() {
             let outboxes: Vec<(Stream, Arc<NetOutbox>)> = plan
                 .outbound
                 .iter()
                 .map(|&s| Ok((s, Arc::new(net.outbox(&keys::stream(here, run, s))?))))
                 .collect::<Result<_, NetError>>()?;
-            routes.extend(outboxes.iter().map(|(_, o)| o.clone()));
-            let (ready_tx, ready_rx) = mpsc::channel();
-            let (prefix, wakes) = (prefix.to_string(), plan.remote_wakes.clone());
-            let (stop, sent, fail) = (stop.clone(), sent.clone(), failure.clone());
-            let thread = std::thread::Builder::new()
-                .name("bridge out".into())
-                .spawn(move || {
-                    noted(&fail, || {
-                        let opened = (|| {
-                            let t = X::open(&prefix, "bridge-out", sizing)?;
-                            let waker = t.waker_any(&wakes)?;
-                            let ports = outboxes
-                                .iter()
-                                .map(|(s, _)| OutPort::<X>::open(&t, *s))
-                                .collect::<Result<Vec<_>, IpcError>>()?;
-                            Ok::<_, IpcError>((t, waker, ports))
-                        })();
-                        let Some((_t, waker, ports)) = report_ready(&ready_tx, opened) else {
-                            return Ok(());
-                        };
-                        loop {
-                            let stopping = stop.load(Ordering::SeqCst);
-                            waker.wait(BRIDGE_POLL)?;
-                            for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
-                                let mut failed = None;
-                                port.drain(offset_ns, |bytes| {
-                                    if failed.is_none() {
-                                        match outbox.put(&bytes) {
-                                            Ok(()) => {
-                                                sent.fetch_add(1, Ordering::Relaxed);
-                                            }
-                                            Err(e) => failed = Some(e),
-                                        }
-                                    }
-                                })?;
-                                if let Some(e) = failed {
-                                    return Err(e);
-                                }
-                            }
-                            // One more drain after the stop was asked: what was sent before it
-                            // leaves.
-                            if stopping {
-                                return Ok(());
-                            }
-                        }
-                    })
-                })
-                .map_err(|e| NetError::Ipc(thread_error(e)))?;
-            threads.push(thread);
-            wait_ready(&ready_rx, "out")?;
+            bridge.routes = outboxes.iter().map(|(_, o)| o.clone()).collect();
+            let thread =
+                start_out::<X>(place, plan.remote_wakes.clone(), outboxes, shared.clone())?;
+            bridge.threads.push(thread);
         }
-
         if !plan.inbound.is_empty() {
             let (tx, rx) = mpsc::channel::<(usize, u8, Vec<u8>)>();
-            let (ready_tx, ready_rx) = mpsc::channel();
-            let inbound = plan.inbound.clone();
-            let keys: Vec<String> = inbound
-                .iter()
-                .map(|i| keys::stream_any(run, i.stream))
-                .collect();
-            // The key of each (port, sending host), for what is said of a frame.
-            let sent_on: Vec<Vec<String>> = inbound
-                .iter()
-                .map(|i| {
-                    i.from
-                        .iter()
-                        .map(|h| keys::stream(h, run, i.stream))
-                        .collect()
-                })
-                .collect();
-            let thread_prefix = prefix.to_string();
-            let (stop, received, fail) = (stop.clone(), received.clone(), failure.clone());
-            let refused = refusals.clone();
-            let thread = std::thread::Builder::new()
-                .name("bridge in".into())
-                .spawn(move || {
-                    noted(&fail, || {
-                        let opened = (|| {
-                            let t = X::open(&thread_prefix, "bridge-in", sizing)?;
-                            let ports = inbound
-                                .iter()
-                                .map(|i| InPort::<X>::open(&t, i.stream))
-                                .collect::<Result<Vec<_>, IpcError>>()?;
-                            Ok::<_, IpcError>((t, ports))
-                        })();
-                        let Some((t, ports)) = report_ready(&ready_tx, opened) else {
-                            return Ok(());
-                        };
-                        // Bells are made at the first ring: the local processes' wakers exist by
-                        // then (nothing arrives for a process before the start, which follows its
-                        // ready).
-                        let mut bells: BTreeMap<Wake, X::Bell> = BTreeMap::new();
-                        let mut due: BTreeSet<Wake> = BTreeSet::new();
-                        let mut admitted = Admitted::new();
-                        loop {
-                            let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
-                                Ok(frame) => Some(frame),
-                                Err(mpsc::RecvTimeoutError::Timeout) => None,
-                                Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
-                            };
-                            for (i, from, bytes) in first.into_iter().chain(rx.try_iter()) {
-                                let key = &sent_on[i][usize::from(from)];
-                                match ports[i].publish(
-                                    (i, key),
-                                    &bytes,
-                                    offset_ns.wrapping_neg(),
-                                    &mut admitted,
-                                )? {
-                                    None => {
-                                        received.fetch_add(1, Ordering::Relaxed);
-                                        due.extend(inbound[i].ring.iter().copied());
-                                    }
-                                    Some(why) => refused.note(|| why),
-                                }
-                            }
-                            for wake in std::mem::take(&mut due) {
-                                if let std::collections::btree_map::Entry::Vacant(e) =
-                                    bells.entry(wake)
-                                {
-                                    e.insert(t.notifier(wake)?);
-                                }
-                                if let Some(bell) = bells.get(&wake) {
-                                    bell.ring()?;
-                                }
-                            }
-                            if stop.load(Ordering::SeqCst) {
-                                return Ok(());
-                            }
-                        }
-                    })
-                })
-                .map_err(|e| NetError::Ipc(thread_error(e)))?;
-            threads.push(thread);
-            wait_ready(&ready_rx, "in")?;
-            for (i, key) in keys.iter().enumerate() {
-                let tx = tx.clone();
-                let (from, service) = (
-                    plan.inbound[i].from.clone(),
-                    plan.inbound[i].stream.service_name(),
-                );
-                let refused = refusals.clone();
-                subscriptions.push(net.subscribe(key, move |on, bytes| {
-                    let sender = keys::sender(on);
-                    match sender.and_then(|h| from.iter().position(|f| f == h)) {
-                        // A run has a handful of hosts: the index fits.
-                        Some(k) if k <= usize::from(u8::MAX) => {
-                            let _ = tx.send((i, k as u8, bytes));
-                        }
-                        _ => refused.note(|| {
-                            format!(
-                                "a frame on `{on}` from host `{}`, which does not send \
-                                 `{service}` in this run",
-                                sender.unwrap_or("?")
-                            )
-                        }),
-                    }
-                })?);
+            let thread = start_in::<X>(place, plan.inbound.clone(), rx, shared.clone())?;
+            bridge.threads.push(thread);
+            for (i, inbound) in plan.inbound.iter().enumerate() {
+                bridge._subscriptions.push(subscribe_in(
+                    net,
+                    run,
+                    (i, inbound),
+                    tx.clone(),
+                    &shared,
+                )?);
             }
         }
-        Ok(Self {
-            stop,
-            failure,
-            routes,
-            threads,
-            sent,
-            received,
-            refusals,
-            _subscriptions: subscriptions,
-        })
+        Ok(bridge)
     }
 
     /// The first frame it refused, described ([`BridgeCounts::refused`] counts them all).
     pub fn first_refusal(&self) -> Option<String> {
-        self.refusals
+        self.shared
+            .refusals
             .first
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -1337,7 +1209,8 @@ impl Bridge {
 
     /// Why a thread of the bridge ended early, if one did: the run cannot go on without it.
     pub fn failure(&self) -> Option<String> {
-        self.failure
+        self.shared
+            .failure
             .lock()
             .unwrap_or_else(std::sync::PoisonError::into_inner)
             .clone()
@@ -1357,16 +1230,16 @@ impl Bridge {
     /// What it carried so far.
     pub fn counts(&self) -> BridgeCounts {
         BridgeCounts {
-            sent: self.sent.load(Ordering::Relaxed),
-            received: self.received.load(Ordering::Relaxed),
-            refused: self.refusals.count.load(Ordering::Relaxed),
+            sent: self.shared.sent.load(Ordering::Relaxed),
+            received: self.shared.received.load(Ordering::Relaxed),
+            refused: self.shared.refusals.count.load(Ordering::Relaxed),
         }
     }
 
     /// Stops the bridge (what was published locally before is still sent); the first error a
     /// thread met, if any.
     pub fn stop(mut self) -> Result<BridgeCounts, NetError> {
-        self.stop.store(true, Ordering::SeqCst);
+        self.shared.stop.store(true, Ordering::SeqCst);
         let mut first = Ok(());
         for t in self.threads.drain(..) {
             let r = t
@@ -1382,11 +1255,203 @@ impl Bridge {
 
 impl Drop for Bridge {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::SeqCst);
+        self.shared.stop.store(true, Ordering::SeqCst);
         for t in self.threads.drain(..) {
             let _ = t.join();
         }
     }
+}
+
+/// Starts the thread that carries the local streams out: woken by the local processes'
+/// wake-ups of the remote ones (`wakes`), it drains each stream and puts its payloads on the
+/// network.
+fn start_out<X: Transport + 'static>(
+    place: Place,
+    wakes: Vec<Wake>,
+    outboxes: Vec<(Stream, Arc<NetOutbox>)>,
+    shared: Shared,
+) -> Result<JoinHandle<Result<(), NetError>>, NetError> {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let (prefix, sizing, offset_ns) = (place.prefix.to_string(), place.sizing, place.offset_ns);
+    let thread = std::thread::Builder::new()
+        .name("bridge out".into())
+        .spawn(move || {
+            noted(&shared.failure, || {
+                let opened = (|| {
+                    let t = X::open(&prefix, "bridge-out", sizing)?;
+                    let waker = t.waker_any(&wakes)?;
+                    let ports = outboxes
+                        .iter()
+                        .map(|(s, _)| OutPort::<X>::open(&t, *s))
+                        .collect::<Result<Vec<_>, IpcError>>()?;
+                    Ok::<_, IpcError>((t, waker, ports))
+                })();
+                let Some((_t, waker, ports)) = report_ready(&ready_tx, opened) else {
+                    return Ok(());
+                };
+                loop {
+                    let stopping = shared.stop.load(Ordering::SeqCst);
+                    waker.wait(BRIDGE_POLL)?;
+                    for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
+                        let mut failed = None;
+                        port.drain(offset_ns, |bytes| {
+                            if failed.is_none() {
+                                match outbox.put(&bytes) {
+                                    Ok(()) => {
+                                        shared.sent.fetch_add(1, Ordering::Relaxed);
+                                    }
+                                    Err(e) => failed = Some(e),
+                                }
+                            }
+                        })?;
+                        if let Some(e) = failed {
+                            return Err(e);
+                        }
+                    }
+                    // One more drain after the stop was asked: what was sent before it leaves.
+                    if stopping {
+                        return Ok(());
+                    }
+                }
+            })
+        })
+        .map_err(|e| NetError::Ipc(thread_error(e)))?;
+    wait_ready(&ready_rx, "out")?;
+    Ok(thread)
+}
+
+/// Starts the thread that carries the other hosts' streams in: each frame handed over by the
+/// subscriptions (port, sending host, bytes) is admitted ([`InPort::publish`]) and published
+/// locally, and only then are the local receivers rung.
+fn start_in<X: Transport + 'static>(
+    place: Place,
+    inbound: Vec<Inbound>,
+    rx: mpsc::Receiver<(usize, u8, Vec<u8>)>,
+    shared: Shared,
+) -> Result<JoinHandle<Result<(), NetError>>, NetError> {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    // The key of each (port, sending host), for what is said of a frame.
+    let sent_on: Vec<Vec<String>> = inbound
+        .iter()
+        .map(|i| {
+            i.from
+                .iter()
+                .map(|h| keys::stream(h, place.run, i.stream))
+                .collect()
+        })
+        .collect();
+    let (prefix, sizing, back) = (
+        place.prefix.to_string(),
+        place.sizing,
+        place.offset_ns.wrapping_neg(),
+    );
+    let thread = std::thread::Builder::new()
+        .name("bridge in".into())
+        .spawn(move || {
+            noted(&shared.failure, || {
+                let opened = (|| {
+                    let t = X::open(&prefix, "bridge-in", sizing)?;
+                    let ports = inbound
+                        .iter()
+                        .map(|i| InPort::<X>::open(&t, i.stream))
+                        .collect::<Result<Vec<_>, IpcError>>()?;
+                    Ok::<_, IpcError>((t, ports))
+                })();
+                let Some((t, ports)) = report_ready(&ready_tx, opened) else {
+                    return Ok(());
+                };
+                let mut ringer = Ringer::<X>::new(t);
+                let mut admitted = Admitted::new();
+                loop {
+                    let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
+                        Ok(frame) => Some(frame),
+                        Err(mpsc::RecvTimeoutError::Timeout) => None,
+                        Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
+                    };
+                    for (i, from, bytes) in first.into_iter().chain(rx.try_iter()) {
+                        let key = &sent_on[i][usize::from(from)];
+                        match ports[i].publish((i, key), &bytes, back, &mut admitted)? {
+                            None => {
+                                shared.received.fetch_add(1, Ordering::Relaxed);
+                                ringer.due(&inbound[i].ring);
+                            }
+                            Some(why) => shared.refusals.note(|| why),
+                        }
+                    }
+                    ringer.ring()?;
+                    if shared.stop.load(Ordering::SeqCst) {
+                        return Ok(());
+                    }
+                }
+            })
+        })
+        .map_err(|e| NetError::Ipc(thread_error(e)))?;
+    wait_ready(&ready_rx, "in")?;
+    Ok(thread)
+}
+
+/// The local wake-up events an inbound bridge rings once a batch of frames is published.
+struct Ringer<X: Transport> {
+    t: X,
+    /// Made at the first ring: the local processes' wakers exist by then (nothing arrives for a
+    /// process before the start, which follows its ready).
+    bells: BTreeMap<Wake, X::Bell>,
+    due: BTreeSet<Wake>,
+}
+
+impl<X: Transport> Ringer<X> {
+    fn new(t: X) -> Self {
+        Self {
+            t,
+            bells: BTreeMap::new(),
+            due: BTreeSet::new(),
+        }
+    }
+
+    fn due(&mut self, wakes: &[Wake]) {
+        self.due.extend(wakes.iter().copied());
+    }
+
+    fn ring(&mut self) -> Result<(), IpcError> {
+        for wake in std::mem::take(&mut self.due) {
+            if let std::collections::btree_map::Entry::Vacant(e) = self.bells.entry(wake) {
+                e.insert(self.t.notifier(wake)?);
+            }
+            if let Some(bell) = self.bells.get(&wake) {
+                bell.ring()?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Subscribes to the inbound stream `i` of the run `run` from any host: a frame from a host the
+/// plan says sends it goes to the inbound thread (`tx`); any other is refused and counted.
+fn subscribe_in(
+    net: &Net,
+    run: &str,
+    (i, inbound): (usize, &Inbound),
+    tx: mpsc::Sender<(usize, u8, Vec<u8>)>,
+    shared: &Shared,
+) -> Result<Subscription, NetError> {
+    let (from, service) = (inbound.from.clone(), inbound.stream.service_name());
+    let refusals = shared.refusals.clone();
+    net.subscribe(&keys::stream_any(run, inbound.stream), move |on, bytes| {
+        let sender = keys::sender(on);
+        match sender.and_then(|h| from.iter().position(|f| f == h)) {
+            // A run has a handful of hosts: the index fits.
+            Some(k) if k <= usize::from(u8::MAX) => {
+                let _ = tx.send((i, k as u8, bytes));
+            }
+            _ => refusals.note(|| {
+                format!(
+                    "a frame on `{on}` from host `{}`, which does not send `{service}` in this \
+                     run",
+                    sender.unwrap_or("?")
+                )
+            }),
+        }
+    })
 }
 
 /// Runs a bridge thread's body, keeping its error where [`Bridge::failure`] finds it.

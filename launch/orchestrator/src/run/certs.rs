@@ -13,7 +13,7 @@ use rcgen::{
     Issuer, KeyPair, KeyUsagePurpose,
 };
 
-use crate::run::hosts::{Lab, LabSecurity};
+use crate::run::hosts::{CertFiles, Lab, LabSecurity};
 
 /// `fdi-launch certs`.
 #[derive(Debug, Clone, clap::Args)]
@@ -25,25 +25,6 @@ pub struct CertsArgs {
     /// new certificates; no file is ever overwritten.
     #[arg(long)]
     pub out: Option<PathBuf>,
-}
-
-/// The files of a host in a certificates folder.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct CertFiles {
-    pub ca: PathBuf,
-    pub cert: PathBuf,
-    pub key: PathBuf,
-}
-
-impl CertFiles {
-    /// `ca.pem`, `<host>.pem` and `<host>.key` of `dir`.
-    pub fn new(dir: &Path, host: &str) -> Self {
-        Self {
-            ca: dir.join("ca.pem"),
-            cert: dir.join(format!("{host}.pem")),
-            key: dir.join(format!("{host}.key")),
-        }
-    }
 }
 
 /// The CA's private key in a certificates folder (kept off the hosts but the one that makes

@@ -50,6 +50,25 @@ pub struct Host {
     pub endpoint: String,
 }
 
+/// The files of a host in a certificates folder.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct CertFiles {
+    pub ca: PathBuf,
+    pub cert: PathBuf,
+    pub key: PathBuf,
+}
+
+impl CertFiles {
+    /// `ca.pem`, `<host>.pem` and `<host>.key` of `dir`.
+    pub fn new(dir: &Path, host: &str) -> Self {
+        Self {
+            ca: dir.join("ca.pem"),
+            cert: dir.join(format!("{host}.pem")),
+            key: dir.join(format!("{host}.key")),
+        }
+    }
+}
+
 /// How the hosts of a deployment reach one another.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum LabSecurity {
@@ -90,51 +109,7 @@ impl Lab {
     /// Checks host names, endpoints and the security of `file`.
     fn check(file: &DeploymentFile, source: &str, base: &Path) -> Result<Self> {
         check_hosts_named(file, source)?;
-        let mut endpoints: BTreeMap<&str, &str> = BTreeMap::new();
-        let want = if file.insecure { Link::Tcp } else { Link::Quic };
-        for (name, h) in &file.hosts {
-            check_host(name, h, &mut endpoints, source)?;
-            let link = check_endpoint(&h.endpoint)
-                .map_err(|e| problem(source, format!("hosts.{name}.endpoint"), e))?;
-            if link != want {
-                let why = if file.insecure {
-                    "the file says `insecure = true`: endpoints are `tcp/<address>:<port>`"
-                } else {
-                    "hosts talk over QUIC with mutual TLS authentication unless the file says \
-                     `insecure = true` (docs/security.md): endpoints are `quic/<address>:<port>`"
-                };
-                return Err(problem(
-                    source,
-                    format!("hosts.{name}.endpoint"),
-                    format!("`{}`: {why}", h.endpoint),
-                ));
-            }
-        }
-        let security = match (&file.certs, file.insecure) {
-            (Some(_), true) => {
-                return Err(problem(
-                    source,
-                    "insecure".into(),
-                    "the file names `certs` and says `insecure = true`: choose one".into(),
-                ))
-            }
-            (None, true) => LabSecurity::Insecure,
-            (Some(dir), false) => LabSecurity::Tls {
-                certs: base.join(dir),
-            },
-            (None, false) => {
-                return Err(problem(
-                    source,
-                    "certs".into(),
-                    format!(
-                        "missing: the hosts authenticate one another with the lab's \
-                         certificates; make them with `fdi-launch certs --hosts {source}` and \
-                         write `certs = \"certs\"`, or write `insecure = true` to run over plain \
-                         TCP (docs/security.md)"
-                    ),
-                ))
-            }
-        };
+        check_endpoints(file, source)?;
         Ok(Self {
             source: source.into(),
             coordinator: file.coordinator.clone(),
@@ -146,7 +121,7 @@ impl Lab {
                     endpoint: h.endpoint.clone(),
                 })
                 .collect(),
-            security,
+            security: lab_security(file, source, base)?,
         })
     }
 
@@ -171,13 +146,13 @@ impl Lab {
         match &self.security {
             LabSecurity::Insecure => Ok(Security::Insecure),
             LabSecurity::Tls { certs } => {
-                let files = crate::run::certs::CertFiles::new(certs, name);
+                let files = CertFiles::new(certs, name);
                 for p in [&files.ca, &files.cert, &files.key] {
                     if !p.is_file() {
                         bail!(
-                            "{}: `certs`: {} is missing on this host (make the lab's \
-                             certificates with `fdi-launch certs --hosts {}` and copy the CA's \
-                             and this host's to it: docs/security.md)",
+                            "{}: `certs`: {} is missing on this host (make the \
+                             certificates of the lab with `fdi-launch certs --hosts {}`, then \
+                             copy ca.pem and the pair of this host here: docs/security.md)",
                             self.source,
                             p.display(),
                             self.source
@@ -212,8 +187,9 @@ pub struct Deployment {
     pub others: Vec<Host>,
     /// Every process of the run (and the launcher) with its host.
     pub layout: Layout,
-    /// How long the run may make no progress before it is stopped, named.
-    pub stall_timeout: std::time::Duration,
+    /// How long the run may make no progress before it is stopped, named (None: the
+    /// runtime's default).
+    pub stall_timeout: Option<std::time::Duration>,
 }
 
 /// The process roles a deployment can place with `roles`.
@@ -263,9 +239,9 @@ impl Deployment {
             .collect();
         check_hosts_run_something(&others, &layout, source)?;
         let stall_timeout = match file.stall_timeout_s {
-            None => crate::run::runtime::STALL_TIMEOUT,
+            None => None,
             Some(t) if t.is_finite() && (1.0..=3600.0).contains(&t) => {
-                std::time::Duration::from_secs_f64(t)
+                Some(std::time::Duration::from_secs_f64(t))
             }
             Some(t) => {
                 return Err(problem(
@@ -296,6 +272,57 @@ impl Deployment {
     /// Whether `wake` runs on the coordinating host.
     pub fn is_local(&self, wake: Wake) -> bool {
         self.host_of(wake) == self.coordinator.name
+    }
+}
+
+/// Checks every host's name and endpoint: unique, and of the link the file's security asks
+/// for (`quic/`, or `tcp/` with `insecure = true`).
+fn check_endpoints(file: &DeploymentFile, source: &str) -> Result<()> {
+    let mut endpoints: BTreeMap<&str, &str> = BTreeMap::new();
+    let want = if file.insecure { Link::Tcp } else { Link::Quic };
+    for (name, h) in &file.hosts {
+        check_host(name, h, &mut endpoints, source)?;
+        let link = check_endpoint(&h.endpoint)
+            .map_err(|e| problem(source, format!("hosts.{name}.endpoint"), e))?;
+        if link != want {
+            let why = if file.insecure {
+                "the file says `insecure = true`: endpoints are `tcp/<address>:<port>`"
+            } else {
+                "hosts talk over QUIC with mutual TLS authentication unless the file says \
+                 `insecure = true` (docs/security.md): endpoints are `quic/<address>:<port>`"
+            };
+            return Err(problem(
+                source,
+                format!("hosts.{name}.endpoint"),
+                format!("`{}`: {why}", h.endpoint),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// How the hosts of `file` reach one another: its `certs` folder (relative to `base`, the
+/// file's folder), or plain TCP when it says `insecure = true`; one of the two, said.
+fn lab_security(file: &DeploymentFile, source: &str, base: &Path) -> Result<LabSecurity> {
+    match (&file.certs, file.insecure) {
+        (Some(_), true) => Err(problem(
+            source,
+            "insecure".into(),
+            "the file names `certs` and says `insecure = true`: choose one".into(),
+        )),
+        (None, true) => Ok(LabSecurity::Insecure),
+        (Some(dir), false) => Ok(LabSecurity::Tls {
+            certs: base.join(dir),
+        }),
+        (None, false) => Err(problem(
+            source,
+            "certs".into(),
+            format!(
+                "missing: the hosts authenticate one another with the lab's certificates; make \
+                 them with `fdi-launch certs --hosts {source}` and write `certs = \"certs\"`, or \
+                 write `insecure = true` to run over plain TCP (docs/security.md)"
+            ),
+        )),
     }
 }
 

@@ -280,7 +280,7 @@ pub fn execute_on(
     opts: &Options,
     deployment: Option<&hosts::Deployment>,
 ) -> Result<RunSummary> {
-    let (progress, placement, traces) = (opts.progress, &opts.placement, opts.traces);
+    let traces = opts.traces;
     if deployment.is_some()
         && (engine != Engine::Ipc || run_dir.is_none() || traces != Traces::Full)
     {
@@ -315,73 +315,82 @@ pub fn execute_on(
             }
             summary
         }
-        (Engine::Ipc, Some(dir)) => {
-            let opts = runtime::IpcOptions {
-                run_dir: dir.to_path_buf(),
-                progress,
-                replay: false,
-                placement: placement.clone(),
-                pipes: traces != Traces::Full,
-                deployment: deployment.cloned(),
-                stop: opts.stop.clone(),
-            };
-            let (outcome, mut joined, write_error) = if traces == Traces::Full {
-                let outcome = runtime::run_ipc(r, &opts)?;
-                let joined = fdi_report::join::join_run(r, dir, outcome.wall_s, |_| {})?;
-                (outcome, joined, None)
-            } else {
-                // Joined online: the processes write into pipes, the launcher keeps what
-                // `traces` says.
-                std::fs::create_dir_all(RunDir::new(dir).traces())
-                    .context("creating the traces folder")
-                    .context(runtime::DidNotStart)?;
-                let tap = tap::Tap::create(r, dir, traces).context(runtime::DidNotStart)?;
-                let (outcome, tapped) = tap.run(r, || runtime::run_ipc(r, &opts));
-                let outcome = outcome?;
-                let joined = tapped
-                    .walked
-                    .context("joining the processes' records")?
-                    .summarize(r, outcome.wall_s);
-                (outcome, joined, tapped.write_error)
-            };
-            joined.summary.lost_agents = outcome.lost;
-            joined.summary.hosts = outcome.hosts;
-            joined.summary.network = outcome.network;
-            if let Some(signal) = outcome.interrupted {
-                let s = &mut joined.summary;
-                eprintln!(
-                    "fdi-launch: interrupted by {} after {:.3} s of {} s simulated: every process was stopped ({}); the run directory keeps what was recorded",
-                    runtime::signal_name(signal),
-                    s.sim_s,
-                    r.scenario.duration_s,
-                    outcome.exits
-                );
-                s.partial = Some(Partial {
-                    reason: format!("interrupted by {}", runtime::signal_name(signal)),
-                    planned_ticks: r.ticks(),
-                    signal: Some(signal),
-                });
-            }
-            if *placement != runtime::Placement::default() {
-                joined.summary.placement = Some(placement.describe());
-            }
-            for w in &joined.warnings {
-                eprintln!("fdi-launch: warning: {w}");
-            }
-            if !outcome.leftovers.is_empty() {
-                eprintln!(
-                    "fdi-launch: warning: {} shared-memory files of run {} could not be removed",
-                    outcome.leftovers.len(),
-                    outcome.prefix
-                );
-            }
-            output::write_run_summary(dir, &joined.summary, traces)?;
-            if let Some(e) = write_error {
-                bail!("a trace could not be kept: {e}; summary.json covers every tick of the run");
-            }
-            Ok(joined.summary)
-        }
+        (Engine::Ipc, Some(dir)) => execute_ipc(r, dir, opts, deployment),
     }
+}
+
+/// [`execute_on`] on the ipc engine into the run directory `dir`.
+fn execute_ipc(
+    r: &Resolved,
+    dir: &Path,
+    opts: &Options,
+    deployment: Option<&hosts::Deployment>,
+) -> Result<RunSummary> {
+    let (progress, placement, traces) = (opts.progress, &opts.placement, opts.traces);
+    let opts = runtime::IpcOptions {
+        run_dir: dir.to_path_buf(),
+        progress,
+        replay: false,
+        placement: placement.clone(),
+        pipes: traces != Traces::Full,
+        deployment: deployment.cloned(),
+        stop: opts.stop.clone(),
+    };
+    let (outcome, mut joined, write_error) = if traces == Traces::Full {
+        let outcome = runtime::run_ipc(r, &opts)?;
+        let joined = fdi_report::join::join_run(r, dir, outcome.wall_s, |_| {})?;
+        (outcome, joined, None)
+    } else {
+        // Joined online: the processes write into pipes, the launcher keeps what
+        // `traces` says.
+        std::fs::create_dir_all(RunDir::new(dir).traces())
+            .context("creating the traces folder")
+            .context(runtime::DidNotStart)?;
+        let tap = tap::Tap::create(r, dir, traces).context(runtime::DidNotStart)?;
+        let (outcome, tapped) = tap.run(r, || runtime::run_ipc(r, &opts));
+        let outcome = outcome?;
+        let joined = tapped
+            .walked
+            .context("joining the processes' records")?
+            .summarize(r, outcome.wall_s);
+        (outcome, joined, tapped.write_error)
+    };
+    joined.summary.lost_agents = outcome.lost;
+    joined.summary.hosts = outcome.hosts;
+    joined.summary.network = outcome.network;
+    if let Some(signal) = outcome.interrupted {
+        let s = &mut joined.summary;
+        eprintln!(
+            "fdi-launch: interrupted by {} after {:.3} s of {} s simulated: every process was stopped ({}); the run directory keeps what was recorded",
+            runtime::signal_name(signal),
+            s.sim_s,
+            r.scenario.duration_s,
+            outcome.exits
+        );
+        s.partial = Some(Partial {
+            reason: format!("interrupted by {}", runtime::signal_name(signal)),
+            planned_ticks: r.ticks(),
+            signal: Some(signal),
+        });
+    }
+    if *placement != runtime::Placement::default() {
+        joined.summary.placement = Some(placement.describe());
+    }
+    for w in &joined.warnings {
+        eprintln!("fdi-launch: warning: {w}");
+    }
+    if !outcome.leftovers.is_empty() {
+        eprintln!(
+            "fdi-launch: warning: {} shared-memory files of run {} could not be removed",
+            outcome.leftovers.len(),
+            outcome.prefix
+        );
+    }
+    output::write_run_summary(dir, &joined.summary, traces)?;
+    if let Some(e) = write_error {
+        bail!("a trace could not be kept: {e}; summary.json covers every tick of the run");
+    }
+    Ok(joined.summary)
 }
 
 /// Validates a scenario after command-line overrides (duration, seed, attack, ...) changed

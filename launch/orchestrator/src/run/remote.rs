@@ -52,6 +52,59 @@ struct HostLink {
 }
 
 impl HostLink {
+    /// Follows host `h` in the run `prefix`: whether its serve is alive, and what it says of
+    /// its processes (lines, exits, stalls, failures, refused frames).
+    fn follow(net: &Net, prefix: &str, h: &Host) -> Result<Self> {
+        let alive = Arc::new(AtomicBool::new(false));
+        let a = alive.clone();
+        let watch = net.watch(&keys::serve(&h.name), move |up| {
+            a.store(up, Ordering::SeqCst)
+        })?;
+        let states: Arc<Mutex<BTreeMap<String, Arc<Mutex<RemoteState>>>>> = Arc::default();
+        let st = states.clone();
+        let failed: Arc<Mutex<Option<String>>> = Arc::default();
+        let fl = failed.clone();
+        let refused: Arc<Mutex<(u64, String)>> = Arc::default();
+        let rf = refused.clone();
+        let name = h.name.clone();
+        let events = net.subscribe(&keys::said(&h.name, prefix, "events"), move |_, bytes| {
+            match serde_json::from_slice::<HostEvent>(&bytes) {
+                Ok(HostEvent::Line { text }) => eprintln!("{name}: {text}"),
+                Ok(HostEvent::Exited { label, raw, ended }) => {
+                    if let Some(s) = lock(&st).get(&label) {
+                        lock(s).exit = Some((raw, ended));
+                    }
+                }
+                Ok(HostEvent::Stalled { label, text }) => {
+                    if let Some(s) = lock(&st).get(&label) {
+                        lock(s).stalled = Some(text);
+                    }
+                }
+                Ok(HostEvent::Failed { text }) => {
+                    lock(&fl).get_or_insert(text);
+                }
+                Ok(HostEvent::Refused { count, first }) => {
+                    *lock(&rf) = (count, first);
+                }
+                Err(e) => eprintln!(
+                    "fdi-launch: warning: host `{name}` sent an event that is not one ({e})"
+                ),
+            }
+        })?;
+        Ok(Self {
+            host: h.clone(),
+            alive,
+            lost_reported: false,
+            processes: Vec::new(),
+            states,
+            reply: None,
+            failed,
+            refused,
+            _watch: watch,
+            _events: events,
+        })
+    }
+
     /// Started, and not lost: a host lost once keeps nothing of the run even if it is heard
     /// from again (its serve stopped and cleaned up when it lost the coordinator).
     fn reachable(&self) -> bool {
@@ -76,6 +129,59 @@ impl std::fmt::Debug for Remote {
             .field("prefix", &self.prefix)
             .finish_non_exhaustive()
     }
+}
+
+/// Adopts the processes host `link` says it started (`reply`) into `supervisor`, each stopped
+/// through the host's command key (`cmd`).
+fn adopt<M>(
+    link: &HostLink,
+    reply: &RunReply,
+    cmd: &Arc<fdi_runtime::net::NetOutbox>,
+    metas: &mut BTreeMap<String, M>,
+    supervisor: &mut Supervisor<M>,
+) -> Result<()> {
+    for (p, _) in &link.processes {
+        let pid = reply
+            .pids
+            .iter()
+            .find(|(l, _)| *l == p.label)
+            .map(|(_, pid)| *pid)
+            .with_context(|| {
+                format!(
+                    "host `{}` did not say it started {}",
+                    link.host.name, p.label
+                )
+            })?;
+        let state = lock(&link.states)
+            .get(&p.label)
+            .cloned()
+            .unwrap_or_default();
+        let cmd = cmd.clone();
+        let stop = Stopper(Arc::new(move |kill| {
+            let c = if kill {
+                HostCommand::Kill
+            } else {
+                HostCommand::Term
+            };
+            if let Ok(body) = serde_json::to_vec(&c) {
+                let _ = cmd.put(&body);
+            }
+        }));
+        let Some(meta) = metas.remove(&p.label) else {
+            continue;
+        };
+        supervisor.adopt_remote(
+            p.label.clone(),
+            meta,
+            RemoteChild {
+                host: link.host.name.clone(),
+                pid,
+                state,
+                stop,
+            },
+        );
+    }
+    Ok(())
 }
 
 /// What the release of the hosts left.
@@ -131,58 +237,11 @@ impl Remote {
         })?;
         let token = net.token(&keys::said(&me, prefix, "coordinator"))?;
         let clock = net.answer_clock(&keys::asked(&me, "*", prefix, "clock"))?;
-        let mut hosts = Vec::new();
-        for h in &deployment.others {
-            let alive = Arc::new(AtomicBool::new(false));
-            let a = alive.clone();
-            let watch = net.watch(&keys::serve(&h.name), move |up| {
-                a.store(up, Ordering::SeqCst)
-            })?;
-            let states: Arc<Mutex<BTreeMap<String, Arc<Mutex<RemoteState>>>>> = Arc::default();
-            let st = states.clone();
-            let failed: Arc<Mutex<Option<String>>> = Arc::default();
-            let fl = failed.clone();
-            let refused: Arc<Mutex<(u64, String)>> = Arc::default();
-            let rf = refused.clone();
-            let name = h.name.clone();
-            let events =
-                net.subscribe(&keys::said(&h.name, prefix, "events"), move |_, bytes| {
-                    match serde_json::from_slice::<HostEvent>(&bytes) {
-                        Ok(HostEvent::Line { text }) => eprintln!("{name}: {text}"),
-                        Ok(HostEvent::Exited { label, raw, ended }) => {
-                            if let Some(s) = lock(&st).get(&label) {
-                                lock(s).exit = Some((raw, ended));
-                            }
-                        }
-                        Ok(HostEvent::Stalled { label, text }) => {
-                            if let Some(s) = lock(&st).get(&label) {
-                                lock(s).stalled = Some(text);
-                            }
-                        }
-                        Ok(HostEvent::Failed { text }) => {
-                            lock(&fl).get_or_insert(text);
-                        }
-                        Ok(HostEvent::Refused { count, first }) => {
-                            *lock(&rf) = (count, first);
-                        }
-                        Err(e) => eprintln!(
-                        "fdi-launch: warning: host `{name}` sent an event that is not one ({e})"
-                    ),
-                    }
-                })?;
-            hosts.push(HostLink {
-                host: h.clone(),
-                alive,
-                lost_reported: false,
-                processes: Vec::new(),
-                states,
-                reply: None,
-                failed,
-                refused,
-                _watch: watch,
-                _events: events,
-            });
-        }
+        let hosts = deployment
+            .others
+            .iter()
+            .map(|h| HostLink::follow(&net, prefix, h))
+            .collect::<Result<Vec<_>>>()?;
         let began = Instant::now();
         while hosts.iter().any(|h| !h.alive.load(Ordering::SeqCst)) {
             if began.elapsed() > REACH_TIMEOUT {
@@ -294,47 +353,7 @@ impl Remote {
                 &self.prefix,
                 &format!("cmd/{}", link.host.name),
             ))?);
-            for (p, _) in &link.processes {
-                let pid = reply
-                    .pids
-                    .iter()
-                    .find(|(l, _)| *l == p.label)
-                    .map(|(_, pid)| *pid)
-                    .with_context(|| {
-                        format!(
-                            "host `{}` did not say it started {}",
-                            link.host.name, p.label
-                        )
-                    })?;
-                let state = lock(&link.states)
-                    .get(&p.label)
-                    .cloned()
-                    .unwrap_or_default();
-                let cmd = cmd.clone();
-                let stop = Stopper(Arc::new(move |kill| {
-                    let c = if kill {
-                        HostCommand::Kill
-                    } else {
-                        HostCommand::Term
-                    };
-                    if let Ok(body) = serde_json::to_vec(&c) {
-                        let _ = cmd.put(&body);
-                    }
-                }));
-                let Some(meta) = metas.remove(&p.label) else {
-                    continue;
-                };
-                supervisor.adopt_remote(
-                    p.label.clone(),
-                    meta,
-                    RemoteChild {
-                        host: link.host.name.clone(),
-                        pid,
-                        state,
-                        stop,
-                    },
-                );
-            }
+            adopt(link, &reply, &cmd, &mut metas, supervisor)?;
             link.reply = Some(reply);
         }
         Ok(())

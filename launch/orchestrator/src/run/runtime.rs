@@ -1056,7 +1056,9 @@ fn supervise<X: Transport>(
 /// program that takes a role may take to answer, plus a second.
 fn stall_timeout_of(resolved: &Resolved, remote: Option<&crate::run::remote::Remote>) -> Duration {
     let roles = &resolved.scenario.roles;
-    let base = remote.map_or(STALL_TIMEOUT, |r| r.deployment.stall_timeout);
+    let base = remote
+        .and_then(|r| r.deployment.stall_timeout)
+        .unwrap_or(STALL_TIMEOUT);
     [roles.attacker.as_ref(), roles.monitor.as_ref()]
         .into_iter()
         .flatten()

@@ -523,22 +523,7 @@ impl HostRun {
         loop {
             self.report_exits();
             self.tell_refusals();
-            if let Some(text) = self.bridge.as_ref().and_then(Bridge::failure) {
-                if !std::mem::replace(&mut failed, true) {
-                    eprintln!("fdi-launch serve: run {}: {text}", self.prefix);
-                    self.send(&HostEvent::Failed { text });
-                }
-            }
-            if let Some(text) = self.procs.stalled(STALL_LIMIT) {
-                // The supervisor's message starts with `<label> (pid <pid>)`.
-                let label = self
-                    .procs
-                    .iter()
-                    .find(|c| text.starts_with(&format!("{} (pid {})", c.label, c.pid())))
-                    .map(|c| c.label.clone())
-                    .unwrap_or_default();
-                self.send(&HostEvent::Stalled { label, text });
-            }
+            self.tell_trouble(&mut failed);
             // One run at a time: another coordinator is told at once, not left to time out.
             while let Some(other) = queue.next(Duration::ZERO)? {
                 let _ = other.answer(Err(format!(
@@ -553,38 +538,7 @@ impl HostRun {
                 }
             }
             if let Some(req) = release.next(Duration::from_millis(20))? {
-                self.stop_processes();
-                let (removed, leftovers, counts) = self.clean_up();
-                let carried = match counts {
-                    Ok(c) => format!(
-                        "its bridge sent {} payloads to the other hosts and let {} in{}",
-                        c.sent,
-                        c.received,
-                        match c.refused {
-                            0 => String::new(),
-                            n => format!(", refusing {n} frames"),
-                        }
-                    ),
-                    Err(ref e) => format!("its bridge failed: {e}"),
-                };
-                let first_refusal = self.bridge_refusal.take();
-                let counts = counts.unwrap_or_default();
-                let released = Released {
-                    removed,
-                    leftovers: leftovers.clone(),
-                    sent: counts.sent,
-                    received: counts.received,
-                    refused: counts.refused,
-                    first_refusal,
-                };
-                req.answer(Ok(serde_json::to_vec(&released)?))?;
-                return Ok(format!(
-                    "run {} released by `{}`: {}; {}",
-                    self.prefix,
-                    self.coordinator,
-                    carried,
-                    left_behind(&leftovers)
-                ));
+                return self.release(req);
             }
             let lost = if seen.load(Ordering::SeqCst) {
                 !alive.load(Ordering::SeqCst)
@@ -593,28 +547,88 @@ impl HostRun {
             };
             let interrupted = self.stop.pending();
             if lost || interrupted.is_some() {
-                let labels: Vec<String> = self.procs.iter().map(|c| c.label.clone()).collect();
-                self.stop_processes();
-                let (_, leftovers, _) = self.clean_up();
-                let why = match interrupted {
-                    Some(sig) => {
-                        format!("interrupted by {}", crate::run::runtime::signal_name(sig))
-                    }
-                    None => format!(
-                        "the coordinator `{}` is unreachable (nothing heard for the {:.1} s \
-                         lease)",
-                        self.coordinator,
-                        net::LEASE.as_secs_f64()
-                    ),
-                };
-                return Ok(format!(
-                    "run {}: {why}: stopped {}; {}",
-                    self.prefix,
-                    labels.join(", "),
-                    left_behind(&leftovers)
-                ));
+                return Ok(self.abandon(interrupted));
             }
         }
+    }
+
+    /// Tells the coordinator that the bridge failed (once) or that a process is stopped.
+    fn tell_trouble(&mut self, failed: &mut bool) {
+        if let Some(text) = self.bridge.as_ref().and_then(Bridge::failure) {
+            if !std::mem::replace(failed, true) {
+                eprintln!("fdi-launch serve: run {}: {text}", self.prefix);
+                self.send(&HostEvent::Failed { text });
+            }
+        }
+        if let Some(text) = self.procs.stalled(STALL_LIMIT) {
+            // The supervisor's message starts with `<label> (pid <pid>)`.
+            let label = self
+                .procs
+                .iter()
+                .find(|c| text.starts_with(&format!("{} (pid {})", c.label, c.pid())))
+                .map(|c| c.label.clone())
+                .unwrap_or_default();
+            self.send(&HostEvent::Stalled { label, text });
+        }
+    }
+
+    /// The coordinator releases the run: its processes stop, its files go, and the answer says
+    /// what the bridge carried and refused and what is left. Returns the serve's line.
+    fn release(&mut self, req: Request) -> Result<String> {
+        self.stop_processes();
+        let (removed, leftovers, counts) = self.clean_up();
+        let carried = match counts {
+            Ok(c) => format!(
+                "its bridge sent {} payloads to the other hosts and let {} in{}",
+                c.sent,
+                c.received,
+                match c.refused {
+                    0 => String::new(),
+                    n => format!(", refusing {n} frames"),
+                }
+            ),
+            Err(ref e) => format!("its bridge failed: {e}"),
+        };
+        let first_refusal = self.bridge_refusal.take();
+        let counts = counts.unwrap_or_default();
+        let released = Released {
+            removed,
+            leftovers: leftovers.clone(),
+            sent: counts.sent,
+            received: counts.received,
+            refused: counts.refused,
+            first_refusal,
+        };
+        req.answer(Ok(serde_json::to_vec(&released)?))?;
+        Ok(format!(
+            "run {} released by `{}`: {}; {}",
+            self.prefix,
+            self.coordinator,
+            carried,
+            left_behind(&leftovers)
+        ))
+    }
+
+    /// The coordinator is gone, or the serve was interrupted: the run's processes stop and its
+    /// files go. Returns the serve's line.
+    fn abandon(&mut self, interrupted: Option<i32>) -> String {
+        let labels: Vec<String> = self.procs.iter().map(|c| c.label.clone()).collect();
+        self.stop_processes();
+        let (_, leftovers, _) = self.clean_up();
+        let why = match interrupted {
+            Some(sig) => format!("interrupted by {}", crate::run::runtime::signal_name(sig)),
+            None => format!(
+                "the coordinator `{}` is unreachable (nothing heard for the {:.1} s lease)",
+                self.coordinator,
+                net::LEASE.as_secs_f64()
+            ),
+        };
+        format!(
+            "run {}: {why}: stopped {}; {}",
+            self.prefix,
+            labels.join(", "),
+            left_behind(&leftovers)
+        )
     }
 
     /// Tells the coordinator how many frames the bridge refused, when that changed.
