@@ -186,6 +186,9 @@ endpoint = "quic/10.77.0.2:7447"
 agents = [3, 4]
 "#;
 
+/// The endpoints of both hosts of [`insecure_two_hosts`], for a rogue that connects to each.
+const BOTH_HOSTS: &str = "tcp/10.77.0.1:7447,tcp/10.77.0.2:7447";
+
 /// [`TWO_HOSTS`] over plain TCP.
 fn insecure_two_hosts() -> String {
     TWO_HOSTS
@@ -458,18 +461,7 @@ fn rogue() -> PathBuf {
 impl Lab {
     /// Runs the rogue on host `i` to its end; its stdout.
     fn rogue(&self, i: usize, args: &[&str]) -> String {
-        let child = self
-            .hosts
-            .command(i, &rogue(), args)
-            .current_dir(&self.scratch.0)
-            .stdin(Stdio::null())
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("spawning fdi-rogue");
-        let out = wait_with_watchdog(child, Duration::from_secs(60));
-        assert!(out.status.success(), "fdi-rogue {args:?}: {}", stderr(&out));
-        String::from_utf8_lossy(&out.stdout).into_owned()
+        wait_rogue(self.start_rogue(i, args))
     }
 
     /// Starts the rogue on host `i`; it is waited for with [`wait_rogue`].
@@ -514,6 +506,7 @@ impl Lab {
     }
 }
 
+/// Waits for a rogue to end; its stdout.
 fn wait_rogue(child: Child) -> String {
     let out = wait_with_watchdog(child, Duration::from_secs(60));
     assert!(out.status.success(), "fdi-rogue: {}", stderr(&out));
@@ -775,15 +768,7 @@ fn an_insecure_run_refuses_names_and_counts_what_a_rogue_peer_sends() {
         s.starts_with("answered"),
         "the run's own trace is served: {s}"
     );
-    let s = lab.rogue(
-        2,
-        &[
-            "tcp/10.77.0.1:7447,tcp/10.77.0.2:7447",
-            "forge-ahead",
-            "1000",
-            "5",
-        ],
-    );
+    let s = lab.rogue(2, &[BOTH_HOSTS, "forge-ahead", "1000", "5"]);
     assert!(s.starts_with("forged 1 frames"), "{s}");
     let out = wait_with_watchdog(run, Duration::from_secs(60));
     let err = stderr(&out);
@@ -808,17 +793,7 @@ fn an_insecure_run_refuses_names_and_counts_what_a_rogue_peer_sends() {
         "--json",
     ]);
     let _ = lab.next_run_prefix(cell, before);
-    let s = lab.rogue(
-        2,
-        &[
-            "tcp/10.77.0.1:7447,tcp/10.77.0.2:7447",
-            "bias",
-            "3",
-            "0.5",
-            "1200",
-            "4",
-        ],
-    );
+    let s = lab.rogue(2, &[BOTH_HOSTS, "bias", "3", "0.5", "1200", "4"]);
     assert!(s.starts_with("forged 1200 frames"), "{s}");
     let out = wait_with_watchdog(run, Duration::from_secs(60));
     let err = stderr(&out);

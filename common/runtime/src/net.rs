@@ -1262,6 +1262,29 @@ impl Drop for Bridge {
     }
 }
 
+/// Spawns the bridge thread of `side` (`out`, `in`): it opens its shared-memory ports with
+/// `open` (they stay on that thread) and then runs `carry` on them; its error is kept where
+/// [`Bridge::failure`] finds it. Returns once the ports are open (or names why they are not).
+fn spawn_bridge<T>(
+    side: &'static str,
+    failure: Arc<std::sync::Mutex<Option<String>>>,
+    open: impl FnOnce() -> Result<T, IpcError> + Send + 'static,
+    carry: impl FnOnce(T) -> Result<(), NetError> + Send + 'static,
+) -> Result<JoinHandle<Result<(), NetError>>, NetError> {
+    let (ready_tx, ready_rx) = mpsc::channel();
+    let thread = std::thread::Builder::new()
+        .name(format!("bridge {side}"))
+        .spawn(move || {
+            noted(&failure, || match report_ready(&ready_tx, open()) {
+                Some(ports) => carry(ports),
+                None => Ok(()),
+            })
+        })
+        .map_err(|e| NetError::Ipc(thread_error(e)))?;
+    wait_ready(&ready_rx, side)?;
+    Ok(thread)
+}
+
 /// Starts the thread that carries the local streams out: woken by the local processes'
 /// wake-ups of the remote ones (`wakes`), it drains each stream and puts its payloads on the
 /// network.
@@ -1271,53 +1294,42 @@ fn start_out<X: Transport + 'static>(
     outboxes: Vec<(Stream, Arc<NetOutbox>)>,
     shared: Shared,
 ) -> Result<JoinHandle<Result<(), NetError>>, NetError> {
-    let (ready_tx, ready_rx) = mpsc::channel();
     let (prefix, sizing, offset_ns) = (place.prefix.to_string(), place.sizing, place.offset_ns);
-    let thread = std::thread::Builder::new()
-        .name("bridge out".into())
-        .spawn(move || {
-            noted(&shared.failure, || {
-                let opened = (|| {
-                    let t = X::open(&prefix, "bridge-out", sizing)?;
-                    let waker = t.waker_any(&wakes)?;
-                    let ports = outboxes
-                        .iter()
-                        .map(|(s, _)| OutPort::<X>::open(&t, *s))
-                        .collect::<Result<Vec<_>, IpcError>>()?;
-                    Ok::<_, IpcError>((t, waker, ports))
-                })();
-                let Some((_t, waker, ports)) = report_ready(&ready_tx, opened) else {
-                    return Ok(());
-                };
-                loop {
-                    let stopping = shared.stop.load(Ordering::SeqCst);
-                    waker.wait(BRIDGE_POLL)?;
-                    for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
-                        let mut failed = None;
-                        port.drain(offset_ns, |bytes| {
-                            if failed.is_none() {
-                                match outbox.put(&bytes) {
-                                    Ok(()) => {
-                                        shared.sent.fetch_add(1, Ordering::Relaxed);
-                                    }
-                                    Err(e) => failed = Some(e),
-                                }
-                            }
-                        })?;
-                        if let Some(e) = failed {
-                            return Err(e);
+    let streams: Vec<Stream> = outboxes.iter().map(|(s, _)| *s).collect();
+    let open = move || {
+        let t = X::open(&prefix, "bridge-out", sizing)?;
+        let waker = t.waker_any(&wakes)?;
+        let ports = streams
+            .iter()
+            .map(|s| OutPort::<X>::open(&t, *s))
+            .collect::<Result<Vec<_>, IpcError>>()?;
+        Ok((t, waker, ports))
+    };
+    let failure = shared.failure.clone();
+    spawn_bridge("out", failure, open, move |(_t, waker, ports)| loop {
+        let stopping = shared.stop.load(Ordering::SeqCst);
+        waker.wait(BRIDGE_POLL)?;
+        for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
+            let mut failed = None;
+            port.drain(offset_ns, |bytes| {
+                if failed.is_none() {
+                    match outbox.put(&bytes) {
+                        Ok(()) => {
+                            shared.sent.fetch_add(1, Ordering::Relaxed);
                         }
-                    }
-                    // One more drain after the stop was asked: what was sent before it leaves.
-                    if stopping {
-                        return Ok(());
+                        Err(e) => failed = Some(e),
                     }
                 }
-            })
-        })
-        .map_err(|e| NetError::Ipc(thread_error(e)))?;
-    wait_ready(&ready_rx, "out")?;
-    Ok(thread)
+            })?;
+            if let Some(e) = failed {
+                return Err(e);
+            }
+        }
+        // One more drain after the stop was asked: what was sent before it leaves.
+        if stopping {
+            return Ok(());
+        }
+    })
 }
 
 /// Starts the thread that carries the other hosts' streams in: each frame handed over by the
@@ -1329,7 +1341,6 @@ fn start_in<X: Transport + 'static>(
     rx: mpsc::Receiver<(usize, u8, Vec<u8>)>,
     shared: Shared,
 ) -> Result<JoinHandle<Result<(), NetError>>, NetError> {
-    let (ready_tx, ready_rx) = mpsc::channel();
     // The key of each (port, sending host), for what is said of a frame.
     let sent_on: Vec<Vec<String>> = inbound
         .iter()
@@ -1345,49 +1356,41 @@ fn start_in<X: Transport + 'static>(
         place.sizing,
         place.offset_ns.wrapping_neg(),
     );
-    let thread = std::thread::Builder::new()
-        .name("bridge in".into())
-        .spawn(move || {
-            noted(&shared.failure, || {
-                let opened = (|| {
-                    let t = X::open(&prefix, "bridge-in", sizing)?;
-                    let ports = inbound
-                        .iter()
-                        .map(|i| InPort::<X>::open(&t, i.stream))
-                        .collect::<Result<Vec<_>, IpcError>>()?;
-                    Ok::<_, IpcError>((t, ports))
-                })();
-                let Some((t, ports)) = report_ready(&ready_tx, opened) else {
-                    return Ok(());
-                };
-                let mut ringer = Ringer::<X>::new(t);
-                let mut admitted = Admitted::new();
-                loop {
-                    let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
-                        Ok(frame) => Some(frame),
-                        Err(mpsc::RecvTimeoutError::Timeout) => None,
-                        Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
-                    };
-                    for (i, from, bytes) in first.into_iter().chain(rx.try_iter()) {
-                        let key = &sent_on[i][usize::from(from)];
-                        match ports[i].publish((i, key), &bytes, back, &mut admitted)? {
-                            None => {
-                                shared.received.fetch_add(1, Ordering::Relaxed);
-                                ringer.due(&inbound[i].ring);
-                            }
-                            Some(why) => shared.refusals.note(|| why),
-                        }
+    let streams: Vec<Stream> = inbound.iter().map(|i| i.stream).collect();
+    let open = move || {
+        let t = X::open(&prefix, "bridge-in", sizing)?;
+        let ports = streams
+            .iter()
+            .map(|s| InPort::<X>::open(&t, *s))
+            .collect::<Result<Vec<_>, IpcError>>()?;
+        Ok((t, ports))
+    };
+    let failure = shared.failure.clone();
+    spawn_bridge("in", failure, open, move |(t, ports)| {
+        let mut ringer = Ringer::<X>::new(t);
+        let mut admitted = Admitted::new();
+        loop {
+            let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
+                Ok(frame) => Some(frame),
+                Err(mpsc::RecvTimeoutError::Timeout) => None,
+                Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
+            };
+            for (i, from, bytes) in first.into_iter().chain(rx.try_iter()) {
+                let key = &sent_on[i][usize::from(from)];
+                match ports[i].publish((i, key), &bytes, back, &mut admitted)? {
+                    None => {
+                        shared.received.fetch_add(1, Ordering::Relaxed);
+                        ringer.due(&inbound[i].ring);
                     }
-                    ringer.ring()?;
-                    if shared.stop.load(Ordering::SeqCst) {
-                        return Ok(());
-                    }
+                    Some(why) => shared.refusals.note(|| why),
                 }
-            })
-        })
-        .map_err(|e| NetError::Ipc(thread_error(e)))?;
-    wait_ready(&ready_rx, "in")?;
-    Ok(thread)
+            }
+            ringer.ring()?;
+            if shared.stop.load(Ordering::SeqCst) {
+                return Ok(());
+            }
+        }
+    })
 }
 
 /// The local wake-up events an inbound bridge rings once a batch of frames is published.

@@ -178,9 +178,7 @@ impl Lab {
 /// Where the processes of a split run are, checked against the scenario.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct Deployment {
-    /// The file it was read from (for messages).
-    pub source: String,
-    /// Its hosts and how they reach one another.
+    /// Its hosts and how they reach one another (and the file it was read from).
     pub lab: Lab,
     pub coordinator: Host,
     /// The other hosts, each with a `fdi-launch serve`.
@@ -252,7 +250,6 @@ impl Deployment {
             }
         };
         Ok(Self {
-            source: source.into(),
             coordinator: host(&coordinator),
             lab: lab.clone(),
             stall_timeout,

@@ -232,7 +232,7 @@ impl Remote {
         let net = Net::open(&config).with_context(|| {
             format!(
                 "host `{}` (the coordinator, {})",
-                deployment.coordinator.name, deployment.source
+                deployment.coordinator.name, deployment.lab.source
             )
         })?;
         let token = net.token(&keys::said(&me, prefix, "coordinator"))?;
