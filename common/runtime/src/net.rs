@@ -377,7 +377,8 @@ pub struct Token(#[allow(dead_code)] zenoh::liveliness::LivelinessToken);
 #[derive(Debug)]
 pub struct Subscription(#[allow(dead_code)] zenoh::pubsub::Subscriber<()>);
 
-/// A queryable answered by a callback, held for as long as it answers.
+/// A queryable answered by a function on a thread of its own, held for as long as it answers
+/// (the thread ends once the queryable is gone and the queries taken are answered).
 #[derive(Debug)]
 pub struct Answering(#[allow(dead_code)] zenoh::query::Queryable<()>);
 
@@ -464,6 +465,34 @@ fn reply(query: &zenoh::query::Query, answer: Result<Vec<u8>, String>) -> Result
     match answer {
         Ok(body) => query.reply(query.key_expr().clone(), body).wait(),
         Err(message) => query.reply_err(message).wait(),
+    }
+}
+
+/// The variable Zenoh reads its runtimes' threads from, once, at its first use.
+pub const ZENOH_RUNTIME_VAR: &str = "ZENOH_RUNTIME";
+
+/// Zenoh's five runtimes (its receiving, sending, accepting, network and application tasks,
+/// QUIC's drivers among them) handed over to one runtime with one worker thread. A frame's
+/// way through the session is a chain of tasks: on separate threads each link of the chain is
+/// a wake-up of another thread, which on the 2-core lab machines costs more than the work
+/// (a split run's profile: the machine 93 % busy, its largest items the kernel's task
+/// switches). On one thread the tasks run one after the other. Measured on two namespaces
+/// (docs/multi-host.md): lockstep 10 s split over QUIC 2.3 s → 1.9 s, realtime end-to-end p50
+/// 450 µs → 350 µs.
+pub const ONE_RUNTIME_THREAD: &str = "(rx: (handover: app), tx: (handover: app), \
+     acc: (handover: app), net: (handover: app), app: (worker_threads: 1))";
+
+/// Gives Zenoh [`ONE_RUNTIME_THREAD`] unless the user's environment sets
+/// [`ZENOH_RUNTIME_VAR`] (then theirs is kept). Call it first thing in `main`, before any
+/// thread exists (the environment is the process's) and before any session is opened (Zenoh
+/// reads it once). Returns the value in force.
+pub fn choose_zenoh_threads() -> String {
+    match std::env::var(ZENOH_RUNTIME_VAR) {
+        Ok(theirs) => theirs,
+        Err(_) => {
+            std::env::set_var(ZENOH_RUNTIME_VAR, ONE_RUNTIME_THREAD);
+            ONE_RUNTIME_THREAD.to_string()
+        }
     }
 }
 
@@ -572,16 +601,31 @@ impl Net {
     }
 
     /// Answers every request on `key` with `f` (on a Zenoh thread).
+    ///
+    /// The answers are made and sent on a thread of the caller's, never in Zenoh's callback:
+    /// an answer (a piece of a trace: megabytes) waits for room in the session's queue, which
+    /// Zenoh's own tasks free, and those may share the callback's thread
+    /// ([`ONE_RUNTIME_THREAD`]).
     pub fn answer(
         &self,
         key: &str,
-        f: impl Fn(&[u8]) -> Result<Vec<u8>, String> + Send + Sync + 'static,
+        f: impl Fn(&[u8]) -> Result<Vec<u8>, String> + Send + 'static,
     ) -> Result<Answering, NetError> {
+        let (tx, rx) = mpsc::channel::<zenoh::query::Query>();
+        std::thread::Builder::new()
+            .name("net answers".into())
+            .spawn(move || {
+                for query in rx {
+                    // A requester gone before the answer: nobody to tell.
+                    let _ = reply(&query, f(&query_body(&query)));
+                }
+            })
+            .map_err(|e| NetError::Ipc(thread_error(e)))?;
         self.session
             .declare_queryable(key.to_string())
             .callback(move |query| {
-                // A requester gone before the answer: nobody to tell.
-                let _ = reply(&query, f(&query_body(&query)));
+                // The thread ends only when this callback is gone.
+                let _ = tx.send(query);
             })
             .wait()
             .map(Answering)
