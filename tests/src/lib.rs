@@ -42,36 +42,13 @@ pub fn launcher() -> PathBuf {
                 cmd.arg("--release");
             }
             cmd.current_dir(concat!(env!("CARGO_MANIFEST_DIR"), "/.."));
-            // The test runs with the variables cargo sets for the test crate itself
-            // (`CARGO_MANIFEST_DIR=…/tests`, `CARGO_PKG_NAME=fdi-tests`, …). Build scripts that
-            // rerun when one of them changes (ring's reads `CARGO_MANIFEST_DIR` and the
-            // `CARGO_PKG_*` of its own crate) would see a change and rebuild half the tree: the
-            // build below must see the environment the test command's build saw.
-            for (key, _) in std::env::vars_os() {
-                if key.to_str().is_some_and(crate_variable) {
-                    cmd.env_remove(key);
-                }
-            }
+            // Built in the environment the test command's build saw, not the test's.
+            fdi_test_runner::clean_build_env(&mut cmd);
             let st = cmd.status().expect("running cargo build for the binaries");
             assert!(st.success(), "building the binaries failed");
             dir.join("fdi-launch")
         })
         .clone()
-}
-
-/// A variable cargo sets for one crate's compilation or test run, never one a user sets for the
-/// whole build (`CARGO_HOME`, `CARGO_TARGET_DIR`, `CARGO_PROFILE_*`, … stay).
-fn crate_variable(key: &str) -> bool {
-    const EXACT: [&str; 7] = [
-        "CARGO_MANIFEST_DIR",
-        "CARGO_MANIFEST_PATH",
-        "CARGO_MANIFEST_LINKS",
-        "CARGO_CRATE_NAME",
-        "CARGO_PRIMARY_PACKAGE",
-        "CARGO_TARGET_TMPDIR",
-        "CARGO_RUSTC_CURRENT_DIR",
-    ];
-    EXACT.contains(&key) || key.starts_with("CARGO_PKG_") || key.starts_with("CARGO_BIN_")
 }
 
 /// A fresh scratch folder, removed on drop.

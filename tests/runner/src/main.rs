@@ -96,6 +96,9 @@ fn main() -> ExitCode {
         }
     }
     let mut nextest = Command::new(&cargo);
+    // `cargo run` set this runner's own variables: the tests' build must not see them, or the
+    // binaries' build inside the tests (without them) would rebuild half the tree.
+    fdi_test_runner::clean_build_env(&mut nextest);
     nextest
         .args(["nextest", "run", "--workspace", "--release"])
         .args(std::env::args_os().skip(1));
