@@ -477,8 +477,9 @@ pub const ZENOH_RUNTIME_VAR: &str = "ZENOH_RUNTIME";
 /// a wake-up of another thread, which on the 2-core lab machines costs more than the work
 /// (a split run's profile: the machine 93 % busy, its largest items the kernel's task
 /// switches). On one thread the tasks run one after the other. Measured on two namespaces
-/// (docs/multi-host.md): lockstep 10 s split over QUIC 2.3 s → 1.9 s, realtime end-to-end p50
-/// 450 µs → 350 µs.
+/// (docs/multi-host.md): the paper's 40 s in lockstep split over QUIC 9.8 s → 7.5 s, realtime
+/// end-to-end p50 431 µs → 323 µs. A program of its own that runs across hosts through the
+/// library calls [`choose_zenoh_threads`] first thing in its `main`, as `fdi-launch` does.
 pub const ONE_RUNTIME_THREAD: &str = "(rx: (handover: app), tx: (handover: app), \
      acc: (handover: app), net: (handover: app), app: (worker_threads: 1))";
 
@@ -600,7 +601,7 @@ impl Net {
             .map_err(Self::key_error(key))
     }
 
-    /// Answers every request on `key` with `f` (on a Zenoh thread).
+    /// Answers every request on `key` with `f`.
     ///
     /// The answers are made and sent on a thread of the caller's, never in Zenoh's callback:
     /// an answer (a piece of a trace: megabytes) waits for room in the session's queue, which
