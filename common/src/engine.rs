@@ -271,7 +271,7 @@ pub fn summarize(
         engine: engine.into(),
         clock: s.clock.as_str().into(),
         controller: s.controller.mode.as_str().into(),
-        attack: resolved.attack.name.clone(),
+        attack: resolved.attack_name(),
         seed: s.seed,
         agents: s.agents.len(),
         ticks,

@@ -348,6 +348,9 @@ impl ScenarioError {
     }
 }
 
+/// How [`Resolved::attack_name`] starts for a run whose attacker is an external program.
+pub const EXTERNAL_ATTACK_PREFIX: &str = "external program ";
+
 /// A validated scenario with its attack profile resolved.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Resolved {
@@ -468,6 +471,16 @@ impl Resolved {
             }];
         }
         Vec::new()
+    }
+
+    /// The run's attack as summaries and headers name it: the attack profile's name, or
+    /// `external program <label>` when a program takes the attacker role (the profile is then
+    /// the empty `none` and says nothing of the attack the run had).
+    pub fn attack_name(&self) -> String {
+        match &self.scenario.roles.attacker {
+            Some(role) => format!("{EXTERNAL_ATTACK_PREFIX}{}", role.label()),
+            None => self.attack.name.clone(),
+        }
     }
 
     /// Whether a program outside the project takes a role: only the multi-process engine can

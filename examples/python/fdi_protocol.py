@@ -174,6 +174,11 @@ class Run:
         # SIGTERM and SIGINT unwind the `with` block too, so the ports are closed.
         for sig in (signal.SIGTERM, signal.SIGINT):
             signal.signal(sig, lambda number, _: sys.exit(128 + number))
+        # iceoryx2 logs from Error up, as the run's own processes do
+        # (common/runtime/src/ipc/iceoryx.rs): its warnings are about its own fallbacks, e.g.
+        # "No config file was loaded" while the program passes its config itself, and would be
+        # taken for the program's lines. IOX2_LOG_LEVEL (iceoryx2's variable) asks for more.
+        iox.set_log_level_from_env_or(iox.LogLevel.Error)
         # The run's node: service type ipc, iceoryx2's default config with the run's prefix
         # (runs never see each other's services).
         config = iox.config.default()

@@ -61,7 +61,7 @@ pub enum Command {
     /// Work with the binary traces of a run.
     #[command(subcommand)]
     Trace(TraceCommand),
-    /// The run directories of a folder: list them, remove the older ones.
+    /// The output folders of a folder: list them (every kind), remove the older run directories.
     #[command(subcommand)]
     Runs(RunsCommand),
     /// Measurements: latency of the realtime runtime, the transport floor, lockstep speed.
@@ -104,11 +104,16 @@ pub enum TraceCommand {
 
 #[derive(Debug, Subcommand)]
 pub enum RunsCommand {
-    /// Every run directory of the folder, newest first: name, date, size, status.
+    /// Every output folder of the folder, newest first: name, kind (run, table1, table2,
+    /// attacks, bench-lockstep, campaign, detect), date, size on disk (as `du -s` counts it),
+    /// status; then what else is there, and the total.
     List {
-        /// Folder of the run directories.
+        /// The folder (`--out` of the commands).
         #[arg(long, default_value = "runs")]
         out: PathBuf,
+        /// Print one JSON object (every folder with its kind and size in bytes) instead.
+        #[arg(long)]
+        json: bool,
     },
     /// Keep the N newest run directories of the folder and remove the others (only folders
     /// that are run directories: `scenario.toml` with `summary.json` or `traces/`).

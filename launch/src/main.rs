@@ -12,7 +12,7 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use cli::{Command, ProcessRole, RunsCommand, TraceCommand};
-use fdi_orchestrator::{attacks, bench, campaign, run::runs, run::serve, tables};
+use fdi_orchestrator::{attacks, bench, campaign, run::outputs, run::runs, run::serve, tables};
 use fdi_report::{export, report};
 
 fn main() -> ExitCode {
@@ -70,7 +70,7 @@ fn dispatch(command: Command, stop: &Stop) -> Result<ExitCode> {
         Command::Trace(TraceCommand::Export { run_dir, format }) => {
             done(export::export(&run_dir, format))
         }
-        Command::Runs(RunsCommand::List { out }) => done(runs::print_list(&out)),
+        Command::Runs(RunsCommand::List { out, json }) => done(outputs::print_list(&out, json)),
         Command::Runs(RunsCommand::Prune { keep, out, dry_run }) => {
             done(runs::print_prune(&out, keep, dry_run))
         }

@@ -129,6 +129,9 @@ fn detect_sweeps_a_scenarios_run_into_monotone_roc_curves_and_replays_a_run_dire
     assert!(
         run_dir.starts_with(&dir.0) && fdi_common::run_dir::RunDir::new(&run_dir).traces().is_dir()
     );
+    // Named apart from `run`'s runs of the same scenario: `<timestamp>-detect-paper-…`.
+    let name = run_dir.file_name().and_then(|n| n.to_str()).unwrap_or("");
+    assert!(name[16..].starts_with("detect-paper-"), "{name}");
     for stem in ["roc", "delay"] {
         let (png, svg) = (
             printed(&out, &format!("{stem}.png")),

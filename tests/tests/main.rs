@@ -19,6 +19,7 @@ mod paper;
 mod protocol;
 mod replay;
 mod report;
+mod runs_list;
 mod runtime;
 mod scenarios;
 mod schema;

@@ -261,7 +261,17 @@ roles = ["attacker"]
     for k in [cell, adversary] {
         lab.wait_log(k, "nothing is left on this host", Duration::from_secs(10));
     }
-    // The run directory holds the whole run: the remote processes' traces were fetched.
+    // The serve's release line says what its bridge carried each way, and why the two counts
+    // differ (issue 33): the cell sends its agents' measurements, takes in their torques.
+    let log = lab.log(cell);
+    assert!(
+        log.contains("payloads to the other hosts (on fdi/measurement, fdi/status")
+            && log.contains("(on fdi/control, fdi/torque/3, fdi/torque/4)")
+            && log.contains("the two counts are of different services, so they need not match"),
+        "{log}"
+    );
+    // The run directory holds the whole run: the remote processes' traces were fetched. Its
+    // name says the run was split (issue 33).
     let runs = lab.scratch.0.join("runs");
     let dir = std::fs::read_dir(&runs)
         .expect("runs")
@@ -269,6 +279,11 @@ roles = ["attacker"]
         .next()
         .expect("a run directory")
         .path();
+    assert!(
+        dir.to_string_lossy().ends_with("-paper-3s-hosts"),
+        "{}",
+        dir.display()
+    );
     for name in ["agent-3", "agent-4", "attacker"] {
         let t = fdi_common::run_dir::RunDir::new(&dir)
             .traces()

@@ -214,7 +214,10 @@ fn runs_prune_keeps_the_newest_and_never_touches_a_folder_that_is_not_a_run() {
     assert!(other.join("notes.txt").is_file());
     let o = fdi_tests::launch_plain(&["runs", "list", "--out", &root], WATCHDOG);
     let text = String::from_utf8_lossy(&o.stdout);
-    assert!(text.contains("1 run directories"), "{text}");
+    assert!(
+        text.contains("1 output folders in") && text.contains("(1 run)"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -504,7 +507,7 @@ fn prune_continues_past_a_file_it_cannot_remove() {
         text.contains(&format!("{name}.pruning")) && text.contains("half-removed"),
         "{text}"
     );
-    assert!(text.contains("1 run directories"), "{text}");
+    assert!(text.contains("(1 run, 1 half-removed)"), "{text}");
     drop(stubborn);
     let o = fdi_tests::launch_plain(&["runs", "prune", "--keep", "1", "--out", &root], WATCHDOG);
     let text = String::from_utf8_lossy(&o.stdout);

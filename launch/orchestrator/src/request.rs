@@ -127,6 +127,14 @@ impl RunRequest {
         }
     }
 
+    /// Splits the run over the hosts of `deployment` (`--hosts`); its directory's name says so
+    /// (`<name>-hosts`), apart from the same scenario's runs on one host.
+    pub fn over_hosts(mut self, deployment: Deployment) -> Self {
+        self.deployment = Some(deployment);
+        self.name.push_str("-hosts");
+        self
+    }
+
     /// Changes the scenario through `edit` and validates it again (every problem named, as the
     /// command line's overrides are).
     pub fn edit(mut self, edit: impl FnOnce(&mut fdi_common::scenario::Scenario)) -> Result<Self> {

@@ -130,6 +130,19 @@ pub fn network_line(s: &RunSummary) -> Option<String> {
     Some(format!("network path: {how}; {refused}"))
 }
 
+/// The attack of a run as its header names it: `attack paper`, or `attack: external program
+/// python3 attacker.py` when a program took the attacker role (its attack profile, `none`,
+/// would misstate the run).
+pub fn attack_words(s: &RunSummary) -> String {
+    if s.attack
+        .starts_with(fdi_common::scenario::EXTERNAL_ATTACK_PREFIX)
+    {
+        format!("attack: {}", s.attack)
+    } else {
+        format!("attack {}", s.attack)
+    }
+}
+
 /// The controller and numerics options of a run beyond its mode (which its header names):
 /// `the paper's calibration (SPEC §4)` or each difference with the paper's value.
 pub fn numerics_line(s: &RunSummary) -> String {

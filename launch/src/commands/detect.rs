@@ -63,6 +63,7 @@ impl DetectArgs {
             hosts: None,
             placement: Placement::default(),
             replay: None,
+            run_by: Some("detect"),
         }
     }
 }

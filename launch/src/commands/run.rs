@@ -55,6 +55,10 @@ pub struct RunArgs {
     /// when they differ). The scenario comes from RUN_DIR.
     #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts", "observer_input", "leakage_w_per_s", "dead_zone_rad_s", "innovation_time_constant_s"])]
     pub replay: Option<PathBuf>,
+    /// The command that runs the scenario when it is not `run` itself (`detect`): the run
+    /// directory's name starts with it (`<timestamp>-detect-paper`), apart from `run`'s.
+    #[arg(skip)]
+    pub run_by: Option<&'static str>,
 }
 
 /// `run`.
@@ -69,6 +73,9 @@ pub fn run(args: &RunArgs, stop: &Stop) -> Result<ExitCode> {
 /// the traces' volume, the hosts file.
 fn request(args: &RunArgs) -> Result<RunRequest> {
     let mut request = RunRequest::new(args.scenario.as_deref(), &args.overrides, args.engine)?;
+    if let Some(command) = args.run_by {
+        request.name = format!("{command}-{}", request.name);
+    }
     let r = &request.resolved;
     check_placement(r, args.engine, &args.placement)?;
     volume::check_volume(
@@ -79,10 +86,10 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
         args.max_trace_size,
         !args.no_space_check,
     )?;
-    request.deployment = match &args.hosts {
-        Some(path) => Some(Deployment::load(path, r)?),
-        None => None,
-    };
+    if let Some(path) = &args.hosts {
+        let deployment = Deployment::load(path, r)?;
+        request = request.over_hosts(deployment);
+    }
     request.traces = args.traces;
     request.placement = args.placement.clone();
     request.progress = !args.json;
@@ -243,8 +250,15 @@ pub fn exit_code(summary: &RunSummary) -> ExitCode {
 
 fn print_summary(s: &RunSummary) {
     println!(
-        "scenario {} | engine {} | clock {} | controller {} | attack {} | {} agents | {:.1} s simulated in {:.2} s wall",
-        s.scenario, s.engine, s.clock, s.controller, s.attack, s.agents, s.sim_s, s.wall_s
+        "scenario {} | engine {} | clock {} | controller {} | {} | {} agents | {:.1} s simulated in {:.2} s wall",
+        s.scenario,
+        s.engine,
+        s.clock,
+        s.controller,
+        output::attack_words(s),
+        s.agents,
+        s.sim_s,
+        s.wall_s
     );
     println!("numerics: {}", output::numerics_line(s));
     if let Some(p) = &s.placement {

@@ -7,10 +7,10 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use iceoryx2::port::listener::Listener;
-use iceoryx2::port::notifier::Notifier;
-use iceoryx2::port::publisher::Publisher;
-use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::port::listener::{Listener, ListenerCreateError};
+use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
+use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
+use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::prelude::*;
 use iceoryx2::prelude::{ipc, local};
 
@@ -44,13 +44,49 @@ pub struct Iceoryx<S: Variant> {
     prefix: String,
 }
 
-/// Maps a port-creation failure on `service` to [`IpcError::Port`].
+/// Maps a port-creation failure on `service` to [`IpcError::Port`]; one that `full` says is
+/// the service's limit of ports of that kind is explained ([`Crowded`]).
 fn port_error<E: std::error::Error + Send + Sync + 'static>(
     service: &str,
+    full: fn(&E) -> bool,
 ) -> impl FnOnce(E) -> IpcError + '_ {
     move |e| IpcError::Port {
         service: service.to_string(),
-        source: e.into(),
+        source: if full(&e) {
+            Box::new(Crowded(e.into()))
+        } else {
+            e.into()
+        },
+    }
+}
+
+/// A port refused because its service already has every port of that kind the run sized it for
+/// (`PublisherCreateError::ExceedsMaxSupportedPublishers` and the like): more processes opened
+/// the run's services than the run has, and the likely cause is two "hosts" of a split run on
+/// one machine sharing one shared memory. Its text says so; its source is iceoryx2's error.
+#[derive(Debug)]
+struct Crowded(Source);
+
+impl std::fmt::Display for Crowded {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}: the service already has every port of this kind that the run's processes \
+             need, so processes beyond the run's opened it. Most likely two \"hosts\" of a \
+             split run share one shared memory: network namespaces on one machine see the \
+             same {} and {} unless each gets its own (a tmpfs on each, docs/multi-host.md, \
+             \"Several hosts on one machine\"), and then every host's processes and bridge \
+             open the same services",
+            self.0,
+            shm_dir().display(),
+            root_dir().display()
+        )
+    }
+}
+
+impl std::error::Error for Crowded {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        Some(&*self.0)
     }
 }
 
@@ -170,7 +206,9 @@ where
         let port = factory
             .publisher_builder()
             .create()
-            .map_err(port_error(&service))?;
+            .map_err(port_error(&service, |e| {
+                matches!(e, PublisherCreateError::ExceedsMaxSupportedPublishers)
+            }))?;
         Ok(IoxOutbox { port, service })
     }
 
@@ -180,7 +218,9 @@ where
         let port = factory
             .subscriber_builder()
             .create()
-            .map_err(port_error(&service))?;
+            .map_err(port_error(&service, |e| {
+                matches!(e, SubscriberCreateError::ExceedsMaxSupportedSubscribers)
+            }))?;
         Ok(IoxInbox { port, service })
     }
 
@@ -190,7 +230,9 @@ where
             .event(wake)?
             .notifier_builder()
             .create()
-            .map_err(port_error(&service))?;
+            .map_err(port_error(&service, |e| {
+                matches!(e, NotifierCreateError::ExceedsMaxSupportedNotifiers)
+            }))?;
         Ok(IoxBell { port, service })
     }
 
@@ -206,7 +248,9 @@ where
                 .event(wake)?
                 .listener_builder()
                 .create()
-                .map_err(port_error(&service))?;
+                .map_err(port_error(&service, |e| {
+                    matches!(e, ListenerCreateError::ExceedsMaxSupportedListeners)
+                }))?;
             ports.push(port);
         }
         let service = wakes
@@ -620,6 +664,44 @@ mod tests {
     /// A node `name` of run `prefix`, sized for one agent and one message in flight.
     fn open_small(prefix: &str, name: &str) -> Shm {
         Shm::open(prefix, name, Sizing::new(1, 1)).expect("node")
+    }
+
+    /// Regression (issue 33): two "hosts" of a split run in network namespaces that shared one
+    /// `/dev/shm` failed with a bare `PublisherCreateError::ExceedsMaxSupportedPublishers`. A
+    /// port beyond the service's limit is still an error, which now says what it means.
+    #[test]
+    fn a_port_beyond_the_services_limit_says_that_two_hosts_may_share_one_shared_memory() {
+        let p = prefix("crowd");
+        {
+            let a = open_small(&p, "host-a");
+            let b = open_small(&p, "host-b");
+            // One publisher per torque stream in a run: the second "host's" is one too many.
+            let _first = Transport::publisher::<super::super::TorqueMsg>(&a, Stream::Torque(1))
+                .expect("the run's publisher");
+            let e = Transport::publisher::<super::super::TorqueMsg>(&b, Stream::Torque(1))
+                .expect_err("a second publisher on a service sized for one");
+            let text = e.to_string();
+            assert!(
+                matches!(e, IpcError::Port { ref service, .. } if service == "fdi/torque/1"),
+                "{text}"
+            );
+            assert!(
+                text.contains("PublisherCreateError::ExceedsMaxSupportedPublishers")
+                    && text.contains("two \"hosts\" of a split run share one shared memory")
+                    && text.contains(&shm_dir().display().to_string())
+                    && text.contains("docs/multi-host.md"),
+                "{text}"
+            );
+            let first = std::error::Error::source(&e).expect("its cause");
+            let iceoryx2 = first
+                .source()
+                .expect("iceoryx2's error, kept as the source");
+            assert_eq!(
+                iceoryx2.to_string(),
+                "PublisherCreateError::ExceedsMaxSupportedPublishers"
+            );
+        }
+        Shm::remove_leftovers(&p).expect("cleanup");
     }
 
     #[test]

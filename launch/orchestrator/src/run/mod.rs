@@ -5,7 +5,9 @@
 //! records `fdi_report::join`.
 
 pub mod certs;
+pub mod disk;
 pub mod hosts;
+pub mod outputs;
 pub mod program;
 pub mod relay;
 pub mod remote;

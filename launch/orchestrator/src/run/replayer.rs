@@ -211,7 +211,9 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool, stop: &Stop) -> Resul
     // The center is event-driven: the replay is lockstep whatever the recording's clock.
     r.scenario.clock = scenario::ClockMode::Lockstep;
     let copies = check_recording(&r, recorded)?;
-    let dir = crate::run_dirs::create_run_dir(out, &r)?;
+    // Named apart from the runs of the same scenario (`<timestamp>-<name>-replay`).
+    let dir =
+        crate::run_dirs::create_named_run_dir(out, &r, &format!("{}-replay", r.scenario.name))?;
     let copied = copies.iter().try_for_each(|from| {
         let to = RunDir::new(&dir)
             .traces()

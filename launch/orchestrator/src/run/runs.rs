@@ -1,7 +1,7 @@
-//! `fdi-launch runs list|prune`: the run directories of a folder, and removing the older ones.
-//! Only folders that are run directories are ever listed or removed: a folder with a
-//! `scenario.toml` file and a `summary.json` file or a `traces/` folder; anything else in the
-//! folder is left alone.
+//! `fdi-launch runs prune`: removing the older run directories of a folder (`runs list`, which
+//! lists every kind of output folder, is [`super::outputs`]). Only folders that are run
+//! directories are ever removed: a folder with a `scenario.toml` file and a `summary.json` file
+//! or a `traces/` folder; anything else in the folder is left alone.
 //!
 //! Prune first renames a run directory `<name>` to `<name>.pruning` (one atomic rename: the
 //! folder is a run directory or a tombstone, never something in between), then removes that.
@@ -16,6 +16,8 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 use bytesize::ByteSize;
 
+use super::disk::usage_of;
+
 /// One run directory.
 #[derive(Debug, Clone)]
 pub struct RunDir {
@@ -23,6 +25,7 @@ pub struct RunDir {
     pub name: String,
     /// Its last modification (of the folder or of its summary), for the order.
     pub modified: std::time::SystemTime,
+    /// The blocks it takes on disk, as `du -s` counts them.
     pub bytes: u64,
     /// `done`, `partial (…)`, `no summary` or `summary unreadable`.
     pub status: String,
@@ -40,23 +43,9 @@ pub fn is_run_dir(p: &Path) -> bool {
             || is(&fdi_common::run_dir::RunDir::new(p).traces(), true))
 }
 
-/// Bytes of the files under `p` (symbolic links not followed).
-fn size_of(p: &Path) -> u64 {
-    let Ok(m) = std::fs::symlink_metadata(p) else {
-        return 0;
-    };
-    if !m.is_dir() {
-        return m.len();
-    }
-    std::fs::read_dir(p)
-        .into_iter()
-        .flatten()
-        .flatten()
-        .map(|e| size_of(&e.path()))
-        .sum()
-}
-
-fn status(p: &Path) -> String {
+/// The status of the run directory `p`: `done`, `partial (…)`, `no summary` or `summary
+/// unreadable`, and what its traces keep.
+pub(super) fn run_status(p: &Path) -> String {
     let Ok(text) =
         fdi_common::scenario::read_limited(&fdi_common::run_dir::RunDir::new(p).summary())
     else {
@@ -83,7 +72,7 @@ fn status(p: &Path) -> String {
 const TOMBSTONE: &str = ".pruning";
 
 /// True for a folder that prune began to remove (`<name>.pruning`, not a symbolic link).
-fn is_tombstone(p: &Path) -> bool {
+pub(super) fn is_tombstone(p: &Path) -> bool {
     p.file_name()
         .is_some_and(|n| n.to_string_lossy().ends_with(TOMBSTONE))
         && std::fs::symlink_metadata(p).is_ok_and(|m| m.is_dir())
@@ -104,6 +93,16 @@ pub fn tombstones(out: &Path) -> Result<Vec<PathBuf>> {
     Ok(found)
 }
 
+/// The last modification of the run directory `p`: of its summary, else of its scenario, else
+/// of the folder.
+pub(super) fn run_modified(p: &Path) -> std::time::SystemTime {
+    let stamp = |q: &Path| std::fs::metadata(q).and_then(|m| m.modified()).ok();
+    stamp(&fdi_common::run_dir::RunDir::new(p).summary())
+        .or_else(|| stamp(&fdi_common::run_dir::RunDir::new(p).scenario()))
+        .or_else(|| stamp(p))
+        .unwrap_or(std::time::UNIX_EPOCH)
+}
+
 /// The run directories of `out`, newest first (tombstones left out: [`tombstones`]).
 pub fn list(out: &Path) -> Result<Vec<RunDir>> {
     let entries = std::fs::read_dir(out)
@@ -115,61 +114,17 @@ pub fn list(out: &Path) -> Result<Vec<RunDir>> {
         if !is_run_dir(&path) || is_tombstone(&path) {
             continue;
         }
-        let stamp = |q: &Path| std::fs::metadata(q).and_then(|m| m.modified()).ok();
-        let modified = stamp(&fdi_common::run_dir::RunDir::new(&path).summary())
-            .or_else(|| stamp(&fdi_common::run_dir::RunDir::new(&path).scenario()))
-            .or_else(|| stamp(&path))
-            .unwrap_or(std::time::UNIX_EPOCH);
         runs.push(RunDir {
             name: e.file_name().to_string_lossy().into_owned(),
-            bytes: size_of(&path),
-            status: status(&path),
+            bytes: usage_of(&path).bytes,
+            status: run_status(&path),
+            modified: run_modified(&path),
             path,
-            modified,
         });
     }
     // Newest first; names (which start with the UTC time of the run) break ties.
     runs.sort_by(|a, b| b.modified.cmp(&a.modified).then(b.name.cmp(&a.name)));
     Ok(runs)
-}
-
-fn date(t: std::time::SystemTime) -> String {
-    jiff::Timestamp::try_from(t)
-        .map(|ts| ts.strftime("%Y-%m-%d %H:%M:%S UTC").to_string())
-        .unwrap_or_else(|_| "?".into())
-}
-
-/// `runs list`: a line per run directory, newest first, then one per tombstone.
-pub fn print_list(out: &Path) -> Result<()> {
-    let runs = list(out)?;
-    for t in tombstones(out)? {
-        println!(
-            "{}  {:>10}  half-removed: an earlier `runs prune` could not remove it whole; the next one tries again",
-            t.file_name().map_or_else(|| t.display().to_string(), |n| n.to_string_lossy().into_owned()),
-            ByteSize::b(size_of(&t)).to_string()
-        );
-    }
-    if runs.is_empty() {
-        println!("no run directories in {}", out.display());
-        return Ok(());
-    }
-    let total: u64 = runs.iter().map(|r| r.bytes).sum();
-    for r in &runs {
-        println!(
-            "{}  {}  {:>10}  {}",
-            r.name,
-            date(r.modified),
-            ByteSize::b(r.bytes).to_string(),
-            r.status
-        );
-    }
-    println!(
-        "{} run directories in {}, {}",
-        runs.len(),
-        out.display(),
-        ByteSize::b(total)
-    );
-    Ok(())
 }
 
 /// What `prune` removed (or would remove, on a dry run), and what it could not.

@@ -344,6 +344,56 @@ fn share(
     Ok((host_of, mine))
 }
 
+/// The services a host's bridge carries, by name: out (published here for processes on other
+/// hosts) and in (published elsewhere for processes here).
+struct Carried {
+    outbound: Vec<String>,
+    inbound: Vec<String>,
+}
+
+impl Carried {
+    /// The services of `plan`, each list sorted (the plan's order is not the reader's).
+    fn of(plan: &net::HostPlan) -> Self {
+        let sorted = |mut v: Vec<String>| {
+            v.sort();
+            v.dedup();
+            v
+        };
+        Self {
+            outbound: sorted(plan.outbound.iter().map(|s| s.service_name()).collect()),
+            inbound: sorted(
+                plan.inbound
+                    .iter()
+                    .map(|i| i.stream.service_name())
+                    .collect(),
+            ),
+        }
+    }
+
+    /// What the bridge carried, in words: the payloads sent and let in are of different
+    /// services (this host's processes' out, the other hosts' in), so the two counts differ
+    /// by what the processes of each side publish.
+    fn describe(&self, c: net::BridgeCounts) -> String {
+        let names = |v: &[String]| match v {
+            [] => "none".to_string(),
+            v => v.join(", "),
+        };
+        format!(
+            "its bridge sent {} payloads to the other hosts (on {}: what this host's processes \
+             publish for theirs) and let in {} from them (on {}){}; the two counts are of \
+             different services, so they need not match",
+            c.sent,
+            names(&self.outbound),
+            c.received,
+            names(&self.inbound),
+            match c.refused {
+                0 => String::new(),
+                n => format!(", refusing {n} frames"),
+            }
+        )
+    }
+}
+
 /// A run's share on this host.
 struct HostRun {
     prefix: String,
@@ -360,6 +410,8 @@ struct HostRun {
     refused_told: u64,
     /// The first frame its bridge refused, kept when the bridge stops.
     bridge_refusal: Option<String>,
+    /// The services its bridge carries out to the other hosts and in from them, by name.
+    carried: Carried,
     dir: tempfile::TempDir,
     /// The serve's stop (SIGINT, SIGTERM).
     stop: Stop,
@@ -440,6 +492,7 @@ impl HostRun {
             processes: mine.iter().map(|p| p.process).collect(),
             refused_told: 0,
             bridge_refusal: None,
+            carried: Carried::of(&plan),
             stop: stop.clone(),
             dir,
         })
@@ -578,15 +631,7 @@ impl HostRun {
         self.stop_processes();
         let (removed, leftovers, counts) = self.clean_up();
         let carried = match counts {
-            Ok(c) => format!(
-                "its bridge sent {} payloads to the other hosts and let {} in{}",
-                c.sent,
-                c.received,
-                match c.refused {
-                    0 => String::new(),
-                    n => format!(", refusing {n} frames"),
-                }
-            ),
+            Ok(c) => self.carried.describe(c),
             Err(ref e) => format!("its bridge failed: {e}"),
         };
         let first_refusal = self.bridge_refusal.take();

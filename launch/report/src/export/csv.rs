@@ -3,8 +3,9 @@
 //! `<process>-latency.csv`, the attacker's torque records to `attacker-actuation.csv`, a monitor
 //! program's verdicts to `control-center-monitor.csv`, events of
 //! every trace to `events.csv`; records of a kind the process does not usually write (say,
-//! center records in an agent trace) to `<process>-<kind>.csv`. Every column is listed in
-//! docs/traces.md.
+//! center records in an agent trace) to `<process>-<kind>.csv`. The detectors' statistics of
+//! every joined tick go to `detectors.csv` (the MCAP export's `/agent<id>/detectors`). Every
+//! column is listed in docs/traces.md.
 //!
 //! Every column name carries its unit (`q1_rad`, `q1_dot_rad_s`, `u1_applied_nm`, `t_s`); `t_s`
 //! is [`fdi_common::engine::tick_time`] of the tick `k`. The control center's file also holds
@@ -30,6 +31,7 @@ use fdi_common::records::{
 use fdi_common::scenario::MAX_DOF;
 use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
 
+use super::detectors;
 use super::sources::{
     abandoned, failed, read_sorted, scan, stem, trace_files, write_failure, Kind, OutDir, RunInfo,
     Sorted, WriteFailed,
@@ -50,7 +52,7 @@ pub(super) fn export(run_dir: &Path) -> Result<()> {
                 tmp: tmp.path().to_path_buf(),
                 dir: dir.path.clone(),
             };
-            let failures = write(&files, &out)?;
+            let failures = write(run_dir, &files, &out)?;
             out.commit()?;
             Ok(failures)
         });
@@ -83,14 +85,16 @@ impl Out {
     }
 }
 
-/// Writes every CSV of `files` into `out.tmp`. The failures of traces that could not be
-/// exported whole (their files hold what was read before); an error ends the export.
-fn write(files: &[PathBuf], out: &Out) -> Result<Vec<String>> {
+/// Writes every CSV of `files` (the traces of `run_dir`) into `out.tmp`, then the detectors'
+/// statistics. The failures of traces that could not be exported whole (their files hold what
+/// was read before); an error ends the export.
+fn write(run_dir: &Path, files: &[PathBuf], out: &Out) -> Result<Vec<String>> {
     let mut events = Csv::create(out, "events.csv", &["process", "t_s", "message"])?;
     let mut failures = Vec::new();
+    let mut run: Option<RunInfo> = None;
     for f in files {
         let mut n = 0;
-        match export_file(f, out, &mut events, &mut n) {
+        match export_file(f, out, &mut events, &mut run, &mut n) {
             Ok(()) => println!("{} -> {}: {n} records", f.display(), out.dir.display()),
             Err(e) if write_failure(&e).is_some() => return Err(e),
             Err(e) if n > 0 => failures.push(format!(
@@ -101,7 +105,61 @@ fn write(files: &[PathBuf], out: &Out) -> Result<Vec<String>> {
         }
     }
     events.finish()?;
+    if let Some(info) = &run {
+        let path = out.dir.join(DETECTORS_CSV);
+        match detectors_csv(run_dir, info, out) {
+            Ok(Ok(n)) => println!("detector statistics -> {}: {n} ticks", path.display()),
+            Ok(Err(none)) => println!("{}: {none}", out.dir.display()),
+            Err(e) if write_failure(&e).is_some() => return Err(e),
+            Err(e) => failures.push(format!("{e:#}")),
+        }
+    }
     Ok(failures)
+}
+
+/// The file of the detectors' statistics.
+const DETECTORS_CSV: &str = "detectors.csv";
+
+/// The columns of `detectors.csv` for the detectors `names`: the tick, then each detector's
+/// fields ([`detectors::fields_of`]).
+fn detectors_header(names: &[&str]) -> Vec<String> {
+    ["k", "agent", "t_s", "in_force"]
+        .into_iter()
+        .map(String::from)
+        .chain(names.iter().flat_map(|n| detectors::fields_of(n)))
+        .collect()
+}
+
+/// `detectors.csv`: a row per joined tick and robot, in (tick, agent) order, with every
+/// detector's statistic (empty without a verdict), configured threshold (empty before it is
+/// calibrated), verdict and alarm ([`detectors::each_tick`], what the MCAP export writes). The
+/// rows before a failure of the join are kept.
+fn detectors_csv(run_dir: &Path, info: &RunInfo, out: &Out) -> Result<Result<u64, String>> {
+    let mut csv = Csv::create(
+        out,
+        DETECTORS_CSV,
+        &detectors_header(&detectors::names(info)),
+    )?;
+    let written = detectors::each_tick(run_dir, info, |tick| {
+        let row = &mut csv.row;
+        head(row, tick.k, tick.agent, info);
+        row.push(flag(tick.in_force));
+        for s in tick.statistics {
+            for x in [s.value, s.threshold] {
+                match x {
+                    Some(x) => row.push(x),
+                    None => row.push_empty(),
+                }
+            }
+            row.push(s.verdict);
+            row.push(flag(s.alarm));
+        }
+        csv.end()
+    });
+    let finished = csv.finish();
+    let written = written?;
+    finished?;
+    Ok(written)
 }
 
 /// One row being built: its fields, each formatted with `{}`.
@@ -354,11 +412,21 @@ impl AttackLookup {
 }
 
 /// Exports one trace, counting its records in `n`. Records before a damage are written.
-fn export_file(path: &Path, out: &Out, events: &mut Csv, n: &mut u64) -> Result<()> {
+/// `run`: the scenario of the first trace (the detectors' statistics are computed from it).
+fn export_file(
+    path: &Path,
+    out: &Out,
+    events: &mut Csv,
+    run: &mut Option<RunInfo>,
+    n: &mut u64,
+) -> Result<()> {
     let mut reader = TraceReader::open(path)?;
     let stem = stem(path);
     let header = reader.header().clone();
     let info = RunInfo::from_header(path, &header)?;
+    if run.is_none() {
+        *run = Some(info.clone());
+    }
     let dof = info.dof;
     let main = main_kind(&header.process).or_else(|| main_kind(&stem));
     let mut files: BTreeMap<Kind, Csv> = BTreeMap::new();
@@ -622,6 +690,94 @@ mod tests {
              q1_hat_rad,q1_dot_hat_rad_s,q1_ddot_hat_rad_s2,u1_sent_nm,alarm,rejected_input,\
              rejected_torque,state_reset,history_miss,missing_input"
         );
+    }
+
+    /// Regression (issue 33): the detectors' statistics were in the MCAP export only.
+    /// `detectors.csv` has every detector's columns, a row per joined tick and robot, and the
+    /// values the MCAP export has, bit for bit.
+    #[test]
+    fn detectors_csv_holds_every_detectors_statistic_as_the_mcap_export_does() {
+        let dir = fixture_copy();
+        export(dir.path()).expect("CSV exported");
+        super::super::mcap::export(dir.path()).expect("MCAP exported");
+        let (header, rows) = read(&dir.path().join("export/detectors.csv"));
+        let names = fdi_common::detect::names();
+        assert!(
+            names.contains(&"chi2") && names.contains(&"cusum"),
+            "{names:?}"
+        );
+        for column in ["k", "agent", "t_s", "in_force"]
+            .into_iter()
+            .map(String::from)
+            .chain(names.iter().flat_map(|n| {
+                [
+                    n.to_string(),
+                    format!("{n}_threshold"),
+                    format!("{n}_verdict"),
+                    format!("{n}_alarm"),
+                ]
+            }))
+        {
+            assert_eq!(
+                header.iter().filter(|h| **h == column).count(),
+                1,
+                "{column} in {header:?}"
+            );
+        }
+        assert_eq!(header.len(), 4 + 4 * names.len(), "{header:?}");
+        let col = |name: &str| header.iter().position(|h| h == name).expect(name);
+        // The MCAP export's messages of each robot, in tick order.
+        let bytes = std::fs::read(dir.path().join("export/run.mcap")).expect("run.mcap");
+        let mut messages: BTreeMap<u32, Vec<serde_json::Value>> = BTreeMap::new();
+        for m in ::mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+            let m = m.expect("a message");
+            let topic = &m.channel.topic;
+            if let Some(id) = topic
+                .strip_suffix("/detectors")
+                .and_then(|t| t.strip_prefix("/agent"))
+            {
+                let id: u32 = id.parse().expect("an agent id");
+                messages
+                    .entry(id)
+                    .or_default()
+                    .push(serde_json::from_slice(&m.data).expect("JSON"));
+            }
+        }
+        assert_eq!(rows.len(), messages.values().map(Vec::len).sum::<usize>());
+        let mut next: BTreeMap<u32, usize> = BTreeMap::new();
+        let mut watched = 0;
+        for row in &rows {
+            let agent: u32 = row[col("agent")].parse().expect("agent");
+            let i = next.entry(agent).or_default();
+            let m = &messages[&agent][*i];
+            *i += 1;
+            assert_eq!(row[col("k")], m["k"].to_string());
+            for name in &names {
+                let [value, threshold, verdict, alarm] = super::super::detectors::fields_of(name);
+                for field in [&value, &threshold] {
+                    let cell = &row[col(field)];
+                    match m[field.as_str()].as_f64() {
+                        Some(x) => assert_eq!(
+                            cell.parse::<f64>().map(f64::to_bits),
+                            Ok(x.to_bits()),
+                            "{field}"
+                        ),
+                        // JSON has no NaN or infinity: the CSV's cell is empty or one.
+                        None => assert!(
+                            cell.is_empty() || cell.parse::<f64>().is_ok_and(|x| !x.is_finite()),
+                            "{field}: {cell}"
+                        ),
+                    }
+                }
+                assert_eq!(
+                    Some(row[col(&verdict)].as_str()),
+                    m[verdict.as_str()].as_str()
+                );
+                assert_eq!(row[col(&alarm)], flag(m[alarm.as_str()] == true));
+                watched += usize::from(row[col(&verdict)] == "watched");
+            }
+        }
+        assert!(watched > 0, "no detector watched a tick of the fixture");
     }
 
     #[test]

@@ -21,6 +21,7 @@
 //! the error names the file and the cause (`no space left on device (ENOSPC)`).
 
 mod csv;
+mod detectors;
 mod mcap;
 mod sources;
 
