@@ -14,10 +14,12 @@
 //! process shell) is the `fdi-runtime` crate.
 
 pub mod attack;
+pub mod collect;
 pub mod control;
 pub mod delay;
 pub mod detect;
 pub mod engine;
+pub mod field_path;
 pub mod files;
 pub mod limits;
 pub mod memo;

@@ -9,12 +9,14 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::attack::{presets, AgentAttack, AttackProfile, ProfileAttacker};
+use crate::collect::Collected;
 use crate::control::CenterParams;
 pub use crate::control::{
     ControllerConfig, ControllerMode, DetectionConfig, ObserverInput, UpdateLaw,
 };
 use crate::delay::DelayProfile;
 pub use crate::detect::DetectorsConfig;
+use crate::field_path::Seg;
 /// [`crate::files`]: the reader of scenario, attack, campaign and deployment files.
 pub use crate::files::read_limited;
 pub use crate::model::ModelConfig;
@@ -217,21 +219,32 @@ pub struct AgentDefaults {
 }
 
 /// Copies the keys of `[defaults]` into every `[[agents]]` table that lacks them, so that the
-/// agents deserialize complete. The `defaults` table itself stays (it is validated too).
-fn apply_agent_defaults(root: &mut toml::Table) {
+/// agents deserialize complete. The `defaults` table itself stays (it is validated too, so a
+/// problem of a copied value is reported once, at `defaults.<key>`). Returns the paths of the
+/// copies (`agents[2].trajectory`).
+fn apply_agent_defaults(root: &mut toml::Table) -> Vec<Vec<Seg>> {
+    let mut copied = Vec::new();
     let Some(toml::Value::Table(defaults)) = root.get("defaults").cloned() else {
-        return;
+        return copied;
     };
     let Some(toml::Value::Array(agents)) = root.get_mut("agents") else {
-        return;
+        return copied;
     };
-    for agent in agents.iter_mut() {
+    for (i, agent) in agents.iter_mut().enumerate() {
         if let toml::Value::Table(a) = agent {
             for (k, v) in &defaults {
-                a.entry(k.clone()).or_insert_with(|| v.clone());
+                if !a.contains_key(k) {
+                    a.insert(k.clone(), v.clone());
+                    copied.push(vec![
+                        Seg::Key("agents".into()),
+                        Seg::Index(i),
+                        Seg::Key(k.clone()),
+                    ]);
+                }
             }
         }
     }
+    copied
 }
 
 fn delay_problems(at: &str, delay: &DelayProfile) -> Vec<Problem> {
@@ -418,6 +431,51 @@ impl Resolved {
             profile: Some(self.attack.clone()),
         };
         toml::to_string(&s).unwrap_or_else(|e| format!("# could not serialize scenario: {e}\n"))
+    }
+
+    /// The scenario as a TOML document with the attack inlined (`attack.profile`) and every
+    /// field written, the ones left at their defaults included (`controller.update_law`,
+    /// `controller.observer_input`, `[detectors]`): what `--set PATH=VALUE` edits.
+    pub fn to_document(&self) -> Result<toml::Table, ScenarioError> {
+        let mut s = self.scenario.clone();
+        s.attack = AttackSource {
+            preset: None,
+            file: None,
+            profile: Some(self.attack.clone()),
+        };
+        let not_toml = |e: toml::ser::Error| {
+            ScenarioError::one(
+                &s.name,
+                "<document>",
+                format!("cannot be written as TOML: {e}"),
+            )
+        };
+        let toml::Value::Table(mut doc) = toml::Value::try_from(&s).map_err(not_toml)? else {
+            return Err(ScenarioError::one(
+                &s.name,
+                "<document>",
+                "is not a TOML table",
+            ));
+        };
+        let c = &s.controller;
+        let defaults = [
+            (
+                "update_law",
+                toml::Value::try_from(c.update_law).map_err(not_toml)?,
+            ),
+            (
+                "observer_input",
+                toml::Value::try_from(c.observer_input).map_err(not_toml)?,
+            ),
+        ];
+        if let Some(toml::Value::Table(controller)) = doc.get_mut("controller") {
+            for (key, value) in defaults {
+                controller.entry(key).or_insert(value);
+            }
+        }
+        let detectors = toml::Value::try_from(s.detectors).map_err(not_toml)?;
+        doc.entry("detectors").or_insert(detectors);
+        Ok(doc)
     }
 
     /// Keeps only the agents `keep` accepts, and only the attack channels of those agents.
@@ -924,112 +982,89 @@ pub fn toml_syntax_error(text: &str, e: &toml::de::Error) -> String {
     format!("TOML syntax{at}: {}", e.message().trim_end())
 }
 
-/// Deserializes `text`, collecting every unknown key (each one is removed and parsing retried)
-/// before reporting the first other error. Returns the value and the unknown-key problems.
+/// Deserializes `text`, collecting every problem of every table in one pass ([`collect`]): a
+/// syntax error first (then nothing else), with its line and column. `reference` is a valid
+/// document of the same kind, whose values stand in for wrong or missing ones so that the
+/// reading reaches every table (never a result: a document with problems is refused).
 fn parse_collecting<T: serde::de::DeserializeOwned>(
     text: &str,
     source_name: &str,
-) -> Result<(Option<T>, Vec<Problem>), ScenarioError> {
-    // Syntax errors first, with their line and column.
+    reference: Option<&toml::Table>,
+) -> Result<Collected<T>, ScenarioError> {
     let mut value: toml::Table = toml::from_str(text)
         .map_err(|e| ScenarioError::one(source_name, "<file>", toml_syntax_error(text, &e)))?;
-    apply_agent_defaults(&mut value);
-    let mut problems = Vec::new();
-    for _ in 0..256 {
-        let de = toml::Value::Table(value.clone());
-        match serde_path_to_error::deserialize::<_, T>(de) {
-            Ok(v) => return Ok((Some(v), problems)),
-            Err(err) => {
-                let path = err.path().to_string();
-                // The toml error appends a location line; the path above already says where.
-                let msg = err
-                    .inner()
-                    .to_string()
-                    .lines()
-                    .next()
-                    .unwrap_or_default()
-                    .trim_end()
-                    .to_string();
-                let unknown = msg.starts_with("unknown field");
-                let key = msg.split('`').nth(1).map(str::to_owned);
-                problems.push(Problem {
-                    path: if path == "." {
-                        "<root>".into()
-                    } else {
-                        path.clone()
-                    },
-                    message: msg,
-                });
-                let removed = match (unknown, key) {
-                    (true, Some(key)) => remove_key(&mut value, &path, &key),
-                    _ => false,
-                };
-                if !removed {
-                    return Ok((None, problems));
-                }
-            }
-        }
-    }
-    Ok((None, problems))
+    let inherited = apply_agent_defaults(&mut value);
+    Ok(crate::collect::collect(value, reference, &inherited))
 }
 
-/// Removes `key` from the table at `path` (as printed by serde_path_to_error, whose last
-/// segment may be the key itself).
-fn remove_key(root: &mut toml::Table, path: &str, key: &str) -> bool {
-    let mut segments: Vec<String> = Vec::new();
-    for part in path.split('.').filter(|s| !s.is_empty()) {
-        let mut rest = part;
-        if let Some(b) = rest.find('[') {
-            segments.push(rest[..b].to_string());
-            rest = &rest[b..];
-            while let Some(end) = rest.find(']') {
-                segments.push(rest[..=end].to_string());
-                rest = &rest[end + 1..];
-            }
-        } else {
-            segments.push(rest.to_string());
-        }
-    }
-    if segments.last().is_some_and(|s| s == key) {
-        segments.pop();
-    }
-    let mut root_value = toml::Value::Table(std::mem::take(root));
-    let removed = remove_at(&mut root_value, &segments, key);
-    if let toml::Value::Table(t) = root_value {
-        *root = t;
-    }
-    removed
-}
-
-fn remove_at(cur: &mut toml::Value, segments: &[String], key: &str) -> bool {
-    let Some((seg, rest)) = segments.split_first() else {
-        return cur.as_table_mut().is_some_and(|t| t.remove(key).is_some());
-    };
-    let next = if let Some(idx) = seg.strip_prefix('[').and_then(|s| s.strip_suffix(']')) {
-        idx.parse::<usize>()
-            .ok()
-            .and_then(|i| cur.as_array_mut().and_then(|a| a.get_mut(i)))
-    } else {
-        cur.as_table_mut().and_then(|t| t.get_mut(seg.as_str()))
-    };
-    next.is_some_and(|n| remove_at(n, rest, key))
-}
-
-/// Parses and validates scenario text. `base_dir` resolves `attack.file`.
+/// Parses and validates scenario text: every problem of every table, each with its path and
+/// its line and column in `text`. `base_dir` resolves `attack.file`.
 pub fn load_str(
     text: &str,
     source_name: &str,
     base_dir: Option<&Path>,
 ) -> Result<Resolved, ScenarioError> {
-    let (scenario, problems) = parse_collecting::<Scenario>(text, source_name)?;
-    let mut problems = with_locations(problems, text, None);
-    let Some(scenario) = scenario else {
+    load_text(text, source_name, base_dir, Some(text))
+}
+
+/// [`load_str`] of a document made by the program (a scenario edited by `--set`): its
+/// problems without a line and column, which would be of text the user never saw.
+pub fn load_document(doc: &toml::Table, source_name: &str) -> Result<Resolved, ScenarioError> {
+    let text = toml::to_string(doc).map_err(|e| {
+        ScenarioError::one(
+            source_name,
+            "<document>",
+            format!("cannot be written as TOML: {e}"),
+        )
+    })?;
+    load_text(&text, source_name, None, None)
+}
+
+/// [`load_str`], the problems located in `located` when given.
+fn load_text(
+    text: &str,
+    source_name: &str,
+    base_dir: Option<&Path>,
+    located: Option<&str>,
+) -> Result<Resolved, ScenarioError> {
+    let locate = |problems: Vec<Problem>| match located {
+        Some(t) => with_locations(problems, t, None),
+        None => problems,
+    };
+    // The embedded paper scenario stands in for wrong or missing values, to read on.
+    let reference = toml::from_str::<toml::Table>(PAPER_SCENARIO).ok();
+    let mut read = parse_collecting::<Scenario>(text, source_name, reference.as_ref())?;
+    let mut problems = locate(std::mem::take(&mut read.problems));
+    let Some(scenario) = read.value.take() else {
         return Err(ScenarioError {
             source_name: source_name.into(),
             problems,
         });
     };
-    problems.extend(with_locations(scenario.validate(), text, None));
+    let own = |p: &Problem| !read.touches_replaced(&p.path);
+    problems.extend(locate(
+        scenario.validate().into_iter().filter(own).collect(),
+    ));
+    let (attack, attack_problems) = resolve_attack(&scenario, base_dir);
+    problems.extend(attack_problems);
+    let resolved = Resolved { scenario, attack };
+    problems.extend(locate(
+        resolved.roles_problems().into_iter().filter(own).collect(),
+    ));
+    if problems.is_empty() {
+        Ok(resolved)
+    } else {
+        Err(ScenarioError {
+            source_name: source_name.into(),
+            problems,
+        })
+    }
+}
+
+/// The attack profile `[attack]` names (a preset, inline, or a file relative to `base_dir`)
+/// and the problems of an attack file (located in it, named `attack.file(FILE).…`).
+fn resolve_attack(scenario: &Scenario, base_dir: Option<&Path>) -> (AttackProfile, Vec<Problem>) {
+    let mut problems = Vec::new();
     let mut attack = AttackProfile::default();
     if let Some(name) = &scenario.attack.preset {
         attack = presets::preset(name)
@@ -1063,16 +1098,7 @@ pub fn load_str(
             },
         }
     }
-    let resolved = Resolved { scenario, attack };
-    problems.extend(with_locations(resolved.roles_problems(), text, None));
-    if problems.is_empty() {
-        Ok(resolved)
-    } else {
-        Err(ScenarioError {
-            source_name: source_name.into(),
-            problems,
-        })
-    }
+    (attack, problems)
 }
 
 /// Loads and validates a scenario file.
@@ -1103,12 +1129,12 @@ pub fn load_attack_text(text: &str, name: &str) -> Result<AttackProfile, Scenari
 /// [`load_attack_text`], the locations said to be `of` a file when given (an attack file that
 /// a scenario names).
 fn parse_attack(text: &str, name: &str, of: Option<&str>) -> Result<AttackProfile, ScenarioError> {
-    let (profile, problems) = parse_collecting::<AttackProfile>(text, name)?;
-    match profile {
-        Some(p) if problems.is_empty() => Ok(p),
+    let read = parse_collecting::<AttackProfile>(text, name, None)?;
+    match read.value {
+        Some(p) if read.problems.is_empty() => Ok(p),
         _ => Err(ScenarioError {
             source_name: name.into(),
-            problems: with_locations(problems, text, of),
+            problems: with_locations(read.problems, text, of),
         }),
     }
 }
@@ -1306,7 +1332,7 @@ mod tests {
     #[test]
     fn a_toml_syntax_error_names_its_line_and_column() {
         let text = "name = \"x\"\nseed = 1\nduration_s = 1.0.0\n";
-        let e = parse_collecting::<toml::Table>(text, "case.toml").expect_err("refused");
+        let e = parse_collecting::<toml::Table>(text, "case.toml", None).expect_err("refused");
         let msg = e.to_string();
         assert!(msg.contains("TOML syntax at line 3, column 17:"), "{msg}");
         assert_eq!(line_column("ab\ncdé\nx", 7), (2, 4));
@@ -1494,6 +1520,105 @@ mod tests {
         let all = err.to_string();
         assert!(all.contains("frobnicate"), "{all}");
         assert!(all.contains("agents[0].delay"), "{all}");
+    }
+
+    /// Regression (issue 33): `validate` stopped at the first table that failed to read: an
+    /// unknown key in `[controller]` hid a misspelt top-level key, and one `shape = "cosin"`
+    /// hid the two others and an unknown key.
+    #[test]
+    fn every_table_s_problems_are_reported_in_one_pass() {
+        let text = PAPER_SCENARIO
+            .replace("duration_s = 40.0", "duraton_s = 40.0")
+            .replace("learning_rate_w = 5000.0", "learning_rate_W = 5000.0");
+        let said: Vec<String> = load_str(&text, "t", None)
+            .expect_err("invalid")
+            .problems
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        for fragment in [
+            "controller.learning_rate_W: unknown field `learning_rate_W`",
+            "controller: missing field `learning_rate_w` (line 15, column 2)",
+            "duraton_s: unknown field `duraton_s`",
+            "<root>: missing field `duration_s`",
+        ] {
+            assert!(
+                said.iter().any(|s| s.contains(fragment)),
+                "{fragment} not in {said:#?}"
+            );
+        }
+        assert_eq!(said.len(), 4, "{said:#?}");
+        let cosine = "shape = \"cosine\", amplitude = 50.0";
+        let text = PAPER_SCENARIO
+            .replace(cosine, "shape = \"cosin\", amplitude = 50.0")
+            .replacen("ramp_rate = 0.01\n", "ramp_rate = 0.01\nbogus = 1\n", 1);
+        let said: Vec<String> = load_str(&text, "t", None)
+            .expect_err("invalid")
+            .problems
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        assert_eq!(
+            said.iter()
+                .filter(|s| s.contains("unknown variant `cosin`"))
+                .count(),
+            PAPER_SCENARIO.matches(cosine).count(),
+            "{said:#?}"
+        );
+        assert!(
+            said.iter()
+                .any(|s| s.starts_with("agents[0].trajectory.bogus: unknown field")),
+            "{said:#?}"
+        );
+        assert_eq!(said.len(), 4, "nothing beyond them: {said:#?}");
+    }
+
+    /// A value that cannot be read is replaced to read on; its own checks then judge the
+    /// replacement, not the file, and are left out, while the file's other values are checked.
+    #[test]
+    fn a_value_that_cannot_be_read_hides_neither_other_values_nor_itself() {
+        let text = PAPER_SCENARIO
+            .replace("beta = 30.0", "beta = \"high\"")
+            .replacen("offset_s = 0.003", "offset_s = -0.003", 1);
+        let said: Vec<String> = load_str(&text, "t", None)
+            .expect_err("invalid")
+            .problems
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        assert_eq!(said.len(), 2, "{said:#?}");
+        assert!(
+            said[0].starts_with("controller.beta: invalid type"),
+            "{said:#?}"
+        );
+        assert!(said[1].starts_with("agents[0].delay:"), "{said:#?}");
+    }
+
+    /// A wrong value in `[defaults]` is copied into every agent without its own: it is
+    /// reported once, where it is written.
+    #[test]
+    fn a_wrong_default_is_reported_once_at_defaults() {
+        let mut lines: Vec<&str> = PAPER_SCENARIO
+            .lines()
+            .filter(|l| !l.starts_with("delay = "))
+            .collect();
+        lines.push("[defaults]");
+        lines.push(
+            "delay = { kind = \"sin\", amplitude_s = 0.002, offset_s = 0.003, rate_rad_s = 0.5 }",
+        );
+        lines.push("");
+        let text = lines.join("\n");
+        let said: Vec<String> = load_str(&text, "t", None)
+            .expect_err("invalid")
+            .problems
+            .iter()
+            .map(ToString::to_string)
+            .collect();
+        assert_eq!(said.len(), 1, "{said:#?}");
+        assert!(
+            said[0].starts_with("defaults.delay.kind: unknown variant `sin`"),
+            "{said:#?}"
+        );
     }
 
     #[test]

@@ -7,7 +7,8 @@ use std::path::Path;
 use anyhow::{anyhow, Context, Result};
 use plotters::prelude::*;
 
-use super::plan::{labels_and_robots, show, toml_cell, Aggregate, Plan};
+use super::plan::{labels_and_robots, toml_cell, Aggregate, Plan};
+use fdi_common::field_path::show;
 use fdi_report::plot::{FONT, PALETTE};
 
 /// One point of a line: x, the mean, and its confidence interval when there is one.

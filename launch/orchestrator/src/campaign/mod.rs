@@ -27,7 +27,6 @@
 
 pub mod figures;
 pub mod flatten;
-pub mod path;
 pub mod plan;
 pub mod runner;
 pub mod stats;
@@ -48,9 +47,9 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::run::{execute, Engine, Traces};
+use fdi_common::field_path::{show, FieldPath, PathError};
 use flatten::Cell;
-use path::FieldPath;
-use plan::{labels_and_robots, show, toml_cell, Aggregate, Axis, Job, Plan, Point};
+use plan::{labels_and_robots, toml_cell, Aggregate, Axis, Job, Plan, Point};
 
 /// What an interrupted campaign kept.
 pub const DURING_THE_CAMPAIGN: &str =
@@ -328,6 +327,17 @@ impl Source<'_> {
     }
 }
 
+/// An edit of the base document that failed: a key missing below the top level may be one the
+/// base scenario leaves at its default, which a campaign edits only once it is written there.
+fn swept(e: PathError) -> anyhow::Error {
+    match e {
+        PathError::NoKey { ref at, .. } if at.starts_with('`') => anyhow::anyhow!(
+            "{e} (a key the base scenario leaves at its default must be written into it to be swept)"
+        ),
+        e => e.into(),
+    }
+}
+
 fn resolve_axes(file: &CampaignFile, src: &Source) -> Result<Vec<Axis>> {
     if file.axes.is_empty() {
         bail!("{}: a campaign needs at least one [[axes]]", src.name);
@@ -541,7 +551,7 @@ fn axis_value(
         return Ok(v.clone());
     }
     let f = number(v, &a.label)?;
-    let base = p.number(doc)?;
+    let base = p.number(doc).map_err(swept)?;
     Ok(toml::Value::Float(base * f))
 }
 
@@ -670,7 +680,9 @@ fn apply_set(
         doc.insert("attack".into(), toml::Value::Table(attack));
     }
     for (p, v) in set {
-        p.set(doc, v).with_context(|| src.at("set"))?;
+        p.set(doc, v)
+            .map_err(swept)
+            .with_context(|| src.at("set"))?;
     }
     Ok(())
 }
@@ -699,6 +711,7 @@ impl Expansion<'_> {
                 let x = axis_value(a, p, v, &mut point_doc)
                     .with_context(|| format!("axis `{}`", a.label))?;
                 p.set(&mut point_doc, &x)
+                    .map_err(swept)
                     .with_context(|| format!("axis `{}` = {}", a.label, show(v)))?;
             }
             values.push((a.label.clone(), v.clone()));
@@ -730,6 +743,7 @@ impl Expansion<'_> {
         if let (Some(a), Some(v)) = (self.seed_axis, sv) {
             a.paths[0]
                 .set(&mut run_doc, v)
+                .map_err(swept)
                 .with_context(|| format!("axis `seed` = {}", show(v)))?;
             label.push(format!("seed = {}", show(v)));
         }

@@ -6,8 +6,8 @@ use std::collections::BTreeMap;
 use fdi_common::scenario::Resolved;
 
 use super::flatten::Cell;
-use super::path::FieldPath;
 use super::stats::Stats;
+use fdi_common::field_path::{show, FieldPath};
 
 /// One axis as resolved.
 #[derive(Debug, Clone)]
@@ -42,13 +42,6 @@ pub(super) struct Job {
 #[derive(Debug, Clone)]
 pub(super) struct Point {
     pub(super) values: Vec<(String, toml::Value)>,
-}
-
-pub(super) fn show(v: &toml::Value) -> String {
-    match v {
-        toml::Value::String(s) => s.clone(),
-        other => other.to_string(),
-    }
 }
 
 /// The campaign as resolved: its axes, points and runs.

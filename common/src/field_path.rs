@@ -1,20 +1,35 @@
 //! Field paths into a scenario's TOML document (`controller.beta`, `agents[2].delay.offset_s`,
-//! `attack.channels[0].segments[1].waveform.amplitude`) and the edit of the value at one.
+//! `attack.channels[0].segments[1].waveform.amplitude`) and the edit of the value at one: the
+//! one language of a campaign's `[set]` and axes and of the command line's `--set PATH=VALUE`.
 //!
 //! A path must name a value the document holds: a key that is not there is an error naming the
 //! path and the keys that are there, an index out of range names the length. Paths into the
 //! attack (`attack.<key>` other than `preset`, `file`, `profile`) reach the inline profile
-//! (`attack.profile.<key>`), which the campaign writes into the document first.
+//! (`attack.profile.<key>`), which the caller writes into the document first.
 
 use std::fmt;
 
-use anyhow::{bail, Result};
-
 /// One step of a path.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
 pub enum Seg {
     Key(String),
     Index(usize),
+}
+
+/// The steps as a path writes them: keys joined by `.`, indices as `[i]` (empty for none).
+pub fn segs_text(segs: &[Seg]) -> String {
+    let mut s = String::new();
+    for seg in segs {
+        match seg {
+            Seg::Key(k) if s.is_empty() => s.push_str(k),
+            Seg::Key(k) => {
+                s.push('.');
+                s.push_str(k);
+            }
+            Seg::Index(i) => s.push_str(&format!("[{i}]")),
+        }
+    }
+    s
 }
 
 /// A parsed field path, printed as written.
@@ -22,6 +37,59 @@ pub enum Seg {
 pub struct FieldPath {
     pub text: String,
     pub segs: Vec<Seg>,
+}
+
+/// Why a path cannot be parsed, or cannot be edited in a document.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum PathError {
+    #[error("field path {path:?}: {why}")]
+    Syntax { path: String, why: String },
+    #[error("field path `{path}`: {at} has no key `{key}`; its keys: {keys}")]
+    NoKey {
+        path: String,
+        /// Where the key was looked for: `` `controller` `` or `the scenario's top level`.
+        at: String,
+        key: String,
+        /// The keys that are there, comma-separated (`none` for an empty table).
+        keys: String,
+    },
+    #[error("field path `{path}`: {at} has {len} elements, no index {index} (indices from 0)")]
+    NoIndex {
+        path: String,
+        at: String,
+        len: usize,
+        index: usize,
+    },
+    #[error("field path `{path}`: {at} is {holds}, not a table: it has no key `{key}`")]
+    NotTable {
+        path: String,
+        at: String,
+        holds: &'static str,
+        key: String,
+    },
+    #[error("field path `{path}`: {at} is {holds}, not an array: it has no index {index}")]
+    NotArray {
+        path: String,
+        at: String,
+        holds: &'static str,
+        index: usize,
+    },
+    #[error("field path `{path}`: the scenario's attack is not inline (it must be written into `attack.profile` before an edit of the profile)")]
+    AttackNotInline { path: String },
+    #[error("field path `{path}` holds {holds}, not a number: it cannot be scaled")]
+    NotNumber { path: String, holds: &'static str },
+    #[error("field path `{path}` holds an integer; the value {value} is not a whole number")]
+    NotWhole { path: String, value: f64 },
+    #[error("field path `{path}` holds an integer; the value {value} is a float, exact as an integer only up to 9e15: write it as an integer")]
+    InexactInteger { path: String, value: f64 },
+    #[error("field path `{path}` holds {holds}; the value {value} is {kind}")]
+    WrongType {
+        path: String,
+        holds: &'static str,
+        value: String,
+        kind: &'static str,
+    },
 }
 
 /// The keys of `[attack]` itself: every other key under `attack.` is one of the profile's.
@@ -33,10 +101,21 @@ impl fmt::Display for FieldPath {
     }
 }
 
+impl std::str::FromStr for FieldPath {
+    type Err = PathError;
+
+    fn from_str(s: &str) -> Result<Self, PathError> {
+        Self::parse(s)
+    }
+}
+
 impl FieldPath {
     /// Parses `key(.key|[index])*`; keys are letters, digits, `_` and `-`.
-    pub fn parse(text: &str) -> Result<Self> {
-        let bad = |why: &str| anyhow::anyhow!("field path {text:?}: {why}");
+    pub fn parse(text: &str) -> Result<Self, PathError> {
+        let bad = |why: &str| PathError::Syntax {
+            path: text.to_string(),
+            why: why.to_string(),
+        };
         let mut segs = Vec::new();
         if text.is_empty() {
             return Err(bad("empty"));
@@ -93,7 +172,7 @@ impl FieldPath {
 
     /// The steps this path takes through the document: a path into the attack profile
     /// (`attack.channels…`) goes through `attack.profile`, where the edit is made.
-    fn target(&self) -> Vec<Seg> {
+    pub fn target(&self) -> Vec<Seg> {
         let mut segs = self.segs.clone();
         if self.is_in_attack_profile() {
             segs.insert(1, Seg::Key("profile".into()));
@@ -114,17 +193,7 @@ impl FieldPath {
 
     /// The path as written up to (not including) segment `n`.
     fn prefix(&self, n: usize) -> String {
-        let mut s = String::new();
-        for seg in &self.segs[..n] {
-            match seg {
-                Seg::Key(k) if s.is_empty() => s.push_str(k),
-                Seg::Key(k) => {
-                    s.push('.');
-                    s.push_str(k);
-                }
-                Seg::Index(i) => s.push_str(&format!("[{i}]")),
-            }
-        }
+        let s = segs_text(&self.segs[..n]);
         if s.is_empty() {
             "the scenario's top level".into()
         } else {
@@ -133,122 +202,171 @@ impl FieldPath {
     }
 
     /// The value at this path in `doc`, for editing.
-    fn locate<'a>(&self, doc: &'a mut toml::Table) -> Result<&'a mut toml::Value> {
-        let redirect = self.is_in_attack_profile();
+    fn locate<'a>(&self, doc: &'a mut toml::Table) -> Result<&'a mut toml::Value, PathError> {
+        let path = || self.text.clone();
         let Some(Seg::Key(first)) = self.segs.first() else {
-            bail!("field path {:?}: it must start with a key", self.text);
+            return Err(PathError::Syntax {
+                path: path(),
+                why: "it must start with a key".into(),
+            });
         };
-        if !doc.contains_key(first.as_str()) {
-            bail!(
-                "field path `{}`: {} has no key `{first}`; its keys: {}",
-                self.text,
-                self.prefix(0),
-                keys(doc)
-            );
-        }
+        let keys_of_doc = keys(doc);
         let mut cur = doc
             .get_mut(first.as_str())
-            .ok_or_else(|| anyhow::anyhow!("field path `{}`: key `{first}` vanished", self.text))?;
-        if redirect {
-            cur = match cur.as_table_mut().and_then(|t| t.get_mut("profile")) {
-                Some(p) => p,
-                None => bail!(
-                    "field path `{}`: the scenario's attack is not inline (internal: it is inlined before any edit)",
-                    self.text
-                ),
-            };
+            .ok_or_else(|| PathError::NoKey {
+                path: path(),
+                at: self.prefix(0),
+                key: first.clone(),
+                keys: keys_of_doc,
+            })?;
+        if self.is_in_attack_profile() {
+            cur = cur
+                .as_table_mut()
+                .and_then(|t| t.get_mut("profile"))
+                .ok_or_else(|| PathError::AttackNotInline { path: path() })?;
         }
         for (n, seg) in self.segs.iter().enumerate().skip(1) {
-            let here = self.prefix(n);
-            cur = match seg {
-                Seg::Key(k) => match cur {
-                    toml::Value::Table(t) => {
-                        if !t.contains_key(k.as_str()) {
-                            bail!(
-                                "field path `{}`: {here} has no key `{k}`; its keys: {} (a key the base scenario leaves at its default must be written into it to be swept)",
-                                self.text,
-                                keys(t)
-                            );
-                        }
-                        t.get_mut(k.as_str()).ok_or_else(|| {
-                            anyhow::anyhow!("field path `{}`: key `{k}` vanished", self.text)
-                        })?
-                    }
-                    other => bail!(
-                        "field path `{}`: {here} is {}, not a table: it has no key `{k}`",
-                        self.text,
-                        kind(other)
-                    ),
-                },
-                Seg::Index(i) => match cur {
-                    toml::Value::Array(a) => {
-                        let len = a.len();
-                        match a.get_mut(*i) {
-                            Some(v) => v,
-                            None => bail!(
-                                "field path `{}`: {here} has {len} elements, no index {i} (indices from 0)",
-                                self.text
-                            ),
-                        }
-                    }
-                    other => bail!(
-                        "field path `{}`: {here} is {}, not an array: it has no index {i}",
-                        self.text,
-                        kind(other)
-                    ),
-                },
+            let at = self.prefix(n);
+            cur = match (seg, cur) {
+                (Seg::Key(k), toml::Value::Table(t)) => {
+                    let keys = keys(t);
+                    t.get_mut(k.as_str()).ok_or_else(|| PathError::NoKey {
+                        path: path(),
+                        at,
+                        key: k.clone(),
+                        keys,
+                    })?
+                }
+                (Seg::Index(i), toml::Value::Array(a)) => {
+                    let len = a.len();
+                    a.get_mut(*i).ok_or(PathError::NoIndex {
+                        path: path(),
+                        at,
+                        len,
+                        index: *i,
+                    })?
+                }
+                (Seg::Key(k), other) => {
+                    return Err(PathError::NotTable {
+                        path: path(),
+                        at,
+                        holds: kind(other),
+                        key: k.clone(),
+                    })
+                }
+                (Seg::Index(i), other) => {
+                    return Err(PathError::NotArray {
+                        path: path(),
+                        at,
+                        holds: kind(other),
+                        index: *i,
+                    })
+                }
             };
         }
         Ok(cur)
     }
 
     /// The number at this path (for `factors`).
-    pub fn number(&self, doc: &mut toml::Table) -> Result<f64> {
+    pub fn number(&self, doc: &mut toml::Table) -> Result<f64, PathError> {
         match self.locate(doc)? {
             toml::Value::Integer(i) => Ok(*i as f64),
             toml::Value::Float(f) => Ok(*f),
-            other => bail!(
-                "field path `{}` holds {}, not a number: it cannot be scaled",
-                self.text,
-                kind(other)
-            ),
+            other => Err(PathError::NotNumber {
+                path: self.text.clone(),
+                holds: kind(other),
+            }),
         }
     }
 
     /// Replaces the value at this path by `value`. A number takes the type of the value it
     /// replaces (an integer where a float was becomes a float; a whole float where an integer
     /// was becomes an integer); any other change of type is refused.
-    pub fn set(&self, doc: &mut toml::Table, value: &toml::Value) -> Result<()> {
+    pub fn set(&self, doc: &mut toml::Table, value: &toml::Value) -> Result<(), PathError> {
+        let path = self.text.clone();
         let slot = self.locate(doc)?;
         let new = match (&*slot, value) {
             (toml::Value::Float(_), toml::Value::Integer(i)) => toml::Value::Float(*i as f64),
             (toml::Value::Integer(_), toml::Value::Float(f)) => {
                 if f.fract() != 0.0 || !f.is_finite() {
-                    bail!(
-                        "field path `{}` holds an integer; the value {f} is not a whole number",
-                        self.text
-                    )
+                    return Err(PathError::NotWhole { path, value: *f });
                 }
                 // Every integer up to 2^53 is a float exactly; beyond, a float may stand for
                 // another integer than the one written: write such values as integers.
                 if f.abs() > 9.0e15 {
-                    bail!(
-                        "field path `{}` holds an integer; the value {f} is a float, exact as an integer only up to 9e15: write it as an integer",
-                        self.text
-                    )
+                    return Err(PathError::InexactInteger { path, value: *f });
                 }
                 toml::Value::Integer(*f as i64)
             }
             (old, new) if std::mem::discriminant(old) == std::mem::discriminant(new) => new.clone(),
-            (old, new) => bail!(
-                "field path `{}` holds {}; the value {new} is {}",
-                self.text,
-                kind(old),
-                kind(new)
-            ),
+            (old, new) => {
+                return Err(PathError::WrongType {
+                    path,
+                    holds: kind(old),
+                    value: new.to_string(),
+                    kind: kind(new),
+                })
+            }
         };
         *slot = new;
         Ok(())
+    }
+}
+
+/// A value as a table or a label shows it: a string without its quotes, anything else as TOML.
+pub fn show(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => s.clone(),
+        other => other.to_string(),
+    }
+}
+
+/// One edit of the command line, `--set PATH=VALUE`: the value at a field path replaced.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Edit {
+    pub path: FieldPath,
+    /// A TOML value (`10`, `0.5`, `"x"`, `[1, 2]`, `{ kind = "constant", value_s = 0.003 }`);
+    /// text that is not one (`traditional`) is a string.
+    pub value: toml::Value,
+}
+
+/// Why `PATH=VALUE` cannot be read.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EditError {
+    #[error("{0:?}: expected PATH=VALUE (a field path, `=`, a value), e.g. controller.beta=10")]
+    NoEquals(String),
+    #[error("{text:?}: {source}")]
+    Path {
+        text: String,
+        #[source]
+        source: PathError,
+    },
+}
+
+impl std::str::FromStr for Edit {
+    type Err = EditError;
+
+    /// `PATH=VALUE`, split at the first `=` (a path holds none).
+    fn from_str(s: &str) -> Result<Self, EditError> {
+        let Some((path, value)) = s.split_once('=') else {
+            return Err(EditError::NoEquals(s.to_string()));
+        };
+        let path = FieldPath::parse(path.trim()).map_err(|source| EditError::Path {
+            text: s.to_string(),
+            source,
+        })?;
+        let value = value.trim();
+        let value = value
+            .parse::<toml::Value>()
+            .unwrap_or_else(|_| toml::Value::String(value.to_string()));
+        Ok(Self { path, value })
+    }
+}
+
+impl fmt::Display for Edit {
+    /// `PATH=VALUE`, the value as [`show`] shows it.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}={}", self.path, show(&self.value))
     }
 }
 
@@ -379,6 +497,35 @@ mod tests {
         assert!(!FieldPath::parse("attack.profile.name")
             .expect("p")
             .is_in_attack_profile());
+    }
+
+    #[test]
+    fn an_edit_is_a_path_an_equals_sign_and_a_toml_value_or_a_word() {
+        let e = |t: &str| t.parse::<Edit>();
+        let beta = e("controller.beta=10").expect("edit");
+        assert_eq!(beta.path.text, "controller.beta");
+        assert_eq!(beta.value, toml::Value::Integer(10));
+        assert_eq!(beta.to_string(), "controller.beta=10");
+        assert_eq!(
+            e("controller.mode=traditional").expect("edit").value,
+            toml::Value::String("traditional".into())
+        );
+        assert_eq!(
+            e("name=\"a=b\"").expect("edit").value,
+            toml::Value::String("a=b".into())
+        );
+        let delay = e("agents[0].delay={ kind = \"constant\", value_s = 0.003 }").expect("edit");
+        assert!(delay.value.is_table(), "{delay:?}");
+        let no_equals = e("controller.beta").expect_err("no =").to_string();
+        assert!(
+            no_equals.contains("controller.beta") && no_equals.contains("PATH=VALUE"),
+            "{no_equals}"
+        );
+        let bad_path = e("controller..beta=1").expect_err("bad path").to_string();
+        assert!(
+            bad_path.contains("controller..beta=1") && bad_path.contains("empty key"),
+            "{bad_path}"
+        );
     }
 
     #[test]
