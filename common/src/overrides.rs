@@ -4,6 +4,8 @@
 
 use crate::control::ObserverInput;
 use crate::detect::ResidualKind;
+use crate::field_path::{Edit, FieldPath, Seg};
+use crate::problem::Problem;
 use crate::scenario::{self, ClockMode, ControllerMode, Resolved, Scenario, ScenarioError};
 
 /// The name the problems of overrides are reported under.
@@ -82,20 +84,134 @@ impl NumericsArgs {
         }
     }
 
-    /// The flags given, by name.
-    pub fn given(&self) -> Vec<&'static str> {
+    /// The flags given, each with the field path it sets.
+    pub fn fields(&self) -> Vec<(&'static str, &'static str)> {
         [
-            ("--observer-input", self.observer_input.is_some()),
-            ("--leakage-w-per-s", self.leakage_w_per_s.is_some()),
-            ("--dead-zone-rad-s", self.dead_zone_rad_s.is_some()),
+            (
+                "--observer-input",
+                "controller.observer_input",
+                self.observer_input.is_some(),
+            ),
+            (
+                "--leakage-w-per-s",
+                "controller.update_law.leakage_w_per_s",
+                self.leakage_w_per_s.is_some(),
+            ),
+            (
+                "--dead-zone-rad-s",
+                "controller.update_law.dead_zone_rad_s",
+                self.dead_zone_rad_s.is_some(),
+            ),
             (
                 "--innovation-time-constant-s",
+                "controller.update_law.innovation_time_constant_s",
                 self.innovation_time_constant_s.is_some(),
             ),
         ]
         .into_iter()
-        .filter_map(|(name, given)| given.then_some(name))
+        .filter_map(|(flag, path, given)| given.then_some((flag, path)))
         .collect()
+    }
+
+    /// The flags given, by name.
+    pub fn given(&self) -> Vec<&'static str> {
+        self.fields().into_iter().map(|(flag, _)| flag).collect()
+    }
+}
+
+/// `--set PATH=VALUE`, repeatable: values of the scenario changed at their field paths, in the
+/// language of a campaign's `[set]` and axes ([`crate::field_path`]; docs/scenarios.md).
+#[derive(Debug, Clone, Default)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
+pub struct SetArgs {
+    /// Set the value at a field path of the scenario (repeatable), as a campaign's `[set]`
+    /// does: `controller.beta=10`, `agents[1].delay.offset_s=0.005`, `detectors.residual=psi2`.
+    /// VALUE is a TOML value (`10`, `0.5`, `"x"`, `[1, 2]`, `{ kind = "constant", value_s =
+    /// 0.003 }`); a word that is none (`traditional`) is a string. The path must name a field
+    /// of the scenario, the value must have its type; the scenario as changed is validated as a
+    /// file is.
+    #[cfg_attr(feature = "clap", arg(long = "set", value_name = "PATH=VALUE"))]
+    pub set: Vec<Edit>,
+}
+
+impl SetArgs {
+    /// `r` with the edits made (none: `r` as it is) and validated. An edit that another flag
+    /// given makes too (`fields`: the flags' names and paths) or that reaches the value of
+    /// another edit is refused: one of them would silently undo the other.
+    pub fn apply(&self, r: Resolved, fields: &[(&str, &str)]) -> Result<Resolved, ScenarioError> {
+        if self.set.is_empty() {
+            return Ok(r);
+        }
+        let problems = self.overlaps(fields);
+        if !problems.is_empty() {
+            return Err(ScenarioError {
+                source_name: SOURCE_NAME.into(),
+                problems,
+            });
+        }
+        let mut doc = r.to_document()?;
+        let problems: Vec<Problem> = self
+            .set
+            .iter()
+            .filter_map(|e| {
+                e.path.set(&mut doc, &e.value).err().map(|why| Problem {
+                    path: format!("--set {e}"),
+                    message: why.to_string(),
+                })
+            })
+            .collect();
+        if !problems.is_empty() {
+            return Err(ScenarioError {
+                source_name: SOURCE_NAME.into(),
+                problems,
+            });
+        }
+        let mut edited =
+            scenario::load_document(&doc, &format!("{SOURCE_NAME} ({})", self.shown()))?;
+        let attack = |e: &Edit| matches!(e.path.segs.first(), Some(Seg::Key(k)) if k == "attack");
+        if !self.set.iter().any(attack) {
+            // The attack is as it was: say where it came from as the scenario did.
+            edited.scenario.attack = r.scenario.attack;
+        }
+        Ok(edited)
+    }
+
+    /// The edits that reach one value: two of them, or one and a flag of `fields`.
+    fn overlaps(&self, fields: &[(&str, &str)]) -> Vec<Problem> {
+        let mut out = Vec::new();
+        for (n, e) in self.set.iter().enumerate() {
+            for (flag, path) in fields {
+                if FieldPath::parse(path).is_ok_and(|p| p.overlaps(&e.path)) {
+                    out.push(Problem {
+                        path: format!("--set {e}"),
+                        message: format!("{flag} sets `{path}` too: give the value once"),
+                    });
+                }
+            }
+            for f in &self.set[n + 1..] {
+                if f.path.overlaps(&e.path) {
+                    out.push(Problem {
+                        path: format!("--set {e}"),
+                        message: format!("--set {f} reaches the same value: give it once"),
+                    });
+                }
+            }
+        }
+        out
+    }
+
+    /// `--set A=1 --set B=x`, as the edits were given (`show`n).
+    pub fn shown(&self) -> String {
+        self.set
+            .iter()
+            .map(|e| format!("--set {e}"))
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+
+    /// The edits as parts of a run directory's name: `controller.beta=10`.
+    pub fn name_parts(&self) -> Vec<String> {
+        self.set.iter().map(ToString::to_string).collect()
     }
 }
 
@@ -126,12 +242,15 @@ pub struct Overrides {
     pub residual: Option<ResidualKind>,
     #[cfg_attr(feature = "clap", command(flatten))]
     pub numerics: NumericsArgs,
+    #[cfg_attr(feature = "clap", command(flatten))]
+    pub set: SetArgs,
 }
 
 impl Overrides {
     /// Applies the overrides to `r` and validates the result: every problem of the scenario
     /// as changed, named under [`SOURCE_NAME`].
-    pub fn apply(&self, mut r: Resolved) -> Result<Resolved, ScenarioError> {
+    pub fn apply(&self, r: Resolved) -> Result<Resolved, ScenarioError> {
+        let mut r = self.set.apply(r, &self.fields())?;
         if let Some(a) = &self.attack {
             let profile = scenario::attack_from_arg(a, &r.scenario)?;
             r = r.with_attack(profile)?;
@@ -155,20 +274,30 @@ impl Overrides {
         validated(r)
     }
 
-    /// The flags given, by name.
-    pub fn given(&self) -> Vec<&'static str> {
+    /// The flags given other than `--set`, each with the field path it sets.
+    pub fn fields(&self) -> Vec<(&'static str, &'static str)> {
         [
-            ("--clock", self.clock.is_some()),
-            ("--attack", self.attack.is_some()),
-            ("--controller", self.controller.is_some()),
-            ("--duration-s", self.duration_s.is_some()),
-            ("--seed", self.seed.is_some()),
-            ("--residual", self.residual.is_some()),
+            ("--clock", "clock", self.clock.is_some()),
+            ("--attack", "attack", self.attack.is_some()),
+            ("--controller", "controller.mode", self.controller.is_some()),
+            ("--duration-s", "duration_s", self.duration_s.is_some()),
+            ("--seed", "seed", self.seed.is_some()),
+            ("--residual", "detectors.residual", self.residual.is_some()),
         ]
         .into_iter()
-        .filter_map(|(name, given)| given.then_some(name))
-        .chain(self.numerics.given())
+        .filter_map(|(flag, path, given)| given.then_some((flag, path)))
+        .chain(self.numerics.fields())
         .collect()
+    }
+
+    /// The flags given, by name (`--set` once however often it is given).
+    pub fn given(&self) -> Vec<&'static str> {
+        let set = (!self.set.set.is_empty()).then_some("--set");
+        self.fields()
+            .into_iter()
+            .map(|(flag, _)| flag)
+            .chain(set)
+            .collect()
     }
 }
 

@@ -23,6 +23,7 @@ mod runs_list;
 mod runtime;
 mod scenarios;
 mod schema;
+mod set_overrides;
 mod sweep;
 mod threads;
 mod traces;

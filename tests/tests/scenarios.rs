@@ -306,6 +306,49 @@ fn validate(file: &Path) -> (Option<i32>, String, String) {
     )
 }
 
+/// Regression (issue 33): `validate` reported only the first table that failed to read. A
+/// file with five problems in three tables (a wrong type at the top level, an unknown key in
+/// `[controller]`, three misspelt shapes in `[[agents]]`) lists all five, each with its path,
+/// line and column, and nothing else.
+#[test]
+fn validate_lists_every_problem_of_every_table_with_its_line_and_column() {
+    let file = cases_dir().join("five-problems-in-three-tables.toml");
+    let (code, out, err) = validate(&file);
+    assert_eq!(code, Some(2), "{out}{err}");
+    let problems: Vec<&str> = err.lines().filter_map(|l| l.strip_prefix("  - ")).collect();
+    let expected = [
+        (
+            "agents[0].trajectory.links[0].shape: unknown variant `cosin`",
+            "(line 47, column 12)",
+        ),
+        (
+            "agents[0].trajectory.links[1].shape: unknown variant `cosin`",
+            "(line 47, column 70)",
+        ),
+        (
+            "agents[2].trajectory.links[0].shape: unknown variant `cosin`",
+            "(line 66, column 12)",
+        ),
+        (
+            "controller.learning_rate_W: unknown field `learning_rate_W`",
+            "(line 20, column 1)",
+        ),
+        (
+            "duration_s: invalid type: string \"40\", expected f64",
+            "(line 7, column 1)",
+        ),
+    ];
+    assert_eq!(problems.len(), expected.len(), "{err}");
+    for (problem, (what, place)) in problems.iter().zip(expected) {
+        assert!(
+            problem.starts_with(what) && problem.ends_with(place),
+            "expected `{what} … {place}`, got `{problem}`:\n{err}"
+        );
+    }
+    assert!(err.contains(": 5 problem(s):"), "{err}");
+    assert!(out.is_empty(), "nothing is said valid: {out}");
+}
+
 #[test]
 fn validate_takes_an_attack_profile_on_its_own_and_says_what_it_cannot_check() {
     let file = scenarios_dir().join("attacks/paper.toml");

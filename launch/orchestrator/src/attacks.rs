@@ -21,7 +21,7 @@ use fdi_common::scenario::{self, ControllerMode, Resolved};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
-use crate::tables::{rmse_chart, MadeWith, Table};
+use crate::tables::{rmse_chart, MadeWith, Owned, Table};
 use fdi_report::output::{csv_bytes, md_table_head, rmse_cell};
 use fdi_report::plot::PALETTE;
 
@@ -44,6 +44,8 @@ pub struct AttacksArgs {
     pub scenario: Option<PathBuf>,
     #[command(flatten)]
     pub numerics: crate::request::NumericsArgs,
+    #[command(flatten)]
+    pub set: crate::request::SetArgs,
 }
 
 /// Where a class's run comes from.
@@ -572,13 +574,40 @@ fn csv(rows: &[Row]) -> Result<Vec<u8>> {
 const DURING_THE_TABLE: &str =
     "during the attack table: the runs already done are discarded, nothing is written";
 
+/// The table's folder, its base scenario (`--scenario`, the numerics flags and `--set`
+/// applied) and how it was made. `--set` of what the table sets itself is refused.
+fn base(args: &AttacksArgs) -> Result<(PathBuf, Resolved, MadeWith)> {
+    let dir = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!(
+            "{}-{}",
+            crate::run_dirs::timestamp(),
+            crate::tables::edited_name("attacks", &args.set)
+        ))
+    });
+    let mut owned = vec![
+        Owned {
+            keys: &["attack"],
+            why: "every class brings its attack",
+        },
+        Owned {
+            keys: &["controller", "mode"],
+            why: "it runs both controllers",
+        },
+    ];
+    if args.duration_s.is_some() {
+        owned.push(Owned {
+            keys: &["duration_s"],
+            why: "--duration-s gives every run's duration",
+        });
+    }
+    let (base, made) = MadeWith::load(args.scenario.as_deref(), &args.numerics, &args.set, &owned)?;
+    Ok((dir, base, made))
+}
+
 /// `fdi-launch attacks`.
 pub fn attacks(args: &AttacksArgs, stop: &Stop) -> Result<ExitCode> {
     stop.check(fdi_common::stop::BEFORE_THE_START)?;
-    let dir = args.out.clone().unwrap_or_else(|| {
-        PathBuf::from("runs").join(format!("{}-attacks", crate::run_dirs::timestamp()))
-    });
-    let (base, made) = MadeWith::load(args.scenario.as_deref(), &args.numerics)?;
+    let (dir, base, made) = base(args)?;
     // Every class resolves before anything runs: a broken one stops the table at once.
     for c in CLASSES {
         c.source

@@ -49,5 +49,7 @@ pub mod tables;
 mod damage_tests;
 
 pub use fdi_common::stop::Stop;
-pub use request::{execute, execute_with, NumericsArgs, Overrides, OverridesOn, RunRequest};
+pub use request::{
+    execute, execute_with, NumericsArgs, Overrides, OverridesOn, RunRequest, SetArgs,
+};
 pub use run::Engine;

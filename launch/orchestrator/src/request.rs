@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use fdi_common::attack::Attacker;
 use fdi_common::engine::RunSummary;
-pub use fdi_common::overrides::{NumericsArgs, Overrides};
+pub use fdi_common::overrides::{NumericsArgs, Overrides, SetArgs};
 use fdi_common::run_dir::RunDir;
 use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::stop::{Stop, BEFORE_THE_START};
@@ -23,7 +23,9 @@ pub trait OverridesOn {
 
     /// The name of a run's directory: the scenario's, then what the overrides changed —
     /// `attack-<preset or file stem>`, the controller, the engine (in-process), the clock, the
-    /// seed, the duration — so that runs of one scenario tell apart in `runs/`.
+    /// seed, the duration, the numerics flags, each `--set` edit (`controller.beta=10`, made
+    /// `controller_beta_10` by the rule of run folders) — so that runs of one scenario tell
+    /// apart in `runs/`.
     fn run_name(&self, r: &Resolved, engine: Engine) -> String;
 }
 
@@ -74,6 +76,7 @@ impl OverridesOn for Overrides {
                 .into_iter()
                 .map(|flag| flag.trim_start_matches('-').to_string()),
         );
+        parts.extend(self.set.name_parts());
         parts.join("-")
     }
 }

@@ -28,6 +28,8 @@ pub struct TableArgs {
     pub scenario: Option<PathBuf>,
     #[command(flatten)]
     pub numerics: crate::request::NumericsArgs,
+    #[command(flatten)]
+    pub set: crate::request::SetArgs,
     /// Print JSON instead of markdown.
     #[arg(long)]
     pub json: bool,
@@ -100,6 +102,68 @@ pub(crate) struct MadeWith {
     pub replaced: Vec<String>,
     /// The options that differ from the paper's calibration (empty: the paper's).
     pub numerics: Vec<fdi_common::numerics::Difference>,
+    /// The edits of `--set`, as given (`controller.beta=10`).
+    pub set: Vec<String>,
+}
+
+/// A field that a table sets itself in every run (its keys, the indices left out:
+/// `agents.delay` is every agent's delay), and what the table does with it: `--set` there is
+/// refused, as the table would silently undo it.
+pub(crate) struct Owned {
+    pub keys: &'static [&'static str],
+    pub why: &'static str,
+}
+
+/// The field paths of `set` that reach a field of `owned` (or a table holding one).
+fn refuse_owned(set: &crate::request::SetArgs, owned: &[Owned]) -> Result<()> {
+    let mut problems = Vec::new();
+    for e in &set.set {
+        let target = e.path.target();
+        let keys: Vec<&str> = target
+            .iter()
+            .filter_map(|s| match s {
+                fdi_common::field_path::Seg::Key(k) => Some(k.as_str()),
+                fdi_common::field_path::Seg::Index(_) => None,
+            })
+            .collect();
+        for o in owned {
+            if keys.starts_with(o.keys) || o.keys.starts_with(&keys) {
+                problems.push(fdi_common::problem::Problem {
+                    path: format!("--set {e}"),
+                    message: format!("this table sets `{}` itself: {}", o.keys.join("."), o.why),
+                });
+            }
+        }
+    }
+    if problems.is_empty() {
+        return Ok(());
+    }
+    Err(scenario::ScenarioError {
+        source_name: fdi_common::overrides::SOURCE_NAME.into(),
+        problems,
+    }
+    .into())
+}
+
+/// The fields Tables I and II set themselves.
+fn owned_by_tables(args: &TableArgs) -> Vec<Owned> {
+    let mut owned = vec![
+        Owned {
+            keys: &["attack"],
+            why: "it runs the paper's attack",
+        },
+        Owned {
+            keys: &["duration_s"],
+            why: "its runs last 40 s, or --duration-s",
+        },
+    ];
+    if args.seeds.is_some() {
+        owned.push(Owned {
+            keys: &["seed"],
+            why: "--seeds runs the scenario's seed and the ones after it",
+        });
+    }
+    owned
 }
 
 impl MadeWith {
@@ -108,9 +172,13 @@ impl MadeWith {
     pub fn load(
         scenario: Option<&Path>,
         numerics: &crate::request::NumericsArgs,
+        set: &crate::request::SetArgs,
+        owned: &[Owned],
     ) -> Result<(Resolved, Self)> {
+        refuse_owned(set, owned)?;
         let mut r = crate::request::load(scenario)?;
         numerics.apply(&mut r.scenario);
+        let r = set.apply(r, &numerics.fields())?;
         let r = crate::run::check_overrides(r)?;
         let made = Self {
             scenario: scenario.map_or_else(
@@ -122,6 +190,7 @@ impl MadeWith {
                 &r.scenario,
                 fdi_common::numerics::Compare::WithoutMode,
             ),
+            set: set.name_parts(),
         };
         Ok((r, made))
     }
@@ -129,6 +198,10 @@ impl MadeWith {
     /// One line: `scenario X (…replaced…); numerics: …`.
     pub fn line(&self) -> String {
         let mut out = format!("scenario: {}", self.scenario);
+        if !self.set.is_empty() {
+            let edits: Vec<String> = self.set.iter().map(|e| format!("`--set {e}`")).collect();
+            let _ = write!(out, " with {}", edits.join(", "));
+        }
         if !self.replaced.is_empty() {
             let _ = write!(
                 out,
@@ -164,8 +237,9 @@ impl MadeWith {
 
 /// The base scenario of Tables I and II: the given one (or the paper's), under the paper's
 /// attack, for the paper's 40 s unless `--duration-s` says otherwise.
-fn base(args: &TableArgs) -> Result<(Resolved, MadeWith)> {
-    let (mut r, mut made) = MadeWith::load(args.scenario.as_deref(), &args.numerics)?;
+fn base(args: &TableArgs, owned: &[Owned]) -> Result<(Resolved, MadeWith)> {
+    let (mut r, mut made) =
+        MadeWith::load(args.scenario.as_deref(), &args.numerics, &args.set, owned)?;
     let paper = scenario::paper()?;
     if r.attack.name != paper.attack.name {
         let profile = scenario::attack_from_arg(&paper.attack.name, &r.scenario)?;
@@ -272,10 +346,22 @@ fn run_case(
     }
 }
 
-/// The folder of one table: `<out>/<timestamp>-<name>`.
+/// The folder of one table: `<out>/<timestamp>-<name>`, then the `--set` edits
+/// (`-controller_beta_10`).
 fn table_dir(args: &TableArgs, name: &str) -> PathBuf {
-    args.out
-        .join(format!("{}-{name}", crate::run_dirs::timestamp()))
+    args.out.join(format!(
+        "{}-{}",
+        crate::run_dirs::timestamp(),
+        edited_name(name, &args.set)
+    ))
+}
+
+/// `name`, then each `--set` edit, as one component of a path ([`crate::run_dirs::safe_name`]).
+pub(crate) fn edited_name(name: &str, set: &crate::request::SetArgs) -> String {
+    let parts: Vec<String> = std::iter::once(name.to_string())
+        .chain(set.name_parts())
+        .collect();
+    crate::run_dirs::safe_name(&parts.join("-"))
 }
 
 /// The RMSE of `robot` in a run, NaN when the run has none.
@@ -287,7 +373,12 @@ fn robot_rmse(s: &RunSummary, robot: u32) -> f64 {
 }
 
 pub fn table1(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
-    let (base, made) = base(args)?;
+    let mut owned = owned_by_tables(args);
+    owned.push(Owned {
+        keys: &["controller", "mode"],
+        why: "it runs both controllers",
+    });
+    let (base, made) = base(args, &owned)?;
     let dir = table_dir(args, "table1");
     if let Some(n) = args.seeds {
         return seeded::table1(args, &base, &made, &dir, n, stop);
@@ -506,7 +597,14 @@ impl Table {
 }
 
 pub fn table2(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
-    let (base, made) = base(args)?;
+    let mut owned = owned_by_tables(args);
+    for keys in [&["agents", "delay"][..], &["defaults", "delay"]] {
+        owned.push(Owned {
+            keys,
+            why: "it runs robot 1 under the four delays of the paper's Table II",
+        });
+    }
+    let (base, made) = base(args, &owned)?;
     table2_robot(&base, args.scenario.as_deref())?;
     let dir = table_dir(args, "table2");
     if let Some(n) = args.seeds {

@@ -53,7 +53,7 @@ pub struct RunArgs {
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
     /// tampered measurements and compare the trace digest with the recording's (exit status 1
     /// when they differ). The scenario comes from RUN_DIR.
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts", "observer_input", "leakage_w_per_s", "dead_zone_rad_s", "innovation_time_constant_s"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts", "observer_input", "leakage_w_per_s", "dead_zone_rad_s", "innovation_time_constant_s", "set"])]
     pub replay: Option<PathBuf>,
     /// The command that runs the scenario when it is not `run` itself (`detect`): the run
     /// directory's name starts with it (`<timestamp>-detect-paper`), apart from `run`'s.
