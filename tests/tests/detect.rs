@@ -307,3 +307,59 @@ fn a_run_directory_without_traces_and_a_scenario_with_problems_are_refused_by_na
     assert!(stderr.contains("agents[0].delay"), "{stderr}");
     assert!(!runs.exists() || std::fs::read_dir(&runs).map_or(0, |d| d.count()) == 0);
 }
+
+/// The default detectors' false alarms on the paper's run without attack (40 s, in-process):
+/// `(robot, detector, false alarms per minute, share of the attack-free time alarmed)`.
+fn false_alarms_without_attack(scratch: &Path, extra: &[&str]) -> Vec<(String, String, f64, f64)> {
+    let out_dir = scratch.to_string_lossy();
+    let mut args = vec![
+        "run", "--engine", "inproc", "--attack", "none", "--json", "--out", &out_dir,
+    ];
+    args.extend(extra);
+    let out = launch_plain(&args, WATCHDOG);
+    assert!(out.status.success(), "{}", text(&out));
+    let summary: serde_json::Value =
+        serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {}", text(&out)));
+    let mut found = Vec::new();
+    for (robot, m) in summary["metrics"].as_object().expect("metrics") {
+        for (name, d) in m["detectors"].as_object().expect("detectors") {
+            assert!(d["watched_from_s"].is_number(), "{robot} {name}: {d}");
+            found.push((
+                robot.clone(),
+                name.clone(),
+                d["false_alarms_per_min"].as_f64().expect("a rate"),
+                d["false_alarm_share"].as_f64().expect("a share"),
+            ));
+        }
+    }
+    found
+}
+
+/// Regression (issue 33): with the innovation residual, then the default, χ² and CUSUM alarmed
+/// 46–133 times a minute, and for good, on a run without any attack. The default detectors
+/// (`psi2` residual, the windowed mean with its calibrated scale) stay under the bound that
+/// docs/detectors.md states: at most 2 false alarms per minute and 2 % of the attack-free time
+/// alarmed, for every detector on every robot. The innovation residual, still an option,
+/// does not (the bound can fail).
+#[test]
+fn the_default_detectors_raise_at_most_two_false_alarms_a_minute_without_attack() {
+    let scratch = Scratch::new("false-alarms");
+    let found = false_alarms_without_attack(&scratch.0.join("default"), &[]);
+    assert_eq!(found.len(), 16, "4 robots × 4 detectors: {found:?}");
+    for (robot, name, per_min, share) in &found {
+        assert!(
+            *per_min <= 2.0 && *share <= 0.02,
+            "robot {robot}, {name}: {per_min} per minute, {share} of the time"
+        );
+    }
+    let innovation = false_alarms_without_attack(
+        &scratch.0.join("innovation"),
+        &["--set", "detectors.residual=innovation"],
+    );
+    assert!(
+        innovation
+            .iter()
+            .any(|(_, name, per_min, share)| name == "chi2" && (*per_min > 2.0 || *share > 0.02)),
+        "{innovation:?}"
+    );
+}

@@ -20,11 +20,13 @@ pub const MAX_WINDOW_TICKS: usize = 1000;
 pub enum ResidualKind {
     /// The observer's innovation, `2N` entries: `[y_k − q̂_k⁻, ẏ_k − q̂̇_k⁻]`, the tampered
     /// measurement the center received minus the observer's prediction of it (its state after
-    /// the previous tick's step).
-    #[default]
+    /// the previous tick's step). Dominated by the observer's model mismatch, it outgrows its
+    /// calibration within seconds, attack or not (docs/detectors.md).
     Innovation,
     /// The observer's `Ψ2` (23), `N` entries: `ẏ_k + β y_k − q̂̇_k⁻ − β q̂_k⁻ − Ŝ_k`, the innovation
-    /// left after the NN's attack estimate.
+    /// left after the NN's attack estimate. The default: near white at the noise floor without
+    /// attack, so the detectors' thresholds mean what they say (docs/detectors.md).
+    #[default]
     Psi2,
 }
 
@@ -118,7 +120,7 @@ pub struct DetectorsConfig {
     /// calibrated instead of being refused.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub calibration_s: Option<f64>,
-    /// The residual tested: `"innovation"` (default) or `"psi2"`.
+    /// The residual tested: `"psi2"` (default) or `"innovation"`.
     pub residual: ResidualKind,
     /// Ridge added to the calibrated covariance: `Σ + ε · (tr Σ / dim) · I`, ε this value
     /// (default 1e-6). Keeps a singular `Σ` (a channel without noise) invertible; 0 turns it

@@ -81,6 +81,8 @@ fn config(window_ticks: usize, p: f64) -> DetectorsConfig {
             false_alarm_probability: p,
             threshold: None,
         },
+        // These tests feed 4-entry residuals: the innovation of a two-link robot.
+        residual: ResidualKind::Innovation,
         ..DetectorsConfig::defaults()
     }
 }
@@ -175,6 +177,7 @@ fn a_step_bias_of_six_standard_deviations_is_detected_by_both_within_a_few_ticks
         let verdicts = run(
             &DetectorsConfig {
                 calibration_s: Some(CAL_S),
+                residual: ResidualKind::Innovation,
                 ..DetectorsConfig::defaults()
             },
             residuals(seed, onset + 1000, |k| {
@@ -205,6 +208,7 @@ fn cusum_detects_a_small_persistent_bias_that_the_per_tick_chi2_misses() {
         let verdicts = run(
             &DetectorsConfig {
                 calibration_s: Some(CAL_S),
+                residual: ResidualKind::Innovation,
                 ..DetectorsConfig::defaults()
             },
             residuals(seed, onset + 3000, |k| {
