@@ -751,6 +751,7 @@ impl FigureLines {
             color,
             points: rows.iter().map(|r| (r.t_end, f(r))).collect(),
             keep: true,
+            dashed: false,
         };
         self.e1.push(line(&|r| r.e_mean[0], label.to_string()));
         self.q_tilde

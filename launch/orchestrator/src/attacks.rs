@@ -649,7 +649,7 @@ pub fn attacks(args: &AttacksArgs, stop: &Stop) -> Result<ExitCode> {
             "rows": rows,
         }),
         chart: rmse_chart(
-            "Attack classes: RMSE of the attacked robots, traditional vs proposed (a robot that diverged has no bar)".into(),
+            "Attack classes: RMSE of the attacked robots, traditional vs proposed (a robot that diverged: an outline marked \"diverged\")".into(),
             rows.iter()
                 .map(|r| format!("{} r{}", r.class, r.robot))
                 .collect(),

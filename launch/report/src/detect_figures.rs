@@ -93,6 +93,7 @@ fn lines(swept: &[Swept], y: impl Fn(&Tally) -> Option<f64>, dy: f64) -> Vec<Lin
             color,
             points,
             keep: true,
+            dashed: false,
         });
         if let Some((threshold, x, v)) = configured {
             out.push(Line {
@@ -100,6 +101,7 @@ fn lines(swept: &[Swept], y: impl Fn(&Tally) -> Option<f64>, dy: f64) -> Vec<Lin
                 color,
                 points: diamond(x, v, 0.012, dy),
                 keep: true,
+                dashed: false,
             });
         }
     }
@@ -112,13 +114,14 @@ pub fn roc(swept: &[Swept], title: &str) -> Option<Figure> {
     if curves.is_empty() {
         return None;
     }
-    // The diagonal first, under the curves (a detector whose alarm is on or off whatever the
-    // attack does lies on it).
+    // The diagonal, dashed and drawn over the curves: a detector whose alarm is on or off
+    // whatever the attack does lies on it, and would hide it.
     let mut lines = vec![Line {
-        label: "chance: TPR = FPR".into(),
+        label: "chance: TPR = FPR (dashed)".into(),
         color: GREY,
         points: vec![(0.0, 0.0), (1.0, 1.0)],
         keep: true,
+        dashed: true,
     }];
     lines.extend(curves);
     Some(Figure {

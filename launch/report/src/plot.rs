@@ -1,8 +1,10 @@
 //! Figures as data ([`Figure`], [`BarChart`]) and their rendering to PNG and SVG with plotters.
 //!
-//! Text is drawn with the DejaVu Sans font embedded in the binary (`src/reporting/fonts/`, Bitstream Vera
-//! license), so figures render the same on a machine without any system font. PNG files are
-//! encoded with the `png` crate from plotters' RGB buffer.
+//! Text is drawn with the DejaVu Sans font embedded in the binary (`src/fonts/`, Bitstream Vera
+//! license), so figures render the same on a machine without any system font. plotters draws
+//! each figure once, as SVG; the PNG is that SVG rasterised by resvg, whose text is shaped with
+//! the same embedded font (plotters' own bitmap text placed glyphs unevenly: "pap er", a decimal
+//! point drawn as "·"), and encoded with the `png` crate.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -48,6 +50,9 @@ pub struct Line {
     /// The y-axis always holds the whole curve: it is never clipped (the true attack S, the
     /// delay τ). Other curves may be clipped by the robust range ([`robust_y_range`]).
     pub keep: bool,
+    /// Drawn dashed and over the other curves (a reference such as the ROC's chance diagonal,
+    /// which a curve lying on it would otherwise hide).
+    pub dashed: bool,
 }
 
 /// A horizontal reference band `lo ≤ y ≤ hi` drawn behind the curves (a bound the paper states).
@@ -366,33 +371,51 @@ pub fn save_bars(chart: &BarChart, stem: &Path, size: (u32, u32)) -> Result<[Pat
     save(stem, size, |root| draw_bars(root, chart))
 }
 
-/// The two backends this module draws on.
-enum DynArea<'a> {
-    Bitmap(DrawingArea<BitMapBackend<'a>, Shift>),
-    Svg(DrawingArea<SVGBackend<'a>, Shift>),
-}
+/// The area this module draws on: SVG (the PNG is rasterised from it).
+type Area<'a> = DrawingArea<SVGBackend<'a>, Shift>;
 
 fn save(
     stem: &Path,
     (w, h): (u32, u32),
-    draw: impl Fn(&DynArea<'_>) -> Result<()>,
+    draw: impl Fn(&Area<'_>) -> Result<()>,
 ) -> Result<[PathBuf; 2]> {
     fonts()?;
     let png_path = stem.with_extension("png");
     let svg_path = stem.with_extension("svg");
-    let mut rgb = vec![0u8; w as usize * h as usize * 3];
-    {
-        let area = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        draw(&DynArea::Bitmap(area))?;
-    }
-    write_png(&png_path, &rgb, (w, h))?;
     let mut svg = String::new();
     {
         let area = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
-        draw(&DynArea::Svg(area))?;
+        draw(&area)?;
     }
+    let rgb = rasterise(&svg, (w, h)).with_context(|| format!("drawing {}", png_path.display()))?;
+    write_png(&png_path, &rgb, (w, h))?;
     std::fs::write(&svg_path, svg).with_context(|| format!("writing {}", svg_path.display()))?;
     Ok([png_path, svg_path])
+}
+
+/// The SVG `svg` of `w` × `h` pixels as RGB bytes on white, its text in the embedded font.
+pub fn rasterise(svg: &str, (w, h): (u32, u32)) -> Result<Vec<u8>> {
+    use resvg::{tiny_skia, usvg};
+    static OPTIONS: OnceLock<usvg::Options<'static>> = OnceLock::new();
+    let options = OPTIONS.get_or_init(|| {
+        let mut o = usvg::Options::default();
+        let db = o.fontdb_mut();
+        db.load_font_data(FONT_BYTES.to_vec());
+        db.set_sans_serif_family("DejaVu Sans");
+        o.font_family = "DejaVu Sans".into();
+        o
+    });
+    let tree = usvg::Tree::from_str(svg, options).context("reading the figure's SVG")?;
+    let mut pixmap =
+        tiny_skia::Pixmap::new(w, h).ok_or_else(|| anyhow!("a figure of {w} × {h} pixels"))?;
+    pixmap.fill(tiny_skia::Color::WHITE);
+    resvg::render(&tree, tiny_skia::Transform::default(), &mut pixmap.as_mut());
+    // Opaque on white: the premultiplied RGBA is the RGB.
+    Ok(pixmap
+        .data()
+        .chunks_exact(4)
+        .flat_map(|p| [p[0], p[1], p[2]])
+        .collect())
 }
 
 pub fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<()> {
@@ -412,18 +435,12 @@ pub fn write_png(path: &Path, rgb: &[u8], (w, h): (u32, u32)) -> Result<()> {
     Ok(())
 }
 
-fn draw_figure(area: &DynArea<'_>, fig: &Figure) -> Result<()> {
-    match area {
-        DynArea::Bitmap(a) => figure_on(a, fig),
-        DynArea::Svg(a) => figure_on(a, fig),
-    }
+fn draw_figure(area: &Area<'_>, fig: &Figure) -> Result<()> {
+    figure_on(area, fig)
 }
 
-fn draw_bars(area: &DynArea<'_>, chart: &BarChart) -> Result<()> {
-    match area {
-        DynArea::Bitmap(a) => bars_on(a, chart),
-        DynArea::Svg(a) => bars_on(a, chart),
-    }
+fn draw_bars(area: &Area<'_>, chart: &BarChart) -> Result<()> {
+    bars_on(area, chart)
 }
 
 fn plot_err<E: std::fmt::Display>(e: E) -> anyhow::Error {
@@ -819,14 +836,23 @@ fn draw_curves<'a, DB: DrawingBackend + 'a>(
         points: 0,
         total: 0,
     };
-    for l in lines {
+    // The dashed references last, over the curves.
+    let order = lines
+        .iter()
+        .filter(|l| !l.dashed)
+        .chain(lines.iter().filter(|l| l.dashed));
+    for l in order {
         let color = l.color;
-        chart
-            .draw_series(LineSeries::new(
-                l.points.iter().map(|&(t, v)| (t, v.clamp(y0, y1))),
-                color,
-            ))
-            .map_err(plot_err)?;
+        let points = l.points.iter().map(|&(t, v)| (t, v.clamp(y0, y1)));
+        if l.dashed {
+            chart
+                .draw_series(DashedLineSeries::new(points, 6, 5, color.stroke_width(2)))
+                .map_err(plot_err)?;
+        } else {
+            chart
+                .draw_series(LineSeries::new(points, color))
+                .map_err(plot_err)?;
+        }
         keys.push(Key::Line(color, l.label.clone()));
         if clips && !l.keep {
             clipped.total += l.points.len();
@@ -961,7 +987,7 @@ fn bars_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &BarChart) -> R
         b.caption(&c.title, (FONT, 20))
             .margin(12)
             .margin_right(24)
-            .x_label_area_size(40)
+            .x_label_area_size(12 + 15 * category_lines(&c.categories) as u32)
             .y_label_area_size(72);
         b
     };
@@ -980,6 +1006,71 @@ fn bars_on<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, c: &BarChart) -> R
             .map_err(plot_err)?;
         bars_body(root, chart, c, 0.0, top)
     }
+}
+
+/// Marks each value of series `j` (bars `width` wide, `color`) that is not finite (a robot
+/// that diverged) where its bar would be: an outline from `base` to `top`, "diverged" written
+/// up it.
+fn mark_diverged<'a, DB, Y>(
+    root: &DrawingArea<DB, Shift>,
+    chart: &ChartContext<'a, DB, Cartesian2d<RangedCoordf64, Y>>,
+    (j, width, color, values): (usize, f64, RGBColor, &[f64]),
+    (base, top): (f64, f64),
+) -> Result<()>
+where
+    DB: DrawingBackend + 'a,
+    Y: Ranged<ValueType = f64>,
+{
+    let (lo_px, hi_px) = (
+        chart.backend_coord(&(0.0, base)).1,
+        chart.backend_coord(&(0.0, top)).1,
+    );
+    for (i, _) in values.iter().enumerate().filter(|(_, v)| !v.is_finite()) {
+        let x = i as f64 + 0.1 + j as f64 * width;
+        let (left, _) = chart.backend_coord(&(x, base));
+        let (right, _) = chart.backend_coord(&(x + width * 0.9, base));
+        root.draw(&Rectangle::new(
+            [(left, hi_px), (right, lo_px)],
+            color.stroke_width(2),
+        ))
+        .map_err(plot_err)?;
+        let up = TextStyle::from((FONT, 12).into_font())
+            .color(&color)
+            .transform(FontTransform::Rotate270)
+            .pos(Pos::new(HPos::Left, VPos::Center));
+        root.draw(&Text::new("diverged", ((left + right) / 2, lo_px - 6), up))
+            .map_err(plot_err)?;
+    }
+    Ok(())
+}
+
+/// Longest line of a category label before it is broken at a hyphen.
+const CATEGORY_LINE: usize = 10;
+
+/// A category's label in lines that fit under its bars: a line per word, a long word broken
+/// after a hyphen (`measurement-delay r1` → `measurement-`, `delay`, `r1`).
+fn category_label(name: &str) -> Vec<String> {
+    let mut lines = Vec::new();
+    for word in name.split_whitespace() {
+        let mut line = String::new();
+        for part in word.split_inclusive('-') {
+            if !line.is_empty() && line.chars().count() + part.chars().count() > CATEGORY_LINE {
+                lines.push(std::mem::take(&mut line));
+            }
+            line.push_str(part);
+        }
+        lines.push(line);
+    }
+    lines
+}
+
+/// The most lines a category label of `categories` takes.
+fn category_lines(categories: &[String]) -> usize {
+    categories
+        .iter()
+        .map(|c| category_label(c).len())
+        .max()
+        .unwrap_or(1)
 }
 
 /// The bars of `c` from `base` up, on a chart whose value axis is `Y` (linear or logarithmic).
@@ -1029,15 +1120,22 @@ where
             .map_err(plot_err)?
             .label(label)
             .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 14, y + 5)], color.filled()));
+        mark_diverged(root, &chart, (j, width, color, values), (base, top))?;
     }
     draw_legend(&mut chart)?;
-    let style = TextStyle::from((FONT, 14).into_font())
+    let style = TextStyle::from((FONT, 13).into_font())
         .color(&BLACK)
         .pos(Pos::new(HPos::Center, VPos::Top));
     for (i, name) in c.categories.iter().enumerate() {
         let (px, py) = chart.backend_coord(&(i as f64 + 0.5, base));
-        root.draw(&Text::new(name.clone(), (px, py + 8), style.clone()))
+        for (n, line) in category_label(name).iter().enumerate() {
+            root.draw(&Text::new(
+                line.clone(),
+                (px, py + 6 + 15 * n as i32),
+                style.clone(),
+            ))
             .map_err(plot_err)?;
+        }
     }
     root.present().map_err(plot_err)?;
     Ok(())
@@ -1046,6 +1144,21 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn category_labels_break_at_spaces_and_after_hyphens_of_long_words() {
+        assert_eq!(
+            category_label("measurement-delay r1"),
+            ["measurement-", "delay", "r1"]
+        );
+        assert_eq!(category_label("paper r2"), ["paper", "r2"]);
+        assert_eq!(category_label("dos-drop r1"), ["dos-drop", "r1"]);
+        assert_eq!(
+            category_label("replay-example r1"),
+            ["replay-", "example", "r1"]
+        );
+        assert_eq!(category_lines(&["a b c".into(), "d".into()]), 3);
+    }
 
     #[test]
     fn drawable_ranges_are_finite_bounded_and_wide_enough_whatever_the_data() {
@@ -1085,6 +1198,7 @@ mod tests {
             color: PALETTE[0],
             points,
             keep: false,
+            dashed: false,
         };
         let fig = Figure {
             title: "diverged".into(),

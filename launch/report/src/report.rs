@@ -485,6 +485,7 @@ fn links(prefix: &str, envs: Vec<Envelope>) -> Vec<Line> {
             color: PALETTE[i % PALETTE.len()],
             points: e.finish(),
             keep: false,
+            dashed: false,
         })
         .collect()
 }
@@ -647,12 +648,14 @@ fn attack_panels(s_hat: Vec<Envelope>, s_true: Vec<Envelope>) -> Vec<Panel> {
                         color: PALETTE[1],
                         points: st.finish(),
                         keep: true,
+                        dashed: false,
                     },
                     Line {
                         label: "estimate Ŝ".into(),
                         color: PALETTE[0],
                         points: sh.finish(),
                         keep: false,
+                        dashed: false,
                     },
                 ],
             )
@@ -697,6 +700,7 @@ fn delay_alarm_panels(tau_ms: Envelope, bands: Vec<Band>) -> Vec<Panel> {
                 color: PALETTE[2],
                 points: tau_ms.finish(),
                 keep: true,
+                dashed: false,
             }],
         ),
         Panel {

@@ -27,6 +27,179 @@ struct Chart {
     series: Vec<Series>,
 }
 
+/// The unit a name's suffix gives (`_rad_s`, `_rad`, `_s`, `_nm`, `_per_min`), if any.
+fn unit_of(name: &str) -> Option<&'static str> {
+    [
+        ("_rad_s", "rad/s"),
+        ("_rad", "rad"),
+        ("_per_min", "per min"),
+        ("_nm", "N·m"),
+        ("_s", "s"),
+    ]
+    .into_iter()
+    .find(|(suffix, _)| name.ends_with(suffix))
+    .map(|(_, unit)| unit)
+}
+
+/// A per-robot metric as the reports name it, with its unit: `rmse_rad` → `RMSE of the
+/// tracking error (rad)`, `detectors.chi2.coverage` → `χ²: coverage (share of the attacked
+/// ticks alarmed)`.
+fn metric_label(f: &str) -> String {
+    let plain = match f {
+        "rmse_rad" => Some("RMSE of the tracking error (rad)"),
+        "max_abs_error_rad" => Some("largest |tracking error| (rad)"),
+        "deadline_misses" => Some("deadline misses (ticks)"),
+        _ => None,
+    };
+    if let Some(p) = plain {
+        return p.into();
+    }
+    if let Some((d, m)) = f.strip_prefix("detectors.").and_then(|r| r.split_once('.')) {
+        let what = match m {
+            "onsets.mean_time_to_detect_s" => "mean time to detect an onset (s)",
+            "false_alarms" => "false alarms (count)",
+            "coverage" => "coverage (share of the attacked ticks alarmed)",
+            "false_alarms_per_min" => "false alarms per minute",
+            other => other,
+        };
+        return format!("{}: {what}", fdi_common::detect::title(d).unwrap_or(d));
+    }
+    match unit_of(f) {
+        Some(u) => format!("{f} ({u})"),
+        None => f.into(),
+    }
+}
+
+/// A campaign axis (a field path) as the reports name it: `controller.beta` → `β, the
+/// controller's gain (controller.beta)`; other paths with the unit of their name.
+fn axis_label(path: &str) -> String {
+    let named = match path {
+        "controller.beta" => Some("β, the controller's gain"),
+        "controller.alpha" => Some("α, the controller's gain"),
+        "controller.k" => Some("k, the controller's gain"),
+        "seed" => Some("seed"),
+        _ => None,
+    };
+    match (named, unit_of(path)) {
+        (Some(n), _) if n == path => n.into(),
+        (Some(n), _) => format!("{n} ({path})"),
+        (None, Some(u)) => format!("{path} ({u})"),
+        (None, None) => path.into(),
+    }
+}
+
+/// Two lines closer than this share of the y-axis at every point are one line to the eye;
+/// a confidence interval shorter than it is hidden under its marker.
+const UNSEEN: f64 = 0.01;
+
+/// What a reader cannot see on the figure, said under it: lines that lie on one another (at
+/// every point within [`UNSEEN`] of the y-axis), and confidence intervals too short to show.
+fn notes(series: &[Series]) -> Vec<String> {
+    let mut out = Vec::new();
+    let (lo, hi) = series
+        .iter()
+        .flat_map(|s| &s.points)
+        .fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+            (lo.min(p.1), hi.max(p.1))
+        });
+    let span = (hi - lo).abs().max(hi.abs() * 1e-3).max(1e-300);
+    let same = |a: &Series, b: &Series| {
+        a.points.len() == b.points.len()
+            && a.points
+                .iter()
+                .zip(&b.points)
+                .all(|(p, q)| p.0 == q.0 && (p.1 - q.1).abs() <= UNSEEN * span)
+    };
+    for (i, a) in series.iter().enumerate() {
+        let twins: Vec<&str> = series[i + 1..]
+            .iter()
+            .filter(|b| same(a, b))
+            .map(|b| b.label.as_str())
+            .collect();
+        if !twins.is_empty() && !series[..i].iter().any(|b| same(a, b)) {
+            out.push(format!(
+                "{} and {} lie on one another (within {} % of the y-axis at every point)",
+                a.label,
+                twins.join(", "),
+                UNSEEN * 100.0
+            ));
+        }
+    }
+    let widths: Vec<f64> = series
+        .iter()
+        .flat_map(|s| &s.points)
+        .filter_map(|p| p.2.map(|(l, h)| h - l))
+        .collect();
+    let hidden = widths.iter().filter(|w| **w < UNSEEN * span).count();
+    if widths.is_empty() {
+        out.push("no confidence interval: one seed per point".into());
+    } else if hidden == widths.len() {
+        let widest = widths.iter().copied().fold(0.0, f64::max);
+        out.push(format!(
+            "the 95 % confidence intervals are too short to show (at most {widest:.3e} wide)"
+        ));
+    } else if hidden > 0 {
+        out.push(format!(
+            "where a point shows no error bar ({hidden} of {}), its 95 % confidence interval is \
+             shorter than the marker",
+            widths.len()
+        ));
+    }
+    out
+}
+
+/// The notes of `series` ([`notes`]) at the foot of `area`; the area above them.
+fn draw_notes<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    series: &[Series],
+) -> Result<DrawingArea<DB, plotters::coord::Shift>>
+where
+    DB::ErrorType: 'static,
+{
+    let lines: Vec<String> = notes(series)
+        .iter()
+        .flat_map(|n| wrap(&format!("Note: {n}"), NOTE_CHARS))
+        .collect();
+    let (_, h) = area.dim_in_pixel();
+    for (i, n) in lines.iter().enumerate() {
+        let y = h as i32 - 8 - 16 * (lines.len() - i) as i32;
+        area.draw(&Text::new(
+            n.clone(),
+            (14, y),
+            (FONT, 13).into_font().color(&RGBColor(90, 90, 90)),
+        ))
+        .map_err(err)?;
+    }
+    Ok(area.margin(0, 16 * lines.len() as i32, 0, 0))
+}
+
+/// The longest line of a note under a figure (13 px text on 900 px).
+const NOTE_CHARS: usize = 120;
+
+/// `text` in lines of at most `width` characters, broken at spaces (a longer word on its own
+/// line), the lines after the first indented.
+fn wrap(text: &str, width: usize) -> Vec<String> {
+    let mut lines: Vec<String> = Vec::new();
+    let mut line = String::new();
+    for word in text.split(' ') {
+        if !line.trim().is_empty() && line.chars().count() + 1 + word.chars().count() > width {
+            lines.push(std::mem::replace(&mut line, "    ".into()));
+        }
+        if !line.is_empty() && !line.ends_with("    ") {
+            line.push(' ');
+        }
+        line.push_str(word);
+    }
+    lines.push(line);
+    lines
+}
+
+/// A label without its parenthesised tail: `RMSE of the tracking error (rad)` → `RMSE of the
+/// tracking error`.
+fn short_label(label: &str) -> &str {
+    label.split(" (").next().unwrap_or(label)
+}
+
 fn file_stem(s: &str) -> String {
     s.chars()
         .map(|c| {
@@ -99,12 +272,14 @@ pub(super) fn write_all(
             }
             let chart = Chart {
                 title: format!(
-                    "{}: {f} vs {axis} (mean, 95 % CI over {seeds} seed{})",
+                    "{}: {} vs {} (mean, 95 % CI over {seeds} seed{})",
                     plan.name,
+                    short_label(&metric_label(f)),
+                    short_label(&axis_label(axis)),
                     if seeds == 1 { "" } else { "s" }
                 ),
-                x_label: axis.to_string(),
-                y_label: f.clone(),
+                x_label: axis_label(axis),
+                y_label: metric_label(f),
                 series,
             };
             save(
@@ -120,22 +295,20 @@ fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow!("drawing a campaign figure: {e}")
 }
 
+/// The figure as SVG, and as PNG rasterised from it ([`fdi_report::plot::rasterise`]).
 fn save(chart: &Chart, stem: &Path) -> Result<()> {
     fdi_report::plot::fonts()?;
-    let (w, h) = (900u32, 560u32);
-    let mut rgb = vec![0u8; w as usize * h as usize * 3];
-    {
-        let area = BitMapBackend::with_buffer(&mut rgb, (w, h)).into_drawing_area();
-        draw(&area, chart)?;
-        area.present().map_err(err)?;
-    }
-    fdi_report::plot::write_png(&stem.with_extension("png"), &rgb, (w, h))?;
+    let (w, h) = (900u32, 580u32);
     let mut svg = String::new();
     {
         let area = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
         draw(&area, chart)?;
         area.present().map_err(err)?;
     }
+    let png = stem.with_extension("png");
+    let rgb = fdi_report::plot::rasterise(&svg, (w, h))
+        .with_context(|| format!("drawing {}", png.display()))?;
+    fdi_report::plot::write_png(&png, &rgb, (w, h))?;
     let p = stem.with_extension("svg");
     std::fs::write(&p, svg).with_context(|| format!("writing {}", p.display()))
 }
@@ -145,6 +318,7 @@ where
     DB::ErrorType: 'static,
 {
     area.fill(&WHITE).map_err(err)?;
+    let area = &draw_notes(area, &c.series)?;
     let pts = c.series.iter().flat_map(|s| &s.points);
     let (mut x0, mut x1, mut y0, mut y1) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
     for &(x, m, ci) in pts {
@@ -217,4 +391,67 @@ where
             .map_err(err)?;
     }
     fdi_report::plot::draw_legend(&mut chart)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn series(label: &str, points: &[Mark]) -> Series {
+        Series {
+            label: label.into(),
+            points: points.to_vec(),
+        }
+    }
+
+    #[test]
+    fn notes_are_wrapped_at_spaces() {
+        assert_eq!(wrap("a bb ccc dd", 6), ["a bb", "    ccc", "    dd"]);
+        assert_eq!(wrap("short", 120), ["short"]);
+    }
+
+    #[test]
+    fn labels_are_the_reports_names_with_units() {
+        assert_eq!(metric_label("rmse_rad"), "RMSE of the tracking error (rad)");
+        assert_eq!(
+            metric_label("detectors.chi2.onsets.mean_time_to_detect_s"),
+            "χ²: mean time to detect an onset (s)"
+        );
+        assert_eq!(
+            axis_label("controller.beta"),
+            "β, the controller's gain (controller.beta)"
+        );
+        assert_eq!(
+            axis_label("agents[2].delay.offset_s"),
+            "agents[2].delay.offset_s (s)"
+        );
+        assert_eq!(
+            short_label(&metric_label("rmse_rad")),
+            "RMSE of the tracking error"
+        );
+    }
+
+    #[test]
+    fn lines_on_one_another_and_hidden_intervals_are_said() {
+        let a = series(
+            "robot 1",
+            &[(1.0, 1.0, Some((0.999, 1.001))), (2.0, 2.0, None)],
+        );
+        let b = series(
+            "robot 3",
+            &[(1.0, 1.001, Some((1.0, 1.002))), (2.0, 2.0, None)],
+        );
+        let c = series("robot 2", &[(1.0, 1.5, Some((1.0, 2.0))), (2.0, 1.8, None)]);
+        let n = notes(&[a, b, c]);
+        assert!(
+            n[0].starts_with("robot 1 and robot 3 lie on one another"),
+            "{n:?}"
+        );
+        assert!(n[1].contains("(2 of 3)"), "{n:?}");
+        let apart = notes(&[
+            series("robot 1", &[(1.0, 1.0, None)]),
+            series("robot 2", &[(1.0, 2.0, None)]),
+        ]);
+        assert_eq!(apart, ["no confidence interval: one seed per point"]);
+    }
 }
