@@ -391,12 +391,14 @@ fn a_cut_network_in_realtime_loses_the_hosts_agents_and_the_others_finish() {
         .find(|l| l.starts_with('{'))
         .expect("JSON");
     let v: serde_json::Value = serde_json::from_str(line).expect("JSON");
-    let lost: Vec<u64> = v["lost_agents"]
+    // In the order they were declared lost (by time): either may be first.
+    let mut lost: Vec<u64> = v["lost_agents"]
         .as_array()
         .expect("lost agents")
         .iter()
         .filter_map(|l| l["agent"].as_u64())
         .collect();
+    lost.sort_unstable();
     assert_eq!(lost, vec![3, 4], "{v}");
     for l in v["lost_agents"].as_array().into_iter().flatten() {
         let reason = l["reason"].as_str().unwrap_or_default();
