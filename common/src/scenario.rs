@@ -1522,6 +1522,16 @@ mod tests {
         assert!(all.contains("agents[0].delay"), "{all}");
     }
 
+    /// Every problem `load_str` reports on `text`, as `validate` prints them.
+    fn problems_of(text: &str) -> Vec<String> {
+        load_str(text, "t", None)
+            .expect_err("invalid")
+            .problems
+            .iter()
+            .map(ToString::to_string)
+            .collect()
+    }
+
     /// Regression (issue 33): `validate` stopped at the first table that failed to read: an
     /// unknown key in `[controller]` hid a misspelt top-level key, and one `shape = "cosin"`
     /// hid the two others and an unknown key.
@@ -1530,12 +1540,7 @@ mod tests {
         let text = PAPER_SCENARIO
             .replace("duration_s = 40.0", "duraton_s = 40.0")
             .replace("learning_rate_w = 5000.0", "learning_rate_W = 5000.0");
-        let said: Vec<String> = load_str(&text, "t", None)
-            .expect_err("invalid")
-            .problems
-            .iter()
-            .map(ToString::to_string)
-            .collect();
+        let said: Vec<String> = problems_of(&text);
         for fragment in [
             "controller.learning_rate_W: unknown field `learning_rate_W`",
             "controller: missing field `learning_rate_w` (line 15, column 2)",
@@ -1552,12 +1557,7 @@ mod tests {
         let text = PAPER_SCENARIO
             .replace(cosine, "shape = \"cosin\", amplitude = 50.0")
             .replacen("ramp_rate = 0.01\n", "ramp_rate = 0.01\nbogus = 1\n", 1);
-        let said: Vec<String> = load_str(&text, "t", None)
-            .expect_err("invalid")
-            .problems
-            .iter()
-            .map(ToString::to_string)
-            .collect();
+        let said: Vec<String> = problems_of(&text);
         assert_eq!(
             said.iter()
                 .filter(|s| s.contains("unknown variant `cosin`"))
@@ -1580,12 +1580,7 @@ mod tests {
         let text = PAPER_SCENARIO
             .replace("beta = 30.0", "beta = \"high\"")
             .replacen("offset_s = 0.003", "offset_s = -0.003", 1);
-        let said: Vec<String> = load_str(&text, "t", None)
-            .expect_err("invalid")
-            .problems
-            .iter()
-            .map(ToString::to_string)
-            .collect();
+        let said: Vec<String> = problems_of(&text);
         assert_eq!(said.len(), 2, "{said:#?}");
         assert!(
             said[0].starts_with("controller.beta: invalid type"),
@@ -1608,12 +1603,7 @@ mod tests {
         );
         lines.push("");
         let text = lines.join("\n");
-        let said: Vec<String> = load_str(&text, "t", None)
-            .expect_err("invalid")
-            .problems
-            .iter()
-            .map(ToString::to_string)
-            .collect();
+        let said: Vec<String> = problems_of(&text);
         assert_eq!(said.len(), 1, "{said:#?}");
         assert!(
             said[0].starts_with("defaults.delay.kind: unknown variant `sin`"),
