@@ -24,6 +24,7 @@ mod runtime;
 mod scenarios;
 mod schema;
 mod set_overrides;
+mod shards;
 mod sweep;
 mod threads;
 mod traces;

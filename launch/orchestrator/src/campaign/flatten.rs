@@ -64,7 +64,6 @@ pub fn flatten(s: &RunSummary) -> Result<Vec<(String, Cell)>> {
         ("ticks".into(), Cell::Num(s.ticks as f64)),
         ("planned_ticks".into(), Cell::Num(s.planned_ticks as f64)),
         ("sim_s".into(), Cell::Num(s.sim_s)),
-        ("wall_s".into(), Cell::Num(s.wall_s)),
         ("lost_agents".into(), Cell::Num(s.lost_agents.len() as f64)),
         (
             "partial".into(),

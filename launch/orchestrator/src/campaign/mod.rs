@@ -29,10 +29,14 @@ pub mod figures;
 pub mod flatten;
 pub mod plan;
 pub mod runner;
+pub mod shard;
 pub mod stats;
+pub mod status;
+pub mod tables;
 
-use std::collections::{BTreeMap, BTreeSet};
-use std::fmt::Write as _;
+pub(crate) use tables::sig;
+
+use std::collections::BTreeSet;
 use std::io::Write as _;
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
@@ -48,8 +52,7 @@ use sha2::{Digest, Sha256};
 
 use crate::run::{execute, Engine, Traces};
 use fdi_common::field_path::{show, FieldPath, PathError};
-use flatten::Cell;
-use plan::{labels_and_robots, toml_cell, Aggregate, Axis, Job, Plan, Point};
+use plan::{Axis, Job, Plan, Point};
 
 /// What an interrupted campaign kept.
 pub const DURING_THE_CAMPAIGN: &str =
@@ -72,6 +75,21 @@ pub struct SweepArgs {
     /// directory per run under `<out>/runs/`), `decimate=K`.
     #[arg(long, default_value_t = Traces::None)]
     pub traces: Traces,
+    /// Run only shard K of N (`K/N`, from 1): a part of the campaign's runs that depends on the
+    /// campaign alone, balanced by expected cost; every shard stores its results in one `--out`
+    /// (a shared folder), and `--aggregate` makes the tables. `auto`: K and N from a Slurm
+    /// array job (`SLURM_ARRAY_TASK_*`) or a Kubernetes Indexed Job (`JOB_COMPLETION_INDEX`,
+    /// with `FDI_SHARD_COUNT`).
+    #[arg(long, value_name = "K/N|auto", conflicts_with_all = ["aggregate", "status"])]
+    pub shard: Option<shard::ShardArg>,
+    /// Run nothing: make the tables and figures from the results in `--out`, and name the runs
+    /// missing with the shard that owns each (exit status 1 when some are).
+    #[arg(long, conflicts_with = "status")]
+    pub aggregate: bool,
+    /// Run nothing: per shard, its runs done of its total, its failures with their errors, and
+    /// the time left estimated from the finished runs.
+    #[arg(long)]
+    pub status: bool,
 }
 
 #[derive(Debug, Deserialize)]
@@ -811,97 +829,235 @@ fn default_out(name: &str) -> PathBuf {
 }
 
 /// Runs a campaign (`fdi-launch sweep`): the runs not stored yet, then its tables and figures.
+/// With `--shard`, only the shard's runs and no tables; with `--aggregate` or `--status`, no
+/// runs.
 pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
     let plan = plan(&args.campaign, args.engine)?;
-    let out = prepare_out(args, &plan)?;
-    let results: Vec<Option<RunSummary>> = plan
-        .jobs
-        .iter()
-        .map(|j| load_stored(&out, &j.key))
-        .collect();
-    let todo: Vec<usize> = (0..plan.jobs.len())
-        .filter(|&i| results[i].is_none())
-        .collect();
-    let skipped = plan.jobs.len() - todo.len();
-    let jobs = args.jobs.unwrap_or_else(runner::default_jobs);
+    let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
+    if args.status {
+        return status::print(&plan, &out);
+    }
+    if args.aggregate {
+        return aggregate(args, &plan, &out);
+    }
+    if let Some(shard) = args.shard {
+        return run_shard(args, &plan, &out, shard.resolve()?, stop);
+    }
+    prepare_out(&out)?;
+    copy_campaign(args, &out)?;
+    let all: Vec<usize> = (0..plan.jobs.len()).collect();
     println!(
-        "campaign {}: {} runs ({} points × {} seeds), engine {}, {} jobs: {skipped} already done (skipped), {} to run",
+        "campaign {}: {} runs ({} points × {} seeds), engine {}, {}",
         plan.name,
         plan.jobs.len(),
         plan.points.len(),
         plan.seeds,
         args.engine.as_str(),
-        jobs,
-        todo.len()
+        plural(args.jobs.unwrap_or_else(runner::default_jobs).get(), "job")
     );
-    let mut tally = Tally {
-        plan: &plan,
-        out: &out,
-        engine: args.engine,
-        results,
-        failed: Vec::new(),
-        ran: 0,
-        signal: None,
-    };
-    let runs_root = out.join("runs");
-    let outcome = runner::run_parallel(
-        &todo,
-        jobs,
-        &plan.name,
-        stop,
-        |&i| run_one(&plan.jobs[i], &plan.name, args, &runs_root, stop),
-        |n, result| tally.record(todo[n], result),
-    )?;
-    let signal = tally.signal.or(outcome.interrupted);
-    let tables = write_outputs(&plan, &tally.results, &out)?;
+    let tally = run_batch(args, &plan, &out, &all, None, stop)?;
+    let results: Vec<Option<RunSummary>> = plan
+        .jobs
+        .iter()
+        .map(|j| load_stored(&out, &j.key))
+        .collect();
+    let tables = tables::write_outputs(&plan, &results, &out)?;
     println!(
-        "skipped {skipped}, ran {}, failed {}{}; {} of {} runs in the tables",
-        tally.ran,
-        tally.failed.len(),
-        if outcome.not_started > 0 {
-            format!(", not started {}", outcome.not_started)
-        } else {
-            String::new()
-        },
-        tally.results.iter().filter(|r| r.is_some()).count(),
+        "{}; {} of {} runs in the tables",
+        tally.said(),
+        results.iter().filter(|r| r.is_some()).count(),
         plan.jobs.len()
     );
     println!("campaign folder {}", out.display());
     for t in tables {
         println!("  {}", t.display());
     }
-    campaign_end(signal, &tally.failed)
+    campaign_end(tally.signal, &tally.failed)
 }
 
-/// The campaign folder (`--out` or the default), made, with a copy of the campaign file.
-fn prepare_out(args: &SweepArgs, plan: &Plan) -> Result<PathBuf> {
-    let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
+/// `1 job`, `2 jobs`.
+fn plural(n: usize, what: &str) -> String {
+    format!("{n} {what}{}", if n == 1 { "" } else { "s" })
+}
+
+/// Shard `shard` of the campaign: its runs not stored yet, its record kept in
+/// `shards/K-of-N.json` as they end, under its lease; no table (`--aggregate` makes them).
+fn run_shard(
+    args: &SweepArgs,
+    plan: &Plan,
+    out: &Path,
+    shard: shard::Shard,
+    stop: &Stop,
+) -> Result<ExitCode> {
+    prepare_out(out)?;
+    let hash = shard::campaign_hash(plan);
+    shard::check_records(&shard::records(out)?, &hash, Some(shard.count), out)?;
+    let _lease = shard::Lease::take(out, shard)?;
+    let owners = shard::owners(plan, shard.count);
+    let owned: Vec<usize> = (0..plan.jobs.len())
+        .filter(|&i| owners[i] == shard.index)
+        .collect();
+    let jobs = args.jobs.unwrap_or_else(runner::default_jobs).get();
+    println!(
+        "campaign {}, shard {shard}: {} of its {} runs, engine {}, {}",
+        plan.name,
+        owned.len(),
+        plan.jobs.len(),
+        args.engine.as_str(),
+        plural(jobs, "job")
+    );
+    let now = shard::unix_now();
+    let record = shard::Record {
+        campaign: plan.name.clone(),
+        campaign_hash: hash,
+        shard,
+        runs: owned.len(),
+        jobs,
+        host: shard::host_name(),
+        pid: std::process::id(),
+        started_unix_s: now,
+        updated_unix_s: now,
+        state: shard::State::Running,
+        ran: 0,
+        skipped: 0,
+        failures: Vec::new(),
+    };
+    let tally = run_batch(args, plan, out, &owned, Some(record), stop)?;
+    println!("{}", tally.said());
+    println!(
+        "shard {shard} of campaign folder {}: once every shard is done, `fdi-launch sweep {} --aggregate --out {}` makes the tables",
+        out.display(),
+        args.campaign.display(),
+        out.display()
+    );
+    campaign_end(tally.signal, &tally.failed)
+}
+
+/// `fdi-launch sweep CAMPAIGN --aggregate`: the tables and figures from the results in the
+/// folder, and the runs missing, each with the shard that owns it. Fails (after writing the
+/// tables of what is there) when a run is missing.
+fn aggregate(args: &SweepArgs, plan: &Plan, out: &Path) -> Result<ExitCode> {
+    if !out.join("points").is_dir() {
+        bail!(
+            "--aggregate: {} holds no results (no points/ folder): run the campaign or its shards into it first",
+            out.display()
+        );
+    }
+    let records = shard::records(out)?;
+    shard::check_records(&records, &shard::campaign_hash(plan), None, out)?;
+    let count = shard::count_of(&records, out)?;
+    copy_campaign(args, out)?;
+    let results: Vec<Option<RunSummary>> =
+        plan.jobs.iter().map(|j| load_stored(out, &j.key)).collect();
+    let tables = tables::write_outputs(plan, &results, out)?;
+    let done = results.iter().filter(|r| r.is_some()).count();
+    println!(
+        "campaign {}: {done} of {} runs in the tables{}",
+        plan.name,
+        plan.jobs.len(),
+        count.map_or(String::new(), |n| format!(" (from {} shards)", n))
+    );
+    println!("campaign folder {}", out.display());
+    for t in tables {
+        println!("  {}", t.display());
+    }
+    if done == plan.jobs.len() {
+        return Ok(ExitCode::SUCCESS);
+    }
+    eprintln!(
+        "fdi-launch: {} of {} runs are missing:\n{}",
+        plan.jobs.len() - done,
+        plan.jobs.len(),
+        status::missing(plan, &results, count, &records)
+    );
+    Ok(ExitCode::FAILURE)
+}
+
+/// The campaign folder `out`, made.
+fn prepare_out(out: &Path) -> Result<()> {
     if out.exists() && !out.is_dir() {
         bail!("--out {} is not a folder", out.display());
     }
     std::fs::create_dir_all(out.join("points"))
-        .with_context(|| format!("creating {}", out.join("points").display()))?;
-    std::fs::copy(&args.campaign, out.join("campaign.toml"))
-        .with_context(|| format!("copying the campaign into {}", out.display()))?;
-    Ok(out)
+        .with_context(|| format!("creating {}", out.join("points").display()))
 }
 
-/// What the runs of a campaign gave so far: each job's result, the runs that failed, how
-/// many ran, and the signal that interrupted one.
-struct Tally<'a> {
-    plan: &'a Plan,
-    out: &'a Path,
+/// A copy of the campaign file in its folder (`campaign.toml`), written whole.
+fn copy_campaign(args: &SweepArgs, out: &Path) -> Result<()> {
+    let text = std::fs::read(&args.campaign)
+        .with_context(|| format!("reading {}", args.campaign.display()))?;
+    write_atomic(&out.join("campaign.toml"), &text)
+        .with_context(|| format!("copying the campaign into {}", out.display()))
+}
+
+/// Runs the jobs `owned` (indices into the plan's jobs) whose result is not stored yet, each
+/// key once; stores each result as it ends, and keeps `record` (a shard's) up to date.
+fn run_batch(
+    args: &SweepArgs,
+    plan: &Plan,
+    out: &Path,
+    owned: &[usize],
+    record: Option<shard::Record>,
+    stop: &Stop,
+) -> Result<Tally> {
+    let mut keys = BTreeSet::new();
+    let todo: Vec<usize> = owned
+        .iter()
+        .copied()
+        .filter(|&i| load_stored(out, &plan.jobs[i].key).is_none())
+        .filter(|&i| keys.insert(plan.jobs[i].key.as_str()))
+        .collect();
+    let skipped = owned.len() - todo.len();
+    println!("{skipped} already done (skipped), {} to run", todo.len());
+    let mut tally = Tally {
+        out: out.to_path_buf(),
+        engine: args.engine,
+        failed: Vec::new(),
+        ran: 0,
+        skipped,
+        not_started: 0,
+        signal: None,
+        record,
+    };
+    tally.save_record(None)?;
+    let runs_root = out.join("runs");
+    let outcome = runner::run_parallel(
+        &todo,
+        args.jobs.unwrap_or_else(runner::default_jobs),
+        &plan.name,
+        stop,
+        |&i| run_one(&plan.jobs[i], &plan.name, args, &runs_root, stop),
+        |n, result| tally.record(&plan.jobs[todo[n]], result),
+    )?;
+    tally.signal = tally.signal.or(outcome.interrupted);
+    tally.not_started = outcome.not_started;
+    let end = if tally.signal.is_some() {
+        shard::State::Interrupted
+    } else if tally.failed.is_empty() {
+        shard::State::Finished
+    } else {
+        shard::State::Failed
+    };
+    tally.save_record(Some(end))?;
+    Ok(tally)
+}
+
+/// What the runs of a batch gave: the runs that failed, how many ran, and the signal that
+/// interrupted one; with the record of the shard they are of.
+struct Tally {
+    out: PathBuf,
     engine: Engine,
-    results: Vec<Option<RunSummary>>,
-    failed: Vec<String>,
+    failed: Vec<shard::Failure>,
     ran: usize,
+    skipped: usize,
+    not_started: usize,
     signal: Option<i32>,
+    record: Option<shard::Record>,
 }
 
-impl Tally<'_> {
-    /// Records the end of job `i`: a summary is stored in `points/`, a failure named.
-    fn record(&mut self, i: usize, result: Result<RunSummary>) -> Result<()> {
-        let job = &self.plan.jobs[i];
+impl Tally {
+    /// Records the end of `job`: a summary is stored in `points/`, a failure named.
+    fn record(&mut self, job: &Job, result: Result<RunSummary>) -> Result<()> {
         match result {
             Ok(summary) => {
                 let stored = Stored {
@@ -911,30 +1067,59 @@ impl Tally<'_> {
                     summary,
                 };
                 write_atomic(
-                    &stored_path(self.out, &job.key),
+                    &stored_path(&self.out, &job.key),
                     (serde_json::to_string_pretty(&stored)? + "\n").as_bytes(),
                 )?;
-                self.results[i] = Some(stored.summary);
                 self.ran += 1;
             }
             Err(e) => match e.downcast_ref::<fdi_common::stop::Interrupted>() {
                 Some(interrupted) => self.signal = Some(interrupted.signal),
                 None => {
-                    eprintln!(
-                        "fdi-launch: the run {} failed: {}",
-                        job.label,
-                        fdi_report::output::describe_error(&e)
-                    );
-                    self.failed.push(job.label.clone());
+                    let error = fdi_report::output::describe_error(&e);
+                    eprintln!("fdi-launch: the run {} failed: {error}", job.label);
+                    self.failed.push(shard::Failure {
+                        run: job.label.clone(),
+                        key: job.key[..16].to_string(),
+                        error,
+                    });
                 }
             },
         }
-        Ok(())
+        self.save_record(None)
+    }
+
+    /// Writes the shard's record (if this batch is a shard's), its state set to `end`.
+    fn save_record(&mut self, end: Option<shard::State>) -> Result<()> {
+        let Some(r) = self.record.as_mut() else {
+            return Ok(());
+        };
+        r.ran = self.ran;
+        r.skipped = self.skipped;
+        r.failures.clone_from(&self.failed);
+        if let Some(end) = end {
+            r.state = end;
+        }
+        r.save(&self.out)
+    }
+
+    /// `skipped 3, ran 9, failed 0`.
+    fn said(&self) -> String {
+        format!(
+            "skipped {}, ran {}, failed {}{}",
+            self.skipped,
+            self.ran,
+            self.failed.len(),
+            if self.not_started > 0 {
+                format!(", not started {}", self.not_started)
+            } else {
+                String::new()
+            }
+        )
     }
 }
 
 /// How a campaign ends: interrupted by `signal`, failed when some runs did, else success.
-fn campaign_end(signal: Option<i32>, failed: &[String]) -> Result<ExitCode> {
+fn campaign_end(signal: Option<i32>, failed: &[shard::Failure]) -> Result<ExitCode> {
     if let Some(signal) = signal {
         return Err(fdi_common::stop::Interrupted {
             signal,
@@ -943,10 +1128,11 @@ fn campaign_end(signal: Option<i32>, failed: &[String]) -> Result<ExitCode> {
         .into());
     }
     if !failed.is_empty() {
+        let runs: Vec<&str> = failed.iter().map(|f| f.run.as_str()).collect();
         eprintln!(
             "fdi-launch: {} runs failed ({}); a rerun runs them again",
             failed.len(),
-            failed.join("; ")
+            runs.join("; ")
         );
         return Ok(ExitCode::FAILURE);
     }
@@ -977,294 +1163,6 @@ fn run_one(
     summary
         .and_then(crate::run::require_whole)
         .with_context(|| format!("the run {}", job.label))
-}
-
-/// One row of the results table.
-struct Row<'a> {
-    job: &'a Job,
-    seed: u64,
-    cells: Vec<(String, Cell)>,
-}
-
-/// Writes the results and aggregate tables and the figures; returns the tables' paths.
-fn write_outputs(plan: &Plan, results: &[Option<RunSummary>], out: &Path) -> Result<Vec<PathBuf>> {
-    let axis_labels: Vec<&str> = plan
-        .axes
-        .iter()
-        .filter(|a| !a.is_seed())
-        .map(|a| a.label.as_str())
-        .collect();
-    let rows = result_rows(plan, results)?;
-    let columns = columns_of(&rows);
-    let (results_csv, results_json) = write_results(&rows, &columns, out)?;
-
-    // Aggregate per point over its seeds.
-    let skip: BTreeSet<&str> = axis_labels.iter().copied().chain(["seed", "key"]).collect();
-    let numeric: Vec<&String> = columns
-        .iter()
-        .filter(|c| !skip.contains(c.as_str()))
-        .filter(|c| rows.iter().any(|r| lookup(r, c).num().is_some()))
-        .collect();
-    let aggregate = aggregate_points(plan, &rows, &numeric);
-    let aggregate_csv = write_aggregate_csv(&aggregate, &numeric, &axis_labels, out)?;
-    let aggregate_json = write_aggregate_json(&aggregate, out)?;
-
-    let families = plot_families(plan.plots.as_deref(), &numeric)?;
-    let md_path = out.join("aggregate.md");
-    write_atomic(
-        &md_path,
-        aggregate_markdown(plan, &aggregate, &families).as_bytes(),
-    )?;
-    figures::write_all(plan, &aggregate, &families, &out.join("figures"))?;
-    Ok(vec![
-        results_csv,
-        results_json,
-        aggregate_csv,
-        aggregate_json,
-        md_path,
-        out.join("figures"),
-    ])
-}
-
-/// A row per run with a result: its point's axis values, its seed and key, and its metrics.
-fn result_rows<'a>(plan: &'a Plan, results: &[Option<RunSummary>]) -> Result<Vec<Row<'a>>> {
-    let mut rows = Vec::new();
-    for (job, r) in plan.jobs.iter().zip(results) {
-        let Some(s) = r else { continue };
-        let mut cells: Vec<(String, Cell)> = plan.points[job.point]
-            .values
-            .iter()
-            .map(|(l, v)| (l.clone(), toml_cell(v)))
-            .collect();
-        cells.push(("seed".into(), Cell::Int(i128::from(s.seed))));
-        cells.push(("key".into(), Cell::Text(job.key[..16].to_string())));
-        cells.extend(flatten::flatten(s)?);
-        rows.push(Row {
-            job,
-            seed: s.seed,
-            cells,
-        });
-    }
-    Ok(rows)
-}
-
-/// Every column any row has, in first-seen order.
-fn columns_of(rows: &[Row]) -> Vec<String> {
-    let mut columns: Vec<String> = Vec::new();
-    let mut seen = BTreeSet::new();
-    for r in rows {
-        for (c, _) in &r.cells {
-            if seen.insert(c.clone()) {
-                columns.push(c.clone());
-            }
-        }
-    }
-    columns
-}
-
-/// The cell of row `r` in column `c` (empty when the row has none).
-fn lookup(r: &Row, c: &str) -> Cell {
-    r.cells
-        .iter()
-        .find(|(n, _)| n == c)
-        .map_or(Cell::Empty, |(_, v)| v.clone())
-}
-
-/// Writes `results.csv` and `results.json`; returns their paths.
-fn write_results(rows: &[Row], columns: &[String], out: &Path) -> Result<(PathBuf, PathBuf)> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    w.write_record(columns)?;
-    for r in rows {
-        w.write_record(columns.iter().map(|c| lookup(r, c).csv()))?;
-    }
-    let results_csv = out.join("results.csv");
-    write_atomic(&results_csv, &w.into_inner().map_err(|e| e.into_error())?)?;
-    let json_rows: Vec<serde_json::Value> = rows
-        .iter()
-        .map(|r| {
-            let mut m = serde_json::Map::new();
-            m.insert("run".into(), r.job.label.clone().into());
-            for (c, v) in &r.cells {
-                m.insert(c.clone(), v.json());
-            }
-            serde_json::Value::Object(m)
-        })
-        .collect();
-    let results_json = out.join("results.json");
-    write_atomic(
-        &results_json,
-        (serde_json::to_string_pretty(&json_rows)? + "\n").as_bytes(),
-    )?;
-    Ok((results_csv, results_json))
-}
-
-/// Per point, the statistics of each numeric column over the point's runs.
-fn aggregate_points(plan: &Plan, rows: &[Row], numeric: &[&String]) -> Vec<Aggregate> {
-    let mut aggregate = Vec::new();
-    for (pi, point) in plan.points.iter().enumerate() {
-        let members: Vec<&Row> = rows.iter().filter(|r| r.job.point == pi).collect();
-        let mut metrics = BTreeMap::new();
-        for c in numeric {
-            let xs: Vec<f64> = members
-                .iter()
-                .map(|r| lookup(r, c).num().unwrap_or(f64::NAN))
-                .collect();
-            metrics.insert((*c).clone(), stats::describe(&xs));
-        }
-        aggregate.push(Aggregate {
-            point: point.clone(),
-            runs: members.len(),
-            seeds: members.iter().map(|r| r.seed).collect(),
-            metrics,
-        });
-    }
-    aggregate
-}
-
-/// Writes `aggregate.csv`: a line per point and metric; returns its path.
-fn write_aggregate_csv(
-    aggregate: &[Aggregate],
-    numeric: &[&String],
-    axis_labels: &[&str],
-    out: &Path,
-) -> Result<PathBuf> {
-    let mut w = csv::Writer::from_writer(Vec::new());
-    let mut header: Vec<&str> = axis_labels.to_vec();
-    header.extend(["metric", "runs", "n", "mean", "sd", "ci_low", "ci_high"]);
-    w.write_record(&header)?;
-    let opt = |x: Option<f64>| x.map_or(String::new(), |x| x.to_string());
-    for a in aggregate {
-        for c in numeric {
-            let s = a.metrics.get(*c).copied().flatten();
-            let mut rec: Vec<String> = a.point.values.iter().map(|(_, v)| show(v)).collect();
-            rec.push((*c).clone());
-            rec.push(a.runs.to_string());
-            rec.push(s.map_or(0, |s| s.n).to_string());
-            rec.push(opt(s.map(|s| s.mean)));
-            rec.push(opt(s.and_then(|s| s.sd)));
-            rec.push(opt(s.and_then(|s| s.ci_low)));
-            rec.push(opt(s.and_then(|s| s.ci_high)));
-            w.write_record(&rec)?;
-        }
-    }
-    let aggregate_csv = out.join("aggregate.csv");
-    write_atomic(&aggregate_csv, &w.into_inner().map_err(|e| e.into_error())?)?;
-    Ok(aggregate_csv)
-}
-
-/// Writes `aggregate.json`: per point, its axis values, runs, seeds and metrics; returns its
-/// path.
-fn write_aggregate_json(aggregate: &[Aggregate], out: &Path) -> Result<PathBuf> {
-    let aggregate_json = out.join("aggregate.json");
-    let json: Vec<serde_json::Value> = aggregate
-        .iter()
-        .map(|a| {
-            let point: serde_json::Map<String, serde_json::Value> = a
-                .point
-                .values
-                .iter()
-                .map(|(l, v)| (l.clone(), toml_cell(v).json()))
-                .collect();
-            serde_json::json!({
-                "point": point,
-                "runs": a.runs,
-                "seeds": a.seeds,
-                "confidence": stats::LEVEL,
-                "metrics": a.metrics,
-            })
-        })
-        .collect();
-    write_atomic(
-        &aggregate_json,
-        (serde_json::to_string_pretty(&json)? + "\n").as_bytes(),
-    )?;
-    Ok(aggregate_json)
-}
-
-/// The per-robot metrics drawn and tabulated: those asked for (each must exist), or the
-/// default set among those present.
-fn plot_families(asked: Option<&[String]>, numeric: &[&String]) -> Result<Vec<String>> {
-    let present: BTreeSet<String> = numeric
-        .iter()
-        .filter_map(|c| {
-            c.strip_prefix("robot")?
-                .split_once('.')
-                .map(|(_, f)| f.to_string())
-        })
-        .collect();
-    if let Some(asked) = asked {
-        for f in asked {
-            if !present.contains(f) {
-                bail!(
-                    "plots: no per-robot metric `{f}` in the results; the metrics are: {}",
-                    present.iter().cloned().collect::<Vec<_>>().join(", ")
-                );
-            }
-        }
-        return Ok(asked.to_vec());
-    }
-    let mut out: Vec<String> = ["rmse_rad", "max_abs_error_rad", "deadline_misses"]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-    let detectors: BTreeSet<&str> = present
-        .iter()
-        .filter_map(|f| {
-            f.strip_prefix("detectors.")?
-                .split_once('.')
-                .map(|(d, _)| d)
-        })
-        .collect();
-    for d in detectors {
-        for m in ["onsets.mean_time_to_detect_s", "false_alarms", "coverage"] {
-            out.push(format!("detectors.{d}.{m}"));
-        }
-    }
-    Ok(out.into_iter().filter(|f| present.contains(f)).collect())
-}
-
-/// `aggregate.md`: per metric, a table of its mean ± CI half-width (n) per point and robot.
-fn aggregate_markdown(plan: &Plan, aggregate: &[Aggregate], families: &[String]) -> String {
-    let (labels, ids) = labels_and_robots(plan, aggregate);
-    let mut md = format!(
-        "# Campaign `{}`\n\nMean ± half-width of the {:.0} % confidence interval (Student t) over the seeds of each point, (n) the runs with a value.\n",
-        plan.name,
-        stats::LEVEL * 100.0
-    );
-    for f in families {
-        let _ = write!(md, "\n## {f}\n\n");
-        let mut cols: Vec<String> = labels.iter().map(|s| s.to_string()).collect();
-        cols.extend(ids.iter().map(|id| format!("robot {id}")));
-        let cols: Vec<&str> = cols.iter().map(String::as_str).collect();
-        md.push_str(&fdi_report::output::md_table_head(&cols));
-        for a in aggregate {
-            let mut cells: Vec<String> = a.point.values.iter().map(|(_, v)| show(v)).collect();
-            for id in &ids {
-                let s = a.metrics.get(&format!("robot{id}.{f}")).copied().flatten();
-                cells.push(match s {
-                    None => "–".into(),
-                    Some(s) => match s.half_width() {
-                        Some(h) => format!("{} ± {} ({})", sig(s.mean), sig(h), s.n),
-                        None => format!("{} ({})", sig(s.mean), s.n),
-                    },
-                });
-            }
-            let _ = writeln!(md, "| {} |", cells.join(" | "));
-        }
-    }
-    md
-}
-
-/// Four significant digits.
-pub(crate) fn sig(x: f64) -> String {
-    if x == 0.0 || !x.is_finite() {
-        return format!("{x}");
-    }
-    if x.abs() < 1e-3 {
-        return format!("{x:.3e}");
-    }
-    let digits = (3 - x.abs().log10().floor() as i32).clamp(0, 12) as usize;
-    format!("{x:.digits$}")
 }
 
 #[cfg(test)]
@@ -1352,7 +1250,7 @@ mod tests {
             })
             .collect();
         let out = dir.path().join("out");
-        write_outputs(&plan, &results, &out).expect("outputs");
+        tables::write_outputs(&plan, &results, &out).expect("outputs");
         let csv = std::fs::read_to_string(out.join("results.csv")).expect("results.csv");
         let mut reader = csv::Reader::from_reader(csv.as_bytes());
         let column = reader

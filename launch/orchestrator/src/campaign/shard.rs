@@ -1,0 +1,731 @@
+//! Campaigns in shards (`fdi-launch sweep CAMPAIGN --shard K/N`): which runs shard K of N owns,
+//! the shard's number from a scheduler's environment (`--shard auto`), the lease that keeps two
+//! copies of one shard from running at once, and the record each shard keeps of itself.
+//!
+//! Everything here is written for a folder shared by many machines (NFS included): a file is
+//! written by one shard only, whole (a temporary file in the same folder, renamed); the lease is
+//! made by an exclusive create, never by `flock`; and a lease's age is measured against the
+//! file server's clock (the modification time of a file just written), never against this
+//! machine's.
+
+use std::io::Write as _;
+use std::path::{Path, PathBuf};
+use std::str::FromStr;
+use std::sync::mpsc;
+use std::time::{Duration, SystemTime};
+
+use anyhow::{anyhow, bail, Context, Result};
+use serde::{Deserialize, Serialize};
+
+use super::plan::Plan;
+use super::write_atomic;
+
+/// The folder of a campaign's shard files (`<out>/shards`).
+pub const SHARDS: &str = "shards";
+/// How often a running shard renews its lease.
+pub const RENEW_EVERY: Duration = Duration::from_secs(20);
+/// A lease not renewed for this long (by the file server's clock) belongs to a shard that is
+/// gone: another copy of the shard may take it over.
+pub const STALE_AFTER: Duration = Duration::from_secs(90);
+
+/// Shard `index` of `count` (1 ≤ index ≤ count).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Shard {
+    pub index: usize,
+    pub count: usize,
+}
+
+impl std::fmt::Display for Shard {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}/{}", self.index, self.count)
+    }
+}
+
+impl Shard {
+    /// Shard `index` of `count`, or why not.
+    pub fn new(index: usize, count: usize) -> Result<Self> {
+        if count == 0 || count > super::MAX_RUNS {
+            bail!(
+                "{index}/{count}: the number of shards N must be between 1 and {}",
+                super::MAX_RUNS
+            );
+        }
+        if index == 0 || index > count {
+            bail!("{index}/{count}: the shard K must be between 1 and N ({count})");
+        }
+        Ok(Self { index, count })
+    }
+
+    /// `K-of-N`: the stem of the shard's files.
+    pub fn stem(&self) -> String {
+        format!("{}-of-{}", self.index, self.count)
+    }
+
+    /// The shard from a scheduler's environment (`get` reads a variable): a Slurm array job
+    /// (`SLURM_ARRAY_TASK_ID` among `SLURM_ARRAY_TASK_MIN`…`MAX` by `STEP`, `COUNT` tasks) or
+    /// a Kubernetes Indexed Job (`JOB_COMPLETION_INDEX`, from 0, and `FDI_SHARD_COUNT`, which
+    /// the job's manifest sets to its `completions`: Kubernetes gives no variable of it).
+    pub fn from_env(get: &dyn Fn(&str) -> Option<String>) -> Result<Self> {
+        let number = |name: &str| -> Result<Option<usize>> {
+            get(name)
+                .map(|v| {
+                    v.trim().parse::<usize>().map_err(|_| {
+                        anyhow!("--shard auto: {name}={v:?} is not a whole number ≥ 0")
+                    })
+                })
+                .transpose()
+        };
+        let need = |name: &str, why: &str| -> Result<usize> {
+            number(name)?.ok_or_else(|| anyhow!("--shard auto: {why}, but {name} is not set"))
+        };
+        if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
+            let why = "SLURM_ARRAY_TASK_ID is set (a Slurm array job)";
+            let count = need("SLURM_ARRAY_TASK_COUNT", why)?;
+            let min = need("SLURM_ARRAY_TASK_MIN", why)?;
+            let max = need("SLURM_ARRAY_TASK_MAX", why)?;
+            let step = number("SLURM_ARRAY_TASK_STEP")?.unwrap_or(1).max(1);
+            // A list of indices (`--array=1,4,9`) is not a range: the shard of a task would
+            // not follow from its index.
+            if max < min || (max - min) % step != 0 || (max - min) / step + 1 != count {
+                bail!(
+                    "--shard auto: the array job's indices ({min} to {max} by {step}, {count} tasks) are not one range: submit it with --array=1-N"
+                );
+            }
+            if id < min || (id - min) % step != 0 {
+                bail!("--shard auto: SLURM_ARRAY_TASK_ID={id} is not one of the array's indices ({min} to {max} by {step})");
+            }
+            return Self::new((id - min) / step + 1, count)
+                .context("--shard auto (a Slurm array job)");
+        }
+        if let Some(index) = number("JOB_COMPLETION_INDEX")? {
+            let count = need(
+                "FDI_SHARD_COUNT",
+                "JOB_COMPLETION_INDEX is set (a Kubernetes Indexed Job; its manifest sets FDI_SHARD_COUNT to the job's completions)",
+            )?;
+            return Self::new(index + 1, count).context("--shard auto (a Kubernetes Indexed Job)");
+        }
+        bail!(
+            "--shard auto: neither SLURM_ARRAY_TASK_ID (a Slurm array job) nor JOB_COMPLETION_INDEX (a Kubernetes Indexed Job) is set: give the shard as --shard K/N"
+        )
+    }
+}
+
+/// `--shard`: `K/N` or `auto`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ShardArg {
+    Part(Shard),
+    Auto,
+}
+
+impl FromStr for ShardArg {
+    type Err = anyhow::Error;
+
+    fn from_str(s: &str) -> Result<Self> {
+        if s == "auto" {
+            return Ok(Self::Auto);
+        }
+        let (k, n) = s
+            .split_once('/')
+            .ok_or_else(|| anyhow!("{s:?}: give K/N (shard K of N, from 1) or `auto`"))?;
+        let whole = |x: &str| {
+            x.parse::<usize>()
+                .map_err(|_| anyhow!("{s:?}: {x:?} is not a whole number"))
+        };
+        Ok(Self::Part(Shard::new(whole(k)?, whole(n)?)?))
+    }
+}
+
+impl ShardArg {
+    /// The shard this process runs: the one given, or the scheduler's.
+    pub fn resolve(self) -> Result<Shard> {
+        match self {
+            Self::Part(s) => Ok(s),
+            Self::Auto => Shard::from_env(&|name| std::env::var(name).ok()),
+        }
+    }
+}
+
+/// The shard (1 … `count`) that owns each run of `plan`, in the order of its jobs.
+///
+/// Runs with one key are one run (they write one result) and go to one shard. The runs are
+/// dealt largest first (expected cost: ticks × agents) to the shard with the least cost so
+/// far ([`deal`]). The partition depends on the campaign's runs only: not on which results
+/// exist, nor on the machine.
+pub(super) fn owners(plan: &Plan, count: usize) -> Vec<usize> {
+    let mut units: Vec<(u128, &str)> = Vec::new();
+    let mut first: std::collections::BTreeMap<&str, usize> = Default::default();
+    for job in &plan.jobs {
+        first.entry(job.key.as_str()).or_insert_with(|| {
+            let cost = u128::from(job.resolved.ticks()) * job.resolved.agent_count() as u128;
+            units.push((cost, job.key.as_str()));
+            units.len() - 1
+        });
+    }
+    let owner_of_unit = deal(&units, count);
+    plan.jobs
+        .iter()
+        .map(|j| owner_of_unit[first[j.key.as_str()]])
+        .collect()
+}
+
+/// The shard (1 … `count`) of each unit `(cost, key)` (keys distinct): largest cost first
+/// (ties: the smaller key), each to the shard with the least cost so far (ties: the lowest
+/// index); a cost of 0 counts as 1. Every shard's total is within the largest cost of every
+/// other's.
+fn deal(units: &[(u128, &str)], count: usize) -> Vec<usize> {
+    let mut order: Vec<usize> = (0..units.len()).collect();
+    order.sort_by(|&a, &b| units[b].0.cmp(&units[a].0).then(units[a].1.cmp(units[b].1)));
+    let mut load = vec![0u128; count.max(1)];
+    let mut owner = vec![0usize; units.len()];
+    for u in order {
+        let (shard, _) = load
+            .iter()
+            .enumerate()
+            .min_by_key(|&(i, l)| (*l, i))
+            .unwrap_or((0, &0));
+        load[shard] += units[u].0.max(1);
+        owner[u] = shard + 1;
+    }
+    owner
+}
+
+/// The hash of a campaign as its shards see it: SHA-256 over its name, its axes, its plots and
+/// the key of every run (each key covers the run's resolved scenario, engine and the
+/// launcher's version). An edit that changes no run and no output (a comment) keeps it.
+pub(super) fn campaign_hash(plan: &Plan) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    h.update(format!("campaign {}\n", plan.name));
+    for a in &plan.axes {
+        h.update(format!("axis {}\n", a.label));
+    }
+    h.update(format!("plots {:?}\n", plan.plots));
+    for j in &plan.jobs {
+        h.update(format!("run {} {} {}\n", j.point, j.key, j.label));
+    }
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// How a shard's run ended, or that it runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum State {
+    Running,
+    Finished,
+    Failed,
+    Interrupted,
+}
+
+impl State {
+    /// `running`, `finished`, `failed`, `interrupted`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Running => "running",
+            Self::Finished => "finished",
+            Self::Failed => "failed",
+            Self::Interrupted => "interrupted",
+        }
+    }
+}
+
+/// A run of the shard that failed.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct Failure {
+    pub run: String,
+    pub key: String,
+    pub error: String,
+}
+
+/// `shards/K-of-N.json`: what shard K of N is doing or did, written by that shard only.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Record {
+    pub campaign: String,
+    pub campaign_hash: String,
+    pub shard: Shard,
+    /// The runs the shard owns.
+    pub runs: usize,
+    pub jobs: usize,
+    pub host: String,
+    pub pid: u32,
+    pub started_unix_s: f64,
+    pub updated_unix_s: f64,
+    pub state: State,
+    pub ran: usize,
+    pub skipped: usize,
+    pub failures: Vec<Failure>,
+}
+
+/// Seconds since the Unix epoch by this machine's clock (shown, never compared across
+/// machines).
+pub fn unix_now() -> f64 {
+    SystemTime::now()
+        .duration_since(SystemTime::UNIX_EPOCH)
+        .map_or(0.0, |d| d.as_secs_f64())
+}
+
+impl Record {
+    pub fn path(out: &Path, shard: Shard) -> PathBuf {
+        out.join(SHARDS).join(format!("{}.json", shard.stem()))
+    }
+
+    /// Writes the record whole.
+    pub fn save(&mut self, out: &Path) -> Result<()> {
+        self.updated_unix_s = unix_now();
+        write_atomic(
+            &Self::path(out, self.shard),
+            (serde_json::to_string_pretty(self)? + "\n").as_bytes(),
+        )
+    }
+}
+
+/// Every shard record in `out/shards` (files named `K-of-N.json`), in shard order; a record
+/// that cannot be read is an error naming it.
+pub fn records(out: &Path) -> Result<Vec<Record>> {
+    let dir = out.join(SHARDS);
+    let entries = match std::fs::read_dir(&dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(anyhow!("reading {}: {e}", dir.display())),
+    };
+    let mut out = Vec::new();
+    for entry in entries {
+        let entry = entry.with_context(|| format!("reading {}", dir.display()))?;
+        let name = entry.file_name();
+        let Some(stem) = name.to_str().and_then(|n| n.strip_suffix(".json")) else {
+            continue;
+        };
+        let Some(shard) = parse_stem(stem) else {
+            continue;
+        };
+        let path = entry.path();
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let r: Record = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not a shard record", path.display()))?;
+        if r.shard != shard {
+            bail!(
+                "{}: holds the record of shard {}, not of {shard}",
+                path.display(),
+                r.shard
+            );
+        }
+        out.push(r);
+    }
+    out.sort_by_key(|r| (r.shard.count, r.shard.index));
+    Ok(out)
+}
+
+/// `K-of-N` as a shard.
+fn parse_stem(stem: &str) -> Option<Shard> {
+    let (k, n) = stem.split_once("-of-")?;
+    Shard::new(k.parse().ok()?, n.parse().ok()?).ok()
+}
+
+/// Refuses a shard of a campaign other than the one the records in `out` were written for
+/// (its hash differs) or a number of shards other than theirs.
+pub fn check_records(
+    records: &[Record],
+    hash: &str,
+    count: Option<usize>,
+    out: &Path,
+) -> Result<()> {
+    for r in records {
+        let path = Record::path(out, r.shard);
+        if r.campaign_hash != hash {
+            bail!(
+                "{} was written by shard {} for another version of the campaign (hash {}…, this campaign's is {}…): its runs are not this campaign's. Run the campaign it was made with, or another --out (the results stored under points/ are kept by their keys: a new folder can take them)",
+                path.display(),
+                r.shard,
+                &r.campaign_hash[..r.campaign_hash.len().min(12)],
+                &hash[..12]
+            );
+        }
+        if let Some(n) = count.filter(|&n| n != r.shard.count) {
+            bail!(
+                "{} is the record of shard {}: this folder's campaign is cut in {} shards, not {n}. Every shard of a folder uses one N (to cut it anew, remove {})",
+                path.display(),
+                r.shard,
+                r.shard.count,
+                out.join(SHARDS).display()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// The number of shards the records in `out` agree on (`None` when there is none).
+pub fn count_of(records: &[Record], out: &Path) -> Result<Option<usize>> {
+    let Some(first) = records.first() else {
+        return Ok(None);
+    };
+    check_records(records, &first.campaign_hash, Some(first.shard.count), out)?;
+    Ok(Some(first.shard.count))
+}
+
+/// This machine: its host name and boot id, which with a pid and the process's start time
+/// name one process.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct Holder {
+    pub host: String,
+    pub boot_id: String,
+    pub pid: u32,
+    /// The process's start time (`/proc/PID/stat` field 22): a pid used again is not it.
+    pub start: String,
+    /// Unique to this lease.
+    pub token: String,
+}
+
+/// The host name of this machine.
+pub fn host_name() -> String {
+    read_trimmed("/proc/sys/kernel/hostname").unwrap_or_else(|| "unknown".into())
+}
+
+fn read_trimmed(path: &str) -> Option<String> {
+    std::fs::read_to_string(path)
+        .ok()
+        .map(|s| s.trim().to_string())
+}
+
+fn start_of(pid: u32) -> Option<String> {
+    fdi_runtime::process::procfs::stat(pid)
+        .ok()?
+        .field(22)
+        .map(str::to_string)
+}
+
+impl Holder {
+    fn me() -> Self {
+        let pid = std::process::id();
+        Self {
+            host: host_name(),
+            boot_id: read_trimmed("/proc/sys/kernel/random/boot_id").unwrap_or_default(),
+            pid,
+            start: start_of(pid).unwrap_or_default(),
+            token: format!("{pid}-{}", unix_now()),
+        }
+    }
+
+    /// Whether this holder is a process of this machine that is gone.
+    fn gone_from_here(&self, me: &Self) -> bool {
+        let dead = || {
+            // A zombie has ended: only its parent has not read its status yet.
+            fdi_runtime::process::procfs::state(self.pid).is_ok_and(|s| matches!(s, 'Z' | 'X'))
+        };
+        self.host == me.host
+            && self.boot_id == me.boot_id
+            && (start_of(self.pid).as_deref() != Some(self.start.as_str()) || dead())
+    }
+}
+
+/// The lease of a running shard (`shards/K-of-N.lease`): made by an exclusive create, renewed
+/// every [`RENEW_EVERY`] by a thread, removed when dropped.
+pub struct Lease {
+    path: PathBuf,
+    token: String,
+    stop: Option<mpsc::Sender<()>>,
+    renewer: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Lease {
+    /// Takes the lease of `shard` in `out`. A lease held by a live copy of the shard is a
+    /// refusal naming its holder; one whose holder is gone (a process of this machine that
+    /// ended, or a lease not renewed for [`STALE_AFTER`]) is taken over, saying so.
+    pub fn take(out: &Path, shard: Shard) -> Result<Self> {
+        let dir = out.join(SHARDS);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        let path = dir.join(format!("{}.lease", shard.stem()));
+        let me = Holder::me();
+        for _ in 0..2 {
+            match create_new(&path, &me) {
+                Ok(()) => return Ok(Self::renewed(path, me.token)),
+                Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
+                Err(e) => return Err(anyhow!("creating {}: {e}", path.display())),
+            }
+            let held = std::fs::read_to_string(&path)
+                .ok()
+                .and_then(|t| serde_json::from_str::<Holder>(&t).ok());
+            let age = lease_age(&path, &dir)?;
+            let why = match &held {
+                Some(h) if h.gone_from_here(&me) => {
+                    format!("its holder (pid {} on this host) is gone", h.pid)
+                }
+                _ if age >= STALE_AFTER => {
+                    format!("it was not renewed for {:.0} s", age.as_secs_f64())
+                }
+                Some(h) => bail!(
+                    "shard {shard} is being run by pid {} on {} (its lease {} was renewed {:.0} s ago): a second copy of a shard is refused. If that process is gone, its lease goes stale {} s after its last renewal, or remove the file",
+                    h.pid,
+                    h.host,
+                    path.display(),
+                    age.as_secs_f64(),
+                    STALE_AFTER.as_secs()
+                ),
+                None => bail!(
+                    "shard {shard} has a lease {} that is being written or is not a lease ({:.0} s old): a second copy of a shard is refused; it goes stale after {} s, or remove the file",
+                    path.display(),
+                    age.as_secs_f64(),
+                    STALE_AFTER.as_secs()
+                ),
+            };
+            eprintln!(
+                "fdi-launch: shard {shard}: taking over the lease {}: {why}",
+                path.display()
+            );
+            match std::fs::remove_file(&path) {
+                Ok(()) => {}
+                Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+                Err(e) => return Err(anyhow!("removing {}: {e}", path.display())),
+            }
+        }
+        bail!(
+            "shard {shard}: another process took the lease {} at the same moment",
+            path.display()
+        )
+    }
+
+    /// The lease just made, with its renewing thread started.
+    fn renewed(path: PathBuf, token: String) -> Self {
+        let (tx, rx) = mpsc::channel::<()>();
+        let (p, t) = (path.clone(), token.clone());
+        let renewer = std::thread::Builder::new()
+            .name("lease".into())
+            .spawn(move || {
+                // Woken by the drop (or its sender going away), else every RENEW_EVERY.
+                while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(RENEW_EVERY) {
+                    if let Err(e) = renew(&p, &t) {
+                        eprintln!("fdi-launch: warning: {e}");
+                    }
+                }
+            })
+            .ok();
+        Self {
+            path,
+            token,
+            stop: Some(tx),
+            renewer,
+        }
+    }
+}
+
+impl Drop for Lease {
+    fn drop(&mut self) {
+        drop(self.stop.take());
+        if let Some(h) = self.renewer.take() {
+            let _ = h.join();
+        }
+        // Only a lease that is still ours.
+        if holds(&self.path, &self.token) {
+            let _ = std::fs::remove_file(&self.path);
+        }
+    }
+}
+
+fn holds(path: &Path, token: &str) -> bool {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| serde_json::from_str::<Holder>(&t).ok())
+        .is_some_and(|h| h.token == token)
+}
+
+/// Whether a shard's process is alive, by its lease.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Liveness {
+    /// Its lease is held and renewed.
+    Live,
+    /// Its lease is stale, or its holder a process of this machine that is gone.
+    Gone,
+    /// It has no lease.
+    Absent,
+}
+
+/// Whether shard `shard` of the campaign in `out` runs now.
+pub fn liveness(out: &Path, shard: Shard) -> Result<Liveness> {
+    let dir = out.join(SHARDS);
+    let path = dir.join(format!("{}.lease", shard.stem()));
+    let Ok(text) = std::fs::read_to_string(&path) else {
+        return Ok(Liveness::Absent);
+    };
+    if serde_json::from_str::<Holder>(&text).is_ok_and(|h| h.gone_from_here(&Holder::me())) {
+        return Ok(Liveness::Gone);
+    }
+    Ok(if lease_age(&path, &dir)? >= STALE_AFTER {
+        Liveness::Gone
+    } else {
+        Liveness::Live
+    })
+}
+
+/// Creates `path` only if it does not exist, holding `who`.
+fn create_new(path: &Path, who: &Holder) -> std::io::Result<()> {
+    let mut f = std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(path)?;
+    let text = serde_json::to_string(who).map_err(std::io::Error::other)?;
+    f.write_all(text.as_bytes())?;
+    f.sync_all()
+}
+
+/// Rewrites the lease in place (its modification time is the renewal), if it is still ours.
+fn renew(path: &Path, token: &str) -> Result<()> {
+    if !holds(path, token) {
+        bail!(
+            "the lease {} is no longer this shard's (taken over, or removed): another copy may run the same runs (their results are the same, written whole)",
+            path.display()
+        );
+    }
+    let text = std::fs::read(path).with_context(|| format!("renewing {}", path.display()))?;
+    std::fs::OpenOptions::new()
+        .write(true)
+        .open(path)
+        .and_then(|mut f| f.write_all(&text))
+        .with_context(|| format!("renewing {}", path.display()))
+}
+
+/// How long ago `path` was last written, by the clock of the file system holding `dir`: the
+/// difference of its modification time and that of a file written in `dir` now.
+fn lease_age(path: &Path, dir: &Path) -> Result<Duration> {
+    let then = std::fs::metadata(path)
+        .and_then(|m| m.modified())
+        .with_context(|| format!("reading {}", path.display()))?;
+    let probe = tempfile::NamedTempFile::new_in(dir)
+        .with_context(|| format!("a file in {}", dir.display()))?;
+    probe
+        .as_file()
+        .write_all(b"now")
+        .with_context(|| format!("writing in {}", dir.display()))?;
+    let now = probe
+        .as_file()
+        .metadata()
+        .and_then(|m| m.modified())
+        .with_context(|| format!("reading a file in {}", dir.display()))?;
+    Ok(now.duration_since(then).unwrap_or(Duration::ZERO))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn env<'a>(vars: &'a [(&'a str, &'a str)]) -> impl Fn(&str) -> Option<String> + 'a {
+        move |name| {
+            vars.iter()
+                .find(|(k, _)| *k == name)
+                .map(|(_, v)| v.to_string())
+        }
+    }
+
+    #[test]
+    fn shards_are_parsed_and_refused_out_of_range() {
+        assert_eq!(
+            "2/3".parse::<ShardArg>().expect("2/3"),
+            ShardArg::Part(Shard { index: 2, count: 3 })
+        );
+        assert_eq!("auto".parse::<ShardArg>().expect("auto"), ShardArg::Auto);
+        for (bad, says) in [
+            ("4/3", "between 1 and N (3)"),
+            ("0/3", "between 1 and N (3)"),
+            ("1/0", "N must be between 1"),
+            ("3", "give K/N"),
+            ("a/3", "\"a\" is not a whole number"),
+            ("-1/3", "is not a whole number"),
+        ] {
+            let e = format!("{:#}", bad.parse::<ShardArg>().expect_err(bad));
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+    }
+
+    #[test]
+    fn the_shard_comes_from_slurm_or_kubernetes() {
+        let slurm = [
+            ("SLURM_ARRAY_TASK_ID", "7"),
+            ("SLURM_ARRAY_TASK_MIN", "5"),
+            ("SLURM_ARRAY_TASK_MAX", "9"),
+            ("SLURM_ARRAY_TASK_STEP", "2"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+        ];
+        assert_eq!(
+            Shard::from_env(&env(&slurm)).expect("slurm"),
+            Shard { index: 2, count: 3 }
+        );
+        let k8s = [("JOB_COMPLETION_INDEX", "0"), ("FDI_SHARD_COUNT", "4")];
+        assert_eq!(
+            Shard::from_env(&env(&k8s)).expect("k8s"),
+            Shard { index: 1, count: 4 }
+        );
+        let list = [
+            ("SLURM_ARRAY_TASK_ID", "4"),
+            ("SLURM_ARRAY_TASK_MIN", "1"),
+            ("SLURM_ARRAY_TASK_MAX", "9"),
+            ("SLURM_ARRAY_TASK_COUNT", "3"),
+        ];
+        for (vars, says) in [
+            (&list[..], "not one range"),
+            (&k8s[..1], "FDI_SHARD_COUNT is not set"),
+            (
+                &[("JOB_COMPLETION_INDEX", "4"), ("FDI_SHARD_COUNT", "4")][..],
+                "between 1 and N",
+            ),
+            (
+                &[("SLURM_ARRAY_TASK_ID", "x")][..],
+                "SLURM_ARRAY_TASK_ID=\"x\"",
+            ),
+            (&[][..], "neither SLURM_ARRAY_TASK_ID"),
+        ] {
+            let e = format!("{:#}", Shard::from_env(&env(vars)).expect_err(says));
+            assert!(e.contains(says), "{vars:?}: {e}");
+        }
+    }
+
+    proptest::proptest! {
+        /// Every unit has one shard in range; the dealing is the same whatever the order the
+        /// units come in; and the totals of any two shards differ by at most the largest cost.
+        #[test]
+        fn dealing_is_deterministic_and_balanced(
+            costs in proptest::collection::vec(0u128..1000, 0..60),
+            count in 1usize..8,
+            rotate in 0usize..60,
+        ) {
+            let keys: Vec<String> = (0..costs.len()).map(|i| format!("{i:04}")).collect();
+            let units: Vec<(u128, &str)> =
+                costs.iter().zip(&keys).map(|(c, k)| (*c, k.as_str())).collect();
+            let owner = deal(&units, count);
+            proptest::prop_assert!(owner.iter().all(|&o| (1..=count).contains(&o)));
+            let mut turned = units.clone();
+            turned.rotate_left(rotate.min(units.len()));
+            let again = deal(&turned, count);
+            for (u, o) in turned.iter().zip(&again) {
+                let i = keys.iter().position(|k| k == u.1).expect("key");
+                proptest::prop_assert_eq!(owner[i], *o);
+            }
+            let mut load = vec![0u128; count];
+            for (u, o) in units.iter().zip(&owner) {
+                load[o - 1] += u.0.max(1);
+            }
+            let largest = units.iter().map(|u| u.0.max(1)).max().unwrap_or(0);
+            let (lo, hi) = (load.iter().min().copied().unwrap_or(0), load.iter().max().copied().unwrap_or(0));
+            proptest::prop_assert!(hi - lo <= largest, "{load:?}, largest {largest}");
+        }
+    }
+
+    #[test]
+    fn a_lease_is_refused_to_a_second_copy_and_taken_over_from_a_gone_holder() {
+        let dir = tempfile::tempdir().expect("dir");
+        let shard = Shard { index: 1, count: 2 };
+        let lease = Lease::take(dir.path(), shard).expect("first");
+        let e = format!(
+            "{:#}",
+            Lease::take(dir.path(), shard).err().expect("second")
+        );
+        assert!(e.contains("a second copy of a shard is refused"), "{e}");
+        drop(lease);
+        assert!(!dir.path().join("shards/1-of-2.lease").exists());
+        // A holder of this host that is gone: pid 1's start time is not this one.
+        let mut gone = Holder::me();
+        gone.start = "0".into();
+        gone.pid = 1;
+        create_new(&dir.path().join("shards/1-of-2.lease"), &gone).expect("stale lease");
+        let taken = Lease::take(dir.path(), shard).expect("taken over");
+        assert!(holds(&taken.path, &taken.token));
+    }
+}
