@@ -32,12 +32,12 @@ pub mod runner;
 pub mod shard;
 pub mod stats;
 pub mod status;
+pub mod store;
 pub mod tables;
 
 pub(crate) use tables::sig;
 
 use std::collections::BTreeSet;
-use std::io::Write as _;
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -52,7 +52,8 @@ use sha2::{Digest, Sha256};
 
 use crate::run::{execute, Engine, Traces};
 use fdi_common::field_path::{show, FieldPath, PathError};
-use plan::{Axis, Job, Plan, Point};
+use plan::{Axis, Job, Plan, Point, MAX_RUNS};
+use store::{load_stored, stored_path, write_atomic, Stored};
 
 /// What an interrupted campaign kept.
 pub const DURING_THE_CAMPAIGN: &str =
@@ -135,18 +136,6 @@ struct RangeFile {
     stop: toml::Value,
     step: Option<toml::Value>,
     count: Option<usize>,
-}
-
-/// Most runs a campaign may hold.
-const MAX_RUNS: usize = 100_000;
-
-/// What `points/<key>.json` holds.
-#[derive(Debug, Serialize, Deserialize)]
-struct Stored {
-    key: String,
-    engine: String,
-    run: String,
-    summary: RunSummary,
 }
 
 fn number(v: &toml::Value, what: &str) -> Result<f64> {
@@ -783,40 +772,6 @@ impl Expansion<'_> {
             key,
         })
     }
-}
-
-fn stored_path(out: &Path, key: &str) -> PathBuf {
-    out.join("points").join(format!("{}.json", &key[..16]))
-}
-
-/// The stored result of a run, if there is a valid one for exactly this key.
-fn load_stored(out: &Path, key: &str) -> Option<RunSummary> {
-    let p = stored_path(out, key);
-    let text = std::fs::read_to_string(&p).ok()?;
-    match serde_json::from_str::<Stored>(&text) {
-        Ok(s) if s.key == key => Some(s.summary),
-        Ok(_) => None,
-        Err(e) => {
-            eprintln!(
-                "fdi-launch: warning: {} cannot be read ({e}); its run is done again",
-                p.display()
-            );
-            None
-        }
-    }
-}
-
-/// Writes `bytes` to `path` whole or not at all (a temporary file in the same folder, renamed).
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut tmp = tempfile::NamedTempFile::new_in(dir)
-        .with_context(|| format!("a temporary file in {}", dir.display()))?;
-    tmp.write_all(bytes)
-        .with_context(|| format!("writing {}", path.display()))?;
-    tmp.persist(path)
-        .map_err(|e| anyhow::anyhow!("writing {}: {}", path.display(), e.error))?;
-    Ok(())
 }
 
 /// The folder of a campaign without `--out`: `runs/campaigns/<name>`, the name made one

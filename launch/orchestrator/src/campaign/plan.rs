@@ -9,6 +9,9 @@ use super::flatten::Cell;
 use super::stats::Stats;
 use fdi_common::field_path::{show, FieldPath};
 
+/// Most runs a campaign may hold.
+pub(super) const MAX_RUNS: usize = 100_000;
+
 /// One axis as resolved.
 #[derive(Debug, Clone)]
 pub(super) struct Axis {

@@ -18,7 +18,7 @@ use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
 use super::plan::Plan;
-use super::write_atomic;
+use super::store::write_atomic;
 
 /// The folder of a campaign's shard files (`<out>/shards`).
 pub const SHARDS: &str = "shards";
@@ -44,10 +44,10 @@ impl std::fmt::Display for Shard {
 impl Shard {
     /// Shard `index` of `count`, or why not.
     pub fn new(index: usize, count: usize) -> Result<Self> {
-        if count == 0 || count > super::MAX_RUNS {
+        if count == 0 || count > super::plan::MAX_RUNS {
             bail!(
                 "{index}/{count}: the number of shards N must be between 1 and {}",
-                super::MAX_RUNS
+                super::plan::MAX_RUNS
             );
         }
         if index == 0 || index > count {

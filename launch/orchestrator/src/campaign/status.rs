@@ -11,7 +11,8 @@ use fdi_common::engine::RunSummary;
 
 use super::plan::Plan;
 use super::shard::{self, Record, Shard, State};
-use super::{load_stored, sig};
+use super::store::load_stored;
+use super::tables::sig;
 
 /// At most this many runs are named per shard; the others are counted.
 const NAMED: usize = 8;

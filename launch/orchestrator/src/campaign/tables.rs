@@ -13,7 +13,9 @@ use fdi_common::field_path::show;
 
 use super::flatten::{self, Cell};
 use super::plan::{labels_and_robots, toml_cell, Aggregate, Job, Plan};
-use super::{figures, stats, write_atomic};
+use super::store::write_atomic;
+use super::figures;
+use super::stats;
 use std::collections::BTreeMap;
 /// One row of the results table.
 struct Row<'a> {
