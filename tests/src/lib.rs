@@ -3,6 +3,7 @@
 
 pub mod mounts;
 pub mod netns;
+pub mod slurm;
 pub mod threads;
 
 use std::path::{Path, PathBuf};

@@ -25,6 +25,7 @@ mod scenarios;
 mod schema;
 mod set_overrides;
 mod shards;
+mod slurm;
 mod sweep;
 mod threads;
 mod traces;

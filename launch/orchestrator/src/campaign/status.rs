@@ -175,6 +175,9 @@ fn left_s(p: &Progress, mean: Option<f64>) -> Option<f64> {
 /// The line of the time left: the slowest running shard's, and what the shards not running
 /// hold.
 fn time_left(shards: &[Progress], mean: Option<f64>, finished: usize) -> String {
+    if shards.iter().all(|p| p.done == p.runs) {
+        return "every run is done: `--aggregate` makes the tables".into();
+    }
     let Some(mean) = mean else {
         return "time left: unknown until a run has finished".into();
     };

@@ -11,11 +11,11 @@ use anyhow::{bail, Result};
 use fdi_common::engine::RunSummary;
 use fdi_common::field_path::show;
 
+use super::figures;
 use super::flatten::{self, Cell};
 use super::plan::{labels_and_robots, toml_cell, Aggregate, Job, Plan};
-use super::store::write_atomic;
-use super::figures;
 use super::stats;
+use super::store::write_atomic;
 use std::collections::BTreeMap;
 /// One row of the results table.
 struct Row<'a> {

@@ -1,0 +1,102 @@
+//! The shipped Slurm job files run a campaign on a real scheduler: a single-node cluster
+//! (Debian's slurmctld, slurmd and munge, started by the test) takes
+//! `examples/cluster/slurm/submit.sh` as a real array job of 3 shards and the aggregate job
+//! after it; the aggregate's tables are byte for byte those of the campaign run whole.
+
+use std::path::Path;
+use std::process::Command;
+use std::time::Duration;
+
+use fdi_tests::slurm::{skip_reason, Cluster};
+use fdi_tests::{launch, launcher, repo_path, Scratch};
+
+const WATCHDOG: Duration = Duration::from_secs(600);
+
+#[test]
+fn the_shipped_slurm_script_runs_a_campaign_as_an_array_job_and_aggregates_it() {
+    let s = Scratch::new("slurm");
+    let cluster = match Cluster::start(&s.0.join("cluster")) {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("{}", skip_reason(&e));
+            return;
+        }
+    };
+    let c = s.0.join("c.toml");
+    std::fs::write(
+        &c,
+        "name = \"on-slurm\"\n[set]\nduration_s = 2.0\n\
+         [[axes]]\npath = \"controller.beta\"\nvalues = [10.0, 20.0, 30.0]\n\
+         [[axes]]\npath = \"seed\"\nrange = { start = 1, stop = 2, step = 1 }\n",
+    )
+    .expect("campaign");
+    let whole = s.0.join("whole");
+    let o = launch(
+        &["sweep", c.to_str().expect("utf-8"), "--jobs", "2"],
+        &whole,
+        WATCHDOG,
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    // The script as a user runs it: from a working folder, with fdi-launch named by FDI_LAUNCH.
+    let jobs = s.0.join("jobs");
+    std::fs::create_dir_all(&jobs).expect("jobs folder");
+    let out = s.0.join("shared").join("on-slurm");
+    let submitted = Command::new(repo_path("examples/cluster/slurm/submit.sh"))
+        .args([c.as_os_str(), out.as_os_str()])
+        .args(["3", "--cpus-per-task=1"])
+        .current_dir(&jobs)
+        .env("SLURM_CONF", cluster.conf())
+        .env("FDI_LAUNCH", launcher())
+        .output()
+        .expect("submit.sh");
+    let said = String::from_utf8_lossy(&submitted.stdout).into_owned();
+    assert!(
+        submitted.status.success(),
+        "{said}\n{}",
+        String::from_utf8_lossy(&submitted.stderr)
+    );
+    let aggregate = said
+        .lines()
+        .find_map(|l| l.strip_prefix("aggregate: job "))
+        .and_then(|l| l.split_whitespace().next())
+        .unwrap_or_else(|| panic!("no aggregate job in: {said}"));
+    let ended = cluster.wait_for_end(aggregate, Duration::from_secs(300));
+    let logs = || {
+        let mut all = String::new();
+        for e in std::fs::read_dir(&jobs).expect("jobs folder").flatten() {
+            let text = std::fs::read_to_string(e.path()).unwrap_or_default();
+            all.push_str(&format!(
+                "--- {}:\n{text}\n",
+                e.file_name().to_string_lossy()
+            ));
+        }
+        format!("{all}{}", cluster.log("slurmctld"))
+    };
+    assert_eq!(
+        ended,
+        Some(("COMPLETED".to_string(), "0:0".to_string())),
+        "the aggregate job did not complete:\n{}",
+        logs()
+    );
+    // Each array task ran its own shard, found from Slurm's environment.
+    let all = logs();
+    for k in 1..=3 {
+        assert!(
+            all.contains(&format!("campaign on-slurm, shard {k}/3: 2 of its 6 runs")),
+            "{all}"
+        );
+    }
+    assert!(
+        all.contains("6 of 6 runs in the tables (from 3 shards)"),
+        "{all}"
+    );
+    same_tables(&whole, &out);
+}
+
+fn same_tables(a: &Path, b: &Path) {
+    for f in ["results.csv", "aggregate.csv"] {
+        let read = |d: &Path| std::fs::read(d.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(read(a) == read(b), "{f} differs");
+    }
+}
