@@ -5,12 +5,17 @@
 //! processes' traces tick by tick ([`join`]) and knows what a run recorded ([`traces`]). It
 //! runs nothing: the runs are `fdi-orchestrator`'s.
 
+#[cfg(feature = "figures")]
 pub mod detect;
+#[cfg(feature = "figures")]
 pub mod detect_figures;
+#[cfg(feature = "figures")]
 pub mod export;
 pub mod io_cause;
 pub mod join;
 pub mod output;
+#[cfg(feature = "figures")]
 pub mod plot;
+#[cfg(feature = "figures")]
 pub mod report;
 pub mod traces;
