@@ -35,6 +35,7 @@ pub mod roles;
 pub mod run_dir;
 pub mod scenario;
 pub mod stop;
+pub mod team;
 pub mod time;
 pub mod trace;
 pub mod trajectory;

@@ -12,7 +12,6 @@ mod errors;
 mod py_episode;
 mod py_run;
 mod py_scenario;
-mod team;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -11,7 +11,7 @@ use pyo3::types::{PyByteArray, PyBytes};
 use crate::episode::{self, Outcome, Spec, CHANNELS};
 use crate::errors::engine_error;
 use crate::py_scenario::Scenario;
-use crate::team::Team;
+use fdi_common::team::Team;
 
 /// `f64`s from native-endian bytes.
 fn floats(bytes: &[u8], what: &str) -> PyResult<Vec<f64>> {

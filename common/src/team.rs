@@ -1,5 +1,5 @@
 //! A team of threads that stays for a batch's life and runs one round of work per call of
-//! [`Team::round`]: the vector environment's step. Each member (the calling thread is one)
+//! [`Team::round`]: the step of the Python package's vector environment. Each member (the calling thread is one)
 //! starts on its own share of the chunks, so that the same environments stay in the same core's
 //! cache step after step, then takes what is left of the others'. Between rounds a member spins
 //! for [`SPIN`] (a vector step follows the last one within tens of microseconds when Python
