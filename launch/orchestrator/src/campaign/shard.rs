@@ -445,7 +445,12 @@ impl Lease {
             let held = std::fs::read_to_string(&path)
                 .ok()
                 .and_then(|t| serde_json::from_str::<Holder>(&t).ok());
-            let age = lease_age(&path, &dir)?;
+            let age = match lease_age(&path, &dir) {
+                Ok(age) => age,
+                // Released since: take it.
+                Err(_) if !path.exists() => continue,
+                Err(e) => return Err(e),
+            };
             let why = match &held {
                 Some(h) if h.gone_from_here(&me) => {
                     format!("its holder (pid {} on this host) is gone", h.pid)
