@@ -45,6 +45,8 @@ def main():
     indexed = 0
     for f in files:
         for doc in yaml.safe_load_all(f.read_text()):
+            if doc is None:
+                continue
             validate(doc, f.name)
             if doc["kind"] == "Job":
                 indexed += check_shards(doc, f.name)

@@ -241,6 +241,11 @@ fn config(dir: &Path, socket: &Path) -> Result<String, String> {
 impl Drop for Cluster {
     fn drop(&mut self) {
         let _ = self.client("scancel", &["--full", "--user=root"]);
+        // The jobs' processes end before the daemons that track them.
+        wait_until(Duration::from_secs(20), || {
+            self.client("squeue", &["-h"])
+                .is_ok_and(|o| o.status.success() && o.stdout.is_empty())
+        });
         // The node first, the controller, then munge.
         for (_, child) in self.daemons.iter_mut().rev() {
             let _ = Command::new("kill")

@@ -92,7 +92,7 @@ fn three_shards_at_once_and_a_killed_shard_run_again_aggregate_to_the_bytes_of_t
     for child in children {
         let said = ok(wait_with_watchdog(child, WATCHDOG));
         // Every shard owns 3 of the 9 runs (equal costs).
-        assert!(said.contains("3 of its 9 runs"), "{said}");
+        assert!(said.contains("3 of the campaign's 9 runs"), "{said}");
         ran += 3;
         assert!(
             !said.contains("results.csv"),

@@ -83,7 +83,9 @@ fn the_shipped_slurm_script_runs_a_campaign_as_an_array_job_and_aggregates_it() 
     let all = logs();
     for k in 1..=3 {
         assert!(
-            all.contains(&format!("campaign on-slurm, shard {k}/3: 2 of its 6 runs")),
+            all.contains(&format!(
+                "campaign on-slurm, shard {k}/3: 2 of the campaign's 6 runs"
+            )),
             "{all}"
         );
     }

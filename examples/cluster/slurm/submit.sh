@@ -20,13 +20,18 @@ shift 3
 case $shards in
   '' | *[!0-9]*) echo "$0: N must be a whole number of shards, not '$shards'" >&2; exit 2 ;;
 esac
-export FDI_CAMPAIGN=$campaign FDI_OUT=$out
 mkdir -p "$out"
+# Passed explicitly: a site may not export the submitting shell's environment by default.
+# FDI_SHARD_COUNT makes task K shard K of N even when it is sent again alone
+# (`sbatch --array=K`).
+export_list="ALL,FDI_CAMPAIGN=$campaign,FDI_OUT=$out,FDI_SHARD_COUNT=$shards"
 # `--parsable` prints `JOBID` or `JOBID;CLUSTER`.
-shard_job=$(sbatch --parsable --array=1-"$shards" "$@" "$here/shard.sbatch")
+shard_job=$(sbatch --parsable --export="$export_list" --array=1-"$shards" "$@" "$here/shard.sbatch")
 shard_job=${shard_job%%;*}
-aggregate_job=$(sbatch --parsable --dependency=afterany:"$shard_job" "$@" "$here/aggregate.sbatch")
-aggregate_job=${aggregate_job%%;*}
 echo "shards: job $shard_job (array 1-$shards)"
+aggregate_job=$(sbatch --parsable --export="$export_list" --dependency=afterany:"$shard_job" "$@" \
+  "$here/aggregate.sbatch")
+aggregate_job=${aggregate_job%%;*}
 echo "aggregate: job $aggregate_job (after every shard)"
 echo "progress: fdi-launch sweep $campaign --status --out $out"
+echo "shard K again: sbatch --export=$export_list --array=K $here/shard.sbatch"

@@ -41,6 +41,8 @@ use std::collections::BTreeSet;
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
@@ -790,7 +792,7 @@ pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
     let plan = plan(&args.campaign, args.engine)?;
     let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
     if args.status {
-        return status::print(&plan, &out);
+        return status::print(&plan, &out, args.engine);
     }
     if args.aggregate {
         return aggregate(args, &plan, &out);
@@ -800,7 +802,7 @@ pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
     }
     prepare_out(&out)?;
     copy_campaign(args, &out)?;
-    let all: Vec<usize> = (0..plan.jobs.len()).collect();
+    let all = unique_jobs(&plan, |_| true);
     println!(
         "campaign {}: {} runs ({} points × {} seeds), engine {}, {}",
         plan.name,
@@ -846,25 +848,31 @@ fn run_shard(
 ) -> Result<ExitCode> {
     prepare_out(out)?;
     let hash = shard::campaign_hash(plan);
-    shard::check_records(&shard::records(out)?, &hash, Some(shard.count), out)?;
-    let _lease = shard::Lease::take(out, shard)?;
+    let expected = shard::Expected {
+        hash: &hash,
+        engine: args.engine.as_str(),
+        count: Some(shard.count),
+    };
+    shard::check_records(&shard::records(out)?, &expected, out)?;
+    let auto = matches!(args.shard, Some(shard::ShardArg::Auto));
+    let lease = shard::Lease::take(out, shard, auto)?;
     let owners = shard::owners(plan, shard.count);
-    let owned: Vec<usize> = (0..plan.jobs.len())
-        .filter(|&i| owners[i] == shard.index)
-        .collect();
+    let owned = unique_jobs(plan, |i| owners[i] == shard.index);
     let jobs = args.jobs.unwrap_or_else(runner::default_jobs).get();
     println!(
-        "campaign {}, shard {shard}: {} of its {} runs, engine {}, {}",
+        "campaign {}, shard {shard}: {} of the campaign's {} runs, engine {}, {}",
         plan.name,
         owned.len(),
-        plan.jobs.len(),
+        unique_jobs(plan, |_| true).len(),
         args.engine.as_str(),
         plural(jobs, "job")
     );
     let now = shard::unix_now();
     let record = shard::Record {
         campaign: plan.name.clone(),
-        campaign_hash: hash,
+        campaign_hash: hash.clone(),
+        engine: args.engine.as_str().into(),
+        launcher: shard::launcher_version(),
         shard,
         runs: owned.len(),
         jobs,
@@ -877,7 +885,7 @@ fn run_shard(
         skipped: 0,
         failures: Vec::new(),
     };
-    let tally = run_batch(args, plan, out, &owned, Some(record), stop)?;
+    let tally = run_batch(args, plan, out, &owned, Some((record, lease.lost())), stop)?;
     println!("{}", tally.said());
     println!(
         "shard {shard} of campaign folder {}: once every shard is done, `fdi-launch sweep {} --aggregate --out {}` makes the tables",
@@ -886,6 +894,15 @@ fn run_shard(
         out.display()
     );
     campaign_end(tally.signal, &tally.failed)
+}
+
+/// The jobs (indices into the plan's) that `keep` keeps, the first of each key only: runs of
+/// one key are one run, stored once.
+fn unique_jobs(plan: &Plan, keep: impl Fn(usize) -> bool) -> Vec<usize> {
+    let mut keys = BTreeSet::new();
+    (0..plan.jobs.len())
+        .filter(|&i| keys.insert(plan.jobs[i].key.as_str()) && keep(i))
+        .collect()
 }
 
 /// `fdi-launch sweep CAMPAIGN --aggregate`: the tables and figures from the results in the
@@ -899,13 +916,28 @@ fn aggregate(args: &SweepArgs, plan: &Plan, out: &Path) -> Result<ExitCode> {
         );
     }
     let records = shard::records(out)?;
-    shard::check_records(&records, &shard::campaign_hash(plan), None, out)?;
+    let hash = shard::campaign_hash(plan);
+    let expected = shard::Expected {
+        hash: &hash,
+        engine: args.engine.as_str(),
+        count: None,
+    };
+    shard::check_records(&records, &expected, out)?;
     let count = shard::count_of(&records, out)?;
-    copy_campaign(args, out)?;
     let results: Vec<Option<RunSummary>> =
         plan.jobs.iter().map(|j| load_stored(out, &j.key)).collect();
-    let tables = tables::write_outputs(plan, &results, out)?;
     let done = results.iter().filter(|r| r.is_some()).count();
+    // The missing runs first: the tables of what is there may fail (no result at all).
+    if done < plan.jobs.len() {
+        eprintln!(
+            "fdi-launch: {} of {} runs are missing:\n{}",
+            plan.jobs.len() - done,
+            plan.jobs.len(),
+            status::missing(plan, &results, count, &records, out)
+        );
+    }
+    copy_campaign(args, out)?;
+    let tables = tables::write_outputs(plan, &results, out)?;
     println!(
         "campaign {}: {done} of {} runs in the tables{}",
         plan.name,
@@ -916,16 +948,11 @@ fn aggregate(args: &SweepArgs, plan: &Plan, out: &Path) -> Result<ExitCode> {
     for t in tables {
         println!("  {}", t.display());
     }
-    if done == plan.jobs.len() {
-        return Ok(ExitCode::SUCCESS);
-    }
-    eprintln!(
-        "fdi-launch: {} of {} runs are missing:\n{}",
-        plan.jobs.len() - done,
-        plan.jobs.len(),
-        status::missing(plan, &results, count, &records)
-    );
-    Ok(ExitCode::FAILURE)
+    Ok(if done == plan.jobs.len() {
+        ExitCode::SUCCESS
+    } else {
+        ExitCode::FAILURE
+    })
 }
 
 /// The campaign folder `out`, made.
@@ -945,25 +972,25 @@ fn copy_campaign(args: &SweepArgs, out: &Path) -> Result<()> {
         .with_context(|| format!("copying the campaign into {}", out.display()))
 }
 
-/// Runs the jobs `owned` (indices into the plan's jobs) whose result is not stored yet, each
-/// key once; stores each result as it ends, and keeps `record` (a shard's) up to date.
+/// Runs the jobs `owned` (indices into the plan's jobs, one per key) whose result is not
+/// stored yet; stores each result as it ends, and keeps a shard's record up to date (with the
+/// flag its lease raises when it is lost: the batch then starts no more runs).
 fn run_batch(
     args: &SweepArgs,
     plan: &Plan,
     out: &Path,
     owned: &[usize],
-    record: Option<shard::Record>,
+    shard: Option<(shard::Record, Arc<AtomicBool>)>,
     stop: &Stop,
 ) -> Result<Tally> {
-    let mut keys = BTreeSet::new();
     let todo: Vec<usize> = owned
         .iter()
         .copied()
         .filter(|&i| load_stored(out, &plan.jobs[i].key).is_none())
-        .filter(|&i| keys.insert(plan.jobs[i].key.as_str()))
         .collect();
     let skipped = owned.len() - todo.len();
     println!("{skipped} already done (skipped), {} to run", todo.len());
+    let (record, lost) = shard.unzip();
     let mut tally = Tally {
         out: out.to_path_buf(),
         engine: args.engine,
@@ -973,8 +1000,9 @@ fn run_batch(
         not_started: 0,
         signal: None,
         record,
+        lost,
     };
-    tally.save_record(None)?;
+    tally.save_record(None);
     let runs_root = out.join("runs");
     let outcome = runner::run_parallel(
         &todo,
@@ -983,7 +1011,14 @@ fn run_batch(
         stop,
         |&i| run_one(&plan.jobs[i], &plan.name, args, &runs_root, stop),
         |n, result| tally.record(&plan.jobs[todo[n]], result),
-    )?;
+    );
+    let outcome = match outcome {
+        Ok(o) => o,
+        Err(e) => {
+            tally.save_record(Some(shard::State::Failed));
+            return Err(e);
+        }
+    };
     tally.signal = tally.signal.or(outcome.interrupted);
     tally.not_started = outcome.not_started;
     let end = if tally.signal.is_some() {
@@ -993,12 +1028,12 @@ fn run_batch(
     } else {
         shard::State::Failed
     };
-    tally.save_record(Some(end))?;
+    tally.save_record(Some(end));
     Ok(tally)
 }
 
 /// What the runs of a batch gave: the runs that failed, how many ran, and the signal that
-/// interrupted one; with the record of the shard they are of.
+/// interrupted one; with the record of the shard they are of, and its lease's flag.
 struct Tally {
     out: PathBuf,
     engine: Engine,
@@ -1008,10 +1043,12 @@ struct Tally {
     not_started: usize,
     signal: Option<i32>,
     record: Option<shard::Record>,
+    lost: Option<Arc<AtomicBool>>,
 }
 
 impl Tally {
-    /// Records the end of `job`: a summary is stored in `points/`, a failure named.
+    /// Records the end of `job`: a summary is stored in `points/`, a failure named. An error
+    /// (a result that cannot be stored, a shard's lease lost) stops the batch.
     fn record(&mut self, job: &Job, result: Result<RunSummary>) -> Result<()> {
         match result {
             Ok(summary) => {
@@ -1040,13 +1077,19 @@ impl Tally {
                 }
             },
         }
-        self.save_record(None)
+        self.save_record(None);
+        if self.lost.as_ref().is_some_and(|l| l.load(Ordering::SeqCst)) {
+            bail!("the shard's lease was lost (another copy took it over, or it was removed): this copy stopped; the results it stored are kept");
+        }
+        Ok(())
     }
 
-    /// Writes the shard's record (if this batch is a shard's), its state set to `end`.
-    fn save_record(&mut self, end: Option<shard::State>) -> Result<()> {
+    /// Writes the shard's record (if this batch is a shard's), its state set to `end`; a
+    /// record that cannot be written is a warning (the results are what counts, and they are
+    /// stored on their own).
+    fn save_record(&mut self, end: Option<shard::State>) {
         let Some(r) = self.record.as_mut() else {
-            return Ok(());
+            return;
         };
         r.ran = self.ran;
         r.skipped = self.skipped;
@@ -1054,7 +1097,9 @@ impl Tally {
         if let Some(end) = end {
             r.state = end;
         }
-        r.save(&self.out)
+        if let Err(e) = r.save(&self.out) {
+            eprintln!("fdi-launch: warning: the shard's record: {e:#}");
+        }
     }
 
     /// `skipped 3, ran 9, failed 0`.

@@ -11,7 +11,8 @@
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
-use std::sync::mpsc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{mpsc, Arc};
 use std::time::{Duration, SystemTime};
 
 use anyhow::{anyhow, bail, Context, Result};
@@ -61,10 +62,14 @@ impl Shard {
         format!("{}-of-{}", self.index, self.count)
     }
 
-    /// The shard from a scheduler's environment (`get` reads a variable): a Slurm array job
-    /// (`SLURM_ARRAY_TASK_ID` among `SLURM_ARRAY_TASK_MIN`…`MAX` by `STEP`, `COUNT` tasks) or
+    /// The shard from a scheduler's environment (`get` reads a variable): a Slurm array job or
     /// a Kubernetes Indexed Job (`JOB_COMPLETION_INDEX`, from 0, and `FDI_SHARD_COUNT`, which
     /// the job's manifest sets to its `completions`: Kubernetes gives no variable of it).
+    ///
+    /// In a Slurm array job with `FDI_SHARD_COUNT` set (as `submit.sh` does), the shard is
+    /// `SLURM_ARRAY_TASK_ID` of `FDI_SHARD_COUNT`: a task sent again alone
+    /// (`sbatch --array=K`) is still shard K of N. Without it, the shard is the task's place in
+    /// the array (`SLURM_ARRAY_TASK_MIN`…`MAX` by `STEP`) of `SLURM_ARRAY_TASK_COUNT`.
     pub fn from_env(get: &dyn Fn(&str) -> Option<String>) -> Result<Self> {
         let number = |name: &str| -> Result<Option<usize>> {
             get(name)
@@ -79,6 +84,11 @@ impl Shard {
             number(name)?.ok_or_else(|| anyhow!("--shard auto: {why}, but {name} is not set"))
         };
         if let Some(id) = number("SLURM_ARRAY_TASK_ID")? {
+            if let Some(count) = number("FDI_SHARD_COUNT")? {
+                return Self::new(id, count).context(
+                    "--shard auto (a Slurm array job: SLURM_ARRAY_TASK_ID of FDI_SHARD_COUNT)",
+                );
+            }
             let why = "SLURM_ARRAY_TASK_ID is set (a Slurm array job)";
             let count = need("SLURM_ARRAY_TASK_COUNT", why)?;
             let min = need("SLURM_ARRAY_TASK_MIN", why)?;
@@ -102,7 +112,8 @@ impl Shard {
                 "FDI_SHARD_COUNT",
                 "JOB_COMPLETION_INDEX is set (a Kubernetes Indexed Job; its manifest sets FDI_SHARD_COUNT to the job's completions)",
             )?;
-            return Self::new(index + 1, count).context("--shard auto (a Kubernetes Indexed Job)");
+            return Self::new(index.saturating_add(1), count)
+                .context("--shard auto (a Kubernetes Indexed Job)");
         }
         bail!(
             "--shard auto: neither SLURM_ARRAY_TASK_ID (a Slurm array job) nor JOB_COMPLETION_INDEX (a Kubernetes Indexed Job) is set: give the shard as --shard K/N"
@@ -175,16 +186,17 @@ pub(super) fn owners(plan: &Plan, count: usize) -> Vec<usize> {
 fn deal(units: &[(u128, &str)], count: usize) -> Vec<usize> {
     let mut order: Vec<usize> = (0..units.len()).collect();
     order.sort_by(|&a, &b| units[b].0.cmp(&units[a].0).then(units[a].1.cmp(units[b].1)));
-    let mut load = vec![0u128; count.max(1)];
+    // The least loaded shard first, the lowest index among equals.
+    let mut load: std::collections::BinaryHeap<std::cmp::Reverse<(u128, usize)>> = (0..count
+        .max(1))
+        .map(|i| std::cmp::Reverse((0, i)))
+        .collect();
     let mut owner = vec![0usize; units.len()];
     for u in order {
-        let (shard, _) = load
-            .iter()
-            .enumerate()
-            .min_by_key(|&(i, l)| (*l, i))
-            .unwrap_or((0, &0));
-        load[shard] += units[u].0.max(1);
-        owner[u] = shard + 1;
+        if let Some(std::cmp::Reverse((l, shard))) = load.pop() {
+            load.push(std::cmp::Reverse((l + units[u].0.max(1), shard)));
+            owner[u] = shard + 1;
+        }
     }
     owner
 }
@@ -242,8 +254,11 @@ pub struct Failure {
 pub struct Record {
     pub campaign: String,
     pub campaign_hash: String,
+    /// The engine of its runs and the launcher's version: both are in every run's key.
+    pub engine: String,
+    pub launcher: String,
     pub shard: Shard,
-    /// The runs the shard owns.
+    /// The runs the shard owns (runs of one key are one).
     pub runs: usize,
     pub jobs: usize,
     pub host: String,
@@ -279,8 +294,9 @@ impl Record {
     }
 }
 
-/// Every shard record in `out/shards` (files named `K-of-N.json`), in shard order; a record
-/// that cannot be read is an error naming it.
+/// Every shard record in `out/shards` (files named `K-of-N.json`), in shard order. A record
+/// that cannot be read is left out with a warning naming it and why (its shard writes it anew
+/// when it runs).
 pub fn records(out: &Path) -> Result<Vec<Record>> {
     let dir = out.join(SHARDS);
     let entries = match std::fs::read_dir(&dir) {
@@ -299,18 +315,21 @@ pub fn records(out: &Path) -> Result<Vec<Record>> {
             continue;
         };
         let path = entry.path();
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("reading {}", path.display()))?;
-        let r: Record = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not a shard record", path.display()))?;
-        if r.shard != shard {
-            bail!(
-                "{}: holds the record of shard {}, not of {shard}",
+        let read = std::fs::read_to_string(&path)
+            .map_err(|e| e.to_string())
+            .and_then(|t| serde_json::from_str::<Record>(&t).map_err(|e| e.to_string()));
+        match read {
+            Ok(r) if r.shard == shard => out.push(r),
+            Ok(r) => eprintln!(
+                "fdi-launch: warning: {} holds the record of shard {}, not of {shard}: left out",
                 path.display(),
                 r.shard
-            );
+            ),
+            Err(e) => eprintln!(
+                "fdi-launch: warning: {} is not a shard record that can be read ({e}): left out (its shard writes it anew)",
+                path.display()
+            ),
         }
-        out.push(r);
     }
     out.sort_by_key(|r| (r.shard.count, r.shard.index));
     Ok(out)
@@ -322,26 +341,53 @@ fn parse_stem(stem: &str) -> Option<Shard> {
     Shard::new(k.parse().ok()?, n.parse().ok()?).ok()
 }
 
-/// Refuses a shard of a campaign other than the one the records in `out` were written for
-/// (its hash differs) or a number of shards other than theirs.
-pub fn check_records(
-    records: &[Record],
-    hash: &str,
-    count: Option<usize>,
-    out: &Path,
-) -> Result<()> {
+/// What the records of a folder must say to be of this campaign.
+pub struct Expected<'a> {
+    pub hash: &'a str,
+    pub engine: &'a str,
+    /// The number of shards, where it is known.
+    pub count: Option<usize>,
+}
+
+/// This launcher's version (`fdi-launch 0.1.0`), which is in every run's key.
+pub fn launcher_version() -> String {
+    format!("fdi-launch {}", env!("CARGO_PKG_VERSION"))
+}
+
+/// Refuses the records of a campaign other than this one: another engine, another launcher
+/// version, another campaign (its hash differs), or a number of shards other than theirs.
+pub fn check_records(records: &[Record], expected: &Expected, out: &Path) -> Result<()> {
+    let short = |h: &str| h.chars().take(12).collect::<String>();
     for r in records {
         let path = Record::path(out, r.shard);
-        if r.campaign_hash != hash {
+        if r.engine != expected.engine {
+            bail!(
+                "{} is the record of shard {}, whose runs are of --engine {}: give --engine {} (the engine is part of every run's key)",
+                path.display(),
+                r.shard,
+                r.engine,
+                r.engine
+            );
+        }
+        if r.launcher != launcher_version() {
+            bail!(
+                "{} is the record of shard {}, run by {}; this is {}: every run's key holds the launcher's version, so the shards of a folder must all be run by one version",
+                path.display(),
+                r.shard,
+                r.launcher,
+                launcher_version()
+            );
+        }
+        if r.campaign_hash != expected.hash {
             bail!(
                 "{} was written by shard {} for another version of the campaign (hash {}…, this campaign's is {}…): its runs are not this campaign's. Run the campaign it was made with, or another --out (the results stored under points/ are kept by their keys: a new folder can take them)",
                 path.display(),
                 r.shard,
-                &r.campaign_hash[..r.campaign_hash.len().min(12)],
-                &hash[..12]
+                short(&r.campaign_hash),
+                short(expected.hash)
             );
         }
-        if let Some(n) = count.filter(|&n| n != r.shard.count) {
+        if let Some(n) = expected.count.filter(|&n| n != r.shard.count) {
             bail!(
                 "{} is the record of shard {}: this folder's campaign is cut in {} shards, not {n}. Every shard of a folder uses one N (to cut it anew, remove {})",
                 path.display(),
@@ -359,16 +405,22 @@ pub fn count_of(records: &[Record], out: &Path) -> Result<Option<usize>> {
     let Some(first) = records.first() else {
         return Ok(None);
     };
-    check_records(records, &first.campaign_hash, Some(first.shard.count), out)?;
+    let expected = Expected {
+        hash: &first.campaign_hash,
+        engine: &first.engine,
+        count: Some(first.shard.count),
+    };
+    check_records(records, &expected, out)?;
     Ok(Some(first.shard.count))
 }
 
-/// This machine: its host name and boot id, which with a pid and the process's start time
-/// name one process.
+/// A process: its machine (host name, boot id), its pid namespace, pid and start time.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
 pub struct Holder {
     pub host: String,
     pub boot_id: String,
+    /// `/proc/self/ns/pid`: containers on one machine may share its host name and boot id.
+    pub pid_ns: String,
     pub pid: u32,
     /// The process's start time (`/proc/PID/stat` field 22): a pid used again is not it.
     pub start: String,
@@ -400,116 +452,182 @@ impl Holder {
         Self {
             host: host_name(),
             boot_id: read_trimmed("/proc/sys/kernel/random/boot_id").unwrap_or_default(),
+            pid_ns: std::fs::read_link("/proc/self/ns/pid")
+                .map(|p| p.display().to_string())
+                .unwrap_or_default(),
             pid,
             start: start_of(pid).unwrap_or_default(),
             token: format!("{pid}-{}", unix_now()),
         }
     }
 
-    /// Whether this holder is a process of this machine that is gone.
+    /// Whether this holder is a process that this one can see, and it has ended (it is not
+    /// there, another process has its pid, or it is a zombie). A holder whose machine or pid
+    /// namespace is not this one's, or not known, is never judged gone from here.
     fn gone_from_here(&self, me: &Self) -> bool {
-        let dead = || {
-            // A zombie has ended: only its parent has not read its status yet.
-            fdi_runtime::process::procfs::state(self.pid).is_ok_and(|s| matches!(s, 'Z' | 'X'))
-        };
-        self.host == me.host
-            && self.boot_id == me.boot_id
-            && (start_of(self.pid).as_deref() != Some(self.start.as_str()) || dead())
+        let known = |a: &str, b: &str| !a.is_empty() && a != "unknown" && a == b;
+        if !(known(&self.host, &me.host)
+            && known(&self.boot_id, &me.boot_id)
+            && known(&self.pid_ns, &me.pid_ns)
+            && !self.start.is_empty())
+        {
+            return false;
+        }
+        let zombie =
+            fdi_runtime::process::procfs::state(self.pid).is_ok_and(|s| matches!(s, 'Z' | 'X'));
+        start_of(self.pid).as_deref() != Some(self.start.as_str()) || zombie
     }
 }
 
 /// The lease of a running shard (`shards/K-of-N.lease`): made by an exclusive create, renewed
-/// every [`RENEW_EVERY`] by a thread, removed when dropped.
+/// every [`RENEW_EVERY`] through the file it created, removed when dropped. A lease found
+/// taken over or removed is lost: [`Lease::lost`] says so, and the shard starts no more runs.
 pub struct Lease {
     path: PathBuf,
     token: String,
+    lost: Arc<AtomicBool>,
     stop: Option<mpsc::Sender<()>>,
     renewer: Option<std::thread::JoinHandle<()>>,
 }
 
+/// Why a lease could not be taken at once.
+enum Held {
+    /// By a live process: who, and how long ago it was renewed.
+    Live(String, Duration),
+}
+
 impl Lease {
-    /// Takes the lease of `shard` in `out`. A lease held by a live copy of the shard is a
-    /// refusal naming its holder; one whose holder is gone (a process of this machine that
-    /// ended, or a lease not renewed for [`STALE_AFTER`]) is taken over, saying so.
-    pub fn take(out: &Path, shard: Shard) -> Result<Self> {
+    /// Takes the lease of `shard` in `out`. A lease whose holder is gone (a process this one
+    /// can see that ended, or a lease not renewed for [`STALE_AFTER`] by the file server's
+    /// clock) is taken over, saying so. One held by a live copy of the shard is a refusal
+    /// naming its holder; with `wait` (under a scheduler, where a retried task may start
+    /// before its failed predecessor's lease is stale) it is waited for until it is stale,
+    /// at most [`STALE_AFTER`] and a renewal, then refused.
+    pub fn take(out: &Path, shard: Shard, wait: bool) -> Result<Self> {
         let dir = out.join(SHARDS);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
         let path = dir.join(format!("{}.lease", shard.stem()));
         let me = Holder::me();
-        for _ in 0..2 {
-            match create_new(&path, &me) {
-                Ok(()) => return Ok(Self::renewed(path, me.token)),
+        let deadline = std::time::Instant::now() + STALE_AFTER + RENEW_EVERY;
+        let mut said = false;
+        loop {
+            match Self::try_take(&path, &dir, shard, &me)? {
+                Ok(lease) => return Ok(lease),
+                Err(Held::Live(who, age)) => {
+                    let refusal = format!(
+                        "shard {shard} is being run by {who} (its lease {} was renewed {:.0} s ago): a second copy of a shard is refused. If that process is gone, its lease goes stale {} s after its last renewal, or remove the file",
+                        path.display(),
+                        age.as_secs_f64(),
+                        STALE_AFTER.as_secs()
+                    );
+                    if !wait || std::time::Instant::now() >= deadline {
+                        bail!(refusal);
+                    }
+                    if !said {
+                        eprintln!(
+                            "fdi-launch: {refusal}; waiting for it to go stale (--shard auto)"
+                        );
+                        said = true;
+                    }
+                    std::thread::sleep(Duration::from_secs(5));
+                }
+            }
+        }
+    }
+
+    /// One attempt at the lease: taken, taken over from a holder that is gone, or held.
+    fn try_take(
+        path: &Path,
+        dir: &Path,
+        shard: Shard,
+        me: &Holder,
+    ) -> Result<std::result::Result<Self, Held>> {
+        for _ in 0..3 {
+            match create_new(path, me) {
+                Ok(file) => {
+                    return Ok(Ok(Self::renewed(
+                        path.to_path_buf(),
+                        me.token.clone(),
+                        file,
+                    )?))
+                }
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
                 Err(e) => return Err(anyhow!("creating {}: {e}", path.display())),
             }
-            let held = std::fs::read_to_string(&path)
-                .ok()
-                .and_then(|t| serde_json::from_str::<Holder>(&t).ok());
-            let age = match lease_age(&path, &dir) {
+            let Ok(text) = std::fs::read_to_string(path) else {
+                continue; // released since: try again
+            };
+            let held = serde_json::from_str::<Holder>(&text).ok();
+            let age = match lease_age(path, dir) {
                 Ok(age) => age,
-                // Released since: take it.
                 Err(_) if !path.exists() => continue,
                 Err(e) => return Err(e),
             };
             let why = match &held {
-                Some(h) if h.gone_from_here(&me) => {
+                Some(h) if h.gone_from_here(me) => {
                     format!("its holder (pid {} on this host) is gone", h.pid)
                 }
                 _ if age >= STALE_AFTER => {
                     format!("it was not renewed for {:.0} s", age.as_secs_f64())
                 }
-                Some(h) => bail!(
-                    "shard {shard} is being run by pid {} on {} (its lease {} was renewed {:.0} s ago): a second copy of a shard is refused. If that process is gone, its lease goes stale {} s after its last renewal, or remove the file",
-                    h.pid,
-                    h.host,
-                    path.display(),
-                    age.as_secs_f64(),
-                    STALE_AFTER.as_secs()
-                ),
-                None => bail!(
-                    "shard {shard} has a lease {} that is being written or is not a lease ({:.0} s old): a second copy of a shard is refused; it goes stale after {} s, or remove the file",
-                    path.display(),
-                    age.as_secs_f64(),
-                    STALE_AFTER.as_secs()
-                ),
+                Some(h) => return Ok(Err(Held::Live(format!("pid {} on {}", h.pid, h.host), age))),
+                None => {
+                    return Ok(Err(Held::Live(
+                        "a process whose lease is being written or is not a lease".into(),
+                        age,
+                    )))
+                }
             };
+            // Only the lease judged: another copy may have taken it over meanwhile.
+            if std::fs::read_to_string(path).ok().as_deref() != Some(text.as_str()) {
+                continue;
+            }
             eprintln!(
                 "fdi-launch: shard {shard}: taking over the lease {}: {why}",
                 path.display()
             );
-            match std::fs::remove_file(&path) {
+            match std::fs::remove_file(path) {
                 Ok(()) => {}
                 Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
                 Err(e) => return Err(anyhow!("removing {}: {e}", path.display())),
             }
         }
         bail!(
-            "shard {shard}: another process took the lease {} at the same moment",
+            "shard {shard}: the lease {} changed hands three times while it was taken: another copy of the shard is starting",
             path.display()
         )
     }
 
-    /// The lease just made, with its renewing thread started.
-    fn renewed(path: PathBuf, token: String) -> Self {
+    /// The lease just made (`file`), with its renewing thread started.
+    fn renewed(path: PathBuf, token: String, file: std::fs::File) -> Result<Self> {
         let (tx, rx) = mpsc::channel::<()>();
-        let (p, t) = (path.clone(), token.clone());
+        let lost = Arc::new(AtomicBool::new(false));
+        let (p, l) = (path.clone(), lost.clone());
         let renewer = std::thread::Builder::new()
             .name("lease".into())
             .spawn(move || {
                 // Woken by the drop (or its sender going away), else every RENEW_EVERY.
                 while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(RENEW_EVERY) {
-                    if let Err(e) = renew(&p, &t) {
-                        eprintln!("fdi-launch: warning: {e}");
+                    if let Err(e) = renew(&p, &file) {
+                        eprintln!("fdi-launch: {e}; this shard starts no more runs");
+                        l.store(true, Ordering::SeqCst);
+                        break;
                     }
                 }
             })
-            .ok();
-        Self {
+            .context("starting the thread that renews the shard's lease")?;
+        Ok(Self {
             path,
             token,
+            lost,
             stop: Some(tx),
-            renewer,
-        }
+            renewer: Some(renewer),
+        })
+    }
+
+    /// Whether the lease was found taken over or removed.
+    pub fn lost(&self) -> Arc<AtomicBool> {
+        self.lost.clone()
     }
 }
 
@@ -533,6 +651,49 @@ fn holds(path: &Path, token: &str) -> bool {
         .is_some_and(|h| h.token == token)
 }
 
+/// Creates `path` only if it does not exist, holding `who`, written and flushed; a file
+/// created but not written is removed.
+fn create_new(path: &Path, who: &Holder) -> std::io::Result<std::fs::File> {
+    let mut f = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create_new(true)
+        .open(path)?;
+    let text = serde_json::to_string(who).map_err(std::io::Error::other)?;
+    match f.write_all(text.as_bytes()).and_then(|()| f.sync_all()) {
+        Ok(()) => Ok(f),
+        Err(e) => {
+            let _ = std::fs::remove_file(path);
+            Err(e)
+        }
+    }
+}
+
+/// Renews the lease through `file`, the one this shard created, if `path` is still that file
+/// (same device and inode): rewrites its first byte in place (its modification time is the
+/// renewal) and flushes it.
+fn renew(path: &Path, file: &std::fs::File) -> Result<()> {
+    use std::os::unix::fs::{FileExt, MetadataExt};
+    let lost = || {
+        anyhow!(
+            "the lease {} is no longer this shard's (taken over, or removed)",
+            path.display()
+        )
+    };
+    let ours = file
+        .metadata()
+        .with_context(|| format!("renewing {}", path.display()))?;
+    let there = std::fs::metadata(path).map_err(|_| lost())?;
+    if (ours.dev(), ours.ino()) != (there.dev(), there.ino()) {
+        return Err(lost());
+    }
+    let mut first = [0u8; 1];
+    file.read_exact_at(&mut first, 0)
+        .and_then(|()| file.write_all_at(&first, 0))
+        .and_then(|()| file.sync_all())
+        .with_context(|| format!("renewing {}", path.display()))
+}
+
 /// Whether a shard's process is alive, by its lease.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Liveness {
@@ -542,50 +703,26 @@ pub enum Liveness {
     Gone,
     /// It has no lease.
     Absent,
+    /// Its lease's age cannot be measured here (the folder cannot be written).
+    Unknown,
 }
 
 /// Whether shard `shard` of the campaign in `out` runs now.
-pub fn liveness(out: &Path, shard: Shard) -> Result<Liveness> {
+pub fn liveness(out: &Path, shard: Shard) -> Liveness {
     let dir = out.join(SHARDS);
     let path = dir.join(format!("{}.lease", shard.stem()));
     let Ok(text) = std::fs::read_to_string(&path) else {
-        return Ok(Liveness::Absent);
+        return Liveness::Absent;
     };
     if serde_json::from_str::<Holder>(&text).is_ok_and(|h| h.gone_from_here(&Holder::me())) {
-        return Ok(Liveness::Gone);
+        return Liveness::Gone;
     }
-    Ok(if lease_age(&path, &dir)? >= STALE_AFTER {
-        Liveness::Gone
-    } else {
-        Liveness::Live
-    })
-}
-
-/// Creates `path` only if it does not exist, holding `who`.
-fn create_new(path: &Path, who: &Holder) -> std::io::Result<()> {
-    let mut f = std::fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(path)?;
-    let text = serde_json::to_string(who).map_err(std::io::Error::other)?;
-    f.write_all(text.as_bytes())?;
-    f.sync_all()
-}
-
-/// Rewrites the lease in place (its modification time is the renewal), if it is still ours.
-fn renew(path: &Path, token: &str) -> Result<()> {
-    if !holds(path, token) {
-        bail!(
-            "the lease {} is no longer this shard's (taken over, or removed): another copy may run the same runs (their results are the same, written whole)",
-            path.display()
-        );
+    match lease_age(&path, &dir) {
+        Ok(age) if age >= STALE_AFTER => Liveness::Gone,
+        Ok(_) => Liveness::Live,
+        Err(_) if !path.exists() => Liveness::Absent,
+        Err(_) => Liveness::Unknown,
     }
-    let text = std::fs::read(path).with_context(|| format!("renewing {}", path.display()))?;
-    std::fs::OpenOptions::new()
-        .write(true)
-        .open(path)
-        .and_then(|mut f| f.write_all(&text))
-        .with_context(|| format!("renewing {}", path.display()))
 }
 
 /// How long ago `path` was last written, by the clock of the file system holding `dir`: the
@@ -653,6 +790,18 @@ mod tests {
             Shard::from_env(&env(&slurm)).expect("slurm"),
             Shard { index: 2, count: 3 }
         );
+        // A task sent again alone (`--array=2`) with N from FDI_SHARD_COUNT.
+        let again = [
+            ("SLURM_ARRAY_TASK_ID", "2"),
+            ("SLURM_ARRAY_TASK_MIN", "2"),
+            ("SLURM_ARRAY_TASK_MAX", "2"),
+            ("SLURM_ARRAY_TASK_COUNT", "1"),
+            ("FDI_SHARD_COUNT", "3"),
+        ];
+        assert_eq!(
+            Shard::from_env(&env(&again)).expect("slurm, one task again"),
+            Shard { index: 2, count: 3 }
+        );
         let k8s = [("JOB_COMPLETION_INDEX", "0"), ("FDI_SHARD_COUNT", "4")];
         assert_eq!(
             Shard::from_env(&env(&k8s)).expect("k8s"),
@@ -717,10 +866,10 @@ mod tests {
     fn a_lease_is_refused_to_a_second_copy_and_taken_over_from_a_gone_holder() {
         let dir = tempfile::tempdir().expect("dir");
         let shard = Shard { index: 1, count: 2 };
-        let lease = Lease::take(dir.path(), shard).expect("first");
+        let lease = Lease::take(dir.path(), shard, false).expect("first");
         let e = format!(
             "{:#}",
-            Lease::take(dir.path(), shard).err().expect("second")
+            Lease::take(dir.path(), shard, false).err().expect("second")
         );
         assert!(e.contains("a second copy of a shard is refused"), "{e}");
         drop(lease);
@@ -729,8 +878,8 @@ mod tests {
         let mut gone = Holder::me();
         gone.start = "0".into();
         gone.pid = 1;
-        create_new(&dir.path().join("shards/1-of-2.lease"), &gone).expect("stale lease");
-        let taken = Lease::take(dir.path(), shard).expect("taken over");
+        drop(create_new(&dir.path().join("shards/1-of-2.lease"), &gone).expect("stale lease"));
+        let taken = Lease::take(dir.path(), shard, false).expect("taken over");
         assert!(holds(&taken.path, &taken.token));
     }
 }

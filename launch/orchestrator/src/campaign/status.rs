@@ -13,6 +13,7 @@ use super::plan::Plan;
 use super::shard::{self, Record, Shard, State};
 use super::store::load_stored;
 use super::tables::sig;
+use crate::run::Engine;
 
 /// At most this many runs are named per shard; the others are counted.
 const NAMED: usize = 8;
@@ -33,6 +34,9 @@ impl Progress {
         match (&self.record, &self.live) {
             (None, _) => "not started".into(),
             (Some(r), shard::Liveness::Live) if r.state == State::Running => "running".into(),
+            (Some(r), shard::Liveness::Unknown) if r.state == State::Running => {
+                "running? (its lease's age cannot be measured from here)".into()
+            }
             (Some(r), _) if r.state == State::Running => {
                 "stopped (its process is gone before its end)".into()
             }
@@ -48,17 +52,30 @@ impl Progress {
 }
 
 /// Prints the campaign's progress in `out`, shard by shard.
-pub(super) fn print(plan: &Plan, out: &Path) -> Result<ExitCode> {
+pub(super) fn print(plan: &Plan, out: &Path, engine: Engine) -> Result<ExitCode> {
     let records = shard::records(out)?;
-    shard::check_records(&records, &shard::campaign_hash(plan), None, out)?;
+    let hash = shard::campaign_hash(plan);
+    let expected = shard::Expected {
+        hash: &hash,
+        engine: engine.as_str(),
+        count: None,
+    };
+    shard::check_records(&records, &expected, out)?;
     let results: Vec<Option<RunSummary>> =
         plan.jobs.iter().map(|j| load_stored(out, &j.key)).collect();
-    let done = results.iter().filter(|r| r.is_some()).count();
+    // Runs of one key are one run.
+    let mut keys = std::collections::BTreeSet::new();
+    let (mut total, mut done) = (0, 0);
+    for (j, r) in plan.jobs.iter().zip(&results) {
+        if keys.insert(j.key.as_str()) {
+            total += 1;
+            done += usize::from(r.is_some());
+        }
+    }
     let Some(count) = shard::count_of(&records, out)? else {
         println!(
-            "campaign {}: {done} of {} runs done in {}; no shard has started there (no {}/K-of-N.json)",
+            "campaign {}: {done} of {total} runs done in {}; no shard has started there (no {}/K-of-N.json)",
             plan.name,
-            plan.jobs.len(),
             out.display(),
             shard::SHARDS
         );
@@ -73,9 +90,8 @@ pub(super) fn print(plan: &Plan, out: &Path) -> Result<ExitCode> {
         .map(|r| r.failures.len())
         .sum();
     println!(
-        "campaign {}: {done} of {} runs done, {failed} failed, in {count} shards ({})",
+        "campaign {}: {done} of {total} runs done, {failed} failed, in {count} shards ({})",
         plan.name,
-        plan.jobs.len(),
         out.display()
     );
     println!("{}", table(&shards, mean));
@@ -105,7 +121,7 @@ fn progress(
                 runs: 0,
                 done: 0,
                 record: None,
-                live: shard::liveness(out, shard)?,
+                live: shard::liveness(out, shard),
             })
         })
         .collect::<Result<_>>()?;
@@ -165,11 +181,11 @@ fn table(shards: &[Progress], mean: Option<f64>) -> String {
     s.trim_end().to_string()
 }
 
-/// The seconds a shard still needs: its runs not done × the mean time of a finished run ÷
-/// its runs at a time.
+/// The seconds a shard still needs: its runs not done, in rounds of its runs at a time, × the
+/// mean time of a finished run (of the whole campaign: runs of unequal cost make it rough).
 fn left_s(p: &Progress, mean: Option<f64>) -> Option<f64> {
     let jobs = p.record.as_ref().map_or(1, |r| r.jobs.max(1));
-    Some((p.runs - p.done) as f64 * mean? / jobs as f64)
+    Some((p.runs - p.done).div_ceil(jobs) as f64 * mean?)
 }
 
 /// The line of the time left: the slowest running shard's, and what the shards not running
@@ -218,6 +234,7 @@ pub(super) fn missing(
     results: &[Option<RunSummary>],
     count: Option<usize>,
     records: &[Record],
+    out: &Path,
 ) -> String {
     let owners = count.map(|n| shard::owners(plan, n));
     let mut groups: std::collections::BTreeMap<usize, Vec<&str>> = Default::default();
@@ -231,13 +248,20 @@ pub(super) fn missing(
     for (owner, runs) in groups {
         let who = match count {
             Some(n) => {
-                let state = records
-                    .iter()
-                    .find(|r| r.shard.index == owner)
-                    .map_or("not started".to_string(), |r| {
-                        format!("{} on {}", r.state.name(), r.host)
-                    });
-                format!("shard {owner}/{n} ({state})")
+                let record = records.iter().find(|r| r.shard.index == owner);
+                let state = match Shard::new(owner, n) {
+                    Ok(shard) => Progress {
+                        shard,
+                        runs: 0,
+                        done: 0,
+                        record: record.cloned(),
+                        live: shard::liveness(out, shard),
+                    }
+                    .state(),
+                    Err(_) => "?".into(),
+                };
+                let host = record.map_or(String::new(), |r| format!(" on {}", r.host));
+                format!("shard {owner}/{n} ({state}{host})")
             }
             None => "no shard record in the folder: the campaign's unsharded run".into(),
         };

@@ -30,7 +30,7 @@ pub(super) fn load_stored(out: &Path, key: &str) -> Option<RunSummary> {
         Ok(_) => None,
         Err(e) => {
             eprintln!(
-                "fdi-launch: warning: {} cannot be read ({e}); its run is done again",
+                "fdi-launch: warning: {} is not a result that can be read ({e}): its run counts as not done",
                 p.display()
             );
             None
@@ -44,7 +44,9 @@ pub(super) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut tmp = tempfile::NamedTempFile::new_in(dir)
         .with_context(|| format!("a temporary file in {}", dir.display()))?;
+    // Flushed before the rename: on a shared file system another machine may open it next.
     tmp.write_all(bytes)
+        .and_then(|()| tmp.as_file().sync_all())
         .with_context(|| format!("writing {}", path.display()))?;
     tmp.persist(path)
         .map_err(|e| anyhow::anyhow!("writing {}: {}", path.display(), e.error))?;
