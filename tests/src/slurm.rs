@@ -175,8 +175,8 @@ impl Cluster {
         format!("--- {name}:\n{out}{log}")
     }
 
-    /// `JobState` and `ExitCode` of job `id` once it has ended (`scontrol show job`), or
-    /// `None` after `limit`.
+    /// `JobState` and `ExitCode` of job `id` once it is in a state a job ends in (`scontrol
+    /// show job`), or `None` after `limit`.
     pub fn wait_for_end(&self, id: &str, limit: Duration) -> Option<(String, String)> {
         let mut ended = None;
         wait_until(limit, || {
@@ -190,8 +190,20 @@ impl Cluster {
                     .map(str::to_string)
             };
             match (field("JobState="), field("ExitCode=")) {
+                // The states a job ends in (COMPLETING is on its way to COMPLETED).
                 (Some(state), Some(code))
-                    if !matches!(state.as_str(), "PENDING" | "RUNNING" | "CONFIGURING") =>
+                    if matches!(
+                        state.as_str(),
+                        "COMPLETED"
+                            | "FAILED"
+                            | "CANCELLED"
+                            | "TIMEOUT"
+                            | "NODE_FAIL"
+                            | "OUT_OF_MEMORY"
+                            | "BOOT_FAIL"
+                            | "DEADLINE"
+                            | "PREEMPTED"
+                    ) =>
                 {
                     ended = Some((state, code));
                     true
