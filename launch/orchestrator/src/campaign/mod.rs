@@ -802,7 +802,7 @@ pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
     }
     prepare_out(&out)?;
     copy_campaign(args, &out)?;
-    let all = unique_jobs(&plan, |_| true);
+    let all = plan.unique_jobs(|_| true);
     println!(
         "campaign {}: {} runs ({} points × {} seeds), engine {}, {}",
         plan.name,
@@ -857,13 +857,13 @@ fn run_shard(
     let auto = matches!(args.shard, Some(shard::ShardArg::Auto));
     let lease = shard::Lease::take(out, shard, auto)?;
     let owners = shard::owners(plan, shard.count);
-    let owned = unique_jobs(plan, |i| owners[i] == shard.index);
+    let owned = plan.unique_jobs(|i| owners[i] == shard.index);
     let jobs = args.jobs.unwrap_or_else(runner::default_jobs).get();
     println!(
         "campaign {}, shard {shard}: {} of the campaign's {} runs, engine {}, {}",
         plan.name,
         owned.len(),
-        unique_jobs(plan, |_| true).len(),
+        plan.unique_jobs(|_| true).len(),
         args.engine.as_str(),
         plural(jobs, "job")
     );
@@ -894,15 +894,6 @@ fn run_shard(
         out.display()
     );
     campaign_end(tally.signal, &tally.failed)
-}
-
-/// The jobs (indices into the plan's) that `keep` keeps, the first of each key only: runs of
-/// one key are one run, stored once.
-fn unique_jobs(plan: &Plan, keep: impl Fn(usize) -> bool) -> Vec<usize> {
-    let mut keys = BTreeSet::new();
-    (0..plan.jobs.len())
-        .filter(|&i| keys.insert(plan.jobs[i].key.as_str()) && keep(i))
-        .collect()
 }
 
 /// `fdi-launch sweep CAMPAIGN --aggregate`: the tables and figures from the results in the

@@ -24,6 +24,17 @@ pub(super) struct Axis {
     pub(super) factors: bool,
 }
 
+impl Plan {
+    /// The jobs (indices into `jobs`) that `keep` keeps, the first of each key only: runs of
+    /// one key are one run, stored once.
+    pub(super) fn unique_jobs(&self, keep: impl Fn(usize) -> bool) -> Vec<usize> {
+        let mut keys = std::collections::BTreeSet::new();
+        (0..self.jobs.len())
+            .filter(|&i| keys.insert(self.jobs[i].key.as_str()) && keep(i))
+            .collect()
+    }
+}
+
 impl Axis {
     pub(super) fn is_seed(&self) -> bool {
         self.paths.len() == 1 && self.paths[0].text == "seed"

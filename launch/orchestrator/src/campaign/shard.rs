@@ -506,7 +506,7 @@ impl Lease {
     pub fn take(out: &Path, shard: Shard, wait: bool) -> Result<Self> {
         let dir = out.join(SHARDS);
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        let path = dir.join(format!("{}.lease", shard.stem()));
+        let path = lease_path(out, shard);
         let me = Holder::me();
         let deadline = std::time::Instant::now() + STALE_AFTER + RENEW_EVERY;
         let mut said = false;
@@ -707,10 +707,15 @@ pub enum Liveness {
     Unknown,
 }
 
+/// `out/shards/K-of-N.lease`: the lease of shard K of N.
+fn lease_path(out: &Path, shard: Shard) -> PathBuf {
+    out.join(SHARDS).join(format!("{}.lease", shard.stem()))
+}
+
 /// Whether shard `shard` of the campaign in `out` runs now.
 pub fn liveness(out: &Path, shard: Shard) -> Liveness {
     let dir = out.join(SHARDS);
-    let path = dir.join(format!("{}.lease", shard.stem()));
+    let path = lease_path(out, shard);
     let Ok(text) = std::fs::read_to_string(&path) else {
         return Liveness::Absent;
     };

@@ -64,14 +64,9 @@ pub(super) fn print(plan: &Plan, out: &Path, engine: Engine) -> Result<ExitCode>
     let results: Vec<Option<RunSummary>> =
         plan.jobs.iter().map(|j| load_stored(out, &j.key)).collect();
     // Runs of one key are one run.
-    let mut keys = std::collections::BTreeSet::new();
-    let (mut total, mut done) = (0, 0);
-    for (j, r) in plan.jobs.iter().zip(&results) {
-        if keys.insert(j.key.as_str()) {
-            total += 1;
-            done += usize::from(r.is_some());
-        }
-    }
+    let unique = plan.unique_jobs(|_| true);
+    let total = unique.len();
+    let done = unique.iter().filter(|&&i| results[i].is_some()).count();
     let Some(count) = shard::count_of(&records, out)? else {
         println!(
             "campaign {}: {done} of {total} runs done in {}; no shard has started there (no {}/K-of-N.json)",
@@ -125,13 +120,10 @@ fn progress(
             })
         })
         .collect::<Result<_>>()?;
-    let mut seen = std::collections::BTreeSet::new();
-    for ((job, owner), result) in plan.jobs.iter().zip(&owners).zip(results) {
-        if seen.insert(job.key.as_str()) {
-            let p = &mut shards[owner - 1];
-            p.runs += 1;
-            p.done += usize::from(result.is_some());
-        }
+    for i in plan.unique_jobs(|_| true) {
+        let p = &mut shards[owners[i] - 1];
+        p.runs += 1;
+        p.done += usize::from(results[i].is_some());
     }
     for r in records {
         let i = r.shard.index - 1;
