@@ -173,6 +173,7 @@ pub fn run<X: Transport, const N: usize>(
     ports: &Ports<X>,
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
+    pace: Option<f64>,
 ) -> Result<Outcome, AgentError> {
     let s = &resolved.scenario;
     let agent = s
@@ -198,7 +199,10 @@ pub fn run<X: Transport, const N: usize>(
         clock: s.clock,
     };
     let stopped_at = match s.clock {
-        ClockMode::Lockstep => lockstep(&mut plant, ports, shutdown, trace, &mut inflow, dt)?,
+        ClockMode::Lockstep => {
+            let pace = pace.map(|factor| Pace { epoch_ns, factor });
+            lockstep(&mut plant, ports, shutdown, trace, &mut inflow, pace)?
+        }
         ClockMode::Realtime => realtime(
             &mut plant,
             ports,
@@ -234,6 +238,34 @@ pub fn run<X: Transport, const N: usize>(
     })
 }
 
+/// A lockstep run slowed for watching (`run --pace`): tick k is measured no sooner than
+/// `t_k / factor` s after the start.
+#[derive(Debug, Clone, Copy)]
+struct Pace {
+    epoch_ns: u64,
+    factor: f64,
+}
+
+impl Pace {
+    /// Sleeps until tick `t` s is due, waking every [`WAIT_SLICE`] to look for a stop. Whether
+    /// the run was stopped meanwhile.
+    fn wait<X: Transport>(
+        self,
+        t: f64,
+        ports: &Ports<X>,
+        shutdown: &Shutdown,
+    ) -> Result<bool, AgentError> {
+        let due = self.epoch_ns + (t / self.factor * 1e9) as u64;
+        while let Some(left) = due.checked_sub(monotonic_ns()).filter(|l| *l > 0) {
+            if shutdown.requested() || ports.launcher.stop_requested()? {
+                return Ok(true);
+            }
+            std::thread::sleep(Duration::from_nanos(left).min(WAIT_SLICE));
+        }
+        Ok(false)
+    }
+}
+
 /// The lockstep loop. Returns the tick it stopped at, when stopped before the end.
 fn lockstep<X: Transport, const N: usize>(
     plant: &mut Plant<N>,
@@ -241,9 +273,9 @@ fn lockstep<X: Transport, const N: usize>(
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
     inflow: &mut Inflow,
-    dt: f64,
+    pace: Option<Pace>,
 ) -> Result<Option<u64>, AgentError> {
-    let (ticks, agent_id) = (inflow.ticks, plant.agent_id());
+    let (ticks, agent_id, dt) = (inflow.ticks, plant.agent_id(), inflow.dt);
     let strategy = WaitStrategy::for_clock(ClockMode::Lockstep);
     // Lookahead (conservative parallel simulation): step k runs as soon as the next
     // command not yet received (stamp t_n) would not be in force at the step's latest
@@ -258,6 +290,16 @@ fn lockstep<X: Transport, const N: usize>(
         let p = match published.take() {
             Some(p) if p.k == k => p,
             _ => {
+                if let Some(pace) = pace {
+                    // What was measured is announced before the pause (it is measured again
+                    // just after: `unrung` is set again).
+                    if unrung {
+                        ports.attacker.ring()?;
+                    }
+                    if pace.wait(t, ports, shutdown)? {
+                        return Ok(Some(k));
+                    }
+                }
                 let state = (plant.q, plant.qd);
                 let measurement = publish(plant, ports, k, t, false)?;
                 unrung = true;
@@ -360,6 +402,7 @@ pub fn run_any<X: Transport>(
     ports: &Ports<X>,
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
+    pace: Option<f64>,
 ) -> Result<Outcome, AgentError> {
     struct Run<'a, X: Transport> {
         agent_id: u32,
@@ -367,6 +410,7 @@ pub fn run_any<X: Transport>(
         ports: &'a Ports<X>,
         shutdown: &'a Shutdown,
         trace: &'a mut TraceWriter,
+        pace: Option<f64>,
     }
     impl<X: Transport> ForLinks for Run<'_, X> {
         type Output = Result<Outcome, AgentError>;
@@ -377,6 +421,7 @@ pub fn run_any<X: Transport>(
                 self.ports,
                 self.shutdown,
                 self.trace,
+                self.pace,
             )
         }
     }
@@ -392,6 +437,7 @@ pub fn run_any<X: Transport>(
         ports,
         shutdown,
         trace,
+        pace,
     })
 }
 
@@ -411,7 +457,7 @@ fn open(args: &ProcessArgs) -> Result<Opened, AgentError> {
 /// Entry point of the `fdi-agent` binary (and of `fdi-launch`'s multi-call fallback).
 pub fn main_with(args: ProcessArgs) -> ExitCode {
     let result = open(&args).and_then(|(id, resolved, ports, mut trace, shutdown)| {
-        run_any(id, &resolved, &ports, &shutdown, &mut trace)
+        run_any(id, &resolved, &ports, &shutdown, &mut trace, args.pace)
     });
     match result {
         Ok(_) => ExitCode::SUCCESS,

@@ -178,6 +178,9 @@ pub struct RunSummary {
     /// A run split over hosts: how its network path was secured and what it refused.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub network: Option<NetworkPath>,
+    /// A run watched live (`--live`): what its server published and what it lost.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub live: Option<LiveStats>,
     /// Set when the run ended before its scenario's end (interrupted): every metric covers the
     /// `ticks` recorded, not the `planned_ticks`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -203,6 +206,27 @@ pub struct NetworkPath {
     /// Per host that refused any: how many and the first.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub refusals: Vec<String>,
+}
+
+/// What the live server of a run (`run --live`) did. Nothing it did changes the run: these
+/// count what viewers were shown.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct LiveStats {
+    /// The address it listened on (`ws://…`).
+    pub address: String,
+    /// Clients that connected during the run.
+    pub clients: u64,
+    /// Ticks whose messages were published (the stream is decimated: docs/traces.md).
+    pub ticks_published: u64,
+    /// Messages handed to the server for at least one subscribed client.
+    pub messages_published: u64,
+    /// Records of the run the server never saw: its queue was full (the run does not wait
+    /// for it). Any: the detectors' topics stopped at the first, their statistics need every
+    /// tick.
+    pub records_dropped: u64,
+    /// The first message that could not be made (none expected; said rather than hidden).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
 }
 
 /// What a run that ended early covers.
@@ -288,6 +312,7 @@ pub fn summarize(
         placement: None,
         hosts: Vec::new(),
         network: None,
+        live: None,
         partial: None,
         numerics: crate::numerics::differences_from_paper(s, crate::numerics::Compare::WithMode),
     }

@@ -52,6 +52,26 @@ pub fn launcher() -> PathBuf {
         .clone()
 }
 
+/// The Python interpreter with the iceoryx2 binding and the tests' packages (`cargo test-all`
+/// makes it: `FDI_PYTHON`), or `None` (after saying so) when the
+/// tests are to be skipped.
+pub fn python() -> Option<PathBuf> {
+    let found = std::env::var_os("FDI_PYTHON")
+        .map(PathBuf::from)
+        .or_else(|| Some(repo_path("target/py-venv/bin/python")).filter(|p| p.exists()));
+    if found.is_none() {
+        assert!(
+            std::env::var_os("FDI_REQUIRE_PYTHON").is_none(),
+            "FDI_REQUIRE_PYTHON is set but there is no Python: set FDI_PYTHON or run `cargo test-all`"
+        );
+        eprintln!(
+            "skipped: no Python with the iceoryx2 binding (FDI_PYTHON unset, no target/py-venv): \
+             `cargo test-all` sets one up"
+        );
+    }
+    found
+}
+
 /// A fresh scratch folder, removed on drop.
 #[derive(Debug)]
 pub struct Scratch(pub PathBuf);

@@ -346,7 +346,7 @@ fn spawn_roles(
         threads.push(spawn(Box::new(move |p, r, d, s| {
             let ports = fdi_agent::Ports::<Local>::open(p, id, r).expect("agent ports");
             let mut trace = writer(d, &format!("agent-{id}"), r);
-            fdi_agent::run_any(id, r, &ports, s, &mut trace)
+            fdi_agent::run_any(id, r, &ports, s, &mut trace, None)
                 .map(|_| ())
                 .map_err(|e| format!("agent {id}: {e}"))
         })));

@@ -19,28 +19,9 @@ use std::time::Duration;
 
 use fdi_common::records::Delivery;
 use fdi_common::trace::TraceRecord;
-use fdi_tests::{json, launch, repo_path, run_dir_of, trace_records, Scratch};
+use fdi_tests::{json, launch, python, repo_path, run_dir_of, trace_records, Scratch};
 
 const WATCHDOG: Duration = Duration::from_secs(300);
-
-/// The Python interpreter with the iceoryx2 binding, or `None` (after saying so) when the
-/// tests are to be skipped.
-fn python() -> Option<PathBuf> {
-    let found = std::env::var_os("FDI_PYTHON")
-        .map(PathBuf::from)
-        .or_else(|| Some(repo_path("target/py-venv/bin/python")).filter(|p| p.exists()));
-    if found.is_none() {
-        assert!(
-            std::env::var_os("FDI_REQUIRE_PYTHON").is_none(),
-            "FDI_REQUIRE_PYTHON is set but there is no Python: set FDI_PYTHON or run `cargo test-all`"
-        );
-        eprintln!(
-            "skipped: no Python with the iceoryx2 binding (FDI_PYTHON unset, no target/py-venv): \
-             `cargo test-all` sets one up"
-        );
-    }
-    found
-}
 
 /// `scenario` (a repo file) with `[roles.<role>] command` run by `python` (paths made
 /// absolute), the other changes of `edit` applied, written into `dir`.

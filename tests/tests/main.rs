@@ -12,6 +12,7 @@ mod external;
 mod faults;
 mod hostile_files;
 mod interrupted_counts;
+mod live;
 mod long_horizon;
 mod machine;
 mod multihost;

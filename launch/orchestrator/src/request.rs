@@ -106,6 +106,10 @@ pub struct RunRequest {
     pub deployment: Option<Deployment>,
     /// Show a progress bar (ipc runs).
     pub progress: bool,
+    /// Serve the run live (`--live`).
+    pub live: Option<crate::run::LiveServe>,
+    /// A lockstep run slowed to this factor of real time (`--pace`).
+    pub pace: Option<f64>,
 }
 
 impl RunRequest {
@@ -127,6 +131,8 @@ impl RunRequest {
             placement: Placement::default(),
             deployment: None,
             progress: false,
+            live: None,
+            pace: None,
         }
     }
 
@@ -162,6 +168,8 @@ pub fn execute(request: &RunRequest, dir: &RunDir, stop: &Stop) -> Result<RunSum
         placement: request.placement.clone(),
         traces: request.traces,
         stop: stop.clone(),
+        live: request.live.clone(),
+        pace: request.pace,
     };
     let run = stop
         .check(BEFORE_THE_START)

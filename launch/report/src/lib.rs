@@ -18,4 +18,5 @@ pub mod output;
 pub mod plot;
 #[cfg(feature = "figures")]
 pub mod report;
+pub mod topics;
 pub mod traces;

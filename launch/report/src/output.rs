@@ -130,6 +130,26 @@ pub fn network_line(s: &RunSummary) -> Option<String> {
     Some(format!("network path: {how}; {refused}"))
 }
 
+/// What the live server of a run watched live (`--live`) did, in a line (None otherwise).
+pub fn live_line(s: &RunSummary) -> Option<String> {
+    let l = s.live.as_ref()?;
+    let mut line = format!(
+        "live: {} served {} clients; {} ticks published ({} messages)",
+        l.address, l.clients, l.ticks_published, l.messages_published
+    );
+    if l.records_dropped > 0 {
+        line.push_str(&format!(
+            "; {} records DROPPED (the server fell behind; the run did not wait): the live \
+             detector statistics stopped at the first",
+            l.records_dropped
+        ));
+    }
+    if let Some(e) = &l.error {
+        line.push_str(&format!("; a message could not be made: {e}"));
+    }
+    Some(line)
+}
+
 /// The attack of a run as its header names it: `attack paper`, or `attack: external program
 /// python3 attacker.py` when a program took the attacker role (its attack profile, `none`,
 /// would misstate the run).

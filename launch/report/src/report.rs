@@ -985,6 +985,9 @@ fn run_section(md: &mut String, run_dir: &Path, r: &Resolved, s: &RunSummary) {
     if let Some(line) = crate::output::network_line(s) {
         let _ = writeln!(md, "| {} |", line.replacen(": ", " | ", 1));
     }
+    if let Some(line) = crate::output::live_line(s) {
+        let _ = writeln!(md, "| {} |", line.replacen(": ", " | ", 1));
+    }
 }
 
 /// The rows of the parameter table: (parameter, value).

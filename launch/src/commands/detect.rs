@@ -62,6 +62,10 @@ impl DetectArgs {
             no_space_check: false,
             hosts: None,
             placement: Placement::default(),
+            live: None,
+            live_rate: fdi_live::Options::DEFAULT_RATE_HZ,
+            live_wait: None,
+            pace: None,
             replay: None,
             run_by: Some("detect"),
         }

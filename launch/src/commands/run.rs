@@ -50,10 +50,28 @@ pub struct RunArgs {
     /// the processes it runs (docs/multi-host.md). Each other host runs `fdi-launch serve`.
     #[arg(long, value_name = "FILE")]
     pub hosts: Option<PathBuf>,
+    /// Serve the run live over the Foxglove WebSocket protocol at ADDR (without one,
+    /// 127.0.0.1:8765; port 0: a free port, printed): open it in Foxglove (Open connection →
+    /// Foxglove WebSocket) with the layouts of examples/live (docs/traces.md). The run never
+    /// waits for a viewer.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
+    pub live: Option<std::net::SocketAddr>,
+    /// Ticks a second of wall time the live stream keeps at most (a paced or realtime run: every
+    /// K-th tick, K fixed; an unpaced lockstep run: a tick once 1/HZ s passed).
+    #[arg(long, value_name = "HZ", default_value_t = fdi_live::Options::DEFAULT_RATE_HZ, requires = "live")]
+    pub live_rate: f64,
+    /// Start the run once a viewer subscribed to a topic of `--live` (waiting at most SECONDS,
+    /// then starting anyway), so that it sees the run from its first tick.
+    #[arg(long, value_name = "SECONDS", requires = "live")]
+    pub live_wait: Option<f64>,
+    /// Slow a lockstep run to FACTOR × real time (1 = real time), to watch it; its numbers are
+    /// the same.
+    #[arg(long, value_name = "FACTOR")]
+    pub pace: Option<f64>,
     /// Golden regression: re-run the control center of a recorded run directory on its recorded
     /// tampered measurements and compare the trace digest with the recording's (exit status 1
     /// when they differ). The scenario comes from RUN_DIR.
-    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts", "observer_input", "leakage_w_per_s", "dead_zone_rad_s", "innovation_time_constant_s", "set"])]
+    #[arg(long, value_name = "RUN_DIR", conflicts_with_all = ["scenario", "engine", "clock", "attack", "controller", "duration_s", "seed", "rt_priority", "cpus", "hosts", "live", "live_wait", "pace", "observer_input", "leakage_w_per_s", "dead_zone_rad_s", "innovation_time_constant_s", "set"])]
     pub replay: Option<PathBuf>,
     /// The command that runs the scenario when it is not `run` itself (`detect`): the run
     /// directory's name starts with it (`<timestamp>-detect-paper`), apart from `run`'s.
@@ -92,6 +110,25 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
     }
     request.traces = args.traces;
     request.placement = args.placement.clone();
+    fdi_orchestrator::run::check_pace(&request.resolved, args.pace)?;
+    if args.live.is_some() && args.hosts.is_some() {
+        anyhow::bail!(
+            "--live serves runs on one host only: the robots of a run split over hosts \
+             (--hosts) reach the coordinator at its end (their traces are fetched whole)"
+        );
+    }
+    let wait = match args.live_wait {
+        Some(w) => Some(std::time::Duration::try_from_secs_f64(w).map_err(|_| {
+            anyhow::anyhow!("--live-wait {w}: a number of seconds, finite and ≥ 0")
+        })?),
+        None => None,
+    };
+    request.live = args.live.map(|addr| fdi_orchestrator::run::LiveServe {
+        addr,
+        rate_hz: args.live_rate,
+        wait,
+    });
+    request.pace = args.pace;
     request.progress = !args.json;
     Ok(request)
 }
@@ -265,6 +302,9 @@ fn print_summary(s: &RunSummary) {
         println!("processes: {p}");
     }
     if let Some(line) = output::network_line(s) {
+        println!("{line}");
+    }
+    if let Some(line) = output::live_line(s) {
         println!("{line}");
     }
     if let Some(notice) = output::partial_notice(s) {

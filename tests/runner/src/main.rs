@@ -5,8 +5,9 @@
 //! `cargo nextest run --workspace --release` with the arguments given.
 //!
 //! The tests of roles taken by Python programs (`tests/tests/external.rs`) need Python with the
-//! pinned iceoryx2 binding: this makes a virtual environment in `target/py-venv` with
-//! `examples/python/requirements.txt` (once; pip keeps it current) and hands its interpreter to
+//! pinned iceoryx2 binding, those of the live view (`tests/tests/live.rs`) a WebSocket client:
+//! this makes a virtual environment in `target/py-venv` with `examples/python/requirements.txt`
+//! and `tests/python/requirements.txt` (once; pip keeps it current) and hands its interpreter to
 //! the tests in `FDI_PYTHON`. Without `python3` they say they are skipped, unless
 //! `FDI_REQUIRE_PYTHON` is set (CI), where they fail.
 
@@ -42,7 +43,8 @@ fn python_venv() -> Result<PathBuf, String> {
             ));
         }
     }
-    let requirements = root.join("examples/python/requirements.txt");
+    let examples = root.join("examples/python/requirements.txt");
+    let tests = root.join("tests/python/requirements.txt");
     let installed = Command::new(&python)
         .args([
             "-m",
@@ -52,13 +54,16 @@ fn python_venv() -> Result<PathBuf, String> {
             "--disable-pip-version-check",
             "-r",
         ])
-        .arg(&requirements)
+        .arg(&examples)
+        .arg("-r")
+        .arg(&tests)
         .status()
         .map_err(|e| format!("{} could not be run ({e})", python.display()))?;
     if !installed.success() {
         return Err(format!(
-            "pip install -r {} failed ({installed})",
-            requirements.display()
+            "pip install -r {} -r {} failed ({installed})",
+            examples.display(),
+            tests.display()
         ));
     }
     Ok(python)

@@ -25,6 +25,10 @@ pub struct ProcessArgs {
     pub launcher_pid: Option<u32>,
     #[command(flatten)]
     pub placement: Placement,
+    /// Lockstep runs: the agents measure tick k no sooner than t_k / FACTOR s of wall time
+    /// after the start (`run --pace`, for watching; the run's numbers are the same).
+    #[arg(long, value_name = "FACTOR")]
+    pub pace: Option<f64>,
 }
 
 impl ProcessArgs {
@@ -51,6 +55,10 @@ impl ProcessArgs {
         if let Some(cpus) = &self.placement.cpus {
             out.extend(["--cpus".into(), cpus.to_string().into()]);
         }
+        if let Some(pace) = self.pace {
+            // Rust's shortest form that reads back to the same number.
+            out.extend(["--pace".into(), pace.to_string().into()]);
+        }
         out
     }
 }
@@ -76,6 +84,7 @@ mod args_tests {
             agent: None,
             launcher_pid: None,
             placement: Placement::default(),
+            pace: None,
         };
         let full = ProcessArgs {
             agent: Some(3),
@@ -84,6 +93,7 @@ mod args_tests {
                 rt_priority: Some(20),
                 cpus: Some("0,2-3".parse::<CpuList>().expect("list")),
             },
+            pace: Some(0.1),
             ..base.clone()
         };
         for args in [base, full] {

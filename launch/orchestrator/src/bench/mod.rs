@@ -303,6 +303,8 @@ fn run_beside_probe(
                 placement: placement.clone(),
                 traces: crate::run::Traces::Full,
                 stop: stop.clone(),
+                live: None,
+                pace: None,
             },
             deployment.as_ref(),
         ),

@@ -110,13 +110,108 @@ impl InprocTraces {
 }
 
 /// How a run runs and what it keeps: the progress bar, the processes' placement, the traces the
-/// run directory keeps, and the stop that interrupts it.
+/// run directory keeps, the stop that interrupts it, its live server and its pace.
 #[derive(Debug, Clone, Default)]
 pub struct Options {
     pub progress: bool,
     pub placement: runtime::Placement,
     pub traces: Traces,
     pub stop: Stop,
+    /// Serve the run live (`--live`).
+    pub live: Option<LiveServe>,
+    /// A lockstep run slowed to this factor of real time (`--pace`).
+    pub pace: Option<f64>,
+}
+
+/// Where and how fast a run is served live (`run --live ADDR --live-rate HZ`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveServe {
+    pub addr: std::net::SocketAddr,
+    pub rate_hz: f64,
+    /// Start the run once a viewer subscribed, waiting at most this long (`--live-wait`).
+    pub wait: Option<std::time::Duration>,
+}
+
+impl LiveServe {
+    /// The live server's options for a run of `r` on `engine` at `pace`.
+    fn options(&self, r: &Resolved, engine: Engine, pace: Option<f64>) -> fdi_live::Options {
+        let s = &r.scenario;
+        let realtime = s.clock == ClockMode::Realtime;
+        let ticks_per_s = if realtime { Some(1.0) } else { pace }.map(|p| p / s.control_period_s);
+        fdi_live::Options {
+            addr: self.addr,
+            rate_hz: self.rate_hz,
+            ticks_per_s,
+            stamped: realtime && engine == Engine::Ipc,
+        }
+    }
+}
+
+/// The live server of a run of `r` on `engine` when `opts` asks for one, started, its address
+/// said on stderr.
+fn start_live(
+    r: &Resolved,
+    engine: Engine,
+    opts: &Options,
+) -> Result<Option<(fdi_live::Live, fdi_live::Feed)>> {
+    let Some(l) = &opts.live else {
+        return Ok(None);
+    };
+    let (live, feed) =
+        fdi_live::Live::start(r, &l.options(r, engine, opts.pace)).context(runtime::DidNotStart)?;
+    eprintln!(
+        "fdi-launch: live at ws://{} (Foxglove: Open connection, Foxglove WebSocket; layouts in \
+         examples/live)",
+        live.addr()
+    );
+    if let Some(wait) = l.wait {
+        eprintln!(
+            "fdi-launch: waiting for a viewer to subscribe (at most {} s)",
+            wait.as_secs_f64()
+        );
+        if !live.wait_for_viewer(wait) {
+            eprintln!(
+                "fdi-launch: no viewer subscribed within {} s: the run starts",
+                wait.as_secs_f64()
+            );
+        }
+    }
+    Ok(Some((live, feed)))
+}
+
+/// Refuses a pace that is not a positive finite factor, or a pace of a realtime run.
+pub fn check_pace(r: &Resolved, pace: Option<f64>) -> Result<()> {
+    let Some(p) = pace else { return Ok(()) };
+    if !(p.is_finite() && p > 0.0) {
+        bail!("--pace {p}: a factor of real time, finite and > 0 (1 = real time)");
+    }
+    if r.scenario.clock != ClockMode::Lockstep {
+        bail!("--pace {p}: a realtime run runs at real time already; --pace slows lockstep runs");
+    }
+    Ok(())
+}
+
+/// Sleeps the in-process engine until each tick is due at its pace.
+struct Pacer {
+    start: std::time::Instant,
+    factor: f64,
+    dt: f64,
+    last: Option<u64>,
+}
+
+impl Pacer {
+    fn wait(&mut self, k: u64) {
+        if self.last == Some(k) {
+            return;
+        }
+        self.last = Some(k);
+        let due = std::time::Duration::from_secs_f64(
+            fdi_common::engine::tick_time(k, self.dt) / self.factor,
+        );
+        if let Some(left) = due.checked_sub(self.start.elapsed()) {
+            std::thread::sleep(left);
+        }
+    }
 }
 
 impl Options {
@@ -127,6 +222,8 @@ impl Options {
             placement: runtime::Placement::default(),
             traces,
             stop: stop.clone(),
+            live: None,
+            pace: None,
         }
     }
 }
@@ -152,7 +249,22 @@ pub fn execute_inproc_with<A: Attacker>(
     traces: Traces,
     attacker: &mut A,
 ) -> Result<RunSummary> {
+    let opts = Options {
+        traces,
+        ..Options::default()
+    };
+    execute_inproc_watched(r, dir, &opts, attacker)
+}
+
+/// [`execute_inproc_with`], served live and paced as `opts` says.
+fn execute_inproc_watched<A: Attacker>(
+    r: &Resolved,
+    dir: &Path,
+    opts: &Options,
+    attacker: &mut A,
+) -> Result<RunSummary> {
     inproc_runs(r)?;
+    let traces = opts.traces;
     let kept = match traces {
         Traces::Full => Some(Kept::Full),
         Traces::Decimate(k) => Some(Kept::Decimate { every: k.get() }),
@@ -162,14 +274,27 @@ pub fn execute_inproc_with<A: Attacker>(
         Some(kept) => Some(InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?),
         None => None,
     };
-    let mut records = RecordThread::start(Books::new(r), writers)?;
-    let ticked =
-        tick_inproc_any_with(r, attacker, |rec| records.push(rec)).context("in-process engine")?;
+    let (live, feed) = start_live(r, Engine::Inproc, opts)?.unzip();
+    let mut records = RecordThread::start(Books::new(r), writers, feed)?;
+    let mut pacer = opts.pace.map(|factor| Pacer {
+        start: std::time::Instant::now(),
+        factor,
+        dt: r.scenario.control_period_s,
+        last: None,
+    });
+    let ticked = tick_inproc_any_with(r, attacker, |rec| {
+        if let Some(p) = &mut pacer {
+            p.wait(rec.center.k);
+        }
+        records.push(rec);
+    })
+    .context("in-process engine")?;
     // The run ends when its records are entered and written: the wait for that counts.
     let waited = std::time::Instant::now();
     let books = records.finish()?;
     let wall_s = ticked.wall_s + waited.elapsed().as_secs_f64();
-    let summary = books.summary(r, ticked.ticks, wall_s, attacker.name());
+    let mut summary = books.summary(r, ticked.ticks, wall_s, attacker.name());
+    summary.live = live.map(fdi_live::Live::finish);
     output::write_run_summary(dir, &summary, traces)?;
     Ok(summary)
 }
@@ -194,7 +319,11 @@ impl RecordThread {
     /// Batches that may wait for the thread.
     const QUEUED: usize = 4;
 
-    fn start(mut books: Books, mut traces: Option<InprocTraces>) -> Result<Self> {
+    fn start(
+        mut books: Books,
+        mut traces: Option<InprocTraces>,
+        mut live: Option<fdi_live::Feed>,
+    ) -> Result<Self> {
         let (to_thread, batches) = std::sync::mpsc::sync_channel::<Vec<TickRecord>>(Self::QUEUED);
         let (give_back, emptied) = std::sync::mpsc::sync_channel(Self::QUEUED + 1);
         let thread = std::thread::Builder::new()
@@ -207,6 +336,9 @@ impl RecordThread {
                         if let (Some(w), Ok(())) = (&mut traces, &written) {
                             written = w.write(rec);
                         }
+                        if let Some(feed) = &mut live {
+                            feed.tick(rec);
+                        }
                     }
                     batch.clear();
                     // Never waits: a batch that finds no room is dropped.
@@ -215,6 +347,7 @@ impl RecordThread {
                 if let (Some(w), Ok(())) = (traces, &written) {
                     written = w.flush();
                 }
+                drop(live);
                 (books, written)
             })
             .context("starting the thread that keeps the run's records")?;
@@ -291,13 +424,20 @@ pub fn execute_on(
              traces are fetched whole at the end)"
         );
     }
+    if deployment.is_some() && opts.live.is_some() {
+        bail!(
+            "--live serves runs on one host only: the robots of a run split over hosts \
+             (--hosts) reach the coordinator at the end (their traces are fetched whole)"
+        );
+    }
+    check_pace(r, opts.pace)?;
     if engine == Engine::Inproc {
         inproc_runs(r)?;
     }
     match (engine, run_dir) {
         (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
         (Engine::Inproc, Some(dir)) => {
-            execute_inproc_with(r, dir, traces, &mut r.profile_attacker())
+            execute_inproc_watched(r, dir, opts, &mut r.profile_attacker())
         }
         (Engine::Ipc, None) => {
             // The processes need a folder of their own (the scenario as used, their pipes):
@@ -308,6 +448,7 @@ pub fn execute_on(
                 traces: Traces::None,
                 ..opts.clone()
             };
+            // (A run without a directory has no viewer: campaigns, benchmarks.)
             let summary = execute(r, engine, Some(&scratch), &scratch_opts);
             if let Err(e) = std::fs::remove_dir_all(&scratch) {
                 eprintln!(
@@ -329,16 +470,19 @@ fn execute_ipc(
     deployment: Option<&hosts::Deployment>,
 ) -> Result<RunSummary> {
     let (progress, placement, traces) = (opts.progress, &opts.placement, opts.traces);
+    let (live, feed) = start_live(r, Engine::Ipc, opts)?.unzip();
     let opts = runtime::IpcOptions {
         run_dir: dir.to_path_buf(),
         progress,
         replay: false,
         placement: placement.clone(),
-        pipes: traces != Traces::Full,
+        // A live run is joined as it runs, from the processes' pipes.
+        pipes: traces != Traces::Full || feed.is_some(),
         deployment: deployment.cloned(),
         stop: opts.stop.clone(),
+        pace: opts.pace,
     };
-    let (outcome, mut joined, write_error) = if traces == Traces::Full {
+    let (outcome, mut joined, write_error) = if !opts.pipes {
         let outcome = runtime::run_ipc(r, &opts)?;
         let joined = fdi_report::join::join_run(r, dir, outcome.wall_s, |_| {})?;
         (outcome, joined, None)
@@ -349,7 +493,7 @@ fn execute_ipc(
             .context("creating the traces folder")
             .context(runtime::DidNotStart)?;
         let tap = tap::Tap::create(r, dir, traces).context(runtime::DidNotStart)?;
-        let (outcome, tapped) = tap.run(r, || runtime::run_ipc(r, &opts));
+        let (outcome, tapped) = tap.run(r, feed, || runtime::run_ipc(r, &opts));
         let outcome = outcome?;
         let joined = tapped
             .walked
@@ -358,6 +502,7 @@ fn execute_ipc(
         (outcome, joined, tapped.write_error)
     };
     joined.summary.lost_agents = outcome.lost;
+    joined.summary.live = live.map(fdi_live::Live::finish);
     joined.summary.hosts = outcome.hosts;
     joined.summary.network = outcome.network;
     if let Some(signal) = outcome.interrupted {

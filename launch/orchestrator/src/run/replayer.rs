@@ -236,6 +236,7 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool, stop: &Stop) -> Resul
                     pipes: false,
                     deployment: None,
                     stop: stop.clone(),
+                    pace: None,
                 },
             )
         }),

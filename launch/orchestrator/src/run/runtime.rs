@@ -159,6 +159,8 @@ pub struct IpcOptions {
     pub deployment: Option<crate::run::hosts::Deployment>,
     /// The launcher's stop.
     pub stop: Stop,
+    /// A lockstep run paced for watching (`--pace FACTOR`): the agents' argument.
+    pub pace: Option<f64>,
 }
 
 pub use fdi_runtime::process::{Placement, ProcessArgs};
@@ -796,6 +798,7 @@ fn spawn_local<X: Transport>(
         agent: rp.agent,
         launcher_pid: Some(std::process::id()),
         placement: opts.placement.clone(),
+        pace: opts.pace,
     };
     cmd.args(args.to_args());
     l.procs.spawn(

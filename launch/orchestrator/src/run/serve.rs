@@ -469,6 +469,7 @@ impl HostRun {
                 agent: p.process.agent(),
                 launcher_pid: Some(std::process::id()),
                 placement: Placement::default(),
+                pace: None,
             };
             cmd.args(child.to_args());
             procs.spawn(p.label.clone(), (), cmd)?;

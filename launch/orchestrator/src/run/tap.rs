@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 
 use anyhow::{Context, Result};
+use fdi_common::records::TickRecord;
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::Resolved;
 use fdi_common::trace::{Kept, TraceReader, TraceRecord, TraceWriter};
@@ -46,10 +47,12 @@ struct Route {
     /// The second stream of a process's records: the attacker's torque records, when the run
     /// attacks some agent's torques; the control center's record of a monitor's verdicts.
     side: Option<Tx>,
+    /// A live run's server, with the process's trace's name: its events and latency stamps.
+    live: Option<(String, fdi_live::RecordFeed)>,
 }
 
 impl Route {
-    fn send(&self, rec: TraceRecord) -> bool {
+    fn send(&mut self, rec: TraceRecord) -> bool {
         match rec {
             TraceRecord::Actuation(_) | TraceRecord::Monitor(_) => {
                 self.side.as_ref().is_none_or(|t| t.send(Ok(rec)))
@@ -58,7 +61,12 @@ impl Route {
                 self.main.send(Ok(rec))
             }
             // Neither latency stamps nor events are part of the join.
-            TraceRecord::Latency { .. } | TraceRecord::Event { .. } => true,
+            TraceRecord::Latency { .. } | TraceRecord::Event { .. } => {
+                if let Some((stem, feed)) = &mut self.live {
+                    feed.record(stem, &rec);
+                }
+                true
+            }
         }
     }
 
@@ -167,7 +175,14 @@ impl Tap {
 
     /// Runs `run` (the processes, writing into the pipes) while the readers and the join go on;
     /// returns its result once every pipe ended, with what the join gathered.
-    pub fn run<T>(self, r: &Resolved, run: impl FnOnce() -> T) -> (T, Tapped) {
+    /// A live run's `feed` is handed every joined tick, and the processes' events and latency
+    /// stamps.
+    pub fn run<T>(
+        self,
+        r: &Resolved,
+        feed: Option<fdi_live::Feed>,
+        run: impl FnOnce() -> T,
+    ) -> (T, Tapped) {
         let Self {
             pipes,
             kept,
@@ -175,7 +190,8 @@ impl Tap {
             run_dir,
             ..
         } = self;
-        let (routes, sources) = route_pipes(&pipes, routed, r);
+        let records = feed.as_ref().map(fdi_live::Feed::records);
+        let (routes, sources) = route_pipes(&pipes, routed, r, records.as_ref());
         let mut holds = Vec::new();
         let mut readers = Vec::new();
         for (p, route) in pipes.into_iter().zip(routes) {
@@ -188,7 +204,7 @@ impl Tap {
                 route,
             });
         }
-        let (result, tapped) = read_while(r, sources, readers, holds, run);
+        let (result, tapped) = read_while(r, sources, readers, holds, feed, run);
         remove_pipe_files(&run_dir);
         (result, tapped)
     }
@@ -207,7 +223,12 @@ fn channel() -> (Tx, Feed) {
 }
 
 /// The route of each pipe's records (in the order of `pipes`) and the join's sources they feed.
-fn route_pipes(pipes: &[Pipe], routed: bool, r: &Resolved) -> (Vec<Route>, Sources) {
+fn route_pipes(
+    pipes: &[Pipe],
+    routed: bool,
+    r: &Resolved,
+    live: Option<&fdi_live::RecordFeed>,
+) -> (Vec<Route>, Sources) {
     let mut agents = Vec::new();
     let mut routes = Vec::new();
     let (mut attacker, mut actuation, mut center, mut monitor) = (None, None, None, None);
@@ -216,6 +237,7 @@ fn route_pipes(pipes: &[Pipe], routed: bool, r: &Resolved) -> (Vec<Route>, Sourc
         let mut route = Route {
             main: tx,
             side: None,
+            live: live.map(|f| (p.process.to_string(), f.clone())),
         };
         if p.process == Process::Attacker {
             attacker = Some(feed);
@@ -265,13 +287,23 @@ fn read_while<T>(
     sources: Sources,
     readers: Vec<Reader>,
     holds: Vec<File>,
+    mut feed: Option<fdi_live::Feed>,
     run: impl FnOnce() -> T,
 ) -> (T, Tapped) {
     std::thread::scope(|s| {
-        let join = s.spawn(move || fdi_report::join::walk(r, sources, 1, |_| {}, || Ok(())));
+        let join = s.spawn(move || {
+            let sink = |rec: &TickRecord| {
+                if let Some(f) = &mut feed {
+                    f.tick(rec);
+                }
+            };
+            fdi_report::join::walk(r, sources, 1, sink, || Ok(()))
+        });
         let readers: Vec<_> = readers
             .into_iter()
-            .map(|rd| s.spawn(move || read_process(rd.read, &rd.fifo, rd.out.as_ref(), &rd.route)))
+            .map(|mut rd| {
+                s.spawn(move || read_process(rd.read, &rd.fifo, rd.out.as_ref(), &mut rd.route))
+            })
             .collect();
         let result = run();
         // Every process has exited: the pipes end once the launcher lets go of them.
@@ -317,7 +349,7 @@ fn read_process(
     read: File,
     fifo: &Path,
     out: Option<&(PathBuf, Kept)>,
-    route: &Route,
+    route: &mut Route,
 ) -> Option<String> {
     // A second handle on the pipe drains it to its end after damage, so that its writer never
     // blocks nor dies of a closed pipe.

@@ -1,12 +1,9 @@
 //! MCAP export: the whole run as `RUN_DIR/export/run.mcap`, for Foxglove and PlotJuggler.
 //!
-//! One topic per agent and stream (`/agent<id>/state`, `/agent<id>/attack`, …, listed in
-//! [`topics`] and docs/traces.md), JSON messages (`json` encoding) with a `jsonschema` schema
-//! record per message type, log time = publish time = the simulated time of the tick in ns
-//! (from [`fdi_common::engine::tick_time`]). Each message also carries its tick `k` and `t_s`.
+//! The topics, encodings and schemas are [`crate::topics`]'s (the live view's too); log time =
+//! publish time = the simulated time of the tick in ns (from [`fdi_common::engine::tick_time`]).
 //! The records of each trace are written per kind in (tick, agent) order; a metadata record
-//! `fdi-mas` holds the scenario, its agents and the planned ticks. JSON has no NaN or infinity:
-//! a non-finite number (a corrupt attack, a diverged robot) is written as `null`.
+//! `fdi-mas` holds the scenario, its agents and the planned ticks.
 //!
 //! The detector statistics (`/agent<id>/detectors`) are those of `fdi-launch detect`, each
 //! tick's written as it comes ([`detectors::each_tick`], as the CSV export's). The file is
@@ -22,390 +19,16 @@ use std::fs::File;
 use std::io::{self, BufWriter, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
-use std::sync::LazyLock;
 
 use anyhow::{bail, Context, Result};
-use fdi_common::detect;
-use fdi_common::records::true_s;
-use fdi_common::trace::{TraceReader, TraceRecord};
-use serde_json::{json, Map, Value};
+use fdi_common::trace::TraceReader;
+use serde_json::Value;
 
 use super::detectors;
 use super::sources::{
-    abandoned, failed, read_sorted, stem, trace_files, write_failure, OutDir, RunInfo, WriteFailed,
+    abandoned, failed, read_sorted, stem, trace_files, write_failure, OutDir, WriteFailed,
 };
-
-/// The type of a message field, as its JSON schema says.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Ty {
-    /// An unsigned integer (a tick, an agent, a time stamp in ns).
-    Int,
-    /// A number (`null` when it is not finite).
-    Num,
-    /// An array of numbers, one per link.
-    Nums,
-    Bool,
-    Str,
-}
-
-/// One field of a message: name, type, meaning with its unit.
-pub(crate) type Field = (&'static str, Ty, &'static str);
-
-/// One message type: its schema name and fields (every field is always present).
-#[derive(Debug)]
-pub(crate) struct Schema {
-    pub name: &'static str,
-    pub description: &'static str,
-    pub fields: &'static [Field],
-}
-
-const K: Field = ("k", Ty::Int, "control tick k");
-const T: Field = (
-    "t_s",
-    Ty::Num,
-    "tick time t_k = k·Δ, s (the log and publish time, in ns)",
-);
-
-macro_rules! schema {
-    ($id:ident, $name:literal, $desc:literal, [$($f:expr),* $(,)?]) => {
-        pub(crate) const $id: Schema = Schema { name: $name, description: $desc, fields: &[$($f),*] };
-    };
-}
-
-schema!(
-    STATE,
-    "fdi_mas.State",
-    "True joint state of the robot at t_k (agent trace).",
-    [
-        K,
-        T,
-        ("q_rad", Ty::Nums, "true joint angles q, rad"),
-        ("q_dot_rad_s", Ty::Nums, "true joint velocities q̇, rad/s"),
-        (
-            "q_ddot_rad_s2",
-            Ty::Nums,
-            "joint accelerations q̈ of the step from t_k, rad/s²"
-        ),
-    ]
-);
-schema!(
-    DESIRED,
-    "fdi_mas.Desired",
-    "Desired trajectory of the scenario at t_k (the paper's q_d).",
-    [
-        K,
-        T,
-        ("q_des_rad", Ty::Nums, "desired joint angles q_d, rad"),
-        (
-            "q_dot_des_rad_s",
-            Ty::Nums,
-            "desired joint velocities q̇_d, rad/s"
-        ),
-        (
-            "q_ddot_des_rad_s2",
-            Ty::Nums,
-            "desired joint accelerations q̈_d, rad/s²"
-        ),
-    ]
-);
-schema!(
-    TRACKING,
-    "fdi_mas.TrackingError",
-    "Tracking error e = q_d − q with the true state (the paper's Figs. 3 and 4).",
-    [
-        K,
-        T,
-        ("e_rad", Ty::Nums, "position error q_d − q, rad"),
-        ("e_dot_rad_s", Ty::Nums, "velocity error q̇_d − q̇, rad/s"),
-    ]
-);
-schema!(
-    CLEAN,
-    "fdi_mas.CleanMeasurement",
-    "Measurement the agent published: with sensor noise, before any attack (agent trace).",
-    [
-        K,
-        T,
-        ("y_rad", Ty::Nums, "measured joint angles, rad"),
-        ("y_dot_rad_s", Ty::Nums, "measured joint velocities, rad/s"),
-    ]
-);
-schema!(TAMPERED, "fdi_mas.TamperedMeasurement", "Measurement the control center took as the tick's input, after the attack (attacker trace); empty arrays when the input was missing.", [
-    K, T,
-    ("y_rad", Ty::Nums, "joint angles as received, rad"),
-    ("y_dot_rad_s", Ty::Nums, "joint velocities as received, rad/s"),
-    ("delivery", Ty::Str, "delivered, missing, forged or replayed"),
-]);
-schema!(ATTACK, "fdi_mas.Attack", "Injected false data of the tick (attacker trace) and the true attack term S the estimate Ŝ tracks.", [
-    K, T,
-    ("alpha_pos_rad", Ty::Nums, "injected position α₁ (S₁), rad"),
-    ("alpha_vel_rad_s", Ty::Nums, "injected velocity α₂ (S₂), rad/s"),
-    ("s_true_rad_s", Ty::Nums, "true S = S₂ + β S₁, rad/s"),
-    ("active", Ty::Bool, "the attack on the measurement was in force"),
-    ("delivery", Ty::Str, "delivered, missing, forged or replayed"),
-]);
-schema!(
-    ESTIMATE,
-    "fdi_mas.Estimate",
-    "Control center's estimates after the tick (control-center trace).",
-    [
-        K,
-        T,
-        (
-            "s_hat_rad_s",
-            Ty::Nums,
-            "attack estimate Ŝ used in the tick, rad/s"
-        ),
-        ("q_hat_rad", Ty::Nums, "observer's joint angles q̂, rad"),
-        (
-            "q_dot_hat_rad_s",
-            Ty::Nums,
-            "observer's joint velocities, rad/s"
-        ),
-        (
-            "q_ddot_hat_rad_s2",
-            Ty::Nums,
-            "observer's joint accelerations, rad/s²"
-        ),
-    ]
-);
-schema!(
-    SENT,
-    "fdi_mas.TorqueSent",
-    "Torque the control center sent, stamped t_k (control-center trace).",
-    [K, T, ("u_nm", Ty::Nums, "joint torques, N·m"),]
-);
-schema!(
-    APPLIED,
-    "fdi_mas.TorqueApplied",
-    "Torque the robot applied at t_k: u(t_k − τ(t_k)) (agent trace).",
-    [
-        K,
-        T,
-        ("u_nm", Ty::Nums, "joint torques, N·m"),
-        (
-            "missed",
-            Ty::Bool,
-            "the due command was missing: the last one was held"
-        ),
-    ]
-);
-schema!(
-    DELAY,
-    "fdi_mas.Delay",
-    "Known input delay of the torque channel at t_k (agent trace).",
-    [K, T, ("tau_s", Ty::Num, "delay τ(t_k), s"),]
-);
-schema!(
-    ALARM,
-    "fdi_mas.Alarm",
-    "Control center's alarm and input flags of the tick (control-center trace).",
-    [
-        K,
-        T,
-        ("alarm", Ty::Bool, "the ‖Ŝ‖ detection alarm"),
-        (
-            "rejected_input",
-            Ty::Bool,
-            "the measurement was rejected (non-finite or absurd)"
-        ),
-        (
-            "rejected_torque",
-            Ty::Bool,
-            "the computed torque was non-finite; the last good one was sent"
-        ),
-        (
-            "state_reset",
-            Ty::Bool,
-            "non-finite observer or estimator state was reset"
-        ),
-        (
-            "history_miss",
-            Ty::Bool,
-            "the torque history did not reach back to t − τ(t)"
-        ),
-        (
-            "missing_input",
-            Ty::Bool,
-            "the tick's measurement was missing: the last good one was used"
-        ),
-    ]
-);
-/// The per-tick statistic of each detector: the paper's alarm, then every detector of
-/// [`detect::RESIDUAL`] with its own fields (made once, from the list).
-pub(crate) static DETECTORS: LazyLock<Schema> = LazyLock::new(|| {
-    const VERDICT: &str = "watched, calibrating, non-finite, missing or uncalibrated";
-    const ALARM: &str = "its alarm at the configured threshold";
-    let mut fields: Vec<Field> = vec![
-        K,
-        T,
-        (
-            "in_force",
-            Ty::Bool,
-            "an attack was in force on the measurement or the torque",
-        ),
-        (
-            "s_hat_norm",
-            Ty::Num,
-            "‖Ŝ‖ held over the hold time, rad/s (null without a verdict)",
-        ),
-        (
-            "s_hat_norm_threshold",
-            Ty::Num,
-            "its configured threshold, rad/s",
-        ),
-        ("s_hat_norm_verdict", Ty::Str, VERDICT),
-        ("s_hat_norm_alarm", Ty::Bool, ALARM),
-    ];
-    // Made once per process: the names and descriptions live as long as the schema.
-    let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
-    for k in detect::RESIDUAL {
-        let [_, threshold, verdict, alarm] = detectors::fields_of(k.name);
-        fields.extend([
-            (
-                k.name,
-                Ty::Num,
-                leak(format!("{} (null without a verdict)", k.statistic)),
-            ),
-            (leak(threshold), Ty::Num, k.threshold_doc),
-            (leak(verdict), Ty::Str, VERDICT),
-            (leak(alarm), Ty::Bool, ALARM),
-        ]);
-    }
-    Schema {
-        name: "fdi_mas.Detectors",
-        description: "Per-tick statistic of each detector, as `fdi-launch detect` computes it from the joined traces (docs/detectors.md).",
-        fields: Vec::leak(fields),
-    }
-});
-schema!(LATENCY, "fdi_mas.Latency", "Monotonic-clock stamps of the torque message of the tick, ns (0 = not stamped; realtime runs).", [
-    K, T,
-    ("agent_sent_ns", Ty::Int, "agent sent the measurement"),
-    ("attacker_received_ns", Ty::Int, "attacker received it"),
-    ("attacker_sent_ns", Ty::Int, "attacker sent it on"),
-    ("center_received_ns", Ty::Int, "control center received it"),
-    ("center_sent_ns", Ty::Int, "control center sent the torque"),
-    ("agent_received_ns", Ty::Int, "agent received the torque"),
-]);
-schema!(
-    ACTUATION,
-    "fdi_mas.Actuation",
-    "The torque's way through the attacker (attacker trace; runs that attack the torque path).",
-    [
-        K,
-        T,
-        ("alpha_u_nm", Ty::Nums, "injected torque α_u, N·m"),
-        (
-            "u_nm",
-            Ty::Nums,
-            "torque the agent took as the tick's command (empty when missing), N·m"
-        ),
-        (
-            "held_s",
-            Ty::Num,
-            "how much later than τ it took effect (a delay attack), s"
-        ),
-        (
-            "active",
-            Ty::Bool,
-            "the attack on the torque path was in force"
-        ),
-        (
-            "delivery",
-            Ty::Str,
-            "delivered, missing, forged or replayed"
-        ),
-    ]
-);
-schema!(
-    MONITOR,
-    "fdi_mas.Monitor",
-    "A monitor program's verdict on the tick (`[roles.monitor]`, control-center trace).",
-    [
-        K,
-        T,
-        ("alarm", Ty::Bool, "the monitor's alarm at this tick"),
-        (
-            "statistic",
-            Ty::Num,
-            "its statistic, in its own unit (null when it gave none)"
-        ),
-        (
-            "late",
-            Ty::Bool,
-            "realtime: it came later than the monitor's deadline after the tick's time"
-        ),
-    ]
-);
-schema!(
-    EVENT,
-    "fdi_mas.Event",
-    "Something a process put on record (a lost peer, a rejected message, the shutdown reason).",
-    [
-        (
-            "t_s",
-            Ty::Num,
-            "the process's time of the event, s (the log time, in ns)"
-        ),
-        ("process", Ty::Str, "the trace it comes from"),
-        ("message", Ty::Str, "what happened"),
-    ]
-);
-
-/// Every per-agent topic (`/agent<id>/<name>`) and its message type; `/events` is the one
-/// topic of the whole run ([`EVENT`]).
-#[cfg(test)]
-pub(crate) fn topics() -> [(&'static str, &'static Schema); 15] {
-    [
-        ("state", &STATE),
-        ("desired", &DESIRED),
-        ("tracking_error", &TRACKING),
-        ("measurement/clean", &CLEAN),
-        ("measurement/tampered", &TAMPERED),
-        ("attack", &ATTACK),
-        ("estimate", &ESTIMATE),
-        ("torque/sent", &SENT),
-        ("torque/applied", &APPLIED),
-        ("delay", &DELAY),
-        ("alarm", &ALARM),
-        ("detectors", &*DETECTORS),
-        ("latency", &LATENCY),
-        ("actuation", &ACTUATION),
-        ("monitor", &MONITOR),
-    ]
-}
-
-/// The topic name of `name` for agent `agent`.
-pub(crate) fn topic(agent: u32, name: &str) -> String {
-    format!("/agent{agent}/{name}")
-}
-
-/// The JSON schema of a message type.
-pub(crate) fn json_schema(s: &Schema) -> Value {
-    let mut props = Map::new();
-    for (name, ty, desc) in s.fields {
-        let number = json!({"type": "number"});
-        let t = match ty {
-            Ty::Int => json!({"type": "integer", "minimum": 0}),
-            Ty::Num => number,
-            Ty::Nums => json!({"type": "array", "items": number}),
-            Ty::Bool => json!({"type": "boolean"}),
-            Ty::Str => json!({"type": "string"}),
-        };
-        let mut t = t;
-        t["description"] = Value::from(*desc);
-        props.insert((*name).to_string(), t);
-    }
-    json!({
-        "$schema": "http://json-schema.org/draft-07/schema#",
-        "title": s.name,
-        "description": format!("{} Non-finite numbers are null (JSON has no NaN).", s.description),
-        "type": "object",
-        "properties": props,
-        "required": s.fields.iter().map(|f| f.0).collect::<Vec<_>>(),
-        "additionalProperties": false,
-    })
-}
+use crate::topics::{self, json_schema, log_time_ns, record, topic_name, RunInfo, Schema, Sink};
 
 /// The chunk size of the MCAP file, bytes: messages are written to the file a chunk at a time
 /// (the `mcap` crate writes a chunk straight to the file and keeps only the chunk's message
@@ -423,15 +46,6 @@ struct Mcap {
     channels: BTreeMap<(u32, &'static str), u16>,
     sequence: u32,
     buf: Vec<u8>,
-}
-
-/// Nanoseconds of a time in seconds; an error for a time no log time can hold.
-fn ns(t: f64) -> Result<u64> {
-    let x = (t * 1e9).round();
-    if !(x.is_finite() && x >= 0.0 && x < u64::MAX as f64) {
-        bail!("time {t} s is not a log time (finite, ≥ 0)");
-    }
-    Ok(x as u64)
 }
 
 /// How the chunks of the MCAP file are compressed: zstd at level 1. On the paper's 40 s run its
@@ -517,54 +131,6 @@ impl Mcap {
         })
     }
 
-    /// Writes `msg` on topic `name` of `agent` (agent 0 with `name` a whole topic: `/events`).
-    fn write(
-        &mut self,
-        agent: u32,
-        name: &'static str,
-        schema: &Schema,
-        t: f64,
-        msg: &Value,
-    ) -> Result<()> {
-        let (path, first) = (&self.path, &self.first);
-        let channel = match self.channels.get(&(agent, name)) {
-            Some(c) => *c,
-            None => {
-                let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
-                let s = self
-                    .w
-                    .add_schema(schema.name, "jsonschema", &text)
-                    .map_err(|e| failure(path, first, e))?;
-                let topic = if agent == 0 {
-                    name.to_string()
-                } else {
-                    topic(agent, name)
-                };
-                let c = self
-                    .w
-                    .add_channel(s, &topic, "json", &BTreeMap::new())
-                    .map_err(|e| failure(path, first, e))?;
-                self.channels.insert((agent, name), c);
-                c
-            }
-        };
-        self.buf.clear();
-        serde_json::to_writer(&mut self.buf, msg).context("a message")?;
-        let time = ns(t)?;
-        self.sequence = self.sequence.wrapping_add(1);
-        self.w
-            .write_to_known_channel(
-                &mcap::records::MessageHeader {
-                    channel_id: channel,
-                    sequence: self.sequence,
-                    log_time: time,
-                    publish_time: time,
-                },
-                &self.buf,
-            )
-            .map_err(|e| failure(&self.path, &self.first, e))
-    }
-
     fn metadata(&mut self, info: &RunInfo) -> Result<()> {
         let s = &info.resolved.scenario;
         let agents: Vec<String> = info.agents.keys().map(u32::to_string).collect();
@@ -601,6 +167,51 @@ impl Mcap {
             .sync_all()
             .map_err(|e| WriteFailed::io(&self.path, e))?;
         Ok(summary)
+    }
+}
+
+impl Sink for Mcap {
+    fn message(
+        &mut self,
+        agent: u32,
+        name: &'static str,
+        schema: &Schema,
+        t: f64,
+        msg: &Value,
+    ) -> Result<()> {
+        let (path, first) = (&self.path, &self.first);
+        let channel = match self.channels.get(&(agent, name)) {
+            Some(c) => *c,
+            None => {
+                let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
+                let s = self
+                    .w
+                    .add_schema(schema.name, "jsonschema", &text)
+                    .map_err(|e| failure(path, first, e))?;
+                let topic = topic_name(agent, name);
+                let c = self
+                    .w
+                    .add_channel(s, &topic, "json", &BTreeMap::new())
+                    .map_err(|e| failure(path, first, e))?;
+                self.channels.insert((agent, name), c);
+                c
+            }
+        };
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, msg).context("a message")?;
+        let time = log_time_ns(t)?;
+        self.sequence = self.sequence.wrapping_add(1);
+        self.w
+            .write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: channel,
+                    sequence: self.sequence,
+                    log_time: time,
+                    publish_time: time,
+                },
+                &self.buf,
+            )
+            .map_err(|e| failure(&self.path, &self.first, e))
     }
 }
 
@@ -683,10 +294,6 @@ fn write(run_dir: &Path, files: &[PathBuf], out: &Path, file: File) -> Result<Ve
     Ok(failures)
 }
 
-fn nums(v: &[f64]) -> Value {
-    Value::from(v)
-}
-
 /// Exports one trace into `w`, counting its records in `n`. `run`: the scenario of the first
 /// trace; every later trace must hold the same.
 fn export_file(path: &Path, w: &mut Mcap, run: &mut Option<RunInfo>, n: &mut u64) -> Result<()> {
@@ -711,205 +318,10 @@ fn export_file(path: &Path, w: &mut Mcap, run: &mut Option<RunInfo>, n: &mut u64
     Ok(())
 }
 
-/// The messages of one record.
-fn record(w: &mut Mcap, info: &RunInfo, path: &Path, stem: &str, rec: &TraceRecord) -> Result<()> {
-    match rec {
-        TraceRecord::Agent(a) => {
-            let t = info.t(a.k);
-            let (q, qd, qdd, dof) = info.desired(path, a.agent, a.k)?;
-            let (q, qd, qdd) = (&q[..dof], &qd[..dof], &qdd[..dof]);
-            let diff = |d: &[f64], x: &[f64]| -> Vec<f64> {
-                d.iter().zip(x).map(|(d, x)| d - x).collect()
-            };
-            let id = a.agent;
-            w.write(
-                id,
-                "state",
-                &STATE,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "q_rad": nums(a.q.as_slice()), "q_dot_rad_s": nums(a.qd.as_slice()),
-                "q_ddot_rad_s2": nums(a.qdd.as_slice())}),
-            )?;
-            w.write(
-                id,
-                "desired",
-                &DESIRED,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "q_des_rad": nums(q), "q_dot_des_rad_s": nums(qd), "q_ddot_des_rad_s2": nums(qdd)}),
-            )?;
-            w.write(
-                id,
-                "tracking_error",
-                &TRACKING,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "e_rad": diff(q, a.q.as_slice()), "e_dot_rad_s": diff(qd, a.qd.as_slice())}),
-            )?;
-            w.write(
-                id,
-                "measurement/clean",
-                &CLEAN,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "y_rad": nums(a.y.as_slice()), "y_dot_rad_s": nums(a.yd.as_slice())}),
-            )?;
-            w.write(
-                id,
-                "torque/applied",
-                &APPLIED,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "u_nm": nums(a.u_applied.as_slice()), "missed": a.missed}),
-            )?;
-            w.write(
-                id,
-                "delay",
-                &DELAY,
-                t,
-                &json!({"k": a.k, "t_s": t, "tau_s": a.tau}),
-            )
-        }
-        TraceRecord::Attack(a) => {
-            let t = info.t(a.k);
-            info.agent(path, a.agent)?;
-            let s: Vec<f64> = a
-                .alpha_position
-                .as_slice()
-                .iter()
-                .zip(a.alpha_velocity.as_slice())
-                .map(|(p, v)| true_s(*p, *v, info.beta))
-                .collect();
-            let delivery = a.delivery.as_str();
-            w.write(
-                a.agent,
-                "attack",
-                &ATTACK,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "alpha_pos_rad": nums(a.alpha_position.as_slice()),
-                "alpha_vel_rad_s": nums(a.alpha_velocity.as_slice()),
-                "s_true_rad_s": s, "active": a.active, "delivery": delivery}),
-            )?;
-            w.write(
-                a.agent,
-                "measurement/tampered",
-                &TAMPERED,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "y_rad": nums(a.y.as_slice()), "y_dot_rad_s": nums(a.yd.as_slice()),
-                "delivery": delivery}),
-            )
-        }
-        TraceRecord::Center(c) => {
-            let t = info.t(c.k);
-            info.agent(path, c.agent)?;
-            w.write(
-                c.agent,
-                "estimate",
-                &ESTIMATE,
-                t,
-                &json!({"k": c.k, "t_s": t,
-                "s_hat_rad_s": nums(c.s_hat.as_slice()), "q_hat_rad": nums(c.q_hat.as_slice()),
-                "q_dot_hat_rad_s": nums(c.qd_hat.as_slice()),
-                "q_ddot_hat_rad_s2": nums(c.qdd_hat.as_slice())}),
-            )?;
-            w.write(
-                c.agent,
-                "torque/sent",
-                &SENT,
-                t,
-                &json!({"k": c.k, "t_s": t,
-                "u_nm": nums(c.u.as_slice())}),
-            )?;
-            w.write(
-                c.agent,
-                "alarm",
-                &ALARM,
-                t,
-                &json!({"k": c.k, "t_s": t,
-                "alarm": c.alarm, "rejected_input": c.rejected_input,
-                "rejected_torque": c.rejected_torque, "state_reset": c.state_reset,
-                "history_miss": c.history_miss, "missing_input": c.missing_input}),
-            )
-        }
-        TraceRecord::Latency { k, agent, stamps } => {
-            let t = info.t(*k);
-            info.agent(path, *agent)?;
-            w.write(
-                *agent,
-                "latency",
-                &LATENCY,
-                t,
-                &json!({"k": k, "t_s": t,
-                "agent_sent_ns": stamps.agent_sent_ns,
-                "attacker_received_ns": stamps.attacker_received_ns,
-                "attacker_sent_ns": stamps.attacker_sent_ns,
-                "center_received_ns": stamps.center_received_ns,
-                "center_sent_ns": stamps.center_sent_ns,
-                "agent_received_ns": stamps.agent_received_ns}),
-            )
-        }
-        TraceRecord::Actuation(a) => {
-            let t = info.t(a.k);
-            info.agent(path, a.agent)?;
-            w.write(
-                a.agent,
-                "actuation",
-                &ACTUATION,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "alpha_u_nm": nums(a.alpha_u.as_slice()), "u_nm": nums(a.u.as_slice()),
-                "held_s": a.held_s, "active": a.active, "delivery": a.delivery.as_str()}),
-            )
-        }
-        TraceRecord::Event { t, message } => w.write(
-            0,
-            "/events",
-            &EVENT,
-            *t,
-            &json!({
-            "t_s": t, "process": stem, "message": message}),
-        ),
-        TraceRecord::Monitor(m) => {
-            let t = info.t(m.k);
-            info.agent(path, m.agent)?;
-            w.write(
-                m.agent,
-                "monitor",
-                &MONITOR,
-                t,
-                &json!({"k": m.k, "t_s": t, "alarm": m.alarm,
-                "statistic": m.statistic, "late": m.late}),
-            )
-        }
-    }
-}
-
 /// The `/agent<id>/detectors` topics: every joined tick's statistics ([`detectors::each_tick`])
 /// written as they come. The number of joined ticks, or why there are none.
 fn detectors(run_dir: &Path, info: &RunInfo, w: &mut Mcap) -> Result<Result<u64, String>> {
-    detectors::each_tick(run_dir, info, |tick| {
-        let mut msg = Map::new();
-        msg.insert("k".into(), Value::from(tick.k));
-        msg.insert("t_s".into(), Value::from(tick.t));
-        msg.insert("in_force".into(), Value::from(tick.in_force));
-        for s in tick.statistics {
-            let [value, threshold, verdict, alarm] = detectors::fields_of(s.name);
-            msg.insert(value, s.value.map_or(Value::Null, Value::from));
-            msg.insert(threshold, s.threshold.map_or(Value::Null, Value::from));
-            msg.insert(verdict, Value::from(s.verdict));
-            msg.insert(alarm, Value::from(s.alarm));
-        }
-        w.write(
-            tick.agent,
-            "detectors",
-            &DETECTORS,
-            tick.t,
-            &Value::Object(msg),
-        )
-    })
+    detectors::each_tick(run_dir, info, |tick| topics::detectors::message(w, tick))
 }
 
 #[cfg(test)]
@@ -917,8 +329,11 @@ mod tests {
     use std::collections::BTreeSet;
 
     use fdi_common::engine::tick_time;
+    use fdi_common::trace::TraceRecord;
+    use serde_json::json;
 
     use super::*;
+    use crate::topics::{topic, topics, EVENT, STATE};
 
     use super::super::tests::fixture_copy;
     use crate::join;
@@ -1027,7 +442,7 @@ mod tests {
                 let end = text[at..].find([',', '}']).expect("its end") + at;
                 let t_s: f64 = text[at..end].parse().expect("a number");
                 assert_eq!(t_s.to_bits(), t.to_bits(), "{topic}");
-                assert_eq!(m.log_time, ns(t).expect("a time"), "{topic}");
+                assert_eq!(m.log_time, log_time_ns(t).expect("a time"), "{topic}");
             }
             let before = last.insert(topic.clone(), m.log_time).unwrap_or(0);
             assert!(before <= m.log_time, "{topic}: log times out of order");
@@ -1061,7 +476,7 @@ mod tests {
             let t = tick_time(k, 1e-3);
             let msg = json!({"k": k, "t_s": t, "q_rad": q, "q_dot_rad_s": q, "q_ddot_rad_s2": q});
             largest = largest.max(serde_json::to_vec(&msg).expect("JSON").len() as u64);
-            w.write(1 + (k % 4) as u32, "state", &STATE, t, &msg)
+            w.message(1 + (k % 4) as u32, "state", &STATE, t, &msg)
                 .expect("written");
         }
         w.finish().expect("closed");

@@ -7,11 +7,9 @@ use std::fmt;
 use std::io;
 use std::path::{Path, PathBuf};
 
+pub(super) use crate::topics::RunInfo;
 use anyhow::{bail, Context, Result};
-use fdi_common::engine::tick_time;
-use fdi_common::scenario::{self, Resolved, MAX_DOF};
-use fdi_common::trace::{TraceError, TraceHeader, TraceReader, TraceRecord};
-use fdi_common::trajectory::TrajectoryConfig;
+use fdi_common::trace::{TraceError, TraceReader, TraceRecord};
 
 /// The `*.trace` files of `RUN_DIR/traces`, sorted; an error when there are none.
 pub(super) fn trace_files(run_dir: &Path) -> Result<Vec<PathBuf>> {
@@ -115,92 +113,6 @@ pub(super) fn failed(failures: Vec<String>) -> Result<()> {
             "{n} traces could not be exported whole:\n{}",
             failures.join("\n")
         ),
-    }
-}
-
-/// `(q_d, q̇_d, q̈_d)` of one tick, rad, rad/s, rad/s², and how many of their entries are links.
-pub(super) type Desired = ([f64; MAX_DOF], [f64; MAX_DOF], [f64; MAX_DOF], usize);
-
-/// One agent as the scenario of a trace describes it.
-#[derive(Debug, Clone)]
-pub(super) struct AgentInfo {
-    pub(super) dof: usize,
-    pub(super) trajectory: TrajectoryConfig,
-}
-
-/// What the scenario in a trace's header says that the exported columns need.
-#[derive(Debug, Clone)]
-pub(super) struct RunInfo {
-    pub(super) resolved: Resolved,
-    /// Δ, s.
-    pub(super) dt: f64,
-    pub(super) beta: f64,
-    pub(super) agents: BTreeMap<u32, AgentInfo>,
-    /// The largest number of links of an agent: the vector columns of a CSV.
-    pub(super) dof: usize,
-}
-
-impl RunInfo {
-    /// From the header of the trace at `path`; an error naming the file when its scenario
-    /// does not parse (the tick times, the desired trajectory and `S` come from it).
-    pub(super) fn from_header(path: &Path, header: &TraceHeader) -> Result<Self> {
-        let resolved = scenario::load_str(&header.scenario_toml, &path.display().to_string(), None)
-            .map_err(|e| anyhow::anyhow!("{e}"))
-            .with_context(|| {
-                format!(
-                    "{}: the scenario in the trace header does not parse: the tick times, the desired trajectory and S cannot be derived",
-                    path.display()
-                )
-            })?;
-        let s = &resolved.scenario;
-        let agents: BTreeMap<u32, AgentInfo> = s
-            .agents
-            .iter()
-            .map(|a| {
-                (
-                    a.id,
-                    AgentInfo {
-                        dof: a.model.dof().min(MAX_DOF),
-                        trajectory: a.trajectory.clone(),
-                    },
-                )
-            })
-            .collect();
-        let dof = agents.values().map(|a| a.dof).max().unwrap_or(0);
-        Ok(Self {
-            dt: s.control_period_s,
-            beta: s.controller.beta,
-            agents,
-            dof,
-            resolved,
-        })
-    }
-
-    /// `t_k`, s: the engine's own function of the tick.
-    pub(super) fn t(&self, k: u64) -> f64 {
-        tick_time(k, self.dt)
-    }
-
-    /// The agent `id`; an error naming the trace when its scenario has no such agent.
-    pub(super) fn agent(&self, path: &Path, id: u32) -> Result<&AgentInfo> {
-        self.agents.get(&id).with_context(|| {
-            format!(
-                "{}: a record of agent {id}, which the scenario in its header does not have",
-                path.display()
-            )
-        })
-    }
-
-    /// `(q_d, q̇_d, q̈_d)` of agent `id` at tick `k`, rad, rad/s, rad/s².
-    pub(super) fn desired(&self, path: &Path, id: u32, k: u64) -> Result<Desired> {
-        let a = self.agent(path, id)?;
-        let r = a.trajectory.reference::<MAX_DOF>(self.t(k));
-        let arr = |v: &fdi_common::model::Vector<MAX_DOF>| {
-            let mut out = [0.0; MAX_DOF];
-            out.copy_from_slice(v.as_slice());
-            out
-        };
-        Ok((arr(&r.q), arr(&r.qd), arr(&r.qdd), a.dof))
     }
 }
 

@@ -1,0 +1,562 @@
+//! fdi-live: a run watched while it runs (`fdi-launch run --live`). The run's records are
+//! served over the Foxglove WebSocket protocol by the `foxglove` crate's server, on the topics,
+//! encodings and schemas of the MCAP export ([`fdi_report::topics`]: one definition for both),
+//! stamped with the simulated time of their tick, which the server also broadcasts so that a
+//! viewer's timeline follows the run.
+//!
+//! The run never waits for it. The engine's (or the launcher's join's) records go through a
+//! bounded queue ([`Feed`]) to a thread of its own that makes the messages; a record that finds
+//! the queue full is dropped and counted. The stream is decimated to what a viewer can draw
+//! (about [`Options::rate_hz`] ticks a second of wall time; [`Decimation`]). A message is made only
+//! for a channel some client subscribed to; the server keeps a bounded backlog per client and
+//! drops a slow client's oldest messages.
+
+use std::collections::BTreeMap;
+use std::net::SocketAddr;
+use std::path::Path;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
+use std::sync::{Arc, Condvar, Mutex, PoisonError};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context as _, Result};
+use fdi_common::engine::{tick_time, LiveStats};
+use fdi_common::records::TickRecord;
+use fdi_common::scenario::Resolved;
+use fdi_common::trace::TraceRecord;
+use fdi_report::topics::{self, detectors, json_schema, topic_name, RunInfo, Schema, Sink};
+use foxglove::websocket::{Capability, Client, ServerListener};
+use foxglove::{ChannelBuilder, Context, PartialMetadata, RawChannel, WebSocketServer};
+use serde_json::Value;
+
+/// How a run is served live.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Options {
+    /// Where the server listens.
+    pub addr: SocketAddr,
+    /// Ticks published per second of wall time, at most.
+    pub rate_hz: f64,
+    /// The run's ticks per second of wall time when the run is paced (a lockstep run at
+    /// `--pace`, a realtime run): the stream then keeps every K-th tick, K fixed. `None`: an
+    /// unpaced lockstep run ([`Decimation::Adaptive`]).
+    pub ticks_per_s: Option<f64>,
+    /// The run's processes stamp each torque's hops (`/agent<id>/latency`).
+    pub stamped: bool,
+}
+
+impl Options {
+    /// The address `--live` serves without one.
+    pub const DEFAULT_ADDR: &'static str = "127.0.0.1:8765";
+    /// Ticks a second the stream keeps at most, by default (`--live-rate`): a plot in Foxglove or
+    /// PlotJuggler redraws at most 60 times a second; 50 ticks of the paper's four robots are
+    /// about 2600 messages a second.
+    pub const DEFAULT_RATE_HZ: f64 = 50.0;
+}
+
+/// Which ticks the stream keeps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Decimation {
+    /// Ticks 0, K, 2K, … (a run of known pace).
+    Every(u64),
+    /// An unpaced run: every K-th tick, K measured again every [`WINDOW`] from the ticks the run
+    /// made meanwhile so that about `rate_hz` are kept a second; and never more than `rate_hz`
+    /// a second over [`BURST`] (the run's records come in bursts, as its processes' trace
+    /// writers flush).
+    Adaptive { rate_hz: f64 },
+}
+
+/// How often an unpaced run's K is measured again.
+pub const WINDOW: Duration = Duration::from_millis(500);
+/// The longest burst of kept ticks of an unpaced run: `rate_hz` × this.
+pub const BURST: Duration = Duration::from_millis(200);
+
+impl Decimation {
+    /// The decimation of `opts`.
+    pub fn of(opts: &Options) -> Self {
+        match opts.ticks_per_s {
+            Some(rate) => Self::Every(((rate / opts.rate_hz).ceil() as u64).max(1)),
+            None => Self::Adaptive {
+                rate_hz: opts.rate_hz,
+            },
+        }
+    }
+}
+
+/// Which ticks a stream keeps, decided as the run hands them over.
+#[derive(Debug, Clone)]
+struct Gate {
+    decimation: Decimation,
+    /// The tick last judged, and whether it is kept.
+    last: Option<(u64, bool)>,
+    /// [`Decimation::Adaptive`]: K, the window it is measured over (its start and first tick),
+    /// the ticks that may still be kept and when they were last counted.
+    every: u64,
+    window: Option<(Instant, u64)>,
+    tokens: f64,
+    refilled: Option<Instant>,
+}
+
+impl Gate {
+    fn new(decimation: Decimation) -> Self {
+        Self {
+            decimation,
+            last: None,
+            every: 1,
+            window: None,
+            tokens: 1.0,
+            refilled: None,
+        }
+    }
+
+    /// Whether tick `k` is kept (every record of a tick is judged alike).
+    fn keeps(&mut self, k: u64) -> bool {
+        if let Some((last, keep)) = self.last {
+            if last == k {
+                return keep;
+            }
+        }
+        let keep = match self.decimation {
+            Decimation::Every(n) => k.is_multiple_of(n),
+            Decimation::Adaptive { rate_hz } => self.adaptive(k, rate_hz),
+        };
+        self.last = Some((k, keep));
+        keep
+    }
+
+    fn adaptive(&mut self, k: u64, rate_hz: f64) -> bool {
+        let now = Instant::now();
+        match self.window {
+            Some((t0, k0)) if now.duration_since(t0) >= WINDOW => {
+                let ticks_per_s =
+                    k.saturating_sub(k0) as f64 / now.duration_since(t0).as_secs_f64();
+                self.every = ((ticks_per_s / rate_hz).ceil() as u64).max(1);
+                self.window = Some((now, k));
+            }
+            Some(_) => {}
+            None => self.window = Some((now, k)),
+        }
+        let cap = (rate_hz * BURST.as_secs_f64()).max(1.0);
+        if let Some(t) = self.refilled {
+            self.tokens = (self.tokens + now.duration_since(t).as_secs_f64() * rate_hz).min(cap);
+        }
+        self.refilled = Some(now);
+        if k.is_multiple_of(self.every) && self.tokens >= 1.0 {
+            self.tokens -= 1.0;
+            true
+        } else {
+            false
+        }
+    }
+}
+
+/// What goes to the server's thread.
+enum Item {
+    /// Joined ticks, each with whether the stream keeps it.
+    Ticks(Vec<(TickRecord, bool)>),
+    /// An event or latency record of a process's trace (named by its file stem).
+    Record(String, Box<TraceRecord>),
+}
+
+/// How long a viewer's subscriptions must rest before [`Live::wait_for_viewer`] lets the run
+/// start.
+pub const SETTLED: Duration = Duration::from_millis(300);
+
+/// How long the server stays up after the run's last message while clients are connected: what
+/// their queues hold is sent meanwhile (the server drops it when it stops).
+pub const LINGER: Duration = Duration::from_secs(1);
+
+/// Records per batch handed to the server's thread.
+const BATCH: usize = 256;
+/// Batches that may wait: about 2 s of the paper's four robots at full speed of the in-process
+/// engine, 64 s in realtime.
+const QUEUED: usize = 256;
+/// A batch is handed over at the latest this long after its first record (a paced run's
+/// viewer sees its ticks as they come).
+const LATENCY: Duration = Duration::from_millis(20);
+
+/// The run's side of the queue: hands records to the server's thread, never waits.
+pub struct Feed {
+    tx: SyncSender<Item>,
+    gate: Gate,
+    batch: Vec<(TickRecord, bool)>,
+    since: Instant,
+    dropped: Arc<AtomicU64>,
+}
+
+impl Feed {
+    /// The joined tick `r` (in the join's order: tick, then robot).
+    pub fn tick(&mut self, r: &TickRecord) {
+        if self.batch.is_empty() {
+            self.since = Instant::now();
+        }
+        let kept = self.gate.keeps(r.center.k);
+        self.batch.push((*r, kept));
+        if self.batch.len() >= BATCH || self.since.elapsed() >= LATENCY {
+            self.flush();
+        }
+    }
+
+    /// Hands over the records held back.
+    pub fn flush(&mut self) {
+        if self.batch.is_empty() {
+            return;
+        }
+        let batch = std::mem::replace(&mut self.batch, Vec::with_capacity(BATCH));
+        let n = batch.len() as u64;
+        if let Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) =
+            self.tx.try_send(Item::Ticks(batch))
+        {
+            self.dropped.fetch_add(n, Ordering::Relaxed);
+        }
+    }
+
+    /// A second feed for the records of processes (events, latency stamps).
+    pub fn records(&self) -> RecordFeed {
+        RecordFeed {
+            tx: self.tx.clone(),
+            gate: Gate::new(self.gate.decimation),
+            dropped: self.dropped.clone(),
+        }
+    }
+}
+
+impl Drop for Feed {
+    fn drop(&mut self) {
+        self.flush();
+    }
+}
+
+/// The events and latency stamps of one process's trace (a clone per process: the latency
+/// stamps of each agent are decimated as its ticks are).
+#[derive(Clone)]
+pub struct RecordFeed {
+    tx: SyncSender<Item>,
+    gate: Gate,
+    dropped: Arc<AtomicU64>,
+}
+
+impl RecordFeed {
+    /// `rec` of the trace `stem` (`agent-3`, `control-center`, …); records other than events
+    /// and latency stamps are the joined ticks' ([`Feed::tick`]) and ignored here.
+    pub fn record(&mut self, stem: &str, rec: &TraceRecord) {
+        match rec {
+            TraceRecord::Event { .. } => {}
+            TraceRecord::Latency { k, .. } if self.gate.keeps(*k) => {}
+            _ => return,
+        }
+        if self
+            .tx
+            .try_send(Item::Record(stem.to_string(), Box::new(rec.clone())))
+            .is_err()
+        {
+            self.dropped.fetch_add(1, Ordering::Relaxed);
+        }
+    }
+}
+
+/// Counts kept by the server's listener.
+#[derive(Default)]
+struct Clients {
+    connected: AtomicU64,
+    /// Subscriptions made so far, waited for by [`Live::wait_for_viewer`].
+    subscribed: Mutex<u64>,
+    changed: Condvar,
+}
+
+impl ServerListener for Clients {
+    fn on_client_connect(&self) {
+        self.connected.fetch_add(1, Ordering::Relaxed);
+    }
+
+    fn on_subscribe(&self, _client: Client, _channel: foxglove::websocket::ChannelView) {
+        let mut n = self
+            .subscribed
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        *n += 1;
+        self.changed.notify_all();
+    }
+}
+
+/// A running live server.
+pub struct Live {
+    addr: SocketAddr,
+    clients: Arc<Clients>,
+    thread: JoinHandle<Published>,
+    dropped: Arc<AtomicU64>,
+}
+
+impl std::fmt::Debug for Live {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Live").field("addr", &self.addr).finish()
+    }
+}
+
+/// What the server's thread did.
+#[derive(Debug, Default)]
+struct Published {
+    ticks: u64,
+    messages: u64,
+    error: Option<String>,
+}
+
+impl Live {
+    /// Starts the server of a run of `resolved` at `opts.addr`, its channels advertised, and
+    /// its thread; the feed the run hands its records to.
+    pub fn start(resolved: &Resolved, opts: &Options) -> Result<(Self, Feed)> {
+        if !(opts.rate_hz.is_finite() && opts.rate_hz > 0.0) {
+            bail!(
+                "--live-rate {}: a rate of ticks a second, > 0",
+                opts.rate_hz
+            );
+        }
+        let ctx = Context::new();
+        let mut channels = BTreeMap::new();
+        for (agent, name, schema) in topics::run_topics(resolved, opts.stamped) {
+            let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
+            let topic = topic_name(agent, name);
+            let c = ChannelBuilder::new(topic.as_str())
+                .message_encoding("json")
+                .schema(foxglove::Schema::new(schema.name, "jsonschema", text))
+                .context(&ctx)
+                .build_raw()
+                .with_context(|| format!("the live channel {topic}"))?;
+            channels.insert((agent, name), c);
+        }
+        let clients = Arc::new(Clients::default());
+        let server = WebSocketServer::new()
+            .name(format!("fdi-mas {}", resolved.scenario.name))
+            .bind(opts.addr.ip().to_string(), opts.addr.port())
+            .capabilities([Capability::Time])
+            .listener(clients.clone())
+            .context(&ctx)
+            .start_blocking()
+            .with_context(|| format!("--live: serving at {}", opts.addr))?;
+        let addr = SocketAddr::new(opts.addr.ip(), server.port());
+        let (tx, rx) = mpsc::sync_channel(QUEUED);
+        let dropped = Arc::new(AtomicU64::new(0));
+        let info = RunInfo::of(resolved.clone());
+        let publisher = Publisher {
+            detectors: Some(detectors::Stats::new(&info)),
+            info,
+            out: Out {
+                channels,
+                published: Published::default(),
+                buf: Vec::with_capacity(1 << 10),
+            },
+            dropped: dropped.clone(),
+            last_kept: None,
+        };
+        let thread = std::thread::Builder::new()
+            .name("live".into())
+            .spawn(move || publisher.run(&rx, server, ctx))
+            .context("starting the live server's thread")?;
+        let feed = Feed {
+            tx,
+            gate: Gate::new(Decimation::of(opts)),
+            batch: Vec::with_capacity(BATCH),
+            since: Instant::now(),
+            dropped: dropped.clone(),
+        };
+        Ok((
+            Self {
+                addr,
+                clients,
+                thread,
+                dropped,
+            },
+            feed,
+        ))
+    }
+
+    /// Waits until a viewer subscribed to a topic and made no further subscription for
+    /// [`SETTLED`] (its first subscriptions come one by one), at most `timeout`. Whether one did.
+    pub fn wait_for_viewer(&self, timeout: Duration) -> bool {
+        let end = Instant::now() + timeout;
+        let clients = &self.clients;
+        let mut n = clients
+            .subscribed
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        let mut seen = None;
+        loop {
+            let now = Instant::now();
+            if now >= end {
+                return seen.is_some();
+            }
+            if *n > 0 && seen == Some(*n) {
+                return true;
+            }
+            let wait = if *n > 0 { SETTLED } else { end - now };
+            seen = (*n > 0).then_some(*n);
+            n = clients
+                .changed
+                .wait_timeout(n, wait.min(end - now))
+                .unwrap_or_else(PoisonError::into_inner)
+                .0;
+        }
+    }
+
+    /// The address it listens on (the port the system gave for port 0).
+    pub fn addr(&self) -> SocketAddr {
+        self.addr
+    }
+
+    /// Waits for the thread to publish what the run handed over and stop the server (every
+    /// [`Feed`] must be dropped first), and says what it did.
+    pub fn finish(self) -> LiveStats {
+        let published = self.thread.join().unwrap_or_else(|_| Published {
+            error: Some("the live server's thread panicked".into()),
+            ..Published::default()
+        });
+        LiveStats {
+            address: format!("ws://{}", self.addr),
+            clients: self.clients.connected.load(Ordering::Relaxed),
+            ticks_published: published.ticks,
+            messages_published: published.messages,
+            records_dropped: self.dropped.load(Ordering::Relaxed),
+            error: published.error,
+        }
+    }
+}
+
+/// The channels of the run and what was published on them.
+struct Out {
+    channels: BTreeMap<(u32, &'static str), Arc<RawChannel>>,
+    published: Published,
+    buf: Vec<u8>,
+}
+
+impl Out {
+    /// Whether any channel has a subscriber.
+    fn watched(&self) -> bool {
+        self.channels.values().any(|c| c.has_sinks())
+    }
+}
+
+impl Sink for Out {
+    fn message(
+        &mut self,
+        agent: u32,
+        name: &'static str,
+        _schema: &Schema,
+        t: f64,
+        msg: &Value,
+    ) -> Result<()> {
+        let Some(c) = self.channels.get(&(agent, name)) else {
+            bail!(
+                "a message on {}, which the run's topics do not have",
+                topic_name(agent, name)
+            );
+        };
+        if !c.has_sinks() {
+            return Ok(());
+        }
+        self.buf.clear();
+        serde_json::to_writer(&mut self.buf, msg).context("a message")?;
+        c.log_with_meta(
+            &self.buf,
+            PartialMetadata {
+                log_time: Some(topics::log_time_ns(t)?),
+            },
+        );
+        self.published.messages += 1;
+        Ok(())
+    }
+}
+
+/// The server's thread: makes the messages of the ticks it keeps, for the channels a client
+/// subscribed to.
+struct Publisher {
+    info: RunInfo,
+    out: Out,
+    /// The detectors, fed every tick; `None` once a record was dropped.
+    detectors: Option<detectors::Stats>,
+    dropped: Arc<AtomicU64>,
+    /// The kept tick last published (its time broadcast).
+    last_kept: Option<u64>,
+}
+
+impl Publisher {
+    fn run(
+        mut self,
+        rx: &Receiver<Item>,
+        server: foxglove::WebSocketServerHandle,
+        ctx: Arc<Context>,
+    ) -> Published {
+        for item in rx {
+            let done = match item {
+                Item::Ticks(batch) => {
+                    if self.dropped.load(Ordering::Relaxed) > 0 {
+                        self.detectors = None;
+                    }
+                    batch
+                        .iter()
+                        .try_for_each(|(r, kept)| self.tick(r, *kept, &server))
+                }
+                Item::Record(stem, rec) => self.record(&stem, &rec),
+            };
+            if let Err(e) = done {
+                self.out.published.error.get_or_insert(format!("{e:#}"));
+            }
+        }
+        // The clients' queues are sent before the server stops (it drops what they hold).
+        let end = Instant::now() + LINGER;
+        while server.client_count() > 0 && Instant::now() < end {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        server.stop().wait_blocking();
+        drop(ctx);
+        self.out.published
+    }
+
+    /// Joined tick `r`: its detector statistics, and when `kept` and watched, its messages (the
+    /// first record of a kept tick broadcasts its time).
+    fn tick(
+        &mut self,
+        r: &TickRecord,
+        kept: bool,
+        server: &foxglove::WebSocketServerHandle,
+    ) -> Result<()> {
+        let k = r.center.k;
+        if kept && self.last_kept != Some(k) {
+            self.last_kept = Some(k);
+            self.out.published.ticks += 1;
+            server.broadcast_time(topics::log_time_ns(tick_time(k, self.info.dt))?);
+        }
+        let kept = kept && self.out.watched();
+        let Self {
+            info,
+            out,
+            detectors,
+            ..
+        } = self;
+        if let Some(stats) = detectors {
+            // Every tick, kept or not: a statistic follows every tick.
+            if let Some(tick) = stats.observe(info, r) {
+                if kept {
+                    detectors::message(out, &tick)?;
+                }
+            }
+        }
+        if !kept {
+            return Ok(());
+        }
+        let recs = [
+            Some(TraceRecord::Agent(r.agent)),
+            Some(TraceRecord::Attack(r.attack)),
+            Some(TraceRecord::Center(r.center)),
+            r.actuation.map(TraceRecord::Actuation),
+            r.monitor.map(TraceRecord::Monitor),
+        ];
+        for rec in recs.iter().flatten() {
+            topics::record(out, info, Path::new("live"), "live", rec)?;
+        }
+        Ok(())
+    }
+
+    fn record(&mut self, stem: &str, rec: &TraceRecord) -> Result<()> {
+        topics::record(&mut self.out, &self.info, Path::new(stem), stem, rec)
+    }
+}

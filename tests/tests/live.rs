@@ -1,0 +1,391 @@
+//! The live view (`run --live`, docs/traces.md): a client that speaks the Foxglove WebSocket
+//! protocol (`tests/python/live_client.py`, Python's `websockets`) watches real runs.
+//!
+//! * On both engines and both clocks it is told the run's channels with the MCAP export's
+//!   encodings and schemas (the same bytes), and receives, on the topics it subscribed to,
+//!   exactly the export's messages of the ticks the stream keeps (every K-th: the same log times,
+//!   the same bytes), and the run's time broadcast at each.
+//! * A client that never reads, one that leaves mid-run and garbage bytes on the port change
+//!   nothing of the run: it ends normally, its digest is the in-process engine's, its traces are
+//!   whole.
+//!
+//! Python comes from `FDI_PYTHON` (`cargo test-all` makes `target/py-venv` with
+//! `tests/python/requirements.txt`); without it the tests say they are skipped, unless
+//! `FDI_REQUIRE_PYTHON` is set (CI), where they fail.
+
+use std::collections::BTreeMap;
+use std::io::{BufRead, BufReader, Write};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::sync::mpsc;
+use std::time::Duration;
+
+use fdi_tests::{json, launch, launch_plain, python, repo_path, run_dir_of, spawn, Scratch};
+use serde_json::Value;
+
+const WATCHDOG: Duration = Duration::from_secs(300);
+
+/// A run of `fdi-launch` with `--live 127.0.0.1:0 --live-wait 60`: its address, once it said it.
+struct LiveRun {
+    child: Child,
+    addr: String,
+    stderr: std::thread::JoinHandle<String>,
+}
+
+impl LiveRun {
+    fn start(args: &[&str], out: &Path) -> Self {
+        let mut all = args.to_vec();
+        all.extend(["--live", "127.0.0.1:0", "--live-wait", "60", "--json"]);
+        let mut child = spawn(&all, out);
+        let stderr = child.stderr.take().expect("stderr");
+        let (tx, rx) = mpsc::channel();
+        let stderr = std::thread::spawn(move || {
+            let mut all = String::new();
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                if let Some(rest) = line.strip_prefix("fdi-launch: live at ws://") {
+                    let addr = rest.split_whitespace().next().unwrap_or_default();
+                    let _ = tx.send(addr.to_string());
+                }
+                all.push_str(&line);
+                all.push('\n');
+            }
+            all
+        });
+        let addr = rx
+            .recv_timeout(Duration::from_secs(120))
+            .expect("the launcher says where it serves");
+        Self {
+            child,
+            addr,
+            stderr,
+        }
+    }
+
+    /// Waits for the run's end; its summary.
+    fn finish(self) -> Value {
+        let out = fdi_tests::wait_with_watchdog(self.child, WATCHDOG);
+        let stderr = self.stderr.join().expect("the stderr reader");
+        json(&Output {
+            stderr: stderr.into_bytes(),
+            ..out
+        })
+    }
+}
+
+/// A test client, and the file it writes.
+struct Client {
+    child: Child,
+    out: PathBuf,
+}
+
+/// Starts the test client on `addr` with `args`, writing into `dir`.
+fn client(python: &Path, addr: &str, args: &[&str], dir: &Path) -> Client {
+    static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let out = dir.join(format!("client-{n}.json"));
+    let child = Command::new(python)
+        .arg(repo_path("tests/python/live_client.py"))
+        .arg(addr)
+        .args(args)
+        .arg("--out")
+        .arg(&out)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("starting the live client");
+    Client { child, out }
+}
+
+/// What a client wrote, once it ended (successfully).
+fn client_output(c: Client) -> Value {
+    let out = fdi_tests::wait_with_watchdog(c.child, WATCHDOG);
+    assert!(
+        out.status.success(),
+        "the live client failed ({}):\n{}",
+        out.status,
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read(&c.out).expect("the client's file");
+    serde_json::from_slice(&text).expect("the client's JSON")
+}
+
+/// The MCAP export of `run_dir`: per topic its channel (encoding, schema name, schema encoding,
+/// schema text) and its messages (log time, text).
+type Channel = (String, String, String, String);
+fn exported(
+    run_dir: &Path,
+) -> (
+    BTreeMap<String, Channel>,
+    BTreeMap<String, Vec<(u64, String)>>,
+) {
+    let run = run_dir.to_string_lossy();
+    let out = launch_plain(&["trace", "export", &run, "--format", "mcap"], WATCHDOG);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let bytes = std::fs::read(run_dir.join("export/run.mcap")).expect("run.mcap");
+    let mut channels = BTreeMap::new();
+    let mut messages: BTreeMap<String, Vec<(u64, String)>> = BTreeMap::new();
+    for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
+        let m = m.expect("a message");
+        let c = &m.channel;
+        let s = c.schema.as_ref().expect("a schema");
+        channels.insert(
+            c.topic.clone(),
+            (
+                c.message_encoding.clone(),
+                s.name.clone(),
+                s.encoding.clone(),
+                String::from_utf8(s.data.to_vec()).expect("a JSON schema"),
+            ),
+        );
+        messages.entry(c.topic.clone()).or_default().push((
+            m.log_time,
+            String::from_utf8(m.data.to_vec()).expect("JSON"),
+        ));
+    }
+    (channels, messages)
+}
+
+/// The tick of a message's text.
+fn tick_of(text: &str) -> u64 {
+    serde_json::from_str::<Value>(text).expect("JSON")["k"]
+        .as_u64()
+        .expect("k")
+}
+
+/// Runs `args` live with a client subscribed to `topics`, and checks what it saw against the
+/// run's MCAP export, the stream keeping every `every`-th tick of `ticks`. The run's summary.
+fn watched_run(python: &Path, args: &[&str], topics: &[&str], every: u64, ticks: u64) -> Value {
+    let out = Scratch::new("live");
+    let run = LiveRun::start(args, &out.0);
+    let mut client_args = Vec::new();
+    for t in topics {
+        client_args.extend(["--topic", t]);
+    }
+    let seen = client_output(client(python, &run.addr, &client_args, &out.0));
+    let summary = run.finish();
+    let run_dir: PathBuf = run_dir_of(&summary);
+    let (channels, messages) = exported(&run_dir);
+
+    // The channels: every topic of the recording, with its very encoding and schema.
+    let advertised = seen["channels"].as_object().expect("channels");
+    for (topic, (encoding, name, schema_encoding, schema)) in &channels {
+        let c = advertised
+            .get(topic)
+            .unwrap_or_else(|| panic!("{topic}: recorded but not advertised"));
+        assert_eq!(c["encoding"], encoding.as_str(), "{topic}");
+        assert_eq!(c["schemaName"], name.as_str(), "{topic}");
+        assert_eq!(c["schemaEncoding"], schema_encoding.as_str(), "{topic}");
+        assert_eq!(c["schema"], schema.as_str(), "{topic}: another schema");
+    }
+    for topic in advertised.keys() {
+        assert!(
+            channels.contains_key(topic) || topic == "/events",
+            "{topic}: advertised, not in the recording"
+        );
+    }
+
+    // The messages: the recording's of the kept ticks, to the byte.
+    let kept = ticks.div_ceil(every);
+    for topic in topics {
+        let want: Vec<(u64, String)> = messages[*topic]
+            .iter()
+            .filter(|(_, text)| tick_of(text) % every == 0)
+            .cloned()
+            .collect();
+        assert_eq!(
+            want.len() as u64,
+            kept,
+            "{topic}: the recording's kept ticks"
+        );
+        let got: Vec<(u64, String)> = seen["messages"][*topic]
+            .as_array()
+            .expect("messages")
+            .iter()
+            .map(|m| {
+                (
+                    m[0].as_u64().expect("a log time"),
+                    m[1].as_str().expect("text").to_string(),
+                )
+            })
+            .collect();
+        assert_eq!(got.len(), want.len(), "{topic}: messages received");
+        for (g, w) in got.iter().zip(&want) {
+            assert_eq!(g, w, "{topic}");
+        }
+    }
+    // The time, broadcast at each kept tick.
+    let times: Vec<u64> = seen["times"]
+        .as_array()
+        .expect("times")
+        .iter()
+        .map(|t| t.as_u64().expect("ns"))
+        .collect();
+    let want: Vec<u64> = messages[topics[0]]
+        .iter()
+        .filter(|(_, text)| tick_of(text) % every == 0)
+        .map(|(t, _)| *t)
+        .collect();
+    assert_eq!(times, want, "the time broadcasts");
+    let live = &summary["live"];
+    assert_eq!(live["clients"], 1, "{live}");
+    assert_eq!(live["ticks_published"], kept, "{live}");
+    assert_eq!(live["records_dropped"], 0, "{live}");
+    summary
+}
+
+/// The digest of the paper scenario for `seconds` on the in-process engine, without a viewer.
+fn inproc_digest(seconds: &str) -> Value {
+    let out = Scratch::new("live-ref");
+    let s = json(&launch(
+        &[
+            "run",
+            "--engine",
+            "inproc",
+            "--duration-s",
+            seconds,
+            "--json",
+        ],
+        &out.0,
+        WATCHDOG,
+    ));
+    s["trace_digest"].clone()
+}
+
+#[test]
+fn a_viewer_sees_the_recording_s_channels_and_every_kept_tick_on_both_engines_and_clocks() {
+    let Some(py) = python() else { return };
+    let topics = [
+        "/agent1/tracking_error",
+        "/agent1/estimate",
+        "/agent1/detectors",
+        "/agent4/attack",
+    ];
+    let reference = inproc_digest("1");
+    // Paced at half real time, 500 ticks a second at most 100 kept: every 5th tick.
+    let pace = ["--pace", "0.5", "--live-rate", "100", "--duration-s", "1"];
+    let inproc = watched_run(
+        &py,
+        &[&["run", "--engine", "inproc"][..], &pace].concat(),
+        &topics,
+        5,
+        1000,
+    );
+    assert_eq!(
+        inproc["trace_digest"], reference,
+        "watched, paced: the same run"
+    );
+    let ipc = watched_run(
+        &py,
+        &[&["run", "--engine", "ipc"][..], &pace].concat(),
+        &topics,
+        5,
+        1000,
+    );
+    assert_eq!(
+        ipc["trace_digest"], reference,
+        "watched, paced: the same run"
+    );
+    // Realtime: 1000 ticks a second, 100 kept; the latency stamps too.
+    let realtime = [
+        "run",
+        "--engine",
+        "ipc",
+        "--clock",
+        "realtime",
+        "--live-rate",
+        "100",
+        "--duration-s",
+        "1",
+    ];
+    let mut rt_topics = topics.to_vec();
+    rt_topics.push("/agent2/latency");
+    watched_run(&py, &realtime, &rt_topics, 10, 1000);
+}
+
+#[test]
+fn viewers_that_never_read_leave_or_send_garbage_change_nothing_of_the_run() {
+    let Some(py) = python() else { return };
+    let reference = inproc_digest("3");
+    let out = Scratch::new("live-bad");
+    // At real time, every tick kept: some 40 MB of messages for a client of every topic, more
+    // than its socket and its queue in the server hold.
+    let run = LiveRun::start(
+        &[
+            "run",
+            "--engine",
+            "ipc",
+            "--duration-s",
+            "3",
+            "--pace",
+            "1",
+            "--live-rate",
+            "1000",
+        ],
+        &out.0,
+    );
+    let every: Vec<String> = (1..=4)
+        .flat_map(|a| {
+            fdi_report::topics::topics()
+                .into_iter()
+                .filter(|(n, _)| !matches!(*n, "latency" | "actuation" | "monitor"))
+                .map(move |(n, _)| format!("/agent{a}/{n}"))
+        })
+        .collect();
+    let mut args = vec!["--mode", "never-read"];
+    for t in &every {
+        args.extend(["--topic", t.as_str()]);
+    }
+    let never = client(&py, &run.addr, &args, &out.0);
+    let leaves = client(
+        &py,
+        &run.addr,
+        &[
+            "--mode",
+            "leave",
+            "--leave-after",
+            "5",
+            "--topic",
+            "/agent2/state",
+        ],
+        &out.0,
+    );
+    // Garbage: a request that is no HTTP, then bytes that are no WebSocket frame after a
+    // handshake that asks for no subprotocol.
+    for bytes in [
+        &b"\x00\xff\x13garbage\r\n\r\n"[..],
+        &b"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n\
+           Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n\r\n\
+           \x82\xff\x00\x00\x00\x00\x00\x00\x00\x10garbage"[..],
+    ] {
+        if let Ok(mut s) = std::net::TcpStream::connect(&run.addr) {
+            let _ = s.write_all(bytes);
+        }
+    }
+    let summary = run.finish();
+    assert_eq!(
+        summary["trace_digest"], reference,
+        "the run as without viewers"
+    );
+    assert_eq!(summary["ticks"], 3000);
+    assert!(summary.get("partial").is_none(), "{summary}");
+    let run_dir = run_dir_of(&summary);
+    for p in ["agent-1", "agent-4", "attacker", "control-center"] {
+        let trace = run_dir.join(format!("traces/{p}.trace"));
+        assert!(trace.exists(), "{}: kept whole", trace.display());
+    }
+    assert!(summary["live"]["clients"].as_u64().expect("clients") >= 2);
+    let left = client_output(leaves);
+    assert_eq!(
+        left["messages"]["/agent2/state"].as_array().map(Vec::len),
+        Some(5),
+        "the client that left read its 5 messages: {}",
+        summary["live"]
+    );
+    // The one that never read was let go when the server stopped.
+    assert_eq!(client_output(never)["mode"], "never-read");
+}
