@@ -110,15 +110,13 @@ fn client_output(c: Client) -> Value {
     serde_json::from_slice(&text).expect("the client's JSON")
 }
 
-/// The MCAP export of `run_dir`: per topic its channel (encoding, schema name, schema encoding,
-/// schema text) and its messages (log time, text).
+/// A channel: encoding, schema name, schema encoding, schema text.
 type Channel = (String, String, String, String);
-fn exported(
-    run_dir: &Path,
-) -> (
-    BTreeMap<String, Channel>,
-    BTreeMap<String, Vec<(u64, String)>>,
-) {
+/// Per topic, its messages: log time, text.
+type Messages = BTreeMap<String, Vec<(u64, String)>>;
+
+/// The MCAP export of `run_dir`: per topic its channel and its messages.
+fn exported(run_dir: &Path) -> (BTreeMap<String, Channel>, Messages) {
     let run = run_dir.to_string_lossy();
     let out = launch_plain(&["trace", "export", &run, "--format", "mcap"], WATCHDOG);
     assert!(
@@ -128,7 +126,7 @@ fn exported(
     );
     let bytes = std::fs::read(run_dir.join("export/run.mcap")).expect("run.mcap");
     let mut channels = BTreeMap::new();
-    let mut messages: BTreeMap<String, Vec<(u64, String)>> = BTreeMap::new();
+    let mut messages = Messages::new();
     for m in mcap::MessageStream::new(&bytes).expect("an MCAP file") {
         let m = m.expect("a message");
         let c = &m.channel;
@@ -194,7 +192,7 @@ fn watched_run(python: &Path, args: &[&str], topics: &[&str], every: u64, ticks:
     for topic in topics {
         let want: Vec<(u64, String)> = messages[*topic]
             .iter()
-            .filter(|(_, text)| tick_of(text) % every == 0)
+            .filter(|(_, text)| tick_of(text).is_multiple_of(every))
             .cloned()
             .collect();
         assert_eq!(
@@ -227,7 +225,7 @@ fn watched_run(python: &Path, args: &[&str], topics: &[&str], every: u64, ticks:
         .collect();
     let want: Vec<u64> = messages[topics[0]]
         .iter()
-        .filter(|(_, text)| tick_of(text) % every == 0)
+        .filter(|(_, text)| tick_of(text).is_multiple_of(every))
         .map(|(t, _)| *t)
         .collect();
     assert_eq!(times, want, "the time broadcasts");
