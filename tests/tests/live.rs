@@ -387,3 +387,135 @@ fn viewers_that_never_read_leave_or_send_garbage_change_nothing_of_the_run() {
     // The one that never read was let go when the server stopped.
     assert_eq!(client_output(never)["mode"], "never-read");
 }
+
+/// Whether `path` (`/agent<id>/<topic>` then, after `sep`, `field` or `field[i]`) names a field
+/// of a topic of the paper's run; its index within the robots' links.
+fn field_exists(path: &str, sep: char) -> Result<(), String> {
+    use fdi_report::topics::{topics, Ty};
+    let rest = path
+        .strip_prefix("/agent")
+        .ok_or_else(|| format!("{path}: not an agent's topic"))?;
+    let (id, rest) = rest
+        .split_once('/')
+        .ok_or_else(|| format!("{path}: no topic"))?;
+    let id: u32 = id.parse().map_err(|_| format!("{path}: agent {id}"))?;
+    if !(1..=4).contains(&id) {
+        return Err(format!("{path}: the paper has robots 1-4"));
+    }
+    let (topic, field) = rest
+        .rsplit_once(sep)
+        .ok_or_else(|| format!("{path}: no field"))?;
+    let (field, index) = match field.split_once('[') {
+        Some((f, i)) => {
+            let i: usize = i
+                .trim_end_matches(']')
+                .parse()
+                .map_err(|_| format!("{path}: index"))?;
+            (f, Some(i))
+        }
+        None => (field, None),
+    };
+    let (_, schema) = topics()
+        .into_iter()
+        .find(|(n, _)| *n == topic)
+        .ok_or_else(|| format!("{path}: no topic {topic}"))?;
+    let (_, ty, _) = schema
+        .fields
+        .iter()
+        .find(|(n, _, _)| *n == field)
+        .ok_or_else(|| format!("{path}: {topic} has no field {field}"))?;
+    match (ty, index) {
+        (Ty::Nums, Some(i)) if i < 2 => Ok(()),
+        (Ty::Nums, _) => Err(format!("{path}: a link of the paper's two")),
+        (_, None) => Ok(()),
+        (_, Some(_)) => Err(format!("{path}: {field} is not an array")),
+    }
+}
+
+/// The values of attribute `attr` of every element `<tag …>` of `xml`, and the text of every
+/// `<tag>…</tag>` for `text_of`.
+fn xml_values(xml: &str, tag: &str, attr: &str) -> Vec<String> {
+    let open = format!("<{tag} ");
+    let key = format!("{attr}=\"");
+    xml.match_indices(&open)
+        .filter_map(|(at, _)| {
+            let rest = &xml[at..];
+            let end = rest.find('>')?;
+            let el = &rest[..end];
+            let v = el.find(&key)? + key.len();
+            Some(el[v..v + el[v..].find('"')?].to_string())
+        })
+        .collect()
+}
+
+fn xml_texts(xml: &str, tag: &str) -> Vec<String> {
+    let (open, close) = (format!("<{tag}>"), format!("</{tag}>"));
+    xml.match_indices(&open)
+        .filter_map(|(at, _)| {
+            let from = at + open.len();
+            Some(xml[from..from + xml[from..].find(&close)?].to_string())
+        })
+        .collect()
+}
+
+#[test]
+fn the_shipped_layouts_name_only_fields_of_the_run_s_topics_and_the_paper_s_bounds() {
+    use fdi_report::report::{PAPER_POSITION_BOUND_RAD, PAPER_VELOCITY_BOUND_RAD_S};
+    let bounds = [
+        PAPER_POSITION_BOUND_RAD,
+        -PAPER_POSITION_BOUND_RAD,
+        PAPER_VELOCITY_BOUND_RAD_S,
+        -PAPER_VELOCITY_BOUND_RAD_S,
+    ];
+    // Foxglove: every plot path is a field of a topic, or a reference line at a paper bound.
+    let text = std::fs::read_to_string(repo_path("examples/live/paper-figures.foxglove.json"))
+        .expect("the Foxglove layout");
+    let layout: Value = serde_json::from_str(&text).expect("JSON");
+    let mut fields = 0;
+    let mut lines = 0;
+    for (id, config) in layout["configById"].as_object().expect("configById") {
+        for p in config["paths"].as_array().into_iter().flatten() {
+            let value = p["value"].as_str().expect("a path");
+            match value.parse::<f64>() {
+                Ok(x) => {
+                    assert!(bounds.contains(&x), "{id}: {x} is no bound of the paper");
+                    lines += 1;
+                }
+                Err(_) => {
+                    field_exists(value, '.').unwrap_or_else(|e| panic!("{id}: {e}"));
+                    fields += 1;
+                }
+            }
+        }
+    }
+    assert_eq!((fields, lines), (64, 16), "every robot's four figures");
+    // PlotJuggler: every curve is a field of a topic, or a series made from one (the bounds).
+    let xml = std::fs::read_to_string(repo_path("examples/live/paper-figures.plotjuggler.xml"))
+        .expect("the PlotJuggler layout");
+    let snippets = xml_values(&xml, "snippet", "name");
+    for source in xml_texts(&xml, "linked_source") {
+        field_exists(&source, '/').unwrap_or_else(|e| panic!("{e}"));
+    }
+    for f in xml_texts(&xml, "function") {
+        let x: f64 = f
+            .trim()
+            .strip_prefix("return ")
+            .and_then(|x| x.parse().ok())
+            .unwrap_or_else(|| panic!("{f}: a bound"));
+        assert!(bounds.contains(&x), "{x} is no bound of the paper");
+    }
+    let curves = xml_values(&xml, "curve", "name");
+    assert_eq!(curves.len(), 80, "every robot's four figures");
+    for c in &curves {
+        if !snippets.contains(c) {
+            field_exists(c, '/').unwrap_or_else(|e| panic!("{e}"));
+        }
+    }
+    assert_eq!(snippets.len(), 16);
+    // The check can fail: a renamed topic or field is refused.
+    assert!(field_exists("/agent1/tracking_error.e_rad[0]", '.').is_ok());
+    assert!(field_exists("/agent1/tracking_errors.e_rad[0]", '.').is_err());
+    assert!(field_exists("/agent1/tracking_error/e_rads[0]", '/').is_err());
+    assert!(field_exists("/agent5/estimate.s_hat_rad_s[0]", '.').is_err());
+    assert!(field_exists("/agent1/estimate.s_hat_rad_s[2]", '.').is_err());
+}
