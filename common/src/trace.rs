@@ -412,11 +412,26 @@ impl Drop for TraceWriter {
     }
 }
 
+/// What a [`TraceReader`] reads from: a file, a pipe, or a file followed as it grows.
+struct Input(Box<dyn Read + Send>);
+
+impl Read for Input {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        self.0.read(buf)
+    }
+}
+
+impl std::fmt::Debug for Input {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Input")
+    }
+}
+
 /// Reads a trace frame by frame.
 #[derive(Debug)]
 pub struct TraceReader {
     path: PathBuf,
-    input: BufReader<File>,
+    input: BufReader<Input>,
     offset: u64,
     /// Byte offset of the frame read last.
     last: u64,
@@ -443,7 +458,7 @@ impl TraceReader {
                 kind: file_kind(meta.file_type()),
             });
         }
-        Self::start(file, path, meta.len())
+        Self::start(Box::new(file), path, meta.len())
     }
 
     /// Reads a trace as it is written, from the read end of a pipe (`file`) that `path` names:
@@ -451,16 +466,22 @@ impl TraceReader {
     /// trace). Frame lengths are still bounded by the limits of a frame; the file's length is
     /// unknown.
     pub fn from_pipe(file: File, path: &Path) -> Result<Self, TraceError> {
-        Self::start(file, path, u64::MAX)
+        Self::start(Box::new(file), path, u64::MAX)
     }
 
-    fn start(file: File, path: &Path, file_len: u64) -> Result<Self, TraceError> {
+    /// Reads the trace `path` names from `input`, a reader that blocks until the next bytes are
+    /// written or the trace ended (a file followed as its process writes it), as a pipe is.
+    pub fn follow(input: impl Read + Send + 'static, path: &Path) -> Result<Self, TraceError> {
+        Self::start(Box::new(input), path, u64::MAX)
+    }
+
+    fn start(file: Box<dyn Read + Send>, path: &Path, file_len: u64) -> Result<Self, TraceError> {
         let io = |op, cause| TraceError::Io {
             op,
             path: path.to_path_buf(),
             cause,
         };
-        let mut input = BufReader::with_capacity(1 << 16, file);
+        let mut input = BufReader::with_capacity(1 << 16, Input(file));
         let mut magic = [0u8; 8];
         if read_full(&mut input, &mut magic).map_err(|e| io(TraceOp::Reading, e))? < 8
             || &magic != MAGIC

@@ -279,6 +279,28 @@ impl ServerListener for Clients {
     }
 }
 
+/// Whether a viewer of a live server subscribed to a topic.
+#[derive(Clone)]
+pub struct Watcher(Arc<Clients>);
+
+impl Watcher {
+    /// Waits until a viewer subscribed to a topic (at any time since the start), at most
+    /// `timeout`; whether one did.
+    pub fn wait(&self, timeout: Duration) -> bool {
+        let n = self
+            .0
+            .subscribed
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner);
+        let (n, _) = self
+            .0
+            .changed
+            .wait_timeout_while(n, timeout, |n| *n == 0)
+            .unwrap_or_else(PoisonError::into_inner);
+        *n > 0
+    }
+}
+
 /// A running live server.
 pub struct Live {
     addr: SocketAddr,
@@ -396,6 +418,11 @@ impl Live {
                 .unwrap_or_else(PoisonError::into_inner)
                 .0;
         }
+    }
+
+    /// Whether a viewer subscribed, for another thread.
+    pub fn watcher(&self) -> Watcher {
+        Watcher(self.clients.clone())
     }
 
     /// The address it listens on (the port the system gave for port 0).

@@ -77,6 +77,12 @@ pub struct LatencyArgs {
     /// the offset measured at the start, and end-to-end is one clock's (the agent's).
     #[arg(long, value_name = "FILE")]
     pub hosts: Option<PathBuf>,
+    /// Serve the measured run live (as `run --live`), to measure what a viewer costs.
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
+    pub live: Option<std::net::SocketAddr>,
+    /// Start the measured run once a viewer subscribed (as `run --live-wait`), at most SECONDS.
+    #[arg(long, value_name = "SECONDS", requires = "live")]
+    pub live_wait: Option<f64>,
 }
 
 #[derive(Debug, Args)]
@@ -269,6 +275,22 @@ fn latency_scenario(a: &LatencyArgs) -> Result<Resolved> {
     Ok(r)
 }
 
+/// The live server `a` asks for.
+fn live_serve(a: &LatencyArgs) -> Result<Option<crate::run::LiveServe>> {
+    let wait = match a.live_wait {
+        Some(w) => Some(
+            std::time::Duration::try_from_secs_f64(w)
+                .map_err(|_| anyhow::anyhow!("--live-wait {w}: seconds, finite and ≥ 0"))?,
+        ),
+        None => None,
+    };
+    Ok(a.live.map(|addr| crate::run::LiveServe {
+        addr,
+        rate_hz: fdi_live::Options::DEFAULT_RATE_HZ,
+        wait,
+    }))
+}
+
 /// A whole realtime run and the timer probe's wake-ups beside it.
 struct MeasuredRun {
     dir: PathBuf,
@@ -303,7 +325,7 @@ fn run_beside_probe(
                 placement: placement.clone(),
                 traces: crate::run::Traces::Full,
                 stop: stop.clone(),
-                live: None,
+                live: live_serve(a)?,
                 pace: None,
             },
             deployment.as_ref(),
@@ -570,6 +592,8 @@ fn transport(a: &TransportArgs, stop: &Stop) -> Result<ExitCode> {
             out: a.out.clone(),
             placement: Default::default(),
             hosts: None,
+            live: None,
+            live_wait: None,
         },
         stop,
     )?;

@@ -6,6 +6,7 @@
 
 pub mod certs;
 pub mod disk;
+pub mod follow;
 pub mod hosts;
 pub mod outputs;
 pub mod program;
@@ -275,24 +276,37 @@ fn execute_inproc_watched<A: Attacker>(
         None => None,
     };
     let (live, feed) = start_live(r, Engine::Inproc, opts)?.unzip();
-    let mut records = RecordThread::start(Books::new(r), writers, feed)?;
+    // With whole traces, a viewer's thread follows them (nothing is read while nobody
+    // watches); otherwise the records go to the server as they are made.
+    let (direct, followed) = match (traces, feed) {
+        (Traces::Full, Some(feed)) => (None, Some(feed)),
+        (_, feed) => (feed, None),
+    };
     let mut pacer = opts.pace.map(|factor| Pacer {
         start: std::time::Instant::now(),
         factor,
         dt: r.scenario.control_period_s,
         last: None,
     });
-    let ticked = tick_inproc_any_with(r, attacker, |rec| {
-        if let Some(p) = &mut pacer {
-            p.wait(rec.center.k);
-        }
-        records.push(rec);
-    })
-    .context("in-process engine")?;
-    // The run ends when its records are entered and written: the wait for that counts.
-    let waited = std::time::Instant::now();
-    let books = records.finish()?;
-    let wall_s = ticked.wall_s + waited.elapsed().as_secs_f64();
+    let run = || -> Result<_> {
+        let mut records = RecordThread::start(Books::new(r), writers, direct)?;
+        let ticked = tick_inproc_any_with(r, attacker, |rec| {
+            if let Some(p) = &mut pacer {
+                p.wait(rec.center.k);
+            }
+            records.push(rec);
+        })
+        .context("in-process engine")?;
+        // The run ends when its records are entered and written: the wait for that counts.
+        let waited = std::time::Instant::now();
+        let books = records.finish()?;
+        Ok((ticked, books, waited.elapsed().as_secs_f64()))
+    };
+    let (ticked, books, waited) = match (&live, followed) {
+        (Some(live), Some(feed)) => run_followed(r, dir, &opts.stop, (live, feed), run),
+        _ => run(),
+    }?;
+    let wall_s = ticked.wall_s + waited;
     let mut summary = books.summary(r, ticked.ticks, wall_s, attacker.name());
     summary.live = live.map(fdi_live::Live::finish);
     output::write_run_summary(dir, &summary, traces)?;
@@ -476,14 +490,18 @@ fn execute_ipc(
         progress,
         replay: false,
         placement: placement.clone(),
-        // A live run is joined as it runs, from the processes' pipes.
-        pipes: traces != Traces::Full || feed.is_some(),
+        pipes: traces != Traces::Full,
         deployment: deployment.cloned(),
         stop: opts.stop.clone(),
         pace: opts.pace,
     };
     let (outcome, mut joined, write_error) = if !opts.pipes {
-        let outcome = runtime::run_ipc(r, &opts)?;
+        let outcome = match (&live, feed) {
+            (Some(live), Some(feed)) => run_followed(r, dir, &opts.stop, (live, feed), || {
+                runtime::run_ipc(r, &opts)
+            }),
+            _ => runtime::run_ipc(r, &opts),
+        }?;
         let joined = fdi_report::join::join_run(r, dir, outcome.wall_s, |_| {})?;
         (outcome, joined, None)
     } else {
@@ -538,6 +556,37 @@ fn execute_ipc(
         bail!("a trace could not be kept: {e}; summary.json covers every tick of the run");
     }
     Ok(joined.summary)
+}
+
+/// Runs `run` (which writes the traces of a run of `r` into `run_dir`) with a thread that
+/// follows those traces into the live server's `feed` once a viewer subscribed ([`follow`]).
+fn run_followed<T>(
+    r: &Resolved,
+    run_dir: &Path,
+    stop: &Stop,
+    (live, feed): (&fdi_live::Live, fdi_live::Feed),
+    run: impl FnOnce() -> T,
+) -> T {
+    let over = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let watcher = live.watcher();
+    std::thread::scope(|s| {
+        let follower = std::thread::Builder::new()
+            .name("live-follow".into())
+            .spawn_scoped(s, || {
+                follow::follow_run(r, run_dir, feed, &watcher, &over, stop)
+            });
+        if let Err(e) = &follower {
+            eprintln!("fdi-launch: warning: the live view could not start its thread: {e}");
+        }
+        let result = run();
+        over.store(true, std::sync::atomic::Ordering::Release);
+        match follower.map(std::thread::ScopedJoinHandle::join) {
+            Ok(Ok(Ok(()))) | Err(_) => {}
+            Ok(Ok(Err(e))) => eprintln!("fdi-launch: warning: the live view stopped: {e:#}"),
+            Ok(Err(_)) => eprintln!("fdi-launch: warning: the live view's thread panicked"),
+        }
+        result
+    })
 }
 
 /// Validates a scenario after command-line overrides (duration, seed, attack, ...) changed
