@@ -279,6 +279,13 @@ impl ServerListener for Clients {
     }
 }
 
+/// Lowers the calling thread's scheduling priority to the least (nice 19): the live view's
+/// threads give way to the run's processes and the launcher's own. Best effort: a system that
+/// refuses leaves the priority as it was.
+pub fn yield_to_the_run() {
+    let _ = rustix::process::setpriority_process(None, 19);
+}
+
 /// Whether a viewer of a live server subscribed to a topic.
 #[derive(Clone)]
 pub struct Watcher(Arc<Clients>);
@@ -352,10 +359,7 @@ impl Live {
             .bind(opts.addr.ip().to_string(), opts.addr.port())
             .capabilities([Capability::Time])
             .listener(clients.clone())
-            .context(&ctx)
-            .start_blocking()
-            .with_context(|| format!("--live: serving at {}", opts.addr))?;
-        let addr = SocketAddr::new(opts.addr.ip(), server.port());
+            .context(&ctx);
         let (tx, rx) = mpsc::sync_channel(QUEUED);
         let dropped = Arc::new(AtomicU64::new(0));
         let info = RunInfo::of(resolved.clone());
@@ -370,10 +374,30 @@ impl Live {
             dropped: dropped.clone(),
             last_kept: None,
         };
+        // The server is started on the thread, which gives way to the run: the threads of its
+        // runtime, made there, inherit that.
+        let (ready_tx, ready) = mpsc::sync_channel(1);
         let thread = std::thread::Builder::new()
             .name("live".into())
-            .spawn(move || publisher.run(&rx, server, ctx))
+            .spawn(move || {
+                yield_to_the_run();
+                match server.start_blocking() {
+                    Ok(server) => {
+                        let _ = ready_tx.send(Ok(server.port()));
+                        publisher.run(&rx, server, ctx)
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e));
+                        Published::default()
+                    }
+                }
+            })
             .context("starting the live server's thread")?;
+        let port = ready
+            .recv()
+            .context("the live server's thread ended before the server started")?
+            .with_context(|| format!("--live: serving at {}", opts.addr))?;
+        let addr = SocketAddr::new(opts.addr.ip(), port);
         let feed = Feed {
             tx,
             gate: Gate::new(Decimation::of(opts)),

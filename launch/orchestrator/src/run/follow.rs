@@ -98,6 +98,7 @@ pub fn follow_run(
     over: &Arc<AtomicBool>,
     stop: &Stop,
 ) -> Result<()> {
+    fdi_live::yield_to_the_run();
     while !watcher.wait(POLL * 5) {
         if over.load(Ordering::Acquire) {
             return Ok(());
