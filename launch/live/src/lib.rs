@@ -4,12 +4,14 @@
 //! stamped with the simulated time of their tick, which the server also broadcasts so that a
 //! viewer's timeline follows the run.
 //!
-//! The run never waits for it. The engine's (or the launcher's join's) records go through a
-//! bounded queue ([`Feed`]) to a thread of its own that makes the messages; a record that finds
-//! the queue full is dropped and counted. The stream is decimated to what a viewer can draw
-//! (about [`Options::rate_hz`] ticks a second of wall time; [`Decimation`]). A message is made only
-//! for a channel some client subscribed to; the server keeps a bounded backlog per client and
-//! drops a slow client's oldest messages.
+//! The run never waits for it. The joined ticks (from the launcher's join of the traces, or from
+//! the in-process engine when it keeps less than whole traces) go through a bounded queue
+//! ([`Feed`]) to a thread of its own that makes the messages; a record that finds the queue full
+//! is dropped and counted. The stream is decimated to what a viewer can draw (about
+//! [`Options::rate_hz`] ticks a second of wall time; [`Decimation`]). A message is made only for
+//! a channel some client subscribed to; the server keeps a bounded backlog per client and drops
+//! a slow client's oldest messages. Its threads run at the least priority
+//! ([`yield_to_the_run`]).
 
 use std::collections::BTreeMap;
 use std::net::SocketAddr;
@@ -279,11 +281,12 @@ impl ServerListener for Clients {
     }
 }
 
-/// Lowers the calling thread's scheduling priority to the least (nice 19): the live view's
-/// threads give way to the run's processes and the launcher's own. Best effort: a system that
-/// refuses leaves the priority as it was.
+/// Puts the calling thread (and the threads it starts) under SCHED_IDLE
+/// ([`fdi_runtime::process::use_idle`]): the live view's threads give way to the run's
+/// processes and the launcher's own. Best effort: a system that refuses leaves the thread as it
+/// was.
 pub fn yield_to_the_run() {
-    let _ = rustix::process::setpriority_process(None, 19);
+    let _ = fdi_runtime::process::use_idle();
 }
 
 /// Whether a viewer of a live server subscribed to a topic.
@@ -609,5 +612,56 @@ impl Publisher {
 
     fn record(&mut self, stem: &str, rec: &TraceRecord) -> Result<()> {
         topics::record(&mut self.out, &self.info, Path::new(stem), stem, rec)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn opts(ticks_per_s: Option<f64>, rate_hz: f64) -> Options {
+        Options {
+            addr: "127.0.0.1:0".parse().expect("an address"),
+            rate_hz,
+            ticks_per_s,
+            stamped: false,
+        }
+    }
+
+    #[test]
+    fn a_paced_stream_keeps_every_k_th_tick_k_from_the_pace_and_the_rate() {
+        assert_eq!(
+            Decimation::of(&opts(Some(1000.0), 50.0)),
+            Decimation::Every(20)
+        );
+        assert_eq!(
+            Decimation::of(&opts(Some(1000.0), 30.0)),
+            Decimation::Every(34)
+        );
+        assert_eq!(
+            Decimation::of(&opts(Some(10.0), 50.0)),
+            Decimation::Every(1)
+        );
+        let mut g = Gate::new(Decimation::Every(5));
+        let kept: Vec<u64> = (0..23).filter(|k| g.keeps(*k)).collect();
+        assert_eq!(kept, [0, 5, 10, 15, 20]);
+        // Every record of a tick is judged alike (four robots' records of tick 5).
+        let mut g = Gate::new(Decimation::Every(5));
+        assert!((0..4).all(|_| g.keeps(5)));
+        assert!((0..4).all(|_| !g.keeps(6)));
+    }
+
+    #[test]
+    fn an_unpaced_stream_never_keeps_more_than_its_burst_at_once() {
+        let rate = 50.0;
+        let mut g = Gate::new(Decimation::of(&opts(None, rate)));
+        // A burst of 10 000 ticks handed over at once (a trace writer's flush).
+        let kept = (0..10_000u64).filter(|k| g.keeps(*k)).count() as f64;
+        let cap = rate * BURST.as_secs_f64();
+        assert!(
+            kept <= cap + 1.0,
+            "{kept} ticks kept at once, at most {cap}"
+        );
+        assert!(kept >= 1.0);
     }
 }

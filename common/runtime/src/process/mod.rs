@@ -26,7 +26,7 @@ pub use launcher::{
     HOLD_LIMIT,
 };
 pub use liveness::{realtime_end_ns, Liveness, LIVENESS_CHECK, LOST_AFTER_NS};
-pub use placement::{use_fifo, CpuList, Placement};
+pub use placement::{use_fifo, use_idle, CpuList, Placement};
 pub use shutdown::Shutdown;
 pub use wait::{WaitStrategy, DEFAULT_SPIN_US, START_TIMEOUT, WAIT_SLICE};
 

@@ -158,6 +158,25 @@ pub fn use_fifo(priority: u8) -> Result<(), String> {
     })
 }
 
+/// Puts the calling thread under SCHED_IDLE at nice 19: it runs only when nothing else wants
+/// its CPU, and any other thread that wakes takes the CPU from it at once (a nice value alone
+/// still lets it hold the CPU for a scheduler slice). Threads it starts later inherit the
+/// policy. The error says why not.
+pub fn use_idle() -> Result<(), String> {
+    use thread_priority::unix::{
+        set_thread_priority_and_policy, thread_native_id, NormalThreadSchedulePolicy,
+        ThreadSchedulePolicy,
+    };
+    use thread_priority::ThreadPriority;
+    set_thread_priority_and_policy(
+        thread_native_id(),
+        ThreadPriority::Min,
+        ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Idle),
+    )
+    .map_err(|e| format!("SCHED_IDLE: {e:?}"))?;
+    rustix::process::setpriority_process(None, 19).map_err(|e| format!("nice 19: {e}"))
+}
+
 #[cfg(test)]
 mod cpu_list_tests {
     use super::CpuList;
