@@ -311,6 +311,27 @@ impl Watcher {
     }
 }
 
+/// The channels of a run of `resolved` in `ctx`: every topic it has, advertised from the start.
+fn channels(
+    resolved: &Resolved,
+    opts: &Options,
+    ctx: &Arc<Context>,
+) -> Result<BTreeMap<(u32, &'static str), Arc<RawChannel>>> {
+    let mut channels = BTreeMap::new();
+    for (agent, name, schema) in topics::run_topics(resolved, opts.stamped) {
+        let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
+        let topic = topic_name(agent, name);
+        let c = ChannelBuilder::new(topic.as_str())
+            .message_encoding("json")
+            .schema(foxglove::Schema::new(schema.name, "jsonschema", text))
+            .context(ctx)
+            .build_raw()
+            .with_context(|| format!("the live channel {topic}"))?;
+        channels.insert((agent, name), c);
+    }
+    Ok(channels)
+}
+
 /// A running live server.
 pub struct Live {
     addr: SocketAddr,
@@ -344,18 +365,7 @@ impl Live {
             );
         }
         let ctx = Context::new();
-        let mut channels = BTreeMap::new();
-        for (agent, name, schema) in topics::run_topics(resolved, opts.stamped) {
-            let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
-            let topic = topic_name(agent, name);
-            let c = ChannelBuilder::new(topic.as_str())
-                .message_encoding("json")
-                .schema(foxglove::Schema::new(schema.name, "jsonschema", text))
-                .context(&ctx)
-                .build_raw()
-                .with_context(|| format!("the live channel {topic}"))?;
-            channels.insert((agent, name), c);
-        }
+        let channels = channels(resolved, opts, &ctx)?;
         let clients = Arc::new(Clients::default());
         let server = WebSocketServer::new()
             .name(format!("fdi-mas {}", resolved.scenario.name))

@@ -13,7 +13,8 @@ use crate::topics::detectors::{Stats, Tick};
 use crate::topics::RunInfo;
 use crate::traces::{recorded, Recorded};
 
-pub(super) use crate::topics::detectors::{fields_of, names};
+pub(super) use crate::topics::detectors::names;
+pub(super) use crate::topics::fields_of;
 
 /// Hands `emit` every joined tick of the traces of `run_dir` with its detectors' statistics,
 /// in the join's order (tick, then robot). The number of ticks handed on, or the line that

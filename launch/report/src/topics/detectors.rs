@@ -11,7 +11,7 @@ use fdi_common::detect::Verdict;
 use fdi_common::records::TickRecord;
 use serde_json::{Map, Value};
 
-use super::{RunInfo, Sink, DETECTORS};
+use super::{fields_of, RunInfo, Sink, DETECTORS};
 
 /// One detector at one tick.
 #[derive(Debug, Clone, Copy)]
@@ -39,17 +39,6 @@ pub struct Tick<'a> {
     pub in_force: bool,
     /// In the order of [`fdi_common::detect::names`].
     pub statistics: &'a [Statistic],
-}
-
-/// The fields of detector `name` in both exports, in the order of [`Statistic`]'s: statistic,
-/// configured threshold, verdict, alarm.
-pub fn fields_of(name: &str) -> [String; 4] {
-    [
-        name.to_string(),
-        format!("{name}_threshold"),
-        format!("{name}_verdict"),
-        format!("{name}_alarm"),
-    ]
 }
 
 /// The names of the detectors of `info`'s run, in the order of [`Tick::statistics`].

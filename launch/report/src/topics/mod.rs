@@ -249,7 +249,7 @@ pub static DETECTORS: LazyLock<Schema> = LazyLock::new(|| {
     // Made once per process: the names and descriptions live as long as the schema.
     let leak = |s: String| -> &'static str { Box::leak(s.into_boxed_str()) };
     for k in detect::RESIDUAL {
-        let [_, threshold, verdict, alarm] = detectors::fields_of(k.name);
+        let [_, threshold, verdict, alarm] = fields_of(k.name);
         fields.extend([
             (
                 k.name,
@@ -360,6 +360,17 @@ pub fn topics() -> [(&'static str, &'static Schema); 15] {
         ("latency", &LATENCY),
         ("actuation", &ACTUATION),
         ("monitor", &MONITOR),
+    ]
+}
+
+/// The fields of detector `name` in both exports and the live view, in the order of [`Statistic`]'s: statistic,
+/// configured threshold, verdict, alarm.
+pub fn fields_of(name: &str) -> [String; 4] {
+    [
+        name.to_string(),
+        format!("{name}_threshold"),
+        format!("{name}_verdict"),
+        format!("{name}_alarm"),
     ]
 }
 
