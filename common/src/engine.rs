@@ -216,14 +216,18 @@ pub struct LiveStats {
     pub address: String,
     /// Clients that connected during the run.
     pub clients: u64,
-    /// Ticks whose messages were published (the stream is decimated: docs/traces.md).
+    /// Ticks whose messages were published while a client subscribed to some topic (the
+    /// stream is decimated: docs/traces.md).
     pub ticks_published: u64,
     /// Messages handed to the server for at least one subscribed client.
     pub messages_published: u64,
-    /// Records of the run the server never saw: its queue was full (the run does not wait
+    /// Joined ticks' records the server never saw: its queue was full (the run does not wait
     /// for it). Any: the detectors' topics stopped at the first, their statistics need every
     /// tick.
     pub records_dropped: u64,
+    /// Events and latency stamps the server never saw (its queue was full).
+    #[serde(default)]
+    pub events_dropped: u64,
     /// The first message that could not be made (none expected; said rather than hidden).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,

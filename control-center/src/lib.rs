@@ -112,7 +112,7 @@ impl<X: Transport> Ports<X> {
 }
 
 /// Ticks between two progress reports to the launcher.
-const PROGRESS_EVERY: u64 = 500;
+pub const PROGRESS_EVERY: u64 = 500;
 
 struct Slot<const N: usize> {
     center: CenterAgent<N>,

@@ -13,6 +13,9 @@ Modes:
   read        read to the end (the default);
   never-read  subscribe, then never read again (the server's queue for it fills);
   leave       disconnect after --leave-after messages.
+
+With --until-k K, a reading client disconnects once every subscribed topic brought a message of
+tick K or later (the server then need not linger for it).
 """
 
 import argparse
@@ -99,6 +102,8 @@ async def run(args):
         write(args.out, {"mode": "never-read"})
         return
     received = 0
+    # The topics still short of --until-k.
+    short = set(subscribed.values())
     try:
         async for frame in ws:
             if not isinstance(frame, bytes):
@@ -106,11 +111,18 @@ async def run(args):
             op = frame[0]
             if op == MESSAGE_DATA:
                 sub, ts = struct.unpack_from("<IQ", frame, 1)
-                out["messages"][subscribed[sub]].append([ts, frame[13:].decode()])
+                text = frame[13:].decode()
+                topic = subscribed[sub]
+                out["messages"][topic].append([ts, text])
                 received += 1
                 if args.mode == "leave" and received >= args.leave_after:
                     await ws.close()
                     break
+                if args.until_k is not None and json.loads(text).get("k", -1) >= args.until_k:
+                    short.discard(topic)
+                    if not short:
+                        await ws.close()
+                        break
             elif op == TIME:
                 (ts,) = struct.unpack_from("<Q", frame, 1)
                 out["times"].append(ts)
@@ -130,6 +142,7 @@ def main():
     p.add_argument("--topic", action="append", default=[])
     p.add_argument("--mode", choices=["read", "never-read", "leave"], default="read")
     p.add_argument("--leave-after", type=int, default=10)
+    p.add_argument("--until-k", type=int, default=None)
     p.add_argument("--connect-timeout", type=float, default=60)
     p.add_argument("--out", required=True, help="where the JSON goes")
     asyncio.run(run(p.parse_args()))

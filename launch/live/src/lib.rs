@@ -26,6 +26,7 @@ use anyhow::{bail, Context as _, Result};
 use fdi_common::engine::{tick_time, LiveStats};
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::Resolved;
+use fdi_common::stop::Stop;
 use fdi_common::trace::TraceRecord;
 use fdi_report::topics::{self, detectors, json_schema, topic_name, RunInfo, Schema, Sink};
 use foxglove::websocket::{Capability, Client, ServerListener};
@@ -62,16 +63,20 @@ pub enum Decimation {
     /// Ticks 0, K, 2K, … (a run of known pace).
     Every(u64),
     /// An unpaced run: every K-th tick, K measured again every [`WINDOW`] from the ticks the run
-    /// made meanwhile so that about `rate_hz` are kept a second; and never more than `rate_hz`
-    /// a second over [`BURST`] (the run's records come in bursts, as its processes' trace
-    /// writers flush).
+    /// made meanwhile so that about `rate_hz` are kept a second.
     Adaptive { rate_hz: f64 },
 }
 
 /// How often an unpaced run's K is measured again.
 pub const WINDOW: Duration = Duration::from_millis(500);
-/// The longest burst of kept ticks of an unpaced run: `rate_hz` × this.
-pub const BURST: Duration = Duration::from_millis(200);
+/// The longest burst of kept ticks: `rate_hz` × this, at most [`MAX_BURST`], whatever the
+/// decimation. The records come in bursts as the trace writers flush (a file every 64 KiB: up to
+/// a second of a paced run's ticks at once), and all at once to a viewer that joins a run late;
+/// each kept tick is also a time message, and the server disconnects a client whose 1024 control
+/// messages wait.
+pub const BURST: Duration = Duration::from_secs(5);
+/// The most ticks kept at once.
+pub const MAX_BURST: f64 = 500.0;
 
 impl Decimation {
     /// The decimation of `opts`.
@@ -85,30 +90,41 @@ impl Decimation {
     }
 }
 
-/// Which ticks a stream keeps, decided as the run hands them over.
+/// Which ticks a stream keeps, decided as the run hands them over: every K-th
+/// ([`Decimation`]), and never more than `rate_hz` a second over [`BURST`] (a token bucket).
 #[derive(Debug, Clone)]
 struct Gate {
     decimation: Decimation,
+    rate_hz: f64,
     /// The tick last judged, and whether it is kept.
     last: Option<(u64, bool)>,
-    /// [`Decimation::Adaptive`]: K, the window it is measured over (its start and first tick),
-    /// the ticks that may still be kept and when they were last counted.
+    /// [`Decimation::Adaptive`]: K and the window it is measured over (its start and first tick).
     every: u64,
     window: Option<(Instant, u64)>,
+    /// The ticks that may still be kept, and when they were last counted.
     tokens: f64,
     refilled: Option<Instant>,
 }
 
 impl Gate {
-    fn new(decimation: Decimation) -> Self {
+    fn new(decimation: Decimation, rate_hz: f64) -> Self {
+        let every = match decimation {
+            Decimation::Every(k) => k,
+            Decimation::Adaptive { .. } => 1,
+        };
         Self {
             decimation,
+            rate_hz,
             last: None,
-            every: 1,
+            every,
             window: None,
-            tokens: 1.0,
+            tokens: Self::cap(rate_hz),
             refilled: None,
         }
+    }
+
+    fn cap(rate_hz: f64) -> f64 {
+        (rate_hz * BURST.as_secs_f64()).clamp(1.0, MAX_BURST)
     }
 
     /// Whether tick `k` is kept (every record of a tick is judged alike).
@@ -118,16 +134,25 @@ impl Gate {
                 return keep;
             }
         }
-        let keep = match self.decimation {
-            Decimation::Every(n) => k.is_multiple_of(n),
-            Decimation::Adaptive { rate_hz } => self.adaptive(k, rate_hz),
-        };
+        let now = Instant::now();
+        if let Decimation::Adaptive { rate_hz } = self.decimation {
+            self.measure(k, rate_hz, now);
+        }
+        if let Some(t) = self.refilled {
+            let more = now.duration_since(t).as_secs_f64() * self.rate_hz;
+            self.tokens = (self.tokens + more).min(Self::cap(self.rate_hz));
+        }
+        self.refilled = Some(now);
+        let keep = k.is_multiple_of(self.every) && self.tokens >= 1.0;
+        if keep {
+            self.tokens -= 1.0;
+        }
         self.last = Some((k, keep));
         keep
     }
 
-    fn adaptive(&mut self, k: u64, rate_hz: f64) -> bool {
-        let now = Instant::now();
+    /// K of an unpaced run, from the ticks it made over the last [`WINDOW`].
+    fn measure(&mut self, k: u64, rate_hz: f64, now: Instant) {
         match self.window {
             Some((t0, k0)) if now.duration_since(t0) >= WINDOW => {
                 let ticks_per_s =
@@ -137,17 +162,6 @@ impl Gate {
             }
             Some(_) => {}
             None => self.window = Some((now, k)),
-        }
-        let cap = (rate_hz * BURST.as_secs_f64()).max(1.0);
-        if let Some(t) = self.refilled {
-            self.tokens = (self.tokens + now.duration_since(t).as_secs_f64() * rate_hz).min(cap);
-        }
-        self.refilled = Some(now);
-        if k.is_multiple_of(self.every) && self.tokens >= 1.0 {
-            self.tokens -= 1.0;
-            true
-        } else {
-            false
         }
     }
 }
@@ -166,15 +180,15 @@ pub const SETTLED: Duration = Duration::from_millis(300);
 
 /// How long the server stays up after the run's last message while clients are connected: what
 /// their queues hold is sent meanwhile (the server drops it when it stops).
-pub const LINGER: Duration = Duration::from_secs(1);
+pub const LINGER: Duration = Duration::from_secs(3);
 
 /// Records per batch handed to the server's thread.
 const BATCH: usize = 256;
-/// Batches that may wait: about 2 s of the paper's four robots at full speed of the in-process
-/// engine, 64 s in realtime.
+/// Batches that may wait: 65 536 records, 16 384 ticks of the paper's four robots (16 s in
+/// realtime).
 const QUEUED: usize = 256;
-/// A batch is handed over at the latest this long after its first record (a paced run's
-/// viewer sees its ticks as they come).
+/// A batch is handed over with the first record that comes this long after its first (or when
+/// it is full, or at the end).
 const LATENCY: Duration = Duration::from_millis(20);
 
 /// The run's side of the queue: hands records to the server's thread, never waits.
@@ -183,7 +197,9 @@ pub struct Feed {
     gate: Gate,
     batch: Vec<(TickRecord, bool)>,
     since: Instant,
+    /// Joined ticks' records dropped; events and latency stamps dropped.
     dropped: Arc<AtomicU64>,
+    events_dropped: Arc<AtomicU64>,
 }
 
 impl Feed {
@@ -217,8 +233,8 @@ impl Feed {
     pub fn records(&self) -> RecordFeed {
         RecordFeed {
             tx: self.tx.clone(),
-            gate: Gate::new(self.gate.decimation),
-            dropped: self.dropped.clone(),
+            gate: Gate::new(self.gate.decimation, self.gate.rate_hz),
+            dropped: self.events_dropped.clone(),
         }
     }
 }
@@ -338,6 +354,7 @@ pub struct Live {
     clients: Arc<Clients>,
     thread: JoinHandle<Published>,
     dropped: Arc<AtomicU64>,
+    events_dropped: Arc<AtomicU64>,
 }
 
 impl std::fmt::Debug for Live {
@@ -375,6 +392,7 @@ impl Live {
             .context(&ctx);
         let (tx, rx) = mpsc::sync_channel(QUEUED);
         let dropped = Arc::new(AtomicU64::new(0));
+        let events_dropped = Arc::new(AtomicU64::new(0));
         let info = RunInfo::of(resolved.clone());
         let publisher = Publisher {
             detectors: Some(detectors::Stats::new(&info)),
@@ -413,10 +431,11 @@ impl Live {
         let addr = SocketAddr::new(opts.addr.ip(), port);
         let feed = Feed {
             tx,
-            gate: Gate::new(Decimation::of(opts)),
+            gate: Gate::new(Decimation::of(opts), opts.rate_hz),
             batch: Vec::with_capacity(BATCH),
             since: Instant::now(),
             dropped: dropped.clone(),
+            events_dropped: events_dropped.clone(),
         };
         Ok((
             Self {
@@ -424,34 +443,43 @@ impl Live {
                 clients,
                 thread,
                 dropped,
+                events_dropped,
             },
             feed,
         ))
     }
 
     /// Waits until a viewer subscribed to a topic and made no further subscription for
-    /// [`SETTLED`] (its first subscriptions come one by one), at most `timeout`. Whether one did.
-    pub fn wait_for_viewer(&self, timeout: Duration) -> bool {
+    /// [`SETTLED`] (its first subscriptions come one by one), at most `timeout`, and no longer
+    /// than `stop` is raised. Whether one did.
+    pub fn wait_for_viewer(&self, timeout: Duration, stop: &Stop) -> bool {
+        /// How often the wait looks at `stop`.
+        const SLICE: Duration = Duration::from_millis(100);
         let end = Instant::now() + timeout;
         let clients = &self.clients;
         let mut n = clients
             .subscribed
             .lock()
             .unwrap_or_else(PoisonError::into_inner);
-        let mut seen = None;
+        // The subscriptions counted at the last look, and since when.
+        let mut seen: Option<(u64, Instant)> = None;
         loop {
             let now = Instant::now();
-            if now >= end {
-                return seen.is_some();
+            if *n > 0 {
+                match seen {
+                    Some((m, since)) if m == *n && now.duration_since(since) >= SETTLED => {
+                        return true;
+                    }
+                    Some((m, _)) if m == *n => {}
+                    _ => seen = Some((*n, now)),
+                }
             }
-            if *n > 0 && seen == Some(*n) {
-                return true;
+            if now >= end || stop.pending().is_some() {
+                return *n > 0;
             }
-            let wait = if *n > 0 { SETTLED } else { end - now };
-            seen = (*n > 0).then_some(*n);
             n = clients
                 .changed
-                .wait_timeout(n, wait.min(end - now))
+                .wait_timeout(n, SLICE.min(end - now))
                 .unwrap_or_else(PoisonError::into_inner)
                 .0;
         }
@@ -480,6 +508,7 @@ impl Live {
             ticks_published: published.ticks,
             messages_published: published.messages,
             records_dropped: self.dropped.load(Ordering::Relaxed),
+            events_dropped: self.events_dropped.load(Ordering::Relaxed),
             error: published.error,
         }
     }
@@ -570,7 +599,9 @@ impl Publisher {
         while server.client_count() > 0 && Instant::now() < end {
             std::thread::sleep(Duration::from_millis(10));
         }
-        server.stop().wait_blocking();
+        // Stopped without waiting for its connections' tasks: one that never finished its
+        // handshake, or a client that reads nothing, would hold the launcher for good.
+        drop(server.stop());
         drop(ctx);
         self.out.published
     }
@@ -584,12 +615,12 @@ impl Publisher {
         server: &foxglove::WebSocketServerHandle,
     ) -> Result<()> {
         let k = r.center.k;
+        let kept = kept && self.out.watched();
         if kept && self.last_kept != Some(k) {
             self.last_kept = Some(k);
             self.out.published.ticks += 1;
             server.broadcast_time(topics::log_time_ns(tick_time(k, self.info.dt))?);
         }
-        let kept = kept && self.out.watched();
         let Self {
             info,
             out,
@@ -652,26 +683,34 @@ mod tests {
             Decimation::of(&opts(Some(10.0), 50.0)),
             Decimation::Every(1)
         );
-        let mut g = Gate::new(Decimation::Every(5));
+        let mut g = Gate::new(Decimation::Every(5), 50.0);
         let kept: Vec<u64> = (0..23).filter(|k| g.keeps(*k)).collect();
         assert_eq!(kept, [0, 5, 10, 15, 20]);
         // Every record of a tick is judged alike (four robots' records of tick 5).
-        let mut g = Gate::new(Decimation::Every(5));
+        let mut g = Gate::new(Decimation::Every(5), 50.0);
         assert!((0..4).all(|_| g.keeps(5)));
         assert!((0..4).all(|_| !g.keeps(6)));
     }
 
     #[test]
-    fn an_unpaced_stream_never_keeps_more_than_its_burst_at_once() {
+    fn no_stream_keeps_more_than_its_burst_at_once() {
         let rate = 50.0;
-        let mut g = Gate::new(Decimation::of(&opts(None, rate)));
-        // A burst of 10 000 ticks handed over at once (a trace writer's flush).
-        let kept = (0..10_000u64).filter(|k| g.keeps(*k)).count() as f64;
-        let cap = rate * BURST.as_secs_f64();
-        assert!(
-            kept <= cap + 1.0,
-            "{kept} ticks kept at once, at most {cap}"
-        );
-        assert!(kept >= 1.0);
+        let cap = (rate * BURST.as_secs_f64()).min(MAX_BURST);
+        // 100 000 ticks handed over at once (a viewer that joins late, a trace writer's flush):
+        // the burst, and what the time spent judging them refilled.
+        for d in [Decimation::of(&opts(None, rate)), Decimation::Every(2)] {
+            let mut g = Gate::new(d, rate);
+            let began = Instant::now();
+            let kept = (0..100_000u64).filter(|k| g.keeps(*k)).count() as f64;
+            let most = cap + rate * began.elapsed().as_secs_f64() + 1.0;
+            assert!(
+                kept <= most,
+                "{d:?}: {kept} ticks kept at once, at most {most}"
+            );
+            assert!(
+                kept >= cap,
+                "{d:?}: {kept} kept, the whole burst {cap} allowed"
+            );
+        }
     }
 }

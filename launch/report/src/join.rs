@@ -323,6 +323,11 @@ pub struct Walked {
 }
 
 impl Walked {
+    /// What the join found wrong with the traces (a damaged or short one).
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
+    }
+
     /// The run's summary (engine `ipc`), and the warnings of the join.
     pub fn summarize(self, resolved: &Resolved, wall_s: f64) -> Joined {
         Joined {

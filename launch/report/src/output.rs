@@ -144,6 +144,12 @@ pub fn live_line(s: &RunSummary) -> Option<String> {
             l.records_dropped
         ));
     }
+    if l.events_dropped > 0 {
+        line.push_str(&format!(
+            "; {} events and latency stamps dropped",
+            l.events_dropped
+        ));
+    }
     if let Some(e) = &l.error {
         line.push_str(&format!("; a message could not be made: {e}"));
     }

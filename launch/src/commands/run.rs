@@ -50,14 +50,15 @@ pub struct RunArgs {
     /// the processes it runs (docs/multi-host.md). Each other host runs `fdi-launch serve`.
     #[arg(long, value_name = "FILE")]
     pub hosts: Option<PathBuf>,
-    /// Serve the run live over the Foxglove WebSocket protocol at ADDR (without one,
-    /// 127.0.0.1:8765; port 0: a free port, printed): open it in Foxglove (Open connection →
+    /// Serve the run live over the Foxglove WebSocket protocol, at `--live=ADDR` or
+    /// 127.0.0.1:8765 (port 0: a free port, printed): open it in Foxglove (Open connection →
     /// Foxglove WebSocket) with the layouts of examples/live (docs/traces.md). The run never
     /// waits for a viewer.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, require_equals = true, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
     pub live: Option<std::net::SocketAddr>,
-    /// Ticks a second of wall time the live stream keeps at most (a paced or realtime run: every
-    /// K-th tick, K fixed; an unpaced lockstep run: a tick once 1/HZ s passed).
+    /// Ticks a second of wall time the live stream keeps at most: every K-th tick (a paced or
+    /// realtime run: K from its pace; an unpaced lockstep run: K measured from its speed), and
+    /// never more than HZ × 5 s (at most 500) at once.
     #[arg(long, value_name = "HZ", default_value_t = fdi_live::Options::DEFAULT_RATE_HZ, requires = "live")]
     pub live_rate: f64,
     /// Start the run once a viewer subscribed to a topic of `--live` (waiting at most SECONDS,
@@ -115,6 +116,12 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
         anyhow::bail!(
             "--live serves runs on one host only: the robots of a run split over hosts \
              (--hosts) reach the coordinator at its end (their traces are fetched whole)"
+        );
+    }
+    if !(args.live_rate.is_finite() && args.live_rate > 0.0) {
+        anyhow::bail!(
+            "--live-rate {}: ticks a second, finite and > 0",
+            args.live_rate
         );
     }
     let wait = match args.live_wait {

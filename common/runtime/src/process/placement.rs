@@ -168,13 +168,15 @@ pub fn use_idle() -> Result<(), String> {
         ThreadSchedulePolicy,
     };
     use thread_priority::ThreadPriority;
-    set_thread_priority_and_policy(
+    let idle = set_thread_priority_and_policy(
         thread_native_id(),
         ThreadPriority::Min,
         ThreadSchedulePolicy::Normal(NormalThreadSchedulePolicy::Idle),
     )
-    .map_err(|e| format!("SCHED_IDLE: {e:?}"))?;
-    rustix::process::setpriority_process(None, 19).map_err(|e| format!("nice 19: {e}"))
+    .map_err(|e| format!("SCHED_IDLE: {e:?}"));
+    // Nice 19 whether or not SCHED_IDLE was allowed (a container may refuse it).
+    let nice = rustix::process::setpriority_process(None, 19).map_err(|e| format!("nice 19: {e}"));
+    idle.and(nice)
 }
 
 #[cfg(test)]

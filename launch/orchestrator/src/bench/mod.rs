@@ -78,7 +78,7 @@ pub struct LatencyArgs {
     #[arg(long, value_name = "FILE")]
     pub hosts: Option<PathBuf>,
     /// Serve the measured run live (as `run --live`), to measure what a viewer costs.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, require_equals = true, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
     pub live: Option<std::net::SocketAddr>,
     /// Start the measured run once a viewer subscribed (as `run --live-wait`), at most SECONDS.
     #[arg(long, value_name = "SECONDS", requires = "live")]

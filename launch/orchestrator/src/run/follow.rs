@@ -9,34 +9,70 @@ use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
-use std::time::Duration;
+use std::sync::{Arc, OnceLock};
+use std::time::{Duration, Instant};
 
-use anyhow::Result;
+use anyhow::{bail, Result};
 use fdi_common::run_dir::{Process, RunDir};
-use fdi_common::scenario::Resolved;
+use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::stop::Stop;
 use fdi_common::trace::{TraceReader, TraceRecord};
 use fdi_report::join::{Feed, Sources};
 
 /// How long a follower sleeps when it reached what was written so far.
 const POLL: Duration = Duration::from_millis(20);
+/// How long after the run's end the follower may still read (a viewer that came late, a machine
+/// too busy for its idle thread): then it stops, and the launcher goes on.
+const FINISH: Duration = Duration::from_secs(5);
+/// In a realtime run, a trace that has not grown for this long is taken to have ended (its
+/// process was lost; a live process's trace writer flushes every 100 ms): the others go on.
+const REALTIME_SILENCE: Duration = Duration::from_secs(2);
+
+/// The end of the run, as the follower sees it.
+#[derive(Debug, Default)]
+pub struct Over {
+    at: OnceLock<Instant>,
+    flag: AtomicBool,
+}
+
+impl Over {
+    /// The run is over: every trace is whole.
+    pub fn set(&self) {
+        let _ = self.at.set(Instant::now());
+        self.flag.store(true, Ordering::Release);
+    }
+
+    fn is_set(&self) -> bool {
+        self.flag.load(Ordering::Acquire)
+    }
+
+    fn overdue(&self) -> bool {
+        self.at.get().is_some_and(|t| t.elapsed() > FINISH)
+    }
+}
 
 /// A trace file read as its process writes it: at its end, a read waits for more until the run
-/// is over, then the file's end is the trace's.
+/// is over (or, in realtime, the file is silent for [`REALTIME_SILENCE`]), then the file's end
+/// is the trace's.
 struct Growing {
     file: File,
-    over: Arc<AtomicBool>,
+    over: Arc<Over>,
+    silence: Option<Duration>,
+    grew: Instant,
 }
 
 impl Read for Growing {
     fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
         loop {
             // Whether the run was over before this read: then what it finds is all there is.
-            let over = self.over.load(Ordering::Acquire);
+            let over = self.over.is_set();
             let n = self.file.read(buf)?;
-            if n > 0 || over {
+            if n > 0 {
+                self.grew = Instant::now();
                 return Ok(n);
+            }
+            if over || self.silence.is_some_and(|s| self.grew.elapsed() > s) {
+                return Ok(0);
             }
             std::thread::sleep(POLL);
         }
@@ -45,9 +81,9 @@ impl Read for Growing {
 
 /// The trace file `path`, once it exists (a process makes it after it starts); `None` if the
 /// run is over without it.
-fn open_when_made(path: &Path, over: &AtomicBool) -> Option<File> {
+fn open_when_made(path: &Path, over: &Over) -> Option<File> {
     loop {
-        let was_over = over.load(Ordering::Acquire);
+        let was_over = over.is_set();
         if let Ok(f) = File::open(path) {
             return Some(f);
         }
@@ -63,7 +99,7 @@ fn open_when_made(path: &Path, over: &AtomicBool) -> Option<File> {
 fn followed(
     path: PathBuf,
     stem: String,
-    over: &Arc<AtomicBool>,
+    (over, silence): (&Arc<Over>, Option<Duration>),
     mut records: Option<fdi_live::RecordFeed>,
 ) -> Feed {
     let Some(file) = open_when_made(&path, over) else {
@@ -73,6 +109,8 @@ fn followed(
     let growing = Growing {
         file,
         over: over.clone(),
+        silence,
+        grew: Instant::now(),
     };
     match TraceReader::follow(growing, &path) {
         Ok(reader) => Box::new(reader.map(move |r| {
@@ -88,34 +126,44 @@ fn followed(
 }
 
 /// Follows the traces of the run of `r` in `run_dir` once `watcher` says a viewer subscribed,
-/// until the run is over (`over`) and every trace read; the joined ticks into `feed`. Returns
-/// at once, reading nothing, if the run is over before anyone watched.
+/// until the run is over (`over`) and every trace read, at most [`FINISH`] after; the joined
+/// ticks into `feed`. Returns at once, reading nothing, if the run is over before anyone
+/// watched. `actuation`: the attacker's trace holds the torque path's records (the ipc engine;
+/// the in-process engine's traces have none).
 pub fn follow_run(
     r: &Resolved,
     run_dir: &Path,
-    mut feed: fdi_live::Feed,
-    watcher: &fdi_live::Watcher,
-    over: &Arc<AtomicBool>,
+    (mut feed, watcher): (fdi_live::Feed, &fdi_live::Watcher),
+    over: &Arc<Over>,
+    actuation: bool,
     stop: &Stop,
 ) -> Result<()> {
     fdi_live::yield_to_the_run();
     while !watcher.wait(POLL * 5) {
-        if over.load(Ordering::Acquire) {
+        if over.is_set() {
             return Ok(());
         }
     }
     let dir = RunDir::new(run_dir);
     let records = feed.records();
-    let feed_of = |p: Process| followed(dir.trace(p), p.to_string(), over, Some(records.clone()));
-    // A second reader of a trace, for its second stream of records.
-    let second = |p: Process| followed(dir.trace(p), p.to_string(), over, None);
     let s = &r.scenario;
+    let silence = (s.clock == ClockMode::Realtime).then_some(REALTIME_SILENCE);
+    let feed_of = |p: Process| {
+        followed(
+            dir.trace(p),
+            p.to_string(),
+            (over, silence),
+            Some(records.clone()),
+        )
+    };
+    // A second reader of a trace, for its second stream of records.
+    let second = |p: Process| followed(dir.trace(p), p.to_string(), (over, silence), None);
     let agents = s
         .agents
         .iter()
         .map(|a| (a.id, feed_of(Process::Agent(a.id))))
         .collect();
-    let routed = s.agents.iter().any(|a| r.attack.attacks_torque_of(a.id));
+    let routed = actuation && s.agents.iter().any(|a| r.attack.attacks_torque_of(a.id));
     let sources = Sources::from_feeds(
         agents,
         feed_of(Process::Attacker),
@@ -123,12 +171,24 @@ pub fn follow_run(
         feed_of(Process::Center),
         s.roles.monitor.is_some().then(|| second(Process::Center)),
     );
-    fdi_report::join::walk(
+    let walked = fdi_report::join::walk(
         r,
         sources,
         1,
         |rec| feed.tick(rec),
-        || Ok(stop.check(fdi_common::stop::DURING_THE_RUN)?),
+        || {
+            stop.check(fdi_common::stop::DURING_THE_RUN)?;
+            if over.overdue() {
+                bail!(
+                    "it had not caught up with the run {} s after its end",
+                    FINISH.as_secs()
+                );
+            }
+            Ok(())
+        },
     )?;
+    for w in walked.warnings() {
+        eprintln!("fdi-launch: warning: live view: {w}");
+    }
     Ok(())
 }

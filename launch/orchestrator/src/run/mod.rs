@@ -170,7 +170,7 @@ fn start_live(
             "fdi-launch: waiting for a viewer to subscribe (at most {} s)",
             wait.as_secs_f64()
         );
-        if !live.wait_for_viewer(wait) {
+        if !live.wait_for_viewer(wait, &opts.stop) {
             eprintln!(
                 "fdi-launch: no viewer subscribed within {} s: the run starts",
                 wait.as_secs_f64()
@@ -192,15 +192,21 @@ pub fn check_pace(r: &Resolved, pace: Option<f64>) -> Result<()> {
     Ok(())
 }
 
-/// Sleeps the in-process engine until each tick is due at its pace.
+/// Sleeps the in-process engine until each tick is due at its pace. Once `stop` is raised it
+/// sleeps no more: the in-process engine cannot stop mid-run, so the rest of the run goes
+/// unpaced and the launcher stops after it.
 struct Pacer {
     start: std::time::Instant,
     factor: f64,
     dt: f64,
     last: Option<u64>,
+    stop: Stop,
 }
 
 impl Pacer {
+    /// How often a paced wait looks at the stop.
+    const SLICE: std::time::Duration = std::time::Duration::from_millis(50);
+
     fn wait(&mut self, k: u64) {
         if self.last == Some(k) {
             return;
@@ -209,8 +215,11 @@ impl Pacer {
         let due = std::time::Duration::from_secs_f64(
             fdi_common::engine::tick_time(k, self.dt) / self.factor,
         );
-        if let Some(left) = due.checked_sub(self.start.elapsed()) {
-            std::thread::sleep(left);
+        while let Some(left) = due.checked_sub(self.start.elapsed()) {
+            if self.stop.pending().is_some() {
+                return;
+            }
+            std::thread::sleep(left.min(Self::SLICE));
         }
     }
 }
@@ -287,6 +296,7 @@ fn execute_inproc_watched<A: Attacker>(
         factor,
         dt: r.scenario.control_period_s,
         last: None,
+        stop: opts.stop.clone(),
     });
     let run = || -> Result<_> {
         let mut records = RecordThread::start(Books::new(r), writers, direct)?;
@@ -303,7 +313,9 @@ fn execute_inproc_watched<A: Attacker>(
         Ok((ticked, books, waited.elapsed().as_secs_f64()))
     };
     let (ticked, books, waited) = match (&live, followed) {
-        (Some(live), Some(feed)) => run_followed(r, dir, &opts.stop, (live, feed), run),
+        (Some(live), Some(feed)) => {
+            run_followed((r, Engine::Inproc), dir, &opts.stop, (live, feed), run)
+        }
         _ => run(),
     }?;
     let wall_s = ticked.wall_s + waited;
@@ -496,12 +508,7 @@ fn execute_ipc(
         pace: opts.pace,
     };
     let (outcome, mut joined, write_error) = if !opts.pipes {
-        let outcome = match (&live, feed) {
-            (Some(live), Some(feed)) => run_followed(r, dir, &opts.stop, (live, feed), || {
-                runtime::run_ipc(r, &opts)
-            }),
-            _ => runtime::run_ipc(r, &opts),
-        }?;
+        let outcome = run_ipc_followed(r, &opts, live.as_ref().zip(feed))?;
         let joined = fdi_report::join::join_run(r, dir, outcome.wall_s, |_| {})?;
         (outcome, joined, None)
     } else {
@@ -558,28 +565,43 @@ fn execute_ipc(
     Ok(joined.summary)
 }
 
+/// [`runtime::run_ipc`], its traces followed into a live server when there is one.
+fn run_ipc_followed(
+    r: &Resolved,
+    opts: &runtime::IpcOptions,
+    live: Option<(&fdi_live::Live, fdi_live::Feed)>,
+) -> Result<runtime::IpcOutcome> {
+    match live {
+        Some(live) => run_followed((r, Engine::Ipc), &opts.run_dir, &opts.stop, live, || {
+            runtime::run_ipc(r, opts)
+        }),
+        None => runtime::run_ipc(r, opts),
+    }
+}
+
 /// Runs `run` (which writes the traces of a run of `r` into `run_dir`) with a thread that
 /// follows those traces into the live server's `feed` once a viewer subscribed ([`follow`]).
 fn run_followed<T>(
-    r: &Resolved,
+    (r, engine): (&Resolved, Engine),
     run_dir: &Path,
     stop: &Stop,
     (live, feed): (&fdi_live::Live, fdi_live::Feed),
     run: impl FnOnce() -> T,
 ) -> T {
-    let over = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let actuation = engine == Engine::Ipc;
+    let over = std::sync::Arc::new(follow::Over::default());
     let watcher = live.watcher();
     std::thread::scope(|s| {
         let follower = std::thread::Builder::new()
             .name("live-follow".into())
             .spawn_scoped(s, || {
-                follow::follow_run(r, run_dir, feed, &watcher, &over, stop)
+                follow::follow_run(r, run_dir, (feed, &watcher), &over, actuation, stop)
             });
         if let Err(e) = &follower {
             eprintln!("fdi-launch: warning: the live view could not start its thread: {e}");
         }
         let result = run();
-        over.store(true, std::sync::atomic::Ordering::Release);
+        over.set();
         match follower.map(std::thread::ScopedJoinHandle::join) {
             Ok(Ok(Ok(()))) | Err(_) => {}
             Ok(Ok(Err(e))) => eprintln!("fdi-launch: warning: the live view stopped: {e:#}"),

@@ -671,7 +671,8 @@ fn spawn_and_supervise<X: Transport>(
         remote.await_routes()?;
     }
     let started = start_run(resolved, transport, l)?;
-    let (wall_s, interrupted) = supervise(resolved, l, &bar, started)?;
+    let stall_timeout = stall_timeout_of(resolved, l.remote.as_ref(), opts.pace);
+    let (wall_s, interrupted) = supervise(resolved, l, &bar, started, stall_timeout)?;
     if interrupted.is_some() {
         return Ok(Supervised {
             wall_s,
@@ -801,6 +802,11 @@ fn spawn_local<X: Transport>(
         pace: opts.pace,
     };
     cmd.args(args.to_args());
+    if opts.pace.is_some() {
+        // Paced, the processes wait most of each tick: spinning before they block would only
+        // burn the CPUs.
+        cmd.env("FDI_SPIN_US", "0");
+    }
     l.procs.spawn(
         label,
         Slot {
@@ -979,9 +985,9 @@ fn supervise<X: Transport>(
     l: &mut Launcher<X>,
     bar: &ProgressBar,
     started: Instant,
+    stall_timeout: Duration,
 ) -> Result<(f64, Option<i32>)> {
     let dt = resolved.scenario.control_period_s;
-    let stall_timeout = stall_timeout_of(resolved, l.remote.as_ref());
     l.progress = (0, started);
     let mut done = vec![false; l.procs.len()];
     // When the run's own processes were all done: the programs taking roles must be done
@@ -1060,11 +1066,22 @@ fn supervise<X: Transport>(
 /// How long a started run may go without progress before it is stopped as stalled: the
 /// deployment's `stall_timeout_s` (split runs) or [`STALL_TIMEOUT`], and never less than what a
 /// program that takes a role may take to answer, plus a second.
-fn stall_timeout_of(resolved: &Resolved, remote: Option<&crate::run::remote::Remote>) -> Duration {
+fn stall_timeout_of(
+    resolved: &Resolved,
+    remote: Option<&crate::run::remote::Remote>,
+    pace: Option<f64>,
+) -> Duration {
     let roles = &resolved.scenario.roles;
-    let base = remote
+    let mut base = remote
         .and_then(|r| r.deployment.stall_timeout)
         .unwrap_or(STALL_TIMEOUT);
+    // A paced run reports its progress every `PROGRESS_EVERY` ticks at its pace: twice that
+    // long without a report is a stall.
+    if let Some(p) = pace {
+        let between =
+            fdi_control_center::PROGRESS_EVERY as f64 * resolved.scenario.control_period_s / p;
+        base = base.max(STALL_TIMEOUT + Duration::from_secs_f64(2.0 * between));
+    }
     [roles.attacker.as_ref(), roles.monitor.as_ref()]
         .into_iter()
         .flatten()
