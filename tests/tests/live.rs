@@ -558,3 +558,72 @@ fn the_shipped_layouts_name_only_fields_of_the_run_s_topics_and_the_paper_s_boun
     assert!(field_exists("/agent5/estimate.s_hat_rad_s[0]", '.').is_err());
     assert!(field_exists("/agent1/estimate.s_hat_rad_s[2]", '.').is_err());
 }
+
+/// A run that keeps no traces is served from the records as they are made: the launcher's join
+/// of the processes' pipes (ipc), the engine's own records (in-process). What the viewer gets is
+/// the recording of the same run with whole traces, to the byte.
+#[test]
+fn a_run_that_keeps_no_traces_is_served_from_its_records_as_they_are_made() {
+    let Some(py) = python() else { return };
+    // The reference: the same run, whole traces, exported.
+    let out = Scratch::new("live-ref-export");
+    let reference = json(&launch(
+        &["run", "--engine", "inproc", "--duration-s", "1", "--json"],
+        &out.0,
+        WATCHDOG,
+    ));
+    let (_, recorded) = exported(&run_dir_of(&reference));
+    let topic = "/agent3/estimate";
+    let every = 5;
+    let want: Vec<(u64, String)> = recorded[topic]
+        .iter()
+        .filter(|(_, text)| tick_of(text).is_multiple_of(every))
+        .cloned()
+        .collect();
+    assert_eq!(want.len(), 200);
+    for engine in ["ipc", "inproc"] {
+        let out = Scratch::new("live-none");
+        let run = LiveRun::start(
+            &[
+                "run",
+                "--engine",
+                engine,
+                "--traces",
+                "none",
+                "--pace",
+                "0.5",
+                "--live-rate",
+                "100",
+                "--duration-s",
+                "1",
+            ],
+            &out.0,
+        );
+        let seen = client_output(client(
+            &py,
+            &run.addr,
+            &["--until-k", "995", "--topic", topic],
+            &out.0,
+        ));
+        let summary = run.finish();
+        assert_eq!(
+            summary["trace_digest"], reference["trace_digest"],
+            "{engine}"
+        );
+        let got: Vec<(u64, String)> = seen["messages"][topic]
+            .as_array()
+            .expect("messages")
+            .iter()
+            .map(|m| {
+                (
+                    m[0].as_u64().expect("a log time"),
+                    m[1].as_str().expect("text").to_string(),
+                )
+            })
+            .collect();
+        assert_eq!(
+            got, want,
+            "{engine}: what the viewer got is the recording's"
+        );
+    }
+}

@@ -25,8 +25,9 @@ const POLL: Duration = Duration::from_millis(20);
 /// too busy for its idle thread): then it stops, and the launcher goes on.
 const FINISH: Duration = Duration::from_secs(5);
 /// In a realtime run, a trace that has not grown for this long is taken to have ended (its
-/// process was lost; a live process's trace writer flushes every 100 ms): the others go on.
-const REALTIME_SILENCE: Duration = Duration::from_secs(2);
+/// process was lost; a live process's trace writer flushes every 100 ms, but the processes may
+/// take seconds to start on a loaded machine after writing their headers): the others go on.
+const REALTIME_SILENCE: Duration = Duration::from_secs(10);
 
 /// The end of the run, as the follower sees it.
 #[derive(Debug, Default)]
