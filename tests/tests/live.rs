@@ -471,8 +471,7 @@ fn field_exists(path: &str, sep: char) -> Result<(), String> {
     }
 }
 
-/// The values of attribute `attr` of every element `<tag …>` of `xml`, and the text of every
-/// `<tag>…</tag>` for `text_of`.
+/// The values of attribute `attr` of every element `<tag …>` of `xml`.
 fn xml_values(xml: &str, tag: &str, attr: &str) -> Vec<String> {
     let open = format!("<{tag} ");
     let key = format!("{attr}=\"");
@@ -487,6 +486,7 @@ fn xml_values(xml: &str, tag: &str, attr: &str) -> Vec<String> {
         .collect()
 }
 
+/// The text of every element `<tag>…</tag>` of `xml`.
 fn xml_texts(xml: &str, tag: &str) -> Vec<String> {
     let (open, close) = (format!("<{tag}>"), format!("</{tag}>"));
     xml.match_indices(&open)
