@@ -148,6 +148,21 @@ fn exported(run_dir: &Path) -> (BTreeMap<String, Channel>, Messages) {
     (channels, messages)
 }
 
+/// What a client received on `topic`: log time, text.
+fn received(seen: &Value, topic: &str) -> Vec<(u64, String)> {
+    seen["messages"][topic]
+        .as_array()
+        .expect("messages")
+        .iter()
+        .map(|m| {
+            (
+                m[0].as_u64().expect("a log time"),
+                m[1].as_str().expect("text").to_string(),
+            )
+        })
+        .collect()
+}
+
 /// The tick of a message's text.
 fn tick_of(text: &str) -> u64 {
     serde_json::from_str::<Value>(text).expect("JSON")["k"]
@@ -236,17 +251,7 @@ fn watched_run(
                 want.len()
             );
         }
-        let got: Vec<(u64, String)> = seen["messages"][*topic]
-            .as_array()
-            .expect("messages")
-            .iter()
-            .map(|m| {
-                (
-                    m[0].as_u64().expect("a log time"),
-                    m[1].as_str().expect("text").to_string(),
-                )
-            })
-            .collect();
+        let got = received(&seen, topic);
         assert_eq!(got.len(), want.len(), "{topic}: messages received");
         for (g, w) in got.iter().zip(&want) {
             assert_eq!(g, w, "{topic}");
@@ -610,17 +615,7 @@ fn a_run_that_keeps_no_traces_is_served_from_its_records_as_they_are_made() {
             summary["trace_digest"], reference["trace_digest"],
             "{engine}"
         );
-        let got: Vec<(u64, String)> = seen["messages"][topic]
-            .as_array()
-            .expect("messages")
-            .iter()
-            .map(|m| {
-                (
-                    m[0].as_u64().expect("a log time"),
-                    m[1].as_str().expect("text").to_string(),
-                )
-            })
-            .collect();
+        let got = received(&seen, topic);
         assert_eq!(
             got, want,
             "{engine}: what the viewer got is the recording's"

@@ -112,29 +112,11 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
     request.traces = args.traces;
     request.placement = args.placement.clone();
     fdi_orchestrator::run::check_pace(&request.resolved, args.pace)?;
-    if args.live.is_some() && args.hosts.is_some() {
-        anyhow::bail!(
-            "--live serves runs on one host only: the robots of a run split over hosts \
-             (--hosts) reach the coordinator at its end (their traces are fetched whole)"
-        );
-    }
-    if !(args.live_rate.is_finite() && args.live_rate > 0.0) {
-        anyhow::bail!(
-            "--live-rate {}: ticks a second, finite and > 0",
-            args.live_rate
-        );
-    }
-    let wait = match args.live_wait {
-        Some(w) => Some(std::time::Duration::try_from_secs_f64(w).map_err(|_| {
-            anyhow::anyhow!("--live-wait {w}: a number of seconds, finite and ≥ 0")
-        })?),
-        None => None,
-    };
-    request.live = args.live.map(|addr| fdi_orchestrator::run::LiveServe {
-        addr,
-        rate_hz: args.live_rate,
-        wait,
-    });
+    fdi_orchestrator::run::check_live_on_one_host(args.live.is_some(), args.hosts.is_some())?;
+    request.live = args
+        .live
+        .map(|addr| fdi_orchestrator::run::LiveServe::new(addr, args.live_rate, args.live_wait))
+        .transpose()?;
     request.pace = args.pace;
     request.progress = !args.json;
     Ok(request)

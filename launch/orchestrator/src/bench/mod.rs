@@ -277,18 +277,11 @@ fn latency_scenario(a: &LatencyArgs) -> Result<Resolved> {
 
 /// The live server `a` asks for.
 fn live_serve(a: &LatencyArgs) -> Result<Option<crate::run::LiveServe>> {
-    let wait = match a.live_wait {
-        Some(w) => Some(
-            std::time::Duration::try_from_secs_f64(w)
-                .map_err(|_| anyhow::anyhow!("--live-wait {w}: seconds, finite and ≥ 0"))?,
-        ),
-        None => None,
-    };
-    Ok(a.live.map(|addr| crate::run::LiveServe {
-        addr,
-        rate_hz: fdi_live::Options::DEFAULT_RATE_HZ,
-        wait,
-    }))
+    a.live
+        .map(|addr| {
+            crate::run::LiveServe::new(addr, fdi_live::Options::DEFAULT_RATE_HZ, a.live_wait)
+        })
+        .transpose()
 }
 
 /// A whole realtime run and the timer probe's wake-ups beside it.

@@ -16,7 +16,7 @@ use anyhow::{bail, Result};
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::stop::Stop;
-use fdi_common::trace::{TraceReader, TraceRecord};
+use fdi_common::trace::TraceReader;
 use fdi_report::join::{Feed, Sources};
 
 /// How long a follower sleeps when it reached what was written so far.
@@ -115,9 +115,8 @@ fn followed(
     };
     match TraceReader::follow(growing, &path) {
         Ok(reader) => Box::new(reader.map(move |r| {
-            if let (Ok(rec @ (TraceRecord::Event { .. } | TraceRecord::Latency { .. })), Some(to)) =
-                (&r, &mut records)
-            {
+            // (It takes the events and latency stamps only.)
+            if let (Ok(rec), Some(to)) = (&r, &mut records) {
                 to.record(&stem, rec);
             }
             r.map_err(|e| e.to_string())

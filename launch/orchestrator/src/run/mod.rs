@@ -134,6 +134,24 @@ pub struct LiveServe {
 }
 
 impl LiveServe {
+    /// `--live=ADDR --live-rate HZ --live-wait SECONDS`, each checked.
+    pub fn new(addr: std::net::SocketAddr, rate_hz: f64, wait_s: Option<f64>) -> Result<Self> {
+        if !(rate_hz.is_finite() && rate_hz > 0.0) {
+            bail!("--live-rate {rate_hz}: ticks a second, finite and > 0");
+        }
+        let wait = match wait_s {
+            Some(w) => Some(std::time::Duration::try_from_secs_f64(w).map_err(|_| {
+                anyhow::anyhow!("--live-wait {w}: a number of seconds, finite and ≥ 0")
+            })?),
+            None => None,
+        };
+        Ok(Self {
+            addr,
+            rate_hz,
+            wait,
+        })
+    }
+
     /// The live server's options for a run of `r` on `engine` at `pace`.
     fn options(&self, r: &Resolved, engine: Engine, pace: Option<f64>) -> fdi_live::Options {
         let s = &r.scenario;
@@ -178,6 +196,17 @@ fn start_live(
         }
     }
     Ok(Some((live, feed)))
+}
+
+/// Refuses `--live` for a run split over hosts (`--hosts`).
+pub fn check_live_on_one_host(live: bool, split: bool) -> Result<()> {
+    if live && split {
+        bail!(
+            "--live serves runs on one host only: the robots of a run split over hosts \
+             (--hosts) reach the coordinator only at its end (their traces are fetched whole)"
+        );
+    }
+    Ok(())
 }
 
 /// Refuses a pace that is not a positive finite factor, or a pace of a realtime run.
@@ -450,12 +479,7 @@ pub fn execute_on(
              traces are fetched whole at the end)"
         );
     }
-    if deployment.is_some() && opts.live.is_some() {
-        bail!(
-            "--live serves runs on one host only: the robots of a run split over hosts \
-             (--hosts) reach the coordinator at the end (their traces are fetched whole)"
-        );
-    }
+    check_live_on_one_host(opts.live.is_some(), deployment.is_some())?;
     check_pace(r, opts.pace)?;
     if engine == Engine::Inproc {
         inproc_runs(r)?;
