@@ -25,18 +25,24 @@ use serde_json::Value;
 
 const WATCHDOG: Duration = Duration::from_secs(300);
 
-/// A run of `fdi-launch` with `--live=127.0.0.1:0 --live-wait 60`: its address, once it said it.
-struct LiveRun {
+/// The arguments that make a run live for the tests: a free port, the run started once a viewer
+/// subscribed, its summary in JSON.
+pub(crate) const LIVE_ARGS: [&str; 4] = ["--live=127.0.0.1:0", "--live-wait", "60", "--json"];
+
+/// A run of `fdi-launch` with [`LIVE_ARGS`]: its address, once it said it.
+pub(crate) struct LiveRun {
     child: Child,
-    addr: String,
+    pub(crate) addr: String,
     stderr: std::thread::JoinHandle<String>,
 }
 
 impl LiveRun {
     fn start(args: &[&str], out: &Path) -> Self {
-        let mut all = args.to_vec();
-        all.extend(["--live=127.0.0.1:0", "--live-wait", "60", "--json"]);
-        let mut child = spawn(&all, out);
+        Self::of(spawn(&[args, &LIVE_ARGS[..]].concat(), out))
+    }
+
+    /// The run `child` started with [`LIVE_ARGS`] (its stderr piped).
+    pub(crate) fn of(mut child: Child) -> Self {
         let stderr = child.stderr.take().expect("stderr");
         let (tx, rx) = mpsc::channel();
         let stderr = std::thread::spawn(move || {
@@ -62,28 +68,39 @@ impl LiveRun {
     }
 
     /// Waits for the run's end; its summary.
-    fn finish(self) -> Value {
+    pub(crate) fn finish(self) -> Value {
+        self.finish_with_stderr().0
+    }
+
+    /// Waits for the run's end; its summary, and what it printed on stderr.
+    pub(crate) fn finish_with_stderr(self) -> (Value, String) {
         let out = fdi_tests::wait_with_watchdog(self.child, WATCHDOG);
         let stderr = self.stderr.join().expect("the stderr reader");
-        json(&Output {
-            stderr: stderr.into_bytes(),
+        let summary = json(&Output {
+            stderr: stderr.clone().into_bytes(),
             ..out
-        })
+        });
+        (summary, stderr)
     }
 }
 
 /// A test client, and the file it writes.
-struct Client {
+pub(crate) struct Client {
     child: Child,
     out: PathBuf,
 }
 
 /// Starts the test client on `addr` with `args`, writing into `dir`.
 fn client(python: &Path, addr: &str, args: &[&str], dir: &Path) -> Client {
+    client_by(Command::new(python), addr, args, dir)
+}
+
+/// [`client`], Python started by `python` (in a network namespace, say).
+pub(crate) fn client_by(mut python: Command, addr: &str, args: &[&str], dir: &Path) -> Client {
     static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
     let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
     let out = dir.join(format!("client-{n}.json"));
-    let child = Command::new(python)
+    let child = python
         .arg(repo_path("tests/python/live_client.py"))
         .arg(addr)
         .args(args)
@@ -98,7 +115,7 @@ fn client(python: &Path, addr: &str, args: &[&str], dir: &Path) -> Client {
 }
 
 /// What a client wrote, once it ended (successfully).
-fn client_output(c: Client) -> Value {
+pub(crate) fn client_output(c: Client) -> Value {
     let out = fdi_tests::wait_with_watchdog(c.child, WATCHDOG);
     assert!(
         out.status.success(),
@@ -185,9 +202,19 @@ fn joined(messages: &Messages) -> BTreeMap<String, std::collections::BTreeSet<u6
         .collect()
 }
 
-/// Runs `args` live with a client subscribed to `topics`, and checks what it saw against the
-/// run's MCAP export, the stream keeping every `every`-th tick of `ticks` (every one of them
-/// when `whole`: a lockstep run joins every tick). The run's summary.
+/// The test client's arguments: subscribed to `topics`, until the last tick of `ticks` the
+/// stream keeps (every `every`-th).
+pub(crate) fn client_args(topics: &[&str], (every, ticks): (u64, u64)) -> Vec<String> {
+    let last = ((ticks - 1) / every * every).to_string();
+    let mut args = vec!["--until-k".to_string(), last];
+    for t in topics {
+        args.extend(["--topic".to_string(), t.to_string()]);
+    }
+    args
+}
+
+/// Runs `args` live with a client subscribed to `topics`, and checks what it saw
+/// ([`check_watched`]). The run's summary.
 fn watched_run(
     python: &Path,
     args: &[&str],
@@ -196,14 +223,24 @@ fn watched_run(
 ) -> Value {
     let out = Scratch::new("live");
     let run = LiveRun::start(args, &out.0);
-    let last = ((ticks - 1) / every * every).to_string();
-    let mut client_args = vec!["--until-k", last.as_str()];
-    for t in topics {
-        client_args.extend(["--topic", t]);
-    }
+    let client_args = client_args(topics, (every, ticks));
+    let client_args: Vec<&str> = client_args.iter().map(String::as_str).collect();
     let seen = client_output(client(python, &run.addr, &client_args, &out.0));
     let summary = run.finish();
-    let run_dir: PathBuf = run_dir_of(&summary);
+    check_watched(&seen, &summary, topics, (every, ticks, whole));
+    summary
+}
+
+/// Checks what a client subscribed to `topics` saw (`seen`) of the run of `summary` against the
+/// run's MCAP export, the stream keeping every `every`-th tick of `ticks` (every one of them
+/// when `whole`: a lockstep run joins every tick).
+pub(crate) fn check_watched(
+    seen: &Value,
+    summary: &Value,
+    topics: &[&str],
+    (every, ticks, whole): (u64, u64, bool),
+) {
+    let run_dir: PathBuf = run_dir_of(summary);
     let (channels, messages) = exported(&run_dir);
 
     // The channels: every topic of the recording, with its very encoding and schema.
@@ -251,7 +288,7 @@ fn watched_run(
                 want.len()
             );
         }
-        let got = received(&seen, topic);
+        let got = received(seen, topic);
         assert_eq!(got.len(), want.len(), "{topic}: messages received");
         for (g, w) in got.iter().zip(&want) {
             assert_eq!(g, w, "{topic}");
@@ -275,11 +312,10 @@ fn watched_run(
     assert_eq!(live["clients"], 1, "{live}");
     assert_eq!(live["ticks_published"], want.len(), "{live}");
     assert_eq!(live["records_dropped"], 0, "{live}");
-    summary
 }
 
 /// The digest of the paper scenario for `seconds` on the in-process engine, without a viewer.
-fn inproc_digest(seconds: &str) -> Value {
+pub(crate) fn inproc_digest(seconds: &str) -> Value {
     let out = Scratch::new("live-ref");
     let s = json(&launch(
         &[

@@ -825,3 +825,79 @@ fn an_insecure_run_refuses_names_and_counts_what_a_rogue_peer_sends() {
     assert_eq!(v["network"]["authenticated"], false, "{v}");
     assert_eq!(v["network"]["refused_frames"], 1200, "{v}");
 }
+
+/// Runs `args` live on the coordinating host of `lab` with a client there subscribed to
+/// `topics`, and checks what it saw against the run's recording
+/// ([`crate::live::check_watched`]). The run's summary.
+fn watched(
+    lab: &Lab,
+    python: &std::path::Path,
+    args: &[&str],
+    topics: &[&str],
+    keep: (u64, u64, bool),
+) -> serde_json::Value {
+    use crate::live::{check_watched, client_args, client_by, client_output, LiveRun, LIVE_ARGS};
+    let run = LiveRun::of(lab.start(&[args, &LIVE_ARGS[..]].concat()));
+    let client_args = client_args(topics, (keep.0, keep.1));
+    let client_args: Vec<&str> = client_args.iter().map(String::as_str).collect();
+    let python = lab.hosts.command(0, python, &[]);
+    let seen = client_output(client_by(python, &run.addr, &client_args, &lab.scratch.0));
+    let (summary, stderr) = run.finish_with_stderr();
+    check_watched(&seen, &summary, topics, keep);
+    // The remote robots came during the run, streamed by their host.
+    assert!(!stderr.contains("live view: the stream"), "{stderr}");
+    summary
+}
+
+/// The live view of a split run (issue 35): a viewer on the coordinating host sees the robots of
+/// every host as the run makes them, those on another host too (their traces asked of its
+/// serve as they grow), the same messages as the run's recording.
+#[test]
+fn a_viewer_of_a_split_run_sees_the_robots_of_every_host() {
+    let Some(python) = fdi_tests::python() else {
+        return;
+    };
+    let Some(mut lab) = Lab::new(2, "multihost-live") else {
+        return;
+    };
+    let file = lab.deployment(TWO_HOSTS);
+    lab.serve(1, "cell");
+    // Agents 3 and 4 run on `cell`, agent 1 on the coordinating host.
+    let topics = [
+        "/agent3/tracking_error",
+        "/agent3/estimate",
+        "/agent4/detectors",
+        "/agent1/tracking_error",
+    ];
+    // Paced at half real time, every 5th tick kept: each of them, as recorded.
+    let lockstep = [
+        "run",
+        "--hosts",
+        &file,
+        "--duration-s",
+        "1",
+        "--pace",
+        "0.5",
+        "--live-rate",
+        "100",
+    ];
+    let summary = watched(&lab, &python, &lockstep, &topics, (5, 1000, true));
+    assert_eq!(
+        summary["trace_digest"],
+        crate::live::inproc_digest("1"),
+        "watched, paced, split: the same run"
+    );
+    // Realtime: every 10th tick of those the join matched.
+    let realtime = [
+        "run",
+        "--hosts",
+        &file,
+        "--clock",
+        "realtime",
+        "--duration-s",
+        "1",
+        "--live-rate",
+        "100",
+    ];
+    watched(&lab, &python, &realtime, &topics, (10, 1000, false));
+}

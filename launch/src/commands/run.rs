@@ -112,7 +112,6 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
     request.traces = args.traces;
     request.placement = args.placement.clone();
     fdi_orchestrator::run::check_pace(&request.resolved, args.pace)?;
-    fdi_orchestrator::run::check_live_on_one_host(args.live.is_some(), args.hosts.is_some())?;
     request.live = args
         .live
         .map(|addr| fdi_orchestrator::run::LiveServe::new(addr, args.live_rate, args.live_wait))

@@ -4,20 +4,29 @@
 //! live server's feed. Nobody watching, nothing is read: the run costs what it costs without
 //! `--live`. The processes never wait for the follower (it reads what their writers flushed:
 //! every 100 ms or 64 KiB), and a viewer that comes late sees the run from its start.
+//!
+//! In a run split over hosts, the traces of the processes on other hosts come as their hosts'
+//! serves stream them once subscribed ([`crate::run::trace_stream`]), and at the end from the
+//! copies the run fetched; the coordinator serves every robot's topics.
 
+use std::collections::BTreeSet;
 use std::fs::File;
-use std::io::Read;
+use std::io::{Cursor, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
+use std::sync::{mpsc, Arc, Mutex, OnceLock};
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::stop::Stop;
 use fdi_common::trace::TraceReader;
 use fdi_report::join::{Feed, Sources};
+
+use crate::run::relay::lock;
+use crate::run::remote::RemoteTraces;
+use crate::run::trace_stream::Chunk;
 
 /// How long a follower sleeps when it reached what was written so far.
 const POLL: Duration = Duration::from_millis(20);
@@ -80,6 +89,235 @@ impl Read for Growing {
     }
 }
 
+/// Where the follower finds the traces of a split run's processes on other hosts: set once
+/// the coordinator reached them, emptied when it fetches them at the end.
+pub type RemoteSlot = Arc<Mutex<Option<RemoteTraces>>>;
+
+/// A subscription the [`Subscriber`] is asked for: the process, and where to answer.
+type Ask = (
+    Process,
+    mpsc::Sender<Option<mpsc::Receiver<Result<Chunk, String>>>>,
+);
+
+/// Subscribes to the streams of the remote traces ([`crate::run::trace_stream`]) on a thread
+/// of its own at the run's priority, which holds the subscriptions until every `Subscriber` is
+/// dropped. The follower runs under SCHED_IDLE, and a Zenoh call takes locks of the session
+/// that a thread the busy run starves must not hold.
+#[derive(Clone)]
+struct Subscriber {
+    to: mpsc::Sender<Ask>,
+    slot: RemoteSlot,
+}
+
+impl Subscriber {
+    fn start(slot: &RemoteSlot) -> Result<Self> {
+        let (to, asks) = mpsc::channel::<Ask>();
+        let traces = slot.clone();
+        std::thread::Builder::new()
+            .name("live-subscribe".into())
+            .spawn(move || {
+                let mut held = Vec::new();
+                for (p, answer) in asks {
+                    let remote = lock(&traces).clone();
+                    let chunks = match remote.map(|t| t.subscribe(p)) {
+                        Some(Ok(s)) => {
+                            held.push(s.subscription);
+                            Some(s.chunks)
+                        }
+                        Some(Err(e)) => {
+                            eprintln!("fdi-launch: warning: live view: {p}: {e:#}");
+                            None
+                        }
+                        None => None,
+                    };
+                    let _ = answer.send(chunks);
+                }
+            })
+            .context("starting the live view's thread that subscribes to the remote traces")?;
+        Ok(Self {
+            to,
+            slot: slot.clone(),
+        })
+    }
+
+    /// The stream of the trace of `p`, or `None` if it cannot be had (the run's end).
+    fn subscribe(&self, p: Process) -> Option<mpsc::Receiver<Result<Chunk, String>>> {
+        let (answer, answered) = mpsc::channel();
+        self.to.send((p, answer)).ok()?;
+        answered.recv().ok().flatten()
+    }
+
+    /// The processes on other hosts, once the coordinator reached them.
+    fn elsewhere(&self) -> Option<BTreeSet<Process>> {
+        lock(&self.slot).as_ref().map(RemoteTraces::processes)
+    }
+}
+
+/// The trace of a process on another host, read as it grows: the chunks its host streams;
+/// once the run is over, the rest from the copy its end fetched into the run directory (the
+/// host then removed its own). A chunk that does not follow on (or is not one) stops the
+/// stream: the rest is read at the end.
+struct Fetched {
+    process: Process,
+    chunks: Option<mpsc::Receiver<Result<Chunk, String>>>,
+    /// How far the trace was read.
+    position: u64,
+    piece: Cursor<Vec<u8>>,
+    /// The fetched copy, read from `position` once the run is over.
+    fetched: PathBuf,
+    rest: Option<File>,
+    over: Arc<Over>,
+    silence: Option<Duration>,
+    grew: Instant,
+}
+
+impl Fetched {
+    /// The rest of the trace, from the copy fetched at the run's end.
+    fn open_rest(&self) -> std::io::Result<File> {
+        let named = |e: std::io::Error| {
+            std::io::Error::new(e.kind(), format!("{}: {e}", self.fetched.display()))
+        };
+        let mut f = File::open(&self.fetched).map_err(named)?;
+        f.seek(SeekFrom::Start(self.position)).map_err(named)?;
+        Ok(f)
+    }
+
+    /// Takes the next chunk, waiting at most [`POLL`]: whether one came.
+    fn next_chunk(&mut self) -> bool {
+        let Some(chunks) = &self.chunks else {
+            std::thread::sleep(POLL);
+            return false;
+        };
+        let broken = match chunks.recv_timeout(POLL) {
+            Ok(Ok((offset, bytes))) if offset <= self.position => {
+                // (A repeat of what was read is skipped.)
+                let seen = usize::try_from(self.position - offset).unwrap_or(usize::MAX);
+                if seen >= bytes.len() {
+                    return false;
+                }
+                self.position += (bytes.len() - seen) as u64;
+                self.piece = Cursor::new(bytes[seen..].to_vec());
+                self.grew = Instant::now();
+                return true;
+            }
+            Ok(Ok((offset, _))) => format!(
+                "a chunk at byte {offset}, after byte {} (the stream began before the \
+                 subscription)",
+                self.position
+            ),
+            Ok(Err(what)) => what,
+            Err(mpsc::RecvTimeoutError::Timeout) => return false,
+            Err(mpsc::RecvTimeoutError::Disconnected) => "the subscription ended".into(),
+        };
+        eprintln!(
+            "fdi-launch: warning: live view: the stream of the trace of {} stopped ({broken}): \
+             the rest is read once the run is over",
+            self.process
+        );
+        self.chunks = None;
+        false
+    }
+}
+
+impl Read for Fetched {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        loop {
+            if let Some(f) = &mut self.rest {
+                return f.read(buf);
+            }
+            let n = self.piece.read(buf)?;
+            if n > 0 {
+                return Ok(n);
+            }
+            if self.over.is_set() {
+                if self.position == 0 && self.chunks.is_some() {
+                    // (Its host never sent: the viewer saw this robot only after the end.)
+                    eprintln!(
+                        "fdi-launch: warning: live view: the stream of the trace of {} delivered \
+                         nothing during the run: its records are read from the fetched copy",
+                        self.process
+                    );
+                }
+                self.rest = Some(self.open_rest()?);
+                continue;
+            }
+            if !self.next_chunk() && self.silence.is_some_and(|s| self.grew.elapsed() > s) {
+                return Ok(0);
+            }
+        }
+    }
+}
+
+/// Where the traces of a run are, to follow them: its directory, and for a split run the other
+/// hosts (once reached).
+pub struct Traces<'a> {
+    dir: RunDir,
+    subscriber: Option<Subscriber>,
+    over: &'a Arc<Over>,
+}
+
+impl<'a> Traces<'a> {
+    /// The traces of the run in `run_dir`, and of its processes on other hosts (`remote`):
+    /// call it on a thread at the run's priority (it may start one).
+    pub fn new(run_dir: &Path, remote: Option<&RemoteSlot>, over: &'a Arc<Over>) -> Result<Self> {
+        Ok(Self {
+            dir: RunDir::new(run_dir),
+            subscriber: remote.map(Subscriber::start).transpose()?,
+            over,
+        })
+    }
+
+    /// Waits until the other hosts of a split run are reached: the processes that run there
+    /// (none on one host), or `None` if the run is over first.
+    fn reached(&self) -> Option<BTreeSet<Process>> {
+        let Some(subscriber) = &self.subscriber else {
+            return Some(BTreeSet::new());
+        };
+        loop {
+            let was_over = self.over.is_set();
+            if let Some(elsewhere) = subscriber.elsewhere() {
+                return Some(elsewhere);
+            }
+            if was_over {
+                return None;
+            }
+            std::thread::sleep(POLL);
+        }
+    }
+
+    /// The trace of `p` read as it grows, asked of its host if it is `elsewhere` (`None`: the
+    /// run is over without it).
+    fn open(
+        &self,
+        p: Process,
+        elsewhere: &BTreeSet<Process>,
+        silence: Option<Duration>,
+    ) -> Option<Box<dyn Read + Send>> {
+        let path = self.dir.trace(p);
+        let over = self.over.clone();
+        if let Some(subscriber) = self.subscriber.as_ref().filter(|_| elsewhere.contains(&p)) {
+            return Some(Box::new(Fetched {
+                process: p,
+                chunks: subscriber.subscribe(p),
+                position: 0,
+                piece: Cursor::default(),
+                fetched: path,
+                rest: None,
+                over,
+                silence,
+                grew: Instant::now(),
+            }));
+        }
+        let file = open_when_made(&path, self.over)?;
+        Some(Box::new(Growing {
+            file,
+            over,
+            silence,
+            grew: Instant::now(),
+        }))
+    }
+}
+
 /// The trace file `path`, once it exists (a process makes it after it starts); `None` if the
 /// run is over without it.
 fn open_when_made(path: &Path, over: &Over) -> Option<File> {
@@ -95,24 +333,20 @@ fn open_when_made(path: &Path, over: &Over) -> Option<File> {
     }
 }
 
-/// The records of the trace at `path`, followed as it grows; its events and latency stamps
-/// also to the live server (`records`: once per trace, a second reader of it has none).
+/// The records of the trace of `p`, followed as it grows; its events and latency stamps also
+/// to the live server (`records`: once per trace, a second reader of it has none).
 fn followed(
-    path: PathBuf,
-    stem: String,
-    (over, silence): (&Arc<Over>, Option<Duration>),
+    (traces, elsewhere): (&Traces, &BTreeSet<Process>),
+    p: Process,
+    silence: Option<Duration>,
     mut records: Option<fdi_live::RecordFeed>,
 ) -> Feed {
-    let Some(file) = open_when_made(&path, over) else {
+    let path = traces.dir.trace(p);
+    let Some(growing) = traces.open(p, elsewhere, silence) else {
         let missing = format!("{}: the process wrote no trace", path.display());
         return Box::new(std::iter::once(Err(missing)));
     };
-    let growing = Growing {
-        file,
-        over: over.clone(),
-        silence,
-        grew: Instant::now(),
-    };
+    let stem = p.to_string();
     match TraceReader::follow(growing, &path) {
         Ok(reader) => Box::new(reader.map(move |r| {
             // (It takes the events and latency stamps only.)
@@ -125,39 +359,35 @@ fn followed(
     }
 }
 
-/// Follows the traces of the run of `r` in `run_dir` once `watcher` says a viewer subscribed,
-/// until the run is over (`over`) and every trace read, at most [`FINISH`] after; the joined
-/// ticks into `feed`. Returns at once, reading nothing, if the run is over before anyone
-/// watched. `actuation`: the attacker's trace holds the torque path's records (the ipc engine;
-/// the in-process engine's traces have none).
+/// Follows the traces of the run of `r` (`traces`) once `watcher` says a viewer subscribed,
+/// until the run is over and every trace read, at most [`FINISH`] after; the joined ticks into
+/// `feed`. Returns at once, reading nothing, if the run is over before anyone watched.
+/// `actuation`: the attacker's trace holds the torque path's records (the ipc engine; the
+/// in-process engine's traces have none).
 pub fn follow_run(
     r: &Resolved,
-    run_dir: &Path,
+    traces: &Traces,
     (mut feed, watcher): (fdi_live::Feed, &fdi_live::Watcher),
-    over: &Arc<Over>,
     actuation: bool,
     stop: &Stop,
 ) -> Result<()> {
     fdi_live::yield_to_the_run();
+    let over = traces.over;
     while !watcher.wait(POLL * 5) {
         if over.is_set() {
             return Ok(());
         }
     }
-    let dir = RunDir::new(run_dir);
+    let Some(elsewhere) = traces.reached() else {
+        return Ok(());
+    };
     let records = feed.records();
     let s = &r.scenario;
     let silence = (s.clock == ClockMode::Realtime).then_some(REALTIME_SILENCE);
-    let feed_of = |p: Process| {
-        followed(
-            dir.trace(p),
-            p.to_string(),
-            (over, silence),
-            Some(records.clone()),
-        )
-    };
+    let at = (traces, &elsewhere);
+    let feed_of = |p: Process| followed(at, p, silence, Some(records.clone()));
     // A second reader of a trace, for its second stream of records.
-    let second = |p: Process| followed(dir.trace(p), p.to_string(), (over, silence), None);
+    let second = |p: Process| followed(at, p, silence, None);
     let agents = s
         .agents
         .iter()

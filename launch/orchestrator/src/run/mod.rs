@@ -18,6 +18,7 @@ pub mod runtime;
 pub mod serve;
 pub mod supervisor;
 pub mod tap;
+pub mod trace_stream;
 pub mod volume;
 
 use std::path::Path;
@@ -198,17 +199,6 @@ fn start_live(
     Ok(Some((live, feed)))
 }
 
-/// Refuses `--live` for a run split over hosts (`--hosts`).
-pub fn check_live_on_one_host(live: bool, split: bool) -> Result<()> {
-    if live && split {
-        bail!(
-            "--live serves runs on one host only: the robots of a run split over hosts \
-             (--hosts) reach the coordinator only at its end (their traces are fetched whole)"
-        );
-    }
-    Ok(())
-}
-
 /// Refuses a pace that is not a positive finite factor, or a pace of a realtime run.
 pub fn check_pace(r: &Resolved, pace: Option<f64>) -> Result<()> {
     let Some(p) = pace else { return Ok(()) };
@@ -342,9 +332,13 @@ fn execute_inproc_watched<A: Attacker>(
         Ok((ticked, books, waited.elapsed().as_secs_f64()))
     };
     let (ticked, books, waited) = match (&live, followed) {
-        (Some(live), Some(feed)) => {
-            run_followed((r, Engine::Inproc), dir, &opts.stop, (live, feed), run)
-        }
+        (Some(live), Some(feed)) => run_followed(
+            (r, Engine::Inproc),
+            (dir, None),
+            &opts.stop,
+            (live, feed),
+            run,
+        ),
         _ => run(),
     }?;
     let wall_s = ticked.wall_s + waited;
@@ -479,7 +473,6 @@ pub fn execute_on(
              traces are fetched whole at the end)"
         );
     }
-    check_live_on_one_host(opts.live.is_some(), deployment.is_some())?;
     check_pace(r, opts.pace)?;
     if engine == Engine::Inproc {
         inproc_runs(r)?;
@@ -530,6 +523,7 @@ fn execute_ipc(
         deployment: deployment.cloned(),
         stop: opts.stop.clone(),
         pace: opts.pace,
+        remote_traces: (live.is_some() && deployment.is_some()).then(Default::default),
     };
     let (outcome, mut joined, write_error) = if !opts.pipes {
         let outcome = run_ipc_followed(r, &opts, live.as_ref().zip(feed))?;
@@ -596,9 +590,13 @@ fn run_ipc_followed(
     live: Option<(&fdi_live::Live, fdi_live::Feed)>,
 ) -> Result<runtime::IpcOutcome> {
     match live {
-        Some(live) => run_followed((r, Engine::Ipc), &opts.run_dir, &opts.stop, live, || {
-            runtime::run_ipc(r, opts)
-        }),
+        Some(live) => run_followed(
+            (r, Engine::Ipc),
+            (&opts.run_dir, opts.remote_traces.as_ref()),
+            &opts.stop,
+            live,
+            || runtime::run_ipc(r, opts),
+        ),
         None => runtime::run_ipc(r, opts),
     }
 }
@@ -607,7 +605,7 @@ fn run_ipc_followed(
 /// follows those traces into the live server's `feed` once a viewer subscribed ([`follow`]).
 fn run_followed<T>(
     (r, engine): (&Resolved, Engine),
-    run_dir: &Path,
+    (run_dir, remote): (&Path, Option<&follow::RemoteSlot>),
     stop: &Stop,
     (live, feed): (&fdi_live::Live, fdi_live::Feed),
     run: impl FnOnce() -> T,
@@ -619,7 +617,8 @@ fn run_followed<T>(
         let follower = std::thread::Builder::new()
             .name("live-follow".into())
             .spawn_scoped(s, || {
-                follow::follow_run(r, run_dir, (feed, &watcher), &over, actuation, stop)
+                follow::Traces::new(run_dir, remote, &over)
+                    .and_then(|t| follow::follow_run(r, &t, (feed, &watcher), actuation, stop))
             });
         if let Err(e) = &follower {
             eprintln!("fdi-launch: warning: the live view could not start its thread: {e}");

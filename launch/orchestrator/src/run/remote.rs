@@ -11,6 +11,7 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
+use fdi_common::run_dir::Process;
 use fdi_runtime::ipc::{Shm, Sizing, Wake};
 use fdi_runtime::net::{self, keys, Answering, Bridge, Net, NetConfig, Subscription, Token};
 
@@ -27,9 +28,12 @@ const REACH_TIMEOUT: Duration = Duration::from_secs(5);
 const START_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long a host may take to send one piece of a trace.
 const TRACE_TIMEOUT: Duration = Duration::from_secs(60);
-/// The pieces a trace is fetched in (Zenoh carries messages of up to 1 GiB; traces may be
-/// larger, and a piece is answered on one of Zenoh's threads).
-pub const TRACE_PIECE: u64 = 4 << 20;
+/// The pieces a trace is fetched in: each answer within one of Zenoh's batches (64 KiB). The
+/// end of a query is sent on the serve's Zenoh thread, the one that empties its queue
+/// ([`fdi_runtime::net::ONE_RUNTIME_THREAD`]): an answer that fills the queue can leave it
+/// waiting for room only it can make (seen with pieces asked during a run,
+/// [`crate::run::trace_stream`]).
+pub const TRACE_PIECE: u64 = crate::run::trace_stream::CHUNK as u64;
 /// How long every route between the hosts may take to be known before the start.
 const ROUTES_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -109,6 +113,50 @@ impl HostLink {
     /// from again (its serve stopped and cleaned up when it lost the coordinator).
     fn reachable(&self) -> bool {
         self.reply.is_some() && !self.lost_reported && self.alive.load(Ordering::SeqCst)
+    }
+}
+
+/// The traces of a run's processes on other hosts, asked of their hosts' serves piece by piece
+/// (a piece from an offset, as far as written): at the run's end to fetch them, during the run
+/// for the live view.
+#[derive(Debug, Clone)]
+pub struct RemoteTraces {
+    net: Net,
+    coordinator: String,
+    prefix: String,
+    /// The host of each process that runs on another host than the coordinating one.
+    hosts: BTreeMap<Process, String>,
+}
+
+impl RemoteTraces {
+    /// The processes that run on other hosts.
+    pub fn processes(&self) -> std::collections::BTreeSet<Process> {
+        self.hosts.keys().copied().collect()
+    }
+
+    /// The host `process` runs on, if not the coordinating one.
+    pub fn host_of(&self, process: Process) -> Option<&str> {
+        self.hosts.get(&process).map(String::as_str)
+    }
+
+    /// Subscribes to the stream of the trace of `process` its host sends once subscribed
+    /// ([`crate::run::trace_stream`]).
+    pub fn subscribe(&self, process: Process) -> Result<crate::run::trace_stream::Subscribed> {
+        let host = self
+            .host_of(process)
+            .with_context(|| format!("{process} runs on no other host"))?;
+        crate::run::trace_stream::subscribe(&self.net, host, &self.prefix, process)
+    }
+
+    /// The piece of the trace of `process` from `offset` on, as far as its host has it (at most
+    /// [`TRACE_PIECE`] bytes), asked within `timeout`.
+    pub fn piece(&self, process: Process, offset: u64, timeout: Duration) -> Result<Vec<u8>> {
+        let host = self
+            .host_of(process)
+            .with_context(|| format!("{process} runs on no other host"))?;
+        let key = keys::asked(host, &self.coordinator, &self.prefix, "traces");
+        let ask = format!("{process} {offset}");
+        Ok(self.net.request(&key, ask.as_bytes(), timeout)?)
     }
 }
 
@@ -275,6 +323,25 @@ impl Remote {
     /// The key the coordinator asks `what` of `host` on.
     fn ask(&self, host: &str, what: &str) -> String {
         keys::asked(host, &self.deployment.coordinator.name, &self.prefix, what)
+    }
+
+    /// The traces of the run's processes on the other hosts, read piece by piece.
+    pub fn traces(&self) -> RemoteTraces {
+        let coordinator = &self.deployment.coordinator.name;
+        let hosts = self
+            .deployment
+            .layout
+            .host_of
+            .iter()
+            .filter(|(_, h)| *h != coordinator)
+            .filter_map(|(w, h)| Some((RemoteProcess::of(*w)?.process, h.clone())))
+            .collect();
+        RemoteTraces {
+            net: self.net.clone(),
+            coordinator: coordinator.clone(),
+            prefix: self.prefix.clone(),
+            hosts,
+        }
     }
 
     /// Starts the coordinator's bridge: before the local processes, so that none of what
@@ -475,6 +542,7 @@ impl Remote {
         // A host gone by now is one lost, whether or not it was noticed during the run.
         while self.lost_host().is_some() {}
         let mut problems = Vec::new();
+        let traces = self.traces();
         for l in &self.hosts {
             if l.reply.is_none() {
                 continue;
@@ -494,7 +562,7 @@ impl Remote {
                     problems.push(format!("{}: {note}", p.label));
                     continue;
                 }
-                if let Err(e) = self.fetch_trace(l, &p.process.to_string(), &path) {
+                if let Err(e) = self.fetch_trace(&traces, p.process, &path) {
                     problems.push(format!(
                         "the trace of {} from host `{}`: {e:#}",
                         p.label, l.host.name
@@ -505,17 +573,15 @@ impl Remote {
         problems
     }
 
-    /// Fetches the trace `name` of host `l` into `path`, piece by piece.
-    fn fetch_trace(&self, l: &HostLink, name: &str, path: &Path) -> Result<()> {
+    /// Fetches the trace of `process` (on host `l`) into `path`, piece by piece.
+    fn fetch_trace(&self, traces: &RemoteTraces, process: Process, path: &Path) -> Result<()> {
         use std::io::Write as _;
-        let key = self.ask(&l.host.name, "traces");
         let mut file = std::io::BufWriter::new(
             std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
         );
         let mut offset = 0u64;
         loop {
-            let ask = format!("{name} {offset}");
-            let piece = self.net.request(&key, ask.as_bytes(), TRACE_TIMEOUT)?;
+            let piece = traces.piece(process, offset, TRACE_TIMEOUT)?;
             file.write_all(&piece)
                 .with_context(|| format!("writing {}", path.display()))?;
             offset += piece.len() as u64;

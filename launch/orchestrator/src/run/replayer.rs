@@ -237,6 +237,7 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool, stop: &Stop) -> Resul
                     deployment: None,
                     stop: stop.clone(),
                     pace: None,
+                    remote_traces: None,
                 },
             )
         }),
@@ -262,11 +263,7 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool, stop: &Stop) -> Resul
         println!("replayed trace digest {got}");
         println!(
             "{}",
-            if matches {
-                "digests match"
-            } else {
-                "digests DIFFER"
-            }
+            ["digests DIFFER", "digests match"][usize::from(matches)]
         );
         println!("run directory {}", dir.display());
     }

@@ -161,6 +161,9 @@ pub struct IpcOptions {
     pub stop: Stop,
     /// A lockstep run paced for watching (`--pace FACTOR`): the agents' argument.
     pub pace: Option<f64>,
+    /// Where a split run leaves the way to its remote traces once it reached the other hosts
+    /// (the live view's follower reads them as they grow).
+    pub remote_traces: Option<crate::run::follow::RemoteSlot>,
 }
 
 pub use fdi_runtime::process::{Placement, ProcessArgs};
@@ -612,7 +615,12 @@ fn connect_remote<X: Transport>(
                 r.start_bridge(fdi_runtime::process::sizing_for(resolved))?;
                 Ok(r)
             })
-            .map(|r| launcher.remote = Some(r)),
+            .map(|r| {
+                if let Some(slot) = &opts.remote_traces {
+                    *crate::run::relay::lock(slot) = Some(r.traces());
+                }
+                launcher.remote = Some(r)
+            }),
         None => Ok(()),
     }
 }
@@ -630,6 +638,10 @@ fn release_remote<X: Transport>(
     let mut remote_left = Vec::new();
     let mut hosts = Vec::new();
     let mut network = None;
+    if let Some(slot) = &opts.remote_traces {
+        // The live view reads the rest from the fetched copies.
+        *crate::run::relay::lock(slot) = None;
+    }
     if let Some(mut remote) = launcher.remote.take() {
         hosts.push(remote.describe_coordinator());
         hosts.extend(remote.describe());

@@ -26,6 +26,7 @@ use crate::run::hosts::{
     RunRequest,
 };
 use crate::run::supervisor::Supervisor;
+use crate::run::trace_stream::Streamer;
 
 /// `fdi-launch serve`.
 #[derive(Debug, Clone, clap::Args)]
@@ -557,6 +558,11 @@ impl HostRun {
             a.store(up, Ordering::SeqCst);
         })?;
         let run_dir = RunDir::new(self.dir.path());
+        // The live view's streams of the traces, sent only once the coordinator subscribed.
+        let streamed: Vec<(Process, PathBuf)> = (self.processes.iter())
+            .map(|p| (*p, run_dir.trace(*p)))
+            .collect();
+        let _stream = Streamer::start(net, (here, &self.prefix), &streamed)?;
         let processes = self.processes.clone();
         let _traces = net.answer(&asked("traces"), move |ask| {
             let (process, offset) = trace_piece_asked(ask, &processes)?;
