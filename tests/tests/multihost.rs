@@ -850,7 +850,7 @@ fn watched(
 }
 
 /// The live view of a split run (issue 35): a viewer on the coordinating host sees the robots of
-/// every host as the run makes them, those on another host too (their traces asked of its
+/// every host as the run makes them, those on another host too (their traces streamed by its
 /// serve as they grow), the same messages as the run's recording.
 #[test]
 fn a_viewer_of_a_split_run_sees_the_robots_of_every_host() {
@@ -860,31 +860,28 @@ fn a_viewer_of_a_split_run_sees_the_robots_of_every_host() {
     let Some(mut lab) = Lab::new(2, "multihost-live") else {
         return;
     };
-    let file = lab.deployment(TWO_HOSTS);
+    // Agents 3 and 4 and the attacker run on `cell`, agent 1 and the control center on the
+    // coordinating host.
+    let file = lab.deployment(
+        &TWO_HOSTS.replace("agents = [3, 4]", "agents = [3, 4]\nroles = [\"attacker\"]"),
+    );
     lab.serve(1, "cell");
-    // Agents 3 and 4 run on `cell`, agent 1 on the coordinating host.
     let topics = [
         "/agent3/tracking_error",
         "/agent3/estimate",
         "/agent4/detectors",
         "/agent1/tracking_error",
+        "/agent2/torque/applied",
     ];
-    // Paced at half real time, every 5th tick kept: each of them, as recorded.
-    let lockstep = [
-        "run",
-        "--hosts",
-        &file,
-        "--duration-s",
-        "1",
-        "--pace",
-        "0.5",
-        "--live-rate",
-        "100",
-    ];
+    // Paced at half real time, every 5th tick kept: each of them, as recorded. An attack on the
+    // torques too: the attacker's trace, on `cell`, is read twice (its torque path).
+    let attack = ["--duration-s", "1", "--attack", "actuator-bias"];
+    let paced = ["--pace", "0.5", "--live-rate", "100"];
+    let lockstep = [&["run", "--hosts", &file][..], &attack, &paced].concat();
     let summary = watched(&lab, &python, &lockstep, &topics, (5, 1000, true));
     assert_eq!(
-        summary["trace_digest"],
-        crate::live::inproc_digest("1"),
+        summary["trace_digest"].as_str(),
+        Some(inproc_digest(&attack).as_str()),
         "watched, paced, split: the same run"
     );
     // Realtime: every 10th tick of those the join matched.

@@ -9,7 +9,8 @@
 //! serves stream them once subscribed ([`crate::run::trace_stream`]), and at the end from the
 //! copies the run fetched; the coordinator serves every robot's topics.
 
-use std::collections::BTreeSet;
+use std::cell::RefCell;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fs::File;
 use std::io::{Cursor, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -26,7 +27,7 @@ use fdi_report::join::{Feed, Sources};
 
 use crate::run::relay::lock;
 use crate::run::remote::RemoteTraces;
-use crate::run::trace_stream::Chunk;
+use crate::run::trace_stream::Received;
 
 /// How long a follower sleeps when it reached what was written so far.
 const POLL: Duration = Duration::from_millis(20);
@@ -93,11 +94,9 @@ impl Read for Growing {
 /// the coordinator reached them, emptied when it fetches them at the end.
 pub type RemoteSlot = Arc<Mutex<Option<RemoteTraces>>>;
 
-/// A subscription the [`Subscriber`] is asked for: the process, and where to answer.
-type Ask = (
-    Process,
-    mpsc::Sender<Option<mpsc::Receiver<Result<Chunk, String>>>>,
-);
+/// A subscription the [`Subscriber`] is asked for: the process, its number of readers, and
+/// where to answer.
+type Ask = (Process, usize, mpsc::Sender<Vec<Received>>);
 
 /// Subscribes to the streams of the remote traces ([`crate::run::trace_stream`]) on a thread
 /// of its own at the run's priority, which holds the subscriptions until every `Subscriber` is
@@ -117,20 +116,20 @@ impl Subscriber {
             .name("live-subscribe".into())
             .spawn(move || {
                 let mut held = Vec::new();
-                for (p, answer) in asks {
+                for (p, readers, answer) in asks {
                     let remote = lock(&traces).clone();
-                    let chunks = match remote.map(|t| t.subscribe(p)) {
+                    let streams = match remote.map(|t| t.subscribe(p, readers)) {
                         Some(Ok(s)) => {
                             held.push(s.subscription);
-                            Some(s.chunks)
+                            s.readers
                         }
                         Some(Err(e)) => {
                             eprintln!("fdi-launch: warning: live view: {p}: {e:#}");
-                            None
+                            Vec::new()
                         }
-                        None => None,
+                        None => Vec::new(),
                     };
-                    let _ = answer.send(chunks);
+                    let _ = answer.send(streams);
                 }
             })
             .context("starting the live view's thread that subscribes to the remote traces")?;
@@ -140,11 +139,14 @@ impl Subscriber {
         })
     }
 
-    /// The stream of the trace of `p`, or `None` if it cannot be had (the run's end).
-    fn subscribe(&self, p: Process) -> Option<mpsc::Receiver<Result<Chunk, String>>> {
+    /// The stream of the trace of `p` for each of `readers`, or none if it cannot be had (the
+    /// run's end).
+    fn subscribe(&self, p: Process, readers: usize) -> Vec<Received> {
         let (answer, answered) = mpsc::channel();
-        self.to.send((p, answer)).ok()?;
-        answered.recv().ok().flatten()
+        if self.to.send((p, readers, answer)).is_err() {
+            return Vec::new();
+        }
+        answered.recv().unwrap_or_default()
     }
 
     /// The processes on other hosts, once the coordinator reached them.
@@ -159,7 +161,7 @@ impl Subscriber {
 /// stream: the rest is read at the end.
 struct Fetched {
     process: Process,
-    chunks: Option<mpsc::Receiver<Result<Chunk, String>>>,
+    chunks: Option<Received>,
     /// How far the trace was read.
     position: u64,
     piece: Cursor<Vec<u8>>,
@@ -230,8 +232,9 @@ impl Read for Fetched {
                 return Ok(n);
             }
             if self.over.is_set() {
-                if self.position == 0 && self.chunks.is_some() {
-                    // (Its host never sent: the viewer saw this robot only after the end.)
+                let came = (self.chunks.as_ref()).is_some_and(|c| c.try_recv().is_ok());
+                if self.position == 0 && !came {
+                    // (No stream, or its host never sent: the viewer saw it only after the end.)
                     eprintln!(
                         "fdi-launch: warning: live view: the stream of the trace of {} delivered \
                          nothing during the run: its records are read from the fetched copy",
@@ -248,11 +251,24 @@ impl Read for Fetched {
     }
 }
 
+/// Which reader of a trace is opened.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Reader {
+    /// The only one.
+    Once,
+    /// The first of two.
+    Twice,
+    /// The second.
+    Second,
+}
+
 /// Where the traces of a run are, to follow them: its directory, and for a split run the other
 /// hosts (once reached).
 pub struct Traces<'a> {
     dir: RunDir,
     subscriber: Option<Subscriber>,
+    /// The streams of remote traces that are read twice, for their second readers.
+    seconds: RefCell<BTreeMap<Process, Received>>,
     over: &'a Arc<Over>,
 }
 
@@ -263,6 +279,7 @@ impl<'a> Traces<'a> {
         Ok(Self {
             dir: RunDir::new(run_dir),
             subscriber: remote.map(Subscriber::start).transpose()?,
+            seconds: RefCell::default(),
             over,
         })
     }
@@ -285,20 +302,32 @@ impl<'a> Traces<'a> {
         }
     }
 
-    /// The trace of `p` read as it grows, asked of its host if it is `elsewhere` (`None`: the
-    /// run is over without it).
+    /// The trace of `p` read as it grows, streamed by its host if it is `elsewhere` (`None`:
+    /// the run is over without it). `reader`: the first of a trace read `Twice`, or its second.
     fn open(
         &self,
-        p: Process,
+        (p, reader): (Process, Reader),
         elsewhere: &BTreeSet<Process>,
         silence: Option<Duration>,
     ) -> Option<Box<dyn Read + Send>> {
         let path = self.dir.trace(p);
         let over = self.over.clone();
         if let Some(subscriber) = self.subscriber.as_ref().filter(|_| elsewhere.contains(&p)) {
+            let chunks = match reader {
+                Reader::Second => self.seconds.borrow_mut().remove(&p),
+                Reader::Once => subscriber.subscribe(p, 1).pop(),
+                Reader::Twice => {
+                    let mut streams = subscriber.subscribe(p, 2).into_iter();
+                    let first = streams.next();
+                    if let Some(second) = streams.next() {
+                        self.seconds.borrow_mut().insert(p, second);
+                    }
+                    first
+                }
+            };
             return Some(Box::new(Fetched {
                 process: p,
-                chunks: subscriber.subscribe(p),
+                chunks,
                 position: 0,
                 piece: Cursor::default(),
                 fetched: path,
@@ -337,12 +366,12 @@ fn open_when_made(path: &Path, over: &Over) -> Option<File> {
 /// to the live server (`records`: once per trace, a second reader of it has none).
 fn followed(
     (traces, elsewhere): (&Traces, &BTreeSet<Process>),
-    p: Process,
+    (p, reader): (Process, Reader),
     silence: Option<Duration>,
     mut records: Option<fdi_live::RecordFeed>,
 ) -> Feed {
     let path = traces.dir.trace(p);
-    let Some(growing) = traces.open(p, elsewhere, silence) else {
+    let Some(growing) = traces.open((p, reader), elsewhere, silence) else {
         let missing = format!("{}: the process wrote no trace", path.display());
         return Box::new(std::iter::once(Err(missing)));
     };
@@ -385,21 +414,24 @@ pub fn follow_run(
     let s = &r.scenario;
     let silence = (s.clock == ClockMode::Realtime).then_some(REALTIME_SILENCE);
     let at = (traces, &elsewhere);
-    let feed_of = |p: Process| followed(at, p, silence, Some(records.clone()));
+    let routed = actuation && s.agents.iter().any(|a| r.attack.attacks_torque_of(a.id));
+    let monitored = s.roles.monitor.is_some();
+    let first = |twice: bool| if twice { Reader::Twice } else { Reader::Once };
+    let feed_of =
+        |p: Process, twice: bool| followed(at, (p, first(twice)), silence, Some(records.clone()));
     // A second reader of a trace, for its second stream of records.
-    let second = |p: Process| followed(at, p, silence, None);
+    let second = |p: Process| followed(at, (p, Reader::Second), silence, None);
     let agents = s
         .agents
         .iter()
-        .map(|a| (a.id, feed_of(Process::Agent(a.id))))
+        .map(|a| (a.id, feed_of(Process::Agent(a.id), false)))
         .collect();
-    let routed = actuation && s.agents.iter().any(|a| r.attack.attacks_torque_of(a.id));
     let sources = Sources::from_feeds(
         agents,
-        feed_of(Process::Attacker),
+        feed_of(Process::Attacker, routed),
         routed.then(|| second(Process::Attacker)),
-        feed_of(Process::Center),
-        s.roles.monitor.is_some().then(|| second(Process::Center)),
+        feed_of(Process::Center, monitored),
+        monitored.then(|| second(Process::Center)),
     );
     let walked = fdi_report::join::walk(
         r,

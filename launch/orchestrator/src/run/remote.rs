@@ -140,12 +140,16 @@ impl RemoteTraces {
     }
 
     /// Subscribes to the stream of the trace of `process` its host sends once subscribed
-    /// ([`crate::run::trace_stream`]).
-    pub fn subscribe(&self, process: Process) -> Result<crate::run::trace_stream::Subscribed> {
+    /// ([`crate::run::trace_stream`]), for `readers` readers.
+    pub fn subscribe(
+        &self,
+        process: Process,
+        readers: usize,
+    ) -> Result<crate::run::trace_stream::Subscribed> {
         let host = self
             .host_of(process)
             .with_context(|| format!("{process} runs on no other host"))?;
-        crate::run::trace_stream::subscribe(&self.net, host, &self.prefix, process)
+        crate::run::trace_stream::subscribe(&self.net, (host, &self.prefix), process, readers)
     }
 
     /// The piece of the trace of `process` from `offset` on, as far as its host has it (at most

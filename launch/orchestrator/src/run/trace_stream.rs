@@ -167,22 +167,35 @@ fn stream(mut streams: Vec<Stream>, stop: &AtomicBool) {
     }
 }
 
-/// The coordinator's subscription to the stream of one remote trace: its chunks, in order, or
-/// a description of what came that was not one; dropping `subscription` ends it.
+/// What the stream of a trace brings: a chunk, or a description of what came that was not one.
+pub type Received = mpsc::Receiver<Result<Chunk, String>>;
+
+/// The coordinator's subscription to the stream of one remote trace: its chunks, in order, to
+/// each of its readers; dropping `subscription` ends it.
 pub struct Subscribed {
-    pub chunks: mpsc::Receiver<Result<Chunk, String>>,
+    pub readers: Vec<Received>,
     pub subscription: Subscription,
 }
 
-/// Subscribes to the stream of the trace of `process` on host `host` in the run `prefix`.
-pub fn subscribe(net: &Net, host: &str, prefix: &str, process: Process) -> Result<Subscribed> {
-    let (to, chunks) = mpsc::channel();
+/// Subscribes to the stream of the trace of `process` on host `host` in the run `prefix`, for
+/// `readers` readers (one subscription: its host begins to stream once it sees one, so a
+/// second, later, could miss the first chunks).
+pub fn subscribe(
+    net: &Net,
+    (host, prefix): (&str, &str),
+    process: Process,
+    readers: usize,
+) -> Result<Subscribed> {
+    let (to, readers): (Vec<_>, Vec<_>) = (0..readers).map(|_| mpsc::channel()).unzip();
     // (On Zenoh's thread: only decoded and handed over.)
     let subscription = net.subscribe(&key(host, prefix, process), move |_, payload| {
-        let _ = to.send(decode(&payload));
+        let chunk = decode(&payload);
+        for t in &to {
+            let _ = t.send(chunk.clone());
+        }
     })?;
     Ok(Subscribed {
-        chunks,
+        readers,
         subscription,
     })
 }
