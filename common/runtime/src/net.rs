@@ -569,10 +569,22 @@ impl Net {
 
     /// A publisher on `key`.
     pub fn outbox(&self, key: &str) -> Result<NetOutbox, NetError> {
+        self.outbox_at(key, zenoh::qos::Priority::default())
+    }
+
+    /// A publisher on `key` whose payloads go after every other payload of the session (Zenoh's
+    /// lowest priority, a queue of its own): bulk data beside a run's frames, which it must not
+    /// hold back (the live view's streams of the traces).
+    pub fn outbox_background(&self, key: &str) -> Result<NetOutbox, NetError> {
+        self.outbox_at(key, zenoh::qos::Priority::Background)
+    }
+
+    fn outbox_at(&self, key: &str, priority: zenoh::qos::Priority) -> Result<NetOutbox, NetError> {
         let publisher = self
             .session
             .declare_publisher(key.to_string())
             .congestion_control(zenoh::qos::CongestionControl::Block)
+            .priority(priority)
             .wait()
             .map_err(Self::key_error(key))?;
         Ok(NetOutbox {

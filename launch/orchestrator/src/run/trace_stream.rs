@@ -1,8 +1,9 @@
 //! The traces of a split run's remote processes streamed to the coordinator as they grow, for
 //! the live view (`run --hosts FILE --live`, docs/multi-host.md): each serve puts its
 //! processes' trace bytes in chunks, each with its offset in the trace, on a key of its own
-//! (`p/<host>/run/<prefix>/trace/<process>`), once the coordinator subscribed to it (a viewer
-//! watches); nobody subscribed, nothing is read or sent.
+//! (`p/<host>/run/<prefix>/trace/<process>`), at Zenoh's lowest priority (after the run's
+//! frames), once the coordinator subscribed to it (a viewer watches); nobody subscribed,
+//! nothing is read or sent.
 //!
 //! Puts, not queries: a query's end is sent by Zenoh on its receiving thread, which with
 //! [`fdi_runtime::net::ONE_RUNTIME_THREAD`] is also the thread that empties the session's
@@ -114,7 +115,8 @@ impl Streamer {
             streams.push(Stream {
                 process: *process,
                 path: path.clone(),
-                outbox: net.outbox(&key(here, prefix, *process))?,
+                // After the run's frames: a viewer's catch-up never holds them back.
+                outbox: net.outbox_background(&key(here, prefix, *process))?,
                 file: None,
                 offset: 0,
                 subscribed: false,
