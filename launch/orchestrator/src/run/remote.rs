@@ -116,13 +116,11 @@ impl HostLink {
     }
 }
 
-/// The traces of a run's processes on other hosts, asked of their hosts' serves piece by piece
-/// (a piece from an offset, as far as written): at the run's end to fetch them, during the run
-/// for the live view.
+/// The traces of a run's processes on other hosts, as the live view subscribes to their
+/// streams ([`crate::run::trace_stream`]) during the run.
 #[derive(Debug, Clone)]
 pub struct RemoteTraces {
     net: Net,
-    coordinator: String,
     prefix: String,
     /// The host of each process that runs on another host than the coordinating one.
     hosts: BTreeMap<Process, String>,
@@ -134,11 +132,6 @@ impl RemoteTraces {
         self.hosts.keys().copied().collect()
     }
 
-    /// The host `process` runs on, if not the coordinating one.
-    pub fn host_of(&self, process: Process) -> Option<&str> {
-        self.hosts.get(&process).map(String::as_str)
-    }
-
     /// Subscribes to the stream of the trace of `process` its host sends once subscribed
     /// ([`crate::run::trace_stream`]), for `readers` readers.
     pub fn subscribe(
@@ -147,20 +140,10 @@ impl RemoteTraces {
         readers: usize,
     ) -> Result<crate::run::trace_stream::Subscribed> {
         let host = self
-            .host_of(process)
+            .hosts
+            .get(&process)
             .with_context(|| format!("{process} runs on no other host"))?;
         crate::run::trace_stream::subscribe(&self.net, (host, &self.prefix), process, readers)
-    }
-
-    /// The piece of the trace of `process` from `offset` on, as far as its host has it (at most
-    /// [`TRACE_PIECE`] bytes), asked within `timeout`.
-    pub fn piece(&self, process: Process, offset: u64, timeout: Duration) -> Result<Vec<u8>> {
-        let host = self
-            .host_of(process)
-            .with_context(|| format!("{process} runs on no other host"))?;
-        let key = keys::asked(host, &self.coordinator, &self.prefix, "traces");
-        let ask = format!("{process} {offset}");
-        Ok(self.net.request(&key, ask.as_bytes(), timeout)?)
     }
 }
 
@@ -329,7 +312,7 @@ impl Remote {
         keys::asked(host, &self.deployment.coordinator.name, &self.prefix, what)
     }
 
-    /// The traces of the run's processes on the other hosts, read piece by piece.
+    /// The traces of the run's processes on the other hosts, for the live view.
     pub fn traces(&self) -> RemoteTraces {
         let coordinator = &self.deployment.coordinator.name;
         let hosts = self
@@ -342,7 +325,6 @@ impl Remote {
             .collect();
         RemoteTraces {
             net: self.net.clone(),
-            coordinator: coordinator.clone(),
             prefix: self.prefix.clone(),
             hosts,
         }
@@ -546,7 +528,6 @@ impl Remote {
         // A host gone by now is one lost, whether or not it was noticed during the run.
         while self.lost_host().is_some() {}
         let mut problems = Vec::new();
-        let traces = self.traces();
         for l in &self.hosts {
             if l.reply.is_none() {
                 continue;
@@ -566,7 +547,7 @@ impl Remote {
                     problems.push(format!("{}: {note}", p.label));
                     continue;
                 }
-                if let Err(e) = self.fetch_trace(&traces, p.process, &path) {
+                if let Err(e) = self.fetch_trace(l, &p.process.to_string(), &path) {
                     problems.push(format!(
                         "the trace of {} from host `{}`: {e:#}",
                         p.label, l.host.name
@@ -577,15 +558,17 @@ impl Remote {
         problems
     }
 
-    /// Fetches the trace of `process` (on host `l`) into `path`, piece by piece.
-    fn fetch_trace(&self, traces: &RemoteTraces, process: Process, path: &Path) -> Result<()> {
+    /// Fetches the trace `name` of host `l` into `path`, piece by piece.
+    fn fetch_trace(&self, l: &HostLink, name: &str, path: &Path) -> Result<()> {
         use std::io::Write as _;
+        let key = self.ask(&l.host.name, "traces");
         let mut file = std::io::BufWriter::new(
             std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
         );
         let mut offset = 0u64;
         loop {
-            let piece = traces.piece(process, offset, TRACE_TIMEOUT)?;
+            let ask = format!("{name} {offset}");
+            let piece = self.net.request(&key, ask.as_bytes(), TRACE_TIMEOUT)?;
             file.write_all(&piece)
                 .with_context(|| format!("writing {}", path.display()))?;
             offset += piece.len() as u64;
