@@ -983,10 +983,31 @@ fn decode<T: Carried>(key: &str, bytes: &[u8], by: i64) -> Result<T, NetError> {
     Ok(value)
 }
 
-/// Encodes `value` with its stamps moved by `by` ns.
-fn encode<T: Carried>(mut value: T, by: i64) -> Vec<u8> {
+/// Appends `value` to `batch`, its stamps moved by `by` ns.
+fn encode<T: Carried>(mut value: T, by: i64, batch: &mut Vec<u8>) {
     value.shift_clock(by);
-    value.as_bytes().to_vec()
+    batch.extend_from_slice(value.as_bytes());
+}
+
+/// Splits a batch of frames of `T` (one or more, one after the other: what one put carries)
+/// into its frames; a batch that is not a whole number of them is an error naming the key.
+fn frames<'b, T: Carried>(
+    key: &str,
+    batch: &'b [u8],
+) -> Result<std::slice::ChunksExact<'b, u8>, NetError> {
+    let size = std::mem::size_of::<T>();
+    if batch.is_empty() || batch.len() % size != 0 {
+        return Err(NetError::Frame {
+            key: key.into(),
+            what: format!(
+                "{} bytes, not a whole number of {} frames of {size} bytes (do both hosts run \
+                 the same fdi-mas?)",
+                batch.len(),
+                std::any::type_name::<T>(),
+            ),
+        });
+    }
+    Ok(batch.chunks_exact(size))
 }
 
 /// What a bridge carried.
@@ -1014,7 +1035,12 @@ struct Refusals {
 
 impl Refusals {
     fn note(&self, what: impl FnOnce() -> String) {
-        if self.count.fetch_add(1, Ordering::Relaxed) == 0 {
+        self.note_many(1, what);
+    }
+
+    /// `n` frames refused for one reason (a batch).
+    fn note_many(&self, n: u64, what: impl FnOnce() -> String) {
+        if self.count.fetch_add(n, Ordering::Relaxed) == 0 {
             *self
                 .first
                 .lock()
@@ -1065,6 +1091,19 @@ enum Kind {
     Alarm,
 }
 
+impl Kind {
+    /// The size of one frame of it on the network.
+    fn frame_bytes(self) -> usize {
+        match self {
+            Self::Measurement => std::mem::size_of::<MeasurementMsg>(),
+            Self::Torque => std::mem::size_of::<TorqueMsg>(),
+            Self::Control => std::mem::size_of::<ControlMsg>(),
+            Self::Status => std::mem::size_of::<StatusMsg>(),
+            Self::Alarm => std::mem::size_of::<AlarmMsg>(),
+        }
+    }
+}
+
 fn kind(stream: Stream) -> Kind {
     match stream {
         Stream::Measurement | Stream::Tampered | Stream::ExternalIn | Stream::ExternalOut => {
@@ -1088,13 +1127,14 @@ impl<X: Transport> OutPort<X> {
         })
     }
 
-    fn drain(&self, by: i64, mut f: impl FnMut(Vec<u8>)) -> Result<usize, IpcError> {
+    /// Takes every frame waiting, encoded one after the other into `batch`; how many.
+    fn drain(&self, by: i64, batch: &mut Vec<u8>) -> Result<usize, IpcError> {
         match self {
-            Self::Measurement(p) => p.drain(|m| f(encode(m, by))),
-            Self::Torque(p) => p.drain(|m| f(encode(m, by))),
-            Self::Control(p) => p.drain(|m| f(encode(m, by))),
-            Self::Status(p) => p.drain(|m| f(encode(m, by))),
-            Self::Alarm(p) => p.drain(|m| f(encode(m, by))),
+            Self::Measurement(p) => p.drain(|m| encode(m, by, batch)),
+            Self::Torque(p) => p.drain(|m| encode(m, by, batch)),
+            Self::Control(p) => p.drain(|m| encode(m, by, batch)),
+            Self::Status(p) => p.drain(|m| encode(m, by, batch)),
+            Self::Alarm(p) => p.drain(|m| encode(m, by, batch)),
         }
     }
 }
@@ -1110,55 +1150,60 @@ impl<X: Transport> InPort<X> {
         })
     }
 
-    /// Publishes the frame `bytes` of port `i` locally, unless it is out of order (then it
-    /// says why, and nothing is published). A frame of the wrong size is an error.
+    /// Publishes the frames of the batch `bytes` of port `i` locally, in order, each unless it
+    /// is out of order (then `refused` is told why, and that frame is not published); how many
+    /// were published. A batch that is not a whole number of frames is an error.
     fn publish(
         &self,
         (i, key): (usize, &str),
         bytes: &[u8],
         by: i64,
         admitted: &mut Admitted,
-    ) -> Result<Option<String>, NetError> {
+        refused: &mut impl FnMut(String),
+    ) -> Result<usize, NetError> {
         fn admit<T: Carried>(
             (i, key): (usize, &str),
             bytes: &[u8],
             by: i64,
             admitted: &mut Admitted,
-        ) -> Result<Result<T, String>, NetError> {
-            let value: T = decode(key, bytes, by)?;
-            if let Some((agent, seq)) = value.order() {
-                match admitted.entry((i, agent)) {
-                    std::collections::btree_map::Entry::Occupied(mut last) => {
-                        if seq <= *last.get() {
-                            return Ok(Err(format!(
-                                "a frame on `{key}` for agent {agent} numbered {seq}, not after \
-                                 the last let in ({})",
-                                last.get()
-                            )));
+            refused: &mut impl FnMut(String),
+            mut send: impl FnMut(T) -> Result<(), IpcError>,
+        ) -> Result<usize, NetError> {
+            let mut published = 0;
+            for frame in frames::<T>(key, bytes)? {
+                let value: T = decode(key, frame, by)?;
+                if let Some((agent, seq)) = value.order() {
+                    match admitted.entry((i, agent)) {
+                        std::collections::btree_map::Entry::Occupied(mut last) => {
+                            if seq <= *last.get() {
+                                refused(format!(
+                                    "a frame on `{key}` for agent {agent} numbered {seq}, not \
+                                     after the last let in ({})",
+                                    last.get()
+                                ));
+                                continue;
+                            }
+                            last.insert(seq);
                         }
-                        last.insert(seq);
-                    }
-                    std::collections::btree_map::Entry::Vacant(v) => {
-                        v.insert(seq);
+                        std::collections::btree_map::Entry::Vacant(v) => {
+                            v.insert(seq);
+                        }
                     }
                 }
+                send(value)?;
+                published += 1;
             }
-            Ok(Ok(value))
+            Ok(published)
         }
         let at = (i, key);
-        let refused = match self {
-            Self::Measurement(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
-            Self::Torque(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
-            Self::Control(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
-            Self::Status(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
-            Self::Alarm(p) => admit(at, bytes, by, admitted)?.map(|m| p.send(m)),
-        };
-        match refused {
-            Ok(sent) => {
-                sent?;
-                Ok(None)
+        match self {
+            Self::Measurement(p) => {
+                admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop))
             }
-            Err(why) => Ok(Some(why)),
+            Self::Torque(p) => admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop)),
+            Self::Control(p) => admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop)),
+            Self::Status(p) => admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop)),
+            Self::Alarm(p) => admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop)),
         }
     }
 }
@@ -1363,28 +1408,24 @@ fn start_out<X: Transport + 'static>(
         Ok((t, waker, ports))
     };
     let failure = shared.failure.clone();
-    spawn_bridge("out", failure, open, move |(_t, waker, ports)| loop {
-        let stopping = shared.stop.load(Ordering::SeqCst);
-        waker.wait(BRIDGE_POLL)?;
-        for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
-            let mut failed = None;
-            port.drain(offset_ns, |bytes| {
-                if failed.is_none() {
-                    match outbox.put(&bytes) {
-                        Ok(()) => {
-                            shared.sent.fetch_add(1, Ordering::Relaxed);
-                        }
-                        Err(e) => failed = Some(e),
-                    }
+    spawn_bridge("out", failure, open, move |(_t, waker, ports)| {
+        let mut batch = Vec::new();
+        loop {
+            let stopping = shared.stop.load(Ordering::SeqCst);
+            waker.wait(BRIDGE_POLL)?;
+            // What a port holds goes in one put: one message for the frames of a wake-up.
+            for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
+                batch.clear();
+                let n = port.drain(offset_ns, &mut batch)?;
+                if n > 0 {
+                    outbox.put(&batch)?;
+                    shared.sent.fetch_add(n as u64, Ordering::Relaxed);
                 }
-            })?;
-            if let Some(e) = failed {
-                return Err(e);
             }
-        }
-        // One more drain after the stop was asked: what was sent before it leaves.
-        if stopping {
-            return Ok(());
+            // One more drain after the stop was asked: what was sent before it leaves.
+            if stopping {
+                return Ok(());
+            }
         }
     })
 }
@@ -1434,12 +1475,11 @@ fn start_in<X: Transport + 'static>(
             };
             for (i, from, bytes) in first.into_iter().chain(rx.try_iter()) {
                 let key = &sent_on[i][usize::from(from)];
-                match ports[i].publish((i, key), &bytes, back, &mut admitted)? {
-                    None => {
-                        shared.received.fetch_add(1, Ordering::Relaxed);
-                        ringer.due(&inbound[i].ring);
-                    }
-                    Some(why) => shared.refusals.note(|| why),
+                let mut refused = |why: String| shared.refusals.note(|| why);
+                let n = ports[i].publish((i, key), &bytes, back, &mut admitted, &mut refused)?;
+                if n > 0 {
+                    shared.received.fetch_add(n as u64, Ordering::Relaxed);
+                    ringer.due(&inbound[i].ring);
                 }
             }
             ringer.ring()?;
@@ -1495,6 +1535,7 @@ fn subscribe_in(
     shared: &Shared,
 ) -> Result<Subscription, NetError> {
     let (from, service) = (inbound.from.clone(), inbound.stream.service_name());
+    let frame = kind(inbound.stream).frame_bytes();
     let refusals = shared.refusals.clone();
     net.subscribe(&keys::stream_any(run, inbound.stream), move |on, bytes| {
         let sender = keys::sender(on);
@@ -1503,7 +1544,8 @@ fn subscribe_in(
             Some(k) if k <= usize::from(u8::MAX) => {
                 let _ = tx.send((i, k as u8, bytes));
             }
-            _ => refusals.note(|| {
+            // Counted in frames (a batch that is not whole frames counts what it would hold).
+            _ => refusals.note_many(bytes.len().div_ceil(frame).max(1) as u64, || {
                 format!(
                     "a frame on `{on}` from host `{}`, which does not send `{service}` in this \
                      run",
@@ -1566,6 +1608,13 @@ fn wait_ready(rx: &mpsc::Receiver<Result<(), IpcError>>, side: &str) -> Result<(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One frame, encoded as the bridge puts it (alone in its batch).
+    fn encoded<T: Carried>(value: T, by: i64) -> Vec<u8> {
+        let mut batch = Vec::new();
+        encode(value, by, &mut batch);
+        batch
+    }
 
     fn layout(entries: &[(Wake, &str)]) -> Layout {
         Layout {
@@ -1681,7 +1730,7 @@ mod tests {
             flags: 0,
             reserved: 0,
         };
-        let bytes = encode(m, 500);
+        let bytes = encoded(m, 500);
         assert_eq!(bytes.len(), std::mem::size_of::<MeasurementMsg>());
         let back: MeasurementMsg = decode("k", &bytes, -500).expect("decodes");
         assert_eq!(back, m, "moved there and back, unset stamps stay unset");
@@ -1690,6 +1739,24 @@ mod tests {
         assert_eq!(shifted.attacker_received_ns, 0);
         let err = decode::<MeasurementMsg>("k", &bytes[1..], 0).expect_err("short frame");
         assert!(err.to_string().contains("frame on `k`"), "{err}");
+        // A put carries a batch: whole frames one after the other, nothing else.
+        let mut batch = Vec::new();
+        for seq in [7, 8, 9] {
+            encode(MeasurementMsg { seq, ..m }, 0, &mut batch);
+        }
+        let seqs: Vec<u64> = frames::<MeasurementMsg>("k", &batch)
+            .expect("three frames")
+            .map(|f| decode::<MeasurementMsg>("k", f, 0).expect("decodes").seq)
+            .collect();
+        assert_eq!(seqs, [7, 8, 9]);
+        for wrong in [&batch[..0], &batch[..batch.len() - 1], &batch[1..]] {
+            let err = frames::<MeasurementMsg>("k", wrong).expect_err("not whole frames");
+            assert!(
+                err.to_string()
+                    .contains(&format!("{} bytes, not a whole number", wrong.len())),
+                "{err}"
+            );
+        }
     }
 
     /// A free TCP port of the loopback interface (bound, read, released).
@@ -1811,13 +1878,23 @@ mod tests {
             "moved to the coordinator's clock"
         );
         assert_eq!(last.attacker_received_ns, 0, "an unset stamp stays unset");
-        assert!(cell.counts().sent >= 200 && control.counts().received >= 200);
+        // The counts follow the publishing of a batch: wait for them too.
+        let began = std::time::Instant::now();
+        while control.counts().received < 200 {
+            assert!(
+                began.elapsed() < Duration::from_secs(10),
+                "{:?}",
+                control.counts()
+            );
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert!(cell.counts().sent >= 200);
         assert_eq!(control.failure(), None);
         assert_eq!(control.counts().refused, 0);
         // A frame numbered before the last let in (a replay), and one on the key of a host
         // that does not send measurements in this run: refused, counted, nothing published.
         let received = control.counts().received;
-        let stale = encode(msg(150), 0);
+        let stale = encoded(msg(150), 0);
         let own = keys::stream("cell", &run, Stream::Measurement);
         cell_net
             .outbox(&own)
@@ -1828,7 +1905,7 @@ mod tests {
         cell_net
             .outbox(&other)
             .expect("raw")
-            .put(&encode(msg(500), 0))
+            .put(&encoded(msg(500), 0))
             .expect("put");
         let began = std::time::Instant::now();
         while control.counts().refused < 2 {
@@ -1846,6 +1923,33 @@ mod tests {
             "{first}"
         );
         inbox.drain(|m| panic!("let in: {m:?}")).expect("drain");
+        // One put with three frames, the second a duplicate of the first: the first and the
+        // third are let in, in order, the duplicate is refused and counted.
+        let mut batch = Vec::new();
+        for seq in [201, 201, 202] {
+            encode(msg(seq), 0, &mut batch);
+        }
+        cell_net
+            .outbox(&own)
+            .expect("raw")
+            .put(&batch)
+            .expect("put");
+        let mut late = Vec::new();
+        let began = std::time::Instant::now();
+        while late.len() < 2
+            || control.counts().refused < 3
+            || control.counts().received < received + 2
+        {
+            assert!(
+                began.elapsed() < Duration::from_secs(10),
+                "of the batch: {late:?}, {:?}",
+                control.counts()
+            );
+            woken.wait(Duration::from_millis(50)).expect("wait");
+            inbox.drain(|m| late.push(m.seq)).expect("drain");
+        }
+        assert_eq!(late, [201, 202]);
+        assert_eq!(control.counts().received, received + 2);
         // A frame of another shape on the run's key: the receiving bridge stops, naming it.
         let key = own;
         cell_net
