@@ -1212,15 +1212,16 @@ impl<X: Transport> InPort<X> {
 /// its streams anyway: a wake-up it missed costs at most this much).
 const BRIDGE_POLL: Duration = Duration::from_millis(20);
 
-/// The bridge of one host for one run: two threads, one carrying the local streams out, one
-/// carrying the other hosts' in.
+/// The bridge of one host for one run: a thread carrying the local streams out, and the
+/// network's callbacks carrying the other hosts' in (a frame is published locally on the
+/// thread that received it, with no hand-over to another thread: one wake-up less per frame).
 #[derive(Debug)]
 pub struct Bridge {
     shared: Shared,
     /// Its publishers on the network, for [`Bridge::unmatched`].
     routes: Vec<Arc<NetOutbox>>,
     threads: Vec<JoinHandle<Result<(), NetError>>>,
-    _subscriptions: Vec<Subscription>,
+    subscriptions: Vec<Subscription>,
 }
 
 /// What a bridge's threads and callbacks share: the stop, the first failure, the counts.
@@ -1232,6 +1233,26 @@ struct Shared {
     sent: Arc<AtomicU64>,
     received: Arc<AtomicU64>,
     refusals: Arc<Refusals>,
+    /// The error that stopped the inbound side: nothing is let in after it.
+    inbound_error: Arc<std::sync::Mutex<Option<NetError>>>,
+}
+
+impl Shared {
+    fn inbound_error(&self) -> std::sync::MutexGuard<'_, Option<NetError>> {
+        self.inbound_error
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Stops the inbound side on `e`, kept where [`Bridge::failure`] and [`Bridge::stop`] find
+    /// it.
+    fn fail_inbound(&self, e: NetError) {
+        self.failure
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .get_or_insert_with(|| format!("the bridge between hosts stopped: {e}"));
+        self.inbound_error().get_or_insert(e);
+    }
 }
 
 /// Where a bridge's threads run: the run's prefix on this host's transport, the run on the
@@ -1250,14 +1271,19 @@ impl Bridge {
     /// process, each with a prefix of its own). Stamps travel in the coordinating host's
     /// clock, which is ours + `offset_ns` (0 on that host): ours are moved to it on the way out,
     /// and back to ours on the way in. Returns once its wakers and ports exist: the local
-    /// processes may be started then, and none of what they send is lost.
+    /// processes may be started then, and none of what they send is lost. `X`'s ports must
+    /// work from any thread ([`crate::ipc::ShmShared`]): the inbound side publishes in the
+    /// network's callbacks.
     pub fn start<X: Transport + 'static>(
         net: &Net,
         (prefix, run, here): (&str, &str, &str),
         sizing: Sizing,
         plan: &HostPlan,
         offset_ns: i64,
-    ) -> Result<Self, NetError> {
+    ) -> Result<Self, NetError>
+    where
+        InSide<X>: Send,
+    {
         let place = Place {
             prefix,
             run,
@@ -1269,7 +1295,7 @@ impl Bridge {
             shared: shared.clone(),
             routes: Vec::new(),
             threads: Vec::new(),
-            _subscriptions: Vec::new(),
+            subscriptions: Vec::new(),
         };
         if !plan.outbound.is_empty() {
             let outboxes: Vec<(Stream, Arc<NetOutbox>)> = plan
@@ -1283,15 +1309,16 @@ impl Bridge {
             bridge.threads.push(thread);
         }
         if !plan.inbound.is_empty() {
-            let (tx, rx) = mpsc::channel::<(usize, u8, Vec<u8>)>();
-            let thread = start_in::<X>(place, plan.inbound.clone(), rx, shared.clone())?;
-            bridge.threads.push(thread);
+            let side = Arc::new(std::sync::Mutex::new(InSide::<X>::open(
+                place,
+                &plan.inbound,
+            )?));
             for (i, inbound) in plan.inbound.iter().enumerate() {
-                bridge._subscriptions.push(subscribe_in(
+                bridge.subscriptions.push(subscribe_in(
                     net,
                     run,
                     (i, inbound),
-                    tx.clone(),
+                    side.clone(),
                     &shared,
                 )?);
             }
@@ -1342,6 +1369,8 @@ impl Bridge {
     /// thread met, if any.
     pub fn stop(mut self) -> Result<BridgeCounts, NetError> {
         self.shared.stop.store(true, Ordering::SeqCst);
+        // Nothing more comes in.
+        self.subscriptions.clear();
         let mut first = Ok(());
         for t in self.threads.drain(..) {
             let r = t
@@ -1350,6 +1379,9 @@ impl Bridge {
             if first.is_ok() {
                 first = r;
             }
+        }
+        if let (Ok(()), Some(e)) = (&first, self.shared.inbound_error().take()) {
+            first = Err(e);
         }
         first.map(|()| self.counts())
     }
@@ -1430,64 +1462,71 @@ fn start_out<X: Transport + 'static>(
     })
 }
 
-/// Starts the thread that carries the other hosts' streams in: each frame handed over by the
-/// subscriptions (port, sending host, bytes) is admitted ([`InPort::publish`]) and published
-/// locally, and only then are the local receivers rung.
-fn start_in<X: Transport + 'static>(
-    place: Place,
-    inbound: Vec<Inbound>,
-    rx: mpsc::Receiver<(usize, u8, Vec<u8>)>,
-    shared: Shared,
-) -> Result<JoinHandle<Result<(), NetError>>, NetError> {
-    // The key of each (port, sending host), for what is said of a frame.
-    let sent_on: Vec<Vec<String>> = inbound
-        .iter()
-        .map(|i| {
-            i.from
-                .iter()
-                .map(|h| keys::stream(h, place.run, i.stream))
-                .collect()
-        })
-        .collect();
-    let (prefix, sizing, back) = (
-        place.prefix.to_string(),
-        place.sizing,
-        place.offset_ns.wrapping_neg(),
-    );
-    let streams: Vec<Stream> = inbound.iter().map(|i| i.stream).collect();
-    let open = move || {
-        let t = X::open(&prefix, "bridge-in", sizing)?;
-        let ports = streams
+/// The inbound side of a bridge: the local ports of the streams it lets in, and what it let
+/// in. Used in the network's callbacks, one at a time.
+pub struct InSide<X: Transport> {
+    ports: Vec<InPort<X>>,
+    /// Per port, the key of each of its sending hosts, for what is said of a frame.
+    sent_on: Vec<Vec<String>>,
+    /// Per port, the local wake-up events rung after its frames.
+    ring: Vec<Vec<Wake>>,
+    ringer: Ringer<X>,
+    admitted: Admitted,
+    /// Moves the stamps from the coordinator's clock to this host's.
+    back: i64,
+}
+
+impl<X: Transport> InSide<X> {
+    fn open(place: Place, inbound: &[Inbound]) -> Result<Self, NetError> {
+        let t = X::open(place.prefix, "bridge-in", place.sizing)?;
+        let ports = inbound
             .iter()
-            .map(|s| InPort::<X>::open(&t, *s))
+            .map(|i| InPort::<X>::open(&t, i.stream))
             .collect::<Result<Vec<_>, IpcError>>()?;
-        Ok((t, ports))
-    };
-    let failure = shared.failure.clone();
-    spawn_bridge("in", failure, open, move |(t, ports)| {
-        let mut ringer = Ringer::<X>::new(t);
-        let mut admitted = Admitted::new();
-        loop {
-            let first = match rx.recv_timeout(BRIDGE_POLL * 2) {
-                Ok(frame) => Some(frame),
-                Err(mpsc::RecvTimeoutError::Timeout) => None,
-                Err(mpsc::RecvTimeoutError::Disconnected) => return Ok(()),
-            };
-            for (i, from, bytes) in first.into_iter().chain(rx.try_iter()) {
-                let key = &sent_on[i][usize::from(from)];
-                let mut refused = |why: String| shared.refusals.note(|| why);
-                let n = ports[i].publish((i, key), &bytes, back, &mut admitted, &mut refused)?;
-                if n > 0 {
-                    shared.received.fetch_add(n as u64, Ordering::Relaxed);
-                    ringer.due(&inbound[i].ring);
-                }
-            }
-            ringer.ring()?;
-            if shared.stop.load(Ordering::SeqCst) {
-                return Ok(());
-            }
+        Ok(Self {
+            ports,
+            sent_on: inbound
+                .iter()
+                .map(|i| {
+                    i.from
+                        .iter()
+                        .map(|h| keys::stream(h, place.run, i.stream))
+                        .collect()
+                })
+                .collect(),
+            ring: inbound.iter().map(|i| i.ring.clone()).collect(),
+            ringer: Ringer::new(t),
+            admitted: Admitted::new(),
+            back: place.offset_ns.wrapping_neg(),
+        })
+    }
+
+    /// Lets in the batch `bytes` of port `i` sent by its host `from` ([`InPort::publish`]),
+    /// and only then rings the local receivers.
+    fn carry(
+        &mut self,
+        (i, from): (usize, usize),
+        bytes: &[u8],
+        shared: &Shared,
+    ) -> Result<(), NetError> {
+        let key = &self.sent_on[i][from];
+        let mut refused = |why: String| shared.refusals.note(|| why);
+        let n =
+            self.ports[i].publish((i, key), bytes, self.back, &mut self.admitted, &mut refused)?;
+        if n > 0 {
+            shared.received.fetch_add(n as u64, Ordering::Relaxed);
+            self.ringer.due(&self.ring[i]);
         }
-    })
+        Ok(self.ringer.ring()?)
+    }
+}
+
+impl<X: Transport> std::fmt::Debug for InSide<X> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("InSide")
+            .field("sent_on", &self.sent_on)
+            .finish()
+    }
 }
 
 /// The local wake-up events an inbound bridge rings once a batch of frames is published.
@@ -1525,33 +1564,46 @@ impl<X: Transport> Ringer<X> {
     }
 }
 
-/// Subscribes to the inbound stream `i` of the run `run` from any host: a frame from a host the
-/// plan says sends it goes to the inbound thread (`tx`); any other is refused and counted.
-fn subscribe_in(
+/// Subscribes to the inbound stream `i` of the run `run` from any host: a batch from a host
+/// the plan says sends it is let in by `side` on the network's thread; any other is refused
+/// and counted. After an error of the inbound side nothing more is let in.
+fn subscribe_in<X: Transport + 'static>(
     net: &Net,
     run: &str,
     (i, inbound): (usize, &Inbound),
-    tx: mpsc::Sender<(usize, u8, Vec<u8>)>,
+    side: Arc<std::sync::Mutex<InSide<X>>>,
     shared: &Shared,
-) -> Result<Subscription, NetError> {
+) -> Result<Subscription, NetError>
+where
+    InSide<X>: Send,
+{
     let (from, service) = (inbound.from.clone(), inbound.stream.service_name());
     let frame = kind(inbound.stream).frame_bytes();
-    let refusals = shared.refusals.clone();
+    let shared = shared.clone();
     net.subscribe(&keys::stream_any(run, inbound.stream), move |on, bytes| {
         let sender = keys::sender(on);
         match sender.and_then(|h| from.iter().position(|f| f == h)) {
-            // A run has a handful of hosts: the index fits.
-            Some(k) if k <= usize::from(u8::MAX) => {
-                let _ = tx.send((i, k as u8, bytes));
+            Some(k) => {
+                let mut side = side
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner);
+                if shared.inbound_error().is_some() {
+                    return;
+                }
+                if let Err(e) = side.carry((i, k), &bytes, &shared) {
+                    shared.fail_inbound(e);
+                }
             }
             // Counted in frames (a batch that is not whole frames counts what it would hold).
-            _ => refusals.note_many(bytes.len().div_ceil(frame).max(1) as u64, || {
-                format!(
+            None => shared
+                .refusals
+                .note_many(bytes.len().div_ceil(frame).max(1) as u64, || {
+                    format!(
                     "a frame on `{on}` from host `{}`, which does not send `{service}` in this \
                      run",
                     sender.unwrap_or("?")
                 )
-            }),
+                }),
         }
     })
 }
@@ -1773,7 +1825,7 @@ mod tests {
     /// wake-up event is rung after them; a frame of the wrong size stops the bridge, named.
     #[test]
     fn a_bridge_carries_a_stream_in_order_and_refuses_a_frame_of_another_shape() {
-        use crate::ipc::Local;
+        use crate::ipc::{Local, LocalShared};
         let port = free_port();
         let endpoint = format!("tcp/127.0.0.1:{port}");
         let control_net = Net::open(&NetConfig {
@@ -1797,7 +1849,7 @@ mod tests {
         let sizing = Sizing::new(1, 4);
         let run = format!("bridge{}", std::process::id());
         let (pc, pa) = (format!("{run}c"), format!("{run}a"));
-        let control = Bridge::start::<Local>(
+        let control = Bridge::start::<LocalShared>(
             &control_net,
             (&pc, &run, "control"),
             sizing,
@@ -1805,7 +1857,7 @@ mod tests {
             0,
         )
         .expect("control bridge");
-        let cell = Bridge::start::<Local>(
+        let cell = Bridge::start::<LocalShared>(
             &cell_net,
             (&pa, &run, "cell"),
             sizing,
@@ -1880,15 +1932,15 @@ mod tests {
         assert_eq!(last.attacker_received_ns, 0, "an unset stamp stays unset");
         // The counts follow the publishing of a batch: wait for them too.
         let began = std::time::Instant::now();
-        while control.counts().received < 200 {
+        while control.counts().received < 200 || cell.counts().sent < 200 {
             assert!(
                 began.elapsed() < Duration::from_secs(10),
-                "{:?}",
+                "{:?} {:?}",
+                cell.counts(),
                 control.counts()
             );
             std::thread::sleep(Duration::from_millis(5));
         }
-        assert!(cell.counts().sent >= 200);
         assert_eq!(control.failure(), None);
         assert_eq!(control.counts().refused, 0);
         // A frame numbered before the last let in (a replay), and one on the key of a host

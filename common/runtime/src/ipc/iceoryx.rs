@@ -12,7 +12,7 @@ use iceoryx2::port::notifier::{Notifier, NotifierCreateError};
 use iceoryx2::port::publisher::{Publisher, PublisherCreateError};
 use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::prelude::*;
-use iceoryx2::prelude::{ipc, local};
+use iceoryx2::prelude::{ipc, ipc_threadsafe, local, local_threadsafe};
 
 use super::{check_prefix, IpcError, Payload, Sizing, Source, Stream, Transport, Wake};
 
@@ -20,6 +20,11 @@ use super::{check_prefix, IpcError, Payload, Sizing, Source, Stream, Transport, 
 pub type Shm = Iceoryx<ipc::Service>;
 /// The in-process transport between the threads of one process (tests).
 pub type Local = Iceoryx<local::Service>;
+/// [`Shm`] whose ports may be used from any thread (each behind a lock): the same services,
+/// opened by the bridge between hosts, which publishes in the network's callbacks.
+pub type ShmShared = Iceoryx<ipc_threadsafe::Service>;
+/// [`Local`] whose ports may be used from any thread (tests of the bridge).
+pub type LocalShared = Iceoryx<local_threadsafe::Service>;
 
 /// The iceoryx2 service variants the runtime uses.
 pub trait Variant: iceoryx2::service::Service {
@@ -32,6 +37,14 @@ impl Variant for ipc::Service {
 }
 
 impl Variant for local::Service {
+    const HAS_FILES: bool = false;
+}
+
+impl Variant for ipc_threadsafe::Service {
+    const HAS_FILES: bool = true;
+}
+
+impl Variant for local_threadsafe::Service {
     const HAS_FILES: bool = false;
 }
 

@@ -44,7 +44,7 @@ pub mod prefix;
 use std::path::PathBuf;
 use std::time::Duration;
 
-pub use iceoryx::{root_dir, shm_dir, Local, Shm};
+pub use iceoryx::{root_dir, shm_dir, Local, LocalShared, Shm, ShmShared};
 pub use machine::MachineError;
 pub use msg::{AlarmMsg, ControlMsg, MeasurementMsg, Role, StatusMsg, TorqueMsg};
 pub use prefix::RunPrefix;

@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use fdi_common::run_dir::Process;
-use fdi_runtime::ipc::{Shm, Sizing, Wake};
+use fdi_runtime::ipc::{ShmShared, Sizing, Wake};
 use fdi_runtime::net::{self, keys, Answering, Bridge, Net, NetConfig, Subscription, Token};
 
 use crate::run::hosts::{
@@ -335,7 +335,7 @@ impl Remote {
     pub fn start_bridge(&mut self, sizing: Sizing) -> Result<()> {
         let plan = net::plan(&self.deployment.layout, &self.deployment.coordinator.name)
             .map_err(anyhow::Error::msg)?;
-        self.bridge = Some(Bridge::start::<Shm>(
+        self.bridge = Some(Bridge::start::<ShmShared>(
             &self.net,
             (
                 &self.prefix,

@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use fdi_common::limits::MAX_FILE_BYTES;
-use fdi_runtime::ipc::{check_prefix, Shm, Transport as _, Wake};
+use fdi_runtime::ipc::{check_prefix, Shm, ShmShared, Transport as _, Wake};
 use fdi_runtime::net::{self, keys, Bridge, Layout, Net, NetConfig, NetOutbox, Request, Requests};
 use fdi_runtime::process::{sizing_for, Placement, ProcessArgs};
 use serde::{Deserialize, Serialize};
@@ -443,7 +443,7 @@ impl HostRun {
         let clock = net
             .clock_offset(&keys::asked(&r.coordinator, here, &r.prefix, "clock"), 16)
             .context("measuring the clock against the coordinator's")?;
-        let bridge = Bridge::start::<Shm>(
+        let bridge = Bridge::start::<ShmShared>(
             net,
             (&r.prefix, &r.prefix, here),
             sizing_for(&resolved),
