@@ -996,7 +996,7 @@ fn frames<'b, T: Carried>(
     batch: &'b [u8],
 ) -> Result<std::slice::ChunksExact<'b, u8>, NetError> {
     let size = std::mem::size_of::<T>();
-    if batch.is_empty() || batch.len() % size != 0 {
+    if batch.is_empty() || !batch.len().is_multiple_of(size) {
         return Err(NetError::Frame {
             key: key.into(),
             what: format!(
