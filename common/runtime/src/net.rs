@@ -1208,8 +1208,8 @@ impl<X: Transport> InPort<X> {
     }
 }
 
-/// How long a bridge thread blocks before it looks at its stop flag (and, outbound, drains
-/// its streams anyway: a wake-up it missed costs at most this much).
+/// How long the outbound thread of a bridge blocks before it looks at its stop flag and drains
+/// its streams anyway (a wake-up it missed costs at most this much).
 const BRIDGE_POLL: Duration = Duration::from_millis(20);
 
 /// The bridge of one host for one run: a thread carrying the local streams out, and the
@@ -1282,6 +1282,7 @@ impl Bridge {
         offset_ns: i64,
     ) -> Result<Self, NetError>
     where
+        OutSide<X>: Send,
         InSide<X>: Send,
     {
         let place = Place {
@@ -1304,8 +1305,7 @@ impl Bridge {
                 .map(|&s| Ok((s, Arc::new(net.outbox(&keys::stream(here, run, s))?))))
                 .collect::<Result<_, NetError>>()?;
             bridge.routes = outboxes.iter().map(|(_, o)| o.clone()).collect();
-            let thread =
-                start_out::<X>(place, plan.remote_wakes.clone(), outboxes, shared.clone())?;
+            let thread = start_out::<X>(place, &plan.remote_wakes, outboxes, shared.clone())?;
             bridge.threads.push(thread);
         }
         if !plan.inbound.is_empty() {
@@ -1396,57 +1396,46 @@ impl Drop for Bridge {
     }
 }
 
-/// Spawns the bridge thread of `side` (`out`, `in`): it opens its shared-memory ports with
-/// `open` (they stay on that thread) and then runs `carry` on them; its error is kept where
-/// [`Bridge::failure`] finds it. Returns once the ports are open (or names why they are not).
-fn spawn_bridge<T>(
-    side: &'static str,
-    failure: Arc<std::sync::Mutex<Option<String>>>,
-    open: impl FnOnce() -> Result<T, IpcError> + Send + 'static,
-    carry: impl FnOnce(T) -> Result<(), NetError> + Send + 'static,
-) -> Result<JoinHandle<Result<(), NetError>>, NetError> {
-    let (ready_tx, ready_rx) = mpsc::channel();
-    let thread = std::thread::Builder::new()
-        .name(format!("bridge {side}"))
-        .spawn(move || {
-            noted(&failure, || match report_ready(&ready_tx, open()) {
-                Some(ports) => carry(ports),
-                None => Ok(()),
-            })
-        })
-        .map_err(|e| NetError::Ipc(thread_error(e)))?;
-    wait_ready(&ready_rx, side)?;
-    Ok(thread)
+/// The outbound side of a bridge: its node, the wake-ups of the remote processes it listens
+/// on, and the local ports of the streams it carries out.
+pub struct OutSide<X: Transport> {
+    _t: X,
+    waker: X::Waker,
+    ports: Vec<OutPort<X>>,
 }
 
 /// Starts the thread that carries the local streams out: woken by the local processes'
 /// wake-ups of the remote ones (`wakes`), it drains each stream and puts its payloads on the
-/// network.
+/// network. Its ports are opened here, so a failure to open them is this call's error; the
+/// thread's is kept where [`Bridge::failure`] finds it.
 fn start_out<X: Transport + 'static>(
     place: Place,
-    wakes: Vec<Wake>,
+    wakes: &[Wake],
     outboxes: Vec<(Stream, Arc<NetOutbox>)>,
     shared: Shared,
-) -> Result<JoinHandle<Result<(), NetError>>, NetError> {
-    let (prefix, sizing, offset_ns) = (place.prefix.to_string(), place.sizing, place.offset_ns);
-    let streams: Vec<Stream> = outboxes.iter().map(|(s, _)| *s).collect();
-    let open = move || {
-        let t = X::open(&prefix, "bridge-out", sizing)?;
-        let waker = t.waker_any(&wakes)?;
-        let ports = streams
+) -> Result<JoinHandle<Result<(), NetError>>, NetError>
+where
+    OutSide<X>: Send,
+{
+    let t = X::open(place.prefix, "bridge-out", place.sizing)?;
+    let side = OutSide {
+        waker: t.waker_any(wakes)?,
+        ports: outboxes
             .iter()
-            .map(|s| OutPort::<X>::open(&t, *s))
-            .collect::<Result<Vec<_>, IpcError>>()?;
-        Ok((t, waker, ports))
+            .map(|(s, _)| OutPort::<X>::open(&t, *s))
+            .collect::<Result<Vec<_>, IpcError>>()?,
+        _t: t,
     };
-    let failure = shared.failure.clone();
-    spawn_bridge("out", failure, open, move |(_t, waker, ports)| {
+    let offset_ns = place.offset_ns;
+    let carry = move || {
+        // The whole side moves to the thread (a closure would take only its fields).
+        let side = side;
         let mut batch = Vec::new();
         loop {
             let stopping = shared.stop.load(Ordering::SeqCst);
-            waker.wait(BRIDGE_POLL)?;
+            side.waker.wait(BRIDGE_POLL)?;
             // What a port holds goes in one put: one message for the frames of a wake-up.
-            for (port, (_, outbox)) in ports.iter().zip(&outboxes) {
+            for (port, (_, outbox)) in side.ports.iter().zip(&outboxes) {
                 batch.clear();
                 let n = port.drain(offset_ns, &mut batch)?;
                 if n > 0 {
@@ -1459,7 +1448,12 @@ fn start_out<X: Transport + 'static>(
                 return Ok(());
             }
         }
-    })
+    };
+    let failure = shared.failure.clone();
+    std::thread::Builder::new()
+        .name("bridge out".into())
+        .spawn(move || noted(&failure, carry))
+        .map_err(|e| NetError::Ipc(thread_error(e)))
 }
 
 /// The inbound side of a bridge: the local ports of the streams it lets in, and what it let
@@ -1518,14 +1512,6 @@ impl<X: Transport> InSide<X> {
             self.ringer.due(&self.ring[i]);
         }
         Ok(self.ringer.ring()?)
-    }
-}
-
-impl<X: Transport> std::fmt::Debug for InSide<X> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("InSide")
-            .field("sent_on", &self.sent_on)
-            .finish()
     }
 }
 
@@ -1627,33 +1613,6 @@ fn thread_error(e: impl std::fmt::Display) -> IpcError {
     IpcError::Node {
         name: "bridge".into(),
         source: e.to_string().into(),
-    }
-}
-
-/// Tells [`Bridge::start`] whether a bridge thread opened its ports (its error goes there);
-/// the ports, when it did.
-fn report_ready<T>(
-    tx: &mpsc::Sender<Result<(), IpcError>>,
-    opened: Result<T, IpcError>,
-) -> Option<T> {
-    match opened {
-        Ok(x) => {
-            let _ = tx.send(Ok(()));
-            Some(x)
-        }
-        Err(e) => {
-            let _ = tx.send(Err(e));
-            None
-        }
-    }
-}
-
-fn wait_ready(rx: &mpsc::Receiver<Result<(), IpcError>>, side: &str) -> Result<(), NetError> {
-    match rx.recv_timeout(Duration::from_secs(10)) {
-        Ok(r) => r.map_err(NetError::Ipc),
-        Err(_) => Err(NetError::Ipc(thread_error(format!(
-            "the bridge's `{side}` thread did not open its shared-memory ports within 10 s"
-        )))),
     }
 }
 
