@@ -198,7 +198,9 @@ impl Fetched {
                     return false;
                 }
                 self.position += (bytes.len() - seen) as u64;
-                self.piece = Cursor::new(bytes[seen..].to_vec());
+                let mut bytes = bytes;
+                bytes.drain(..seen);
+                self.piece = Cursor::new(bytes);
                 self.grew = Instant::now();
                 return true;
             }
