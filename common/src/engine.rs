@@ -228,6 +228,14 @@ pub struct LiveStats {
     /// Events and latency stamps the server never saw (its queue was full).
     #[serde(default)]
     pub events_dropped: u64,
+    /// Messages (the run's data and time broadcasts) dropped from slow clients' outboxes, oldest
+    /// first, summed over clients (the run never waits for a client).
+    #[serde(default)]
+    pub client_messages_dropped: u64,
+    /// Clients let go: their outbox was full of the protocol's control messages, or they came
+    /// when the most connections were open.
+    #[serde(default)]
+    pub clients_let_go: u64,
     /// The first message that could not be made (none expected; said rather than hidden).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,

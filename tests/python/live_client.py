@@ -1,6 +1,6 @@
-"""A Foxglove WebSocket client for the tests of `run --live`: subprotocol foxglove.sdk.v1, the
-Foxglove SDK's name of the protocol foxglove.websocket.v1 specifies (same messages; the SDK's
-server, which `run --live` uses, accepts no other name).
+"""A Foxglove WebSocket client for the tests of `run --live`. It offers one subprotocol,
+--subprotocol: foxglove.websocket.v1 (the protocol's specification) or foxglove.sdk.v1 (the
+Foxglove SDK's name of the same messages; the default); `run --live` answers either.
 
 Connects to ws://ADDR (retrying until the server is up, at most --connect-timeout s), reads the
 server info and the advertised channels, subscribes to the topics given, and records every
@@ -26,18 +26,18 @@ import time
 
 import websockets
 
-SUBPROTOCOL = "foxglove.sdk.v1"
+SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 1
 TIME = 2
 
 
-async def connect(url, timeout):
+async def connect(url, subprotocol, timeout):
     end = time.monotonic() + timeout
     while True:
         try:
             return await websockets.connect(
                 url,
-                subprotocols=[SUBPROTOCOL],
+                subprotocols=[subprotocol],
                 max_size=None,
                 open_timeout=5,
                 close_timeout=1,
@@ -49,8 +49,8 @@ async def connect(url, timeout):
 
 
 async def run(args):
-    ws = await connect(f"ws://{args.addr}", args.connect_timeout)
-    if ws.subprotocol != SUBPROTOCOL:
+    ws = await connect(f"ws://{args.addr}", args.subprotocol, args.connect_timeout)
+    if ws.subprotocol != args.subprotocol:
         raise SystemExit(f"the server chose subprotocol {ws.subprotocol!r}")
     out = {"server_info": None, "channels": {}, "messages": {}, "times": []}
     by_id = {}
@@ -140,6 +140,7 @@ def main():
     p = argparse.ArgumentParser()
     p.add_argument("addr")
     p.add_argument("--topic", action="append", default=[])
+    p.add_argument("--subprotocol", choices=SUBPROTOCOLS, default=SUBPROTOCOLS[0])
     p.add_argument("--mode", choices=["read", "never-read", "leave"], default="read")
     p.add_argument("--leave-after", type=int, default=10)
     p.add_argument("--until-k", type=int, default=None)

@@ -9,12 +9,15 @@
 //! ([`Feed`]) to a thread of its own that makes the messages; a record that finds the queue full
 //! is dropped and counted. The stream is decimated to what a viewer can draw (about
 //! [`Options::rate_hz`] ticks a second of wall time; [`Decimation`]). A message is made only for
-//! a channel some client subscribed to; the server keeps a bounded backlog per client and drops
-//! a slow client's oldest messages. Its threads run at the least priority
-//! ([`yield_to_the_run`]).
+//! a channel some client subscribed to. Viewers connect to the server's [`door`], which relays
+//! each to the SDK's server on loopback under any name of the protocol, and keeps a bounded
+//! outbox per client whose oldest messages a slow client loses, counted. Its threads run at the
+//! least priority ([`yield_to_the_run`]).
+
+pub mod door;
 
 use std::collections::BTreeMap;
-use std::net::SocketAddr;
+use std::net::{Ipv4Addr, SocketAddr};
 use std::path::Path;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{self, Receiver, SyncSender, TrySendError};
@@ -181,6 +184,8 @@ pub const SETTLED: Duration = Duration::from_millis(300);
 /// How long the server stays up after the run's last message while clients are connected: what
 /// their queues hold is sent meanwhile (the server drops it when it stops).
 pub const LINGER: Duration = Duration::from_secs(3);
+/// How long the door then has to send its clients what their outboxes hold and close them.
+pub const CLOSING: Duration = Duration::from_millis(500);
 
 /// Records per batch handed to the server's thread.
 const BATCH: usize = 256;
@@ -352,6 +357,7 @@ fn channels(
 pub struct Live {
     addr: SocketAddr,
     clients: Arc<Clients>,
+    door: Arc<door::Counts>,
     thread: JoinHandle<Published>,
     dropped: Arc<AtomicU64>,
     events_dropped: Arc<AtomicU64>,
@@ -384,15 +390,18 @@ impl Live {
         let ctx = Context::new();
         let channels = channels(resolved, opts, &ctx)?;
         let clients = Arc::new(Clients::default());
+        // The SDK's server listens on loopback; viewers connect to the door (module `door`).
         let server = WebSocketServer::new()
             .name(format!("fdi-mas {}", resolved.scenario.name))
-            .bind(opts.addr.ip().to_string(), opts.addr.port())
+            .bind(Ipv4Addr::LOCALHOST.to_string(), 0)
             .capabilities([Capability::Time])
+            .message_backlog_size(door::UPSTREAM_BACKLOG)
             .listener(clients.clone())
             .context(&ctx);
         let (tx, rx) = mpsc::sync_channel(QUEUED);
         let dropped = Arc::new(AtomicU64::new(0));
         let events_dropped = Arc::new(AtomicU64::new(0));
+        let counts = Arc::new(door::Counts::default());
         let info = RunInfo::of(resolved.clone());
         let publisher = Publisher {
             detectors: Some(detectors::Stats::new(&info)),
@@ -404,18 +413,23 @@ impl Live {
             },
             dropped: dropped.clone(),
             last_kept: None,
+            door: counts.clone(),
         };
-        // The server is started on the thread, which gives way to the run: the threads of its
-        // runtime, made there, inherit that.
+        // The servers are started on the thread, which gives way to the run: the threads of
+        // their runtime, made there, inherit that.
         let (ready_tx, ready) = mpsc::sync_channel(1);
+        let at = opts.addr;
+        let door = counts.clone();
         let thread = std::thread::Builder::new()
             .name("live".into())
             .spawn(move || {
                 yield_to_the_run();
-                match server.start_blocking() {
-                    Ok(server) => {
-                        let _ = ready_tx.send(Ok(server.port()));
-                        publisher.run(&rx, server, ctx)
+                match open(server, at, door) {
+                    Ok((runtime, server, addr)) => {
+                        let _ = ready_tx.send(Ok(addr));
+                        let published = publisher.run(&rx, server, ctx);
+                        runtime.shutdown_background();
+                        published
                     }
                     Err(e) => {
                         let _ = ready_tx.send(Err(e));
@@ -424,11 +438,9 @@ impl Live {
                 }
             })
             .context("starting the live server's thread")?;
-        let port = ready
+        let addr = ready
             .recv()
-            .context("the live server's thread ended before the server started")?
-            .with_context(|| format!("--live: serving at {}", opts.addr))?;
-        let addr = SocketAddr::new(opts.addr.ip(), port);
+            .context("the live server's thread ended before the server started")??;
         let feed = Feed {
             tx,
             gate: Gate::new(Decimation::of(opts), opts.rate_hz),
@@ -441,6 +453,7 @@ impl Live {
             Self {
                 addr,
                 clients,
+                door: counts,
                 thread,
                 dropped,
                 events_dropped,
@@ -509,9 +522,42 @@ impl Live {
             messages_published: published.messages,
             records_dropped: self.dropped.load(Ordering::Relaxed),
             events_dropped: self.events_dropped.load(Ordering::Relaxed),
+            client_messages_dropped: self.door.dropped.load(Ordering::Relaxed),
+            clients_let_go: self.door.let_go.load(Ordering::Relaxed),
             error: published.error,
         }
     }
+}
+
+/// Starts the SDK's `server` and the door at `addr` in front of it, on a runtime of one thread;
+/// the runtime, the server, and the door's address (the port the system gave for port 0).
+fn open(
+    server: WebSocketServer,
+    addr: SocketAddr,
+    counts: Arc<door::Counts>,
+) -> Result<(
+    tokio::runtime::Runtime,
+    foxglove::WebSocketServerHandle,
+    SocketAddr,
+)> {
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(1)
+        .thread_name("live-io")
+        .enable_all()
+        .build()
+        .context("the live server's runtime")?;
+    let server = runtime
+        .block_on(server.start())
+        .context("the live server (Foxglove SDK) on loopback")?;
+    let upstream = SocketAddr::new(Ipv4Addr::LOCALHOST.into(), server.port());
+    let listener = runtime
+        .block_on(tokio::net::TcpListener::bind(addr))
+        .with_context(|| format!("--live: serving at {addr}"))?;
+    let addr = listener
+        .local_addr()
+        .with_context(|| format!("--live: the address served at {addr}"))?;
+    runtime.spawn(door::serve(listener, upstream, counts));
+    Ok((runtime, server, addr))
 }
 
 /// The channels of the run and what was published on them.
@@ -569,6 +615,8 @@ struct Publisher {
     dropped: Arc<AtomicU64>,
     /// The kept tick last published (its time broadcast).
     last_kept: Option<u64>,
+    /// The door's connections.
+    door: Arc<door::Counts>,
 }
 
 impl Publisher {
@@ -595,13 +643,19 @@ impl Publisher {
             }
         }
         // The clients' queues are sent before the server stops (it drops what they hold).
+        let open = || self.door.open.load(Ordering::Relaxed) > 0;
         let end = Instant::now() + LINGER;
-        while server.client_count() > 0 && Instant::now() < end {
+        while open() && Instant::now() < end {
             std::thread::sleep(Duration::from_millis(10));
         }
         // Stopped without waiting for its connections' tasks: one that never finished its
-        // handshake, or a client that reads nothing, would hold the launcher for good.
+        // handshake, or a client that reads nothing, would hold the launcher for good. The door
+        // then closes its clients' connections once their outboxes are sent, at most CLOSING.
         drop(server.stop());
+        let end = Instant::now() + CLOSING;
+        while open() && Instant::now() < end {
+            std::thread::sleep(Duration::from_millis(10));
+        }
         drop(ctx);
         self.out.published
     }

@@ -150,6 +150,18 @@ pub fn live_line(s: &RunSummary) -> Option<String> {
             l.events_dropped
         ));
     }
+    if l.client_messages_dropped > 0 {
+        line.push_str(&format!(
+            "; {} messages dropped for slow clients (oldest first; the run did not wait)",
+            l.client_messages_dropped
+        ));
+    }
+    if l.clients_let_go > 0 {
+        line.push_str(&format!(
+            "; {} clients let go (control messages unread, or too many connections)",
+            l.clients_let_go
+        ));
+    }
     if let Some(e) = &l.error {
         line.push_str(&format!("; a message could not be made: {e}"));
     }
