@@ -2,7 +2,9 @@
 //! deployment file, for the mutually authenticated TLS between the hosts of a split run
 //! (docs/security.md). A host's certificate has its host name as common name (what Zenoh's
 //! access control knows it by) and its endpoint's address as subject alternative name (what
-//! the hosts connecting to it check).
+//! the hosts connecting to it check). A host's certificate is valid for `--days` (365 by
+//! default), the CA for [`CA_DAYS`]; a split run checks both before it opens its session
+//! ([`check_validity`]).
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -25,6 +27,68 @@ pub struct CertsArgs {
     /// new certificates; no file is ever overwritten.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// How many days the new host certificates are valid (from an hour before now, for clocks
+    /// a little behind). Renew one by removing its pair and running this again.
+    #[arg(long, default_value_t = 365, value_parser = clap::value_parser!(u32).range(1..=3650))]
+    pub days: u32,
+}
+
+/// How many days a CA made here is valid.
+pub const CA_DAYS: u32 = 3650;
+
+/// A certificate's warning time: a split run says so when one expires within this many days.
+pub const WARN_DAYS: i64 = 30;
+
+/// The validity of a certificate made now for `days`: from an hour ago to `days` from now.
+fn validity(params: &mut CertificateParams, days: u32) {
+    let now = time::OffsetDateTime::now_utc();
+    params.not_before = now - time::Duration::hours(1);
+    params.not_after = now + time::Duration::days(i64::from(days));
+}
+
+/// Whether the certificate in the PEM file `path` is valid at `now` (Unix seconds): an error
+/// naming the file and the date when it is not yet or no longer valid, or when the file holds no
+/// certificate; a warning when it expires within [`WARN_DAYS`].
+pub fn check_validity(path: &Path, now: i64) -> Result<Option<String>> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: not a certificate in PEM ({e})", path.display()))?;
+    let cert = pem
+        .parse_x509()
+        .map_err(|e| anyhow::anyhow!("{}: not an X.509 certificate ({e})", path.display()))?;
+    let (from, until) = (
+        cert.validity().not_before.timestamp(),
+        cert.validity().not_after.timestamp(),
+    );
+    let date = |t: i64| {
+        jiff::Timestamp::from_second(t).map_or_else(|_| format!("{t} s"), |d| d.to_string())
+    };
+    let renew = "make a new one: remove it (and its key) and run `fdi-launch certs --hosts FILE` \
+                 (docs/security.md)";
+    if now < from {
+        bail!(
+            "{}: the certificate is valid only from {} (this host's clock says {}): {renew}, or \
+             set the clock",
+            path.display(),
+            date(from),
+            date(now)
+        );
+    }
+    if now > until {
+        bail!(
+            "{}: the certificate expired on {}: {renew}",
+            path.display(),
+            date(until)
+        );
+    }
+    let left = (until - now) / 86_400;
+    Ok((left < WARN_DAYS).then(|| {
+        format!(
+            "{}: the certificate expires on {} (in {left} days): {renew}",
+            path.display(),
+            date(until)
+        )
+    }))
 }
 
 /// The CA's private key in a certificates folder (kept off the hosts but the one that makes
@@ -68,6 +132,7 @@ fn authority(dir: &Path, made: &mut Vec<PathBuf>) -> Result<Issuer<'static, KeyP
             params.distinguished_name = name;
             params.is_ca = IsCa::Ca(BasicConstraints::Constrained(0));
             params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::CrlSign];
+            validity(&mut params, CA_DAYS);
             let key_pair = KeyPair::generate()?;
             let ca = params.self_signed(&key_pair)?;
             write_new(&key, &key_pair.serialize_pem(), true)?;
@@ -84,8 +149,8 @@ fn authority(dir: &Path, made: &mut Vec<PathBuf>) -> Result<Issuer<'static, KeyP
 }
 
 /// Makes what is missing in `out` for the hosts of `lab`: the CA, and each host's certificate
-/// and key. Returns the files made.
-pub fn make(lab: &Lab, out: &Path) -> Result<Vec<PathBuf>> {
+/// and key, valid for `days`. Returns the files made.
+pub fn make(lab: &Lab, out: &Path, days: u32) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let mut made = Vec::new();
     let ca = authority(out, &mut made)?;
@@ -109,6 +174,7 @@ pub fn make(lab: &Lab, out: &Path) -> Result<Vec<PathBuf>> {
         name.push(DnType::CommonName, h.name.clone());
         params.distinguished_name = name;
         params.use_authority_key_identifier_extension = true;
+        validity(&mut params, days);
         params.key_usages = vec![KeyUsagePurpose::DigitalSignature];
         params.extended_key_usages = vec![
             ExtendedKeyUsagePurpose::ServerAuth,
@@ -134,7 +200,7 @@ pub fn certs(args: &CertsArgs) -> Result<()> {
             lab.source
         ),
     };
-    let made = make(&lab, &out)?;
+    let made = make(&lab, &out, args.days)?;
     if made.is_empty() {
         println!("{}: every host has its certificate already", out.display());
     }
@@ -174,7 +240,7 @@ mod tests {
     #[test]
     fn a_lab_s_certificates_are_made_once_and_new_hosts_signed_by_its_ca() {
         let dir = tempfile::tempdir().expect("temporary folder");
-        let made = make(&lab(&["control", "cell"]), dir.path()).expect("made");
+        let made = make(&lab(&["control", "cell"]), dir.path(), 365).expect("made");
         assert_eq!(made.len(), 6, "{made:?}");
         let ca = std::fs::read_to_string(dir.path().join("ca.pem")).expect("ca");
         use std::os::unix::fs::PermissionsExt as _;
@@ -184,7 +250,7 @@ mod tests {
             .mode();
         assert_eq!(mode & 0o077, 0, "a private key is its owner's only");
         // Again, with one more host: only its files are made, the CA is the same.
-        let made = make(&lab(&["control", "cell", "adversary"]), dir.path()).expect("made");
+        let made = make(&lab(&["control", "cell", "adversary"]), dir.path(), 365).expect("made");
         assert_eq!(
             made,
             vec![
@@ -196,7 +262,43 @@ mod tests {
         assert_eq!(ca, again);
         // Half a pair is refused, not completed over.
         std::fs::remove_file(dir.path().join("cell.key")).expect("rm");
-        let e = make(&lab(&["control", "cell"]), dir.path()).expect_err("half a pair");
+        let e = make(&lab(&["control", "cell"]), dir.path(), 365).expect_err("half a pair");
         assert!(e.to_string().contains("without the other"), "{e}");
+    }
+
+    #[test]
+    fn certificates_are_valid_for_their_days_and_a_run_names_one_expired_or_not_yet_valid() {
+        let dir = tempfile::tempdir().expect("temporary folder");
+        make(&lab(&["control", "cell"]), dir.path(), 90).expect("made");
+        let now = jiff::Timestamp::now().as_second();
+        let day = 86_400;
+        let cell = dir.path().join("cell.pem");
+        let ca = dir.path().join("ca.pem");
+        assert_eq!(check_validity(&cell, now).expect("valid"), None);
+        assert_eq!(check_validity(&ca, now).expect("valid"), None);
+        // 89 days on, it warns; after its 90 days, a run stops naming the file and the date.
+        let warned = check_validity(&cell, now + 89 * day)
+            .expect("still valid")
+            .expect("a warning");
+        assert!(
+            warned.contains("cell.pem") && warned.contains("expires on"),
+            "{warned}"
+        );
+        let e = check_validity(&cell, now + 91 * day).expect_err("expired");
+        let e = format!("{e:#}");
+        assert!(e.contains("cell.pem: the certificate expired on"), "{e}");
+        assert!(e.contains("fdi-launch certs"), "{e}");
+        // The CA lasts its ten years; a clock two hours behind is refused too.
+        assert_eq!(check_validity(&ca, now + 3000 * day).expect("valid"), None);
+        assert!(check_validity(&ca, now + 3651 * day).is_err());
+        let e = format!(
+            "{:#}",
+            check_validity(&cell, now - 2 * 3600).expect_err("early")
+        );
+        assert!(e.contains("valid only from"), "{e}");
+        // A file that holds no certificate is named.
+        let key = dir.path().join("cell.key");
+        let e = format!("{:#}", check_validity(&key, now).expect_err("a key"));
+        assert!(e.contains("cell.key"), "{e}");
     }
 }

@@ -6,7 +6,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context as _, Result};
 use fdi_common::scenario::{self, Resolved};
 use fdi_runtime::ipc::Wake;
 use fdi_runtime::net::{check_endpoint, check_host_name, Layout, Link, Security};
@@ -141,7 +141,8 @@ impl Lab {
     }
 
     /// How host `name` opens its Zenoh session: with TLS, its certificate and key, the lab's
-    /// CA, and the lab's hosts (checked to exist, named otherwise).
+    /// CA, and the lab's hosts (checked to exist, and the certificates to be valid now, named
+    /// otherwise; one that expires within 30 days is said on stderr).
     pub fn security_of(&self, name: &str) -> Result<Security> {
         match &self.security {
             LabSecurity::Insecure => Ok(Security::Insecure),
@@ -157,6 +158,14 @@ impl Lab {
                             p.display(),
                             self.source
                         );
+                    }
+                }
+                let now = jiff::Timestamp::now().as_second();
+                for p in [&files.ca, &files.cert] {
+                    let checked = crate::run::certs::check_validity(p, now)
+                        .with_context(|| format!("{}: `certs`", self.source))?;
+                    if let Some(warning) = checked {
+                        eprintln!("fdi-launch: warning: {warning}");
                     }
                 }
                 Ok(Security::Tls {
