@@ -518,3 +518,34 @@ fn prune_continues_past_a_file_it_cannot_remove() {
     );
     assert!(!tomb.exists() && dirs[2].is_dir());
 }
+
+/// The Actuation records of the attacker's trace of the run `summary`, in the trace's order.
+fn actuations(summary: &serde_json::Value) -> Vec<fdi_common::records::ActuationRecord> {
+    let dir = run_dir_of(summary);
+    let path = fdi_common::run_dir::RunDir::new(&dir).trace(fdi_common::run_dir::Process::Attacker);
+    TraceReader::open(&path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .filter_map(|r| match r {
+            Ok(TraceRecord::Actuation(a)) => Some(a),
+            Ok(_) => None,
+            Err(e) => panic!("{}: {e}", path.display()),
+        })
+        .collect()
+}
+
+#[test]
+fn both_engines_record_the_torque_path_of_an_attacked_robot_alike() {
+    let out = Scratch::new("traces-actuation");
+    let args = ["--attack", "actuator-bias"];
+    let inproc = run(&out.0, "1", &[&["--engine", "inproc"][..], &args].concat());
+    let ipc = run(&out.0, "1", &[&["--engine", "ipc"][..], &args].concat());
+    assert_eq!(inproc["trace_digest"], ipc["trace_digest"]);
+    let (a, b) = (actuations(&inproc), actuations(&ipc));
+    // Robot 1's torque path, every tick of the second.
+    assert_eq!(a.len(), 1000, "in-process: {} records", a.len());
+    assert!(a.iter().all(|r| r.agent == 1));
+    assert_eq!(
+        a, b,
+        "the in-process engine's torque-path records are the processes'"
+    );
+}

@@ -97,6 +97,11 @@ impl InprocTraces {
             w.write(&agent)?;
         }
         self.attacker.write(&TraceRecord::Attack(rec.attack))?;
+        // The torque path's record, where the attacker sits on it (as the attacker process
+        // writes it).
+        if let Some(a) = rec.actuation {
+            self.attacker.write(&TraceRecord::Actuation(a))?;
+        }
         self.center.write(&TraceRecord::Center(rec.center))?;
         Ok(())
     }
