@@ -415,32 +415,8 @@ impl Live {
             last_kept: None,
             door: counts.clone(),
         };
-        // The servers are started on the thread, which gives way to the run: the threads of
-        // their runtime, made there, inherit that.
-        let (ready_tx, ready) = mpsc::sync_channel(1);
-        let at = opts.addr;
-        let door = counts.clone();
-        let thread = std::thread::Builder::new()
-            .name("live".into())
-            .spawn(move || {
-                yield_to_the_run();
-                match open(server, at, door) {
-                    Ok((runtime, server, addr)) => {
-                        let _ = ready_tx.send(Ok(addr));
-                        let published = publisher.run(&rx, server, ctx);
-                        runtime.shutdown_background();
-                        published
-                    }
-                    Err(e) => {
-                        let _ = ready_tx.send(Err(e));
-                        Published::default()
-                    }
-                }
-            })
-            .context("starting the live server's thread")?;
-        let addr = ready
-            .recv()
-            .context("the live server's thread ended before the server started")??;
+        let (thread, addr) =
+            serve_on_a_thread(server, (opts.addr, counts.clone()), publisher, (rx, ctx))?;
         let feed = Feed {
             tx,
             gate: Gate::new(Decimation::of(opts), opts.rate_hz),
@@ -527,6 +503,41 @@ impl Live {
             error: published.error,
         }
     }
+}
+
+/// Starts the thread that starts the servers (the SDK's `server`, the door at `at`) and then
+/// publishes what `rx` brings; the thread, and the door's address once they listen.
+fn serve_on_a_thread(
+    server: WebSocketServer,
+    (at, door): (SocketAddr, Arc<door::Counts>),
+    publisher: Publisher,
+    (rx, ctx): (Receiver<Item>, Arc<Context>),
+) -> Result<(JoinHandle<Published>, SocketAddr)> {
+    // The servers are started on the thread, which gives way to the run: the threads of their
+    // runtime, made there, inherit that.
+    let (ready_tx, ready) = mpsc::sync_channel(1);
+    let thread = std::thread::Builder::new()
+        .name("live".into())
+        .spawn(move || {
+            yield_to_the_run();
+            match open(server, at, door) {
+                Ok((runtime, server, addr)) => {
+                    let _ = ready_tx.send(Ok(addr));
+                    let published = publisher.run(&rx, server, ctx);
+                    runtime.shutdown_background();
+                    published
+                }
+                Err(e) => {
+                    let _ = ready_tx.send(Err(e));
+                    Published::default()
+                }
+            }
+        })
+        .context("starting the live server's thread")?;
+    let addr = ready
+        .recv()
+        .context("the live server's thread ended before the server started")??;
+    Ok((thread, addr))
 }
 
 /// Starts the SDK's `server` and the door at `addr` in front of it, on a runtime of one thread;

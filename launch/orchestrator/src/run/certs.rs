@@ -4,7 +4,7 @@
 //! access control knows it by) and its endpoint's address as subject alternative name (what
 //! the hosts connecting to it check). A host's certificate is valid for `--days` (365 by
 //! default), the CA for [`CA_DAYS`]; a split run checks both before it opens its session
-//! ([`check_validity`]).
+//! ([`crate::run::hosts::check_validity`]).
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -36,59 +36,11 @@ pub struct CertsArgs {
 /// How many days a CA made here is valid.
 pub const CA_DAYS: u32 = 3650;
 
-/// A certificate's warning time: a split run says so when one expires within this many days.
-pub const WARN_DAYS: i64 = 30;
-
 /// The validity of a certificate made now for `days`: from an hour ago to `days` from now.
 fn validity(params: &mut CertificateParams, days: u32) {
     let now = time::OffsetDateTime::now_utc();
     params.not_before = now - time::Duration::hours(1);
     params.not_after = now + time::Duration::days(i64::from(days));
-}
-
-/// Whether the certificate in the PEM file `path` is valid at `now` (Unix seconds): an error
-/// naming the file and the date when it is not yet or no longer valid, or when the file holds no
-/// certificate; a warning when it expires within [`WARN_DAYS`].
-pub fn check_validity(path: &Path, now: i64) -> Result<Option<String>> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
-        .map_err(|e| anyhow::anyhow!("{}: not a certificate in PEM ({e})", path.display()))?;
-    let cert = pem
-        .parse_x509()
-        .map_err(|e| anyhow::anyhow!("{}: not an X.509 certificate ({e})", path.display()))?;
-    let (from, until) = (
-        cert.validity().not_before.timestamp(),
-        cert.validity().not_after.timestamp(),
-    );
-    let date = |t: i64| {
-        jiff::Timestamp::from_second(t).map_or_else(|_| format!("{t} s"), |d| d.to_string())
-    };
-    let renew = "make a new one: remove it (and its key) and run `fdi-launch certs --hosts FILE` \
-                 (docs/security.md)";
-    if now < from {
-        bail!(
-            "{}: the certificate is valid only from {} (this host's clock says {}): {renew}, or \
-             set the clock",
-            path.display(),
-            date(from),
-            date(now)
-        );
-    }
-    if now > until {
-        bail!(
-            "{}: the certificate expired on {}: {renew}",
-            path.display(),
-            date(until)
-        );
-    }
-    let left = (until - now) / 86_400;
-    Ok((left < WARN_DAYS).then(|| {
-        format!(
-            "{}: the certificate expires on {} (in {left} days): {renew}",
-            path.display(),
-            date(until)
-        )
-    }))
 }
 
 /// The CA's private key in a certificates folder (kept off the hosts but the one that makes
@@ -217,7 +169,7 @@ pub fn certs(args: &CertsArgs) -> Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::run::hosts::Host;
+    use crate::run::hosts::{check_validity, Host};
 
     fn lab(names: &[&str]) -> Lab {
         Lab {

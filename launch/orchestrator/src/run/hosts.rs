@@ -162,7 +162,7 @@ impl Lab {
                 }
                 let now = jiff::Timestamp::now().as_second();
                 for p in [&files.ca, &files.cert] {
-                    let checked = crate::run::certs::check_validity(p, now)
+                    let checked = check_validity(p, now)
                         .with_context(|| format!("{}: `certs`", self.source))?;
                     if let Some(warning) = checked {
                         eprintln!("fdi-launch: warning: {warning}");
@@ -641,6 +641,54 @@ pub struct Released {
     /// Frames its bridge refused, and the first, described.
     pub refused: u64,
     pub first_refusal: Option<String>,
+}
+
+/// A certificate's warning time: a split run says so when one expires within this many days.
+pub const WARN_DAYS: i64 = 30;
+
+/// Whether the certificate in the PEM file `path` is valid at `now` (Unix seconds): an error
+/// naming the file and the date when it is not yet or no longer valid, or when the file holds no
+/// certificate; a warning when it expires within [`WARN_DAYS`].
+pub fn check_validity(path: &Path, now: i64) -> Result<Option<String>> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let (_, pem) = x509_parser::pem::parse_x509_pem(&bytes)
+        .map_err(|e| anyhow::anyhow!("{}: not a certificate in PEM ({e})", path.display()))?;
+    let cert = pem
+        .parse_x509()
+        .map_err(|e| anyhow::anyhow!("{}: not an X.509 certificate ({e})", path.display()))?;
+    let (from, until) = (
+        cert.validity().not_before.timestamp(),
+        cert.validity().not_after.timestamp(),
+    );
+    let date = |t: i64| {
+        jiff::Timestamp::from_second(t).map_or_else(|_| format!("{t} s"), |d| d.to_string())
+    };
+    let renew = "make a new one: remove it (and its key) and run `fdi-launch certs --hosts FILE` \
+                 (docs/security.md)";
+    if now < from {
+        bail!(
+            "{}: the certificate is valid only from {} (this host's clock says {}): {renew}, or \
+             set the clock",
+            path.display(),
+            date(from),
+            date(now)
+        );
+    }
+    if now > until {
+        bail!(
+            "{}: the certificate expired on {}: {renew}",
+            path.display(),
+            date(until)
+        );
+    }
+    let left = (until - now) / 86_400;
+    Ok((left < WARN_DAYS).then(|| {
+        format!(
+            "{}: the certificate expires on {} (in {left} days): {renew}",
+            path.display(),
+            date(until)
+        )
+    }))
 }
 
 #[cfg(test)]
