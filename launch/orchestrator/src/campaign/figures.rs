@@ -11,6 +11,56 @@ use super::plan::{labels_and_robots, toml_cell, Aggregate, Plan};
 use fdi_common::field_path::show;
 use fdi_report::plot::{FONT, PALETTE};
 
+/// The marker of a line's points: the palette's colours come round again every
+/// `PALETTE.len()` lines, each time with the next shape, so that no two lines of a figure look
+/// alike up to `PALETTE.len() × 4` lines.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Shape {
+    Circle,
+    Square,
+    Triangle,
+    Cross,
+}
+
+impl Shape {
+    /// The marker at `at` (pixels from its anchor), filled with `color` (a cross is drawn).
+    fn at<DB: DrawingBackend>(
+        self,
+        (x, y): (i32, i32),
+        color: RGBColor,
+    ) -> DynElement<'static, DB, (i32, i32)> {
+        let fill = color.filled();
+        match self {
+            Self::Circle => Circle::new((x, y), 3, fill).into_dyn(),
+            Self::Square => Rectangle::new([(x - 3, y - 3), (x + 3, y + 3)], fill).into_dyn(),
+            Self::Triangle => TriangleMarker::new((x, y), 4, fill).into_dyn(),
+            Self::Cross => Cross::new((x, y), 4, color.stroke_width(2)).into_dyn(),
+        }
+    }
+}
+
+/// Error bars of `points`: each interval, capped at both ends by `cap` either side.
+fn error_bars(points: &[Mark], cap: f64) -> Vec<Vec<(f64, f64)>> {
+    let mut bars = Vec::new();
+    for &(x, _, ci) in points {
+        if let Some((lo, hi)) = ci {
+            bars.push(vec![(x, lo), (x, hi)]);
+            bars.push(vec![(x - cap, lo), (x + cap, lo)]);
+            bars.push(vec![(x - cap, hi), (x + cap, hi)]);
+        }
+    }
+    bars
+}
+
+/// The colour and marker of line `i` of a figure.
+fn style_of(i: usize) -> (RGBColor, Shape) {
+    const SHAPES: [Shape; 4] = [Shape::Circle, Shape::Square, Shape::Triangle, Shape::Cross];
+    (
+        PALETTE[i % PALETTE.len()],
+        SHAPES[(i / PALETTE.len()) % SHAPES.len()],
+    )
+}
+
 /// One point of a line: x, the mean, and its confidence interval when there is one.
 type Mark = (f64, f64, Option<(f64, f64)>);
 
@@ -358,34 +408,27 @@ where
         .draw()
         .map_err(err)?;
     for (i, s) in c.series.iter().enumerate() {
-        let color = PALETTE[i % PALETTE.len()];
+        let (color, shape) = style_of(i);
         let line: Vec<(f64, f64)> = s.points.iter().map(|&(x, m, _)| (x, m)).collect();
         chart
             .draw_series(LineSeries::new(line.clone(), color.stroke_width(2)))
             .map_err(err)?
             .label(&s.label)
             .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+                EmptyElement::at((x, y))
+                    + PathElement::new(vec![(0, 0), (18, 0)], color.stroke_width(2))
+                    + shape.at((9, 0), color)
             });
         chart
             .draw_series(
                 line.iter()
-                    .map(|&(x, m)| Circle::new((x, m), 3, color.filled())),
+                    .map(|&(x, m)| EmptyElement::at((x, m)) + shape.at((0, 0), color)),
             )
             .map_err(err)?;
-        // Error bars: the interval, capped at both ends (caps a fixed share of the x-axis).
-        let cap = (x1 - x0) * 0.006;
-        let mut bars = Vec::new();
-        for &(x, _, ci) in &s.points {
-            if let Some((lo, hi)) = ci {
-                bars.push(vec![(x, lo), (x, hi)]);
-                bars.push(vec![(x - cap, lo), (x + cap, lo)]);
-                bars.push(vec![(x - cap, hi), (x + cap, hi)]);
-            }
-        }
         chart
             .draw_series(
-                bars.into_iter()
+                error_bars(&s.points, (x1 - x0) * 0.006)
+                    .into_iter()
                     .map(|p| PathElement::new(p, color.stroke_width(1))),
             )
             .map_err(err)?;
@@ -453,5 +496,58 @@ mod tests {
             series("robot 2", &[(1.0, 2.0, None)]),
         ]);
         assert_eq!(apart, ["no confidence interval: one seed per point"]);
+    }
+
+    #[test]
+    fn no_two_of_the_first_twenty_four_lines_look_alike_and_a_figure_of_them_draws() {
+        let styles: Vec<(RGBColor, Shape)> = (0..PALETTE.len() * 4).map(style_of).collect();
+        for (i, a) in styles.iter().enumerate() {
+            for b in &styles[i + 1..] {
+                assert!(a != b, "lines {i} and another share {a:?}");
+            }
+        }
+        assert_eq!(style_of(6), (PALETTE[0], Shape::Square));
+        // Eight lines (two robots × four values of another axis) into an SVG.
+        let chart = Chart {
+            title: "eight lines".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            series: (0..8)
+                .map(|k| {
+                    let y = f64::from(k);
+                    series(
+                        &format!("line {k}"),
+                        &[(1.0, y, Some((y - 0.1, y + 0.1))), (2.0, y + 0.5, None)],
+                    )
+                })
+                .collect(),
+        };
+        let svg_of = |c: &Chart| {
+            let mut svg = String::new();
+            {
+                fdi_report::plot::fonts().expect("fonts");
+                let area = SVGBackend::with_string(&mut svg, (640, 480)).into_drawing_area();
+                draw(&area, c).expect("drawn");
+            }
+            svg
+        };
+        // Squares in the first colour: the 7th line's two points and its legend entry, none
+        // while the figure has six lines.
+        let (r, g, b) = (PALETTE[0].0, PALETTE[0].1, PALETTE[0].2);
+        let fill = format!("fill=\"#{r:02X}{g:02X}{b:02X}\"");
+        let squares = |svg: &str| {
+            svg.lines()
+                .filter(|l| l.contains("<rect") && l.contains(&fill))
+                .count()
+        };
+        assert_eq!(squares(&svg_of(&chart)), 3);
+        let six = Chart {
+            series: chart.series[..6]
+                .iter()
+                .map(|s| series(&s.label, &s.points))
+                .collect(),
+            ..chart
+        };
+        assert_eq!(squares(&svg_of(&six)), 0);
     }
 }
