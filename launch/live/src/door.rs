@@ -239,6 +239,8 @@ async fn pipe(
     let (mut to_server, mut from_server) = server.split();
     let outbox = Mutex::new(Outbox::default());
     let ready = Notify::new();
+    // Raised when the client is let go: the connection ends at once, unsent messages with it.
+    let cut = Notify::new();
     let lock = || outbox.lock().unwrap_or_else(PoisonError::into_inner);
     // The server's messages, queued as they come.
     let down = async {
@@ -254,7 +256,8 @@ async fn pipe(
                 }
                 Pushed::Full => {
                     counts.let_go.fetch_add(1, Ordering::Relaxed);
-                    break;
+                    cut.notify_one();
+                    return;
                 }
             }
             ready.notify_one();
@@ -297,6 +300,7 @@ async fn pipe(
         let _ = to_server.close().await;
     };
     tokio::select! {
+        () = cut.notified() => {}
         () = up => {}
         ((), ()) = async { tokio::join!(down, send) } => {}
     }
@@ -346,5 +350,72 @@ mod tests {
         assert_eq!(o.push(Message::binary(vec![2])), Pushed::DroppedOne);
         assert_eq!(o.push(Message::text("status")), Pushed::Full);
         assert!(o.queue.iter().all(Message::is_text));
+    }
+
+    /// A stand-in for the SDK's server on loopback: records the subprotocol it was asked for,
+    /// then sends `texts` text messages of 4 KiB as fast as the relay reads them.
+    async fn upstream(texts: usize) -> (SocketAddr, tokio::sync::oneshot::Receiver<String>) {
+        let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let addr = listener.local_addr().expect("address");
+        let (asked_tx, asked) = tokio::sync::oneshot::channel();
+        tokio::spawn(async move {
+            let (tcp, _) = listener.accept().await.expect("accept");
+            let mut name = String::new();
+            #[allow(clippy::result_large_err)]
+            let note = |req: &Request, mut resp: Response| -> Result<Response, ErrorResponse> {
+                if let Some(v) = req.headers().get(header::SEC_WEBSOCKET_PROTOCOL) {
+                    name = v.to_str().unwrap_or("?").to_string();
+                    resp.headers_mut()
+                        .insert(header::SEC_WEBSOCKET_PROTOCOL, v.clone());
+                }
+                Ok(resp)
+            };
+            let mut ws = tokio_tungstenite::accept_hdr_async(tcp, note)
+                .await
+                .expect("handshake");
+            let _ = asked_tx.send(name);
+            let text = "x".repeat(4096);
+            for _ in 0..texts {
+                if ws.send(Message::text(text.clone())).await.is_err() {
+                    return;
+                }
+            }
+        });
+        (addr, asked)
+    }
+
+    #[tokio::test(flavor = "multi_thread", worker_threads = 1)]
+    async fn a_client_of_the_old_name_is_relayed_under_the_new_and_let_go_when_it_never_reads() {
+        // 16 000 control messages of 4 KiB (64 MiB): more than its sockets and its outbox hold.
+        let (up, asked) = upstream(16_000).await;
+        let door = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let at = door.local_addr().expect("address");
+        let counts = Arc::new(Counts::default());
+        tokio::spawn(serve(door, up, counts.clone()));
+        let mut request = format!("ws://{at}/")
+            .into_client_request()
+            .expect("request");
+        request.headers_mut().insert(
+            header::SEC_WEBSOCKET_PROTOCOL,
+            HeaderValue::from_static("foxglove.websocket.v1"),
+        );
+        let tcp = TcpStream::connect(at).await.expect("connect");
+        let (client, answer) = tokio_tungstenite::client_async(request, tcp)
+            .await
+            .expect("the door answers");
+        assert_eq!(
+            answer.headers().get(header::SEC_WEBSOCKET_PROTOCOL),
+            Some(&HeaderValue::from_static("foxglove.websocket.v1"))
+        );
+        assert_eq!(asked.await.expect("asked"), "foxglove.sdk.v1");
+        // The client reads nothing: once its outbox is full of control messages it is let go,
+        // and its connection closed.
+        let end = tokio::time::Instant::now() + Duration::from_secs(30);
+        while counts.open.load(Ordering::Relaxed) > 0 && tokio::time::Instant::now() < end {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        assert_eq!(counts.let_go.load(Ordering::Relaxed), 1);
+        assert_eq!(counts.open.load(Ordering::Relaxed), 0, "still open");
+        drop(client);
     }
 }
