@@ -663,8 +663,13 @@ pub fn check_validity(path: &Path, now: i64) -> Result<Option<String>> {
     let date = |t: i64| {
         jiff::Timestamp::from_second(t).map_or_else(|_| format!("{t} s"), |d| d.to_string())
     };
-    let renew = "make a new one: remove it (and its key) and run `fdi-launch certs --hosts FILE` \
-                 (docs/security.md)";
+    let renew = if cert.is_ca() {
+        "make a new lab CA: remove ca.pem, ca.key and every host's pair, run `fdi-launch certs \
+         --hosts FILE` and give every host its new files (docs/security.md)"
+    } else {
+        "make a new one: remove it (and its key) and run `fdi-launch certs --hosts FILE` \
+         (docs/security.md)"
+    };
     if now < from {
         bail!(
             "{}: the certificate is valid only from {} (this host's clock says {}): {renew}, or \
