@@ -1247,10 +1247,7 @@ impl Shared {
     /// Stops the inbound side on `e`, kept where [`Bridge::failure`] and [`Bridge::stop`] find
     /// it.
     fn fail_inbound(&self, e: NetError) {
-        self.failure
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .get_or_insert_with(|| format!("the bridge between hosts stopped: {e}"));
+        note_failure(&self.failure, &e);
         self.inbound_error().get_or_insert(e);
     }
 }
@@ -1601,12 +1598,17 @@ fn noted(
 ) -> Result<(), NetError> {
     let r = body();
     if let Err(e) = &r {
-        failure
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .get_or_insert_with(|| format!("the bridge between hosts stopped: {e}"));
+        note_failure(failure, e);
     }
     r
+}
+
+/// Keeps `e` as the bridge's failure, unless one is kept already.
+fn note_failure(failure: &std::sync::Mutex<Option<String>>, e: &NetError) {
+    failure
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .get_or_insert_with(|| format!("the bridge between hosts stopped: {e}"));
 }
 
 fn thread_error(e: impl std::fmt::Display) -> IpcError {

@@ -128,9 +128,6 @@ pub struct Counts {
     pub dropped: AtomicU64,
     /// Clients let go: outbox full of control messages, or a connection over the limit.
     pub let_go: AtomicU64,
-    /// Connections whose WebSocket handshake failed or timed out, or that offered no name of the
-    /// protocol.
-    pub refused: AtomicU64,
 }
 
 /// Serves connections on `listener`, each relayed to the SDK's server at `upstream`, until the
@@ -197,12 +194,11 @@ async fn relay(stream: TcpStream, upstream: SocketAddr, counts: &Counts) {
         tokio_tungstenite::accept_hdr_async_with_config(stream, answer, Some(config())),
     )
     .await;
+    // A handshake that failed, timed out or offered no name of the protocol ends here.
     let (Ok(Ok(client)), Some(up)) = (accepted, chosen) else {
-        counts.refused.fetch_add(1, Ordering::Relaxed);
         return;
     };
     let Some(server) = connect(upstream, up).await else {
-        counts.refused.fetch_add(1, Ordering::Relaxed);
         return;
     };
     pipe(client, server, counts).await;

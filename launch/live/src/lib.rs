@@ -654,19 +654,19 @@ impl Publisher {
             }
         }
         // The clients' queues are sent before the server stops (it drops what they hold).
-        let open = || self.door.open.load(Ordering::Relaxed) > 0;
-        let end = Instant::now() + LINGER;
-        while open() && Instant::now() < end {
-            std::thread::sleep(Duration::from_millis(10));
-        }
+        // While the door has connections, at most `longest`.
+        let while_open = |longest: Duration| {
+            let end = Instant::now() + longest;
+            while self.door.open.load(Ordering::Relaxed) > 0 && Instant::now() < end {
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        };
+        while_open(LINGER);
         // Stopped without waiting for its connections' tasks: one that never finished its
         // handshake, or a client that reads nothing, would hold the launcher for good. The door
         // then closes its clients' connections once their outboxes are sent, at most CLOSING.
         drop(server.stop());
-        let end = Instant::now() + CLOSING;
-        while open() && Instant::now() < end {
-            std::thread::sleep(Duration::from_millis(10));
-        }
+        while_open(CLOSING);
         drop(ctx);
         self.out.published
     }
