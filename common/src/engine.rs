@@ -158,9 +158,12 @@ pub struct RunSummary {
     /// share the metrics cover. 0 in summaries written before it existed.
     #[serde(default)]
     pub planned_ticks: u64,
+    #[serde(with = "crate::json_float")]
     pub sim_s: f64,
+    #[serde(with = "crate::json_float")]
     pub wall_s: f64,
     /// RMSE per agent id, rad.
+    #[serde(with = "crate::json_float::map")]
     pub rmse_rad: BTreeMap<String, f64>,
     pub trace_digest: String,
     /// Per agent id: RMSE, detection, rejected inputs, deadline misses.
@@ -368,14 +371,31 @@ pub fn run_inproc_any(
 pub fn run_inproc_any_with<A: Attacker>(
     resolved: &Resolved,
     attacker: &mut A,
+    sink: impl FnMut(&TickRecord),
+) -> Result<RunSummary, EngineError> {
+    run_inproc_any_until(resolved, attacker, sink, || true)
+}
+
+/// [`run_inproc_any_with`] that asks `go_on` before each tick and stops where it says no (an
+/// interrupt): the summary then covers the ticks run (`ticks` says how many; the caller says
+/// why in its `partial`).
+pub fn run_inproc_any_until<A: Attacker>(
+    resolved: &Resolved,
+    attacker: &mut A,
     mut sink: impl FnMut(&TickRecord),
+    go_on: impl FnMut() -> bool,
 ) -> Result<RunSummary, EngineError> {
     // What `Lockstep` does tick by tick: each record into the books, then to the sink.
     let mut books = Books::new(resolved);
-    let ticked = tick_inproc_any_with(resolved, attacker, |rec| {
-        books.push(rec);
-        sink(rec);
-    })?;
+    let ticked = tick_inproc_any_with(
+        resolved,
+        attacker,
+        |rec| {
+            books.push(rec);
+            sink(rec);
+        },
+        go_on,
+    )?;
     Ok(books.summary(resolved, ticked.ticks, ticked.wall_s, attacker.name()))
 }
 
@@ -607,22 +627,25 @@ pub struct Ticked {
 /// [`run_inproc_any_with`] without its books: `sink` sees every record, in digest order, and
 /// the caller keeps the [`Books`] from them (on another thread, say: the command line's run
 /// digests, evaluates and writes the records there while this thread ticks). [`Books::summary`]
-/// of those books is [`run_inproc_any_with`]'s summary, to the bit.
+/// of those books is [`run_inproc_any_with`]'s summary, to the bit. `go_on` is asked before
+/// each tick: where it says no (an interrupt), the run stops, and `ticks` says how far it got.
 pub fn tick_inproc_any_with<A: Attacker>(
     resolved: &Resolved,
     attacker: &mut A,
     sink: impl FnMut(&TickRecord),
+    go_on: impl FnMut() -> bool,
 ) -> Result<Ticked, EngineError> {
-    struct Run<'a, A, F> {
+    struct Run<'a, A, F, G> {
         resolved: &'a Resolved,
         attacker: &'a mut A,
         sink: F,
+        go_on: G,
     }
-    impl<A: Attacker, F: FnMut(&TickRecord)> ForLinks for Run<'_, A, F> {
+    impl<A: Attacker, F: FnMut(&TickRecord), G: FnMut() -> bool> ForLinks for Run<'_, A, F, G> {
         type Output = Result<Ticked, EngineError>;
         fn call<const N: usize>(mut self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
             let mut ticker = Ticker::<N>::new(self.resolved)?;
-            while ticker.tick(self.attacker, &mut self.sink) {}
+            while (self.go_on)() && ticker.tick(self.attacker, &mut self.sink) {}
             Ok(Ticked {
                 ticks: ticker.k(),
                 wall_s: ticker.wall_s(),
@@ -634,6 +657,7 @@ pub fn tick_inproc_any_with<A: Attacker>(
             resolved,
             attacker,
             sink,
+            go_on,
         })
         .ok_or(EngineError::NoAgents)?
 }

@@ -21,6 +21,7 @@ pub mod detect;
 pub mod engine;
 pub mod field_path;
 pub mod files;
+pub mod json_float;
 pub mod limits;
 pub mod memo;
 pub mod metrics;

@@ -35,14 +35,17 @@ pub struct Onset {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct AgentMetrics {
     /// `sqrt(mean over ticks and links of (q_d − q)²)`, rad.
+    #[serde(with = "crate::json_float")]
     pub rmse_rad: f64,
     /// Largest `|q_d − q|` over the run, rad.
+    #[serde(with = "crate::json_float")]
     pub max_abs_error_rad: f64,
     /// Every rising edge of "attack in force", with its detection.
     pub onsets: Vec<Onset>,
     /// Alarm rising edges while no attack was in force.
     pub false_alarms: u64,
     /// Fraction of in-force ticks with the alarm on.
+    #[serde(with = "crate::json_float")]
     pub alarm_coverage: f64,
     /// Ticks with the attack in force.
     #[serde(default)]
@@ -97,6 +100,7 @@ pub struct DetectorMetrics {
     /// watched no attack-free tick.
     pub false_alarms_per_min: Option<f64>,
     /// Attack-free time the detector watched, s (its calibration window left out).
+    #[serde(with = "crate::json_float")]
     pub attack_free_watched_s: f64,
     /// Fraction of the attack-free ticks it watched with the alarm on; `None` as above. A
     /// detector whose alarm never clears raises few false alarms but a share near 1.

@@ -693,6 +693,9 @@ impl Scenario {
         if self.name.trim().is_empty() {
             push("name".into(), "must not be empty".into());
         }
+        if let Some(why) = crate::files::unprintable(&self.name) {
+            push("name".into(), why);
+        }
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
             push(
                 "duration_s".into(),
@@ -1404,6 +1407,35 @@ mod tests {
             "{e}"
         );
         let _ = std::fs::remove_file(&p);
+    }
+
+    /// Regression (issue 51): a name holding a control character (NUL, ESC) reached figure
+    /// titles, which no SVG reader takes, and the terminal. The scenario's and its attack
+    /// profile's are refused, named with their field path.
+    #[test]
+    fn a_name_with_a_control_character_is_refused_naming_the_field() {
+        let paper = PAPER_SCENARIO.replacen("name = \"paper\"", "name = \"pa\\u001bper\"", 1);
+        assert_ne!(
+            paper, PAPER_SCENARIO,
+            "the paper scenario names itself `paper`"
+        );
+        let e = load_str(&paper, "s.toml", None)
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            e.contains("- name: holds the control character U+001B at byte 2")
+                && e.contains("(line 8, column 1)"),
+            "{e}"
+        );
+        let attack =
+            PAPER_SCENARIO.replacen("preset = \"paper\"", "profile = { name = \"x\\u0000\" }", 1);
+        let e = load_str(&attack, "s.toml", None)
+            .expect_err("refused")
+            .to_string();
+        assert!(
+            e.contains("- attack.profile.name: holds the control character U+0000 at byte 1"),
+            "{e}"
+        );
     }
 
     #[test]

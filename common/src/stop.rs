@@ -97,6 +97,26 @@ impl Stop {
     }
 }
 
+/// The environment variable naming a [`hold`] point.
+pub const HOLD_VAR: &str = "FDI_HOLD";
+/// The longest a [`hold`] lasts.
+pub const HOLD_LIMIT: std::time::Duration = std::time::Duration::from_secs(120);
+
+/// A point where the launcher can be held for a test of what an interrupt does there
+/// (docs/faults.md, "Hold points"): when the environment variable [`HOLD_VAR`] names `point`,
+/// waits until `stop` is raised (at most [`HOLD_LIMIT`]); otherwise returns at once. The
+/// only point is `report` (the report's staging folder made, no figure drawn yet), so that a
+/// test signals the launcher while it writes the report, whatever the machine's speed.
+pub fn hold(point: &str, stop: &Stop) {
+    if std::env::var_os(HOLD_VAR).is_none_or(|v| v != point) {
+        return;
+    }
+    let began = std::time::Instant::now();
+    while stop.pending().is_none() && began.elapsed() < HOLD_LIMIT {
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -450,7 +450,7 @@ impl TraceReader {
             path: path.to_path_buf(),
             cause,
         };
-        let file = File::open(path).map_err(|e| io(TraceOp::Opening, e))?;
+        let file = crate::files::open_to_read(path).map_err(|e| io(TraceOp::Opening, e))?;
         let meta = file.metadata().map_err(|e| io(TraceOp::Opening, e))?;
         if !meta.is_file() {
             return Err(TraceError::NotAFile {

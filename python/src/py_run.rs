@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use fdi_common::engine::{run_inproc_any, RunSummary};
+use fdi_common::engine::{run_inproc_any_until, RunSummary};
 use fdi_common::run_dir::RunDir;
 use fdi_common::scenario;
 use pyo3::prelude::*;
@@ -60,6 +60,10 @@ impl RunResult {
     }
 }
 
+/// Ticks between two looks at the interpreter's signals in [`run`] (a few milliseconds of a
+/// paper run; the look takes the interpreter's lock).
+const SIGNALS_EVERY: u32 = 512;
+
 /// Runs `scenario` to its end on the in-process engine (the command line's `run --engine
 /// inproc`, without a run directory), the interpreter released meanwhile. `ticks`: keep every
 /// tick's columns.
@@ -72,17 +76,41 @@ pub fn run(py: Python<'_>, scenario: &Scenario, ticks: bool) -> PyResult<RunResu
         .agents
         .iter()
         .any(|a| resolved.attack.attacks_torque_of(a.id));
-    let (summary, columns) = py
+    let (summary, columns, interrupt) = py
         .detach(move || {
             let mut columns = ticks.then(|| Columns::new(&resolved, routed));
-            run_inproc_any(&resolved, |r| {
-                if let Some(c) = &mut columns {
-                    c.push(r);
-                }
-            })
-            .map(|s| (s, columns))
+            // Ctrl-C (KeyboardInterrupt) and other signals reach the run between ticks: the
+            // interpreter is asked every `SIGNALS_EVERY` ticks, and the run stops there.
+            let (mut ticked, mut interrupt) = (0u32, None);
+            let mut attacker = resolved.profile_attacker();
+            run_inproc_any_until(
+                &resolved,
+                &mut attacker,
+                |r| {
+                    if let Some(c) = &mut columns {
+                        c.push(r);
+                    }
+                },
+                || {
+                    ticked = ticked.wrapping_add(1);
+                    if ticked % SIGNALS_EVERY != 0 {
+                        return true;
+                    }
+                    match Python::attach(|py| py.check_signals()) {
+                        Ok(()) => true,
+                        Err(e) => {
+                            interrupt = Some(e);
+                            false
+                        }
+                    }
+                },
+            )
+            .map(|s| (s, columns, interrupt))
         })
         .map_err(engine_error)?;
+    if let Some(e) = interrupt {
+        return Err(e);
+    }
     RunResult::new(py, &summary, columns, None, Vec::new())
 }
 

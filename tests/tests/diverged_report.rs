@@ -1,6 +1,7 @@
 //! A run that diverges still gets its report, in bounded time: the figures of values like
 //! 1e300 or non-finite ones used to make the axis ticks loop for ever, and the report ignored
-//! SIGINT meanwhile.
+//! SIGINT meanwhile. Its `summary.json` holds non-finite numbers as words and `report` reads
+//! them back (issue 51: it wrote `null`, which `report` could not read).
 
 use std::time::Duration;
 
@@ -25,7 +26,7 @@ fn a_diverging_scenarios_report_finishes_and_can_be_made_again() {
                 "--engine",
                 engine,
                 "--duration-s",
-                "0.2",
+                "2",
                 "--json",
             ],
             &out,
@@ -43,11 +44,16 @@ fn a_diverging_scenarios_report_finishes_and_can_be_made_again() {
         assert!(report.is_file(), "{engine}: no report: {stderr}");
         let md = std::fs::read_to_string(&report).expect("report.md");
         assert!(md.contains("diverged at t ="), "{engine}: {md}");
-        let again = launch_plain(&["report", &dir.to_string_lossy()], WATCHDOG);
+        let written = std::fs::read_to_string(dir.join("summary.json")).expect("summary.json");
+        let rmse = &serde_json::from_str::<serde_json::Value>(&written).expect("JSON")["metrics"]
+            ["1"]["rmse_rad"];
         assert!(
-            again.status.success(),
-            "{engine}: {}",
-            String::from_utf8_lossy(&again.stderr)
+            matches!(rmse.as_str(), Some("NaN" | "inf")),
+            "{engine}: robot 1's RMSE is not finite, written as a word: {rmse}"
         );
+        let again = launch_plain(&["report", &dir.to_string_lossy()], WATCHDOG);
+        let said = String::from_utf8_lossy(&again.stderr);
+        assert!(again.status.success(), "{engine}: {said}");
+        assert!(!said.contains("cannot be read"), "{engine}: {said}");
     }
 }

@@ -45,18 +45,33 @@ fn launcher_with_agent_2(dir: &Path, agent2: &str) -> PathBuf {
     me
 }
 
-/// Starts `program run ARGS --out OUT` leading a process group of its own, as a shell starts a
+/// `program run ARGS --out OUT` leading a process group of its own, as a shell starts a
 /// foreground job (so that a signal to the group is what a terminal's Ctrl-C sends).
-fn spawn_as_job(program: &Path, args: &[&str], out: &Path) -> Child {
-    Command::new(program)
-        .arg("run")
+fn job(program: &Path, args: &[&str], out: &Path) -> Command {
+    let mut c = Command::new(program);
+    c.arg("run")
         .args(args)
         .arg("--out")
         .arg(out)
         .process_group(0)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
+        .stderr(Stdio::piped());
+    c
+}
+
+/// Starts [`job`].
+fn spawn_as_job(program: &Path, args: &[&str], out: &Path) -> Child {
+    job(program, args, out)
+        .spawn()
+        .expect("spawning fdi-launch")
+}
+
+/// Starts [`job`] held at the hold point `point` (docs/faults.md, "Hold points") until it is
+/// signalled.
+fn spawn_held_job(program: &Path, args: &[&str], out: &Path, point: &str) -> Child {
+    job(program, args, out)
+        .env(fdi_common::stop::HOLD_VAR, point)
         .spawn()
         .expect("spawning fdi-launch")
 }
@@ -171,10 +186,13 @@ fn an_interrupt_while_the_report_is_written_stops_it_keeps_the_run_and_exits_128
     ] {
         let dir = Scratch::new(&format!("report-interrupt-{clock}"));
         let out = dir.0.join("out");
-        let child = spawn_as_job(
+        // Held once the report's folder is made (docs/faults.md, "Hold points"), whatever
+        // the machine's speed: the signal comes while the report is written.
+        let child = spawn_held_job(
             &launcher(),
             &["--clock", clock, "--duration-s", duration, "--json"],
             &out,
+            "report",
         );
         let leader = child.id();
         let mut seen = false;
@@ -217,6 +235,59 @@ fn an_interrupt_while_the_report_is_written_stops_it_keeps_the_run_and_exits_128
         assert!(!err.contains("[W]"), "iceoryx2's own logger printed: {err}");
         assert_no_leftovers(leader);
     }
+}
+
+/// Regression (issue 51): the in-process engine never looked at the stop: Ctrl-C during a
+/// long `--engine inproc` run went unheard until the report. It now stops the engine before
+/// its next tick, keeps what it ran (the traces, a summary saying it is partial) and exits 130.
+#[test]
+fn ctrl_c_stops_an_in_process_run_between_ticks_and_keeps_what_it_ran() {
+    let dir = Scratch::new("inproc-interrupt");
+    let out = dir.0.join("out");
+    // 20 000 simulated seconds: minutes of the engine's time, unless it is stopped.
+    let child = spawn_as_job(
+        &launcher(),
+        &[
+            "--engine",
+            "inproc",
+            "--duration-s",
+            "20000",
+            "--traces",
+            "decimate=1000",
+            "--json",
+        ],
+        &out,
+    );
+    let leader = child.id();
+    // Mid-run: agent 1's trace holds records beyond its header (written in 8 KiB blocks).
+    let grown = || {
+        entries(&out)
+            .iter()
+            .filter_map(|r| fs::metadata(r.join("traces/agent-1.trace")).ok())
+            .any(|m| m.len() > 16 << 10)
+    };
+    assert!(
+        wait_until(WATCHDOG, || grown() || !alive(leader)),
+        "the run neither grew its trace nor ended"
+    );
+    signal_group(leader, "-INT");
+    let r = wait_with_watchdog(child, WATCHDOG);
+    let err = stderr_of(&r);
+    assert_eq!(r.status.code(), Some(130), "{err}");
+    assert!(
+        err.contains("interrupted by SIGINT after")
+            && err.contains("the in-process engine stopped"),
+        "{err}"
+    );
+    let v: serde_json::Value = serde_json::from_slice(&r.stdout).expect("run --json");
+    assert_eq!(v["partial"]["signal"], 2, "{err}");
+    let (ticks, planned) = (v["ticks"].as_u64(), v["planned_ticks"].as_u64());
+    assert!(
+        ticks.is_some_and(|t| t > 0) && ticks < planned && planned == Some(20_000_000),
+        "{ticks:?} of {planned:?}"
+    );
+    let run = entries(&out).pop().expect("the run directory");
+    assert!(fdi_common::run_dir::RunDir::new(&run).summary().is_file());
 }
 
 /// Regression (issue 18): a control center with no robot left reported done and the run was

@@ -321,10 +321,15 @@ fn books_kept_from_the_records_are_the_whole_run_s() {
         let mut books = Books::new(&r);
         let mut handed = Vec::new();
         let mut attacker = r.profile_attacker();
-        let ticked = tick_inproc_any_with(&r, &mut attacker, |rec| {
-            books.push(rec);
-            handed.push(*rec);
-        })
+        let ticked = tick_inproc_any_with(
+            &r,
+            &mut attacker,
+            |rec| {
+                books.push(rec);
+                handed.push(*rec);
+            },
+            || true,
+        )
         .expect("runs");
         assert_eq!(ticked.ticks, r.ticks());
         let got = books.summary(&r, ticked.ticks, ticked.wall_s, "paper");

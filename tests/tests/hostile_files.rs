@@ -135,6 +135,38 @@ fn a_device_as_scenario_or_attack_file_is_refused_without_reading_it() {
     assert!(entries(&out).is_empty(), "{:?}", entries(&out));
 }
 
+/// Regression (issue 51): a named pipe given as a scenario, attack, deployment or campaign file
+/// blocked the launcher in its open (until a writer came) and it ignored SIGINT and SIGTERM
+/// meanwhile. Nobody writes to this pipe: each command refuses it at once, naming it.
+#[test]
+fn a_named_pipe_given_as_a_file_is_refused_at_once_not_waited_on() {
+    let dir = Scratch::new("fifo-input");
+    let fifo = dir.0.join("scenario.toml");
+    let made = Command::new("mkfifo").arg(&fifo).status().expect("mkfifo");
+    assert!(made.success(), "mkfifo {}", fifo.display());
+    let (f, out) = (
+        fifo.to_string_lossy().into_owned(),
+        dir.0.join("out").to_string_lossy().into_owned(),
+    );
+    for args in [
+        vec!["run", &f, "--out", &out],
+        vec!["run", "--attack", &f, "--out", &out],
+        vec!["run", "--hosts", &f, "--out", &out],
+        vec!["sweep", &f, "--out", &out],
+    ] {
+        let r = launch_capped(&args);
+        assert_refused(
+            &r,
+            &[&format!("{f} is not a regular file (a named pipe)")],
+            &args.join(" "),
+        );
+    }
+    let v = launch_capped(&["validate", &f]);
+    assert_eq!(v.status.code(), Some(2), "{}", stderr_of(&v));
+    assert!(stderr_of(&v).contains("is not a regular file (a named pipe)"));
+    assert!(entries(&dir.0.join("out")).is_empty());
+}
+
 #[test]
 fn a_scenario_too_large_once_its_attack_is_inlined_is_refused_before_a_run_directory_exists() {
     // Under the size limit as a file (about 0.75 MB), about 2 MB once written out in full: the

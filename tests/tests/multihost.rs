@@ -658,6 +658,78 @@ fn request_file(lab: &Lab, name: &str, edit: impl FnOnce(&mut serde_json::Value)
     name.to_string()
 }
 
+/// Regression (issue 51): a host of the lab that is not its coordinator (here the attacker's,
+/// with its own valid certificate) asked `cell`'s serve to start agents 3 and 4, naming itself
+/// coordinator, and held the robots' host: the real coordinator was told "host `cell` is busy".
+/// The serve takes run requests only from the file's coordinator; the refusal is answered and
+/// written in the serve's log, and the coordinator's run goes through.
+#[test]
+fn a_host_that_is_not_the_coordinator_cannot_take_the_robots_host() {
+    let Some(mut lab) = Lab::new(3, "multihost-takeover") else {
+        return;
+    };
+    let file = lab.deployment(
+        r#"
+coordinator = "control"
+certs = "certs"
+[hosts.control]
+endpoint = "quic/10.77.0.1:7447"
+[hosts.cell]
+endpoint = "quic/10.77.0.2:7447"
+agents = [3, 4]
+[hosts.adversary]
+endpoint = "quic/10.77.0.3:7447"
+roles = ["attacker"]
+"#,
+    );
+    let cell = lab.serve(1, "cell");
+    let request = request_file(&lab, "takeover.json", |v| {
+        v["coordinator"] = serde_json::json!("adversary");
+        v["layout"] = serde_json::json!([
+            ["launcher", "adversary"],
+            ["center", "adversary"],
+            ["attacker", "adversary"],
+            ["agent/1", "adversary"],
+            ["agent/2", "adversary"],
+            ["agent/3", "cell"],
+            ["agent/4", "cell"]
+        ]);
+    });
+    let s = lab.rogue(
+        2,
+        &[
+            "--tls",
+            "certs/ca.pem",
+            "certs/adversary.pem",
+            "certs/adversary.key",
+            "quic/10.77.0.2:7447",
+            "request",
+            "cell",
+            "adversary",
+            &request,
+        ],
+    );
+    let why = "a run request came from `adversary`, which";
+    assert!(
+        s.starts_with("refused:") && s.contains(why) && s.contains("(`control`)"),
+        "{s}"
+    );
+    lab.wait_log(cell, why, Duration::from_secs(10));
+    assert!(
+        !lab.log(cell).contains("started agent"),
+        "{}",
+        lab.log(cell)
+    );
+    // The coordinator's run is not told the host is busy.
+    let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
+    assert_eq!(
+        digest(&out),
+        inproc_digest(&["--duration-s", "1"]),
+        "{}",
+        stderr(&out)
+    );
+}
+
 /// Over plain TCP (said so by the file), what a rogue peer sends is refused, counted and
 /// named: run requests that carry paths, programs, processes no run has or sizes no run needs
 /// are refused before anything is written, a trace asked by a path is refused, 200 idle or

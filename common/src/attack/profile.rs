@@ -209,6 +209,9 @@ impl AttackProfile {
     /// `agent_dofs` maps each agent id of the scenario to its number of links.
     pub fn problems(&self, agent_dofs: &BTreeMap<u32, usize>) -> Vec<(String, String)> {
         let mut out = Vec::new();
+        if let Some(why) = crate::files::unprintable(&self.name) {
+            out.push(("name".into(), why));
+        }
         self.covert_problems(agent_dofs, &mut out);
         self.message_problems(agent_dofs, &mut out);
         self.channel_problems(agent_dofs, &mut out);

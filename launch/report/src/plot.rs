@@ -380,17 +380,35 @@ fn save(
     draw: impl Fn(&Area<'_>) -> Result<()>,
 ) -> Result<[PathBuf; 2]> {
     fonts()?;
-    let png_path = stem.with_extension("png");
-    let svg_path = stem.with_extension("svg");
     let mut svg = String::new();
     {
         let area = SVGBackend::with_string(&mut svg, (w, h)).into_drawing_area();
         draw(&area)?;
     }
+    write_figure(stem, svg, (w, h))
+}
+
+/// Writes the figure `svg` of `w` × `h` pixels as `<stem>.svg` and, rasterised from it, as
+/// `<stem>.png` ([`rasterise`]); the two paths.
+pub fn write_figure(stem: &Path, svg: String, (w, h): (u32, u32)) -> Result<[PathBuf; 2]> {
+    let png_path = stem.with_extension("png");
+    let svg_path = stem.with_extension("svg");
+    let svg = xml_text(svg);
     let rgb = rasterise(&svg, (w, h)).with_context(|| format!("drawing {}", png_path.display()))?;
     write_png(&png_path, &rgb, (w, h))?;
     std::fs::write(&svg_path, svg).with_context(|| format!("writing {}", svg_path.display()))?;
     Ok([png_path, svg_path])
+}
+
+/// `svg` with every character XML 1.0 does not allow (the control characters but tab, line
+/// feed and carriage return) shown as U+FFFD: a title or label made from a name read from a
+/// file is drawn, never the reason the figure cannot be read.
+fn xml_text(svg: String) -> String {
+    let forbidden = |c: char| c.is_control() && !matches!(c, '\t' | '\n' | '\r');
+    if !svg.contains(forbidden) {
+        return svg;
+    }
+    svg.replace(forbidden, "\u{fffd}")
 }
 
 /// The SVG `svg` of `w` × `h` pixels as RGB bytes on white, its text in the embedded font.
@@ -1144,6 +1162,25 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Regression (issue 51): a name holding NUL or ESC, drawn in a title, made an SVG that
+    /// no reader takes ("reading the figure's SVG"), after every run of a campaign.
+    #[test]
+    fn a_title_with_control_characters_is_drawn_and_its_svg_read_back() {
+        let dir = tempfile::tempdir().expect("dir");
+        let stem = dir.path().join("f");
+        let [png, svg] = save(&stem, (200, 100), |area| {
+            area.titled("a\u{0}b\u{1b}[31mc\td", (FONT, 12))
+                .map(drop)
+                .map_err(|e| anyhow!("{e}"))
+        })
+        .expect("drawn");
+        let text = std::fs::read_to_string(&svg).expect("svg");
+        assert!(text.contains("a\u{fffd}b\u{fffd}[31mc"), "{text}");
+        assert!(png.is_file());
+        rasterise(&text, (200, 100)).expect("read back");
+        assert_eq!(xml_text("x\ty\n".into()), "x\ty\n");
+    }
 
     #[test]
     fn category_labels_break_at_spaces_and_after_hyphens_of_long_words() {

@@ -759,6 +759,7 @@ fn write_into(
         kept,
     } = gathered;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    fdi_common::stop::hold("report", stop);
     // A decimated trace records a tick every K: its last recorded tick stands for K ticks.
     let recorded = series
         .agents

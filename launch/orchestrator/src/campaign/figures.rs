@@ -345,7 +345,7 @@ fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow!("drawing a campaign figure: {e}")
 }
 
-/// The figure as SVG, and as PNG rasterised from it ([`fdi_report::plot::rasterise`]).
+/// The figure as SVG, and as PNG rasterised from it ([`fdi_report::plot::write_figure`]).
 fn save(chart: &Chart, stem: &Path) -> Result<()> {
     fdi_report::plot::fonts()?;
     let (w, h) = (900u32, 580u32);
@@ -355,12 +355,7 @@ fn save(chart: &Chart, stem: &Path) -> Result<()> {
         draw(&area, chart)?;
         area.present().map_err(err)?;
     }
-    let png = stem.with_extension("png");
-    let rgb = fdi_report::plot::rasterise(&svg, (w, h))
-        .with_context(|| format!("drawing {}", png.display()))?;
-    fdi_report::plot::write_png(&png, &rgb, (w, h))?;
-    let p = stem.with_extension("svg");
-    std::fs::write(&p, svg).with_context(|| format!("writing {}", p.display()))
+    fdi_report::plot::write_figure(stem, svg, (w, h)).map(drop)
 }
 
 fn draw<DB: DrawingBackend>(area: &DrawingArea<DB, plotters::coord::Shift>, c: &Chart) -> Result<()>

@@ -593,6 +593,9 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
             src.at("name")
         );
     }
+    if let Some(why) = fdi_common::files::unprintable(&file.name) {
+        bail!("{}: {why}", src.at("name"));
+    }
     let (base_text, base_name, base_dir) = read_base(campaign, &file)?;
     let base = scenario::load_str(&base_text, &base_name, base_dir.as_deref())?;
     let mut doc: toml::Table =
@@ -1385,6 +1388,23 @@ mod tests {
             .map(|j| j.resolved.scenario.controller.beta)
             .collect();
         assert_eq!(betas, [5.0, 10.0]);
+    }
+
+    /// Regression (issue 51): a name holding NUL or ESC ran every run of the campaign, then
+    /// failed writing its first SVG. It is refused before any run, naming the field and the
+    /// character.
+    #[test]
+    fn a_campaign_name_with_a_control_character_is_refused_before_any_run() {
+        for (name, code) in [("a\\u0000b", "U+0000"), ("a\\u001b[31mb", "U+001B")] {
+            let e = refusal(&format!(
+                "name = \"{name}\"\n[[axes]]\npath = \"controller.beta\"\nvalues = [1.0]\n"
+            ));
+            assert!(
+                e.starts_with("c.toml: name (line 1, column 1): holds the control character")
+                    && e.contains(&format!("{code} at byte 1")),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -554,32 +554,43 @@ impl Lease {
                 Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => {}
                 Err(e) => return Err(anyhow!("creating {}: {e}", path.display())),
             }
-            let Ok(text) = std::fs::read_to_string(path) else {
+            // Bytes, not text: a lease of any content is judged (one that is not UTF-8 too).
+            let Ok(bytes) = std::fs::read(path) else {
                 continue; // released since: try again
             };
-            let held = serde_json::from_str::<Holder>(&text).ok();
+            let held = serde_json::from_slice::<Holder>(&bytes).ok();
             let age = match lease_age(path, dir) {
                 Ok(age) => age,
                 Err(_) if !path.exists() => continue,
                 Err(e) => return Err(e),
             };
-            let why = match &held {
-                Some(h) if h.gone_from_here(me) => {
+            let why = match (&held, age) {
+                (Some(h), _) if h.gone_from_here(me) => {
                     format!("its holder (pid {} on this host) is gone", h.pid)
                 }
-                _ if age >= STALE_AFTER => {
-                    format!("it was not renewed for {:.0} s", age.as_secs_f64())
+                (_, LeaseAge::Ago(d)) if d >= STALE_AFTER => {
+                    format!("it was not renewed for {:.0} s", d.as_secs_f64())
                 }
-                Some(h) => return Ok(Err(Held::Live(format!("pid {} on {}", h.pid, h.host), age))),
-                None => {
+                (_, LeaseAge::Ahead(d)) if d >= STALE_AFTER => format!(
+                    "its time is {:.0} s ahead of the file server's clock, which no renewal \
+                     makes",
+                    d.as_secs_f64()
+                ),
+                (Some(h), _) => {
+                    return Ok(Err(Held::Live(
+                        format!("pid {} on {}", h.pid, h.host),
+                        age.since(),
+                    )))
+                }
+                (None, _) => {
                     return Ok(Err(Held::Live(
                         "a process whose lease is being written or is not a lease".into(),
-                        age,
+                        age.since(),
                     )))
                 }
             };
             // Only the lease judged: another copy may have taken it over meanwhile.
-            if std::fs::read_to_string(path).ok().as_deref() != Some(text.as_str()) {
+            if std::fs::read(path).ok().as_deref() != Some(bytes.as_slice()) {
                 continue;
             }
             eprintln!(
@@ -716,23 +727,42 @@ fn lease_path(out: &Path, shard: Shard) -> PathBuf {
 pub fn liveness(out: &Path, shard: Shard) -> Liveness {
     let dir = out.join(SHARDS);
     let path = lease_path(out, shard);
-    let Ok(text) = std::fs::read_to_string(&path) else {
+    let Ok(bytes) = std::fs::read(&path) else {
         return Liveness::Absent;
     };
-    if serde_json::from_str::<Holder>(&text).is_ok_and(|h| h.gone_from_here(&Holder::me())) {
+    if serde_json::from_slice::<Holder>(&bytes).is_ok_and(|h| h.gone_from_here(&Holder::me())) {
         return Liveness::Gone;
     }
     match lease_age(&path, &dir) {
-        Ok(age) if age >= STALE_AFTER => Liveness::Gone,
+        Ok(LeaseAge::Ago(d) | LeaseAge::Ahead(d)) if d >= STALE_AFTER => Liveness::Gone,
         Ok(_) => Liveness::Live,
         Err(_) if !path.exists() => Liveness::Absent,
         Err(_) => Liveness::Unknown,
     }
 }
 
+/// How long ago a lease was last written, by the clock of the file system that holds it; or
+/// how far ahead of that clock its time is (a lease dated in the future: no renewal makes one,
+/// so one far ahead is not a live lease, whatever the clock of its writer's machine).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LeaseAge {
+    Ago(Duration),
+    Ahead(Duration),
+}
+
+impl LeaseAge {
+    /// How long ago it was renewed, for messages (0 for a lease dated ahead).
+    fn since(self) -> Duration {
+        match self {
+            Self::Ago(d) => d,
+            Self::Ahead(_) => Duration::ZERO,
+        }
+    }
+}
+
 /// How long ago `path` was last written, by the clock of the file system holding `dir`: the
 /// difference of its modification time and that of a file written in `dir` now.
-fn lease_age(path: &Path, dir: &Path) -> Result<Duration> {
+fn lease_age(path: &Path, dir: &Path) -> Result<LeaseAge> {
     let then = std::fs::metadata(path)
         .and_then(|m| m.modified())
         .with_context(|| format!("reading {}", path.display()))?;
@@ -747,7 +777,10 @@ fn lease_age(path: &Path, dir: &Path) -> Result<Duration> {
         .metadata()
         .and_then(|m| m.modified())
         .with_context(|| format!("reading a file in {}", dir.display()))?;
-    Ok(now.duration_since(then).unwrap_or(Duration::ZERO))
+    Ok(match now.duration_since(then) {
+        Ok(ago) => LeaseAge::Ago(ago),
+        Err(ahead) => LeaseAge::Ahead(ahead.duration()),
+    })
 }
 
 #[cfg(test)]
@@ -886,5 +919,59 @@ mod tests {
         drop(create_new(&dir.path().join("shards/1-of-2.lease"), &gone).expect("stale lease"));
         let taken = Lease::take(dir.path(), shard, false).expect("taken over");
         assert!(holds(&taken.path, &taken.token));
+    }
+
+    /// Regression (issue 51): a lease of random bytes 100 s old was never taken over ("changed
+    /// hands three times": it was read as text, which failed, as if it had been released), and
+    /// a lease dated a year ahead (written by a machine whose clock ran fast) blocked its shard
+    /// until that date. Neither can be a live lease: both are taken over, saying why; one
+    /// renewed a moment ago, or dated a few seconds ahead, is still refused.
+    #[test]
+    fn a_lease_that_cannot_be_live_is_taken_over_one_just_renewed_is_not() {
+        let shard = Shard { index: 2, count: 3 };
+        let day = Duration::from_secs(86_400);
+        let now = SystemTime::now();
+        for (content, mtime, taken) in [
+            (
+                vec![0xff, 0x00, 0x9c, 0xfe],
+                now - Duration::from_secs(100),
+                true,
+            ),
+            (b"{\"pid\":".to_vec(), now - Duration::from_secs(100), true),
+            (vec![0xff, 0x00, 0x9c, 0xfe], now + 365 * day, true),
+            (
+                vec![0xff, 0x00, 0x9c, 0xfe],
+                now - Duration::from_secs(5),
+                false,
+            ),
+            (
+                vec![0xff, 0x00, 0x9c, 0xfe],
+                now + Duration::from_secs(5),
+                false,
+            ),
+        ] {
+            let dir = tempfile::tempdir().expect("dir");
+            let path = lease_path(dir.path(), shard);
+            std::fs::create_dir_all(path.parent().expect("shards/")).expect("shards/");
+            std::fs::write(&path, &content).expect("lease");
+            std::fs::File::options()
+                .write(true)
+                .open(&path)
+                .and_then(|f| f.set_modified(mtime))
+                .expect("mtime");
+            let live = liveness(dir.path(), shard);
+            match Lease::take(dir.path(), shard, false) {
+                Ok(lease) => {
+                    assert!(taken, "{content:?} at {mtime:?}: taken over");
+                    assert!(holds(&lease.path, &lease.token));
+                    assert_eq!(live, Liveness::Gone);
+                }
+                Err(e) => {
+                    assert!(!taken, "{content:?} at {mtime:?}: {e:#}");
+                    assert!(format!("{e:#}").contains("is not a lease"), "{e:#}");
+                    assert_eq!(live, Liveness::Live);
+                }
+            }
+        }
     }
 }

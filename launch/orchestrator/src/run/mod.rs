@@ -26,7 +26,7 @@ use std::path::Path;
 use anyhow::{bail, Context, Result};
 use clap::ValueEnum;
 use fdi_common::attack::Attacker;
-use fdi_common::engine::{run_inproc_any, tick_inproc_any_with, Books, Partial, RunSummary};
+use fdi_common::engine::{run_inproc_any_until, tick_inproc_any_with, Books, Partial, RunSummary};
 use fdi_common::records::TickRecord;
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
@@ -322,14 +322,21 @@ fn execute_inproc_watched<A: Attacker>(
         last: None,
         stop: opts.stop.clone(),
     });
+    let stop = &opts.stop;
     let run = || -> Result<_> {
         let mut records = RecordThread::start(Books::new(r), writers, direct)?;
-        let ticked = tick_inproc_any_with(r, attacker, |rec| {
-            if let Some(p) = &mut pacer {
-                p.wait(rec.center.k);
-            }
-            records.push(rec);
-        })
+        // An interrupt stops the engine before its next tick; what it ran is kept.
+        let ticked = tick_inproc_any_with(
+            r,
+            attacker,
+            |rec| {
+                if let Some(p) = &mut pacer {
+                    p.wait(rec.center.k);
+                }
+                records.push(rec);
+            },
+            || stop.pending().is_none(),
+        )
         .context("in-process engine")?;
         // The run ends when its records are entered and written: the wait for that counts.
         let waited = std::time::Instant::now();
@@ -349,8 +356,29 @@ fn execute_inproc_watched<A: Attacker>(
     let wall_s = ticked.wall_s + waited;
     let mut summary = books.summary(r, ticked.ticks, wall_s, attacker.name());
     summary.live = live.map(fdi_live::Live::finish);
+    if ticked.ticks < r.ticks() {
+        if let Some(signal) = stop.take() {
+            interrupted(&mut summary, r, signal, "the in-process engine stopped");
+        }
+    }
     output::write_run_summary(dir, &summary, traces)?;
     Ok(summary)
+}
+
+/// Marks `s` as a run interrupted by `signal` after its start (`how`: what was stopped), and
+/// says so on stderr: the run directory keeps what was recorded, its metrics cover it.
+fn interrupted(s: &mut RunSummary, r: &Resolved, signal: i32, how: &str) {
+    eprintln!(
+        "fdi-launch: interrupted by {} after {:.3} s of {} s simulated: {how}; the run directory keeps what was recorded",
+        runtime::signal_name(signal),
+        s.sim_s,
+        r.scenario.duration_s,
+    );
+    s.partial = Some(Partial {
+        reason: format!("interrupted by {}", runtime::signal_name(signal)),
+        planned_ticks: r.ticks(),
+        signal: Some(signal),
+    });
 }
 
 /// The records of an in-process run entered in its books (digest, metrics) and written to its
@@ -483,7 +511,18 @@ pub fn execute_on(
         inproc_runs(r)?;
     }
     match (engine, run_dir) {
-        (Engine::Inproc, None) => run_inproc_any(r, |_| {}).context("in-process engine"),
+        (Engine::Inproc, None) => {
+            let stop = &opts.stop;
+            let mut attacker = r.profile_attacker();
+            let mut s = run_inproc_any_until(r, &mut attacker, |_| {}, || stop.pending().is_none())
+                .context("in-process engine")?;
+            if s.ticks < r.ticks() {
+                if let Some(signal) = stop.take() {
+                    interrupted(&mut s, r, signal, "the in-process engine stopped");
+                }
+            }
+            Ok(s)
+        }
         (Engine::Inproc, Some(dir)) => {
             execute_inproc_watched(r, dir, opts, &mut r.profile_attacker())
         }
@@ -554,19 +593,8 @@ fn execute_ipc(
     joined.summary.hosts = outcome.hosts;
     joined.summary.network = outcome.network;
     if let Some(signal) = outcome.interrupted {
-        let s = &mut joined.summary;
-        eprintln!(
-            "fdi-launch: interrupted by {} after {:.3} s of {} s simulated: every process was stopped ({}); the run directory keeps what was recorded",
-            runtime::signal_name(signal),
-            s.sim_s,
-            r.scenario.duration_s,
-            outcome.exits
-        );
-        s.partial = Some(Partial {
-            reason: format!("interrupted by {}", runtime::signal_name(signal)),
-            planned_ticks: r.ticks(),
-            signal: Some(signal),
-        });
+        let how = format!("every process was stopped ({})", outcome.exits);
+        interrupted(&mut joined.summary, r, signal, &how);
     }
     if *placement != runtime::Placement::default() {
         joined.summary.placement = Some(placement.describe());

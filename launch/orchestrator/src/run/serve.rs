@@ -280,6 +280,16 @@ impl Serving<'_> {
                 self.lab.source
             );
         }
+        // Another host of the lab (the attacker's, say) would hold this host's robots for as
+        // long as it liked: only the coordinator the file names starts runs.
+        if asker != self.lab.coordinator {
+            bail!(
+                "a run request came from `{asker}`, which {} does not name as the coordinator \
+                 (`{}`): only the coordinator starts runs on this host",
+                self.lab.source,
+                self.lab.coordinator
+            );
+        }
         if r.scenario.len() as u64 > MAX_FILE_BYTES {
             bail!(
                 "a scenario of {} bytes, more than the {MAX_FILE_BYTES} byte limit of scenario \
