@@ -25,7 +25,6 @@ use fdi_runtime::ipc::{
 };
 use fdi_runtime::process::{
     self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
-    LOST_AFTER_NS,
 };
 
 /// Errors of the attacker process.
@@ -400,8 +399,9 @@ impl<'a, X: Transport> Relay<'a, X> {
         let dt = s.control_period_s;
         let strategy = WaitStrategy::for_clock(s.clock);
         let realtime = s.clock == ClockMode::Realtime;
-        let liveness = Liveness::new(targets.len(), monotonic_ns().max(epoch_ns), LOST_AFTER_NS);
-        let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
+        let since = monotonic_ns().max(epoch_ns);
+        let liveness = Liveness::new(targets.len(), since, process::lost_after_ns(dt));
+        let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s, dt);
         let sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
         let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
         let external = match (&s.roles.attacker, &ports.external) {

@@ -281,6 +281,26 @@ impl RunSummary {
             .collect()
     }
 
+    /// `(agent, deadline misses, steps it recorded)` of every robot that fell behind its clock:
+    /// it missed more than [`MISSES_TOLERATED`] of its steps' deadlines (a realtime run on an
+    /// overloaded machine, or at a rate the machine cannot keep), in agent order.
+    pub fn fell_behind(&self) -> Vec<(&str, u64, u64)> {
+        self.metrics
+            .iter()
+            .filter(|(_, m)| m.deadline_misses as f64 > MISSES_TOLERATED * m.agent_ticks as f64)
+            .map(|(id, m)| (id.as_str(), m.deadline_misses, m.agent_ticks))
+            .collect()
+    }
+
+    /// Whether the run is not a clean one though every robot was controlled to its end: a
+    /// robot lost for a while, one that ran uncontrolled for some ticks, or one that fell
+    /// behind its clock (exit status 3).
+    pub fn not_clean(&self) -> bool {
+        !self.lost_agents.is_empty()
+            || !self.uncontrolled().is_empty()
+            || !self.fell_behind().is_empty()
+    }
+
     /// `(agent, t)` of every robot that diverged, in agent order.
     pub fn diverged(&self) -> Vec<(&str, f64)> {
         self.metrics
@@ -289,6 +309,11 @@ impl RunSummary {
             .collect()
     }
 }
+
+/// The share of its steps whose deadline a robot may miss (the command due not in force) in a
+/// clean run: beyond it the run fell behind its clock, and it is a result, not a clean one
+/// (exit status 3). A loaded machine misses a few (docs/performance.md).
+pub const MISSES_TOLERATED: f64 = 0.10;
 
 /// Joins metrics and digest into a summary.
 pub fn summarize(

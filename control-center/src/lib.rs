@@ -23,7 +23,6 @@ use fdi_runtime::ipc::{
 };
 use fdi_runtime::process::{
     self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
-    LOST_AFTER_NS,
 };
 
 /// Errors of the control-center process.
@@ -111,8 +110,7 @@ impl<X: Transport> Ports<X> {
     }
 }
 
-/// Ticks between two progress reports to the launcher.
-pub const PROGRESS_EVERY: u64 = 500;
+pub use fdi_runtime::process::PROGRESS_EVERY;
 
 struct Slot<const N: usize> {
     center: CenterAgent<N>,
@@ -123,8 +121,8 @@ struct Slot<const N: usize> {
 /// liveness (realtime), and what one batch of measurements did.
 struct Intake {
     sequence: SequenceTracker,
-    /// Realtime: an agent silent for [`LOST_AFTER_NS`] is declared lost; the others stay
-    /// controlled.
+    /// Realtime: an agent silent for [`process::lost_after_ns`] is declared lost; the others
+    /// stay controlled.
     liveness: Liveness,
     /// Messages refused so far.
     refused: u64,
@@ -137,10 +135,10 @@ struct Intake {
 }
 
 impl Intake {
-    fn new(ids: &[u32], ticks: u64, since_ns: u64) -> Self {
+    fn new(ids: &[u32], ticks: u64, since_ns: u64, dt: f64) -> Self {
         Self {
             sequence: SequenceTracker::new(ids.iter().copied(), ticks),
-            liveness: Liveness::new(ids.len(), since_ns, LOST_AFTER_NS),
+            liveness: Liveness::new(ids.len(), since_ns, process::lost_after_ns(dt)),
             refused: 0,
             failure: None,
             rejoined: Vec::new(),
@@ -272,8 +270,8 @@ fn report_progress<X: Transport, const N: usize>(
     Ok(())
 }
 
-/// Realtime: records and reports every agent silent for [`LOST_AFTER_NS`] as lost (the
-/// others stay controlled).
+/// Realtime: records and reports every agent silent for [`process::lost_after_ns`] as lost
+/// (the others stay controlled).
 fn declare_lost<X: Transport, const N: usize>(
     slots: &[Slot<N>],
     liveness: &mut Liveness,
@@ -286,7 +284,8 @@ fn declare_lost<X: Transport, const N: usize>(
     for i in liveness.newly_lost(now, |i| slots[i].next >= ticks) {
         let (id, last) = (slots[i].center.agent_id(), slots[i].next.saturating_sub(1));
         let silent_ms = liveness.silence_ns(i, now) as f64 / 1e6;
-        let message = format!("agent {id} lost: detected {silent_ms:.1} ms after its last measurement (limit {} ms, after tick {last}); the others stay controlled", LOST_AFTER_NS / 1_000_000);
+        let limit_ms = liveness.limit_ns() as f64 / 1e6;
+        let message = format!("agent {id} lost: detected {silent_ms:.1} ms after its last measurement (limit {limit_ms} ms, after tick {last}); the others stay controlled");
         trace.write(&TraceRecord::Event {
             t: tick_time(last, dt),
             message,
@@ -374,8 +373,8 @@ impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
         let ticks = resolved.ticks();
         let dt = s.control_period_s;
         let realtime = s.clock == ClockMode::Realtime;
-        let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s);
-        let intake = Intake::new(&ids, ticks, monotonic_ns().max(epoch_ns));
+        let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s, dt);
+        let intake = Intake::new(&ids, ticks, monotonic_ns().max(epoch_ns), dt);
         let monitor = match (&s.roles.monitor, &ports.monitor) {
             (Some(role), Some(_)) => Some(Monitor::new(role, &ids, dt, !realtime, epoch_ns)),
             _ => None,

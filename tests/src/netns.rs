@@ -17,6 +17,9 @@ pub struct Hosts {
     pub names: Vec<String>,
     /// Interface of each host (in its namespace); the first host has the bridge.
     devices: Vec<String>,
+    /// The bridge's end of each other host's veth pair (in the first namespace), by host;
+    /// empty for the first.
+    ports: Vec<String>,
 }
 
 fn ip(args: &[&str]) -> Result<(), String> {
@@ -68,6 +71,7 @@ impl Hosts {
         let mut hosts = Self {
             names: Vec::new(),
             devices: Vec::new(),
+            ports: vec![String::new()],
         };
         for i in 0..n {
             let name = format!("fdi-{tag}-{i}");
@@ -110,8 +114,38 @@ impl Hosts {
             ip(&["-n", &h, "link", "set", "lo", "up"])?;
             ip(&["-n", &h, "link", "set", &inner, "up"])?;
             hosts.devices.push(inner);
+            hosts.ports.push(outer);
+        }
+        for i in 1..n {
+            hosts.wait_carried(i)?;
         }
         Ok(hosts)
+    }
+
+    /// Waits until both ends of host `i`'s link carry packets: the kernel reports a link
+    /// brought up as operationally up only once it has activated it (its queue discipline,
+    /// `linkwatch`), which it may put off for up to a second, longer on a loaded machine; a
+    /// packet sent meanwhile is dropped. A QUIC client whose first packets were dropped waits
+    /// seconds before it sends them again (issue 51: the run after a healed cut found no serve
+    /// within its 5 s). A watchdog bounds the wait, not a speed check.
+    fn wait_carried(&self, i: usize) -> Result<(), String> {
+        let up = |ns: &str, dev: &str| {
+            Command::new("ip")
+                .args(["-n", ns, "-o", "link", "show", "dev", dev])
+                .output()
+                .is_ok_and(|o| String::from_utf8_lossy(&o.stdout).contains(" state UP "))
+        };
+        let began = std::time::Instant::now();
+        while !(up(&self.names[i], &self.devices[i]) && up(&self.names[0], &self.ports[i])) {
+            if began.elapsed() > std::time::Duration::from_secs(60) {
+                return Err(format!(
+                    "the link of host {i} ({}) was not up within 60 s",
+                    self.devices[i]
+                ));
+            }
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        Ok(())
     }
 
     /// `program args` on host `i`, with the host's own shared memory.
@@ -126,9 +160,13 @@ impl Hosts {
     }
 
     /// Cuts host `i` (> 0) off the network, or joins it again.
+    /// Joining waits until the link carries packets again.
     pub fn set_link(&self, i: usize, up: bool) {
         let state = if up { "up" } else { "down" };
         ip(&["-n", &self.names[i], "link", "set", &self.devices[i], state]).expect("link state");
+        if up {
+            self.wait_carried(i).expect("the link back up");
+        }
     }
 }
 

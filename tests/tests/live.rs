@@ -76,7 +76,9 @@ impl LiveRun {
     pub(crate) fn finish_with_stderr(self) -> (Value, String) {
         let out = fdi_tests::wait_with_watchdog(self.child, WATCHDOG);
         let stderr = self.stderr.join().expect("the stderr reader");
-        let summary = json(&Output {
+        // A realtime run may lose a robot for a while on a loaded machine (exit 3, said in
+        // its summary): what the viewer saw is checked against the recording either way.
+        let summary = fdi_tests::json_realtime(&Output {
             stderr: stderr.clone().into_bytes(),
             ..out
         });

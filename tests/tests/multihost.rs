@@ -64,8 +64,9 @@ impl Lab {
                     &work.display().to_string(),
                 ],
             )
+            .env("RUST_LOG", "info,zenoh_link_quic=debug,zenoh_link_commons=debug,zenoh_transport::unicast::establishment=debug,zenoh_transport::unicast::manager=debug,zenoh::net::runtime::orchestrator=debug,zenoh::net::protocol::gossip=debug")
             .stdin(Stdio::null())
-            .stdout(Stdio::null())
+            .stdout(file.try_clone().expect("clone"))
             .stderr(file)
             .spawn()
             .expect("spawning fdi-launch serve");
@@ -346,7 +347,11 @@ fn a_cut_network_stops_a_lockstep_run_naming_the_host_and_the_next_run_is_clean(
     assert!(log.contains("stopped agent 3, agent 4"), "{log}");
     // Back on the network, the same serve takes the next run, which is clean.
     lab.hosts.set_link(1, true);
+    std::env::set_var("RUST_LOG", "info,zenoh_link_quic=debug,zenoh_link_commons=debug,zenoh_transport::unicast::establishment=debug,zenoh_transport::unicast::manager=debug,zenoh::net::runtime::orchestrator=debug,zenoh::net::protocol::gossip=debug");
     let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
+    if !out.status.success() {
+        eprintln!("COORD STDOUT:\n{}", String::from_utf8_lossy(&out.stdout));
+    }
     assert_eq!(
         digest(&out),
         inproc_digest(&["--duration-s", "1"]),
@@ -721,6 +726,7 @@ roles = ["attacker"]
         lab.log(cell)
     );
     // The coordinator's run is not told the host is busy.
+    lab.serve(2, "adversary");
     let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
     assert_eq!(
         digest(&out),
@@ -895,7 +901,17 @@ fn an_insecure_run_refuses_names_and_counts_what_a_rogue_peer_sends() {
         .expect("JSON");
     let v: serde_json::Value = serde_json::from_str(line).expect("JSON");
     assert_eq!(v["network"]["authenticated"], false, "{v}");
-    assert_eq!(v["network"]["refused_frames"], 1200, "{v}");
+    // Of a forged frame and the honest one of its number, the bridge lets in at most the
+    // first to come: the other is refused. A forgery that overtakes the honest frames before
+    // its own number (the rogue's path faster than the host's, on a loaded machine) makes
+    // them refused too, so the count is at least the frames forged (issue 51: it was 1201
+    // once, against an exact 1200 asserted).
+    let refused = v["network"]["refused_frames"].as_u64().unwrap_or(0);
+    assert!(refused >= 1200, "{refused} refused of 1200 forged: {v}");
+    assert!(
+        v["network"]["refusals"].to_string().contains("for agent 3"),
+        "{v}"
+    );
 }
 
 /// Runs `args` live on the coordinating host of `lab` with a client there subscribed to

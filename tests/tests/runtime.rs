@@ -873,3 +873,71 @@ fn realtime_attacker_stalled_half_a_second_every_agent_rejoins_its_uncontrolled_
     );
     assert_no_leftovers(launcher);
 }
+
+/// The paper's scenario with `n` robots: its four agents' tables again and again, numbered
+/// 1..=n (the attack stays on the first four).
+fn paper_team(n: u32) -> String {
+    let paper = fdi_common::scenario::PAPER_SCENARIO;
+    let (head, agents) = paper.split_once("[[agents]]").expect("the paper's agents");
+    let tables: Vec<&str> = agents.split("[[agents]]").collect();
+    let mut out = head.replacen("name = \"paper\"", &format!("name = \"team{n}\""), 1);
+    for i in 1..=n {
+        let table = tables[(i as usize - 1) % tables.len()];
+        let (id_line, rest) = table.split_once('\n').map_or(("", table), |(a, b)| (a, b));
+        let (_, tail) = rest.split_once('\n').expect("the id line");
+        assert!(rest.starts_with("id = "), "{id_line}{rest}");
+        out.push_str(&format!("[[agents]]{id_line}\nid = {i}\n{tail}"));
+    }
+    out
+}
+
+/// Regression (issue 51): with 96 robots on the 2-core machine a realtime run falls behind its
+/// clock, the control center last of all; when it found a robot again that had already
+/// finished, the launcher forgot the robot's "done" and took the run for stalled ("no progress
+/// for 10.0 s … reported tick 2000 of 2000 last", exit 1, no summary). A run that fell behind
+/// is a result: it ends with its summary, and its exit status says what the summary holds
+/// (4 a robot diverged, 3 a robot uncontrolled or more than a tenth of its deadlines missed).
+#[test]
+fn realtime_an_overloaded_run_of_96_robots_is_a_result_not_a_stall() {
+    let dir = Scratch::new("rt-overloaded");
+    let file = dir.0.join("team96.toml");
+    std::fs::write(&file, paper_team(96)).expect("scenario");
+    let out = launch(
+        &[
+            "run",
+            &file.to_string_lossy(),
+            "--clock",
+            "realtime",
+            "--duration-s",
+            "2",
+            "--traces",
+            "none",
+            "--json",
+        ],
+        &dir.0,
+        WATCHDOG,
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("run stalled"), "{err}");
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("a summary");
+    assert_eq!(v["agents"], 96);
+    let metrics = v["metrics"].as_object().expect("metrics");
+    let field = |m: &serde_json::Value, f: &str| m[f].as_u64().expect(f);
+    let diverged = metrics.values().any(|m| !m["diverged_at_s"].is_null());
+    let behind = metrics.values().any(|m| {
+        field(m, "uncontrolled_ticks") > 0
+            || field(m, "deadline_misses") * 10 > field(m, "agent_ticks")
+    });
+    let lost = !v["lost_agents"].as_array().expect("lost_agents").is_empty();
+    let expected = if diverged {
+        4
+    } else if lost || behind {
+        3
+    } else {
+        0
+    };
+    assert_eq!(out.status.code(), Some(expected), "{err}");
+    if expected == 3 {
+        assert!(err.contains("not a clean run (exit 3)"), "{err}");
+    }
+}

@@ -206,8 +206,11 @@ pub fn run_scenario(args: &RunArgs, stop: &Stop) -> Result<RunDone> {
 /// What a run that is not a clean success amounts to, in words (printed last), for the exit
 /// codes 5 and 3: which robots ran without control and for how long.
 fn verdict(s: &RunSummary) -> Option<String> {
-    if s.partial.is_some() || s.lost_agents.is_empty() {
+    if s.partial.is_some() {
         return None;
+    }
+    if s.lost_agents.is_empty() {
+        return behind(s);
     }
     // Per robot that was lost: the ticks the center never computed, and the steps the robot
     // itself found without the command due (late commands after a stall count there).
@@ -241,12 +244,38 @@ fn verdict(s: &RunSummary) -> Option<String> {
     }
 }
 
+/// What a run whose robots were never lost but ran uncontrolled for some ticks, or fell behind
+/// their clock, amounts to (exit 3).
+fn behind(s: &RunSummary) -> Option<String> {
+    if !s.diverged().is_empty() || !s.not_clean() {
+        return None;
+    }
+    let mut said: Vec<String> = s
+        .uncontrolled()
+        .iter()
+        .map(|(id, n, of)| format!("robot {id} ran uncontrolled for {n} of its {of} ticks"))
+        .collect();
+    said.extend(s.fell_behind().iter().map(|(id, n, of)| {
+        format!(
+            "robot {id} missed {n} of its {of} deadlines ({:.1} %)",
+            100.0 * *n as f64 / (*of).max(1) as f64
+        )
+    }));
+    Some(format!(
+        "not a clean run (exit 3): the run fell behind its clock ({}; more than {:.0} % of a robot's deadlines missed, or any tick uncontrolled, is not clean): its numbers are results of an overloaded run, not of the scenario's timing",
+        said.join("; "),
+        100.0 * fdi_common::engine::MISSES_TOLERATED
+    ))
+}
+
 /// The exit status of a run that produced a summary: 128 + signal when interrupted, 6 when the
 /// bridges between hosts refused frames on the run's keys (its data may have been altered
 /// outside the attacker: its results cannot be attributed), 5 when the
 /// control center lost every robot for good (the run failed: none was controlled to its end),
 /// 4 when a robot diverged, 3 when a realtime run lost a robot for a while, rejoined or not (it
-/// ran uncontrolled meanwhile: not a clean run), else 0.
+/// ran uncontrolled meanwhile: not a clean run), or fell behind its clock (a robot ran
+/// uncontrolled for some ticks, or missed more than
+/// [`MISSES_TOLERATED`](fdi_common::engine::MISSES_TOLERATED) of its deadlines), else 0.
 pub fn exit_code(summary: &RunSummary) -> ExitCode {
     if let Some(signal) = summary.partial.as_ref().and_then(|p| p.signal) {
         ExitCode::from(
@@ -266,7 +295,7 @@ pub fn exit_code(summary: &RunSummary) -> ExitCode {
         ExitCode::from(5)
     } else if !summary.diverged().is_empty() {
         ExitCode::from(4)
-    } else if !summary.lost_agents.is_empty() {
+    } else if summary.not_clean() {
         ExitCode::from(3)
     } else {
         ExitCode::SUCCESS
@@ -307,6 +336,37 @@ fn print_summary(s: &RunSummary) {
 
 #[cfg(test)]
 mod tests {
+    use std::process::ExitCode;
+
+    /// Regression (issue 51): a realtime run that fell behind its clock (a 1 MHz run with 90 %
+    /// of its deadlines missed, its robots uncontrolled 44 % of the time) exited 0. Any tick
+    /// uncontrolled, or more than a tenth of a robot's deadlines missed, is not a clean run:
+    /// exit 3, said in words; a diverged robot still comes first (4).
+    #[test]
+    fn a_run_that_fell_behind_its_clock_exits_3_and_says_so() {
+        let mut s = fdi_report::output::sample_summary();
+        s.metrics.remove("2");
+        let m = s.metrics.get_mut("1").expect("robot 1");
+        (m.uncontrolled_ticks, m.deadline_misses, m.agent_ticks) = (0, 10, 100);
+        assert_eq!(super::exit_code(&s), ExitCode::SUCCESS, "10 % is tolerated");
+        assert_eq!(super::verdict(&s), None);
+        let m = s.metrics.get_mut("1").expect("robot 1");
+        m.deadline_misses = 11;
+        assert_eq!(super::exit_code(&s), ExitCode::from(3));
+        let said = super::verdict(&s).expect("a verdict");
+        assert!(
+            said.starts_with("not a clean run (exit 3): the run fell behind its clock (robot 1 missed 11 of its 100 deadlines (11.0 %)"),
+            "{said}"
+        );
+        let m = s.metrics.get_mut("1").expect("robot 1");
+        (m.deadline_misses, m.uncontrolled_ticks) = (0, 1);
+        assert_eq!(super::exit_code(&s), ExitCode::from(3));
+        assert!(super::verdict(&s)
+            .is_some_and(|v| v.contains("robot 1 ran uncontrolled for 1 of its 100 ticks")));
+        s.metrics.get_mut("1").expect("robot 1").diverged_at_s = Some(0.5);
+        assert_eq!(super::exit_code(&s), ExitCode::from(4));
+    }
+
     /// Regression (issue 18): an I/O error that is both the tail of its context's message and
     /// that context's source was printed twice (`No space left on device (os error 28): No
     /// space left on device (os error 28)`).

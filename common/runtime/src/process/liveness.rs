@@ -2,14 +2,30 @@
 
 use std::time::Duration;
 
-/// Silence after which a realtime peer is declared lost, ns. With a liveness check every
-/// [`LIVENESS_CHECK`] the loss is reported within 45 ms of the last message.
+/// Silence after which a realtime peer is declared lost, ns, at the least ([`lost_after_ns`]).
+/// With a liveness check every [`LIVENESS_CHECK`] the loss is reported within 45 ms of the last
+/// message.
 pub const LOST_AFTER_NS: u64 = 40_000_000;
+/// ... and in control periods: a peer is heard from once a period, so a run whose period is
+/// longer than 1 ms gives each peer this many of them.
+pub const LOST_AFTER_PERIODS: u64 = 40;
+
+/// Silence after which a realtime peer of a run with control period `control_period_s` is
+/// declared lost, ns: [`LOST_AFTER_NS`] or [`LOST_AFTER_PERIODS`] periods, the longer (40 ms
+/// at the paper's 1 kHz; a run with a 40 s period would have lost every peer between two of
+/// its ticks).
+pub fn lost_after_ns(control_period_s: f64) -> u64 {
+    // A float too large for u64 saturates.
+    let periods = (LOST_AFTER_PERIODS as f64 * control_period_s * 1e9) as u64;
+    LOST_AFTER_NS.max(periods)
+}
 
 /// The wall-clock instant after which a realtime peer that is still lost stays lost: the run's
-/// end (epoch + duration) plus the loss limit.
-pub fn realtime_end_ns(epoch_ns: u64, duration_s: f64) -> u64 {
-    epoch_ns + (duration_s * 1e9) as u64 + LOST_AFTER_NS
+/// end (epoch + duration) plus the loss limit of its control period.
+pub fn realtime_end_ns(epoch_ns: u64, duration_s: f64, control_period_s: f64) -> u64 {
+    epoch_ns
+        .saturating_add((duration_s * 1e9) as u64)
+        .saturating_add(lost_after_ns(control_period_s))
 }
 /// How often a realtime event-driven process checks liveness while idle.
 pub const LIVENESS_CHECK: Duration = Duration::from_millis(5);
@@ -66,6 +82,11 @@ impl Liveness {
         out
     }
 
+    /// The silence after which a peer is declared lost, ns.
+    pub fn limit_ns(&self) -> u64 {
+        self.after_ns
+    }
+
     /// How long peer `i` has been silent at `now_ns`.
     pub fn silence_ns(&self, i: usize, now_ns: u64) -> u64 {
         self.last_seen_ns
@@ -95,5 +116,21 @@ mod liveness_tests {
         let mut e = Liveness::new(1, 100, 40);
         e.seen(0, 50);
         assert!(e.newly_lost(130, |_| false).is_empty());
+    }
+
+    /// Regression (issue 51): the loss limit was 40 ms whatever the control period, so a
+    /// realtime run with a 40 s period would have declared every agent lost between two ticks.
+    #[test]
+    fn the_loss_limit_is_40_ms_or_40_control_periods_the_longer() {
+        use super::{lost_after_ns, realtime_end_ns};
+        assert_eq!(lost_after_ns(0.001), 40_000_000, "the paper's 1 kHz");
+        assert_eq!(lost_after_ns(1e-6), 40_000_000, "1 MHz");
+        assert_eq!(lost_after_ns(40.0), 1_600_000_000_000);
+        assert_eq!(lost_after_ns(1e300), u64::MAX, "saturates");
+        assert_eq!(
+            realtime_end_ns(5, 1.0, 0.001),
+            5 + 1_000_000_000 + 40_000_000
+        );
+        assert_eq!(realtime_end_ns(u64::MAX - 1, 1.0, 40.0), u64::MAX);
     }
 }

@@ -25,10 +25,15 @@ pub use launcher::{
     connect, finish, node_name, sizing_for, start, trace_header, Connection, LauncherLink, Start,
     HOLD_LIMIT,
 };
-pub use liveness::{realtime_end_ns, Liveness, LIVENESS_CHECK, LOST_AFTER_NS};
+pub use liveness::{lost_after_ns, realtime_end_ns, Liveness, LIVENESS_CHECK, LOST_AFTER_NS};
 pub use placement::{use_fifo, use_idle, CpuList, Placement};
 pub use shutdown::Shutdown;
 pub use wait::{WaitStrategy, DEFAULT_SPIN_US, START_TIMEOUT, WAIT_SLICE};
+
+/// Ticks between two progress reports of a process to the launcher (the control center's, and
+/// a realtime agent's): the launcher takes a run that reports nothing for its stall timeout
+/// for stalled.
+pub const PROGRESS_EVERY: u64 = 500;
 
 /// Why a process stopped early.
 #[derive(Debug, thiserror::Error)]

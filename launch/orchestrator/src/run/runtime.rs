@@ -182,8 +182,13 @@ struct Launcher<X: Transport> {
     started: bool,
     /// The other hosts of a split run.
     remote: Option<crate::run::remote::Remote>,
-    /// The last tick the control center reported, and when it came (or the start).
+    /// The last tick the control center reported, and when any process last said it moved
+    /// on (or the start).
     progress: (u64, Instant),
+    /// The agents that reported done (their last tick run), by id: a later "rejoined" of the
+    /// control center, which lags behind robots that ran ahead of it on an overloaded machine,
+    /// leaves them done.
+    said_done: std::collections::BTreeSet<u32>,
 }
 
 impl<X: Transport> Launcher<X> {
@@ -323,9 +328,16 @@ impl<X: Transport> Launcher<X> {
         let (mut lost, mut rejoined) = (Vec::new(), Vec::new());
         let procs = &self.procs;
         let progress = &mut self.progress;
+        let said_done = &mut self.said_done;
         self.status.drain(|m| {
-            if m.kind == StatusMsg::DONE || Role::from_code(m.role) == Some(Role::Center) {
+            // Progress: anything the control center says, and any process's progress or done
+            // (a realtime robot that fell behind its clock still ticks after the center is
+            // done). The tick kept is the center's.
+            let center = Role::from_code(m.role) == Some(Role::Center);
+            if center {
                 *progress = (progress.0.max(m.tick), Instant::now());
+            } else if m.kind == StatusMsg::DONE || m.kind == StatusMsg::PROGRESS {
+                progress.1 = Instant::now();
             }
             if Role::from_code(m.role) == Some(Role::Center) {
                 bar.set_position(m.tick);
@@ -333,6 +345,9 @@ impl<X: Transport> Launcher<X> {
             if m.kind == StatusMsg::DONE {
                 if let Some(i) = procs.iter().position(|p| matches_status(p.meta.wake, &m)) {
                     done[i] = true;
+                    if let Wake::Agent(id) = procs[i].meta.wake {
+                        said_done.insert(id);
+                    }
                 }
             }
             if m.kind == StatusMsg::LOST {
@@ -367,9 +382,12 @@ impl<X: Transport> Launcher<X> {
                 continue;
             };
             x.rejoined_t_s = Some(t);
-            // It is controlled again and will report done itself, unless its process ended.
+            // It is controlled again and will report done itself, unless its process ended or
+            // it reported done already (issue 51: a robot that ran ahead of an overloaded
+            // center was done when the center found it again, and the run was taken for
+            // stalled).
             if let Some(i) = slot(&self.procs, agent) {
-                done[i] = self.procs[i].status.is_some();
+                done[i] = self.procs[i].status.is_some() || self.said_done.contains(&agent);
             }
             let gap = x.t_s.map_or(String::new(), |from| {
                 format!(" after a gap of {:.3} s", t - from)
@@ -549,6 +567,7 @@ fn open_launcher(
         started: false,
         remote: None,
         progress: (0, Instant::now()),
+        said_done: std::collections::BTreeSet::new(),
     };
     Ok((transport, launcher))
 }
@@ -1069,8 +1088,19 @@ fn supervise<X: Transport>(
         }
         if let Some(stall) = l.no_progress(resolved, stall_timeout) {
             bar.abandon();
+            let waiting: Vec<String> = l
+                .procs
+                .iter()
+                .enumerate()
+                .filter(|(i, p)| !finished(*i, p))
+                .map(|(_, p)| p.label.clone())
+                .collect();
             l.teardown();
-            bail!("run stalled: {stall} (processes: {})", l.exits());
+            bail!(
+                "run stalled: {stall}; not done: {} (processes: {})",
+                waiting.join(", "),
+                l.exits()
+            );
         }
     }
 }
@@ -1087,18 +1117,27 @@ fn stall_timeout_of(
     let mut base = remote
         .and_then(|r| r.deployment.stall_timeout)
         .unwrap_or(STALL_TIMEOUT);
-    // A paced run reports its progress every `PROGRESS_EVERY` ticks at its pace: twice that
-    // long without a report is a stall.
-    if let Some(p) = pace {
-        let between =
-            fdi_control_center::PROGRESS_EVERY as f64 * resolved.scenario.control_period_s / p;
-        base = base.max(STALL_TIMEOUT + Duration::from_secs_f64(2.0 * between));
+    // A paced or realtime run reports its progress every `PROGRESS_EVERY` ticks (or once, at
+    // its end, when it has fewer) at its pace: twice that long without a report is a stall (a
+    // realtime run of one 40 s tick was stopped as stalled after 10 s).
+    let realtime = resolved.scenario.clock == fdi_common::scenario::ClockMode::Realtime;
+    if let Some(p) = pace.or(realtime.then_some(1.0)) {
+        base = base.max(STALL_TIMEOUT + reports_apart(resolved, p).saturating_mul(2));
     }
     [roles.attacker.as_ref(), roles.monitor.as_ref()]
         .into_iter()
         .flatten()
         .map(|r| r.timeout() + Duration::from_secs(1))
         .fold(base, Duration::max)
+}
+
+/// How much wall time passes between two progress reports of a run of `resolved` at `pace` ×
+/// real time: [`PROGRESS_EVERY`](fdi_runtime::process::PROGRESS_EVERY) ticks, or the whole
+/// run when it has fewer.
+fn reports_apart(resolved: &Resolved, pace: f64) -> Duration {
+    let ticks = fdi_runtime::process::PROGRESS_EVERY.min(resolved.ticks().max(1));
+    let s = ticks as f64 * resolved.scenario.control_period_s / pace;
+    Duration::try_from_secs_f64(s).unwrap_or(Duration::MAX)
 }
 
 /// Every process is done: the stop lets them go (each keeps its ports until then, so that no
@@ -1184,5 +1223,28 @@ mod tests {
         assert_eq!(super::speed(950.6, 1e-3), "951 ticks/s, 1.0× real time");
         assert_eq!(super::speed(0.0, 1e-3), "… ticks/s");
         assert_eq!(super::speed(f64::NAN, 1e-3), "… ticks/s");
+    }
+
+    /// Regression (issue 51): a valid realtime run of one 40 s tick reports its progress once,
+    /// at its end, and was stopped as stalled by the 10 s watchdog. A realtime run's stall
+    /// timeout is at least twice the wall time between two of its reports, plus the 10 s.
+    #[test]
+    fn the_stall_timeout_of_a_realtime_run_outlasts_the_time_between_its_reports() {
+        use fdi_common::scenario::ClockMode;
+        use std::time::Duration;
+        let mut r = fdi_common::scenario::paper().expect("paper");
+        let timeout =
+            |r: &fdi_common::scenario::Resolved, pace| super::stall_timeout_of(r, None, pace);
+        assert_eq!(timeout(&r, None), super::STALL_TIMEOUT, "lockstep");
+        r.scenario.clock = ClockMode::Realtime;
+        // 500 ticks of 1 ms apart: 10 s + 2 × 0.5 s.
+        assert_eq!(timeout(&r, None), Duration::from_secs(11));
+        r.scenario.control_period_s = 40.0;
+        r.scenario.duration_s = 40.0;
+        assert_eq!(r.ticks(), 1);
+        assert_eq!(timeout(&r, None), Duration::from_secs(90));
+        // Lockstep paced at a tenth of real time: the same rule at its pace.
+        r.scenario.clock = ClockMode::Lockstep;
+        assert_eq!(timeout(&r, Some(0.1)), Duration::from_secs(810));
     }
 }
