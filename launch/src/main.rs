@@ -35,6 +35,14 @@ fn main() -> ExitCode {
         Command::Process { .. } | Command::BenchPeer { .. }
     ) {
         fdi_orchestrator::run::runtime::reap_stale_runs();
+        // Whatever a run's processes start, and orphan, stays below this process, which ends
+        // it with the run (a program taking a role that detaches a child twice, say).
+        if let Err(e) = fdi_orchestrator::run::program::contain_descendants() {
+            eprintln!(
+                "fdi-launch: warning: cannot become the subreaper of the run's processes ({e}): \
+                 a child that a role's program detaches twice may outlive the run"
+            );
+        }
     }
     match dispatch(cli.command, &stop) {
         Ok(code) => code,

@@ -514,6 +514,11 @@ fn realtime_the_monitors_verdicts_are_counted_received_late_and_missing() {
 /// does not speak the protocol: it never says ready, and the run stops after its 1 s timeout),
 /// written into `dir`.
 fn sh_attacker(dir: &Path, name: &str, script: &str) -> String {
+    sh_role(dir, "attacker", name, script)
+}
+
+/// [`sh_attacker`] for `role` (`attacker` or `monitor`).
+fn sh_role(dir: &Path, role_name: &str, name: &str, script: &str) -> String {
     let text = std::fs::read_to_string(repo_path("scenarios/paper.toml")).expect("the scenario");
     let mut doc: toml::Table = toml::from_str(&text).expect("TOML");
     let mut role = toml::Table::new();
@@ -523,7 +528,7 @@ fn sh_attacker(dir: &Path, name: &str, script: &str) -> String {
     );
     role.insert("name".into(), name.into());
     role.insert("timeout_s".into(), 1.0.into());
-    set_role(&mut doc, "attacker", toml::Value::Table(role), 1.0);
+    set_role(&mut doc, role_name, toml::Value::Table(role), 1.0);
     let mut attack = toml::Table::new();
     attack.insert("preset".into(), "none".into());
     doc.insert("attack".into(), toml::Value::Table(attack));
@@ -626,4 +631,28 @@ fn an_external_programs_detached_child_is_gone_when_the_run_ends() {
         err.contains("external attacker `detached`") && err.contains("outside its group"),
         "the launcher names the program and what it ended: {err}"
     );
+}
+
+/// Regression (issue 51): a grandchild that calls `setsid` and runs with an empty environment
+/// (nothing of the run's left to find it by) outlived the run, below the attacker's program and
+/// the monitor's. The launcher is the subreaper of whatever its runs start: once its parent is
+/// gone, the grandchild is the launcher's child, and it is ended with the run.
+#[test]
+fn a_grandchild_that_calls_setsid_with_an_empty_environment_is_ended_with_the_run() {
+    for role in ["attacker", "monitor"] {
+        let s = Scratch::new(&format!("ext-cleared-{role}"));
+        let orphan = s.0.join("orphan.pid");
+        let script = format!(
+            "(env -i setsid sleep 3600 < /dev/null > /dev/null 2>&1 & echo $! > {}); \
+             exec sleep 3600",
+            orphan.display()
+        );
+        let scenario = sh_role(&s.0, role, "cleared", &script);
+        run_sh_attacker(&scenario, &s.0.join("runs"), "cleared", "not ready after");
+        let pid = pid_written(&orphan);
+        assert!(
+            !fdi_tests::alive(pid),
+            "{role}: the grandchild (pid {pid}) outlived the run"
+        );
+    }
 }

@@ -64,9 +64,8 @@ impl Lab {
                     &work.display().to_string(),
                 ],
             )
-            .env("RUST_LOG", "info,zenoh_link_quic=debug,zenoh_link_commons=debug,zenoh_transport::unicast::establishment=debug,zenoh_transport::unicast::manager=debug,zenoh::net::runtime::orchestrator=debug,zenoh::net::protocol::gossip=debug")
             .stdin(Stdio::null())
-            .stdout(file.try_clone().expect("clone"))
+            .stdout(Stdio::null())
             .stderr(file)
             .spawn()
             .expect("spawning fdi-launch serve");
@@ -345,13 +344,12 @@ fn a_cut_network_stops_a_lockstep_run_naming_the_host_and_the_next_run_is_clean(
     );
     let log = lab.log(cell);
     assert!(log.contains("stopped agent 3, agent 4"), "{log}");
-    // Back on the network, the same serve takes the next run, which is clean.
+    // Back on the network, the same serve takes the next run, which is clean. (Packets of the
+    // dead coordinator, queued while its host looked for `cell`'s address, may reach the serve
+    // once the link is back and hold its listener for up to QUIC's 30 s idle timeout: the
+    // coordinator's wait for the serve, 40 s, rides it out; issue 51.)
     lab.hosts.set_link(1, true);
-    std::env::set_var("RUST_LOG", "info,zenoh_link_quic=debug,zenoh_link_commons=debug,zenoh_transport::unicast::establishment=debug,zenoh_transport::unicast::manager=debug,zenoh::net::runtime::orchestrator=debug,zenoh::net::protocol::gossip=debug");
     let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
-    if !out.status.success() {
-        eprintln!("COORD STDOUT:\n{}", String::from_utf8_lossy(&out.stdout));
-    }
     assert_eq!(
         digest(&out),
         inproc_digest(&["--duration-s", "1"]),
@@ -461,12 +459,19 @@ fn a_host_without_a_serve_is_named_before_anything_starts() {
     let Some(mut lab) = Lab::new(2, "multihost-no-serve") else {
         return;
     };
-    let file = lab.deployment(TWO_HOSTS);
+    // The wait for the serves, shortened by the file (its default, 40 s, rides out a serve
+    // that is deaf for a while after a cut network).
+    let file = lab.deployment(&TWO_HOSTS.replace(
+        "certs = \"certs\"",
+        "certs = \"certs\"\nreach_timeout_s = 6",
+    ));
     let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
     assert!(
-        err.contains("no `fdi-launch serve` answers on host `cell` (quic/10.77.0.2:7447)"),
+        err.contains(
+            "no `fdi-launch serve` answers on host `cell` (quic/10.77.0.2:7447) within 6 s"
+        ) && err.contains("fdi-launch: waiting for the serve of host `cell` (at most 6 s"),
         "{err}"
     );
     // Nothing started, nothing recorded: no run directory is left.
@@ -624,9 +629,10 @@ fn quic_keeps_rogue_peers_out_and_the_run_equals_the_in_process_engine() {
     let _ = spray.kill();
     let _ = spray.wait();
     // The positive control: the same rogue with `cell`'s own key is let in (which is why a
-    // host's key stays on that host).
+    // host's key stays on that host), from an address of the lab (issue 51: from any other,
+    // the serve's socket does not even take its packets).
     let s = lab.rogue(
-        2,
+        0,
         &[
             "--tls",
             "certs/ca.pem",
@@ -661,6 +667,34 @@ fn request_file(lab: &Lab, name: &str, edit: impl FnOnce(&mut serde_json::Value)
     let p = lab.scratch.0.join(name);
     std::fs::write(&p, serde_json::to_vec(&v).expect("JSON")).expect("request file");
     name.to_string()
+}
+
+/// Regression (issue 51): a flood of datagrams shaped like QUIC connection openers from a
+/// machine without a certificate (200 sockets, 2000 a second) kept every split run out for its
+/// length and 20-60 s after: Zenoh's QUIC listener took each for a connection and paused a
+/// tenth of a second after each failed one. The hosts take QUIC packets only from the addresses
+/// of the deployment file: a run gets through during the flood and right after it.
+#[test]
+fn a_quic_initial_flood_from_outside_the_lab_keeps_no_run_out() {
+    let Some(mut lab) = Lab::new(3, "multihost-flood") else {
+        return;
+    };
+    // The serve must answer within 5 s, in the flood and right after it.
+    let file = lab.deployment(&TWO_HOSTS.replace(
+        "certs = \"certs\"",
+        "certs = \"certs\"\nreach_timeout_s = 5",
+    ));
+    lab.serve(1, "cell");
+    let expected = inproc_digest(&["--duration-s", "1"]);
+    let flood = lab.start_rogue(2, &["flood", "200", "10.77.0.2:7447", "12", "2000"]);
+    // During the flood: the flood runs for 12 s, the run starts at once.
+    let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
+    assert_eq!(digest(&out), expected, "{}", stderr(&out));
+    let said = wait_rogue(flood);
+    assert!(said.starts_with("sent "), "{said}");
+    // Right after it.
+    let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
+    assert_eq!(digest(&out), expected, "{}", stderr(&out));
 }
 
 /// Regression (issue 51): a host of the lab that is not its coordinator (here the attacker's,
@@ -815,9 +849,11 @@ fn an_insecure_run_refuses_names_and_counts_what_a_rogue_peer_sends() {
         "a refused request leaves nothing in {}",
         work.display()
     );
-    // 200 connections held on the serve's port, half of them half-closed: a run gets through.
-    let mut held = lab.start_rogue(2, &["hold", "200", "10.77.0.2:7447", "30"]);
-    std::thread::sleep(Duration::from_secs(1));
+    // 300 connections held on the serve's port, half of them half-closed, opened 2 s before
+    // the run (issue 51: the run request then failed at once, "within 30.0 s" said after 1.4
+    // s; a request nothing answers yet is sent again now): a run gets through.
+    let mut held = lab.start_rogue(2, &["hold", "300", "10.77.0.2:7447", "30"]);
+    std::thread::sleep(Duration::from_secs(2));
     let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
     assert_eq!(
         digest(&out),

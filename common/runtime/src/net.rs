@@ -188,6 +188,10 @@ pub enum Security {
         key: std::path::PathBuf,
         /// The hosts of the lab (the deployment file's): their certificates' common names.
         lab: Vec<String>,
+        /// The addresses the lab's hosts send from (their endpoints'): the QUIC packets of any
+        /// other address are dropped by the kernel before Zenoh sees them ([`admit_only`]).
+        /// Empty: from anywhere (a session that listens nowhere).
+        peers: Vec<std::net::IpAddr>,
     },
     /// Plain TCP: anyone on the network can connect, listen and send (said so by the
     /// deployment file, and in every run's summary).
@@ -203,6 +207,10 @@ pub struct NetConfig {
     pub connect: Vec<String>,
     pub security: Security,
 }
+
+/// How long a request that nothing answered waits before it is sent again
+/// ([`Net::request`]).
+const ASK_AGAIN: Duration = Duration::from_millis(50);
 
 /// How long a connection may take to become a session (its TLS and Zenoh handshakes): a peer
 /// that opens a connection and says nothing is dropped then.
@@ -338,7 +346,9 @@ impl NetConfig {
             Security::Insecure => {
                 set(&mut c, "transport/link/protocols", "[\"tcp\"]".into())?;
             }
-            Security::Tls { ca, cert, key, lab } => {
+            Security::Tls {
+                ca, cert, key, lab, ..
+            } => {
                 // QUIC only (TLS 1.3, mutual authentication): nothing else is accepted. Zenoh's
                 // TLS over TCP is not used: its link reads and writes one TLS stream from two
                 // tasks at once, which rustls does not support, and under traffic both ways
@@ -361,6 +371,170 @@ impl NetConfig {
         }
         Ok(c)
     }
+}
+
+/// Makes the kernel drop every datagram that reaches this process's UDP sockets bound to the
+/// endpoints `listen` (its QUIC listeners, Zenoh's sockets) unless it comes from one of `peers`
+/// or from loopback: a socket filter (classic BPF) on each. Zenoh's QUIC listener takes
+/// connections one at a time, and pauses a tenth of a second after each connection opener it
+/// could not decrypt: a flood of them from anywhere (no certificate needed) kept the lab's own
+/// hosts out (issue 51). The lab's hosts are known by their endpoints; anything else never
+/// reaches Zenoh. Fails when a listener's socket is not found or the filter is not taken.
+pub fn admit_only(listen: &[String], peers: &[std::net::IpAddr]) -> Result<(), String> {
+    use std::net::ToSocketAddrs as _;
+    // The program's jumps are a byte long: about 60 addresses at most.
+    if peers.len() > MAX_FILTERED_PEERS {
+        return Err(format!(
+            "{} addresses, more than the {MAX_FILTERED_PEERS} a filter holds",
+            peers.len()
+        ));
+    }
+    let program = peer_filter(peers);
+    let me = rustix::process::pidfd_open(
+        rustix::process::getpid(),
+        rustix::process::PidfdFlags::empty(),
+    )
+    .map_err(|e| format!("opening this process's pidfd: {e}"))?;
+    let fds: Vec<i32> = std::fs::read_dir("/proc/self/fd")
+        .map_err(|e| format!("reading /proc/self/fd: {e}"))?
+        .flatten()
+        .filter(|e| {
+            std::fs::read_link(e.path()).is_ok_and(|l| l.to_string_lossy().starts_with("socket:"))
+        })
+        .filter_map(|e| e.file_name().to_str()?.parse().ok())
+        .collect();
+    for endpoint in listen {
+        let (address, port) = endpoint
+            .split_once('/')
+            .and_then(|(_, rest)| rest.rsplit_once(':'))
+            .ok_or_else(|| format!("endpoint `{endpoint}` has no address and port"))?;
+        let address = address.trim_start_matches('[').trim_end_matches(']');
+        let wanted: Vec<std::net::SocketAddr> = (address, port.parse::<u16>().unwrap_or(0))
+            .to_socket_addrs()
+            .map_err(|e| format!("endpoint `{endpoint}`: {e}"))?
+            .collect();
+        let mut filtered = 0;
+        for &fd in &fds {
+            // A copy of the descriptor: the filter is set on the socket both share.
+            let Ok(copy) =
+                rustix::process::pidfd_getfd(&me, fd, rustix::process::PidfdGetfdFlags::empty())
+            else {
+                continue;
+            };
+            let socket = socket2::SockRef::from(&copy);
+            let datagram = socket.r#type().is_ok_and(|t| t == socket2::Type::DGRAM);
+            let bound = socket
+                .local_addr()
+                .ok()
+                .and_then(|a| a.as_socket())
+                .is_some_and(|a| wanted.contains(&a));
+            if datagram && bound {
+                socket
+                    .attach_filter(&program)
+                    .map_err(|e| format!("filtering the socket of `{endpoint}`: {e}"))?;
+                filtered += 1;
+            }
+        }
+        if filtered == 0 {
+            return Err(format!(
+                "no UDP socket of this process is bound to `{endpoint}`"
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The most addresses [`admit_only`] filters on.
+const MAX_FILTERED_PEERS: usize = 48;
+
+/// The classic BPF program of [`admit_only`]: accepts a datagram whose IP source address is
+/// one of `peers` or a loopback address, drops any other. It reads the network header (the
+/// kernel's negative offset `SKF_NET_OFF`), IPv4 and IPv6 alike.
+fn peer_filter(peers: &[std::net::IpAddr]) -> Vec<socket2::SockFilter> {
+    use socket2::SockFilter as F;
+    use std::net::IpAddr;
+    const NET: u32 = 0xfff0_0000; // SKF_NET_OFF (-0x100000)
+    const LD_W: u16 = 0x20; // BPF_LD | BPF_W | BPF_ABS
+    const LD_B: u16 = 0x30; // BPF_LD | BPF_B | BPF_ABS
+    const AND: u16 = 0x54; // BPF_ALU | BPF_AND | BPF_K
+    const JEQ: u16 = 0x15; // BPF_JMP | BPF_JEQ | BPF_K
+    const RET: u16 = 0x06; // BPF_RET | BPF_K
+                           // Instructions are built with placeholders for jumps: `Accept` (to the final accept) and
+                           // `Next` (past this test), resolved at the end.
+    enum Jump {
+        Accept,
+        Next(usize),
+        Fall,
+    }
+    let mut code: Vec<(u16, Jump, Jump, u32)> = Vec::new();
+    let v4: Vec<u32> = peers
+        .iter()
+        .filter_map(|p| match p {
+            IpAddr::V4(a) => Some(u32::from(*a)),
+            IpAddr::V6(a) => a.to_ipv4_mapped().map(u32::from),
+        })
+        .collect();
+    let v6: Vec<[u32; 4]> = peers
+        .iter()
+        .filter_map(|p| match p {
+            IpAddr::V6(a) if a.to_ipv4_mapped().is_none() => {
+                let s = a.segments();
+                Some(std::array::from_fn(|i| {
+                    (u32::from(s[2 * i]) << 16) | u32::from(s[2 * i + 1])
+                }))
+            }
+            _ => None,
+        })
+        .collect();
+    let mut v6_tests: Vec<[u32; 4]> = v6.clone();
+    v6_tests.push([0, 0, 0, 1]); // ::1
+                                 // The IP version: the high nibble of the header's first byte.
+    code.push((LD_B, Jump::Fall, Jump::Fall, NET));
+    code.push((AND, Jump::Fall, Jump::Fall, 0xf0));
+    // Not 4: the IPv6 part, after the IPv4 one (its length: 2 + 2 per v4 peer + 2... known
+    // below), so a placeholder resolved once the IPv4 part is built.
+    let version_test = code.len();
+    code.push((JEQ, Jump::Fall, Jump::Fall, 0x40));
+    // IPv4: the source address, then each peer; then loopback (127.0.0.0/8).
+    code.push((LD_W, Jump::Fall, Jump::Fall, NET + 12));
+    for a in &v4 {
+        code.push((JEQ, Jump::Accept, Jump::Fall, *a));
+    }
+    code.push((AND, Jump::Fall, Jump::Fall, 0xff00_0000));
+    code.push((JEQ, Jump::Accept, Jump::Fall, 0x7f00_0000));
+    code.push((RET, Jump::Fall, Jump::Fall, 0));
+    let v6_start = code.len();
+    // IPv6: each address in four words (source at bytes 8..24).
+    for words in &v6_tests {
+        let test_end = code.len() + 8;
+        for (i, w) in words.iter().enumerate() {
+            code.push((LD_W, Jump::Fall, Jump::Fall, NET + 8 + 4 * i as u32));
+            let last = i == 3;
+            code.push((
+                JEQ,
+                if last { Jump::Accept } else { Jump::Fall },
+                Jump::Next(test_end),
+                *w,
+            ));
+        }
+    }
+    code.push((RET, Jump::Fall, Jump::Fall, 0));
+    let accept = code.len();
+    code.push((RET, Jump::Fall, Jump::Fall, 0xffff_ffff));
+    // The version test: 4 falls through to the IPv4 part, anything else jumps to IPv6.
+    code[version_test].2 = Jump::Next(v6_start);
+    let offset = |from: usize, to: usize| u8::try_from(to - from - 1).unwrap_or(u8::MAX);
+    code.iter()
+        .enumerate()
+        .map(|(i, (op, t, f, k))| {
+            let target = |j: &Jump| match j {
+                Jump::Accept => offset(i, accept),
+                Jump::Next(to) => offset(i, *to),
+                Jump::Fall => 0,
+            };
+            F::new(*op, target(t), target(f), *k)
+        })
+        .collect()
 }
 
 /// A host's Zenoh session.
@@ -512,6 +686,17 @@ impl Net {
                 ),
                 source,
             })?;
+        if let Security::Tls { peers, .. } = &config.security {
+            if !peers.is_empty() && !config.listen.is_empty() {
+                if let Err(e) = admit_only(&config.listen, peers) {
+                    eprintln!(
+                        "fdi-launch: warning: the QUIC listener takes packets from any address \
+                         ({e}): a flood of connection openers from outside the lab can keep \
+                         runs out (docs/security.md)"
+                    );
+                }
+            }
+        }
         Ok(Self { session })
     }
 
@@ -659,27 +844,41 @@ impl Net {
     }
 
     /// Sends `body` to whoever answers `key` and returns its answer; a refusal is
-    /// [`NetError::Refused`] with the answerer's message.
+    /// [`NetError::Refused`] with the answerer's message. A query that ends at once with no
+    /// answer (this session does not know the answerer yet: a session learns the others'
+    /// queryables a moment after it connects, longer when their host is busy) is sent again
+    /// until `timeout`: a request is answered once, so only one that got no answer is repeated.
     pub fn request(&self, key: &str, body: &[u8], timeout: Duration) -> Result<Vec<u8>, NetError> {
-        let replies = self
-            .session
-            .get(key.to_string())
-            .payload(body.to_vec())
-            .timeout(timeout)
-            .wait()
-            .map_err(Self::key_error(key))?;
-        match replies.recv() {
-            Ok(reply) => match reply.into_result() {
-                Ok(sample) => Ok(sample.payload().to_bytes().into_owned()),
-                Err(e) => Err(NetError::Refused {
-                    key: key.into(),
-                    message: String::from_utf8_lossy(&e.payload().to_bytes()).into_owned(),
-                }),
-            },
-            Err(_) => Err(NetError::NoAnswer {
-                key: key.into(),
-                timeout,
-            }),
+        let began = std::time::Instant::now();
+        loop {
+            let left = timeout.saturating_sub(began.elapsed());
+            let replies = self
+                .session
+                .get(key.to_string())
+                .payload(body.to_vec())
+                .timeout(left)
+                .wait()
+                .map_err(Self::key_error(key))?;
+            match replies.recv() {
+                Ok(reply) => {
+                    return match reply.into_result() {
+                        Ok(sample) => Ok(sample.payload().to_bytes().into_owned()),
+                        Err(e) => Err(NetError::Refused {
+                            key: key.into(),
+                            message: String::from_utf8_lossy(&e.payload().to_bytes()).into_owned(),
+                        }),
+                    }
+                }
+                Err(_) if began.elapsed() + ASK_AGAIN < timeout => {
+                    std::thread::sleep(ASK_AGAIN);
+                }
+                Err(_) => {
+                    return Err(NetError::NoAnswer {
+                        key: key.into(),
+                        timeout: began.elapsed(),
+                    })
+                }
+            }
         }
     }
 

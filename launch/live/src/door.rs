@@ -13,8 +13,12 @@
 //!   as the SDK lets go a client whose control queue is full. The run never waits for a client.
 //!
 //! Every wait is bounded: a connection has [`HANDSHAKE`] to finish its WebSocket handshake (and
-//! the relay as long to reach the server), at most [`MAX_CONNECTIONS`] are open at once (more are
-//! closed as they come), and a message is at most [`MAX_MESSAGE`].
+//! the relay as long to reach the server), at most [`MAX_CONNECTIONS`] are open at once, and a
+//! message is at most [`MAX_MESSAGE`]. When every place is taken, a new connection takes the
+//! place of the oldest one whose client has said nothing since it connected (a viewer
+//! subscribes at once; a client that holds a connection and never speaks is not a viewer); when
+//! every client has spoken, the new connection is closed. So idle connections, however many,
+//! never keep a viewer out.
 
 use std::collections::VecDeque;
 use std::net::SocketAddr;
@@ -130,29 +134,85 @@ pub struct Counts {
     pub let_go: AtomicU64,
 }
 
+/// One open connection, as the door keeps it.
+#[derive(Debug, Default)]
+struct Connection {
+    /// Its client sent a message since its handshake (a viewer subscribes at once).
+    spoke: std::sync::atomic::AtomicBool,
+    /// Raised to close it (its place is taken by a new connection).
+    evict: Notify,
+}
+
+/// The open connections, oldest first.
+type Open = Mutex<VecDeque<(u64, Arc<Connection>)>>;
+
+/// How long a new connection waits for the place of the connection it evicted.
+const EVICTED_WITHIN: Duration = Duration::from_secs(1);
+
 /// Serves connections on `listener`, each relayed to the SDK's server at `upstream`, until the
 /// runtime it runs on is shut down.
 pub async fn serve(listener: TcpListener, upstream: SocketAddr, counts: Arc<Counts>) {
     let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
-    loop {
+    let open: Arc<Open> = Arc::default();
+    for n in 0u64.. {
         let Ok((stream, _)) = listener.accept().await else {
             // A failed accept (e.g. out of descriptors): try again a little later.
             tokio::time::sleep(Duration::from_millis(10)).await;
             continue;
         };
-        let Ok(slot) = slots.clone().try_acquire_owned() else {
-            counts.let_go.fetch_add(1, Ordering::Relaxed);
-            drop(stream);
-            continue;
-        };
         let counts = counts.clone();
+        let (slots, open) = (slots.clone(), open.clone());
         tokio::spawn(async move {
+            let slot = match slots.clone().try_acquire_owned() {
+                Ok(slot) => slot,
+                Err(_) => {
+                    // Full: the place of the oldest connection that never spoke, if any.
+                    if !evict_silent(&open) {
+                        counts.let_go.fetch_add(1, Ordering::Relaxed);
+                        return;
+                    }
+                    match tokio::time::timeout(EVICTED_WITHIN, slots.acquire_owned()).await {
+                        Ok(Ok(slot)) => slot,
+                        _ => {
+                            counts.let_go.fetch_add(1, Ordering::Relaxed);
+                            return;
+                        }
+                    }
+                }
+            };
+            let me = Arc::new(Connection::default());
+            lock(&open).push_back((n, me.clone()));
             counts.open.fetch_add(1, Ordering::Relaxed);
-            relay(stream, upstream, &counts).await;
+            tokio::select! {
+                () = relay(stream, upstream, &counts, &me.spoke) => {}
+                () = me.evict.notified() => {
+                    counts.let_go.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+            lock(&open).retain(|(k, _)| *k != n);
             counts.open.fetch_sub(1, Ordering::Relaxed);
             drop(slot);
         });
     }
+}
+
+fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Closes the oldest open connection whose client never spoke; whether there was one.
+fn evict_silent(open: &Open) -> bool {
+    let mut open = lock(open);
+    let Some(i) = open
+        .iter()
+        .position(|(_, c)| !c.spoke.load(Ordering::Relaxed))
+    else {
+        return false;
+    };
+    if let Some((_, c)) = open.remove(i) {
+        c.evict.notify_one();
+    }
+    true
 }
 
 fn config() -> WebSocketConfig {
@@ -161,8 +221,14 @@ fn config() -> WebSocketConfig {
         .max_frame_size(Some(MAX_MESSAGE))
 }
 
-/// One client's connection, from its handshake to its end.
-async fn relay(stream: TcpStream, upstream: SocketAddr, counts: &Counts) {
+/// One client's connection, from its handshake to its end; `spoke` is raised once its client
+/// sends a message.
+async fn relay(
+    stream: TcpStream,
+    upstream: SocketAddr,
+    counts: &Counts,
+    spoke: &std::sync::atomic::AtomicBool,
+) {
     let _ = stream.set_nodelay(true);
     let mut chosen = None;
     // The callback's type is tungstenite's (its refusal is an HTTP response).
@@ -201,7 +267,7 @@ async fn relay(stream: TcpStream, upstream: SocketAddr, counts: &Counts) {
     let Some(server) = connect(upstream, up).await else {
         return;
     };
-    pipe(client, server, counts).await;
+    pipe(client, server, counts, spoke).await;
 }
 
 /// The relay's connection to the SDK's server, asking for subprotocol `name`.
@@ -230,6 +296,7 @@ async fn pipe(
     client: tokio_tungstenite::WebSocketStream<TcpStream>,
     server: tokio_tungstenite::WebSocketStream<TcpStream>,
     counts: &Counts,
+    spoke: &std::sync::atomic::AtomicBool,
 ) {
     let (mut to_client, mut from_client) = client.split();
     let (mut to_server, mut from_server) = server.split();
@@ -289,8 +356,11 @@ async fn pipe(
             if m.is_close() {
                 break;
             }
-            if (m.is_binary() || m.is_text()) && to_server.send(m).await.is_err() {
-                break;
+            if m.is_binary() || m.is_text() {
+                spoke.store(true, Ordering::Relaxed);
+                if to_server.send(m).await.is_err() {
+                    break;
+                }
             }
         }
         let _ = to_server.close().await;
@@ -378,6 +448,105 @@ mod tests {
             }
         });
         (addr, asked)
+    }
+
+    /// A stand-in for the SDK's server that takes any number of connections and sends each a
+    /// binary message every 10 ms.
+    async fn upstream_streaming() -> SocketAddr {
+        let listener = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let addr = listener.local_addr().expect("address");
+        tokio::spawn(async move {
+            while let Ok((tcp, _)) = listener.accept().await {
+                tokio::spawn(async move {
+                    #[allow(clippy::result_large_err)]
+                    let echo =
+                        |req: &Request, mut resp: Response| -> Result<Response, ErrorResponse> {
+                            if let Some(v) = req.headers().get(header::SEC_WEBSOCKET_PROTOCOL) {
+                                resp.headers_mut()
+                                    .insert(header::SEC_WEBSOCKET_PROTOCOL, v.clone());
+                            }
+                            Ok(resp)
+                        };
+                    let Ok(mut ws) = tokio_tungstenite::accept_hdr_async(tcp, echo).await else {
+                        return;
+                    };
+                    while ws.send(Message::binary(vec![7u8; 16])).await.is_ok() {
+                        tokio::time::sleep(Duration::from_millis(10)).await;
+                    }
+                });
+            }
+        });
+        addr
+    }
+
+    /// A client of the door at `at` that finished its handshake.
+    async fn connected(at: SocketAddr) -> tokio_tungstenite::WebSocketStream<TcpStream> {
+        let mut request = format!("ws://{at}/")
+            .into_client_request()
+            .expect("request");
+        request.headers_mut().insert(
+            header::SEC_WEBSOCKET_PROTOCOL,
+            HeaderValue::from_static("foxglove.sdk.v1"),
+        );
+        let tcp = TcpStream::connect(at).await.expect("connect");
+        tokio_tungstenite::client_async(request, tcp)
+            .await
+            .expect("the door answers")
+            .0
+    }
+
+    /// Regression (issue 51): 64 clients that finished their handshake and then said nothing
+    /// held every place of the door, and a viewer was refused for the whole run. With 100 such
+    /// clients held open, a viewer that connects and subscribes (any message) gets a place
+    /// (the oldest silent connection's) and receives the server's messages; a client that has
+    /// spoken is never evicted for a new one.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 1)]
+    async fn idle_connections_however_many_never_keep_a_viewer_out() {
+        let up = upstream_streaming().await;
+        let door = TcpListener::bind("127.0.0.1:0").await.expect("bind");
+        let at = door.local_addr().expect("address");
+        let counts = Arc::new(Counts::default());
+        tokio::spawn(serve(door, up, counts.clone()));
+        let mut idle = Vec::new();
+        for _ in 0..100 {
+            idle.push(connected(at).await);
+        }
+        let mut viewer = connected(at).await;
+        viewer
+            .send(Message::text(r#"{"op":"subscribe","subscriptions":[]}"#))
+            .await
+            .expect("subscribed");
+        let received = tokio::time::timeout(Duration::from_secs(30), async {
+            while let Some(Ok(m)) = viewer.next().await {
+                if m.is_binary() {
+                    return true;
+                }
+            }
+            false
+        })
+        .await;
+        assert_eq!(received, Ok(true), "the viewer received the server's data");
+        assert!(
+            counts.let_go.load(Ordering::Relaxed) >= 37,
+            "silent ones made room"
+        );
+        assert!(counts.open.load(Ordering::Relaxed) <= MAX_CONNECTIONS as u64);
+        // The viewer has spoken: 64 more silent clients take the others' places, not its own.
+        for _ in 0..64 {
+            idle.push(connected(at).await);
+        }
+        let still = tokio::time::timeout(Duration::from_secs(30), async {
+            let mut binaries = 0;
+            while let Some(Ok(m)) = viewer.next().await {
+                binaries += usize::from(m.is_binary());
+                if binaries >= 10 {
+                    return true;
+                }
+            }
+            false
+        })
+        .await;
+        assert_eq!(still, Ok(true), "the viewer kept its place");
     }
 
     #[tokio::test(flavor = "multi_thread", worker_threads = 1)]

@@ -5,6 +5,10 @@
 //! fdi-rogue hold N ADDRESS:PORT SECONDS [udp]
 //!     N plain TCP connections to the port (every other one half-closed), held, saying nothing;
 //!     with `udp`, N UDP sockets sending a datagram of garbage to it every 100 ms
+//! fdi-rogue flood N ADDRESS:PORT SECONDS RATE
+//!     N UDP sockets sending, RATE a second in all, datagrams shaped like QUIC connection
+//!     openers (long header, Initial, version 1, connection ids of 8 bytes, 1200 bytes, the rest
+//!     random): what a QUIC server takes for a new connection until it tries to decrypt it
 //! fdi-rogue no-cert CA ENDPOINT SECONDS
 //!     a QUIC session that trusts the lab's CA but shows no certificate: says whether it
 //!     ever reached a serve
@@ -39,6 +43,10 @@ fn main() {
         hold(&args);
         return;
     }
+    if args.first().map(String::as_str) == Some("flood") {
+        flood(&args);
+        return;
+    }
     if args.first().map(String::as_str) == Some("no-cert") {
         no_cert(&args);
         return;
@@ -51,6 +59,8 @@ fn main() {
             key: files[2].clone().into(),
             // The rogue knows the lab's names; its certificate decides what it may do.
             lab: vec!["control".into(), "cell".into(), "rogue".into()],
+            // It listens nowhere.
+            peers: Vec::new(),
         }
     } else {
         Security::Insecure
@@ -112,20 +122,9 @@ fn main() {
     }
 }
 
-/// Asks `key`, again while nobody answers (a fresh session learns the others' queryables
-/// a moment after it connects), for up to 10 s.
+/// Asks `key` (sent again while nobody answers, for up to 10 s: [`Net::request`]).
 fn ask(net: &Net, key: &str, body: &[u8]) -> Result<Vec<u8>, fdi_runtime::net::NetError> {
-    let began = Instant::now();
-    loop {
-        match net.request(key, body, Duration::from_secs(10)) {
-            Err(fdi_runtime::net::NetError::NoAnswer { .. })
-                if began.elapsed() < Duration::from_secs(10) =>
-            {
-                std::thread::sleep(Duration::from_millis(100));
-            }
-            r => return r,
-        }
-    }
+    net.request(key, body, Duration::from_secs(10))
 }
 
 /// A Zenoh session without a certificate (Zenoh directly: fdi-mas never opens one).
@@ -201,6 +200,56 @@ fn hold(args: &[String]) {
     }
     println!("holding {} connections", held.len());
     std::thread::sleep(Duration::from_secs_f64(seconds));
+}
+
+/// QUIC Initial-shaped datagrams from many sockets at a rate.
+fn flood(args: &[String]) {
+    let (n, address, seconds, rate): (usize, String, f64, f64) = (
+        arg(args, 1, "sockets"),
+        arg(args, 2, "address"),
+        arg(args, 3, "seconds"),
+        arg(args, 4, "rate"),
+    );
+    let sockets: Vec<std::net::UdpSocket> = (0..n)
+        .filter_map(|_| std::net::UdpSocket::bind("0.0.0.0:0").ok())
+        .collect();
+    assert!(!sockets.is_empty(), "fdi-rogue: no socket");
+    // xorshift64: random enough for garbage, no dependency.
+    let mut x: u64 = 0x9e37_79b9_7f4a_7c15 ^ u64::from(std::process::id());
+    let mut next = move || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let mut packet = [0u8; 1200];
+    let began = Instant::now();
+    let mut sent = 0u64;
+    while began.elapsed().as_secs_f64() < seconds {
+        // Paced: the packets due by now.
+        let due = (began.elapsed().as_secs_f64() * rate) as u64;
+        while sent < due {
+            for b in packet.iter_mut() {
+                *b = next() as u8;
+            }
+            // Long header, fixed bit, type Initial, packet number length in the low bits.
+            packet[0] = 0xc0 | (packet[0] & 0x03);
+            packet[1..5].copy_from_slice(&1u32.to_be_bytes());
+            packet[5] = 8; // destination connection id, 8 random bytes
+            packet[14] = 8; // source connection id, 8 random bytes
+            packet[23] = 0; // no token
+            let length = (1200 - 26) as u16 | 0x4000; // two-byte varint
+            packet[24..26].copy_from_slice(&length.to_be_bytes());
+            let s = &sockets[(sent as usize) % sockets.len()];
+            let _ = s.send_to(&packet, &address);
+            sent += 1;
+        }
+        std::thread::sleep(Duration::from_millis(1));
+    }
+    println!(
+        "sent {sent} QUIC-Initial-shaped datagrams from {} sockets",
+        sockets.len()
+    );
 }
 
 /// What the rogue forges.

@@ -27,6 +27,10 @@ struct DeploymentFile {
     /// How long a run may make no progress before it is stopped, named (s).
     #[serde(default)]
     stall_timeout_s: Option<f64>,
+    /// How long the coordinator waits for every other host's serve before it names those it
+    /// does not hear (s).
+    #[serde(default)]
+    reach_timeout_s: Option<f64>,
     hosts: BTreeMap<String, HostFile>,
 }
 
@@ -173,9 +177,35 @@ impl Lab {
                     cert: files.cert,
                     key: files.key,
                     lab: self.hosts.iter().map(|h| h.name.clone()).collect(),
+                    peers: self.addresses()?,
                 })
             }
         }
+    }
+
+    /// The addresses of the hosts' endpoints (a name resolved to each of its addresses): where
+    /// the lab's QUIC packets come from.
+    fn addresses(&self) -> Result<Vec<std::net::IpAddr>> {
+        use std::net::ToSocketAddrs as _;
+        let mut out = Vec::new();
+        for h in &self.hosts {
+            let address = fdi_runtime::net::endpoint_address(&h.endpoint).with_context(|| {
+                format!(
+                    "{}: host `{}`: endpoint {}",
+                    self.source, h.name, h.endpoint
+                )
+            })?;
+            let resolved = (address, 0).to_socket_addrs().with_context(|| {
+                format!(
+                    "{}: host `{}`: the address of endpoint {} cannot be resolved",
+                    self.source, h.name, h.endpoint
+                )
+            })?;
+            out.extend(resolved.map(|a| a.ip()));
+        }
+        out.sort();
+        out.dedup();
+        Ok(out)
     }
 
     /// Whether the hosts authenticate one another.
@@ -197,6 +227,9 @@ pub struct Deployment {
     /// How long the run may make no progress before it is stopped, named (None: the
     /// runtime's default).
     pub stall_timeout: Option<std::time::Duration>,
+    /// How long the coordinator waits for the other hosts' serves
+    /// ([`Deployment::REACH_TIMEOUT`] unless the file says).
+    pub reach_timeout: std::time::Duration,
 }
 
 /// The process roles a deployment can place with `roles`.
@@ -206,6 +239,13 @@ const PLACEABLE: [(&str, Wake); 2] = [
 ];
 
 impl Deployment {
+    /// How long the coordinator waits for the other hosts' serves by default: longer than a
+    /// serve can stay deaf to a new coordinator. A serve's Zenoh listener takes connections one
+    /// handshake at a time, and a handshake whose client is gone holds it for QUIC's idle
+    /// timeout (30 s): packets of a coordinator that died in a network cut, delivered once the
+    /// network is back (issue 51), start such a handshake.
+    pub const REACH_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(40);
+
     /// Reads and checks `path` against the run's scenario: every problem names the file and
     /// the field. The file is read as scenario files are ([`scenario::read_limited`]): a
     /// regular file of at most [`scenario::MAX_FILE_BYTES`], refused otherwise without reading
@@ -245,23 +285,25 @@ impl Deployment {
             .map(host)
             .collect();
         check_hosts_run_something(&others, &layout, source)?;
-        let stall_timeout = match file.stall_timeout_s {
-            None => None,
+        let seconds = |field: &str, value: Option<f64>| match value {
+            None => Ok(None),
             Some(t) if t.is_finite() && (1.0..=3600.0).contains(&t) => {
-                Some(std::time::Duration::from_secs_f64(t))
+                Ok(Some(std::time::Duration::from_secs_f64(t)))
             }
-            Some(t) => {
-                return Err(problem(
-                    source,
-                    "stall_timeout_s".into(),
-                    format!("must be 1 to 3600 s, got {t}"),
-                ))
-            }
+            Some(t) => Err(problem(
+                source,
+                field.into(),
+                format!("must be 1 to 3600 s, got {t}"),
+            )),
         };
+        let stall_timeout = seconds("stall_timeout_s", file.stall_timeout_s)?;
+        let reach_timeout =
+            seconds("reach_timeout_s", file.reach_timeout_s)?.unwrap_or(Self::REACH_TIMEOUT);
         Ok(Self {
             coordinator: host(&coordinator),
             lab: lab.clone(),
             stall_timeout,
+            reach_timeout,
             others,
             layout,
         })

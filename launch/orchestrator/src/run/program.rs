@@ -3,8 +3,11 @@
 //! `setpgid`). At the end of the run the launcher ends the whole group, and with it the
 //! processes that left the group: the program's descendants while it lives, and any process
 //! whose environment still holds every variable the program was given (docs/protocol.md: the
-//! run's prefix, the launcher's pid, …), which finds a process that detached twice and is a
-//! child of init by then. A process that also rewrote its environment escapes.
+//! run's prefix, the launcher's pid, …), which finds a process that detached twice. The launcher
+//! is its descendants' subreaper ([`contain_descendants`]): a process that detached twice (its
+//! own session, its environment cleared) is the launcher's child then, not init's, and every
+//! child of the launcher that the launcher did not start itself is ended with the program too
+//! (issue 51: one that also cleared its environment outlived the run).
 
 use std::collections::{BTreeSet, HashMap};
 use std::process::Command;
@@ -15,6 +18,30 @@ use rustix::process::{Pid, Signal};
 
 /// How often the processes of a program are looked up while they are given time to exit.
 const POLL: Duration = Duration::from_millis(50);
+
+/// The children this process started itself (the run's processes, the programs of roles):
+/// any other child of it is a process orphaned below it ([`contain_descendants`]).
+static STARTED: std::sync::Mutex<BTreeSet<u32>> = std::sync::Mutex::new(BTreeSet::new());
+
+/// Makes this process the subreaper of its descendants: a process orphaned anywhere below it
+/// (its parent exited: a double fork, `setsid`, …) becomes its child rather than init's, so
+/// that a run can find and end whatever its programs started, whatever they did. Called once
+/// by the command line at its start.
+pub fn contain_descendants() -> std::io::Result<()> {
+    rustix::process::set_child_subreaper(Some(rustix::process::getpid())).map_err(Into::into)
+}
+
+/// Notes `pid` as a child this process started (or, `started` false, reaped).
+pub fn note_started(pid: u32, started: bool) {
+    let mut s = STARTED
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    if started {
+        s.insert(pid);
+    } else {
+        s.remove(&pid);
+    }
+}
 
 /// What identifies the processes of one program.
 #[derive(Debug, Clone)]
@@ -66,6 +93,12 @@ impl Program {
             .filter_map(|p| procfs::stat(p).ok().map(|s| (p, s)))
             .filter(|(_, s)| !matches!(s.state, 'Z' | 'X' | 'x'))
             .collect();
+        // Orphans below this process (its subreaper's children it did not start).
+        let started = STARTED
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+            .clone();
+        let orphan = |s: &procfs::Stat| s.ppid == me && !started.contains(&s.pid);
         let descends = |mut pid: u32| {
             // A chain of parents ends at 0 (init's parent); a bound against a changing tree.
             for _ in 0..stats.len().min(4096) {
@@ -73,6 +106,7 @@ impl Program {
                     return true;
                 }
                 match stats.get(&pid) {
+                    Some(s) if orphan(s) => return true,
                     Some(s) if s.ppid != pid => pid = s.ppid,
                     _ => return false,
                 }
@@ -159,6 +193,7 @@ impl Program {
                 self.signal(&late, Signal::KILL);
             }
         }
+        reap_orphans();
         found
     }
 
@@ -166,6 +201,26 @@ impl Program {
     pub fn kill(&self) {
         let members = self.members();
         self.signal(&members, Signal::KILL);
+        reap_orphans();
+    }
+}
+
+/// Reaps the orphans below this process that have exited (they became its children as their
+/// subreaper, and nothing else waits for them).
+pub fn reap_orphans() {
+    let me = std::process::id();
+    let started = STARTED
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .clone();
+    let Ok(pids) = procfs::pids() else {
+        return;
+    };
+    for pid in pids.into_iter().filter(|p| !started.contains(p)) {
+        let dead_orphan = procfs::stat(pid).is_ok_and(|s| s.ppid == me && s.state == 'Z');
+        if let (true, Some(p)) = (dead_orphan, Pid::from_raw(pid as i32)) {
+            let _ = rustix::process::waitpid(Some(p), rustix::process::WaitOptions::NOHANG);
+        }
     }
 }
 

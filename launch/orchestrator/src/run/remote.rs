@@ -22,8 +22,9 @@ use crate::run::hosts::{
 use crate::run::relay::lock;
 use crate::run::supervisor::{Remote as RemoteChild, RemoteState, Stopper, Supervisor};
 
-/// How long the coordinator waits for each host's serve to be seen when a run begins.
-const REACH_TIMEOUT: Duration = Duration::from_secs(5);
+/// After how long without every host's serve the coordinator says it is waiting (it waits
+/// [`Deployment::reach_timeout`] in all).
+const SAY_WAITING: Duration = Duration::from_secs(5);
 /// How long a host may take to start its processes (their ports open).
 const START_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long a host may take to send one piece of a trace.
@@ -278,8 +279,25 @@ impl Remote {
             .map(|h| HostLink::follow(&net, prefix, h))
             .collect::<Result<Vec<_>>>()?;
         let began = Instant::now();
+        let limit = deployment.reach_timeout;
+        let mut said = false;
         while hosts.iter().any(|h| !h.alive.load(Ordering::SeqCst)) {
-            if began.elapsed() > REACH_TIMEOUT {
+            if !said && began.elapsed() > SAY_WAITING && limit > SAY_WAITING {
+                said = true;
+                let missing: Vec<String> = hosts
+                    .iter()
+                    .filter(|h| !h.alive.load(Ordering::SeqCst))
+                    .map(|h| format!("`{}`", h.host.name))
+                    .collect();
+                eprintln!(
+                    "fdi-launch: waiting for the serve of host {} (at most {:.0} s: a serve whose \
+                     network was cut may take up to 30 s to hear a new coordinator; \
+                     docs/multi-host.md)",
+                    missing.join(", "),
+                    limit.as_secs_f64()
+                );
+            }
+            if began.elapsed() > limit {
                 let missing: Vec<String> = hosts
                     .iter()
                     .filter(|h| !h.alive.load(Ordering::SeqCst))
@@ -291,7 +309,7 @@ impl Remote {
                      file and the same lab's certificates, and is its port open (UDP for \
                      `quic/`, TCP for `tcp/`)? docs/multi-host.md)",
                     missing.join(", "),
-                    REACH_TIMEOUT.as_secs_f64()
+                    limit.as_secs_f64()
                 );
             }
             std::thread::sleep(Duration::from_millis(10));

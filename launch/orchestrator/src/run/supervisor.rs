@@ -178,6 +178,7 @@ impl<M> Supervisor<M> {
             .stderr(Stdio::piped())
             .process_group(0);
         let mut child = cmd.spawn().with_context(|| format!("spawning {label}"))?;
+        crate::run::program::note_started(child.id(), true);
         let tee = self.tee.clone();
         let stderr = child
             .stderr
@@ -226,6 +227,7 @@ impl<M> Supervisor<M> {
                 cmd.get_program()
             )
         })?;
+        crate::run::program::note_started(child.id(), true);
         let program = Program::new(child.id(), &cmd);
         // Our copies of the write end went into the command: dropped with it, so the relay
         // sees the end of the stream when the child (and whatever it started) exits.
@@ -254,6 +256,9 @@ impl<M> Supervisor<M> {
                         .map(|(raw, _)| ExitStatus::from_raw(*raw)),
                 };
                 if let Some(st) = exited {
+                    if let Handle::Local(child) = &c.child {
+                        crate::run::program::note_started(child.id(), false);
+                    }
                     c.status = Some(st);
                     out.push(i);
                 }
