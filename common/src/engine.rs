@@ -239,6 +239,10 @@ pub struct LiveStats {
     /// when the most connections were open.
     #[serde(default)]
     pub clients_let_go: u64,
+    /// Connections the SDK's server took that did not come through the door (a process of
+    /// this machine that connected to its loopback port: outside the door's cap and counts).
+    #[serde(default)]
+    pub clients_outside_the_door: u64,
     /// The first message that could not be made (none expected; said rather than hidden).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,

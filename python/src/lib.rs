@@ -9,6 +9,7 @@ use pyo3::prelude::*;
 mod columns;
 mod episode;
 mod errors;
+mod memory;
 mod py_episode;
 mod py_run;
 mod py_scenario;

@@ -327,6 +327,50 @@ impl Batch {
     }
 }
 
+/// Environments made before their memory is measured and the whole batch's is projected.
+const PROBE: usize = 64;
+
+/// `n` episodes of `scenario`. The first [`PROBE`] are made, what they took (the growth of the
+/// process's resident memory) is projected to `n`, and a batch that would not fit in the
+/// memory this process may still use is refused with `MemoryError` before it is made (issue
+/// 51: `VectorAttackerEnv(100000)`, about 8 GB, aborted the interpreter under a memory limit).
+fn episodes(scenario: &Scenario, spec: &Spec, n: usize) -> PyResult<Vec<episode::Episode>> {
+    let make = |k: usize, out: &mut Vec<episode::Episode>| -> PyResult<()> {
+        for _ in 0..k {
+            out.push(
+                episode::Episode::new(scenario.resolved.clone(), spec.clone())
+                    .map_err(PyValueError::new_err)?,
+            );
+        }
+        Ok(())
+    };
+    let mut out = Vec::new();
+    let before = crate::memory::resident();
+    make(n.min(PROBE), &mut out)?;
+    if n > PROBE {
+        if let (Some(before), Some(after)) = (before, crate::memory::resident()) {
+            let each = after.saturating_sub(before) / PROBE as u64;
+            let need = each.saturating_mul((n - PROBE) as u64);
+            if let Some(free) = crate::memory::available() {
+                if need > free {
+                    return Err(pyo3::exceptions::PyMemoryError::new_err(format!(
+                        "{n} environments need about {} ({} each, measured on the first {PROBE}), \
+                         more than the {} this process may still use (the machine's available \
+                         memory, its memory limits): make fewer",
+                        crate::memory::human(each.saturating_mul(n as u64)),
+                        crate::memory::human(each),
+                        crate::memory::human(free.saturating_add(each * PROBE as u64))
+                    )));
+                }
+            }
+        }
+        out.try_reserve_exact(n - out.len())
+            .map_err(|_| pyo3::exceptions::PyMemoryError::new_err(format!("{n} environments")))?;
+        make(n - PROBE, &mut out)?;
+    }
+    Ok(out)
+}
+
 #[pymethods]
 impl Batch {
     #[new]
@@ -353,10 +397,7 @@ impl Batch {
             )));
         }
         let spec = spec(robots, channels, budget, detectors, decision_period)?;
-        let episodes = (0..n)
-            .map(|_| episode::Episode::new(scenario.resolved.clone(), spec.clone()))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(PyValueError::new_err)?;
+        let episodes = episodes(scenario, &spec, n)?;
         let per = episodes.first().map_or(0, |e| e.action_size());
         let envs = Arc::new(Envs {
             slots: episodes

@@ -94,3 +94,27 @@ def test_a_rust_panic_is_an_exception_not_an_abort():
         fdi_mas._core.panic_for_test()
     # The interpreter goes on.
     assert fdi_mas.run(fdi_mas.Scenario.paper(duration_s=0.01), ticks=False).summary["ticks"] == 10
+
+
+def test_ctrl_c_reaches_a_long_run_between_ticks():
+    """Regression (issue 51): `fdi_mas.run` ran its whole simulation after Ctrl-C (the engine
+    never looked). KeyboardInterrupt now reaches it between ticks."""
+    import signal
+    import subprocess
+    import sys
+
+    script = (
+        "import fdi_mas\n"
+        "s = fdi_mas.Scenario.paper(duration_s=100000)\n"
+        "print('start', flush=True)\n"
+        "try:\n"
+        "    fdi_mas.run(s, ticks=False)\n"
+        "    print('ran to the end')\n"
+        "except KeyboardInterrupt:\n"
+        "    print('interrupted')\n"
+    )
+    p = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline().strip() == "start"
+    p.send_signal(signal.SIGINT)
+    out, _ = p.communicate(timeout=300)
+    assert out.strip() == "interrupted", out

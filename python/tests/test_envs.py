@@ -176,3 +176,32 @@ def test_the_vector_environment_names_the_environment_of_a_bad_action():
     # Nothing ran: the next good step is every environment's first tick.
     obs, *_ = vec.step(np.zeros(vec.action_space.shape))
     assert (obs[:, 0] == 0.0).all()
+
+
+def test_a_vector_environment_too_large_for_the_memory_left_raises_memory_error():
+    """Regression (issue 51): `VectorAttackerEnv(100000)` (about 83 KB an environment) under a
+    memory limit aborted the interpreter ("memory allocation … failed"). The size is checked
+    first: MemoryError, saying what it would need, and the interpreter goes on."""
+    import subprocess
+    import sys
+    import textwrap
+
+    script = textwrap.dedent(
+        """
+        import resource
+        import fdi_mas
+        from fdi_mas.envs import VectorAttackerEnv
+        scenario = fdi_mas.Scenario.paper(duration_s=0.3)
+        VectorAttackerEnv(2, scenario, threads=1)  # the module's own memory, first
+        resource.setrlimit(resource.RLIMIT_AS, (3 << 30, 3 << 30))
+        try:
+            VectorAttackerEnv(100000, scenario, threads=1)
+        except MemoryError as e:
+            print("MemoryError:", e)
+        print("still here")
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "MemoryError: 100000 environments need about" in out.stdout, out.stdout + out.stderr
+    assert "still here" in out.stdout

@@ -346,9 +346,8 @@ impl NetConfig {
             Security::Insecure => {
                 set(&mut c, "transport/link/protocols", "[\"tcp\"]".into())?;
             }
-            Security::Tls {
-                ca, cert, key, lab, ..
-            } => {
+            #[rustfmt::skip]
+            Security::Tls { ca, cert, key, lab, .. } => {
                 // QUIC only (TLS 1.3, mutual authentication): nothing else is accepted. Zenoh's
                 // TLS over TCP is not used: its link reads and writes one TLS stream from two
                 // tasks at once, which rustls does not support, and under traffic both ways
@@ -447,26 +446,19 @@ pub fn admit_only(listen: &[String], peers: &[std::net::IpAddr]) -> Result<(), S
 /// The most addresses [`admit_only`] filters on.
 const MAX_FILTERED_PEERS: usize = 48;
 
+/// A jump of a filter instruction being built: to the final accept, to an instruction, or none.
+#[derive(Clone, Copy)]
+enum Jump {
+    Accept,
+    To(usize),
+    Fall,
+}
+
 /// The classic BPF program of [`admit_only`]: accepts a datagram whose IP source address is
 /// one of `peers` or a loopback address, drops any other. It reads the network header (the
 /// kernel's negative offset `SKF_NET_OFF`), IPv4 and IPv6 alike.
 fn peer_filter(peers: &[std::net::IpAddr]) -> Vec<socket2::SockFilter> {
-    use socket2::SockFilter as F;
     use std::net::IpAddr;
-    const NET: u32 = 0xfff0_0000; // SKF_NET_OFF (-0x100000)
-    const LD_W: u16 = 0x20; // BPF_LD | BPF_W | BPF_ABS
-    const LD_B: u16 = 0x30; // BPF_LD | BPF_B | BPF_ABS
-    const AND: u16 = 0x54; // BPF_ALU | BPF_AND | BPF_K
-    const JEQ: u16 = 0x15; // BPF_JMP | BPF_JEQ | BPF_K
-    const RET: u16 = 0x06; // BPF_RET | BPF_K
-                           // Instructions are built with placeholders for jumps: `Accept` (to the final accept) and
-                           // `Next` (past this test), resolved at the end.
-    enum Jump {
-        Accept,
-        Next(usize),
-        Fall,
-    }
-    let mut code: Vec<(u16, Jump, Jump, u32)> = Vec::new();
     let v4: Vec<u32> = peers
         .iter()
         .filter_map(|p| match p {
@@ -474,7 +466,7 @@ fn peer_filter(peers: &[std::net::IpAddr]) -> Vec<socket2::SockFilter> {
             IpAddr::V6(a) => a.to_ipv4_mapped().map(u32::from),
         })
         .collect();
-    let v6: Vec<[u32; 4]> = peers
+    let mut v6: Vec<[u32; 4]> = peers
         .iter()
         .filter_map(|p| match p {
             IpAddr::V6(a) if a.to_ipv4_mapped().is_none() => {
@@ -486,56 +478,60 @@ fn peer_filter(peers: &[std::net::IpAddr]) -> Vec<socket2::SockFilter> {
             _ => None,
         })
         .collect();
-    let mut v6_tests: Vec<[u32; 4]> = v6.clone();
-    v6_tests.push([0, 0, 0, 1]); // ::1
-                                 // The IP version: the high nibble of the header's first byte.
-    code.push((LD_B, Jump::Fall, Jump::Fall, NET));
-    code.push((AND, Jump::Fall, Jump::Fall, 0xf0));
-    // Not 4: the IPv6 part, after the IPv4 one (its length: 2 + 2 per v4 peer + 2... known
-    // below), so a placeholder resolved once the IPv4 part is built.
+    v6.push([0, 0, 0, 1]); // ::1
+    let mut code: Vec<(u16, Jump, Jump, u32)> = Vec::new();
+    // The IP version: the high nibble of the header's first byte; 4 falls through to the
+    // IPv4 part, anything else jumps to the IPv6 part (its place is known once the IPv4 part
+    // is built).
+    code.push((BPF_LD_B, Jump::Fall, Jump::Fall, SKF_NET_OFF));
+    code.push((BPF_AND, Jump::Fall, Jump::Fall, 0xf0));
     let version_test = code.len();
-    code.push((JEQ, Jump::Fall, Jump::Fall, 0x40));
-    // IPv4: the source address, then each peer; then loopback (127.0.0.0/8).
-    code.push((LD_W, Jump::Fall, Jump::Fall, NET + 12));
-    for a in &v4 {
-        code.push((JEQ, Jump::Accept, Jump::Fall, *a));
-    }
-    code.push((AND, Jump::Fall, Jump::Fall, 0xff00_0000));
-    code.push((JEQ, Jump::Accept, Jump::Fall, 0x7f00_0000));
-    code.push((RET, Jump::Fall, Jump::Fall, 0));
-    let v6_start = code.len();
-    // IPv6: each address in four words (source at bytes 8..24).
-    for words in &v6_tests {
+    code.push((BPF_JEQ, Jump::Fall, Jump::Fall, 0x40));
+    // IPv4: the source address, each peer's; then loopback (127.0.0.0/8).
+    code.push((BPF_LD_W, Jump::Fall, Jump::Fall, SKF_NET_OFF + 12));
+    code.extend(v4.iter().map(|a| (BPF_JEQ, Jump::Accept, Jump::Fall, *a)));
+    code.push((BPF_AND, Jump::Fall, Jump::Fall, 0xff00_0000));
+    code.push((BPF_JEQ, Jump::Accept, Jump::Fall, 0x7f00_0000));
+    code.push((BPF_RET, Jump::Fall, Jump::Fall, 0));
+    code[version_test].2 = Jump::To(code.len());
+    // IPv6: each address in four words (the source at bytes 8..24).
+    for words in &v6 {
         let test_end = code.len() + 8;
         for (i, w) in words.iter().enumerate() {
-            code.push((LD_W, Jump::Fall, Jump::Fall, NET + 8 + 4 * i as u32));
-            let last = i == 3;
             code.push((
-                JEQ,
-                if last { Jump::Accept } else { Jump::Fall },
-                Jump::Next(test_end),
-                *w,
+                BPF_LD_W,
+                Jump::Fall,
+                Jump::Fall,
+                SKF_NET_OFF + 8 + 4 * i as u32,
             ));
+            let matched = if i == 3 { Jump::Accept } else { Jump::Fall };
+            code.push((BPF_JEQ, matched, Jump::To(test_end), *w));
         }
     }
-    code.push((RET, Jump::Fall, Jump::Fall, 0));
+    code.push((BPF_RET, Jump::Fall, Jump::Fall, 0));
     let accept = code.len();
-    code.push((RET, Jump::Fall, Jump::Fall, 0xffff_ffff));
-    // The version test: 4 falls through to the IPv4 part, anything else jumps to IPv6.
-    code[version_test].2 = Jump::Next(v6_start);
-    let offset = |from: usize, to: usize| u8::try_from(to - from - 1).unwrap_or(u8::MAX);
+    code.push((BPF_RET, Jump::Fall, Jump::Fall, 0xffff_ffff));
+    // A jump is an offset past the next instruction.
+    let offset = |from: usize, j: Jump| match j {
+        Jump::Accept => u8::try_from(accept - from - 1).unwrap_or(u8::MAX),
+        Jump::To(to) => u8::try_from(to - from - 1).unwrap_or(u8::MAX),
+        Jump::Fall => 0,
+    };
     code.iter()
         .enumerate()
-        .map(|(i, (op, t, f, k))| {
-            let target = |j: &Jump| match j {
-                Jump::Accept => offset(i, accept),
-                Jump::Next(to) => offset(i, *to),
-                Jump::Fall => 0,
-            };
-            F::new(*op, target(t), target(f), *k)
-        })
+        .map(|(i, &(op, t, f, k))| socket2::SockFilter::new(op, offset(i, t), offset(i, f), k))
         .collect()
 }
+
+/// Classic BPF: `SKF_NET_OFF` (-0x100000), the offset of the network header.
+const SKF_NET_OFF: u32 = 0xfff0_0000;
+/// Classic BPF opcodes: `BPF_LD | BPF_W | BPF_ABS`, `BPF_LD | BPF_B | BPF_ABS`,
+/// `BPF_ALU | BPF_AND | BPF_K`, `BPF_JMP | BPF_JEQ | BPF_K`, `BPF_RET | BPF_K`.
+const BPF_LD_W: u16 = 0x20;
+const BPF_LD_B: u16 = 0x30;
+const BPF_AND: u16 = 0x54;
+const BPF_JEQ: u16 = 0x15;
+const BPF_RET: u16 = 0x06;
 
 /// A host's Zenoh session.
 #[derive(Debug, Clone)]
@@ -2185,6 +2181,36 @@ mod tests {
         drop((outbox, bell, inbox, woken));
         let _ = cell.stop();
         assert!(control.stop().is_err(), "the refusal is the bridge's error");
+    }
+
+    /// The socket filter of [`admit_only`] is a program the kernel takes (it checks every
+    /// jump), and a datagram from loopback passes it. (That those of other addresses do not is
+    /// the flood test's, in network namespaces: `tests/tests/multihost.rs`.)
+    #[test]
+    fn the_peer_filter_is_taken_by_the_kernel_and_lets_loopback_through() {
+        let peers: Vec<std::net::IpAddr> = ["10.0.0.1", "10.0.0.2", "fe80::1", "::ffff:10.0.0.3"]
+            .iter()
+            .map(|a| a.parse().expect("address"))
+            .collect();
+        let program = peer_filter(&peers);
+        // 3 + 1 + 3 peers of IPv4 + 3, then 8 per IPv6 address (one, and ::1), and 2 returns.
+        assert_eq!(program.len(), 3 + 1 + 3 + 3 + 16 + 2);
+        let receiver = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+        socket2::SockRef::from(&receiver)
+            .attach_filter(&program)
+            .expect("the kernel takes the program");
+        receiver
+            .set_read_timeout(Some(Duration::from_secs(10)))
+            .expect("timeout");
+        let sender = std::net::UdpSocket::bind("127.0.0.1:0").expect("bind");
+        sender
+            .send_to(b"hello", receiver.local_addr().expect("address"))
+            .expect("send");
+        let mut buf = [0u8; 8];
+        assert_eq!(receiver.recv(&mut buf).expect("received"), 5);
+        let too_many = vec![peers[0]; MAX_FILTERED_PEERS + 1];
+        let e = admit_only(&["quic/127.0.0.1:1".into()], &too_many).expect_err("refused");
+        assert!(e.contains("more than the 48"), "{e}");
     }
 
     #[test]

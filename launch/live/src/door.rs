@@ -132,6 +132,8 @@ pub struct Counts {
     pub dropped: AtomicU64,
     /// Clients let go: outbox full of control messages, or a connection over the limit.
     pub let_go: AtomicU64,
+    /// Connections relayed to the SDK's server (its handshake there done).
+    pub relayed: AtomicU64,
 }
 
 /// One open connection, as the door keeps it.
@@ -267,6 +269,7 @@ async fn relay(
     let Some(server) = connect(upstream, up).await else {
         return;
     };
+    counts.relayed.fetch_add(1, Ordering::Relaxed);
     pipe(client, server, counts, spoke).await;
 }
 

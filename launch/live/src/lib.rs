@@ -500,6 +500,11 @@ impl Live {
             events_dropped: self.events_dropped.load(Ordering::Relaxed),
             client_messages_dropped: self.door.dropped.load(Ordering::Relaxed),
             clients_let_go: self.door.let_go.load(Ordering::Relaxed),
+            clients_outside_the_door: self
+                .clients
+                .connected
+                .load(Ordering::Relaxed)
+                .saturating_sub(self.door.relayed.load(Ordering::Relaxed)),
             error: published.error,
         }
     }

@@ -162,6 +162,13 @@ pub fn live_line(s: &RunSummary) -> Option<String> {
             l.clients_let_go
         ));
     }
+    if l.clients_outside_the_door > 0 {
+        line.push_str(&format!(
+            "; {} clients connected to the server's loopback port directly, not through its door \
+             (a process of this machine: docs/security.md)",
+            l.clients_outside_the_door
+        ));
+    }
     if let Some(e) = &l.error {
         line.push_str(&format!("; a message could not be made: {e}"));
     }

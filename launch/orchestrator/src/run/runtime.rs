@@ -312,6 +312,40 @@ impl<X: Transport> Launcher<X> {
         ))
     }
 
+    /// Once the run's own processes are all done, a program taking a role that has not
+    /// reported done within its timeout after them (`since`: when they were), named.
+    fn external_late(&self, done: &[bool], since: &mut Option<Instant>) -> Option<String> {
+        let finished = |i: usize, p: &Proc| done[i] || p.status.is_some_and(|st| !st.success());
+        let own = |(i, p): (usize, &Proc)| p.meta.external.is_some() || finished(i, p);
+        if !self.procs.iter().enumerate().all(own) {
+            return None;
+        }
+        let since = *since.get_or_insert_with(Instant::now);
+        let (_, p) = self.procs.iter().enumerate().find(|(i, p)| {
+            !finished(*i, p) && p.meta.external.is_some_and(|t| since.elapsed() > t)
+        })?;
+        Some(format!(
+            "{} (pid {}) did not report done within {:.1} s after the run's other processes (a \
+             program that takes a role reports done on `fdi/status` after its last message: \
+             docs/protocol.md)",
+            p.label,
+            p.pid(),
+            since.elapsed().as_secs_f64()
+        ))
+    }
+
+    /// The processes that have not reported done (and not failed), named.
+    fn not_done(&self, done: &[bool]) -> String {
+        let names: Vec<&str> = self
+            .procs
+            .iter()
+            .enumerate()
+            .filter(|(i, p)| !(done[*i] || p.status.is_some_and(|st| !st.success())))
+            .map(|(_, p)| p.label.as_str())
+            .collect();
+        names.join(", ")
+    }
+
     /// A child stopped (SIGSTOP, or traced) for longer than [`STALL_LIMIT`], named.
     fn stalled(&mut self) -> Option<String> {
         self.procs.stalled(STALL_LIMIT)
@@ -1063,23 +1097,9 @@ fn supervise<X: Transport>(
         {
             return Ok((started.elapsed().as_secs_f64(), None));
         }
-        let own = |(i, p): (usize, &Proc)| p.meta.external.is_some() || finished(i, p);
-        if l.procs.iter().enumerate().all(own) {
-            let since = *own_done.get_or_insert_with(Instant::now);
-            if let Some(p) = l.procs.iter().enumerate().find(|(i, p)| {
-                !finished(*i, p) && p.meta.external.is_some_and(|t| since.elapsed() > t)
-            }) {
-                let p = p.1;
-                bar.abandon();
-                bail!(
-                    "run stopped: {} (pid {}) did not report done within {:.1} s after the \
-                     run's other processes (a program that takes a role reports done on \
-                     `fdi/status` after its last message: docs/protocol.md)",
-                    p.label,
-                    p.pid(),
-                    since.elapsed().as_secs_f64()
-                );
-            }
+        if let Some(late) = l.external_late(&done, &mut own_done) {
+            bar.abandon();
+            bail!("run stopped: {late}");
         }
         if let Some(stall) = l.stalled() {
             bar.abandon();
@@ -1088,17 +1108,10 @@ fn supervise<X: Transport>(
         }
         if let Some(stall) = l.no_progress(resolved, stall_timeout) {
             bar.abandon();
-            let waiting: Vec<String> = l
-                .procs
-                .iter()
-                .enumerate()
-                .filter(|(i, p)| !finished(*i, p))
-                .map(|(_, p)| p.label.clone())
-                .collect();
+            let waiting = l.not_done(&done);
             l.teardown();
             bail!(
-                "run stalled: {stall}; not done: {} (processes: {})",
-                waiting.join(", "),
+                "run stalled: {stall}; not done: {waiting} (processes: {})",
                 l.exits()
             );
         }
