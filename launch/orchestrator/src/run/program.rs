@@ -31,16 +31,26 @@ pub fn contain_descendants() -> std::io::Result<()> {
     rustix::process::set_child_subreaper(Some(rustix::process::getpid())).map_err(Into::into)
 }
 
-/// Notes `pid` as a child this process started (or, `started` false, reaped).
-pub fn note_started(pid: u32, started: bool) {
-    let mut s = STARTED
+fn started() -> std::sync::MutexGuard<'static, BTreeSet<u32>> {
+    STARTED
         .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner);
-    if started {
-        s.insert(pid);
-    } else {
-        s.remove(&pid);
-    }
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// Spawns `cmd` as a child this process started: the only way the launcher starts a process.
+/// The child is noted under the same lock [`reap_orphans`] holds, so a child that exits at
+/// once is never taken for an orphan and reaped behind its owner's back (its `wait` would
+/// then fail with "No child processes").
+pub fn spawn_noted(cmd: &mut Command) -> std::io::Result<std::process::Child> {
+    let mut s = started();
+    let child = cmd.spawn()?;
+    s.insert(child.id());
+    Ok(child)
+}
+
+/// Notes that the child `pid` this process started was reaped by its owner.
+pub fn note_reaped(pid: u32) {
+    started().remove(&pid);
 }
 
 /// What identifies the processes of one program.
@@ -209,10 +219,8 @@ impl Program {
 /// subreaper, and nothing else waits for them).
 pub fn reap_orphans() {
     let me = std::process::id();
-    let started = STARTED
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-        .clone();
+    // Held while the orphans are reaped: no child is started (and not yet noted) meanwhile.
+    let started = started();
     let Ok(pids) = procfs::pids() else {
         return;
     };
@@ -256,7 +264,7 @@ mod tests {
             .stdout(Stdio::null())
             .stderr(Stdio::null())
             .process_group(0);
-        let child = cmd.spawn().expect("sh");
+        let child = spawn_noted(&mut cmd).expect("sh");
         let program = Program::new(child.id(), &cmd);
         (child, program)
     }

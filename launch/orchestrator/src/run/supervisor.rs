@@ -177,8 +177,8 @@ impl<M> Supervisor<M> {
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
             .process_group(0);
-        let mut child = cmd.spawn().with_context(|| format!("spawning {label}"))?;
-        crate::run::program::note_started(child.id(), true);
+        let mut child = crate::run::program::spawn_noted(&mut cmd)
+            .with_context(|| format!("spawning {label}"))?;
         let tee = self.tee.clone();
         let stderr = child
             .stderr
@@ -221,13 +221,12 @@ impl<M> Supervisor<M> {
             .stdout(writer.try_clone().context("making a pipe for its output")?)
             .stderr(writer)
             .process_group(0);
-        let child = cmd.spawn().with_context(|| {
+        let child = crate::run::program::spawn_noted(&mut cmd).with_context(|| {
             format!(
                 "spawning {label} ({:?}: is the program installed and on PATH?)",
                 cmd.get_program()
             )
         })?;
-        crate::run::program::note_started(child.id(), true);
         let program = Program::new(child.id(), &cmd);
         // Our copies of the write end went into the command: dropped with it, so the relay
         // sees the end of the stream when the child (and whatever it started) exits.
@@ -257,7 +256,7 @@ impl<M> Supervisor<M> {
                 };
                 if let Some(st) = exited {
                     if let Handle::Local(child) = &c.child {
-                        crate::run::program::note_started(child.id(), false);
+                        crate::run::program::note_reaped(child.id());
                     }
                     c.status = Some(st);
                     out.push(i);
