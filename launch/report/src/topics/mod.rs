@@ -19,6 +19,7 @@ use anyhow::{Context, Result};
 use fdi_common::detect;
 use fdi_common::engine::tick_time;
 use fdi_common::records::true_s;
+use fdi_common::records::{AgentRecord, AttackRecord, CenterRecord};
 use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::trace::{TraceHeader, TraceRecord};
 use fdi_common::trajectory::TrajectoryConfig;
@@ -566,126 +567,9 @@ pub fn record(
     rec: &TraceRecord,
 ) -> Result<()> {
     match rec {
-        TraceRecord::Agent(a) => {
-            let t = info.t(a.k);
-            let (q, qd, qdd, dof) = info.desired(path, a.agent, a.k)?;
-            let (q, qd, qdd) = (&q[..dof], &qd[..dof], &qdd[..dof]);
-            let diff = |d: &[f64], x: &[f64]| -> Vec<f64> {
-                d.iter().zip(x).map(|(d, x)| d - x).collect()
-            };
-            let id = a.agent;
-            w.message(
-                id,
-                "state",
-                &STATE,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "q_rad": nums(a.q.as_slice()), "q_dot_rad_s": nums(a.qd.as_slice()),
-                "q_ddot_rad_s2": nums(a.qdd.as_slice())}),
-            )?;
-            w.message(
-                id,
-                "desired",
-                &DESIRED,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "q_des_rad": nums(q), "q_dot_des_rad_s": nums(qd), "q_ddot_des_rad_s2": nums(qdd)}),
-            )?;
-            w.message(
-                id,
-                "tracking_error",
-                &TRACKING,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "e_rad": diff(q, a.q.as_slice()), "e_dot_rad_s": diff(qd, a.qd.as_slice())}),
-            )?;
-            w.message(
-                id,
-                "measurement/clean",
-                &CLEAN,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "y_rad": nums(a.y.as_slice()), "y_dot_rad_s": nums(a.yd.as_slice())}),
-            )?;
-            w.message(
-                id,
-                "torque/applied",
-                &APPLIED,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "u_nm": nums(a.u_applied.as_slice()), "missed": a.missed}),
-            )?;
-            w.message(
-                id,
-                "delay",
-                &DELAY,
-                t,
-                &json!({"k": a.k, "t_s": t, "tau_s": a.tau}),
-            )
-        }
-        TraceRecord::Attack(a) => {
-            let t = info.t(a.k);
-            info.agent(path, a.agent)?;
-            let s: Vec<f64> = a
-                .alpha_position
-                .as_slice()
-                .iter()
-                .zip(a.alpha_velocity.as_slice())
-                .map(|(p, v)| true_s(*p, *v, info.beta))
-                .collect();
-            let delivery = a.delivery.as_str();
-            w.message(
-                a.agent,
-                "attack",
-                &ATTACK,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "alpha_pos_rad": nums(a.alpha_position.as_slice()),
-                "alpha_vel_rad_s": nums(a.alpha_velocity.as_slice()),
-                "s_true_rad_s": s, "active": a.active, "delivery": delivery}),
-            )?;
-            w.message(
-                a.agent,
-                "measurement/tampered",
-                &TAMPERED,
-                t,
-                &json!({"k": a.k, "t_s": t,
-                "y_rad": nums(a.y.as_slice()), "y_dot_rad_s": nums(a.yd.as_slice()),
-                "delivery": delivery}),
-            )
-        }
-        TraceRecord::Center(c) => {
-            let t = info.t(c.k);
-            info.agent(path, c.agent)?;
-            w.message(
-                c.agent,
-                "estimate",
-                &ESTIMATE,
-                t,
-                &json!({"k": c.k, "t_s": t,
-                "s_hat_rad_s": nums(c.s_hat.as_slice()), "q_hat_rad": nums(c.q_hat.as_slice()),
-                "q_dot_hat_rad_s": nums(c.qd_hat.as_slice()),
-                "q_ddot_hat_rad_s2": nums(c.qdd_hat.as_slice())}),
-            )?;
-            w.message(
-                c.agent,
-                "torque/sent",
-                &SENT,
-                t,
-                &json!({"k": c.k, "t_s": t,
-                "u_nm": nums(c.u.as_slice())}),
-            )?;
-            w.message(
-                c.agent,
-                "alarm",
-                &ALARM,
-                t,
-                &json!({"k": c.k, "t_s": t,
-                "alarm": c.alarm, "rejected_input": c.rejected_input,
-                "rejected_torque": c.rejected_torque, "state_reset": c.state_reset,
-                "history_miss": c.history_miss, "missing_input": c.missing_input}),
-            )
-        }
+        TraceRecord::Agent(a) => agent_messages(w, info, path, a),
+        TraceRecord::Attack(a) => attack_messages(w, info, path, a),
+        TraceRecord::Center(c) => center_messages(w, info, path, c),
         TraceRecord::Latency { k, agent, stamps } => {
             let t = info.t(*k);
             info.agent(path, *agent)?;
@@ -737,4 +621,129 @@ pub fn record(
             )
         }
     }
+}
+
+/// An agent's state, desired trajectory, tracking error, clean measurement, applied torque
+/// and delay.
+fn agent_messages(w: &mut impl Sink, info: &RunInfo, path: &Path, a: &AgentRecord) -> Result<()> {
+    let t = info.t(a.k);
+    let (q, qd, qdd, dof) = info.desired(path, a.agent, a.k)?;
+    let (q, qd, qdd) = (&q[..dof], &qd[..dof], &qdd[..dof]);
+    let diff = |d: &[f64], x: &[f64]| -> Vec<f64> { d.iter().zip(x).map(|(d, x)| d - x).collect() };
+    let id = a.agent;
+    w.message(
+        id,
+        "state",
+        &STATE,
+        t,
+        &json!({"k": a.k, "t_s": t,
+            "q_rad": nums(a.q.as_slice()), "q_dot_rad_s": nums(a.qd.as_slice()),
+            "q_ddot_rad_s2": nums(a.qdd.as_slice())}),
+    )?;
+    w.message(
+        id,
+        "desired",
+        &DESIRED,
+        t,
+        &json!({"k": a.k, "t_s": t,
+            "q_des_rad": nums(q), "q_dot_des_rad_s": nums(qd), "q_ddot_des_rad_s2": nums(qdd)}),
+    )?;
+    w.message(
+        id,
+        "tracking_error",
+        &TRACKING,
+        t,
+        &json!({"k": a.k, "t_s": t,
+            "e_rad": diff(q, a.q.as_slice()), "e_dot_rad_s": diff(qd, a.qd.as_slice())}),
+    )?;
+    w.message(
+        id,
+        "measurement/clean",
+        &CLEAN,
+        t,
+        &json!({"k": a.k, "t_s": t,
+            "y_rad": nums(a.y.as_slice()), "y_dot_rad_s": nums(a.yd.as_slice())}),
+    )?;
+    w.message(
+        id,
+        "torque/applied",
+        &APPLIED,
+        t,
+        &json!({"k": a.k, "t_s": t,
+            "u_nm": nums(a.u_applied.as_slice()), "missed": a.missed}),
+    )?;
+    w.message(
+        id,
+        "delay",
+        &DELAY,
+        t,
+        &json!({"k": a.k, "t_s": t, "tau_s": a.tau}),
+    )
+}
+
+/// The attack on a measurement and the tampered measurement.
+fn attack_messages(w: &mut impl Sink, info: &RunInfo, path: &Path, a: &AttackRecord) -> Result<()> {
+    let t = info.t(a.k);
+    info.agent(path, a.agent)?;
+    let s: Vec<f64> = a
+        .alpha_position
+        .as_slice()
+        .iter()
+        .zip(a.alpha_velocity.as_slice())
+        .map(|(p, v)| true_s(*p, *v, info.beta))
+        .collect();
+    let delivery = a.delivery.as_str();
+    w.message(
+        a.agent,
+        "attack",
+        &ATTACK,
+        t,
+        &json!({"k": a.k, "t_s": t,
+            "alpha_pos_rad": nums(a.alpha_position.as_slice()),
+            "alpha_vel_rad_s": nums(a.alpha_velocity.as_slice()),
+            "s_true_rad_s": s, "active": a.active, "delivery": delivery}),
+    )?;
+    w.message(
+        a.agent,
+        "measurement/tampered",
+        &TAMPERED,
+        t,
+        &json!({"k": a.k, "t_s": t,
+            "y_rad": nums(a.y.as_slice()), "y_dot_rad_s": nums(a.yd.as_slice()),
+            "delivery": delivery}),
+    )
+}
+
+/// The control center's estimate, sent torque and alarm.
+fn center_messages(w: &mut impl Sink, info: &RunInfo, path: &Path, c: &CenterRecord) -> Result<()> {
+    let t = info.t(c.k);
+    info.agent(path, c.agent)?;
+    w.message(
+        c.agent,
+        "estimate",
+        &ESTIMATE,
+        t,
+        &json!({"k": c.k, "t_s": t,
+            "s_hat_rad_s": nums(c.s_hat.as_slice()), "q_hat_rad": nums(c.q_hat.as_slice()),
+            "q_dot_hat_rad_s": nums(c.qd_hat.as_slice()),
+            "q_ddot_hat_rad_s2": nums(c.qdd_hat.as_slice())}),
+    )?;
+    w.message(
+        c.agent,
+        "torque/sent",
+        &SENT,
+        t,
+        &json!({"k": c.k, "t_s": t,
+            "u_nm": nums(c.u.as_slice())}),
+    )?;
+    w.message(
+        c.agent,
+        "alarm",
+        &ALARM,
+        t,
+        &json!({"k": c.k, "t_s": t,
+            "alarm": c.alarm, "rejected_input": c.rejected_input,
+            "rejected_torque": c.rejected_torque, "state_reset": c.state_reset,
+            "history_miss": c.history_miss, "missing_input": c.missing_input}),
+    )
 }
