@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::model::Vector;
 
-/// Known time-varying delay of the torque channel (SPEC §5), in seconds.
+/// Known time-varying delay of the torque channel (docs/model.md, "Delayed torque channel"), in seconds.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum DelayProfile {
@@ -186,7 +186,7 @@ pub struct Lookup<const N: usize> {
     /// Stamp of that command, `None` before the first.
     pub stamp: Option<f64>,
     /// True when a newer command should have been in force but has not arrived: the last
-    /// received command is held (SPEC §5 deadline miss). Also true when [`Self::pruned`].
+    /// received command is held (a deadline miss: docs/model.md, "Delayed torque channel"). Also true when [`Self::pruned`].
     pub missed: bool,
     /// The query reached before the oldest command kept after pruning: the oldest kept
     /// command is held (never zero) and the lookup counts as a miss.

@@ -1,5 +1,5 @@
-//! Run metrics from joined tick records: RMSE per robot (SPEC §7), time-to-detect per attack
-//! onset and false alarms (SPEC §4.9), for the paper's alarm and, side by side, for the
+//! Run metrics from joined tick records: RMSE per robot (docs/model.md, "Reproduction"), time-to-detect per attack
+//! onset and false alarms (docs/detectors.md), for the paper's alarm and, side by side, for the
 //! classical detectors of [`crate::detect`].
 
 use std::collections::BTreeMap;

@@ -1,5 +1,5 @@
 //! How a run's numbers were made: the controller and numerics options of a scenario that
-//! differ from the paper's calibration (the embedded paper scenario, SPEC §4).
+//! differ from the paper's calibration (the embedded paper scenario; docs/model.md, "Gains (the calibration)").
 //!
 //! Tables, summaries and reports name these beside every number they show, so a result is
 //! never shown without the choices that produced it.
@@ -61,7 +61,7 @@ pub fn differences_from_paper(s: &Scenario, compare: Compare) -> Vec<Difference>
 /// One line: `the paper's numerics` or `controller.x = 1 (paper: 2); …`.
 pub fn describe(differences: &[Difference]) -> String {
     if differences.is_empty() {
-        "the paper's calibration (SPEC §4)".into()
+        "the paper's calibration (docs/model.md, \"Gains\")".into()
     } else {
         differences
             .iter()
@@ -154,7 +154,10 @@ mod tests {
     #[test]
     fn the_paper_scenario_differs_in_nothing() {
         assert!(differences_from_paper(&paper(), Compare::WithMode).is_empty());
-        assert_eq!(describe(&[]), "the paper's calibration (SPEC §4)");
+        assert_eq!(
+            describe(&[]),
+            "the paper's calibration (docs/model.md, \"Gains\")"
+        );
     }
 
     #[test]

@@ -42,7 +42,7 @@ mod parsers {
 #[derive(Debug, Clone, Default)]
 #[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct NumericsArgs {
-    /// Replace `controller.observer_input`: `sample` (the paper's default, SPEC §4.6) or
+    /// Replace `controller.observer_input`: `sample` (the default; docs/model.md, "Numerics of the delayed input") or
     /// `step-mean`.
     #[cfg_attr(feature = "clap", arg(long, value_name = "INPUT"))]
     pub observer_input: Option<ObserverInput>,

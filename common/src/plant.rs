@@ -1,5 +1,5 @@
 //! The agent's side: the true robot, its sensor, and the delayed torque channel's receiving end
-//! (SPEC §2, §5). Integration: classic RK4 over each control period (optionally sub-stepped),
+//! (docs/model.md, "Plant" and "Delayed torque channel"). Integration: classic RK4 over each control period (optionally sub-stepped),
 //! each sub-step split where the zero-order-held delayed input `u(t − τ(t))` switches to a
 //! newer command, so every RK stage sees the command in force over its whole piece.
 
@@ -293,7 +293,7 @@ impl<const N: usize> Plant<N> {
 }
 // `[noise]` and `[disturbance]` of a scenario: read by the plant only.
 
-/// Gaussian sensor noise θ (SPEC §2).
+/// Gaussian sensor noise θ (docs/model.md, "Plant").
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NoiseConfig {

@@ -1,7 +1,7 @@
 //! The scenario: everything a run needs, as TOML (serde, `deny_unknown_fields`), then
 //! [`Scenario::validate`] that returns every problem with its field path.
 //!
-//! Parameters carry their units in their names; typical values are the paper's (SPEC §4).
+//! Parameters carry their units in their names; typical values are the paper's (docs/model.md, "Gains (the calibration)").
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -41,7 +41,7 @@ pub const MAX_PLAUSIBLE_ATTACK_RAD: f64 = 10.0;
 /// The embedded default scenario: the paper's experiment (identical to `scenarios/paper.toml`).
 pub const PAPER_SCENARIO: &str = include_str!("../../scenarios/paper.toml");
 
-/// How processes are clocked (SPEC §6).
+/// How processes are clocked (docs/model.md, "Clocks").
 #[derive(
     Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema, Default,
 )]
@@ -1656,7 +1656,7 @@ mod tests {
         assert_eq!(
             paper().expect("valid").scenario.controller.observer_input,
             ObserverInput::Sample,
-            "absent means sample (SPEC §4.6)"
+            "absent means sample (the default)"
         );
         let anchor = "detection = { threshold = 0.6, hold_s = 0.05 }\n";
         assert!(PAPER_SCENARIO.contains(anchor));

@@ -552,7 +552,7 @@ fn delay_sweep(setup: &Setup, delays_ms: &[f64]) -> Result<()> {
     Ok(())
 }
 
-/// Table I of the paper, proposed controller, robots 1–4 (SPEC §8).
+/// Table I of the paper, proposed controller, robots 1–4 (docs/model.md, "Reproduction").
 const PAPER_TABLE1_PROPOSED: [(u32, f64); 4] = [(1, 0.008), (2, 0.013), (3, 0.009), (4, 0.010)];
 
 /// Per agent id, RMSE (rad) and false alarms of one in-process run.

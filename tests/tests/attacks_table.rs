@@ -57,7 +57,7 @@ fn attacks_table_has_a_row_per_class_and_marks_what_is_undefined() {
     let (made, csv_text) = csv_text.split_once('\n').expect("a comment line");
     assert_eq!(
         made,
-        "# made with scenario: the embedded paper scenario; numerics: the paper's calibration (SPEC §4)"
+        "# made with scenario: the embedded paper scenario; numerics: the paper's calibration (docs/model.md, \"Gains\")"
     );
     // No field of this table needs CSV quoting (names, numbers, empty fields).
     assert!(!csv_text.contains('"'), "{csv_text}");

@@ -52,7 +52,7 @@ fn robot_1_under_the_paper_laws_does_not_drift_between_150_and_300_s() {
     assert_eq!(alarms, 0, "false alarms over 300 s without attack");
 }
 
-/// Table I of the paper, proposed controller (SPEC §8).
+/// Table I of the paper, proposed controller (docs/model.md, "Reproduction").
 const PAPER_TABLE1: [(u32, f64); 4] = [(1, 0.008), (2, 0.013), (3, 0.009), (4, 0.010)];
 
 #[test]

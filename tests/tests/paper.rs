@@ -32,7 +32,7 @@ fn the_paper_scenario_reproduces_table_i_under_the_default_numerics() {
     assert_eq!(
         paper.scenario.controller.observer_input,
         ObserverInput::Sample,
-        "the default observer input is SPEC §4.6's sample"
+        "the default observer input is the sample"
     );
     assert!(paper.scenario.controller.update_law.is_paper());
     // Measured: proposed 0.0086 / 0.0107 / 0.0086 / 0.0087, traditional 0.0187 / 0.0494 /

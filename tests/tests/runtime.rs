@@ -28,7 +28,7 @@ fn lockstep_ipc_digest_equals_the_in_process_digest() {
     assert_eq!(ipc["trace_digest"], inproc["trace_digest"], "under {out}");
     assert_eq!(ipc["rmse_rad"], inproc["rmse_rad"]);
     assert_eq!(ipc["ticks"], 3000);
-    // The run directory holds what SPEC §7 lists.
+    // The run directory holds what docs/traces.md lists.
     let run_dir = std::path::PathBuf::from(ipc["run_dir"].as_str().expect("run_dir"));
     for f in [
         fdi_common::run_dir::RunDir::SCENARIO,

@@ -1,4 +1,4 @@
-//! False-data-injection attack profiles as data (SPEC §3).
+//! False-data-injection attack profiles as data (docs/attacks.md).
 //!
 //! A profile is a list of channels; a channel targets one agent, one signal (position or
 //! velocity) and one or more links, and holds a time schedule of segments, each a

@@ -1,4 +1,4 @@
-//! The control center's per-agent pipeline for one tick (SPEC §4, steps 1–10).
+//! The control center's per-agent pipeline for one tick (docs/model.md, "Control center", steps 1–10).
 
 use crate::delay::{DelayLine, DelayProfile};
 use crate::model::{EulerLagrange, Matrix, ModelConfig, Vector};
@@ -270,7 +270,7 @@ impl<const N: usize> CenterAgent<N> {
         // Sampling u at the single instant t − τ(t) instead would pick the older or the newer
         // command when that instant falls on a stamp (τ a multiple of Δ), a whole period of
         // effective delay that a hair of τ more or less would flip.
-        // With `observer_input = "sample"` (SPEC §4.6 as written), u_τ is the command in force
+        // With `observer_input = "sample"` (the default: docs/model.md, "Numerics of the delayed input"), u_τ is the command in force
         // at `t − τ(t)`, held over the step.
         let query_next = (t + dt) - self.params.delay.tau(t + dt);
         match self.params.controller.observer_input {

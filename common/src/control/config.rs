@@ -4,7 +4,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::problem::Problem;
 
-/// Controller variant (SPEC §4.8).
+/// Controller variant (docs/model.md, "Control center", step 8).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(rename_all = "kebab-case")]
 pub enum ControllerMode {
@@ -48,8 +48,8 @@ pub enum ObserverInput {
     /// The mean of the delayed input `u(s − τ(s))` over the step: the input the plant
     /// integrates over that step.
     StepMean,
-    /// The single sample `u(t_k − τ(t_k))` held over the step (SPEC §4.6 as written; the
-    /// numerics of the SPEC's prototype; the default: it reproduces the paper's Table I). It
+    /// The single sample `u(t_k − τ(t_k))` held over the step (the default: it reproduces the
+    /// paper's Table I; docs/model.md, "Numerics of the delayed input"). It
     /// lags the plant's input by about half a period.
     #[default]
     Sample,
@@ -86,7 +86,7 @@ impl std::str::FromStr for ObserverInput {
     }
 }
 
-/// Alarm when `‖Ŝ‖` stays above a threshold for a hold time (beyond the paper, SPEC §4.9).
+/// Alarm when `‖Ŝ‖` stays above a threshold for a hold time (beyond the paper: docs/model.md, "Control center", step 9).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct DetectionConfig {
@@ -96,7 +96,7 @@ pub struct DetectionConfig {
     pub hold_s: f64,
 }
 
-/// Gains of the control center (SPEC §4, calibration there).
+/// Gains of the control center (docs/model.md, "Gains (the calibration)").
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ControllerConfig {
@@ -129,7 +129,7 @@ pub struct ControllerConfig {
     /// or all 0: the paper's laws.
     #[serde(default, skip_serializing_if = "UpdateLaw::is_paper")]
     pub update_law: UpdateLaw,
-    /// `observer_input`: `"sample"` (default, SPEC §4.6) or `"step-mean"`, the discretization
+    /// `observer_input`: `"sample"` (default; docs/model.md, "Numerics of the delayed input") or `"step-mean"`, the discretization
     /// of the observer's input `u_τ` ([`ObserverInput`]).
     #[serde(default, skip_serializing_if = "ObserverInput::is_default")]
     pub observer_input: ObserverInput,

@@ -1,7 +1,7 @@
 //! The paper's agent: a two-link revolute planar manipulator (eq. 67).
 //!
 //! `c2 = cos q2`, `s2 = sin q2` of the **true** state: the `cos(y2)` in the paper's eq. (67) is a
-//! typo, physics does not see the attacked measurement (SPEC §2). Planar, so `G = 0`.
+//! typo, physics does not see the attacked measurement (docs/model.md, "Plant"). Planar, so `G = 0`.
 
 use serde::{Deserialize, Serialize};
 

@@ -189,7 +189,7 @@ pub fn attack_words(s: &RunSummary) -> String {
 }
 
 /// The controller and numerics options of a run beyond its mode (which its header names):
-/// `the paper's calibration (SPEC §4)` or each difference with the paper's value.
+/// `the paper's calibration (docs/model.md, "Gains")` or each difference with the paper's value.
 pub fn numerics_line(s: &RunSummary) -> String {
     let beyond_mode: Vec<_> = s
         .numerics

@@ -1,6 +1,6 @@
 //! Corrupt values: a deliberate fault injection, not a stealthy attack. The attacker adds a
 //! non-finite or absurd `value` (NaN, ±∞, 1e300, …) to the measurement, to exercise the control
-//! center's input guard (SPEC §4.10: such a measurement is rejected, counted, the last good one
+//! center's input guard (docs/model.md, "Control center", step 10: such a measurement is rejected, counted, the last good one
 //! held, and no non-finite torque is ever sent).
 //!
 //! This is the one waveform exempt from the finiteness check of [`super::Waveform::problems`]:

@@ -75,7 +75,7 @@ pub enum Waveform {
     },
     /// Fault injection: `value` as is, NaN, ±∞ or absurdly large (`{ kind = "corrupt", value =
     /// "nan" }`, `"inf"`, `"-inf"` or a number such as `1e300`). The only waveform exempt from the
-    /// finiteness check; the control center must reject what it produces (SPEC §4.10).
+    /// finiteness check; the control center must reject what it produces (docs/model.md, "Control center", step 10).
     Corrupt {
         /// A number, or "nan", "inf", "+inf", "-inf".
         value: CorruptValue,

@@ -79,7 +79,7 @@ fn projection_handles_weights_whose_squares_overflow() {
     assert!((frobenius(&m) - 50.0).abs() < 1e-9, "{m:?}");
 }
 
-/// The paper's (37), (38) as SPEC §4.7 states them, written out independently of
+/// The paper's (37), (38) as docs/model.md states them ("Control center", step 7), written out independently of
 /// [`NnEstimator::update`] (same order of operations): Euler step of `V̂` with the old `Ŵ`,
 /// then of `Ŵ`, then projection.
 fn paper_step(nn: &NnEstimator<2>, w: &mut [f64], v: &mut [f64], psi2: &Vector<2>, dt: f64) {
