@@ -584,36 +584,6 @@ impl Scenario {
                 }
             }
         }
-        let end = self.duration_s;
-        let late = |from_s: f64| end.is_finite() && from_s >= end;
-        let never = |from_s: f64| {
-            format!("starts at {from_s} s, at or after the end of the run (duration_s = {end} s): it never acts")
-        };
-        for (i, ch) in attack.channels.iter().enumerate() {
-            for (j, seg) in ch.segments.iter().enumerate() {
-                if late(seg.from_s) {
-                    push(
-                        format!("attack.channels[{i}].segments[{j}].from_s"),
-                        never(seg.from_s),
-                    );
-                }
-            }
-        }
-        for (i, m) in attack.messages.iter().enumerate() {
-            for (j, seg) in m.segments.iter().enumerate() {
-                if late(seg.from_s) {
-                    push(
-                        format!("attack.messages[{i}].segments[{j}].from_s"),
-                        never(seg.from_s),
-                    );
-                }
-            }
-        }
-        for (i, c) in attack.covert.iter().enumerate() {
-            if late(c.from_s) {
-                push(format!("attack.covert[{i}].from_s"), never(c.from_s));
-            }
-        }
         for (i, ch) in attack.channels.iter().enumerate() {
             if ch.signal == crate::attack::Signal::Torque {
                 continue;
@@ -626,6 +596,62 @@ impl Scenario {
                         format!("injects up to {rad:.3e} rad (or rad/s), more than {MAX_PLAUSIBLE_ATTACK_RAD}: measurements that far off may drive the plant beyond any bound"),
                     );
                 }
+            }
+        }
+        out.extend(self.late_attack_warnings(attack));
+        out
+    }
+
+    /// The attacks of `attack` that never act within the run: per robot when none of its
+    /// attacks does, else per segment.
+    fn late_attack_warnings(&self, attack: &AttackProfile) -> Vec<Problem> {
+        let mut out = Vec::new();
+        let mut push = |path: String, message: String| out.push(Problem { path, message });
+        let end = self.duration_s;
+        let late = |from_s: f64| end.is_finite() && from_s >= end;
+        let never = |from_s: f64| {
+            format!("starts at {from_s} s, at or after the end of the run (duration_s = {end} s): it never acts")
+        };
+        // Per robot: an attack that never acts within the run (issue 55: a 10 s run of a
+        // profile whose only attack starts at 10 s ran with no attacked tick and no word).
+        // The late segments of such a robot are not listed one by one.
+        let mut silent_agents = Vec::new();
+        for agent in attack.agents() {
+            let silent = match attack.first_action_s(agent) {
+                Some(first) if late(first) => format!(
+                    "robot {agent} is never attacked within the run: its first attack starts at {first} s, at or after the end (duration_s = {end} s)"
+                ),
+                Some(_) => continue,
+                None => format!(
+                    "robot {agent} is named but never attacked: every segment of its attack is `none` or `pass`"
+                ),
+            };
+            silent_agents.push(agent);
+            push("attack".into(), silent);
+        }
+        for (i, ch) in attack.channels.iter().enumerate() {
+            for (j, seg) in ch.segments.iter().enumerate() {
+                if late(seg.from_s) && !silent_agents.contains(&ch.agent) {
+                    push(
+                        format!("attack.channels[{i}].segments[{j}].from_s"),
+                        never(seg.from_s),
+                    );
+                }
+            }
+        }
+        for (i, m) in attack.messages.iter().enumerate() {
+            for (j, seg) in m.segments.iter().enumerate() {
+                if late(seg.from_s) && !silent_agents.contains(&m.agent) {
+                    push(
+                        format!("attack.messages[{i}].segments[{j}].from_s"),
+                        never(seg.from_s),
+                    );
+                }
+            }
+        }
+        for (i, c) in attack.covert.iter().enumerate() {
+            if late(c.from_s) && !silent_agents.contains(&c.agent) {
+                push(format!("attack.covert[{i}].from_s"), never(c.from_s));
             }
         }
         out
@@ -1496,6 +1522,38 @@ mod tests {
         // A warning, not a problem: the scenario stays valid.
         let problems = r.clone().with_attack(attack).err();
         assert!(problems.is_none(), "{problems:?}");
+    }
+
+    #[test]
+    fn a_robot_whose_attack_never_acts_within_the_run_is_a_warning_naming_it() {
+        let mut r = paper().expect("paper");
+        let freeze = presets::preset("freeze").expect("the freeze preset");
+        let robot_1 = |w: &[Problem]| -> Vec<String> {
+            w.iter()
+                .filter(|p| p.path == "attack")
+                .map(|p| p.message.clone())
+                .collect()
+        };
+        // The freeze starts at 10 s: a 10 s run never sees it, an 11 s run does.
+        r.scenario.duration_s = 10.0;
+        assert_eq!(
+            robot_1(&r.scenario.warnings(&freeze)),
+            ["robot 1 is never attacked within the run: its first attack starts at 10 s, at or after the end (duration_s = 10 s)"]
+        );
+        r.scenario.duration_s = 11.0;
+        assert!(robot_1(&r.scenario.warnings(&freeze)).is_empty());
+        // A robot named with nothing but `none`.
+        let mut idle = freeze.clone();
+        for ch in &mut idle.channels {
+            ch.agent = 2;
+            for seg in &mut ch.segments {
+                seg.waveform = crate::attack::Waveform::None;
+            }
+        }
+        assert_eq!(
+            robot_1(&r.scenario.warnings(&idle)),
+            ["robot 2 is named but never attacked: every segment of its attack is `none` or `pass`"]
+        );
     }
 
     #[test]

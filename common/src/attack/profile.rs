@@ -205,6 +205,32 @@ impl AttackProfile {
         out
     }
 
+    /// When the first attack on `agent` starts acting, s: the earliest start of a segment that
+    /// injects something (a waveform other than `none`), of a message segment other than
+    /// `pass`, or of a covert attack. `None`: the profile never attacks it.
+    pub fn first_action_s(&self, agent: u32) -> Option<f64> {
+        let channels = self
+            .channels
+            .iter()
+            .filter(|c| c.agent == agent)
+            .flat_map(|c| &c.segments)
+            .filter(|s| !s.waveform.is_none())
+            .map(|s| s.from_s);
+        let messages = self
+            .messages
+            .iter()
+            .filter(|m| m.agent == agent)
+            .flat_map(|m| &m.segments)
+            .filter(|s| s.effect != super::message::Effect::Pass)
+            .map(|s| s.from_s);
+        let covert = self
+            .covert
+            .iter()
+            .filter(|c| c.agent == agent)
+            .map(|c| c.from_s);
+        channels.chain(messages).chain(covert).reduce(f64::min)
+    }
+
     /// Every problem of the profile, as `(field path relative to the profile, message)`.
     /// `agent_dofs` maps each agent id of the scenario to its number of links.
     pub fn problems(&self, agent_dofs: &BTreeMap<u32, usize>) -> Vec<(String, String)> {

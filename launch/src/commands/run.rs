@@ -134,6 +134,12 @@ pub struct RunDone {
 /// prints the summary.
 pub fn run_scenario(args: &RunArgs, stop: &Stop) -> Result<RunDone> {
     let request = request(args)?;
+    // What `validate` warns of, said before the run (an attack that never acts, a gain far
+    // from the calibration, …): the run goes on.
+    let r = &request.resolved;
+    for w in r.scenario.warnings(&r.attack) {
+        eprintln!("fdi-launch: warning: {}: {}", w.path, w.message);
+    }
     stop.check(BEFORE_THE_START)?;
     let run_dir = request.create_run_dir(&args.out)?;
     let summary = execute(&request, &run_dir, stop)?;
