@@ -13,7 +13,8 @@
 //!     a QUIC session that trusts the lab's CA but shows no certificate: says whether it
 //!     ever reached a serve
 //! fdi-rogue [--tls CA CERT KEY] ENDPOINT[,ENDPOINT...] forge-ahead JUMP SECONDS
-//!     the first measurement frame seen goes back on its key numbered JUMP ahead
+//!     the first measurement frame seen goes back on its key numbered JUMP ahead (a payload
+//!     is a batch of frames: each frame of it counts)
 //! fdi-rogue [--tls CA CERT KEY] ENDPOINT bias AGENT RAD FRAMES SECONDS
 //!     each measurement frame of AGENT seen goes back on its key with y[0] + RAD, FRAMES times
 //! fdi-rogue [--tls CA CERT KEY] ENDPOINT impersonate HOST PREFIX SECONDS
@@ -284,24 +285,31 @@ fn forge(net: &Net, forgery: Forgery, seconds: f64) {
         let Ok((key, bytes)) = rx.recv_timeout(Duration::from_millis(50)) else {
             continue;
         };
-        seen += 1;
-        let Ok(mut m) = MeasurementMsg::read_from_bytes(&bytes) else {
-            continue;
-        };
-        if forged >= limit {
+        // A payload is a batch of one or more frames (what the bridge drained at once).
+        let size = std::mem::size_of::<MeasurementMsg>();
+        if bytes.is_empty() || bytes.len() % size != 0 {
             continue;
         }
-        match forgery {
-            Forgery::Ahead(jump) => m.seq += jump,
-            Forgery::Bias(agent, rad, _) if m.agent == agent => m.y[0] += rad,
-            Forgery::Bias(..) => continue,
-        }
-        if !outboxes.iter().any(|(k, _)| *k == key) {
-            outboxes.push((key.clone(), net.outbox(&key).expect("outbox")));
-        }
-        if let Some((_, o)) = outboxes.iter().find(|(k, _)| *k == key) {
-            if o.put(m.as_bytes()).is_ok() {
-                forged += 1;
+        for frame in bytes.chunks_exact(size) {
+            seen += 1;
+            let Ok(mut m) = MeasurementMsg::read_from_bytes(frame) else {
+                continue;
+            };
+            if forged >= limit {
+                continue;
+            }
+            match forgery {
+                Forgery::Ahead(jump) => m.seq += jump,
+                Forgery::Bias(agent, rad, _) if m.agent == agent => m.y[0] += rad,
+                Forgery::Bias(..) => continue,
+            }
+            if !outboxes.iter().any(|(k, _)| *k == key) {
+                outboxes.push((key.clone(), net.outbox(&key).expect("outbox")));
+            }
+            if let Some((_, o)) = outboxes.iter().find(|(k, _)| *k == key) {
+                if o.put(m.as_bytes()).is_ok() {
+                    forged += 1;
+                }
             }
         }
     }

@@ -307,7 +307,11 @@ mod tests {
         };
         wait_for(|| pid_in(&kept).is_some() && pid_in(&gone).is_some());
         let (kept, gone) = (pid_in(&kept).unwrap_or(0), pid_in(&gone).unwrap_or(0));
-        wait_for(|| program.members().len() == 3);
+        // `setsid` is found in the group until it has called setsid(2): wait for that.
+        wait_for(|| {
+            let m = program.members();
+            m.len() == 3 && m.iter().any(|m| m.pid == gone && !m.in_group)
+        });
         let members = program.members();
         assert!(
             members.iter().any(|m| m.pid == kept && m.in_group),
