@@ -103,7 +103,11 @@ def test_ctrl_c_reaches_a_long_run_between_ticks():
     import subprocess
     import sys
 
+    # Python leaves SIGINT ignored in a child whose parent ignored it (a job started in the
+    # background by a shell): the child asks for Ctrl-C's usual meaning itself.
     script = (
+        "import signal\n"
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
         "import fdi_mas\n"
         "s = fdi_mas.Scenario.paper(duration_s=100000)\n"
         "print('start', flush=True)\n"

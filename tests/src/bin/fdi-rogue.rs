@@ -17,6 +17,7 @@
 //!     is a batch of frames: each frame of it counts)
 //! fdi-rogue [--tls CA CERT KEY] ENDPOINT bias AGENT RAD FRAMES SECONDS
 //!     each measurement frame of AGENT seen goes back on its key with y[0] + RAD, FRAMES times
+//!     (forge-ahead and bias end once their frames are forged, or after SECONDS)
 //! fdi-rogue [--tls CA CERT KEY] ENDPOINT impersonate HOST PREFIX SECONDS
 //!     measurement frames put every millisecond on HOST's key of run PREFIX, and on the
 //!     rogue's own; says whether HOST's serve was ever seen
@@ -281,7 +282,8 @@ fn forge(net: &Net, forgery: Forgery, seconds: f64) {
     let mut outboxes: Vec<(String, fdi_runtime::net::NetOutbox)> = Vec::new();
     let (mut forged, mut seen) = (0u64, 0u64);
     let began = Instant::now();
-    while began.elapsed().as_secs_f64() < seconds {
+    // Until the frames asked for are forged, or at most `seconds`.
+    while forged < limit && began.elapsed().as_secs_f64() < seconds {
         let Ok((key, bytes)) = rx.recv_timeout(Duration::from_millis(50)) else {
             continue;
         };
