@@ -924,8 +924,9 @@ fn an_insecure_run_refuses_names_and_counts_what_a_rogue_peer_sends() {
         "--json",
     ]);
     let _ = lab.next_run_prefix(cell, before);
-    // The rogue ends once it forged its frames; 12 s bound the wait for them (its session
-    // and the run's processes start first, on a loaded machine slowly).
+    // The rogue ends once it forged its frames and the run's stream went quiet (its session
+    // outlives its puts); 12 s bound it (its session and the run's processes start first,
+    // on a loaded machine slowly).
     let s = lab.rogue(2, &[BOTH_HOSTS, "bias", "3", "0.5", "1200", "12"]);
     assert!(s.starts_with("forged 1200 frames"), "{s}");
     let out = wait_with_watchdog(run, Duration::from_secs(60));

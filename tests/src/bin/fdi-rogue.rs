@@ -17,7 +17,8 @@
 //!     is a batch of frames: each frame of it counts)
 //! fdi-rogue [--tls CA CERT KEY] ENDPOINT bias AGENT RAD FRAMES SECONDS
 //!     each measurement frame of AGENT seen goes back on its key with y[0] + RAD, FRAMES times
-//!     (forge-ahead and bias end once their frames are forged, or after SECONDS)
+//!     (forge-ahead and bias end once their frames are forged and the stream went quiet for
+//!     0.5 s, or after SECONDS)
 //! fdi-rogue [--tls CA CERT KEY] ENDPOINT impersonate HOST PREFIX SECONDS
 //!     measurement frames put every millisecond on HOST's key of run PREFIX, and on the
 //!     rogue's own; says whether HOST's serve was ever seen
@@ -282,11 +283,18 @@ fn forge(net: &Net, forgery: Forgery, seconds: f64) {
     let mut outboxes: Vec<(String, fdi_runtime::net::NetOutbox)> = Vec::new();
     let (mut forged, mut seen) = (0u64, 0u64);
     let began = Instant::now();
-    // Until the frames asked for are forged, or at most `seconds`.
-    while forged < limit && began.elapsed().as_secs_f64() < seconds {
+    // Until the frames asked for are forged and the run's stream has gone quiet (the session
+    // lives on while the run does, so that what it put goes out: a rogue that exited right
+    // after its last put lost the frames still queued), or at most `seconds`.
+    let mut quiet_since = Instant::now();
+    while began.elapsed().as_secs_f64() < seconds {
+        if forged >= limit && quiet_since.elapsed() > Duration::from_millis(500) {
+            break;
+        }
         let Ok((key, bytes)) = rx.recv_timeout(Duration::from_millis(50)) else {
             continue;
         };
+        quiet_since = Instant::now();
         // A payload is a batch of one or more frames (what the bridge drained at once).
         let size = std::mem::size_of::<MeasurementMsg>();
         if bytes.is_empty() || bytes.len() % size != 0 {
