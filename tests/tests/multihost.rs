@@ -454,6 +454,14 @@ fn a_serve_that_dies_stops_a_lockstep_run_naming_its_host() {
     assert_eq!(left(), 0, "removed:\n{log}");
 }
 
+/// The two-host deployment whose coordinator waits `seconds` for the serves.
+fn two_hosts_reached_within(seconds: u32) -> String {
+    TWO_HOSTS.replace(
+        "certs = \"certs\"",
+        &format!("certs = \"certs\"\nreach_timeout_s = {seconds}"),
+    )
+}
+
 #[test]
 fn a_host_without_a_serve_is_named_before_anything_starts() {
     let Some(mut lab) = Lab::new(2, "multihost-no-serve") else {
@@ -461,10 +469,7 @@ fn a_host_without_a_serve_is_named_before_anything_starts() {
     };
     // The wait for the serves, shortened by the file (its default, 40 s, rides out a serve
     // that is deaf for a while after a cut network).
-    let file = lab.deployment(&TWO_HOSTS.replace(
-        "certs = \"certs\"",
-        "certs = \"certs\"\nreach_timeout_s = 6",
-    ));
+    let file = lab.deployment(&two_hosts_reached_within(6));
     let out = lab.run(&["run", "--hosts", &file, "--duration-s", "1"]);
     let err = stderr(&out);
     assert_eq!(out.status.code(), Some(1), "{err}");
@@ -680,10 +685,7 @@ fn a_quic_initial_flood_from_outside_the_lab_keeps_no_run_out() {
         return;
     };
     // The serve must answer within 5 s, in the flood and right after it.
-    let file = lab.deployment(&TWO_HOSTS.replace(
-        "certs = \"certs\"",
-        "certs = \"certs\"\nreach_timeout_s = 5",
-    ));
+    let file = lab.deployment(&two_hosts_reached_within(5));
     lab.serve(1, "cell");
     let expected = inproc_digest(&["--duration-s", "1"]);
     let flood = lab.start_rogue(2, &["flood", "200", "10.77.0.2:7447", "12", "2000"]);

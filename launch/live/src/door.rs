@@ -484,18 +484,28 @@ mod tests {
 
     /// A client of the door at `at` that finished its handshake.
     async fn connected(at: SocketAddr) -> tokio_tungstenite::WebSocketStream<TcpStream> {
+        connected_as(at, "foxglove.sdk.v1").await.0
+    }
+
+    /// A client of the door at `at` offering `protocol`, its handshake done, and the answer.
+    async fn connected_as(
+        at: SocketAddr,
+        protocol: &'static str,
+    ) -> (
+        tokio_tungstenite::WebSocketStream<TcpStream>,
+        tokio_tungstenite::tungstenite::handshake::client::Response,
+    ) {
         let mut request = format!("ws://{at}/")
             .into_client_request()
             .expect("request");
         request.headers_mut().insert(
             header::SEC_WEBSOCKET_PROTOCOL,
-            HeaderValue::from_static("foxglove.sdk.v1"),
+            HeaderValue::from_static(protocol),
         );
         let tcp = TcpStream::connect(at).await.expect("connect");
         tokio_tungstenite::client_async(request, tcp)
             .await
             .expect("the door answers")
-            .0
     }
 
     /// Regression (issue 51): 64 clients that finished their handshake and then said nothing
@@ -560,17 +570,7 @@ mod tests {
         let at = door.local_addr().expect("address");
         let counts = Arc::new(Counts::default());
         tokio::spawn(serve(door, up, counts.clone()));
-        let mut request = format!("ws://{at}/")
-            .into_client_request()
-            .expect("request");
-        request.headers_mut().insert(
-            header::SEC_WEBSOCKET_PROTOCOL,
-            HeaderValue::from_static("foxglove.websocket.v1"),
-        );
-        let tcp = TcpStream::connect(at).await.expect("connect");
-        let (client, answer) = tokio_tungstenite::client_async(request, tcp)
-            .await
-            .expect("the door answers");
+        let (client, answer) = connected_as(at, "foxglove.websocket.v1").await;
         assert_eq!(
             answer.headers().get(header::SEC_WEBSOCKET_PROTOCOL),
             Some(&HeaderValue::from_static("foxglove.websocket.v1"))
