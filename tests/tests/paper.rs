@@ -137,9 +137,19 @@ fn a_numerics_flag_is_named_in_the_table_and_the_run_summary() {
         t["made_with"]["numerics"],
         serde_json::json!([{ "field": "controller.observer_input", "value": "\"step-mean\"", "paper": "\"sample\"" }])
     );
-    // Robot 1 is the paper's: its paper values stay beside the run's.
-    for r in t["rows"].as_array().expect("rows") {
-        assert!(r["paper_rmse_rad"].as_f64().is_some(), "{r}");
+    // Robot 1 is the paper's: its paper values stay beside the run's, and the verdict judges
+    // each of them on this run's value over the paper's.
+    let rows = t["rows"].as_array().expect("rows");
+    let cells = t["verdict"]["cells"].as_array().expect("verdict cells");
+    assert_eq!(cells.len(), rows.len(), "{}", t["verdict"]);
+    for (r, c) in rows.iter().zip(cells) {
+        let (this, paper) = (r["rmse_rad"].as_f64(), r["paper_rmse_rad"].as_f64());
+        let (Some(this), Some(paper)) = (this, paper) else {
+            panic!("a row without its values: {r}");
+        };
+        assert_eq!(c["row"], r["case"], "{c}");
+        assert_eq!(c["ratio"].as_f64(), Some(this / paper), "{c}");
+        assert_eq!(c["within"], (this / paper - 1.0).abs() <= 0.25, "{c}");
     }
 
     let o = launch(

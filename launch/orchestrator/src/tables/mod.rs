@@ -17,6 +17,9 @@ use fdi_report::output::{csv_bytes, md_table_head};
 use fdi_report::plot::{BarChart, PALETTE};
 use plotters::style::RGBColor;
 
+mod verdict;
+use verdict::{Cell, Verdict};
+
 #[derive(Debug, Args)]
 pub struct TableArgs {
     #[arg(long, value_enum, default_value_t = Engine::Ipc)]
@@ -391,11 +394,12 @@ pub fn table1(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
     let traditional = run_mode(ControllerMode::Traditional)?;
     let proposed = run_mode(ControllerMode::Proposed)?;
     let rows = table1_rows(&base, &traditional, &proposed);
+    let verdict = table1_verdict(&rows);
     let table = Table {
         name: "table1",
-        md: table1_markdown(args.engine, &made, &rows),
+        md: table1_markdown(args.engine, &made, &rows, &verdict),
         csv: table1_csv(&rows)?,
-        json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows }),
+        json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows, "verdict": verdict }),
         chart: table1_chart(args.engine, &rows),
         made,
     };
@@ -427,32 +431,74 @@ fn table1_title(engine: Engine) -> String {
     )
 }
 
-/// `table1.md` (without its leading `# `), as printed.
-fn table1_markdown(engine: Engine, made: &MadeWith, rows: &[Table1Row]) -> String {
-    let mut md = format!("{}\n\n{}", table1_title(engine), made.md());
-    md.push_str(&md_table_head(&[
-        "robot",
+/// Table I's cells beside the paper's: each robot's traditional, then proposed RMSE.
+fn table1_verdict(rows: &[Table1Row]) -> Verdict {
+    let column = |name: &str, this: fn(&Table1Row) -> f64, paper: fn(&Table1Row) -> Option<f64>| {
+        rows.iter()
+            .filter_map(|r| Cell::new(name, format!("robot {}", r.robot), this(r), paper(r)))
+            .collect::<Vec<_>>()
+    };
+    let mut cells = column(
         "traditional",
+        |r| r.traditional_rmse_rad,
+        |r| r.paper_traditional,
+    );
+    cells.extend(column(
         "proposed",
-        "ratio",
-        "paper traditional",
-        "paper proposed",
-        "paper ratio",
-    ]));
+        |r| r.proposed_rmse_rad,
+        |r| r.paper_proposed,
+    ));
+    Verdict::of(cells)
+}
+
+/// The columns of a Table I in markdown, plain or over seeds.
+const TABLE1_HEAD: [&str; 9] = [
+    "robot",
+    "traditional",
+    "proposed",
+    "ratio",
+    "paper traditional",
+    "paper proposed",
+    "paper ratio",
+    "traditional / paper",
+    "proposed / paper",
+];
+
+/// The last four cells of a Table I row in markdown: the paper's values, its ratio, and this
+/// table's values over the paper's (`trad` and `prop`, means over seeds).
+fn table1_paper_cells(r: &Table1Row) -> String {
+    format!(
+        "{} | {} | {} | {} | {}",
+        or_dash(r.paper_traditional, 3),
+        or_dash(r.paper_proposed, 3),
+        or_dash(ratio(r.paper_traditional, r.paper_proposed), 2),
+        or_dash(over_paper(r.traditional_rmse_rad, r.paper_traditional), 2),
+        or_dash(over_paper(r.proposed_rmse_rad, r.paper_proposed), 2),
+    )
+}
+
+/// `table1.md` (without its leading `# `), as printed.
+fn table1_markdown(engine: Engine, made: &MadeWith, rows: &[Table1Row], v: &Verdict) -> String {
+    let mut md = format!("{}\n\n{}", table1_title(engine), made.md());
+    md.push_str(&md_table_head(&TABLE1_HEAD));
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {:.4} | {:.4} | {:.2} | {} | {} | {} |",
+            "| {} | {:.4} | {:.4} | {:.2} | {} |",
             r.robot,
             r.traditional_rmse_rad,
             r.proposed_rmse_rad,
             r.traditional_rmse_rad / r.proposed_rmse_rad,
-            or_dash(r.paper_traditional, 3),
-            or_dash(r.paper_proposed, 3),
-            or_dash(ratio(r.paper_traditional, r.paper_proposed), 2)
+            table1_paper_cells(r),
         );
     }
+    let _ = writeln!(md, "\n{}", v.line());
     md
+}
+
+/// `this / paper`, where the paper has a value.
+fn over_paper(this: f64, paper: Option<f64>) -> Option<f64> {
+    Some(this / paper?)
 }
 
 /// `a / b` of two values that may be missing.
@@ -622,11 +668,12 @@ pub fn table2(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
             paper_rmse_rad: compare.then_some(paper_rmse),
         });
     }
+    let verdict = table2_verdict(&rows);
     let table = Table {
         name: "table2",
-        md: table2_markdown(args.engine, &made, &rows),
+        md: table2_markdown(args.engine, &made, &rows, &verdict),
         csv: table2_csv(&rows)?,
-        json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows }),
+        json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows, "verdict": verdict }),
         chart: table2_chart(args.engine, &rows),
         made,
     };
@@ -662,25 +709,34 @@ fn table2_title(engine: Engine) -> String {
     )
 }
 
+/// Table II's cells beside the paper's: robot 1's RMSE per delay case.
+fn table2_verdict(rows: &[Table2Row]) -> Verdict {
+    Verdict::of(
+        rows.iter()
+            .filter_map(|r| Cell::new("robot 1", r.case.to_string(), r.rmse_rad, r.paper_rmse_rad))
+            .collect(),
+    )
+}
+
+/// The columns of a Table II in markdown, plain or over seeds.
+const TABLE2_HEAD: [&str; 5] = ["case", "tau(t) (ms)", "RMSE", "paper RMSE", "RMSE / paper"];
+
 /// `table2.md` (without its leading `# `), as printed.
-fn table2_markdown(engine: Engine, made: &MadeWith, rows: &[Table2Row]) -> String {
+fn table2_markdown(engine: Engine, made: &MadeWith, rows: &[Table2Row], v: &Verdict) -> String {
     let mut md = format!("{}\n\n{}", table2_title(engine), made.md());
-    md.push_str(&md_table_head(&[
-        "case",
-        "tau(t) (ms)",
-        "RMSE",
-        "paper RMSE",
-    ]));
+    md.push_str(&md_table_head(&TABLE2_HEAD));
     for r in rows {
         let _ = writeln!(
             md,
-            "| {} | {} | {:.4} | {} |",
+            "| {} | {} | {:.4} | {} | {} |",
             r.case,
             r.tau_ms,
             r.rmse_rad,
-            or_dash(r.paper_rmse_rad, 4)
+            or_dash(r.paper_rmse_rad, 4),
+            or_dash(over_paper(r.rmse_rad, r.paper_rmse_rad), 2),
         );
     }
+    let _ = writeln!(md, "\n{}", v.line());
     md
 }
 
@@ -869,7 +925,6 @@ mod seeded {
         let (trad, prop) = summaries.split_at(seeds.len());
         let rows = rows1(paper, trad, prop)?;
         let over = describe_seeds(&seeds);
-        let md = markdown1(args.engine, made, &over, n, &rows);
         let csv = csv1(&rows)?;
         let plain: Vec<Table1Row> = rows
             .iter()
@@ -881,6 +936,8 @@ mod seeded {
                 paper_proposed: r.paper_proposed,
             })
             .collect();
+        let verdict = table1_verdict(&plain);
+        let md = markdown1(args.engine, made, (&over, n), (&rows, &plain), &verdict);
         let chart = table1_chart(args.engine, &plain);
         publish(
             args,
@@ -889,7 +946,7 @@ mod seeded {
             (md, csv, chart),
             made,
             (&over, &seeds),
-            &rows,
+            (&rows, &verdict),
         )
     }
 
@@ -930,35 +987,34 @@ mod seeded {
         Ok(rows)
     }
 
-    /// `table1.md` over seeds (`over`, as words; `n` of them).
-    fn markdown1(engine: Engine, made: &MadeWith, over: &str, n: u32, rows: &[Row1]) -> String {
+    /// `table1.md` over seeds (`over`, as words; `n` of them); `plain` are the rows' means.
+    fn markdown1(
+        engine: Engine,
+        made: &MadeWith,
+        (over, n): (&str, u32),
+        (rows, plain): (&[Row1], &[Table1Row]),
+        v: &Verdict,
+    ) -> String {
         let mut md = format!(
             "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
             table1_title(engine),
             made.md()
         );
-        md.push_str(&md_table_head(&[
-            "robot",
-            "traditional",
-            "proposed",
-            "ratio of means",
-            "paper traditional",
-            "paper proposed",
-            "paper ratio",
-        ]));
-        for r in rows {
+        let mut head = TABLE1_HEAD;
+        head[3] = "ratio of means";
+        md.push_str(&md_table_head(&head));
+        for (r, p) in rows.iter().zip(plain) {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {:.2} | {} | {} | {} |",
+                "| {} | {} | {} | {:.2} | {} |",
                 r.robot,
                 r.traditional_rmse_rad.md(),
                 r.proposed_rmse_rad.md(),
                 r.traditional_rmse_rad.mean / r.proposed_rmse_rad.mean,
-                or_dash(r.paper_traditional, 3),
-                or_dash(r.paper_proposed, 3),
-                or_dash(ratio(r.paper_traditional, r.paper_proposed), 2)
+                table1_paper_cells(p),
             );
         }
+        let _ = writeln!(md, "\n{} (on the means)", v.line());
         md
     }
 
@@ -1017,7 +1073,6 @@ mod seeded {
         let summaries = run_all(args, dir, &cases, stop)?;
         let rows = rows2(&summaries, seeds.len(), compare)?;
         let over = describe_seeds(&seeds);
-        let md = markdown2(args.engine, made, &over, n, &rows);
         let csv = csv2(&rows)?;
         let plain: Vec<Table2Row> = rows
             .iter()
@@ -1028,6 +1083,8 @@ mod seeded {
                 paper_rmse_rad: r.paper_rmse_rad,
             })
             .collect();
+        let verdict = table2_verdict(&plain);
+        let md = markdown2(args.engine, made, (&over, n), &rows, &verdict);
         let chart = table2_chart(args.engine, &plain);
         publish(
             args,
@@ -1036,7 +1093,7 @@ mod seeded {
             (md, csv, chart),
             made,
             (&over, &seeds),
-            &rows,
+            (&rows, &verdict),
         )
     }
 
@@ -1059,28 +1116,31 @@ mod seeded {
     }
 
     /// `table2.md` over seeds (`over`, as words; `n` of them).
-    fn markdown2(engine: Engine, made: &MadeWith, over: &str, n: u32, rows: &[Row2]) -> String {
+    fn markdown2(
+        engine: Engine,
+        made: &MadeWith,
+        (over, n): (&str, u32),
+        rows: &[Row2],
+        v: &Verdict,
+    ) -> String {
         let mut md = format!(
             "{}, mean ± half-width of the 95 % confidence interval (Student t) over {over} (n = {n})\n\n{}",
             table2_title(engine),
             made.md()
         );
-        md.push_str(&md_table_head(&[
-            "case",
-            "tau(t) (ms)",
-            "RMSE",
-            "paper RMSE",
-        ]));
+        md.push_str(&md_table_head(&TABLE2_HEAD));
         for r in rows {
             let _ = writeln!(
                 md,
-                "| {} | {} | {} | {} |",
+                "| {} | {} | {} | {} | {} |",
                 r.case,
                 r.tau_ms,
                 r.rmse_rad.md(),
-                or_dash(r.paper_rmse_rad, 4)
+                or_dash(r.paper_rmse_rad, 4),
+                or_dash(over_paper(r.rmse_rad.mean, r.paper_rmse_rad), 2),
             );
         }
+        let _ = writeln!(md, "\n{} (on the means)", v.line());
         md
     }
 
@@ -1111,7 +1171,7 @@ mod seeded {
         (md, csv, mut chart): (String, Vec<u8>, BarChart),
         made: &MadeWith,
         (over, seeds): (&str, &[u64]),
-        rows: &R,
+        (rows, verdict): (&R, &Verdict),
     ) -> Result<ExitCode> {
         chart.title = format!("{} (mean over {over})", chart.title);
         let table = Table {
@@ -1123,7 +1183,8 @@ mod seeded {
                 "made_with": made,
                 "seeds": seeds,
                 "confidence": stats::LEVEL,
-                "rows": rows
+                "rows": rows,
+                "verdict": verdict
             }),
             chart,
             made: made.clone(),
@@ -1135,6 +1196,52 @@ mod seeded {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn table1s_verdict_judges_both_columns_against_the_paper() {
+        // docs/model.md, "Reproduction": the default calibration's Table I.
+        let ours = [
+            (0.0187, 0.0086),
+            (0.0494, 0.0107),
+            (0.0204, 0.0086),
+            (0.0092, 0.0087),
+        ];
+        let rows: Vec<Table1Row> = PAPER_TABLE1
+            .iter()
+            .zip(ours)
+            .map(|(&(robot, pt, pp), (t, p))| Table1Row {
+                robot,
+                traditional_rmse_rad: t,
+                proposed_rmse_rad: p,
+                paper_traditional: Some(pt),
+                paper_proposed: Some(pp),
+            })
+            .collect();
+        let v = table1_verdict(&rows);
+        let outside: Vec<String> = v
+            .cells
+            .iter()
+            .filter(|c| !c.within)
+            .map(|c| format!("{} {}", c.column, c.row))
+            .collect();
+        assert_eq!(outside, ["traditional robot 1", "traditional robot 4"]);
+        let md = table1_markdown(
+            Engine::Ipc,
+            &MadeWith {
+                scenario: "the embedded paper scenario".into(),
+                replaced: Vec::new(),
+                numerics: Vec::new(),
+                set: Vec::new(),
+            },
+            &rows,
+            &v,
+        );
+        assert!(
+            md.contains("| 3 | 0.0204 | 0.0086 | 2.37 | 0.026 | 0.009 | 2.89 | 0.78 | 0.96 |")
+                && md.contains("Verdict: 6 of 8 cells within ±25 % of the paper."),
+            "{md}"
+        );
+    }
 
     #[test]
     fn table_csvs_have_a_header_and_a_row_per_entry() {
