@@ -171,6 +171,33 @@ fn candidates(message: &str, reference: Option<&toml::Table>, steps: &[Seg]) -> 
     out
 }
 
+/// The name serde expects that is nearest to an unknown key or variant it names, when one is
+/// near enough to be a misspelling: at most a third of its letters are added, removed, changed
+/// or swapped (at least one).
+fn did_you_mean(message: &str) -> Option<&str> {
+    let written = ["unknown field `", "unknown variant `"]
+        .iter()
+        .find_map(|p| message.strip_prefix(p))?
+        .split('`')
+        .next()?;
+    let (_, list) = message.split_once(", expected ")?;
+    let near = list
+        .split('`')
+        .skip(1)
+        .step_by(2)
+        .min_by_key(|n| strsim::osa_distance(n, written))?;
+    let most = (written.chars().count() / 3).max(1);
+    (strsim::osa_distance(near, written) <= most).then_some(near)
+}
+
+/// serde's message with `(did you mean `near`?)` after the name written.
+fn with_suggestion(message: &str, near: &str) -> String {
+    match message.split_once(", expected ") {
+        Some((head, list)) => format!("{head} (did you mean `{near}`?), expected {list}"),
+        None => format!("{message} (did you mean `{near}`?)"),
+    }
+}
+
 /// The problem an error of serde names, and the steps of its path (`None` when a step of it
 /// has no name).
 fn problem_of(err: &serde_path_to_error::Error<toml::de::Error>) -> (Problem, Option<Vec<Seg>>) {
@@ -203,6 +230,8 @@ pub fn collect<T: DeserializeOwned>(
     let mut replaced: Vec<Vec<Seg>> = Vec::new();
     let mut tried: Vec<(Vec<Seg>, Vec<toml::Value>)> = Vec::new();
     let mut stopped = false;
+    // Keys meant by an unknown key that is near one of them (`duraton_s` → `duration_s`).
+    let mut misspelt: Vec<Vec<Seg>> = Vec::new();
     for _ in 0..MAX_READINGS {
         let err = match serde_path_to_error::deserialize::<_, T>(toml::Value::Table(doc.clone())) {
             Ok(value) => {
@@ -227,7 +256,15 @@ pub fn collect<T: DeserializeOwned>(
                 at.push(Seg::Key(k.clone()));
             }
             Kind::MissingKey(k) => at.push(Seg::Key(k.clone())),
-            _ => {}
+            Kind::WrongValue | Kind::UnknownKey(_) => {}
+        }
+        let mut problem = problem;
+        if let Some(near) = did_you_mean(&message) {
+            problem.message = with_suggestion(&message, near);
+            if let (Kind::UnknownKey(_), Some((_, table))) = (&kind, at.split_last()) {
+                // The key meant is then missing: that is this problem, not a second one.
+                misspelt.push([table, &[Seg::Key(near.to_string())]].concat());
+            }
         }
         let follows = replaced.iter().chain(quiet).any(|r| at.starts_with(r));
         let read_on = match kind {
@@ -241,8 +278,10 @@ pub fn collect<T: DeserializeOwned>(
                 &mut replaced,
             ),
         };
-        // A problem that follows from a replacement is left out, unless reading stops at it.
-        if !follows || !read_on {
+        // A problem that follows from a replacement is left out, unless reading stops at it;
+        // so is a key reported missing that an unknown key near its name was meant to be.
+        let meant = matches!(kind, Kind::MissingKey(_)) && misspelt.contains(&at);
+        if (!follows && !meant) || !read_on {
             problems.push(problem);
         }
         if !read_on {
@@ -353,15 +392,23 @@ mod tests {
             "#,
         );
         let said: Vec<String> = c.problems.iter().map(ToString::to_string).collect();
-        assert_eq!(said.len(), 7, "{said:#?}");
+        assert_eq!(said.len(), 6, "{said:#?}");
+        assert!(
+            !said
+                .iter()
+                .any(|s| s.contains("missing field `duration_s`")),
+            "the misspelt key is reported once: {said:#?}"
+        );
         for (path, what) in [
             ("a.gain", "invalid type"),
             ("a.extra", "unknown field `extra`"),
             ("b[0].mode", "unknown variant `traditonal`"),
             ("b[1].mode", "unknown variant `propsed`"),
             ("b[2].mode", "invalid type"),
-            ("duraton_s", "unknown field `duraton_s`"),
-            ("<root>", "missing field `duration_s`"),
+            (
+                "duraton_s",
+                "unknown field `duraton_s` (did you mean `duration_s`?)",
+            ),
         ] {
             assert!(
                 said.iter().any(|s| s.starts_with(path) && s.contains(what)),
@@ -371,6 +418,37 @@ mod tests {
         assert!(c.value.is_some(), "read on to the end");
         assert!(c.touches_replaced("a.gain") && c.touches_replaced("a"));
         assert!(c.touches_replaced("duration_s") && !c.touches_replaced("b[0].gain"));
+    }
+
+    #[test]
+    fn a_near_name_is_suggested_and_a_far_one_is_not() {
+        let c = read(
+            "duration_s = 1\n[a]\ngian = 1.0\nmode = \"tradition\"\n[[b]]\ngain = 1.0\nzzz = 1\n",
+        );
+        let said: Vec<String> = c.problems.iter().map(ToString::to_string).collect();
+        assert_eq!(
+            said,
+            [
+                "a.gian: unknown field `gian` (did you mean `gain`?), expected `gain` or `mode`",
+                "a.mode: unknown variant `tradition` (did you mean `traditional`?), expected `proposed` or `traditional`",
+                "b[0].zzz: unknown field `zzz`, expected `gain` or `mode`",
+            ],
+            "{said:#?}"
+        );
+    }
+
+    #[test]
+    fn a_missing_key_that_no_unknown_key_is_near_is_still_reported() {
+        let c = read("period = 1\n[a]\ngain = 1.0\n[[b]]\ngain = 2.0\n");
+        let said: Vec<String> = c.problems.iter().map(ToString::to_string).collect();
+        assert!(
+            said.iter()
+                .any(|s| s == "<root>: missing field `duration_s`"),
+            "{said:#?}"
+        );
+        let c = read("[a]\ngain = 1.0\n[[b]]\ngain = 2.0\n");
+        let said: Vec<String> = c.problems.iter().map(ToString::to_string).collect();
+        assert_eq!(said, ["<root>: missing field `duration_s`"], "{said:#?}");
     }
 
     #[test]

@@ -1632,17 +1632,16 @@ mod tests {
             .replace("learning_rate_w = 5000.0", "learning_rate_W = 5000.0");
         let said: Vec<String> = problems_of(&text);
         for fragment in [
-            "controller.learning_rate_W: unknown field `learning_rate_W`",
-            "controller: missing field `learning_rate_w` (line 15, column 2)",
-            "duraton_s: unknown field `duraton_s`",
-            "<root>: missing field `duration_s`",
+            "controller.learning_rate_W: unknown field `learning_rate_W` (did you mean `learning_rate_w`?)",
+            "duraton_s: unknown field `duraton_s` (did you mean `duration_s`?)",
         ] {
             assert!(
                 said.iter().any(|s| s.contains(fragment)),
                 "{fragment} not in {said:#?}"
             );
         }
-        assert_eq!(said.len(), 4, "{said:#?}");
+        // A misspelt key is one problem: the key it meant is not reported missing as well.
+        assert_eq!(said.len(), 2, "{said:#?}");
         let cosine = "shape = \"cosine\", amplitude = 50.0";
         let text = PAPER_SCENARIO
             .replace(cosine, "shape = \"cosin\", amplitude = 50.0")

@@ -39,6 +39,9 @@ def main(path):
         summary = reader.get_summary()
         if summary is None:
             fail(f"{path}: no summary section")
+        header = reader.get_header()
+        if header.profile != "fdi-mas" or not header.library.startswith("fdi-launch "):
+            fail(f"{path}: header profile {header.profile!r}, library {header.library!r}")
         meta = [m for m in reader.iter_metadata() if m.name == "fdi-mas"]
         if len(meta) != 1:
             fail(f"{path}: {len(meta)} fdi-mas metadata records, 1 expected")

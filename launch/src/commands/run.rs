@@ -50,8 +50,8 @@ pub struct RunArgs {
     /// the processes it runs (docs/multi-host.md). Each other host runs `fdi-launch serve`.
     #[arg(long, value_name = "FILE")]
     pub hosts: Option<PathBuf>,
-    /// Serve the run live over the Foxglove WebSocket protocol, at `--live=ADDR` or
-    /// 127.0.0.1:8765 (port 0: a free port, printed): open it in Foxglove (Open connection →
+    /// Serve the run live over the Foxglove WebSocket protocol, at `--live=ADDR` (or
+    /// `--live ADDR`) or 127.0.0.1:8765 (port 0: a free port, printed): open it in Foxglove (Open connection →
     /// Foxglove WebSocket) with the layouts of examples/live (docs/traces.md). The run never
     /// waits for a viewer.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, require_equals = true, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
@@ -91,7 +91,8 @@ pub fn run(args: &RunArgs, stop: &Stop) -> Result<ExitCode> {
 /// The request of `run`'s flags, checked before anything starts: the overrides, the placement,
 /// the traces' volume, the hosts file.
 fn request(args: &RunArgs) -> Result<RunRequest> {
-    let mut request = RunRequest::new(args.scenario.as_deref(), &args.overrides, args.engine)?;
+    let (scenario, live) = scenario_and_live(args)?;
+    let mut request = RunRequest::new(scenario, &args.overrides, args.engine)?;
     if let Some(command) = args.run_by {
         request.name = format!("{command}-{}", request.name);
     }
@@ -112,13 +113,39 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
     request.traces = args.traces;
     request.placement = args.placement.clone();
     fdi_orchestrator::run::check_pace(&request.resolved, args.pace)?;
-    request.live = args
-        .live
+    request.live = live
         .map(|addr| fdi_orchestrator::run::LiveServe::new(addr, args.live_rate, args.live_wait))
         .transpose()?;
     request.pace = args.pace;
     request.progress = !args.json;
     Ok(request)
+}
+
+/// The scenario file and the live address of `run`'s flags. `--live 127.0.0.1:8765` (with a
+/// space, as most tools take an option's value) reaches clap as `--live` and a scenario file
+/// `127.0.0.1:8765`: a scenario argument that is an address and no file, after a bare `--live`,
+/// is the address of `--live`. After `--live=ADDR` it is refused, naming both.
+fn scenario_and_live(
+    args: &RunArgs,
+) -> Result<(Option<&std::path::Path>, Option<std::net::SocketAddr>)> {
+    let scenario = args.scenario.as_deref();
+    let (Some(live), Some(path)) = (args.live, scenario) else {
+        return Ok((scenario, args.live));
+    };
+    let Some(addr) = path
+        .to_str()
+        .and_then(|s| s.parse::<std::net::SocketAddr>().ok())
+        .filter(|_| !path.exists())
+    else {
+        return Ok((scenario, args.live));
+    };
+    if live.to_string() != fdi_live::Options::DEFAULT_ADDR {
+        anyhow::bail!(
+            "`{addr}` is an address, not a scenario file, and --live has its address already ({live}): \
+             give one address, as `--live=ADDR`"
+        );
+    }
+    Ok((None, Some(addr)))
 }
 
 /// What [`run_scenario`] left: the run directory, and the exit status of the run.
@@ -343,6 +370,45 @@ fn print_summary(s: &RunSummary) {
 #[cfg(test)]
 mod tests {
     use std::process::ExitCode;
+
+    use clap::Parser;
+
+    fn run_args(argv: &[&str]) -> super::RunArgs {
+        let cli = crate::cli::Cli::try_parse_from([&["fdi-launch", "run"], argv].concat())
+            .expect("parses");
+        let crate::cli::Command::Run(args) = cli.command else {
+            panic!("not run")
+        };
+        args
+    }
+
+    /// Regression (issue 55): `run --live 127.0.0.1:8765` read the address as the scenario
+    /// file ("cannot read 127.0.0.1:8765").
+    #[test]
+    fn live_with_a_space_before_its_address_serves_there_and_a_second_address_is_refused() {
+        let args = run_args(&["--live", "127.0.0.1:8799"]);
+        let (scenario, live) = super::scenario_and_live(&args).expect("accepted");
+        assert_eq!(scenario, None);
+        assert_eq!(live, Some("127.0.0.1:8799".parse().expect("an address")));
+        let args = run_args(&["--live=127.0.0.1:8798", "127.0.0.1:8799"]);
+        let e = super::scenario_and_live(&args).expect_err("two addresses");
+        assert!(
+            e.to_string().contains("`127.0.0.1:8799` is an address"),
+            "{e}"
+        );
+        // A scenario file stays one, and without --live an address is a file name.
+        let args = run_args(&["--live", "scenarios/paper.toml"]);
+        let (scenario, live) = super::scenario_and_live(&args).expect("accepted");
+        assert_eq!(scenario, Some(std::path::Path::new("scenarios/paper.toml")));
+        assert_eq!(
+            live.map(|a| a.to_string()).as_deref(),
+            Some("127.0.0.1:8765")
+        );
+        let args = run_args(&["127.0.0.1:8799"]);
+        let (scenario, live) = super::scenario_and_live(&args).expect("accepted");
+        assert_eq!(scenario, Some(std::path::Path::new("127.0.0.1:8799")));
+        assert_eq!(live, None);
+    }
 
     /// Regression (issue 51): a realtime run that fell behind its clock (a 1 MHz run with 90 %
     /// of its deadlines missed, its robots uncontrolled 44 % of the time) exited 0. Any tick

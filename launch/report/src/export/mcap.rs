@@ -53,6 +53,10 @@ struct Mcap {
 /// time), 84 MB at level 9 (ten times), and 149 MB with lz4 (docs/traces.md).
 const COMPRESSION: (mcap::Compression, u32) = (mcap::Compression::Zstd, 1);
 
+/// The profile in the MCAP header: fdi-mas's own (JSON messages with JSON schemas, the
+/// `fdi-mas` metadata record; docs/traces.md, "MCAP").
+pub const PROFILE: &str = "fdi-mas";
+
 /// The options of the MCAP writer: chunks of [`CHUNK_SIZE`] (before compression), each
 /// compressed with [`COMPRESSION`] on this thread.
 fn options() -> mcap::WriteOptions {
@@ -61,7 +65,7 @@ fn options() -> mcap::WriteOptions {
         .compression_level(COMPRESSION.1)
         .compression_threads(0)
         .chunk_size(Some(CHUNK_SIZE))
-        .profile("")
+        .profile(PROFILE)
         .library(concat!("fdi-launch ", env!("CARGO_PKG_VERSION")))
 }
 
@@ -131,6 +135,42 @@ impl Mcap {
         })
     }
 
+    /// The channel of `name` of `agent`, made (with its schema) the first time it is asked for.
+    fn channel(&mut self, agent: u32, name: &'static str, schema: &Schema) -> Result<u16> {
+        if let Some(c) = self.channels.get(&(agent, name)) {
+            return Ok(*c);
+        }
+        let (path, first) = (&self.path, &self.first);
+        let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
+        let s = self
+            .w
+            .add_schema(schema.name, "jsonschema", &text)
+            .map_err(|e| failure(path, first, e))?;
+        let topic = topic_name(agent, name);
+        let c = self
+            .w
+            .add_channel(s, &topic, "json", &BTreeMap::new())
+            .map_err(|e| failure(path, first, e))?;
+        self.channels.insert((agent, name), c);
+        Ok(c)
+    }
+
+    /// Makes the channel of every topic the run has ([`topics::run_topics`], the list the live
+    /// view advertises) that no message reached: the file lists the same topics as the live
+    /// view of the run. Returns those topics. A run stamped its hops when it has latency
+    /// records (realtime runs of the ipc engine write one per tick).
+    fn every_topic_of(&mut self, info: &RunInfo) -> Result<Vec<String>> {
+        let stamped = self.channels.keys().any(|(_, n)| *n == "latency");
+        let mut empty = Vec::new();
+        for (agent, name, schema) in crate::topics::run_topics(&info.resolved, stamped) {
+            if !self.channels.contains_key(&(agent, name)) {
+                self.channel(agent, name, schema)?;
+                empty.push(topic_name(agent, name));
+            }
+        }
+        Ok(empty)
+    }
+
     fn metadata(&mut self, info: &RunInfo) -> Result<()> {
         let s = &info.resolved.scenario;
         let agents: Vec<String> = info.agents.keys().map(u32::to_string).collect();
@@ -179,24 +219,7 @@ impl Sink for Mcap {
         t: f64,
         msg: &Value,
     ) -> Result<()> {
-        let (path, first) = (&self.path, &self.first);
-        let channel = match self.channels.get(&(agent, name)) {
-            Some(c) => *c,
-            None => {
-                let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
-                let s = self
-                    .w
-                    .add_schema(schema.name, "jsonschema", &text)
-                    .map_err(|e| failure(path, first, e))?;
-                let topic = topic_name(agent, name);
-                let c = self
-                    .w
-                    .add_channel(s, &topic, "json", &BTreeMap::new())
-                    .map_err(|e| failure(path, first, e))?;
-                self.channels.insert((agent, name), c);
-                c
-            }
-        };
+        let channel = self.channel(agent, name, schema)?;
         self.buf.clear();
         serde_json::to_writer(&mut self.buf, msg).context("a message")?;
         let time = log_time_ns(t)?;
@@ -263,6 +286,7 @@ fn write(run_dir: &Path, files: &[PathBuf], out: &Path, file: File) -> Result<Ve
     let mut w = Mcap::create(out, file)?;
     let mut failures = Vec::new();
     let mut run: Option<RunInfo> = None;
+    let mut empty = Vec::new();
     for f in files {
         let mut n = 0;
         match export_file(f, &mut w, &mut run, &mut n) {
@@ -283,11 +307,17 @@ fn write(run_dir: &Path, files: &[PathBuf], out: &Path, file: File) -> Result<Ve
             Err(e) => failures.push(format!("{e:#}")),
         }
         w.metadata(info)?;
+        empty = w.every_topic_of(info)?;
     }
     let summary = w.finish()?;
     let messages = summary.stats.as_ref().map_or(0, |s| s.message_count);
+    let without = if empty.is_empty() {
+        String::new()
+    } else {
+        format!(" ({} without messages: {})", empty.len(), empty.join(", "))
+    };
     println!(
-        "{}: {messages} messages on {} topics",
+        "{}: {messages} messages on {} topics{without}",
         out.display(),
         summary.channels.len()
     );
@@ -399,6 +429,14 @@ mod tests {
         .scenario
         .control_period_s;
         assert!(want.len() >= 4 * 12, "{want:?}");
+        let header = mcap::read::LinearReader::new(&bytes)
+            .expect("an MCAP file")
+            .find_map(|r| match r.expect("a whole record") {
+                mcap::records::Record::Header(h) => Some(h),
+                _ => None,
+            })
+            .expect("a header record");
+        assert_eq!(header.profile, PROFILE);
 
         let schemas: BTreeMap<&str, &Schema> = topics().iter().map(|(n, s)| (*n, *s)).collect();
         let mut got: BTreeMap<String, u64> = BTreeMap::new();
@@ -452,7 +490,23 @@ mod tests {
         let summary = mcap::Summary::read(&bytes)
             .expect("a summary")
             .expect("a summary");
-        assert_eq!(summary.channels.len(), want.len());
+        // Its channels are the run's topics, the live view's list: those with messages and
+        // those without (this fixture has no events).
+        let info = RunInfo::from_header(
+            &trace_files(dir.path()).expect("traces")[0],
+            TraceReader::open(&trace_files(dir.path()).expect("traces")[0])
+                .expect("a trace")
+                .header(),
+        )
+        .expect("its scenario");
+        let run: BTreeSet<String> = crate::topics::run_topics(&info.resolved, false)
+            .into_iter()
+            .map(|(agent, name, _)| topic_name(agent, name))
+            .collect();
+        let channels: BTreeSet<String> =
+            summary.channels.values().map(|c| c.topic.clone()).collect();
+        assert_eq!(channels, run);
+        assert!(run.len() > want.len() && !want.contains_key("/events"));
         assert_eq!(summary.metadata_indexes.len(), 1, "the fdi-mas metadata");
         // What was read above came out of compressed chunks.
         assert!(!summary.chunk_indexes.is_empty());
