@@ -429,14 +429,6 @@ mod tests {
         .scenario
         .control_period_s;
         assert!(want.len() >= 4 * 12, "{want:?}");
-        let header = mcap::read::LinearReader::new(&bytes)
-            .expect("an MCAP file")
-            .find_map(|r| match r.expect("a whole record") {
-                mcap::records::Record::Header(h) => Some(h),
-                _ => None,
-            })
-            .expect("a header record");
-        assert_eq!(header.profile, PROFILE);
 
         let schemas: BTreeMap<&str, &Schema> = topics().iter().map(|(n, s)| (*n, *s)).collect();
         let mut got: BTreeMap<String, u64> = BTreeMap::new();
@@ -490,8 +482,35 @@ mod tests {
         let summary = mcap::Summary::read(&bytes)
             .expect("a summary")
             .expect("a summary");
-        // Its channels are the run's topics, the live view's list: those with messages and
-        // those without (this fixture has no events).
+        assert_eq!(summary.channels.len(), want.len() + 1, "and /events, empty");
+        assert_eq!(summary.metadata_indexes.len(), 1, "the fdi-mas metadata");
+        // What was read above came out of compressed chunks.
+        assert!(!summary.chunk_indexes.is_empty());
+        for c in &summary.chunk_indexes {
+            assert_eq!(c.compression, "zstd");
+            assert!(c.compressed_size < c.uncompressed_size, "{c:?}");
+        }
+    }
+
+    /// The header names fdi-mas's profile; the channels are the run's topics, the list the live
+    /// view advertises: those with messages and those without (this fixture has no events).
+    #[test]
+    fn the_header_names_the_profile_and_the_channels_are_the_live_view_s_topics() {
+        let dir = fixture_copy();
+        export(dir.path()).expect("exported");
+        let bytes = std::fs::read(dir.path().join("export/run.mcap")).expect("run.mcap");
+        let want = expected(dir.path());
+        let header = mcap::read::LinearReader::new(&bytes)
+            .expect("an MCAP file")
+            .find_map(|r| match r.expect("a whole record") {
+                mcap::records::Record::Header(h) => Some(h),
+                _ => None,
+            })
+            .expect("a header record");
+        assert_eq!(header.profile, PROFILE);
+        let summary = mcap::Summary::read(&bytes)
+            .expect("a summary")
+            .expect("a summary");
         let info = RunInfo::from_header(
             &trace_files(dir.path()).expect("traces")[0],
             TraceReader::open(&trace_files(dir.path()).expect("traces")[0])
@@ -507,13 +526,6 @@ mod tests {
             summary.channels.values().map(|c| c.topic.clone()).collect();
         assert_eq!(channels, run);
         assert!(run.len() > want.len() && !want.contains_key("/events"));
-        assert_eq!(summary.metadata_indexes.len(), 1, "the fdi-mas metadata");
-        // What was read above came out of compressed chunks.
-        assert!(!summary.chunk_indexes.is_empty());
-        for c in &summary.chunk_indexes {
-            assert_eq!(c.compression, "zstd");
-            assert!(c.compressed_size < c.uncompressed_size, "{c:?}");
-        }
     }
 
     /// The file is written a bounded chunk at a time: every chunk holds at most
