@@ -150,6 +150,58 @@ pub struct Outcome {
     pub truncated: bool,
 }
 
+/// The attacker's reward of a step (docs/python.md, "Rewards"): both terms are per tick, so
+/// that a step's reward does not grow with its length, and each is of order one:
+///
+/// `damage_weight · (mean error / damage_scale_rad − 1) − stealth_weight · alarmed share`
+///
+/// where the mean error is the step's mean over its ticks of `‖q_d − q‖` averaged over the
+/// chosen robots (rad) and `damage_scale_rad` the same mean over the attack-free run: 0 when
+/// the attack changes nothing, 1 when it doubles the error. The alarmed share is the step's
+/// ticks at whose end a chosen detector alarmed, over its ticks (0 to 1).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttackerReward {
+    pub damage_weight: f64,
+    pub stealth_weight: f64,
+    /// The attack-free run's mean tracking error (rad), > 0.
+    pub damage_scale_rad: f64,
+}
+
+impl AttackerReward {
+    /// The weights and scale, each checked: finite, and a scale above zero.
+    pub fn new(
+        damage_weight: f64,
+        stealth_weight: f64,
+        damage_scale_rad: f64,
+    ) -> Result<Self, String> {
+        if !(damage_weight.is_finite() && stealth_weight.is_finite()) {
+            return Err(format!(
+                "damage_weight and stealth_weight must be finite, got {damage_weight} and {stealth_weight}"
+            ));
+        }
+        if !(damage_scale_rad.is_finite() && damage_scale_rad > 0.0) {
+            return Err(format!(
+                "damage_scale must be a finite error above 0 rad, got {damage_scale_rad}"
+            ));
+        }
+        Ok(Self {
+            damage_weight,
+            stealth_weight,
+            damage_scale_rad,
+        })
+    }
+
+    /// The reward of a step that gave `o`; 0 for a step of no tick (a reset).
+    pub fn of(&self, o: &Outcome) -> f64 {
+        if o.ticks == 0 {
+            return 0.0;
+        }
+        let n = o.ticks as f64;
+        self.damage_weight * (o.damage / n / self.damage_scale_rad - 1.0)
+            - self.stealth_weight * o.alarm_ticks as f64 / n
+    }
+}
+
 /// The latest values each observer has seen, per robot in the scenario's order.
 #[derive(Debug, Clone)]
 struct Seen {

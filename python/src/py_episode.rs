@@ -243,8 +243,7 @@ struct Envs {
     actions: RwLock<Vec<f64>>,
     /// Entries of one environment's action.
     per: usize,
-    /// `(damage_weight, stealth_weight)`.
-    weights: (f64, f64),
+    reward: episode::AttackerReward,
 }
 
 impl Envs {
@@ -257,14 +256,13 @@ impl Envs {
                 continue; // a panic before: `step` reports the poisoned slot
             };
             let action = actions.get(i * self.per..(i + 1) * self.per).unwrap_or(&[]);
-            step_slot(&mut slot, action, self.weights);
+            step_slot(&mut slot, action, &self.reward);
         }
     }
 }
 
-/// One environment's step: the reward `damage_weight · damage − stealth_weight · alarm ticks`
-/// (zero for a reset), its end, its view.
-fn step_slot(slot: &mut Slot, action: &[f64], (damage_weight, stealth_weight): (f64, f64)) {
+/// One environment's step: its reward (zero for a reset), its end, its view.
+fn step_slot(slot: &mut Slot, action: &[f64], reward: &episode::AttackerReward) {
     let o = if slot.ended {
         slot.ended = false;
         if let Err(e) = slot.episode.reset(None) {
@@ -275,7 +273,7 @@ fn step_slot(slot: &mut Slot, action: &[f64], (damage_weight, stealth_weight): (
         slot.episode.apply_action(action);
         slot.episode.step()
     };
-    slot.reward = damage_weight * o.damage - stealth_weight * o.alarm_ticks as f64;
+    slot.reward = reward.of(&o);
     (slot.terminated, slot.truncated) = (o.terminated, o.truncated);
     slot.ended_digest = None;
     if o.terminated || o.truncated {
@@ -284,6 +282,28 @@ fn step_slot(slot: &mut Slot, action: &[f64], (damage_weight, stealth_weight): (
     }
     slot.view.clear();
     slot.episode.attacker_view(&mut slot.view);
+}
+
+/// The attacker's reward of a step of `ticks` ticks with `damage` and `alarm_ticks`
+/// (`episode::AttackerReward`): the one formula of `AttackerEnv`, the vector environment and
+/// the attack-defend environment.
+#[pyfunction]
+pub fn attacker_reward(
+    ticks: u64,
+    damage: f64,
+    alarm_ticks: u64,
+    damage_weight: f64,
+    stealth_weight: f64,
+    damage_scale_rad: f64,
+) -> PyResult<f64> {
+    let reward = episode::AttackerReward::new(damage_weight, stealth_weight, damage_scale_rad)
+        .map_err(PyValueError::new_err)?;
+    Ok(reward.of(&episode::Outcome {
+        ticks,
+        damage,
+        alarm_ticks,
+        ..episode::Outcome::default()
+    }))
 }
 
 /// Many episodes of one spec stepped together on every core: the vector environment's engine.
@@ -374,7 +394,7 @@ fn episodes(scenario: &Scenario, spec: &Spec, n: usize) -> PyResult<Vec<episode:
 #[pymethods]
 impl Batch {
     #[new]
-    #[pyo3(signature = (scenario, n, robots, channels, budget, detectors, decision_period, damage_weight, stealth_weight, threads = None))]
+    #[pyo3(signature = (scenario, n, robots, channels, budget, detectors, decision_period, damage_weight, stealth_weight, damage_scale_rad, threads = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         scenario: &Scenario,
@@ -386,16 +406,14 @@ impl Batch {
         decision_period: u64,
         damage_weight: f64,
         stealth_weight: f64,
+        damage_scale_rad: f64,
         threads: Option<usize>,
     ) -> PyResult<Self> {
         if n == 0 {
             return Err(PyValueError::new_err("n: at least one environment"));
         }
-        if !(damage_weight.is_finite() && stealth_weight.is_finite()) {
-            return Err(PyValueError::new_err(format!(
-                "damage_weight and stealth_weight must be finite, got {damage_weight} and {stealth_weight}"
-            )));
-        }
+        let reward = episode::AttackerReward::new(damage_weight, stealth_weight, damage_scale_rad)
+            .map_err(PyValueError::new_err)?;
         let spec = spec(robots, channels, budget, detectors, decision_period)?;
         let episodes = episodes(scenario, &spec, n)?;
         let per = episodes.first().map_or(0, |e| e.action_size());
@@ -417,7 +435,7 @@ impl Batch {
                 .collect(),
             actions: RwLock::new(vec![0.0; n * per]),
             per,
-            weights: (damage_weight, stealth_weight),
+            reward,
         });
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let chunks = n.div_ceil(CHUNK);

@@ -157,11 +157,35 @@ def test_the_detector_environment_draws_its_attack_from_its_seed_and_scores_alar
     # No attack: an alarm costs a false alarm per tick, silence costs nothing.
     _, r_on, *_ = env.step(np.ones(4, dtype=np.int8))
     _, r_off, *_ = env.step(np.zeros(4, dtype=np.int8))
-    assert r_on == -4 * 20 and r_off == 0
+    # Per robot-tick: -1 for every robot alarming on every clean tick.
+    assert r_on == -1.0 and r_off == 0
     env.reset(options={"attack": "paper"})
     _, r_on, _, _, info = env.step(np.ones(4, dtype=np.int8))
     attacked = sum(info["attacked_ticks"])
-    assert attacked > 0 and r_on == attacked - (4 * 20 - attacked)
+    assert attacked > 0 and r_on == (attacked - (4 * 20 - attacked)) / (4 * 20)
+
+
+def test_the_attacker_s_reward_is_on_the_attack_free_error_s_scale():
+    """Regression (issue 55): the stealth penalty (1 per alarmed tick) was about 1000 times
+    the damage term (about 1e-3 rad per tick): every perturbation of a policy scored far below
+    the zero policy. Both terms are now per tick and of order one."""
+    scenario = fdi_mas.Scenario.paper(duration_s=2.0, residual="psi2")
+    env = AttackerEnv(scenario, robots=[2], budget={"position": 0.2}, decision_period=50)
+    scale = env.damage_scale
+    assert 1e-5 < scale < 0.1
+    clean, steps, info = run_episode(env, np.zeros(env.action_space.shape))
+    assert info["damage_scale_rad"] == scale
+    # The attack-free episode: error on its own scale, no alarm: a return of 0.
+    assert abs(clean) < 1e-9 * steps
+    # Each step's reward from its info: the documented formula.
+    env.reset()
+    _, r, _, _, i = env.step(np.ones(env.action_space.shape))
+    e = i["damage"] / i["ticks"]
+    assert r == pytest.approx((e / scale - 1.0) - i["alarm_ticks"] / i["ticks"], rel=1e-12)
+    with pytest.raises(ValueError, match="damage_scale"):
+        AttackerEnv(scenario, damage_scale=0.0)
+    given = AttackerEnv(scenario, damage_scale=0.01)
+    assert given.damage_scale == 0.01
 
 
 def test_the_vector_environment_names_the_environment_of_a_bad_action():

@@ -130,3 +130,46 @@ def period_of(decision_period: int) -> int:
     if int(decision_period) < 1:
         raise ValueError(f"decision_period: at least 1 tick, got {decision_period}")
     return int(decision_period)
+
+
+#: Attack-free errors already measured, per (scenario TOML, robots).
+_ATTACK_FREE: dict[tuple[str, tuple[int, ...]], float] = {}
+
+
+def attack_free_error(scenario: _core.Scenario, robots: Sequence[int]) -> float:
+    """The attacker's damage scale: over the attack-free run of ``scenario`` (its attack
+    replaced by ``none``, nothing injected), the mean over the ticks of ``‖q_d − q‖`` averaged
+    over ``robots`` (rad). Measured once per scenario and robots (one run of the engine: about
+    0.3 s for the paper's 40 s)."""
+    free = scenario.replace(attack="none")
+    key = (free.to_toml(), tuple(robots))
+    if key not in _ATTACK_FREE:
+        episode = _core.Episode(free, list(robots), [], [0.0, 0.0, 0.0], [], max(1, free.ticks))
+        ticks, damage = 0, 0.0
+        try:
+            while True:
+                out = episode.step(b"")
+                ticks, damage = ticks + out[0], damage + out[1]
+                if out[4] or out[5]:
+                    break
+        finally:
+            episode.close()
+        if ticks == 0 or not np.isfinite(damage) or damage <= 0.0:
+            raise ValueError(
+                f"damage_scale: the attack-free run of {scenario.name!r} gave no finite error to "
+                f"scale the damage by ({damage} rad over {ticks} ticks): give damage_scale"
+            )
+        _ATTACK_FREE[key] = damage / ticks
+    return _ATTACK_FREE[key]
+
+
+def damage_scale_of(
+    damage_scale: float | None, scenario: _core.Scenario, robots: Sequence[int]
+) -> float:
+    """``damage_scale`` (rad) when given, else :func:`attack_free_error`; finite and above 0."""
+    if damage_scale is None:
+        return attack_free_error(scenario, robots)
+    scale = float(damage_scale)
+    if not np.isfinite(scale) or scale <= 0.0:
+        raise ValueError(f"damage_scale: a finite error above 0 rad, got {damage_scale}")
+    return scale

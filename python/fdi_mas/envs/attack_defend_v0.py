@@ -57,6 +57,7 @@ class AttackDefendEnv(ParallelEnv):
         detectors: Sequence[str] | str = _common.DEFAULT_DETECTORS,
         damage_weight: float = 1.0,
         stealth_weight: float = 1.0,
+        damage_scale: float | None = None,
         detect_reward: float = 1.0,
         false_alarm_penalty: float = 1.0,
         miss_penalty: float = 1.0,
@@ -83,7 +84,10 @@ class AttackDefendEnv(ParallelEnv):
             self.detectors,
             int(decision_period),
         )
-        self.attack_weights = (float(damage_weight), float(stealth_weight))
+        # The damage scale is the attack-free error of the base scenario (its attack replaced).
+        scale = _common.damage_scale_of(damage_scale, first, self.robots)
+        self.attack_weights = (float(damage_weight), float(stealth_weight), scale)
+        _core.attacker_reward(0, 0.0, 0, *self.attack_weights)
         self.detect_weights = (float(detect_reward), float(false_alarm_penalty), float(miss_penalty))
         robot_ids, links, _ = self._episode.shape()
         self.robot_ids = robot_ids
@@ -159,7 +163,7 @@ class AttackDefendEnv(ParallelEnv):
         ticks, damage, alarm_ticks, attacked, terminated, truncated = out[:6]
         a_obs, c_obs = _common.views(out)
         rewards = {
-            ATTACKER: float(self.attack_weights[0] * damage - self.attack_weights[1] * alarm_ticks),
+            ATTACKER: _core.attacker_reward(ticks, damage, alarm_ticks, *self.attack_weights),
             DETECTOR: detection_reward(alarm, np.asarray(attacked), ticks, *self.detect_weights),
         }
         obs = {ATTACKER: a_obs, DETECTOR: c_obs}

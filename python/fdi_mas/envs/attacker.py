@@ -31,10 +31,17 @@ class AttackerEnv(gym.Env):
     the step. An action with a non-finite entry, an entry outside [-1, 1] or another shape
     raises ``ValueError`` (wrap the environment in ``gymnasium.wrappers.ClipAction`` to clip).
 
-    **Reward** per step: ``damage_weight × Σ_ticks mean over the chosen robots of ‖q_d − q‖``
-    (rad: the true tracking error) ``− stealth_weight × (ticks at whose end any chosen
-    detector of any robot is alarming)``. ``detectors``: any of :func:`fdi_mas.detectors`
-    (default ``s_hat_norm``, ``chi2``, ``cusum``).
+    **Reward** per step (docs/python.md, "Rewards"), both terms per tick and of order one:
+    ``damage_weight × (e / damage_scale − 1) − stealth_weight × alarmed``, where ``e`` is the
+    step's mean over its ticks of ``‖q_d − q‖`` (rad, the true tracking error) averaged over
+    the chosen robots, ``damage_scale`` the same mean over the whole attack-free run (measured
+    once at construction, unless given in rad), and ``alarmed`` the share of the step's ticks
+    at whose end any chosen detector of any robot was alarming (0 to 1). So 0 when the attack
+    changes nothing and stays unseen, +1 per step for doubling the error, −1 for a step alarmed
+    throughout; an attack-free episode's return is 0 up to its false alarms. ``info`` has the
+    raw terms: ``damage`` (Σ over the step's ticks of the mean error, rad), ``alarm_ticks``,
+    ``ticks``, ``attacked_ticks`` (per robot), and ``damage_scale_rad``. ``detectors``: any of
+    :func:`fdi_mas.detectors` (default ``s_hat_norm``, ``chi2``, ``cusum``).
 
     **Episode**: the scenario's horizon; it terminates when a robot diverges (its state leaves
     the bound of ``fdi_common::metrics::DIVERGENCE_BOUND_RAD`` or becomes non-finite) and
@@ -58,6 +65,7 @@ class AttackerEnv(gym.Env):
         detectors: Sequence[str] | str = _common.DEFAULT_DETECTORS,
         damage_weight: float = 1.0,
         stealth_weight: float = 1.0,
+        damage_scale: float | None = None,
         decision_period: int = 1,
         render_mode: str | None = None,
     ) -> None:
@@ -69,6 +77,9 @@ class AttackerEnv(gym.Env):
         self.budget = _common.budget_of(budget)
         self.damage_weight = float(damage_weight)
         self.stealth_weight = float(stealth_weight)
+        self.damage_scale = _common.damage_scale_of(damage_scale, self.scenario, self.robots)
+        # The weights are checked now, not at the first step.
+        _core.attacker_reward(0, 0.0, 0, self.damage_weight, self.stealth_weight, self.damage_scale)
         self.decision_period = _common.period_of(decision_period)
         self._episode = _core.Episode(
             self.scenario,
@@ -92,7 +103,8 @@ class AttackerEnv(gym.Env):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Back to the scenario's start. ``options={"scenario": Scenario}`` runs another
-        scenario with the same robots (e.g. another seed)."""
+        scenario with the same robots (e.g. another seed); the damage scale stays the
+        constructor's scenario's."""
         super().reset(seed=seed)
         _common.check_open(self._episode)
         scenario = (options or {}).get("scenario")
@@ -112,13 +124,16 @@ class AttackerEnv(gym.Env):
         out = self._episode.step(_common.checked_action(action, self._action_shape))
         ticks, damage, alarm_ticks, attacked, terminated, truncated = out[:6]
         obs, _ = _common.views(out)
-        reward = self.damage_weight * damage - self.stealth_weight * alarm_ticks
+        reward = _core.attacker_reward(
+            ticks, damage, alarm_ticks, self.damage_weight, self.stealth_weight, self.damage_scale
+        )
         info: dict[str, Any] = {
             "t_s": float(obs[0]),
             "ticks": ticks,
             "damage": damage,
             "alarm_ticks": alarm_ticks,
             "attacked_ticks": attacked,
+            "damage_scale_rad": self.damage_scale,
         }
         if terminated or truncated:
             self._ended = True

@@ -35,14 +35,18 @@ def detection_reward(
     false_alarm_penalty: float,
     miss_penalty: float,
 ) -> float:
-    """A step's reward for per-robot ``alarm``s against the ground truth: per robot, with its
+    """A step's reward for per-robot ``alarm``s against the ground truth, per robot-tick so that
+    it is of order one whatever the step's length and the team's size: per robot, with its
     alarm on, ``detect_reward`` per attacked tick and ``− false_alarm_penalty`` per clean one;
-    with its alarm off, ``− miss_penalty`` per attacked tick; summed over robots."""
+    with its alarm off, ``− miss_penalty`` per attacked tick; summed over robots and divided by
+    ``ticks × robots`` (0 for a step of no tick)."""
     attacked = np.asarray(attacked, dtype=np.float64)
     clean = ticks - attacked
     on = np.asarray(alarm, dtype=bool)
+    if ticks <= 0 or on.size == 0:
+        return 0.0
     r = np.where(on, detect_reward * attacked - false_alarm_penalty * clean, -miss_penalty * attacked)
-    return float(r.sum())
+    return float(r.sum() / (ticks * on.size))
 
 
 class DetectorEnv(gym.Env):
@@ -57,9 +61,12 @@ class DetectorEnv(gym.Env):
     **Action** (``MultiBinary(robots)``): the alarm per robot, held for the step's
     ``decision_period`` ticks.
 
-    **Reward** per step, against the ground truth the attacker records (an attack in force on
-    the robot at the tick): per robot, alarm on: ``detect_reward`` per attacked tick,
-    ``− false_alarm_penalty`` per clean tick; alarm off: ``− miss_penalty`` per attacked tick.
+    **Reward** per step (docs/python.md, "Rewards"), against the ground truth the attacker
+    records (an attack in force on the robot at the tick): per robot, alarm on:
+    ``detect_reward`` per attacked tick, ``− false_alarm_penalty`` per clean tick; alarm off:
+    ``− miss_penalty`` per attacked tick; divided by the step's robot-ticks, so between
+    ``−max(false_alarm_penalty, miss_penalty)`` and ``detect_reward`` per step. A detector that
+    never alarms scores ``−miss_penalty ×`` the attacked share.
 
     **Episode**: at each reset the attack is drawn (from ``attacks``, shipped profiles,
     ``none`` included) with the environment's random generator (``reset(seed=…)``), and,

@@ -40,6 +40,7 @@ class VectorAttackerEnv(VectorEnv):
         detectors: Sequence[str] | str = _common.DEFAULT_DETECTORS,
         damage_weight: float = 1.0,
         stealth_weight: float = 1.0,
+        damage_scale: float | None = None,
         decision_period: int = 1,
         threads: int | None = None,
         render_mode: str | None = None,
@@ -55,6 +56,7 @@ class VectorAttackerEnv(VectorEnv):
         self.budget = _common.budget_of(budget)
         self.damage_weight = float(damage_weight)
         self.stealth_weight = float(stealth_weight)
+        self.damage_scale = _common.damage_scale_of(damage_scale, self.scenario, self.robots)
         decision_period = _common.period_of(decision_period)
         self._batch = _core.Batch(
             self.scenario,
@@ -66,6 +68,7 @@ class VectorAttackerEnv(VectorEnv):
             int(decision_period),
             self.damage_weight,
             self.stealth_weight,
+            self.damage_scale,
             threads,
         )
         agents, links, _ = self._batch.shape()
