@@ -171,9 +171,7 @@ fn candidates(message: &str, reference: Option<&toml::Table>, steps: &[Seg]) -> 
     out
 }
 
-/// The name serde expects that is nearest to an unknown key or variant it names, when one is
-/// near enough to be a misspelling: at most a third of its letters are added, removed, changed
-/// or swapped (at least one).
+/// The name serde expects that is [`nearest`] to an unknown key or variant it names.
 fn did_you_mean(message: &str) -> Option<&str> {
     let written = ["unknown field `", "unknown variant `"]
         .iter()
@@ -181,10 +179,14 @@ fn did_you_mean(message: &str) -> Option<&str> {
         .split('`')
         .next()?;
     let (_, list) = message.split_once(", expected ")?;
-    let near = list
-        .split('`')
-        .skip(1)
-        .step_by(2)
+    nearest(written, list.split('`').skip(1).step_by(2))
+}
+
+/// The name of `names` nearest to `written` when it is near enough to be a misspelling of it:
+/// at most a third of its letters are added, removed, changed or swapped (at least one).
+pub fn nearest<'a>(written: &str, names: impl IntoIterator<Item = &'a str>) -> Option<&'a str> {
+    let near = names
+        .into_iter()
         .min_by_key(|n| strsim::osa_distance(n, written))?;
     let most = (written.chars().count() / 3).max(1);
     (strsim::osa_distance(near, written) <= most).then_some(near)

@@ -1262,9 +1262,13 @@ pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, 
             let message = if std::fs::symlink_metadata(path).is_ok() {
                 "a symbolic link whose target does not exist".to_string()
             } else {
+                let names = presets::names();
+                let near = crate::collect::nearest(arg, names.iter().copied())
+                    .map(|n| format!("; did you mean `{n}`?"))
+                    .unwrap_or_default();
                 format!(
-                    "neither a preset ({}) nor an existing file",
-                    presets::names().join(", ")
+                    "neither a preset ({}) nor an existing file{near}",
+                    names.join(", ")
                 )
             };
             Err(ScenarioError::one(arg, "--attack", message))

@@ -4,6 +4,10 @@
 use std::path::PathBuf;
 
 use fdi_common::overrides::{Overrides, SOURCE_NAME};
+
+/// The name the problems of the keywords of `Scenario.paper`, `load` and `replace` are reported
+/// under (the command line's are [`SOURCE_NAME`]).
+const KEYWORDS_SOURCE: &str = "keyword arguments";
 use fdi_common::problem::Problem;
 use fdi_common::scenario::{self, ClockMode, Resolved, ScenarioError};
 use pyo3::prelude::*;
@@ -35,7 +39,7 @@ const KEYWORDS: &[&str] = &[
 
 fn problem(path: &str, message: impl Into<String>) -> ScenarioError {
     ScenarioError {
-        source_name: SOURCE_NAME.into(),
+        source_name: KEYWORDS_SOURCE.into(),
         problems: vec![Problem {
             path: path.into(),
             message: message.into(),
@@ -101,7 +105,10 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> Result<Overrides, ScenarioEr
             _ => Err(problem(
                 &key,
                 format!(
-                    "no such keyword; the scenario's keywords are {}",
+                    "no such keyword{}; the scenario's keywords are {}",
+                    fdi_common::collect::nearest(&key, KEYWORDS.iter().copied())
+                        .map(|n| format!(" (did you mean `{n}`?)"))
+                        .unwrap_or_default(),
                     KEYWORDS.join(", ")
                 ),
             )),
@@ -114,10 +121,31 @@ fn overrides(kwargs: Option<&Bound<'_, PyDict>>) -> Result<Overrides, ScenarioEr
         Ok(o)
     } else {
         Err(ScenarioError {
-            source_name: SOURCE_NAME.into(),
+            source_name: KEYWORDS_SOURCE.into(),
             problems,
         })
     }
+}
+
+/// A problem of the overrides in Python's words: reported under [`KEYWORDS_SOURCE`], each
+/// flag's path (`--attack`, `--duration-s`) as its keyword (`attack`, `duration_s`). A problem
+/// inside an attack file given as `attack` keeps its file's name and paths.
+fn in_keywords(mut e: ScenarioError) -> ScenarioError {
+    let flagged = e.problems.iter().any(|p| p.path.starts_with("--"));
+    if e.source_name == SOURCE_NAME || flagged {
+        // A flag's problem reported under the value given (`--attack frezee`) names it.
+        let value = (e.source_name != SOURCE_NAME).then(|| e.source_name.clone());
+        e.source_name = KEYWORDS_SOURCE.into();
+        for p in &mut e.problems {
+            if let Some(flag) = p.path.strip_prefix("--") {
+                p.path = flag.replace('-', "_");
+                if let Some(v) = &value {
+                    p.message = format!("{v:?}: {}", p.message);
+                }
+            }
+        }
+    }
+    e
 }
 
 /// `r` with the overrides of `kwargs` applied and validated; the realtime clock refused (the
@@ -126,7 +154,7 @@ pub fn with_overrides(
     r: Resolved,
     kwargs: Option<&Bound<'_, PyDict>>,
 ) -> Result<Resolved, ScenarioError> {
-    let r = overrides(kwargs)?.apply(r)?;
+    let r = overrides(kwargs)?.apply(r).map_err(in_keywords)?;
     if r.scenario.clock == ClockMode::Realtime {
         return Err(problem(
             "clock",

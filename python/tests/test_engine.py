@@ -79,6 +79,29 @@ def test_scenario_errors_name_every_field():
         fdi_mas.Scenario.paper(duration_s="long")
 
 
+def test_python_errors_speak_of_keywords_and_suggest_the_name_meant():
+    """Regression (issue 55): `Scenario.paper(attack='frezee')` spoke of `--attack`, a bad
+    keyword was reported under "command-line overrides", and an unknown preset got no "did
+    you mean" where a scenario key does."""
+    with pytest.raises(fdi_mas.ScenarioError) as e:
+        fdi_mas.Scenario.paper(attack="frezee")
+    said = str(e.value)
+    assert said.startswith("keyword arguments: 1 problem(s)"), said
+    assert "--" not in said and "command-line" not in said, said
+    [(path, message)] = e.value.problems
+    assert path == "attack" and '"frezee"' in message, e.value.problems
+    assert message.endswith("did you mean `freeze`?"), message
+    with pytest.raises(fdi_mas.ScenarioError) as e:
+        fdi_mas.Scenario.paper(duration_s=-1.0, sed=3)
+    said = str(e.value)
+    assert said.startswith("keyword arguments: ") and "command-line" not in said, said
+    assert ("sed", next(m for p, m in e.value.problems if p == "sed")) in e.value.problems
+    assert "did you mean `seed`?" in dict(e.value.problems)["sed"]
+    with pytest.raises(fdi_mas.ScenarioError) as e:
+        fdi_mas.Scenario.paper().replace(duration_s=0.0)
+    assert str(e.value).startswith("keyword arguments: "), str(e.value)
+
+
 def test_a_scenario_file_s_errors_give_line_and_column(tmp_path: pathlib.Path):
     bad = tmp_path / "bad.toml"
     bad.write_text('name = "bad"\nduration_s = 1.0\nduraton_s = 2.0\n')
