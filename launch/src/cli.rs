@@ -53,6 +53,11 @@ pub enum Command {
     Report {
         /// A run directory (`runs/<timestamp>-<name>`).
         run_dir: PathBuf,
+        /// The robots that get their own figures: ids separated by commas (`3,7`) or `all`.
+        /// By default every robot of a team of at most 8, none of a larger team, which gets the
+        /// team figure (every robot's error on one plot) instead.
+        #[arg(long, value_name = "IDS")]
+        robots: Option<fdi_report::team::PerRobot>,
     },
     /// ROC and detection delay: sweep every detector's threshold over one recorded run (the
     /// detectors replay its records, nothing is simulated again) and write `roc.csv`, `roc.svg`/`.png`

@@ -73,7 +73,9 @@ fn dispatch(command: Command, stop: &Stop) -> Result<ExitCode> {
         Command::Table1(args) => tables::table1(&args, stop),
         Command::Table2(args) => tables::table2(&args, stop),
         Command::Attacks(args) => attacks::attacks(&args, stop),
-        Command::Report { run_dir } => done(report::report(&run_dir, stop)),
+        Command::Report { run_dir, robots } => {
+            done(report::report(&run_dir, &robots.unwrap_or_default(), stop))
+        }
         Command::Detect(args) => commands::detect::detect(&args, stop),
         Command::Trace(TraceCommand::Export { run_dir, format }) => {
             done(export::export(&run_dir, format))

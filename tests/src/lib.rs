@@ -365,3 +365,20 @@ impl Drop for Tmpfs {
         let _ = Command::new("umount").arg(&self.0 .0).status();
     }
 }
+
+/// The paper's scenario with `n` robots: its four agents' tables again and again, numbered
+/// 1..=n (the attack stays on the first four).
+pub fn paper_team(n: u32) -> String {
+    let paper = fdi_common::scenario::PAPER_SCENARIO;
+    let (head, agents) = paper.split_once("[[agents]]").expect("the paper's agents");
+    let tables: Vec<&str> = agents.split("[[agents]]").collect();
+    let mut out = head.replacen("name = \"paper\"", &format!("name = \"team{n}\""), 1);
+    for i in 1..=n {
+        let table = tables[(i as usize - 1) % tables.len()];
+        let (id_line, rest) = table.split_once('\n').map_or(("", table), |(a, b)| (a, b));
+        let (_, tail) = rest.split_once('\n').expect("the id line");
+        assert!(rest.starts_with("id = "), "{id_line}{rest}");
+        out.push_str(&format!("[[agents]]{id_line}\nid = {i}\n{tail}"));
+    }
+    out
+}

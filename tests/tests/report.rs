@@ -712,3 +712,92 @@ fn timeline_draws_every_interval_of_the_per_tick_attack_flag() {
     // The robots without an attack.
     assert!(figure_svg(&run_dir, "robot2-delay-alarm").contains("never"));
 }
+
+/// Regression (issue 55): a 64-robot run drew 7 figures per robot, PNG and SVG, one after the
+/// other: 30 s of report for 0.55 s of simulation. A team of more than 8 robots leads with the
+/// team figure (every robot's error on one plot) and the RMSE table; `report --robots` draws
+/// the figures of the robots named, and refuses an id that is not the run's.
+#[test]
+fn a_large_team_leads_with_the_team_figure_and_draws_robots_on_demand() {
+    let dir = Scratch::new("report-team");
+    let file = dir.0.join("team12.toml");
+    std::fs::write(&file, fdi_tests::paper_team(12)).expect("scenario");
+    let path = file.to_string_lossy().into_owned();
+    let run = [
+        "run",
+        &path,
+        "--engine",
+        "inproc",
+        "--duration-s",
+        "0.5",
+        "--json",
+    ];
+    let run_dir = run_dir_of(&json(&launch(&run, &dir.0, WATCHDOG)));
+    let report = run_dir.join("report");
+    let files = |report: &Path| -> Vec<String> {
+        let mut names: Vec<String> = std::fs::read_dir(report)
+            .expect("the report folder")
+            .filter_map(Result::ok)
+            .map(|e| e.file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    assert_eq!(
+        files(&report),
+        [
+            "detection.csv",
+            "report.md",
+            "segments.csv",
+            "team-position-error.png",
+            "team-position-error.svg"
+        ]
+    );
+    let svg = figure_svg(&run_dir, "team-position-error");
+    assert!(
+        svg.contains("each of the 12 robots") && svg.contains("largest RMSE"),
+        "the team figure's legend"
+    );
+    // One curve per robot (the legend's sample lines are paths, not polylines).
+    assert!(svg.matches("<polyline").count() >= 12, "a curve per robot");
+    let md = std::fs::read_to_string(report.join("report.md")).expect("report.md");
+    assert!(
+        md.contains("## Team")
+            && md.contains("(team-position-error.png)")
+            && md.contains("Per-robot figures are drawn for 0 of the 12 robots")
+            && md.contains("--robots 3,7")
+            && !md.contains("## Robot 1\n"),
+        "{md}"
+    );
+    assert!(
+        md.contains("| 12 |"),
+        "the RMSE table has every robot:\n{md}"
+    );
+
+    let rd = run_dir.to_string_lossy().into_owned();
+    let out = launch_plain(&["report", &rd, "--robots", "3,11"], WATCHDOG);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let names = files(&report);
+    for id in [3, 11] {
+        for f in FIGURES {
+            for ext in ["png", "svg"] {
+                let name = format!("robot{id}-{f}.{ext}");
+                assert!(names.contains(&name), "{name} in {names:?}");
+            }
+        }
+    }
+    assert_eq!(names.len(), 5 + 2 * FIGURES.len() * 2, "{names:?}");
+    let md = std::fs::read_to_string(report.join("report.md")).expect("report.md");
+    assert!(
+        md.contains("## Robot 3\n") && md.contains("## Robot 11\n") && !md.contains("## Robot 4\n"),
+        "{md}"
+    );
+
+    let out = launch_plain(&["report", &rd, "--robots", "3,13"], WATCHDOG);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("--robots: 13 is not a robot of the run (its robots: 1–12)"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -874,23 +874,6 @@ fn realtime_attacker_stalled_half_a_second_every_agent_rejoins_its_uncontrolled_
     assert_no_leftovers(launcher);
 }
 
-/// The paper's scenario with `n` robots: its four agents' tables again and again, numbered
-/// 1..=n (the attack stays on the first four).
-fn paper_team(n: u32) -> String {
-    let paper = fdi_common::scenario::PAPER_SCENARIO;
-    let (head, agents) = paper.split_once("[[agents]]").expect("the paper's agents");
-    let tables: Vec<&str> = agents.split("[[agents]]").collect();
-    let mut out = head.replacen("name = \"paper\"", &format!("name = \"team{n}\""), 1);
-    for i in 1..=n {
-        let table = tables[(i as usize - 1) % tables.len()];
-        let (id_line, rest) = table.split_once('\n').map_or(("", table), |(a, b)| (a, b));
-        let (_, tail) = rest.split_once('\n').expect("the id line");
-        assert!(rest.starts_with("id = "), "{id_line}{rest}");
-        out.push_str(&format!("[[agents]]{id_line}\nid = {i}\n{tail}"));
-    }
-    out
-}
-
 /// Regression (issue 51): with 96 robots on the 2-core machine a realtime run falls behind its
 /// clock, the control center last of all; when it found a robot again that had already
 /// finished, the launcher forgot the robot's "done" and took the run for stalled ("no progress
@@ -901,7 +884,7 @@ fn paper_team(n: u32) -> String {
 fn realtime_an_overloaded_run_of_96_robots_is_a_result_not_a_stall() {
     let dir = Scratch::new("rt-overloaded");
     let file = dir.0.join("team96.toml");
-    std::fs::write(&file, paper_team(96)).expect("scenario");
+    std::fs::write(&file, fdi_tests::paper_team(96)).expect("scenario");
     let out = launch(
         &[
             "run",

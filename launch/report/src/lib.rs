@@ -18,5 +18,7 @@ pub mod output;
 pub mod plot;
 #[cfg(feature = "figures")]
 pub mod report;
+#[cfg(feature = "figures")]
+pub mod team;
 pub mod topics;
 pub mod traces;

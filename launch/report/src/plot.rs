@@ -871,7 +871,10 @@ fn draw_curves<'a, DB: DrawingBackend + 'a>(
                 .draw_series(LineSeries::new(points, color))
                 .map_err(plot_err)?;
         }
-        keys.push(Key::Line(color, l.label.clone()));
+        // A curve without a label has no legend entry (the team figure's many robots share one).
+        if !l.label.is_empty() {
+            keys.push(Key::Line(color, l.label.clone()));
+        }
         if clips && !l.keep {
             clipped.total += l.points.len();
             for e in excursions(&l.points, y0, y1) {

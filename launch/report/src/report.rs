@@ -24,6 +24,7 @@ use crate::output::{csv_bytes, md_table_head};
 use crate::plot::{
     self, Band, Envelope, Figure, Guide, Intervals, Line, Panel, PanelKind, PALETTE,
 };
+use crate::team::{self, PerRobot};
 
 /// Buckets per plotted curve (each gives its minimum and maximum).
 pub const BUCKETS: u64 = 2000;
@@ -90,10 +91,14 @@ pub const FIGURES: [(&str, &str); 6] = [
 
 /// `fdi-launch report RUN_DIR`: joins the traces again and recomputes the summary; the engine
 /// and the wall time, which the traces do not hold, come from `summary.json` when it is there.
-pub fn report(run_dir: &Path, stop: &Stop) -> Result<()> {
+/// `per_robot` chooses the robots that get their own figures (the team figure comes with a
+/// team of more than [`team::HANDFUL`]).
+pub fn report(run_dir: &Path, per_robot: &PerRobot, stop: &Stop) -> Result<()> {
     let scenario_path = RunDir::new(run_dir).scenario();
     let resolved = scenario::load_file(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
+    let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
+    let figured = per_robot.robots(&ids).map_err(anyhow::Error::msg)?;
     let mut warnings = Vec::new();
     let summary_path = RunDir::new(run_dir).summary();
     let stored = read_stored_summary(&summary_path, &mut warnings);
@@ -114,6 +119,7 @@ pub fn report(run_dir: &Path, stop: &Stop) -> Result<()> {
             series,
             warnings: &warnings,
             kept,
+            figured,
         };
         return write_and_name(run_dir, (&resolved, &s), gathered, stop);
     }
@@ -122,6 +128,7 @@ pub fn report(run_dir: &Path, stop: &Stop) -> Result<()> {
         series,
         warnings: &warnings,
         kept,
+        figured,
     };
     write_and_name(run_dir, (&resolved, &summary), gathered, stop)
 }
@@ -266,11 +273,14 @@ pub fn write_report(
     stop: &Stop,
 ) -> Result<()> {
     let kept = crate::traces::recorded(run_dir)?;
+    let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
+    let figured = PerRobot::Auto.robots(&ids).map_err(anyhow::Error::msg)?;
     let (series, warnings) = gather(run_dir, resolved, kept, stop)?;
     let gathered = Gathered {
         series,
         warnings: &warnings,
         kept,
+        figured,
     };
     write(run_dir, (resolved, summary), gathered, stop)?;
     Ok(())
@@ -287,6 +297,8 @@ struct Gathered<'a> {
     series: RunSeries,
     warnings: &'a [String],
     kept: Recorded,
+    /// The robots that get their own figures.
+    figured: std::collections::BTreeSet<u32>,
 }
 
 /// Maxima of one attack segment of one robot, at the full tick rate.
@@ -327,6 +339,8 @@ struct AgentSeries {
     /// Attack switch times in `(0, duration)`.
     switches: Vec<f64>,
     pos: Vec<Envelope>,
+    /// `‖q_d − q‖` over the links, for the team figure (coarser: [`team::TEAM_BUCKETS`]).
+    pos_norm: Envelope,
     vel: Vec<Envelope>,
     s_hat: Vec<Envelope>,
     s_true: Vec<Envelope>,
@@ -358,6 +372,9 @@ impl RunSeries {
         let ticks = r.ticks();
         let stride = usize::try_from(ticks.div_ceil(BUCKETS)).unwrap_or(1).max(1);
         let env = |n: usize| (0..n).map(|_| Envelope::new(stride, ticks)).collect();
+        let team_stride = usize::try_from(ticks.div_ceil(team::TEAM_BUCKETS))
+            .unwrap_or(1)
+            .max(1);
         let agents = s
             .agents
             .iter()
@@ -377,6 +394,7 @@ impl RunSeries {
                         .collect(),
                     switches,
                     pos: env(dof),
+                    pos_norm: Envelope::new(team_stride, ticks),
                     vel: env(dof),
                     s_hat: env(dof),
                     s_true: env(dof),
@@ -428,6 +446,7 @@ impl RunSeries {
         );
         let get = |v: &[f64], i: usize| v.get(i).copied().unwrap_or(f64::NAN);
         let mut s_err_sq = 0.0;
+        let mut e_sq = 0.0;
         let mut seg = seg;
         for i in 0..a.dof {
             let e_pos = reference.q[i] - get(q, i);
@@ -435,6 +454,7 @@ impl RunSeries {
             let s_true = true_s(get(ap, i), get(av, i), beta);
             let sh = get(s_hat, i);
             a.pos[i].push(t, e_pos);
+            e_sq += e_pos * e_pos;
             a.vel[i].push(t, e_vel);
             a.s_hat[i].push(t, sh);
             a.s_true[i].push(t, s_true);
@@ -451,6 +471,7 @@ impl RunSeries {
                 *v = v.max(e_vel.abs());
             }
         }
+        a.pos_norm.push(t, e_sq.sqrt());
         if let Some(s) = seg {
             s.s_err_sq += s_err_sq;
             s.ticks += 1;
@@ -522,6 +543,29 @@ struct Layout {
     paper: bool,
     period_s: f64,
 }
+
+/// The team figure (`team-position-error`): every robot's position error, the one with the
+/// largest RMSE drawn over the others.
+fn team_job(agents: &[AgentSeries], summary: &RunSummary, l: &Layout) -> Job {
+    let worst = summary
+        .metrics
+        .iter()
+        .filter(|(_, m)| m.rmse_rad.is_finite())
+        .max_by(|a, b| a.1.rmse_rad.total_cmp(&b.1.rmse_rad))
+        .and_then(|(id, m)| id.parse::<u32>().ok().map(|id| (id, m.rmse_rad)));
+    let robots = agents
+        .iter()
+        .map(|a| (a.id, a.pos_norm.clone().finish()))
+        .collect();
+    Job {
+        stem: TEAM_FIGURE.into(),
+        figure: team::team_figure(robots, worst, l.x_range, &l.partial),
+        size: (1000, 520),
+    }
+}
+
+/// The stem of the team figure's files.
+const TEAM_FIGURE: &str = "team-position-error";
 
 /// The figures of one robot.
 fn figures(a: AgentSeries, l: &Layout) -> Vec<Job> {
@@ -757,6 +801,7 @@ fn write_into(
         series,
         warnings,
         kept,
+        figured,
     } = gathered;
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     fdi_common::stop::hold("report", stop);
@@ -783,18 +828,23 @@ fn write_into(
     };
     let mut segments = Vec::new();
     let mut jobs = Vec::new();
+    let team_figure = kept != Recorded::None && team::has_team_figure(series.agents.len());
     if kept != Recorded::None {
+        if team_figure {
+            jobs.push(team_job(&series.agents, summary, &layout));
+        }
         for a in series.agents {
             segments.push((a.id, a.segments.clone()));
-            jobs.extend(figures(a, &layout));
+            if figured.contains(&a.id) {
+                jobs.extend(figures(a, &layout));
+            }
         }
         render_all(dir, jobs, stop)?;
     }
     let md = markdown(
         run_dir,
-        resolved,
-        summary,
-        &segments,
+        (resolved, summary),
+        (&segments, &figured, team_figure),
         warnings,
         partial.as_deref(),
         kept,
@@ -869,9 +919,12 @@ fn fmt_opt_s(v: Option<f64>) -> String {
 /// `report.md`: one section after the other.
 fn markdown(
     run_dir: &Path,
-    r: &Resolved,
-    s: &RunSummary,
-    segments: &[(u32, Vec<SegmentStats>)],
+    (r, s): (&Resolved, &RunSummary),
+    (segments, figured, team_figure): (
+        &[(u32, Vec<SegmentStats>)],
+        &std::collections::BTreeSet<u32>,
+        bool,
+    ),
     warnings: &[String],
     partial: Option<&str>,
     kept: Recorded,
@@ -892,11 +945,11 @@ fn markdown(
                 "\n**The figures and the segment table are drawn from decimated traces (`--traces decimate={k}`): every {k}-th tick, so a spike between two kept ticks may not show. The tables of metrics come from the run's summary and cover every tick.**"
             );
             segments_section(&mut md, segments);
-            figures_section(&mut md, r, partial);
+            figures_section(&mut md, r, partial, (figured, team_figure));
         }
         Recorded::Full => {
             segments_section(&mut md, segments);
-            figures_section(&mut md, r, partial);
+            figures_section(&mut md, r, partial, (figured, team_figure));
         }
     }
     warnings_section(&mut md, warnings);
@@ -1220,10 +1273,36 @@ fn segments_section(md: &mut String, segments: &[(u32, Vec<SegmentStats>)]) {
 }
 
 /// How the figures are drawn, then every robot's figures.
-fn figures_section(md: &mut String, r: &Resolved, partial: Option<&str>) {
+fn figures_section(
+    md: &mut String,
+    r: &Resolved,
+    partial: Option<&str>,
+    (figured, team_figure): (&std::collections::BTreeSet<u32>, bool),
+) {
     md.push_str("\n## Reading the figures\n\n");
     md.push_str(&figure_notes(r, partial));
-    for a in &r.scenario.agents {
+    let ids: Vec<u32> = r.scenario.agents.iter().map(|a| a.id).collect();
+    if team_figure {
+        let _ = writeln!(
+            md,
+            "\n## Team\n\n**Every robot's position error** ‖q_d − q‖, the robot with the largest \
+             RMSE drawn over the others; the RMSE of each robot is the table above \
+             ([SVG]({TEAM_FIGURE}.svg))\n\n![the team's position errors]({TEAM_FIGURE}.png)\n"
+        );
+    }
+    let left = ids.len() - figured.len();
+    if left > 0 {
+        let _ = writeln!(
+            md,
+            "\nPer-robot figures are drawn for {} of the {} robots (a team of more than {} leads \
+             with the team figure): `fdi-launch report RUN_DIR --robots 3,7` draws those of the \
+             robots named, `--robots all` every robot's.",
+            figured.len(),
+            ids.len(),
+            team::HANDFUL
+        );
+    }
+    for a in r.scenario.agents.iter().filter(|a| figured.contains(&a.id)) {
         let id = a.id;
         let _ = writeln!(md, "\n## Robot {id}\n");
         for (suffix, what) in FIGURES {
