@@ -916,15 +916,19 @@ fn fmt_opt_s(v: Option<f64>) -> String {
     v.map_or_else(|| "never".into(), |d| format!("{d:.3}"))
 }
 
+/// What the figures of `report.md` are: each robot's segment maxima, the robots with their own
+/// figures, whether the team figure is drawn.
+type Drawn<'a> = (
+    &'a [(u32, Vec<SegmentStats>)],
+    &'a std::collections::BTreeSet<u32>,
+    bool,
+);
+
 /// `report.md`: one section after the other.
 fn markdown(
     run_dir: &Path,
     (r, s): (&Resolved, &RunSummary),
-    (segments, figured, team_figure): (
-        &[(u32, Vec<SegmentStats>)],
-        &std::collections::BTreeSet<u32>,
-        bool,
-    ),
+    (segments, figured, team_figure): Drawn<'_>,
     warnings: &[String],
     partial: Option<&str>,
     kept: Recorded,
