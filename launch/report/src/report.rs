@@ -878,11 +878,10 @@ fn recorded_span(recorded: f64, period_s: f64, duration_s: f64) -> (f64, Option<
     }
 }
 
-/// Renders the figures on up to two threads (the machine's cores, at most).
+/// Renders the figures on every core (a thread per core, at most one per figure).
 fn render_all(dir: &Path, jobs: Vec<Job>, stop: &Stop) -> Result<()> {
     let workers = std::thread::available_parallelism()
         .map_or(1, std::num::NonZero::get)
-        .clamp(1, 4)
         .min(jobs.len().max(1));
     let mut shares: Vec<Vec<Job>> = (0..workers).map(|_| vec![]).collect();
     for (i, j) in jobs.into_iter().enumerate() {

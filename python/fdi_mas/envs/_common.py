@@ -147,11 +147,15 @@ def attack_free_error(scenario: _core.Scenario, robots: Sequence[int]) -> float:
         episode = _core.Episode(free, list(robots), [], [0.0, 0.0, 0.0], [], max(1, free.ticks))
         ticks, damage = 0, 0.0
         try:
-            while True:
+            # One step runs the whole horizon; the bound only guards against an engine that
+            # would never end its episode.
+            for _ in range(free.ticks + 1):
                 out = episode.step(b"")
                 ticks, damage = ticks + out[0], damage + out[1]
                 if out[4] or out[5]:
                     break
+            else:
+                raise RuntimeError(f"the attack-free run of {scenario.name!r} did not end")
         finally:
             episode.close()
         if ticks == 0 or not np.isfinite(damage) or damage <= 0.0:
