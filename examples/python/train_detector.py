@@ -9,7 +9,7 @@ clean tick or for silence on an attacked one). It prints one line per iteration:
 population's mean return, its best, and the mean's own return, which starts at a detector
 that never alarms and climbs.
 
-    python examples/python/train_detector.py                 # 10 iterations × 16, ~1 min
+    python examples/python/train_detector.py                 # 10 iterations × 16, 62 s on one core
     python examples/python/train_detector.py --iterations 2  # a short form
 """
 

@@ -156,8 +156,11 @@ pub struct Outcome {
 /// `damage_weight · (mean error / damage_scale_rad − 1) − stealth_weight · alarmed share`
 ///
 /// where the mean error is the step's mean over its ticks of `‖q_d − q‖` averaged over the
-/// chosen robots (rad) and `damage_scale_rad` the same mean over the attack-free run: 0 when
-/// the attack changes nothing, 1 when it doubles the error. The alarmed share is the step's
+/// chosen robots (rad) and `damage_scale_rad` the same mean over the whole attack-free run: a
+/// step at twice the run's mean error scores 1. The scale is the run's mean, not the
+/// attack-free error at the step's time: an attack-free step scores above 0 in the start-up
+/// transient and below it later, and only a whole attack-free episode of equal steps returns 0.
+/// The alarmed share is the step's
 /// ticks at whose end a chosen detector alarmed, over its ticks (0 to 1).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AttackerReward {

@@ -144,7 +144,9 @@ pub fn team_figure(
             label: format!("robot {id}: largest RMSE ({rmse:.4} rad)"),
             color: PALETTE[0],
             points,
-            keep: false,
+            // Never clipped: in a large team its points are a small share of the panel's, and
+            // the robust range would cut the one curve the figure is meant to show.
+            keep: true,
             dashed: false,
         });
     }

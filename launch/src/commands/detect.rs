@@ -53,6 +53,7 @@ impl DetectArgs {
     pub fn run_args(&self) -> RunArgs {
         RunArgs {
             scenario: Some(self.target.clone()),
+            live_addr: None,
             engine: self.engine.unwrap_or(Engine::Ipc),
             overrides: self.overrides.clone(),
             out: self.runs.clone(),

@@ -21,6 +21,10 @@ use fdi_report::traces::Traces;
 pub struct RunArgs {
     /// Scenario TOML file; without it the embedded paper scenario runs.
     pub scenario: Option<PathBuf>,
+    /// A second argument: the address of a bare `--live` written with a space before it
+    /// (`run --live 127.0.0.1:8765 FILE`, `run FILE --live 127.0.0.1:8765`).
+    #[arg(hide = true)]
+    pub live_addr: Option<String>,
     #[arg(long, value_enum, default_value_t = Engine::Ipc)]
     pub engine: Engine,
     #[command(flatten)]
@@ -51,7 +55,7 @@ pub struct RunArgs {
     #[arg(long, value_name = "FILE")]
     pub hosts: Option<PathBuf>,
     /// Serve the run live over the Foxglove WebSocket protocol, at `--live=ADDR` (or
-    /// `--live ADDR`) or 127.0.0.1:8765 (port 0: a free port, printed): open it in Foxglove (Open connection →
+    /// `--live ADDR`, before or after the scenario file) or 127.0.0.1:8765 (port 0: a free port, printed): open it in Foxglove (Open connection →
     /// Foxglove WebSocket) with the layouts of examples/live (docs/traces.md). The run never
     /// waits for a viewer.
     #[arg(long, value_name = "ADDR", num_args = 0..=1, require_equals = true, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
@@ -122,30 +126,56 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
 }
 
 /// The scenario file and the live address of `run`'s flags. `--live 127.0.0.1:8765` (with a
-/// space, as most tools take an option's value) reaches clap as `--live` and a scenario file
-/// `127.0.0.1:8765`: a scenario argument that is an address and no file, after a bare `--live`,
-/// is the address of `--live`. After `--live=ADDR` it is refused, naming both.
+/// space, as most tools take an option's value) reaches clap as a bare `--live` and an
+/// argument `127.0.0.1:8765`, before or after the scenario file: an argument that is an address
+/// and no file is then the address of `--live`. After `--live=ADDR` (other than the default
+/// address, which a bare `--live` also gives) it is refused, naming both; so is a second
+/// argument that is no address of `--live`.
 fn scenario_and_live(
     args: &RunArgs,
 ) -> Result<(Option<&std::path::Path>, Option<std::net::SocketAddr>)> {
-    let scenario = args.scenario.as_deref();
-    let (Some(live), Some(path)) = (args.live, scenario) else {
-        return Ok((scenario, args.live));
+    let address = |p: &std::path::Path| {
+        p.to_str()
+            .and_then(|s| s.parse::<std::net::SocketAddr>().ok())
+            .filter(|_| !p.exists())
     };
-    let Some(addr) = path
-        .to_str()
-        .and_then(|s| s.parse::<std::net::SocketAddr>().ok())
-        .filter(|_| !path.exists())
-    else {
-        return Ok((scenario, args.live));
+    let given: Vec<&std::path::Path> = args
+        .scenario
+        .as_deref()
+        .into_iter()
+        .chain(args.live_addr.as_deref().map(std::path::Path::new))
+        .collect();
+    let Some(live) = args.live else {
+        if let Some(extra) = &args.live_addr {
+            anyhow::bail!("`{extra}`: `run` takes one scenario file");
+        }
+        return Ok((args.scenario.as_deref(), None));
     };
-    if live.to_string() != fdi_live::Options::DEFAULT_ADDR {
-        anyhow::bail!(
+    let addrs: Vec<std::net::SocketAddr> = given.iter().filter_map(|p| address(p)).collect();
+    let files: Vec<&std::path::Path> = given
+        .iter()
+        .copied()
+        .filter(|p| address(p).is_none())
+        .collect();
+    match (addrs.as_slice(), files.as_slice()) {
+        ([], [_, second]) => {
+            anyhow::bail!("`{}`: `run` takes one scenario file", second.display())
+        }
+        ([], _) => Ok((files.first().copied(), Some(live))),
+        ([addr], _) if live.to_string() != fdi_live::Options::DEFAULT_ADDR => anyhow::bail!(
             "`{addr}` is an address, not a scenario file, and --live has its address already ({live}): \
              give one address, as `--live=ADDR`"
-        );
+        ),
+        ([addr], _) => Ok((files.first().copied(), Some(*addr))),
+        _ => anyhow::bail!(
+            "two addresses for --live ({}): give one, as `--live=ADDR`",
+            addrs
+                .iter()
+                .map(ToString::to_string)
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
     }
-    Ok((None, Some(addr)))
 }
 
 /// What [`run_scenario`] left: the run directory, and the exit status of the run.
@@ -408,6 +438,22 @@ mod tests {
         let (scenario, live) = super::scenario_and_live(&args).expect("accepted");
         assert_eq!(scenario, Some(std::path::Path::new("127.0.0.1:8799")));
         assert_eq!(live, None);
+        // With a scenario file, before or after it.
+        for argv in [
+            ["--live", "127.0.0.1:8797", "x.toml"],
+            ["x.toml", "--live", "127.0.0.1:8797"],
+        ] {
+            let args = run_args(&argv);
+            let (scenario, live) = super::scenario_and_live(&args).expect("accepted");
+            assert_eq!(scenario, Some(std::path::Path::new("x.toml")), "{argv:?}");
+            assert_eq!(live, Some("127.0.0.1:8797".parse().expect("an address")));
+        }
+        let e = super::scenario_and_live(&run_args(&["a.toml", "b.toml"])).expect_err("two files");
+        assert!(
+            e.to_string()
+                .contains("`b.toml`: `run` takes one scenario file"),
+            "{e}"
+        );
     }
 
     /// Regression (issue 51): a realtime run that fell behind its clock (a 1 MHz run with 90 %

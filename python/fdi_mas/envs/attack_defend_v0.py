@@ -76,18 +76,21 @@ class AttackDefendEnv(ParallelEnv):
         self.channels = _common.names_of(channels, _common.CHANNELS, "channels")
         self.detectors = _common.names_of(detectors, _core.detectors(), "detectors")
         decision_period = _common.period_of(decision_period)
+        budget_values = _common.budget_of(budget)
+        # The weights checked and the damage scale measured (the attack-free error of the base
+        # scenario, its attack replaced) before the episode is made: nothing left open on error.
+        self.attack_weights = (float(damage_weight), float(stealth_weight), 1.0)
+        _core.attacker_reward(0, 0.0, 0, *self.attack_weights)
+        scale = _common.damage_scale_of(damage_scale, first, self.robots)
+        self.attack_weights = (float(damage_weight), float(stealth_weight), scale)
         self._episode = _core.Episode(
             first,
             self.robots,
             self.channels,
-            _common.budget_of(budget),
+            budget_values,
             self.detectors,
             int(decision_period),
         )
-        # The damage scale is the attack-free error of the base scenario (its attack replaced).
-        scale = _common.damage_scale_of(damage_scale, first, self.robots)
-        self.attack_weights = (float(damage_weight), float(stealth_weight), scale)
-        _core.attacker_reward(0, 0.0, 0, *self.attack_weights)
         self.detect_weights = (float(detect_reward), float(false_alarm_penalty), float(miss_penalty))
         robot_ids, links, _ = self._episode.shape()
         self.robot_ids = robot_ids

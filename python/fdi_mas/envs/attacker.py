@@ -36,9 +36,11 @@ class AttackerEnv(gym.Env):
     step's mean over its ticks of ``‖q_d − q‖`` (rad, the true tracking error) averaged over
     the chosen robots, ``damage_scale`` the same mean over the whole attack-free run (measured
     once at construction, unless given in rad), and ``alarmed`` the share of the step's ticks
-    at whose end any chosen detector of any robot was alarming (0 to 1). So 0 when the attack
-    changes nothing and stays unseen, +1 per step for doubling the error, −1 for a step alarmed
-    throughout; an attack-free episode's return is 0 up to its false alarms. ``info`` has the
+    at whose end any chosen detector of any robot was alarming (0 to 1). So +1 for a step at
+    twice the attack-free run's mean error, −1 for a step alarmed throughout. The scale is the
+    run's mean, not the attack-free error at the step's time: an attack-free step scores above
+    0 in the start-up transient and below it later; a whole attack-free episode of equal steps
+    returns 0 (up to false alarms). ``info`` has the
     raw terms: ``damage`` (Σ over the step's ticks of the mean error, rad), ``alarm_ticks``,
     ``ticks``, ``attacked_ticks`` (per robot), and ``damage_scale_rad``. ``detectors``: any of
     :func:`fdi_mas.detectors` (default ``s_hat_norm``, ``chi2``, ``cusum``).

@@ -40,20 +40,46 @@ impl Cell {
 pub struct Verdict {
     pub band: f64,
     pub cells: Vec<Cell>,
+    /// Why no cell has a paper value, said when there is none.
+    #[serde(skip)]
+    none: &'static str,
+    /// The table was made with options other than the paper's calibration: its cells are
+    /// judged against the paper all the same, and the line says so.
+    pub other_calibration: bool,
+    /// The cells are means over seeds.
+    #[serde(skip)]
+    on_means: bool,
 }
 
 impl Verdict {
-    pub fn of(cells: Vec<Cell>) -> Self {
-        Self { band: BAND, cells }
+    /// The verdict of `cells`; `none`: why there is no cell, when there is none.
+    pub fn of(cells: Vec<Cell>, none: &'static str) -> Self {
+        Self {
+            band: BAND,
+            cells,
+            none,
+            other_calibration: false,
+            on_means: false,
+        }
+    }
+
+    /// The same, for a table made with options other than the paper's calibration.
+    pub fn other_calibration(mut self, other: bool) -> Self {
+        self.other_calibration = other;
+        self
+    }
+
+    /// The same, for cells that are means over seeds.
+    pub fn on_means(mut self) -> Self {
+        self.on_means = true;
+        self
     }
 
     /// The line printed under the table: the cells within the band, per column, then those
-    /// outside it with their ratio; where the paper has no value, says so.
+    /// outside it with their ratio; where the paper has no value, says why.
     pub fn line(&self) -> String {
         if self.cells.is_empty() {
-            return "No cell has a paper value to compare with: these robots are not the paper's \
-                    (model, trajectory and delay)."
-                .into();
+            return format!("No cell has a paper value to compare with: {}.", self.none);
         }
         let list = |within: bool| -> String {
             let mut columns: Vec<&str> = Vec::new();
@@ -85,9 +111,16 @@ impl Verdict {
             }
         };
         let inside = self.cells.iter().filter(|c| c.within).count();
+        let caveat = if self.other_calibration {
+            " This table was made with options other than the paper's calibration (above): a \
+             cell outside the band may be the options'."
+        } else {
+            ""
+        };
         format!(
-            "Verdict: {inside} of {} cells within ±{:.0} % of the paper. Within: {}. Outside: {}. \
-             Why the band, and why these cells: {WHY}.",
+            "Verdict{}: {inside} of {} cells within ±{:.0} % of the paper. Within: {}. Outside: {}. \
+             Why the band, and why these cells: {WHY}.{caveat}",
+            if self.on_means { " (on the means)" } else { "" },
             self.cells.len(),
             BAND * 100.0,
             list(true),
@@ -120,13 +153,25 @@ mod tests {
             Cell::new("proposed", "robot 1".into(), 0.0086, Some(0.008)),
             Cell::new("proposed", "robot 2".into(), f64::INFINITY, Some(0.013)),
         ];
-        let v = Verdict::of(cells.into_iter().flatten().collect());
+        let v = Verdict::of(cells.into_iter().flatten().collect(), "none");
         assert_eq!(
             v.line(),
             "Verdict: 2 of 4 cells within ±25 % of the paper. Within: traditional robot 2; \
              proposed robot 1. Outside: traditional robot 1 (0.67×); proposed robot 2 (no finite \
              value). Why the band, and why these cells: docs/model.md, \"Reproduction band\"."
         );
-        assert!(Verdict::of(Vec::new()).line().contains("not the paper's"));
+        assert_eq!(
+            Verdict::of(Vec::new(), "robot 1 is not the paper's").line(),
+            "No cell has a paper value to compare with: robot 1 is not the paper's."
+        );
+        let means = Verdict::of(v.cells.clone(), "none")
+            .on_means()
+            .other_calibration(true)
+            .line();
+        assert!(
+            means.starts_with("Verdict (on the means): 2 of 4")
+                && means.ends_with("a cell outside the band may be the options'."),
+            "{means}"
+        );
     }
 }
