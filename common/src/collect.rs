@@ -171,15 +171,32 @@ fn candidates(message: &str, reference: Option<&toml::Table>, steps: &[Seg]) -> 
     out
 }
 
-/// The name serde expects that is [`nearest`] to an unknown key or variant it names.
-fn did_you_mean(message: &str) -> Option<&str> {
+/// The name serde expects that is [`nearest`] to an unknown key or variant it names, among
+/// those not `present` already (a key beside its misspelling is a line to delete, not a name
+/// to suggest).
+fn did_you_mean<'a>(message: &'a str, present: &[&str]) -> Option<&'a str> {
     let written = ["unknown field `", "unknown variant `"]
         .iter()
         .find_map(|p| message.strip_prefix(p))?
         .split('`')
         .next()?;
     let (_, list) = message.split_once(", expected ")?;
-    nearest(written, list.split('`').skip(1).step_by(2))
+    nearest(
+        written,
+        list.split('`')
+            .skip(1)
+            .step_by(2)
+            .filter(|n| !present.contains(n)),
+    )
+}
+
+/// The keys of the table that holds the last step of `at` in `doc`.
+fn keys_beside<'a>(doc: &'a toml::Table, at: &[Seg]) -> Vec<&'a str> {
+    let table = match at.split_last() {
+        Some((_, [])) | None => Some(doc),
+        Some((_, above)) => value_at(doc, above).and_then(toml::Value::as_table),
+    };
+    table.map_or_else(Vec::new, |t| t.keys().map(String::as_str).collect())
 }
 
 /// The name of `names` nearest to `written` when it is near enough to be a misspelling of it:
@@ -261,7 +278,11 @@ pub fn collect<T: DeserializeOwned>(
             Kind::WrongValue | Kind::UnknownKey(_) => {}
         }
         let mut problem = problem;
-        if let Some(near) = did_you_mean(&message) {
+        let present = match kind {
+            Kind::UnknownKey(_) => keys_beside(&doc, &at),
+            Kind::MissingKey(_) | Kind::WrongValue => Vec::new(),
+        };
+        if let Some(near) = did_you_mean(&message, &present) {
             problem.message = with_suggestion(&message, near);
             if let (Kind::UnknownKey(_), Some((_, table))) = (&kind, at.split_last()) {
                 // The key meant is then missing: that is this problem, not a second one.
@@ -435,6 +456,17 @@ mod tests {
                 "a.mode: unknown variant `tradition` (did you mean `traditional`?), expected `proposed` or `traditional`",
                 "b[0].zzz: unknown field `zzz`, expected `gain` or `mode`",
             ],
+            "{said:#?}"
+        );
+    }
+
+    #[test]
+    fn a_key_beside_its_misspelling_is_not_suggested() {
+        let c = read("duration_s = 1\n[a]\ngain = 1.0\ngains = 2.0\n[[b]]\ngain = 2.0\n");
+        let said: Vec<String> = c.problems.iter().map(ToString::to_string).collect();
+        assert_eq!(
+            said,
+            ["a.gains: unknown field `gains`, expected `gain` or `mode`"],
             "{said:#?}"
         );
     }

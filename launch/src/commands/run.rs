@@ -58,8 +58,8 @@ pub struct RunArgs {
     /// `--live ADDR`, before or after the scenario file) or 127.0.0.1:8765 (port 0: a free port, printed): open it in Foxglove (Open connection →
     /// Foxglove WebSocket) with the layouts of examples/live (docs/traces.md). The run never
     /// waits for a viewer.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, require_equals = true, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
-    pub live: Option<std::net::SocketAddr>,
+    #[arg(long, value_name = "ADDR", num_args = 0..=1, require_equals = true, default_missing_value = "")]
+    pub live: Option<LiveAt>,
     /// Ticks a second of wall time the live stream keeps at most: every K-th tick (a paced or
     /// realtime run: K from its pace; an unpaced lockstep run: K measured from its speed), and
     /// never more than HZ × 5 s (at most 500) at once.
@@ -82,6 +82,26 @@ pub struct RunArgs {
     /// directory's name starts with it (`<timestamp>-detect-paper`), apart from `run`'s.
     #[arg(skip)]
     pub run_by: Option<&'static str>,
+}
+
+/// Where `--live` serves: a bare `--live` (its address is the default, or the argument written
+/// after it with a space), or `--live=ADDR`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LiveAt {
+    Bare,
+    At(std::net::SocketAddr),
+}
+
+impl std::str::FromStr for LiveAt {
+    type Err = std::net::AddrParseError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        if s.is_empty() {
+            Ok(Self::Bare)
+        } else {
+            s.parse().map(Self::At)
+        }
+    }
 }
 
 /// `run`.
@@ -128,9 +148,8 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
 /// The scenario file and the live address of `run`'s flags. `--live 127.0.0.1:8765` (with a
 /// space, as most tools take an option's value) reaches clap as a bare `--live` and an
 /// argument `127.0.0.1:8765`, before or after the scenario file: an argument that is an address
-/// and no file is then the address of `--live`. After `--live=ADDR` (other than the default
-/// address, which a bare `--live` also gives) it is refused, naming both; so is a second
-/// argument that is no address of `--live`.
+/// and no file is then the address of `--live`. After `--live=ADDR` it is refused, naming both;
+/// so is a second argument that is no address of `--live`.
 fn scenario_and_live(
     args: &RunArgs,
 ) -> Result<(Option<&std::path::Path>, Option<std::net::SocketAddr>)> {
@@ -151,6 +170,9 @@ fn scenario_and_live(
         }
         return Ok((args.scenario.as_deref(), None));
     };
+    let default: std::net::SocketAddr = fdi_live::Options::DEFAULT_ADDR
+        .parse()
+        .map_err(|e| anyhow::anyhow!("the default live address: {e}"))?;
     let addrs: Vec<std::net::SocketAddr> = given.iter().filter_map(|p| address(p)).collect();
     let files: Vec<&std::path::Path> = given
         .iter()
@@ -161,12 +183,20 @@ fn scenario_and_live(
         ([], [_, second]) => {
             anyhow::bail!("`{}`: `run` takes one scenario file", second.display())
         }
-        ([], _) => Ok((files.first().copied(), Some(live))),
-        ([addr], _) if live.to_string() != fdi_live::Options::DEFAULT_ADDR => anyhow::bail!(
-            "`{addr}` is an address, not a scenario file, and --live has its address already ({live}): \
-             give one address, as `--live=ADDR`"
-        ),
-        ([addr], _) => Ok((files.first().copied(), Some(*addr))),
+        ([], _) => Ok((
+            files.first().copied(),
+            Some(match live {
+                LiveAt::Bare => default,
+                LiveAt::At(a) => a,
+            }),
+        )),
+        ([addr], _) => match live {
+            LiveAt::Bare => Ok((files.first().copied(), Some(*addr))),
+            LiveAt::At(given) => anyhow::bail!(
+                "`{addr}` is an address, not a scenario file, and --live has its address already ({given}): \
+                 give one address, as `--live=ADDR`"
+            ),
+        },
         _ => anyhow::bail!(
             "two addresses for --live ({}): give one, as `--live=ADDR`",
             addrs
@@ -420,6 +450,17 @@ mod tests {
         let (scenario, live) = super::scenario_and_live(&args).expect("accepted");
         assert_eq!(scenario, None);
         assert_eq!(live, Some("127.0.0.1:8799".parse().expect("an address")));
+        for given in ["--live=127.0.0.1:8798", "--live=127.0.0.1:8765"] {
+            let args = run_args(&[given, "127.0.0.1:8799"]);
+            let e = super::scenario_and_live(&args).expect_err("two addresses");
+            assert!(
+                e.to_string().contains("`127.0.0.1:8799` is an address"),
+                "{e}"
+            );
+        }
+        let args = run_args(&["--live=127.0.0.1:8798"]);
+        let (_, live) = super::scenario_and_live(&args).expect("accepted");
+        assert_eq!(live, Some("127.0.0.1:8798".parse().expect("an address")));
         let args = run_args(&["--live=127.0.0.1:8798", "127.0.0.1:8799"]);
         let e = super::scenario_and_live(&args).expect_err("two addresses");
         assert!(
