@@ -97,8 +97,7 @@ pub fn report(run_dir: &Path, per_robot: &PerRobot, stop: &Stop) -> Result<()> {
     let scenario_path = RunDir::new(run_dir).scenario();
     let resolved = scenario::load_file(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
-    let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
-    let figured = per_robot.robots(&ids).map_err(anyhow::Error::msg)?;
+    let figured = figured(&resolved, per_robot)?;
     let mut warnings = Vec::new();
     let summary_path = RunDir::new(run_dir).summary();
     let stored = read_stored_summary(&summary_path, &mut warnings);
@@ -167,6 +166,12 @@ fn read_stored_summary(summary_path: &Path, warnings: &mut Vec<String>) -> Optio
             None
         }
     }
+}
+
+/// The robots of `r` that get their own figures under `per_robot`.
+fn figured(r: &Resolved, per_robot: &PerRobot) -> Result<std::collections::BTreeSet<u32>> {
+    let ids: Vec<u32> = r.scenario.agents.iter().map(|a| a.id).collect();
+    per_robot.robots(&ids).map_err(anyhow::Error::msg)
 }
 
 /// Joins a run's full traces again: the figures' series and the summary recomputed, with
@@ -273,8 +278,7 @@ pub fn write_report(
     stop: &Stop,
 ) -> Result<()> {
     let kept = crate::traces::recorded(run_dir)?;
-    let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
-    let figured = PerRobot::Auto.robots(&ids).map_err(anyhow::Error::msg)?;
+    let figured = figured(resolved, &PerRobot::Auto)?;
     let (series, warnings) = gather(run_dir, resolved, kept, stop)?;
     let gathered = Gathered {
         series,

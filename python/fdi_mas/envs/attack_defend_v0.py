@@ -77,12 +77,12 @@ class AttackDefendEnv(ParallelEnv):
         self.detectors = _common.names_of(detectors, _core.detectors(), "detectors")
         decision_period = _common.period_of(decision_period)
         budget_values = _common.budget_of(budget)
-        # The weights checked and the damage scale measured (the attack-free error of the base
-        # scenario, its attack replaced) before the episode is made: nothing left open on error.
-        self.attack_weights = (float(damage_weight), float(stealth_weight), 1.0)
-        _core.attacker_reward(0, 0.0, 0, *self.attack_weights)
+        # The damage scale measured (the attack-free error of the base scenario, its attack
+        # replaced) and the weights checked before the episode is made, as AttackerEnv does:
+        # nothing left open on error.
         scale = _common.damage_scale_of(damage_scale, first, self.robots)
         self.attack_weights = (float(damage_weight), float(stealth_weight), scale)
+        _core.attacker_reward(0, 0.0, 0, *self.attack_weights)
         self._episode = _core.Episode(
             first,
             self.robots,

@@ -400,7 +400,7 @@ pub fn table1(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
     let traditional = run_mode(ControllerMode::Traditional)?;
     let proposed = run_mode(ControllerMode::Proposed)?;
     let rows = table1_rows(&base, &traditional, &proposed);
-    let verdict = table1_verdict(&rows).other_calibration(made.is_other_calibration());
+    let verdict = table1_verdict(&rows, &made);
     let table = Table {
         name: "table1",
         md: table1_markdown(args.engine, &made, &rows, &verdict),
@@ -437,8 +437,9 @@ fn table1_title(engine: Engine) -> String {
     )
 }
 
-/// Table I's cells beside the paper's: each robot's traditional, then proposed RMSE.
-fn table1_verdict(rows: &[Table1Row]) -> Verdict {
+/// Table I's cells beside the paper's: each robot's traditional, then proposed RMSE; `made`
+/// says whether the table's options are the paper's calibration.
+fn table1_verdict(rows: &[Table1Row], made: &MadeWith) -> Verdict {
     let column = |name: &str, this: fn(&Table1Row) -> f64, paper: fn(&Table1Row) -> Option<f64>| {
         rows.iter()
             .filter_map(|r| Cell::new(name, format!("robot {}", r.robot), this(r), paper(r)))
@@ -458,6 +459,7 @@ fn table1_verdict(rows: &[Table1Row]) -> Verdict {
         cells,
         "no robot is the paper's (its model, trajectory and delay)",
     )
+    .other_calibration(made.is_other_calibration())
 }
 
 /// The columns of a Table I in markdown, plain or over seeds.
@@ -677,7 +679,7 @@ pub fn table2(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
             paper_rmse_rad: compare.then_some(paper_rmse),
         });
     }
-    let verdict = table2_verdict(&rows).other_calibration(made.is_other_calibration());
+    let verdict = table2_verdict(&rows, &made);
     let table = Table {
         name: "table2",
         md: table2_markdown(args.engine, &made, &rows, &verdict),
@@ -718,14 +720,16 @@ fn table2_title(engine: Engine) -> String {
     )
 }
 
-/// Table II's cells beside the paper's: robot 1's RMSE per delay case.
-fn table2_verdict(rows: &[Table2Row]) -> Verdict {
+/// Table II's cells beside the paper's: robot 1's RMSE per delay case; `made` says whether the
+/// table's options are the paper's calibration.
+fn table2_verdict(rows: &[Table2Row], made: &MadeWith) -> Verdict {
     Verdict::of(
         rows.iter()
             .filter_map(|r| Cell::new("robot 1", r.case.to_string(), r.rmse_rad, r.paper_rmse_rad))
             .collect(),
         "robot 1 is not the paper's (its model and trajectory)",
     )
+    .other_calibration(made.is_other_calibration())
 }
 
 /// The columns of a Table II in markdown, plain or over seeds.
@@ -946,9 +950,7 @@ mod seeded {
                 paper_proposed: r.paper_proposed,
             })
             .collect();
-        let verdict = table1_verdict(&plain)
-            .on_means()
-            .other_calibration(made.is_other_calibration());
+        let verdict = table1_verdict(&plain, made).on_means();
         let md = markdown1(args.engine, made, (&over, n), (&rows, &plain), &verdict);
         let chart = table1_chart(args.engine, &plain);
         publish(
@@ -1095,9 +1097,7 @@ mod seeded {
                 paper_rmse_rad: r.paper_rmse_rad,
             })
             .collect();
-        let verdict = table2_verdict(&plain)
-            .on_means()
-            .other_calibration(made.is_other_calibration());
+        let verdict = table2_verdict(&plain, made).on_means();
         let md = markdown2(args.engine, made, (&over, n), &rows, &verdict);
         let chart = table2_chart(args.engine, &plain);
         publish(
@@ -1231,7 +1231,13 @@ mod tests {
                 paper_proposed: Some(pp),
             })
             .collect();
-        let v = table1_verdict(&rows);
+        let made = MadeWith {
+            scenario: "the embedded paper scenario".into(),
+            replaced: Vec::new(),
+            numerics: Vec::new(),
+            set: Vec::new(),
+        };
+        let v = table1_verdict(&rows, &made);
         let outside: Vec<String> = v
             .cells
             .iter()
@@ -1239,17 +1245,7 @@ mod tests {
             .map(|c| format!("{} {}", c.column, c.row))
             .collect();
         assert_eq!(outside, ["traditional robot 1", "traditional robot 4"]);
-        let md = table1_markdown(
-            Engine::Ipc,
-            &MadeWith {
-                scenario: "the embedded paper scenario".into(),
-                replaced: Vec::new(),
-                numerics: Vec::new(),
-                set: Vec::new(),
-            },
-            &rows,
-            &v,
-        );
+        let md = table1_markdown(Engine::Ipc, &made, &rows, &v);
         assert!(
             md.contains("| 3 | 0.0204 | 0.0086 | 2.37 | 0.026 | 0.009 | 2.89 | 0.78 | 0.96 |")
                 && md.contains("Verdict: 6 of 8 cells within ±25 % of the paper."),
