@@ -17,7 +17,7 @@ use fdi_report::{export, report};
 
 fn main() -> ExitCode {
     // Before any thread or Zenoh session exists (runs across hosts; no cost otherwise).
-    fdi_runtime::net::choose_zenoh_threads();
+    fdi_net::choose_zenoh_threads();
     let cli = cli::Cli::parse();
     let stop = Stop::new();
     if handles_interrupts(&cli.command) {

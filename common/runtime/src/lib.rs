@@ -3,8 +3,8 @@
 //! [`ipc`] is the transport: the [`ipc::Transport`] trait the roles are generic over, and its
 //! iceoryx2 implementation (shared memory between processes, or in-process between threads for
 //! tests), the only code that calls iceoryx2 and knows where its files live.
-//! [`net`] carries a run's services between hosts over Zenoh (runs split over hosts), the
-//! only code that calls Zenoh.
+//! Runs split over hosts carry these services between hosts in their own crate, `fdi-net` (the
+//! only code that calls Zenoh): a run on one host compiles and links none of it.
 //! [`process`] is the shell around a role's loop: the launcher's arguments and the placement of
 //! the process, shutdown on signals or the launcher's death, the start handshake and status
 //! reports, admission of received messages, and the liveness of realtime peers. The math the
@@ -13,5 +13,4 @@
 #![cfg_attr(test, allow(clippy::too_many_lines))]
 
 pub mod ipc;
-pub mod net;
 pub mod process;

@@ -30,8 +30,8 @@
 
 use std::time::{Duration, Instant};
 
+use fdi_net::{keys, Net, NetConfig, Security};
 use fdi_runtime::ipc::{MeasurementMsg, Stream};
-use fdi_runtime::net::{keys, Net, NetConfig, Security};
 use zerocopy::{FromBytes, IntoBytes};
 
 fn arg<T: std::str::FromStr>(args: &[String], i: usize, what: &str) -> T {
@@ -126,7 +126,7 @@ fn main() {
 }
 
 /// Asks `key` (sent again while nobody answers, for up to 10 s: [`Net::request`]).
-fn ask(net: &Net, key: &str, body: &[u8]) -> Result<Vec<u8>, fdi_runtime::net::NetError> {
+fn ask(net: &Net, key: &str, body: &[u8]) -> Result<Vec<u8>, fdi_net::NetError> {
     net.request(key, body, Duration::from_secs(10))
 }
 
@@ -280,7 +280,7 @@ fn forge(net: &Net, forgery: Forgery, seconds: f64) {
         Forgery::Ahead(_) => 1,
         Forgery::Bias(_, _, frames) => frames,
     };
-    let mut outboxes: Vec<(String, fdi_runtime::net::NetOutbox)> = Vec::new();
+    let mut outboxes: Vec<(String, fdi_net::NetOutbox)> = Vec::new();
     let (mut forged, mut seen) = (0u64, 0u64);
     let began = Instant::now();
     // Until the frames asked for are forged and the run's stream has gone quiet (the session

@@ -118,7 +118,7 @@ pub fn make(lab: &Lab, out: &Path, days: u32) -> Result<Vec<PathBuf>> {
                 files.key.display()
             ),
         }
-        let address = fdi_runtime::net::endpoint_address(&h.endpoint)
+        let address = fdi_net::endpoint_address(&h.endpoint)
             .with_context(|| format!("host `{}`: endpoint `{}`", h.name, h.endpoint))?;
         let mut params = CertificateParams::new(vec![address.to_string(), h.name.clone()])
             .with_context(|| format!("host `{}`: the names {address}, {}", h.name, h.name))?;

@@ -1,15 +1,15 @@
 //! Runs split over hosts (`fdi-launch run --hosts FILE`): the deployment file, which says
 //! where each process runs and how each host is reached, and the messages the coordinating
 //! host and each host's `fdi-launch serve` exchange (JSON over Zenoh queries and samples,
-//! `fdi_runtime::net`). docs/multi-host.md is the user's guide.
+//! `fdi_net`). docs/multi-host.md is the user's guide.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context as _, Result};
 use fdi_common::scenario::{self, Resolved};
+use fdi_net::{check_endpoint, check_host_name, Layout, Link, Security};
 use fdi_runtime::ipc::Wake;
-use fdi_runtime::net::{check_endpoint, check_host_name, Layout, Link, Security};
 use serde::{Deserialize, Serialize};
 
 /// The deployment file as written.
@@ -189,7 +189,7 @@ impl Lab {
         use std::net::ToSocketAddrs as _;
         let mut out = Vec::new();
         for h in &self.hosts {
-            let address = fdi_runtime::net::endpoint_address(&h.endpoint).with_context(|| {
+            let address = fdi_net::endpoint_address(&h.endpoint).with_context(|| {
                 format!(
                     "{}: host `{}`: endpoint {}",
                     self.source, h.name, h.endpoint
@@ -271,8 +271,7 @@ impl Deployment {
         check_external_roles_stay(&coordinator, &host_of, resolved, source)?;
         let layout = Layout::new(host_of, resolved);
         for name in file.hosts.keys() {
-            fdi_runtime::net::plan(&layout, name)
-                .map_err(|e| problem(source, "hosts".into(), e))?;
+            fdi_net::plan(&layout, name).map_err(|e| problem(source, "hosts".into(), e))?;
         }
         let host = |name: &String| Host {
             name: name.clone(),
@@ -573,7 +572,7 @@ pub fn parse_wake(word: &str) -> Result<Wake> {
 
 /// Puts `value` as JSON on `outbox`, best effort: the messages of a run's control plane that
 /// nobody waits for (a line, an exit, a stop); a lost one is covered by the host's liveliness.
-pub fn put_json(outbox: &fdi_runtime::net::NetOutbox, value: &impl Serialize) {
+pub fn put_json(outbox: &fdi_net::NetOutbox, value: &impl Serialize) {
     if let Ok(body) = serde_json::to_vec(value) {
         let _ = outbox.put(&body);
     }

@@ -12,8 +12,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use fdi_common::run_dir::Process;
+use fdi_net::{
+    self as net, keys, Answering, Bridge, Net, NetConfig, Subscription, Token, ZenohBridge,
+};
 use fdi_runtime::ipc::{ShmShared, Sizing, Wake};
-use fdi_runtime::net::{self, keys, Answering, Bridge, Net, NetConfig, Subscription, Token};
 
 use crate::run::hosts::{
     wake_word, Deployment, Host, HostCommand, HostEvent, Released, RemoteProcess, RunReply,
@@ -31,7 +33,7 @@ const START_TIMEOUT: Duration = Duration::from_secs(30);
 const TRACE_TIMEOUT: Duration = Duration::from_secs(60);
 /// The pieces a trace is fetched in: each answer within one of Zenoh's batches (64 KiB). The
 /// end of a query is sent on the serve's Zenoh thread, the one that empties its queue
-/// ([`fdi_runtime::net::ONE_RUNTIME_THREAD`]): an answer that fills the queue can leave it
+/// ([`fdi_net::ONE_RUNTIME_THREAD`]): an answer that fills the queue can leave it
 /// waiting for room only it can make (seen with pieces asked during a run,
 /// [`crate::run::trace_stream`]).
 pub const TRACE_PIECE: u64 = crate::run::trace_stream::CHUNK as u64;
@@ -154,7 +156,7 @@ pub struct Remote {
     prefix: String,
     net: Net,
     hosts: Vec<HostLink>,
-    bridge: Option<Bridge>,
+    bridge: Option<Box<dyn Bridge>>,
     _token: Token,
     _clock: Answering,
 }
@@ -172,7 +174,7 @@ impl std::fmt::Debug for Remote {
 fn adopt<M>(
     link: &HostLink,
     reply: &RunReply,
-    cmd: &Arc<fdi_runtime::net::NetOutbox>,
+    cmd: &Arc<fdi_net::NetOutbox>,
     metas: &mut BTreeMap<String, M>,
     supervisor: &mut Supervisor<M>,
 ) -> Result<()> {
@@ -271,6 +273,9 @@ impl Remote {
                 deployment.coordinator.name, deployment.lab.source
             )
         })?;
+        if let Some(warning) = net.unfiltered() {
+            eprintln!("fdi-launch: warning: {warning}");
+        }
         let token = net.token(&keys::said(&me, prefix, "coordinator"))?;
         let clock = net.answer_clock(&keys::asked(&me, "*", prefix, "clock"))?;
         let hosts = deployment
@@ -353,17 +358,20 @@ impl Remote {
     pub fn start_bridge(&mut self, sizing: Sizing) -> Result<()> {
         let plan = net::plan(&self.deployment.layout, &self.deployment.coordinator.name)
             .map_err(anyhow::Error::msg)?;
-        self.bridge = Some(Bridge::start::<ShmShared>(
-            &self.net,
-            (
-                &self.prefix,
-                &self.prefix,
-                &self.deployment.coordinator.name,
-            ),
-            sizing,
-            &plan,
-            0,
-        )?);
+        self.bridge = Some(
+            ZenohBridge::start::<ShmShared>(
+                &self.net,
+                (
+                    &self.prefix,
+                    &self.prefix,
+                    &self.deployment.coordinator.name,
+                ),
+                sizing,
+                &plan,
+                0,
+            )
+            .map(Box::new)?,
+        );
         Ok(())
     }
 
@@ -433,7 +441,7 @@ impl Remote {
     /// Why the run cannot go on across hosts, if it cannot: the coordinator's bridge stopped, or
     /// a host said its own did.
     pub fn failure(&self) -> Option<String> {
-        if let Some(f) = self.bridge.as_ref().and_then(Bridge::failure) {
+        if let Some(f) = self.bridge.as_ref().and_then(|b| b.failure()) {
             return Some(format!(
                 "host `{}` (the coordinator): {f}",
                 self.deployment.coordinator.name

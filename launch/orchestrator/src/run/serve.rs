@@ -1,6 +1,6 @@
 //! `fdi-launch serve`: the other hosts' side of a split run. It waits for runs; for each it
 //! runs the processes the coordinating host gives it on its own shared memory, bridges the
-//! run's services with the other hosts (`fdi_runtime::net::Bridge`), reports what its
+//! run's services with the other hosts (`fdi_net::Bridge`), reports what its
 //! processes print and how they end, hands their traces to the coordinator, and removes
 //! everything the run left once it is released, or at once when the coordinator is gone.
 
@@ -16,8 +16,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use fdi_common::limits::MAX_FILE_BYTES;
+use fdi_net::{
+    self as net, keys, Bridge, Layout, Net, NetConfig, NetOutbox, Request, Requests, ZenohBridge,
+};
 use fdi_runtime::ipc::{check_prefix, Shm, ShmShared, Transport as _, Wake};
-use fdi_runtime::net::{self, keys, Bridge, Layout, Net, NetConfig, NetOutbox, Request, Requests};
 use fdi_runtime::process::{sizing_for, Placement, ProcessArgs};
 use serde::{Deserialize, Serialize};
 
@@ -86,6 +88,9 @@ pub fn serve(args: &ServeArgs, stop: &Stop) -> Result<ExitCode> {
         security: lab.security_of(&me.name)?,
     })
     .with_context(|| format!("host `{}`", me.name))?;
+    if let Some(warning) = net.unfiltered() {
+        eprintln!("fdi-launch serve: warning: {warning}");
+    }
     let _token = net.token(&keys::serve(&me.name))?;
     let requests = net.requests(&keys::run_requests(&me.name))?;
     eprintln!(
@@ -411,7 +416,7 @@ struct HostRun {
     coordinator: String,
     reply: RunReply,
     procs: Supervisor<()>,
-    bridge: Option<Bridge>,
+    bridge: Option<Box<dyn Bridge>>,
     events: Arc<NetOutbox>,
     /// Per child: its end was reported.
     reported: Vec<bool>,
@@ -453,7 +458,7 @@ impl HostRun {
         let clock = net
             .clock_offset(&keys::asked(&r.coordinator, here, &r.prefix, "clock"), 16)
             .context("measuring the clock against the coordinator's")?;
-        let bridge = Bridge::start::<ShmShared>(
+        let bridge = ZenohBridge::start::<ShmShared>(
             net,
             (&r.prefix, &r.prefix, here),
             sizing_for(&resolved),
@@ -498,7 +503,7 @@ impl HostRun {
                 rtt_ns: clock.rtt_ns,
             },
             procs,
-            bridge: Some(bridge),
+            bridge: Some(Box::new(bridge)),
             events,
             reported: vec![false; n],
             processes: mine.iter().map(|p| p.process).collect(),
@@ -579,7 +584,7 @@ impl HostRun {
             let path = run_dir.trace(process);
             read_piece(&path, offset).map_err(|e| format!("reading the trace of {process}: {e}"))
         })?;
-        let bridge_routes = self.bridge.as_ref().map(Bridge::routes);
+        let bridge_routes = self.bridge.as_ref().map(|b| b.routes());
         let _routes = net.answer(&asked("routes"), move |_| {
             let unmatched = bridge_routes
                 .as_ref()
@@ -624,7 +629,7 @@ impl HostRun {
 
     /// Tells the coordinator that the bridge failed (once) or that a process is stopped.
     fn tell_trouble(&mut self, failed: &mut bool) {
-        if let Some(text) = self.bridge.as_ref().and_then(Bridge::failure) {
+        if let Some(text) = self.bridge.as_ref().and_then(|b| b.failure()) {
             if !std::mem::replace(failed, true) {
                 eprintln!("fdi-launch serve: run {}: {text}", self.prefix);
                 self.send(&HostEvent::Failed { text });
@@ -727,7 +732,7 @@ impl HostRun {
         if let Some(b) = &self.bridge {
             self.bridge_refusal = b.first_refusal();
         }
-        let counts = match self.bridge.take().map(Bridge::stop) {
+        let counts = match self.bridge.take().map(|b| b.stop()) {
             Some(Ok(c)) => Ok(c),
             Some(Err(e)) => Err(e.to_string()),
             None => Ok(net::BridgeCounts::default()),

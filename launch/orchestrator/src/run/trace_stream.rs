@@ -6,7 +6,7 @@
 //! nothing is read or sent.
 //!
 //! Puts, not queries: a query's end is sent by Zenoh on its receiving thread, which with
-//! [`fdi_runtime::net::ONE_RUNTIME_THREAD`] is also the thread that empties the session's
+//! [`fdi_net::ONE_RUNTIME_THREAD`] is also the thread that empties the session's
 //! queue. Asked for trace pieces during a run, a serve whose queue the run's frames and the
 //! piece filled waited on that thread for room only that thread could make: the session stopped
 //! and both ends took the other for gone. A put is queued by the thread that puts.
@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use fdi_common::run_dir::Process;
-use fdi_runtime::net::{keys, Net, NetOutbox, Subscription};
+use fdi_net::{keys, Net, NetOutbox, Subscription};
 
 /// The most trace bytes in one chunk: well inside one of Zenoh's batches (64 KiB), so that a
 /// chunk never holds the run's frames back for long.
