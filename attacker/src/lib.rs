@@ -3,7 +3,8 @@
 //! ([`AgentAttack::measurement`]), and, for the agents whose torques the profile attacks,
 //! every torque on its way back ([`AgentAttack::torque`]); it records what it did to each.
 //! A message the attack keeps from its receiver is replaced by a gap marker. Purely
-//! event-driven in both clocks.
+//! event-driven in both clocks. One [`Role`] of the run (its lifecycle and process shell:
+//! [`fdi_runtime::role`]).
 
 use std::process::ExitCode;
 
@@ -13,19 +14,19 @@ use external::{External, ExternalPorts};
 
 use fdi_common::attack::{AgentAttack, Sent};
 use fdi_common::engine::{actuation_record, attack_record, tick_time};
-use fdi_common::model::{EulerLagrange, ForLinks, Vector};
+use fdi_common::model::Vector;
 use fdi_common::plant::Measurement;
 use fdi_common::records::{ActuationRecord, Delivery, Joints};
+use fdi_common::run_dir::Process;
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox, Role, Shm, Stream, TorqueMsg,
+    self, monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox, Stream, TorqueMsg,
     Transport, Wake, Waker as _,
 };
-use fdi_runtime::process::{
-    self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
-};
+use fdi_runtime::process::{self, Connection, Liveness, ProcessArgs, WaitStrategy};
+use fdi_runtime::role::{self, End, Opened, Role, Turn};
 
 /// Errors of the attacker process.
 pub type AttackerError = fdi_runtime::process::RoleError;
@@ -40,28 +41,55 @@ pub struct Ports<X: Transport> {
     pub actuation: Option<Actuation<X>>,
     /// The program that takes the attacker role (`[roles.attacker]`), when there is one.
     pub external: Option<ExternalPorts<X>>,
-    pub waker: X::Waker,
-    pub launcher: LauncherLink<X>,
-    /// The node; declared last so that it is dropped after the ports.
-    pub transport: X,
+}
+
+/// The attacker of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Attacker;
+
+impl Role for Attacker {
+    type Ports<X: Transport> = Ports<X>;
+    type Running<'a, X: Transport + 'a, const N: usize> = Relay<'a, X, N>;
+
+    fn identity(&self) -> (ipc::Role, Wake) {
+        (ipc::Role::Attacker, Wake::Attacker)
+    }
+
+    fn program(&self) -> String {
+        "fdi-attacker".into()
+    }
+
+    fn trace_name(&self) -> Option<String> {
+        Some(Process::Attacker.to_string())
+    }
+
+    fn open<X: Transport>(
+        &self,
+        transport: &X,
+        resolved: &Resolved,
+    ) -> Result<Ports<X>, AttackerError> {
+        Ports::open(transport, resolved)
+    }
+
+    fn prepare<'a, X: Transport + 'a, const N: usize>(
+        &'a self,
+        resolved: &'a Resolved,
+        opened: &'a Opened<X, Ports<X>>,
+    ) -> Result<Relay<'a, X, N>, AttackerError> {
+        Ok(Relay::new(resolved, opened, Target::all(resolved)))
+    }
 }
 
 impl<X: Transport> Ports<X> {
-    /// Opens the attacker's node in the run `prefix` and its ports.
-    pub fn open(prefix: &str, resolved: &Resolved) -> Result<Self, AttackerError> {
-        let conn: Connection<X> = process::connect(
-            prefix,
-            Role::Attacker,
-            Wake::Attacker,
-            process::sizing_for(resolved),
-        )?;
+    /// The attacker's ports on its node.
+    fn open(transport: &X, resolved: &Resolved) -> Result<Self, AttackerError> {
         let mut agents = Vec::new();
         for a in &resolved.scenario.agents {
             if resolved.attack.attacks_torque_of(a.id) {
                 agents.push((
                     a.id,
-                    conn.transport.publisher(Stream::Torque(a.id))?,
-                    conn.transport.notifier(Wake::Agent(a.id))?,
+                    transport.publisher(Stream::Torque(a.id))?,
+                    transport.notifier(Wake::Agent(a.id))?,
                 ));
             }
         }
@@ -69,23 +97,20 @@ impl<X: Transport> Ports<X> {
             None
         } else {
             Some(Actuation {
-                torques: conn.transport.subscriber(Stream::Actuation)?,
+                torques: transport.subscriber(Stream::Actuation)?,
                 agents,
             })
         };
         let external = match resolved.scenario.roles.attacker {
-            Some(_) => Some(ExternalPorts::open(&conn.transport)?),
+            Some(_) => Some(ExternalPorts::open(transport)?),
             None => None,
         };
         Ok(Self {
-            measurement: conn.transport.subscriber(Stream::Measurement)?,
-            tampered: conn.transport.publisher(Stream::Tampered)?,
-            center: conn.transport.notifier(Wake::Center)?,
+            measurement: transport.subscriber(Stream::Measurement)?,
+            tampered: transport.publisher(Stream::Tampered)?,
+            center: transport.notifier(Wake::Center)?,
             actuation,
             external,
-            waker: conn.waker,
-            launcher: conn.launcher,
-            transport: conn.transport,
         })
     }
 }
@@ -336,42 +361,12 @@ fn relay_torques<X: Transport, const N: usize>(
     Ok(refused)
 }
 
-/// Relays until every agent's last tick went through (or `shutdown`). Returns messages refused.
-pub fn run<X: Transport, const N: usize>(
-    resolved: &Resolved,
-    ports: &Ports<X>,
-    shutdown: &Shutdown,
-    trace: &mut TraceWriter,
-) -> Result<u64, AttackerError> {
-    let targets = Target::all(resolved);
-    let epoch_ns = match ports
-        .launcher
-        .ready_and_wait_start(&ports.waker, shutdown)?
-    {
-        Start::Go { epoch_ns } => epoch_ns,
-        Start::Shutdown => return Ok(0),
-    };
-    let mut relay = Relay::new::<N>(resolved, ports, targets, epoch_ns);
-    loop {
-        let (relayed, forwarded) = relay.take_measurements::<N>(trace)?;
-        relay.pass_on(relayed, forwarded, trace)?;
-        relay.take_torques::<N>(trace)?;
-        if relay.settled() {
-            break;
-        }
-        if shutdown.requested() || ports.launcher.stop_requested()? {
-            return Ok(relay.refused);
-        }
-        relay.wait()?;
-    }
-    relay.finish(trace, shutdown)
-}
-
 /// The attacker over a run: the agents it relays for, what it refused, the checks of what
 /// arrives, the program that takes its role (if any), and the run's timing.
-struct Relay<'a, X: Transport> {
+pub struct Relay<'a, X: Transport, const N: usize> {
     resolved: &'a Resolved,
     ports: &'a Ports<X>,
+    conn: &'a Connection<X>,
     targets: Vec<Target>,
     /// Messages refused so far.
     refused: u64,
@@ -386,31 +381,71 @@ struct Relay<'a, X: Transport> {
     end_ns: u64,
 }
 
-impl<'a, X: Transport> Relay<'a, X> {
-    /// The state of a run started at `epoch_ns`, for agents of `N` links.
-    fn new<const N: usize>(
-        resolved: &'a Resolved,
-        ports: &'a Ports<X>,
-        targets: Vec<Target>,
-        epoch_ns: u64,
-    ) -> Self {
+impl<X: Transport, const N: usize> role::Running for Relay<'_, X, N> {
+    /// The run started at `epoch_ns`: the agents' liveness counts from then, and the program
+    /// that takes the attacker role (if any) is given its time from then.
+    fn begin(&mut self, epoch_ns: u64, _: &mut TraceWriter) -> Result<(), AttackerError> {
+        let s = &self.resolved.scenario;
+        let since = monotonic_ns().max(epoch_ns);
+        self.liveness = Liveness::new(self.targets.len(), since, process::lost_after_ns(self.dt));
+        self.end_ns = process::realtime_end_ns(epoch_ns, s.duration_s, self.dt);
+        let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
+        self.external = match (&s.roles.attacker, &self.ports.external) {
+            (Some(role), Some(_)) => Some(External::new(role, &ids, N, self.dt, self.realtime)),
+            _ => None,
+        };
+        Ok(())
+    }
+
+    fn turn(&mut self, trace: &mut TraceWriter) -> Result<Turn, AttackerError> {
+        let (relayed, forwarded) = self.take_measurements(trace)?;
+        self.pass_on(relayed, forwarded, trace)?;
+        self.take_torques(trace)?;
+        Ok(if self.settled() {
+            Turn::Done
+        } else {
+            Turn::Pending
+        })
+    }
+
+    /// Waits for the next input (or, in realtime with answers due, the earliest deadline).
+    fn wait(&mut self) -> Result<(), AttackerError> {
+        self.wait_for_input()
+    }
+
+    /// A note of what was refused and what the program did.
+    fn end(self, _: &mut TraceWriter) -> Result<End, AttackerError> {
+        let mut notes = Vec::new();
+        if self.refused > 0 {
+            notes.push(format!("{} measurement messages refused", self.refused));
+        }
+        if let Some(x) = &self.external {
+            notes.push(x.summary());
+        }
+        let note =
+            (!notes.is_empty()).then(|| (self.resolved.scenario.duration_s, notes.join("; ")));
+        Ok(End {
+            ticks: self.ticks,
+            note,
+        })
+    }
+}
+
+impl<'a, X: Transport, const N: usize> Relay<'a, X, N> {
+    /// The state of a run, for agents of `N` links (its clocks are set at the start).
+    fn new(resolved: &'a Resolved, opened: &'a Opened<X, Ports<X>>, targets: Vec<Target>) -> Self {
         let s = &resolved.scenario;
         let ticks = resolved.ticks();
         let dt = s.control_period_s;
         let strategy = WaitStrategy::for_clock(s.clock);
         let realtime = s.clock == ClockMode::Realtime;
-        let since = monotonic_ns().max(epoch_ns);
-        let liveness = Liveness::new(targets.len(), since, process::lost_after_ns(dt));
-        let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s, dt);
+        let liveness = Liveness::new(targets.len(), 0, process::lost_after_ns(dt));
         let sequence = SequenceTracker::new(s.agents.iter().map(|a| a.id), ticks);
-        let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
-        let external = match (&s.roles.attacker, &ports.external) {
-            (Some(role), Some(_)) => Some(External::new(role, &ids, N, dt, realtime)),
-            _ => None,
-        };
+        let (external, end_ns) = (None, 0);
         Self {
             resolved,
-            ports,
+            ports: &opened.ports,
+            conn: &opened.conn,
             targets,
             refused: 0,
             sequence,
@@ -426,7 +461,7 @@ impl<'a, X: Transport> Relay<'a, X> {
 
     /// Admits every measurement waiting and relays it (or hands it to the program that takes
     /// the attacker role). Returns how many were relayed to the center and how many handed over.
-    fn take_measurements<const N: usize>(
+    fn take_measurements(
         &mut self,
         trace: &mut TraceWriter,
     ) -> Result<(usize, usize), AttackerError> {
@@ -491,7 +526,7 @@ impl<'a, X: Transport> Relay<'a, X> {
         let ports = self.ports;
         if let (Some(x), Some(p)) = (&mut self.external, &ports.external) {
             if forwarded > 0 {
-                p.ring(&ports.transport)?;
+                p.ring(&self.conn.transport)?;
             }
             relayed += x.take_answers(p, &ports.tampered, trace)?;
             relayed += x.enforce(monotonic_ns(), &ports.tampered, trace)?;
@@ -503,10 +538,7 @@ impl<'a, X: Transport> Relay<'a, X> {
     }
 
     /// Relays the torques waiting on the actuation path, when the run attacks some.
-    fn take_torques<const N: usize>(
-        &mut self,
-        trace: &mut TraceWriter,
-    ) -> Result<(), AttackerError> {
+    fn take_torques(&mut self, trace: &mut TraceWriter) -> Result<(), AttackerError> {
         if let Some(actuation) = &self.ports.actuation {
             let clock = self.resolved.scenario.clock;
             self.refused += relay_torques::<X, N>(
@@ -544,8 +576,7 @@ impl<'a, X: Transport> Relay<'a, X> {
             .all(|(i, t)| liveness.settled(i, t.finished(ticks) && answered(i), now, end_ns))
     }
 
-    /// Waits for the next input (or, in realtime with answers due, the earliest deadline).
-    fn wait(&self) -> Result<(), AttackerError> {
+    fn wait_for_input(&self) -> Result<(), AttackerError> {
         let ports = self.ports;
         let has_input = || {
             Ok(ports.measurement.has_messages()?
@@ -565,92 +596,21 @@ impl<'a, X: Transport> Relay<'a, X> {
         {
             // Realtime with answers due: wake at the earliest deadline at the latest.
             Some(due) if self.realtime => {
-                ports
-                    .waker
-                    .wait_precise(due.min(fdi_runtime::process::LIVENESS_CHECK))?;
+                (self.conn.waker).wait_precise(due.min(fdi_runtime::process::LIVENESS_CHECK))?;
             }
             _ => {
                 self.strategy.wait_for_input(
                     self.resolved.scenario.clock,
-                    &ports.waker,
+                    &self.conn.waker,
                     has_input,
                 )?;
             }
         }
         Ok(())
     }
-
-    /// Closes the trace with a note of what was refused and what the program did, and tells
-    /// the launcher. Returns the messages refused.
-    fn finish(self, trace: &mut TraceWriter, shutdown: &Shutdown) -> Result<u64, AttackerError> {
-        let refused = self.refused;
-        let mut notes = Vec::new();
-        if refused > 0 {
-            notes.push(format!("{refused} measurement messages refused"));
-        }
-        if let Some(x) = &self.external {
-            notes.push(x.summary());
-        }
-        let note =
-            (!notes.is_empty()).then(|| (self.resolved.scenario.duration_s, notes.join("; ")));
-        process::finish(
-            trace,
-            note,
-            self.ticks,
-            (&self.ports.launcher, &self.ports.waker),
-            shutdown,
-        )?;
-        Ok(refused)
-    }
-}
-
-/// [`run`] with the number of links of the run's agents.
-pub fn run_any<X: Transport>(
-    resolved: &Resolved,
-    ports: &Ports<X>,
-    shutdown: &Shutdown,
-    trace: &mut TraceWriter,
-) -> Result<u64, AttackerError> {
-    struct Run<'a, X: Transport> {
-        resolved: &'a Resolved,
-        ports: &'a Ports<X>,
-        shutdown: &'a Shutdown,
-        trace: &'a mut TraceWriter,
-    }
-    impl<X: Transport> ForLinks for Run<'_, X> {
-        type Output = Result<u64, AttackerError>;
-        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            run::<X, N>(self.resolved, self.ports, self.shutdown, self.trace)
-        }
-    }
-    resolved
-        .with_links(Run {
-            resolved,
-            ports,
-            shutdown,
-            trace,
-        })
-        .unwrap_or(Ok(0))
-}
-
-type Opened = (Resolved, Ports<Shm>, TraceWriter, Shutdown);
-
-fn open(args: &ProcessArgs) -> Result<Opened, AttackerError> {
-    let (shutdown, resolved) = process::start(args)?;
-    let ports = Ports::open(&args.prefix, &resolved)?;
-    let trace = TraceWriter::create(&args.trace, &process::trace_header("attacker", &resolved))?;
-    Ok((resolved, ports, trace, shutdown))
 }
 
 /// Entry point of the `fdi-attacker` binary.
 pub fn main_with(args: ProcessArgs) -> ExitCode {
-    match open(&args).and_then(|(resolved, ports, mut trace, shutdown)| {
-        run_any(&resolved, &ports, &shutdown, &mut trace)
-    }) {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(e) => {
-            fdi_runtime::process::print_failure(format_args!("fdi-attacker: {e}"));
-            ExitCode::FAILURE
-        }
-    }
+    role::main_with(&Attacker, &args)
 }

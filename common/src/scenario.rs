@@ -375,10 +375,13 @@ impl Resolved {
     /// Runs `work` with the number of links every agent of the run has (validation makes them
     /// share one) and the first agent's model; `None` for a run without agents.
     pub fn with_links<W: crate::model::ForLinks>(&self, work: W) -> Option<W::Output> {
-        self.scenario
-            .agents
-            .first()
-            .map(|a| a.model.with_links(work))
+        self.model().map(|m| m.with_links(work))
+    }
+
+    /// The model of the run's agents (the first agent's: validation makes every agent of a
+    /// run share one number of links); `None` for a run without agents.
+    pub fn model(&self) -> Option<&crate::model::ModelConfig> {
+        self.scenario.agents.first().map(|a| &a.model)
     }
 
     /// The attack on agent `agent_id` of the run: [`AgentAttack::compile`] of its profile, with

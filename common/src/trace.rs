@@ -327,7 +327,8 @@ pub const FLUSH_INTERVAL: std::time::Duration = std::time::Duration::from_millis
 #[derive(Debug)]
 pub struct TraceWriter {
     path: PathBuf,
-    out: BufWriter<File>,
+    /// `None`: a writer that keeps nothing ([`TraceWriter::discarding`]).
+    out: Option<BufWriter<File>>,
     buf: Vec<u8>,
     last_flush: std::time::Instant,
 }
@@ -342,15 +343,33 @@ impl TraceWriter {
         })?;
         let mut w = Self {
             path: path.to_path_buf(),
-            out: BufWriter::with_capacity(1 << 16, file),
+            out: Some(BufWriter::with_capacity(1 << 16, file)),
             buf: Vec::with_capacity(512),
             last_flush: std::time::Instant::now(),
         };
         let mut start = MAGIC.to_vec();
         start.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
-        w.out.write_all(&start).map_err(|e| w.io(e))?;
+        w.write_out(&start)?;
         w.frame(header, FrameKind::Header)?;
         Ok(w)
+    }
+
+    /// A writer that encodes and checks its records as any other but keeps none: for a process
+    /// that writes no trace (the replayer, whose `--trace` is the recording it reads).
+    pub fn discarding() -> Self {
+        Self {
+            path: PathBuf::new(),
+            out: None,
+            buf: Vec::new(),
+            last_flush: std::time::Instant::now(),
+        }
+    }
+
+    fn write_out(&mut self, bytes: &[u8]) -> Result<(), TraceError> {
+        match self.out.as_mut().map(|out| out.write_all(bytes)) {
+            Some(Err(e)) => Err(self.io(e)),
+            Some(Ok(())) | None => Ok(()),
+        }
     }
 
     fn io(&self, cause: std::io::Error) -> TraceError {
@@ -380,10 +399,11 @@ impl TraceWriter {
                 })
             }
         };
-        self.out
-            .write_all(&len.to_le_bytes())
-            .map_err(|e| self.io(e))?;
-        self.out.write_all(&self.buf).map_err(|e| self.io(e))
+        self.write_out(&len.to_le_bytes())?;
+        let buf = std::mem::take(&mut self.buf);
+        let written = self.write_out(&buf);
+        self.buf = buf;
+        written
     }
 
     /// Appends a record; flushes when [`FLUSH_INTERVAL`] has passed since the last flush.
@@ -397,7 +417,10 @@ impl TraceWriter {
 
     pub fn flush(&mut self) -> Result<(), TraceError> {
         self.last_flush = std::time::Instant::now();
-        self.out.flush().map_err(|e| self.io(e))
+        match self.out.as_mut().map(std::io::Write::flush) {
+            Some(Err(e)) => Err(self.io(e)),
+            Some(Ok(())) | None => Ok(()),
+        }
     }
 
     pub fn path(&self) -> &Path {
@@ -408,7 +431,9 @@ impl TraceWriter {
 impl Drop for TraceWriter {
     fn drop(&mut self) {
         // Best effort: an explicit `flush` reports errors; a drop on the way out cannot.
-        let _ = self.out.flush();
+        if let Some(out) = self.out.as_mut() {
+            let _ = out.flush();
+        }
     }
 }
 

@@ -2,7 +2,8 @@
 //! measurements; each torque goes back to its agent stamped with its tick time, straight or,
 //! for an agent whose torques the run attacks, through the attacker. Purely
 //! event-driven: every agent's tick is computed as soon as its measurement arrives (agents are
-//! independent, so the result does not depend on the order in which agents arrive).
+//! independent, so the result does not depend on the order in which agents arrive). One
+//! [`Role`] of the run (its lifecycle and process shell: [`fdi_runtime::role`]).
 
 use std::process::ExitCode;
 
@@ -12,18 +13,17 @@ use monitor::{Monitor, MonitorPorts};
 
 use fdi_common::control::CenterAgent;
 use fdi_common::engine::{center_record, center_tick, tick_time};
-use fdi_common::model::{EulerLagrange, ForLinks};
 use fdi_common::plant::Measurement;
+use fdi_common::run_dir::Process;
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::{from_vector, to_vector, SequenceTracker};
 use fdi_runtime::ipc::{
-    monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, StatusMsg, Stream,
+    self, monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, StatusMsg, Stream,
     TorqueMsg, Transport, Wake,
 };
-use fdi_runtime::process::{
-    self, Connection, LauncherLink, Liveness, ProcessArgs, Shutdown, Start, WaitStrategy,
-};
+use fdi_runtime::process::{self, Connection, LauncherLink, Liveness, ProcessArgs, WaitStrategy};
+use fdi_runtime::role::{self, End, Opened, Role, Turn};
 
 /// Errors of the control-center process.
 pub type CenterError = fdi_runtime::process::RoleError;
@@ -46,21 +46,56 @@ pub struct Ports<X: Transport> {
     pub route: Vec<usize>,
     /// The monitor program (`[roles.monitor]`), when the run has one.
     pub monitor: Option<MonitorPorts<X>>,
-    pub waker: X::Waker,
-    pub launcher: LauncherLink<X>,
-    /// The node; declared last so that it is dropped after the ports.
-    pub transport: X,
+}
+
+/// The control center of a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ControlCenter;
+
+impl Role for ControlCenter {
+    type Ports<X: Transport> = Ports<X>;
+    type Running<'a, X: Transport + 'a, const N: usize> = Center<'a, X, N>;
+
+    fn identity(&self) -> (ipc::Role, Wake) {
+        (ipc::Role::Center, Wake::Center)
+    }
+
+    fn program(&self) -> String {
+        "fdi-control-center".into()
+    }
+
+    fn trace_name(&self) -> Option<String> {
+        Some(Process::Center.to_string())
+    }
+
+    fn open<X: Transport>(
+        &self,
+        transport: &X,
+        resolved: &Resolved,
+    ) -> Result<Ports<X>, CenterError> {
+        Ports::open(transport, resolved)
+    }
+
+    fn prepare<'a, X: Transport + 'a, const N: usize>(
+        &'a self,
+        resolved: &'a Resolved,
+        opened: &'a Opened<X, Ports<X>>,
+    ) -> Result<Center<'a, X, N>, CenterError> {
+        let s = &resolved.scenario;
+        let slots = (s.agents.iter())
+            .map(|a| {
+                CenterAgent::<N>::new(s.center_params(a))
+                    .map(|center| Slot { center, next: 0 })
+                    .ok_or(CenterError::Dof(a.id))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Center::new(resolved, opened, slots))
+    }
 }
 
 impl<X: Transport> Ports<X> {
-    /// Opens the control center's node in the run `prefix` and its ports.
-    pub fn open(prefix: &str, resolved: &Resolved) -> Result<Self, CenterError> {
-        let conn: Connection<X> = process::connect(
-            prefix,
-            Role::Center,
-            Wake::Center,
-            process::sizing_for(resolved),
-        )?;
+    /// The control center's ports on its node.
+    fn open(transport: &X, resolved: &Resolved) -> Result<Self, CenterError> {
         let mut links = Vec::with_capacity(resolved.agent_count());
         let mut route = Vec::with_capacity(resolved.agent_count());
         let mut actuation = None;
@@ -68,32 +103,29 @@ impl<X: Transport> Ports<X> {
             if !resolved.attack.attacks_torque_of(a.id) {
                 route.push(links.len());
                 links.push(AgentLink {
-                    torque: conn.transport.publisher(Stream::Torque(a.id))?,
-                    bell: conn.transport.notifier(Wake::Agent(a.id))?,
+                    torque: transport.publisher(Stream::Torque(a.id))?,
+                    bell: transport.notifier(Wake::Agent(a.id))?,
                 });
                 continue;
             }
             if actuation.is_none() {
                 actuation = Some(links.len());
                 links.push(AgentLink {
-                    torque: conn.transport.publisher(Stream::Actuation)?,
-                    bell: conn.transport.notifier(Wake::Attacker)?,
+                    torque: transport.publisher(Stream::Actuation)?,
+                    bell: transport.notifier(Wake::Attacker)?,
                 });
             }
             route.extend(actuation);
         }
         let monitor = match resolved.scenario.roles.monitor {
-            Some(_) => Some(MonitorPorts::open(&conn.transport)?),
+            Some(_) => Some(MonitorPorts::open(transport)?),
             None => None,
         };
         Ok(Self {
-            tampered: conn.transport.subscriber(Stream::Tampered)?,
+            tampered: transport.subscriber(Stream::Tampered)?,
             links,
             route,
             monitor,
-            waker: conn.waker,
-            launcher: conn.launcher,
-            transport: conn.transport,
         })
     }
 
@@ -232,7 +264,7 @@ fn announce_rejoined<X: Transport>(
     silent_ns: u64,
     k: u64,
     dt: f64,
-    ports: &Ports<X>,
+    launcher: &LauncherLink<X>,
     trace: &mut TraceWriter,
 ) -> Result<(), CenterError> {
     let message = format!(
@@ -243,7 +275,7 @@ fn announce_rejoined<X: Transport>(
         t: tick_time(k, dt),
         message,
     })?;
-    ports.launcher.report_rejoined(id, k)?;
+    launcher.report_rejoined(id, k)?;
     Ok(())
 }
 
@@ -254,7 +286,7 @@ fn report_progress<X: Transport, const N: usize>(
     liveness: &Liveness,
     reported: &mut u64,
     ticks: u64,
-    ports: &Ports<X>,
+    launcher: &LauncherLink<X>,
 ) -> Result<(), CenterError> {
     let done = slots
         .iter()
@@ -265,7 +297,7 @@ fn report_progress<X: Transport, const N: usize>(
         .unwrap_or(0);
     if done >= *reported + PROGRESS_EVERY || done >= ticks {
         *reported = done;
-        ports.launcher.report(StatusMsg::PROGRESS, done)?;
+        launcher.report(StatusMsg::PROGRESS, done)?;
     }
     Ok(())
 }
@@ -278,7 +310,7 @@ fn declare_lost<X: Transport, const N: usize>(
     now: u64,
     ticks: u64,
     dt: f64,
-    ports: &Ports<X>,
+    launcher: &LauncherLink<X>,
     trace: &mut TraceWriter,
 ) -> Result<(), CenterError> {
     for i in liveness.newly_lost(now, |i| slots[i].next >= ticks) {
@@ -290,63 +322,17 @@ fn declare_lost<X: Transport, const N: usize>(
             t: tick_time(last, dt),
             message,
         })?;
-        ports.launcher.report_lost(id, last)?;
+        launcher.report_lost(id, last)?;
     }
     Ok(())
 }
 
-/// Controls every agent until their last tick (or `shutdown`).
-pub fn run<X: Transport, const N: usize>(
-    resolved: &Resolved,
-    ports: &Ports<X>,
-    shutdown: &Shutdown,
-    trace: &mut TraceWriter,
-) -> Result<u64, CenterError> {
-    let s = &resolved.scenario;
-    let slots = s
-        .agents
-        .iter()
-        .map(|a| {
-            CenterAgent::<N>::new(s.center_params(a))
-                .map(|center| Slot { center, next: 0 })
-                .ok_or(CenterError::Dof(a.id))
-        })
-        .collect::<Result<Vec<_>, _>>()?;
-    let epoch_ns = match ports
-        .launcher
-        .ready_and_wait_start(&ports.waker, shutdown)?
-    {
-        Start::Go { epoch_ns } => epoch_ns,
-        Start::Shutdown => return Ok(0),
-    };
-    let strategy = WaitStrategy::for_clock(s.clock);
-    let mut center = Center::new(resolved, ports, slots, epoch_ns);
-    loop {
-        let arrived = center.take_measurements(trace)?;
-        center.ring(arrived)?;
-        let now = center.follow_agents(trace)?;
-        if center.done(now)? {
-            break;
-        }
-        if shutdown.requested() || ports.launcher.stop_requested()? {
-            return Ok(center.intake.refused);
-        }
-        strategy.wait_for_input(s.clock, &ports.waker, || {
-            Ok(ports.tampered.has_messages()?
-                || match &ports.monitor {
-                    Some(m) => m.alarms.has_messages()?,
-                    None => false,
-                })
-        })?;
-    }
-    center.finish(trace, shutdown)
-}
-
 /// The control center over a run: an agent controller per agent, the intake, the monitor (if
 /// any) and the run's timing.
-struct Center<'a, X: Transport, const N: usize> {
+pub struct Center<'a, X: Transport, const N: usize> {
     resolved: &'a Resolved,
     ports: &'a Ports<X>,
+    conn: &'a Connection<X>,
     slots: Vec<Slot<N>>,
     intake: Intake,
     monitor: Option<Monitor>,
@@ -358,30 +344,96 @@ struct Center<'a, X: Transport, const N: usize> {
     dt: f64,
     realtime: bool,
     end_ns: u64,
+    strategy: WaitStrategy,
+}
+
+impl<X: Transport, const N: usize> role::Running for Center<'_, X, N> {
+    /// The run started at `epoch_ns`: the agents' liveness counts from then, and the monitor
+    /// program (if any) is given its time from then.
+    fn begin(&mut self, epoch_ns: u64, _: &mut TraceWriter) -> Result<(), CenterError> {
+        let s = &self.resolved.scenario;
+        let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
+        self.end_ns = process::realtime_end_ns(epoch_ns, s.duration_s, self.dt);
+        self.intake = Intake::new(&ids, self.ticks, monotonic_ns().max(epoch_ns), self.dt);
+        self.monitor = match (&s.roles.monitor, &self.ports.monitor) {
+            (Some(role), Some(_)) => {
+                Some(Monitor::new(role, &ids, self.dt, !self.realtime, epoch_ns))
+            }
+            _ => None,
+        };
+        Ok(())
+    }
+
+    fn turn(&mut self, trace: &mut TraceWriter) -> Result<Turn, CenterError> {
+        let arrived = self.take_measurements(trace)?;
+        self.ring(arrived)?;
+        let now = self.follow_agents(trace)?;
+        Ok(if self.done(now)? {
+            Turn::Done
+        } else {
+            Turn::Pending
+        })
+    }
+
+    fn wait(&mut self) -> Result<(), CenterError> {
+        let ports = self.ports;
+        self.strategy
+            .wait_for_input(self.resolved.scenario.clock, &self.conn.waker, || {
+                Ok(ports.tampered.has_messages()?
+                    || match &ports.monitor {
+                        Some(m) => m.alarms.has_messages()?,
+                        None => false,
+                    })
+            })?;
+        Ok(())
+    }
+
+    /// A note of what was refused, rejected or missing and what the monitor did.
+    fn end(self, _: &mut TraceWriter) -> Result<End, CenterError> {
+        let ticks = self.ticks;
+        let (refused, rejected, missing) = (
+            self.intake.refused,
+            self.slots
+                .iter()
+                .map(|x| x.center.rejected_inputs)
+                .sum::<u64>(),
+            self.slots
+                .iter()
+                .map(|x| x.center.missing_inputs)
+                .sum::<u64>(),
+        );
+        let mut notes = Vec::new();
+        if refused > 0 || rejected > 0 || missing > 0 {
+            notes.push(format!(
+                "{refused} messages refused, {rejected} measurements rejected as non-finite or \
+                 absurd, {missing} ticks without a measurement (gap markers, forged stamps; the last \
+                 good one held)"
+            ));
+        }
+        if let Some(mon) = &self.monitor {
+            notes.push(mon.summary(ticks));
+        }
+        let note =
+            (!notes.is_empty()).then(|| (self.resolved.scenario.duration_s, notes.join("; ")));
+        Ok(End { ticks, note })
+    }
 }
 
 impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
-    /// The state of a run started at `epoch_ns`.
-    fn new(
-        resolved: &'a Resolved,
-        ports: &'a Ports<X>,
-        slots: Vec<Slot<N>>,
-        epoch_ns: u64,
-    ) -> Self {
+    /// The state of a run (its clocks are set at the start).
+    fn new(resolved: &'a Resolved, opened: &'a Opened<X, Ports<X>>, slots: Vec<Slot<N>>) -> Self {
         let s = &resolved.scenario;
         let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
         let ticks = resolved.ticks();
         let dt = s.control_period_s;
         let realtime = s.clock == ClockMode::Realtime;
-        let end_ns = process::realtime_end_ns(epoch_ns, s.duration_s, dt);
-        let intake = Intake::new(&ids, ticks, monotonic_ns().max(epoch_ns), dt);
-        let monitor = match (&s.roles.monitor, &ports.monitor) {
-            (Some(role), Some(_)) => Some(Monitor::new(role, &ids, dt, !realtime, epoch_ns)),
-            _ => None,
-        };
+        let intake = Intake::new(&ids, ticks, 0, dt);
+        let (monitor, end_ns) = (None, 0);
+        let strategy = WaitStrategy::for_clock(s.clock);
         Self {
             resolved,
-            ports,
+            ports: &opened.ports,
+            conn: &opened.conn,
             slots,
             intake,
             monitor,
@@ -391,6 +443,7 @@ impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
             dt,
             realtime,
             end_ns,
+            strategy,
         }
     }
 
@@ -438,7 +491,7 @@ impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
         ports.ring(&mut self.intake.answered)?;
         if let Some(mp) = &ports.monitor {
             if computed || arrived > 0 {
-                mp.ring(&ports.transport)?;
+                mp.ring(&self.conn.transport)?;
             }
         }
         Ok(())
@@ -447,17 +500,17 @@ impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
     /// Announces the agents that rejoined, declares the agents fallen silent lost (realtime)
     /// and reports progress. Returns the time it looked at the agents.
     fn follow_agents(&mut self, trace: &mut TraceWriter) -> Result<u64, CenterError> {
-        let (ports, dt, ticks) = (self.ports, self.dt, self.ticks);
+        let (launcher, dt, ticks) = (&self.conn.launcher, self.dt, self.ticks);
         let slots = &self.slots;
         let liveness = &mut self.intake.liveness;
         for (i, silent, k) in self.intake.rejoined.drain(..) {
-            announce_rejoined(slots[i].center.agent_id(), silent, k, dt, ports, trace)?;
+            announce_rejoined(slots[i].center.agent_id(), silent, k, dt, launcher, trace)?;
         }
         let now = monotonic_ns();
         if self.realtime {
-            declare_lost(slots, liveness, now, ticks, dt, ports, trace)?;
+            declare_lost(slots, liveness, now, ticks, dt, launcher, trace)?;
         }
-        report_progress(slots, liveness, &mut self.reported, ticks, ports)?;
+        report_progress(slots, liveness, &mut self.reported, ticks, launcher)?;
         Ok(now)
     }
 
@@ -479,96 +532,9 @@ impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
         };
         Ok(controlled && judged)
     }
-
-    /// Closes the trace with a note of what was refused, rejected or missing and what the
-    /// monitor did, and tells the launcher. Returns the messages refused.
-    fn finish(self, trace: &mut TraceWriter, shutdown: &Shutdown) -> Result<u64, CenterError> {
-        let ticks = self.ticks;
-        let (refused, rejected, missing) = (
-            self.intake.refused,
-            self.slots
-                .iter()
-                .map(|x| x.center.rejected_inputs)
-                .sum::<u64>(),
-            self.slots
-                .iter()
-                .map(|x| x.center.missing_inputs)
-                .sum::<u64>(),
-        );
-        let mut notes = Vec::new();
-        if refused > 0 || rejected > 0 || missing > 0 {
-            notes.push(format!(
-                "{refused} messages refused, {rejected} measurements rejected as non-finite or \
-                 absurd, {missing} ticks without a measurement (gap markers, forged stamps; the last \
-                 good one held)"
-            ));
-        }
-        if let Some(mon) = &self.monitor {
-            notes.push(mon.summary(ticks));
-        }
-        let note =
-            (!notes.is_empty()).then(|| (self.resolved.scenario.duration_s, notes.join("; ")));
-        process::finish(
-            trace,
-            note,
-            ticks,
-            (&self.ports.launcher, &self.ports.waker),
-            shutdown,
-        )?;
-        Ok(refused)
-    }
-}
-
-/// [`run`] with the number of links of the run's agents.
-pub fn run_any<X: Transport>(
-    resolved: &Resolved,
-    ports: &Ports<X>,
-    shutdown: &Shutdown,
-    trace: &mut TraceWriter,
-) -> Result<u64, CenterError> {
-    struct Run<'a, X: Transport> {
-        resolved: &'a Resolved,
-        ports: &'a Ports<X>,
-        shutdown: &'a Shutdown,
-        trace: &'a mut TraceWriter,
-    }
-    impl<X: Transport> ForLinks for Run<'_, X> {
-        type Output = Result<u64, CenterError>;
-        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            run::<X, N>(self.resolved, self.ports, self.shutdown, self.trace)
-        }
-    }
-    resolved
-        .with_links(Run {
-            resolved,
-            ports,
-            shutdown,
-            trace,
-        })
-        .unwrap_or(Ok(0))
-}
-
-type Opened = (Resolved, Ports<Shm>, TraceWriter, Shutdown);
-
-fn open(args: &ProcessArgs) -> Result<Opened, CenterError> {
-    let (shutdown, resolved) = process::start(args)?;
-    let ports = Ports::open(&args.prefix, &resolved)?;
-    let trace = TraceWriter::create(
-        &args.trace,
-        &process::trace_header(&fdi_common::run_dir::Process::Center.to_string(), &resolved),
-    )?;
-    Ok((resolved, ports, trace, shutdown))
 }
 
 /// Entry point of the `fdi-control-center` binary.
 pub fn main_with(args: ProcessArgs) -> ExitCode {
-    match open(&args).and_then(|(resolved, ports, mut trace, shutdown)| {
-        run_any(&resolved, &ports, &shutdown, &mut trace)
-    }) {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(e) => {
-            fdi_runtime::process::print_failure(format_args!("fdi-control-center: {e}"));
-            ExitCode::FAILURE
-        }
-    }
+    role::main_with(&ControlCenter, &args)
 }

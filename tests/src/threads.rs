@@ -18,6 +18,7 @@ use fdi_runtime::ipc::{
     StatusMsg, Stream, TorqueMsg, Transport, Wake, Waker as _,
 };
 use fdi_runtime::process::{self, Shutdown, Start, WaitStrategy};
+use fdi_runtime::role;
 
 use crate::Scratch;
 
@@ -321,17 +322,19 @@ fn spawn_roles(
     };
     let mut threads = vec![
         spawn(Box::new(|p, r, d, s| {
-            let ports = fdi_control_center::Ports::<Local>::open(p, r).expect("center ports");
+            let center = fdi_control_center::ControlCenter;
+            let opened = role::open::<_, Local>(&center, p, r).expect("center ports");
             let mut trace = writer(d, fdi_common::run_dir::Process::CENTER, r);
-            fdi_control_center::run_any(r, &ports, s, &mut trace)
+            role::drive(&center, r, &opened, s, &mut trace)
                 .map(|_| ())
                 .map_err(|e| format!("control center: {e}"))
         })),
         spawn(Box::new(move |p, r, d, s| match middle {
             Middle::Attacker => {
-                let ports = fdi_attacker::Ports::<Local>::open(p, r).expect("attacker ports");
+                let attacker = fdi_attacker::Attacker;
+                let opened = role::open::<_, Local>(&attacker, p, r).expect("attacker ports");
                 let mut trace = writer(d, "attacker", r);
-                fdi_attacker::run_any(r, &ports, s, &mut trace)
+                role::drive(&attacker, r, &opened, s, &mut trace)
                     .map(|_| ())
                     .map_err(|e| format!("attacker: {e}"))
             }
@@ -344,9 +347,10 @@ fn spawn_roles(
     for a in &resolved.scenario.agents {
         let id = a.id;
         threads.push(spawn(Box::new(move |p, r, d, s| {
-            let ports = fdi_agent::Ports::<Local>::open(p, id, r).expect("agent ports");
+            let agent = fdi_agent::Agent { id, pace: None };
+            let opened = role::open::<_, Local>(&agent, p, r).expect("agent ports");
             let mut trace = writer(d, &format!("agent-{id}"), r);
-            fdi_agent::run_any(id, r, &ports, s, &mut trace, None)
+            role::drive(&agent, r, &opened, s, &mut trace)
                 .map(|_| ())
                 .map_err(|e| format!("agent {id}: {e}"))
         })));

@@ -14,3 +14,4 @@
 
 pub mod ipc;
 pub mod process;
+pub mod role;

@@ -65,6 +65,12 @@ pub enum RoleError {
     MissingId,
     #[error("agent {0}: its model has another number of links than the run's first agent")]
     Dof(u32),
+    #[error("the scenario has no agents")]
+    NoAgents,
+    /// What the role was given to read cannot be used (the replayer's recording); the message
+    /// names the file.
+    #[error("{0}")]
+    Input(String),
     #[error("{0}")]
     Scheduling(String),
     /// A program that takes a role (`[roles]`) broke the protocol (docs/protocol.md); the

@@ -2,9 +2,11 @@
 //! and publishes a recorded run's tampered measurements (the attacker trace's `y`, `ẏ` per agent
 //! per tick, in order) to the control center, in lockstep batches: it never runs more than
 //! [`AHEAD`] ticks ahead of the torques it got back, so no buffer overflows. Its `--trace` is
-//! the attacker trace it plays back (read only); it writes no trace of its own.
+//! the attacker trace it plays back (read only); it writes no trace of its own. One
+//! [`Role`] of the run, in the attacker's place (its lifecycle and process shell:
+//! [`fdi_runtime::role`]).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Duration;
 
@@ -14,12 +16,13 @@ use fdi_common::records::{AttackRecord, Delivery};
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{self, Resolved, MAX_DOF};
 use fdi_common::stop::Stop;
-use fdi_common::trace::{TraceReader, TraceRecord};
+use fdi_common::trace::{TraceReader, TraceRecord, TraceWriter};
 use fdi_runtime::ipc::{
-    Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Role, Shm, Stream, TorqueMsg, Transport,
-    Wake, Waker as _,
+    self, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Stream, TorqueMsg, Transport, Wake,
+    Waker as _,
 };
-use fdi_runtime::process::{self, ProcessArgs, Shutdown, Start};
+use fdi_runtime::process::{ProcessArgs, RoleError};
+use fdi_runtime::role::{self, End, Opened, Role, Turn};
 
 /// Ticks one agent may be ahead of its last torque (well within every stream's buffer).
 const AHEAD: u64 = 64;
@@ -86,91 +89,157 @@ fn payload(j: &fdi_common::records::Joints) -> [f64; MAX_DOF] {
     a
 }
 
-fn run(args: &ProcessArgs) -> Result<()> {
-    let shutdown = Shutdown::install(args.launcher_pid).context("installing signal handlers")?;
-    let resolved = scenario::load_file(&args.scenario)?;
-    let recording = load_recording(&resolved, &args.trace)?;
-    let conn = process::connect::<Shm>(
-        &args.prefix,
-        Role::Attacker,
-        Wake::Attacker,
-        process::sizing_for(&resolved),
-    )?;
-    let tampered = conn
-        .transport
-        .publisher::<MeasurementMsg>(Stream::Tampered)?;
-    let torques: Vec<_> = resolved
-        .scenario
-        .agents
-        .iter()
-        .map(|a| conn.transport.subscriber::<TorqueMsg>(Stream::Torque(a.id)))
-        .collect::<Result<_, _>>()?;
-    match conn.launcher.ready_and_wait_start(&conn.waker, &shutdown)? {
-        Start::Go { .. } => {}
-        Start::Shutdown => return Ok(()),
+/// The replayer of the recording at `recording` (an attacker trace).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Replayer {
+    pub recording: PathBuf,
+}
+
+/// The replayer's ports: the tampered measurements it publishes, the torques it counts.
+#[derive(Debug)]
+pub struct Ports<X: Transport> {
+    tampered: X::Outbox<MeasurementMsg>,
+    /// Per agent in the scenario's order.
+    torques: Vec<X::Inbox<TorqueMsg>>,
+}
+
+impl Role for Replayer {
+    type Ports<X: Transport> = Ports<X>;
+    type Running<'a, X: Transport + 'a, const N: usize> = Replay<'a, X>;
+
+    fn identity(&self) -> (ipc::Role, Wake) {
+        (ipc::Role::Attacker, Wake::Attacker)
     }
-    // Created once every process is ready, so that it reaches the center's listener.
-    let center = conn.transport.notifier(Wake::Center)?;
-    let dt = resolved.scenario.control_period_s;
-    let ticks = resolved.ticks();
-    let n = recording.len();
-    let (mut sent, mut answered) = (vec![0u64; n], vec![0u64; n]);
-    while answered.iter().any(|a| *a < ticks) {
+
+    fn program(&self) -> String {
+        "fdi-replayer".into()
+    }
+
+    fn trace_name(&self) -> Option<String> {
+        None
+    }
+
+    fn open<X: Transport>(
+        &self,
+        transport: &X,
+        resolved: &Resolved,
+    ) -> Result<Ports<X>, RoleError> {
+        Ok(Ports {
+            tampered: transport.publisher(Stream::Tampered)?,
+            torques: (resolved.scenario.agents.iter())
+                .map(|a| transport.subscriber(Stream::Torque(a.id)))
+                .collect::<Result<_, _>>()?,
+        })
+    }
+
+    fn prepare<'a, X: Transport + 'a, const N: usize>(
+        &'a self,
+        resolved: &'a Resolved,
+        opened: &'a Opened<X, Ports<X>>,
+    ) -> Result<Replay<'a, X>, RoleError> {
+        let recording = load_recording(resolved, &self.recording)
+            .map_err(|e| RoleError::Input(format!("{e:#}")))?;
+        let n = recording.len();
+        Ok(Replay {
+            resolved,
+            opened,
+            recording,
+            sent: vec![0; n],
+            answered: vec![0; n],
+            center: None,
+        })
+    }
+}
+
+/// A replay under way: per agent, the ticks sent and the ticks answered with a torque.
+pub struct Replay<'a, X: Transport> {
+    resolved: &'a Resolved,
+    opened: &'a Opened<X, Ports<X>>,
+    recording: Vec<Vec<AttackRecord>>,
+    sent: Vec<u64>,
+    answered: Vec<u64>,
+    /// The center's bell, made at the start.
+    center: Option<X::Bell>,
+}
+
+impl<X: Transport> role::Running for Replay<'_, X> {
+    fn begin(&mut self, _: u64, _: &mut TraceWriter) -> Result<(), RoleError> {
+        // Made once every process is ready, so that it reaches the center's listener.
+        self.center = Some(self.opened.conn.transport.notifier(Wake::Center)?);
+        Ok(())
+    }
+
+    /// Publishes every agent's next ticks up to [`AHEAD`] past its last torque, then counts
+    /// the torques back.
+    fn turn(&mut self, _: &mut TraceWriter) -> Result<Turn, RoleError> {
+        let s = &self.resolved.scenario;
+        let (dt, ticks) = (s.control_period_s, self.resolved.ticks());
         let mut published = false;
-        for (i, recs) in recording.iter().enumerate() {
-            while sent[i] < ticks && sent[i] < answered[i] + AHEAD {
-                let r = &recs[sent[i] as usize];
+        for (i, recs) in self.recording.iter().enumerate() {
+            while self.sent[i] < ticks && self.sent[i] < self.answered[i] + AHEAD {
+                let r = &recs[self.sent[i] as usize];
                 let t = tick_time(r.k, dt);
                 // A tick whose input was missing is a gap marker, as the attacker sent it.
-                let dof = resolved.scenario.agents[i].model.dof() as u32;
-                tampered.send(if r.delivery == Delivery::Delivered {
-                    MeasurementMsg {
-                        seq: r.k,
-                        agent: r.agent,
-                        dof: r.y.as_slice().len() as u32,
-                        t,
-                        y: payload(&r.y),
-                        yd: payload(&r.yd),
-                        agent_sent_ns: 0,
-                        attacker_received_ns: 0,
-                        attacker_sent_ns: 0,
-                        flags: 0,
-                        reserved: 0,
-                    }
-                } else {
-                    MeasurementMsg::gap(r.k, r.agent, dof, t)
-                })?;
-                sent[i] += 1;
+                let dof = s.agents[i].model.dof() as u32;
+                self.opened
+                    .ports
+                    .tampered
+                    .send(if r.delivery == Delivery::Delivered {
+                        MeasurementMsg {
+                            seq: r.k,
+                            agent: r.agent,
+                            dof: r.y.as_slice().len() as u32,
+                            t,
+                            y: payload(&r.y),
+                            yd: payload(&r.yd),
+                            agent_sent_ns: 0,
+                            attacker_received_ns: 0,
+                            attacker_sent_ns: 0,
+                            flags: 0,
+                            reserved: 0,
+                        }
+                    } else {
+                        MeasurementMsg::gap(r.k, r.agent, dof, t)
+                    })?;
+                self.sent[i] += 1;
                 published = true;
             }
         }
-        if published {
+        if let (true, Some(center)) = (published, &self.center) {
             center.ring()?;
         }
-        for (i, inbox) in torques.iter().enumerate() {
-            inbox.drain(|m| answered[i] = answered[i].max(m.seq + 1))?;
+        for (i, inbox) in self.opened.ports.torques.iter().enumerate() {
+            let answered = &mut self.answered[i];
+            inbox.drain(|m| *answered = (*answered).max(m.seq + 1))?;
         }
-        if answered.iter().all(|a| *a >= ticks) {
-            break;
-        }
-        if shutdown.requested() || conn.launcher.stop_requested()? {
-            return Ok(());
-        }
-        conn.waker.wait_precise(POLL)?;
+        Ok(if self.answered.iter().all(|a| *a >= ticks) {
+            Turn::Done
+        } else {
+            Turn::Pending
+        })
     }
-    conn.launcher.done_and_hold(ticks, &conn.waker, &shutdown)?;
-    Ok(())
+
+    fn wait(&mut self) -> Result<(), RoleError> {
+        self.opened.conn.waker.wait_precise(POLL)?;
+        Ok(())
+    }
+
+    fn end(self, _: &mut TraceWriter) -> Result<End, RoleError> {
+        Ok(End {
+            ticks: self.resolved.ticks(),
+            note: None,
+        })
+    }
 }
 
 /// Entry point of `fdi-launch process replayer`.
-pub fn main_with(args: &ProcessArgs) -> ExitCode {
-    match run(args) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            fdi_runtime::process::print_failure(format_args!("fdi-replayer: {e:#}"));
-            ExitCode::FAILURE
-        }
-    }
+pub fn main_with(args: &ProcessArgs) -> std::process::ExitCode {
+    role::main_with(
+        &Replayer {
+            recording: args.trace.clone(),
+        },
+        args,
+    )
 }
 
 /// Checks that every trace of `path` reads to its end, naming the file otherwise.
