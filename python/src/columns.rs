@@ -1,6 +1,6 @@
-//! Every tick of a run as columns (one row per robot and tick, in the trace digest's order),
-//! named as the CSV export names its columns (docs/traces.md), for numpy arrays and a pandas
-//! DataFrame on the Python side.
+//! Every tick of a run as columns (one row per robot and tick, in the trace digest's order):
+//! the tick table of `fdi_report::columns`, whose names the CSV export's files share
+//! (docs/traces.md), for numpy arrays and a pandas DataFrame on the Python side.
 
 use std::collections::BTreeMap;
 
@@ -8,6 +8,7 @@ use fdi_common::model::{EulerLagrange, ForLinks};
 use fdi_common::records::{true_s, Joints, TickRecord};
 use fdi_common::scenario::Resolved;
 use fdi_common::trajectory::TrajectoryConfig;
+use fdi_report::columns;
 use pyo3::prelude::*;
 use pyo3::types::{PyBytes, PyList};
 
@@ -40,11 +41,9 @@ pub struct Columns {
     names: Vec<String>,
     data: Vec<Data>,
     scratch: Vec<f64>,
-}
-
-/// Per link: `<stem><i><suffix>` for i from 1.
-fn per_link<'a>(stem: &'a str, suffix: &'a str, links: usize) -> impl Iterator<Item = String> + 'a {
-    (1..=links).map(move |i| format!("{stem}{i}{suffix}"))
+    /// The first column a row did not fill as declared (its index), or the row's length when
+    /// it filled another number of columns: a bug, reported by [`Columns::into_py`].
+    misfit: Option<usize>,
 }
 
 impl Columns {
@@ -72,74 +71,21 @@ impl Columns {
             names: Vec::new(),
             data: Vec::new(),
             scratch: vec![0.0; links],
+            misfit: None,
         };
         c.declare();
         c
     }
 
+    /// The columns of the tick table (`fdi_report::columns::tick_table`: the names and types
+    /// the CSV export's files share).
     fn declare(&mut self) {
-        let l = self.links;
-        let mut names: Vec<(String, u8)> = vec![("k".into(), b'i'), ("agent".into(), b'i')];
-        let f = |stem: &str, suffix: &str| -> Vec<(String, u8)> {
-            per_link(stem, suffix, l).map(|n| (n, b'f')).collect()
-        };
-        names.push(("t_s".into(), b'f'));
-        for (stem, suffix) in [
-            ("q", "_des_rad"),
-            ("q", "_rad"),
-            ("q", "_dot_rad_s"),
-            ("q", "_ddot_rad_s2"),
-            ("y", "_clean_rad"),
-            ("y", "_dot_clean_rad_s"),
-            ("u", "_applied_nm"),
-        ] {
-            names.extend(f(stem, suffix));
-        }
-        names.push(("tau_s".into(), b'f'));
-        names.push(("missed".into(), b'b'));
-        for (stem, suffix) in [
-            ("alpha", "_pos_rad"),
-            ("alpha", "_vel_rad_s"),
-            ("y", "_tampered_rad"),
-            ("y", "_dot_tampered_rad_s"),
-            ("s", "_true_rad_s"),
-        ] {
-            names.extend(f(stem, suffix));
-        }
-        names.push(("active".into(), b'b'));
-        names.push(("delivered".into(), b'b'));
-        names.push(("attacked".into(), b'b'));
-        for (stem, suffix) in [
-            ("s", "_hat_rad_s"),
-            ("q", "_hat_rad"),
-            ("q", "_dot_hat_rad_s"),
-            ("q", "_ddot_hat_rad_s2"),
-            ("u", "_sent_nm"),
-        ] {
-            names.extend(f(stem, suffix));
-        }
-        for flag in [
-            "alarm",
-            "rejected_input",
-            "rejected_torque",
-            "state_reset",
-            "history_miss",
-            "missing_input",
-        ] {
-            names.push((flag.into(), b'b'));
-        }
-        if self.actuation {
-            names.extend(f("alpha", "_u_nm"));
-            names.extend(f("u", "_tampered_nm"));
-            names.push(("held_s".into(), b'f'));
-            names.push(("actuation_active".into(), b'b'));
-        }
-        for (name, kind) in names {
+        for (name, ty) in columns::tick_table(self.links, self.actuation) {
             self.names.push(name);
-            self.data.push(match kind {
-                b'i' => Data::I64(Vec::new()),
-                b'b' => Data::Bool(Vec::new()),
-                _ => Data::F64(Vec::new()),
+            self.data.push(match ty {
+                columns::Type::Int => Data::I64(Vec::new()),
+                columns::Type::Flag => Data::Bool(Vec::new()),
+                columns::Type::Float | columns::Type::Text => Data::F64(Vec::new()),
             });
         }
     }
@@ -150,6 +96,7 @@ impl Columns {
             data: &mut self.data,
             at: 0,
             links: self.links,
+            misfit: &mut self.misfit,
         };
         row.int(r.agent.k as i64);
         row.int(i64::from(r.agent.agent));
@@ -171,6 +118,7 @@ impl Columns {
         for j in [&x.alpha_position, &x.alpha_velocity, &x.y, &x.yd] {
             row.joints(j);
         }
+        row.flag(x.active);
         let s: Vec<f64> = x
             .alpha_position
             .as_slice()
@@ -179,7 +127,6 @@ impl Columns {
             .map(|(p, v)| true_s(*p, *v, self.beta))
             .collect();
         row.floats(&s);
-        row.flag(x.active);
         row.flag(x.delivery == fdi_common::records::Delivery::Delivered);
         row.flag(fdi_common::detect::in_force(r));
         let c = &r.center;
@@ -212,6 +159,9 @@ impl Columns {
                 }
             }
         }
+        if row.at != row.data.len() {
+            row.misfit.get_or_insert(row.at);
+        }
     }
 
     /// The columns as a list of `(name, dtype, bytes)`: dtype `f8`, `i8` or `?`, the bytes
@@ -222,6 +172,11 @@ impl Columns {
             Data::I64(v) => v.len(),
             Data::Bool(v) => v.len(),
         };
+        if let Some(at) = self.misfit {
+            return Err(crate::errors::engine_error(format!(
+                "the tick table's row did not fill column {at} as declared (a bug)"
+            )));
+        }
         let rows = self.data.first().map_or(0, len);
         if let Some((name, _)) = self
             .names
@@ -251,6 +206,7 @@ struct Row<'a> {
     data: &'a mut [Data],
     at: usize,
     links: usize,
+    misfit: &'a mut Option<usize>,
 }
 
 impl Row<'_> {
@@ -259,19 +215,27 @@ impl Row<'_> {
         self.at += 1;
         d
     }
+    /// Notes the column just passed as not filled as declared.
+    fn misfit(&mut self) {
+        let at = self.at - 1;
+        self.misfit.get_or_insert(at);
+    }
     fn int(&mut self, v: i64) {
-        if let Some(Data::I64(c)) = self.next() {
-            c.push(v);
+        match self.next() {
+            Some(Data::I64(c)) => c.push(v),
+            _ => self.misfit(),
         }
     }
     fn float(&mut self, v: f64) {
-        if let Some(Data::F64(c)) = self.next() {
-            c.push(v);
+        match self.next() {
+            Some(Data::F64(c)) => c.push(v),
+            _ => self.misfit(),
         }
     }
     fn flag(&mut self, v: bool) {
-        if let Some(Data::Bool(c)) = self.next() {
-            c.push(v);
+        match self.next() {
+            Some(Data::Bool(c)) => c.push(v),
+            _ => self.misfit(),
         }
     }
     /// `links` columns from `v`; NaN where `v` has no entry.

@@ -5,6 +5,7 @@
 //! processes' traces tick by tick ([`join`]) and knows what a run recorded ([`traces`]). It
 //! runs nothing: the runs are `fdi-orchestrator`'s.
 
+pub mod columns;
 #[cfg(feature = "figures")]
 pub mod detect;
 #[cfg(feature = "figures")]

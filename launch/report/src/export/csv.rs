@@ -36,6 +36,7 @@ use super::sources::{
     abandoned, failed, read_sorted, scan, stem, trace_files, write_failure, Kind, OutDir, RunInfo,
     Sorted, WriteFailed,
 };
+use crate::columns;
 
 pub(super) fn export(run_dir: &Path) -> Result<()> {
     let files = trace_files(run_dir)?;
@@ -233,94 +234,6 @@ impl Csv {
     }
 }
 
-/// A group of columns: one, or one per link named `<stem><link><suffix>` (links from 1).
-#[derive(Debug, Clone, Copy)]
-enum Col {
-    One(&'static str),
-    Links(&'static str, &'static str),
-}
-
-use Col::{Links, One};
-
-const AGENT: &[Col] = &[
-    One("k"),
-    One("agent"),
-    One("t_s"),
-    Links("q", "_rad"),
-    Links("q", "_dot_rad_s"),
-    Links("q", "_ddot_rad_s2"),
-    Links("y", "_clean_rad"),
-    Links("y", "_dot_clean_rad_s"),
-    Links("u", "_applied_nm"),
-    One("tau_s"),
-    One("missed"),
-];
-
-const ATTACK: &[Col] = &[
-    One("k"),
-    One("agent"),
-    One("t_s"),
-    Links("alpha", "_pos_rad"),
-    Links("alpha", "_vel_rad_s"),
-    Links("y", "_tampered_rad"),
-    Links("y", "_dot_tampered_rad_s"),
-    One("active"),
-    One("delivery"),
-];
-
-const ACTUATION: &[Col] = &[
-    One("k"),
-    One("agent"),
-    One("t_s"),
-    Links("alpha", "_u_nm"),
-    Links("u", "_tampered_nm"),
-    One("held_s"),
-    One("active"),
-    One("delivery"),
-];
-
-const CENTER: &[Col] = &[
-    One("k"),
-    One("agent"),
-    One("t_s"),
-    Links("q", "_des_rad"),
-    Links("q", "_dot_des_rad_s"),
-    Links("q", "_ddot_des_rad_s2"),
-    Links("s", "_true_rad_s"),
-    Links("s", "_hat_rad_s"),
-    Links("q", "_hat_rad"),
-    Links("q", "_dot_hat_rad_s"),
-    Links("q", "_ddot_hat_rad_s2"),
-    Links("u", "_sent_nm"),
-    One("alarm"),
-    One("rejected_input"),
-    One("rejected_torque"),
-    One("state_reset"),
-    One("history_miss"),
-    One("missing_input"),
-];
-
-const MONITOR: &[Col] = &[
-    One("k"),
-    One("agent"),
-    One("t_s"),
-    One("alarm"),
-    One("statistic"),
-    One("late"),
-];
-
-const LATENCY: &[Col] = &[
-    One("k"),
-    One("agent"),
-    One("t_s"),
-    One("agent_sent_ns"),
-    One("attacker_received_ns"),
-    One("attacker_sent_ns"),
-    One("center_received_ns"),
-    One("center_sent_ns"),
-    One("agent_received_ns"),
-];
-
 impl Kind {
     fn name(self) -> &'static str {
         match self {
@@ -333,25 +246,29 @@ impl Kind {
         }
     }
 
-    fn columns(self) -> &'static [Col] {
+    /// The groups of its columns (`fdi_report::columns`, the list the tick table of the
+    /// Python package shares).
+    fn columns(self) -> &'static [&'static [columns::Col]] {
         match self {
-            Self::Agent => AGENT,
-            Self::Attack => ATTACK,
-            Self::Center => CENTER,
-            Self::Latency => LATENCY,
-            Self::Actuation => ACTUATION,
-            Self::Monitor => MONITOR,
+            Self::Agent => &[columns::KEY, columns::AGENT],
+            Self::Attack => &[columns::KEY, columns::ATTACK],
+            Self::Center => &[
+                columns::KEY,
+                columns::DESIRED,
+                columns::S_TRUE,
+                columns::CENTER,
+            ],
+            Self::Latency => &[columns::KEY, columns::LATENCY],
+            Self::Actuation => &[columns::KEY, columns::ACTUATION],
+            Self::Monitor => &[columns::KEY, columns::MONITOR],
         }
     }
 
     /// The column names for vectors of `dof` links.
     fn header(self, dof: usize) -> Vec<String> {
-        self.columns()
-            .iter()
-            .flat_map(|c| match *c {
-                One(name) => vec![name.to_string()],
-                Links(stem, suffix) => (1..=dof).map(|i| format!("{stem}{i}{suffix}")).collect(),
-            })
+        columns::named(self.columns(), dof)
+            .into_iter()
+            .map(|(name, _)| name)
             .collect()
     }
 }
