@@ -318,7 +318,7 @@ fn stamped(m: &MeasurementMsg) -> MeasurementMsg {
 /// The attacker's record of the tick of `clean`, answered by `a`: the injection is what it sent
 /// minus what the agent sent; a gap marker is missing (replayed when older messages came
 /// before it), a stamp that is not the tick's time is forged.
-fn record(
+pub fn record(
     clean: &MeasurementMsg,
     a: &MeasurementMsg,
     replayed: bool,
@@ -361,44 +361,5 @@ fn record(
         yd,
         active: injected || delivery != Delivery::Delivered || replayed,
         delivery,
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use fdi_common::scenario::MAX_DOF;
-
-    fn clean(seq: u64) -> MeasurementMsg {
-        let mut y = [0.0; MAX_DOF];
-        y[0] = 0.5;
-        y[1] = -0.25;
-        MeasurementMsg {
-            y,
-            flags: 0,
-            ..MeasurementMsg::gap(seq, 2, 2, tick_time(seq, 1e-3))
-        }
-    }
-
-    #[test]
-    fn records_classify_what_was_sent() {
-        let c = clean(7);
-        let same = record(&c, &c, false, 1e-3, 2);
-        assert_eq!((same.delivery, same.active), (Delivery::Delivered, false));
-        assert_eq!(same.y.as_slice(), &[0.5, -0.25]);
-        let mut biased = c;
-        biased.y[1] += 0.125;
-        let r = record(&c, &biased, false, 1e-3, 2);
-        assert_eq!((r.delivery, r.active), (Delivery::Delivered, true));
-        assert_eq!(r.alpha_position.as_slice(), &[0.0, 0.125]);
-        let gap = MeasurementMsg::gap(7, 2, 2, c.t);
-        assert_eq!(record(&c, &gap, false, 1e-3, 2).delivery, Delivery::Missing);
-        let replay = record(&c, &gap, true, 1e-3, 2);
-        assert_eq!((replay.delivery, replay.active), (Delivery::Replayed, true));
-        assert!(replay.y.as_slice().is_empty());
-        let mut forged = c;
-        forged.t += 1e-3;
-        let f = record(&c, &forged, false, 1e-3, 2);
-        assert_eq!((f.delivery, f.active), (Delivery::Forged, true));
     }
 }

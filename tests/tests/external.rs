@@ -17,8 +17,11 @@ use std::path::{Path, PathBuf};
 use std::process::Output;
 use std::time::Duration;
 
+use fdi_common::engine::tick_time;
 use fdi_common::records::Delivery;
+use fdi_common::scenario::MAX_DOF;
 use fdi_common::trace::TraceRecord;
+use fdi_runtime::ipc::MeasurementMsg;
 use fdi_tests::{json, launch, python, repo_path, run_dir_of, trace_records, Scratch};
 
 const WATCHDOG: Duration = Duration::from_secs(300);
@@ -655,4 +658,44 @@ fn a_grandchild_that_calls_setsid_with_an_empty_environment_is_ended_with_the_ru
             "{role}: the grandchild (pid {pid}) outlived the run"
         );
     }
+}
+
+/// A measurement of agent 2 at tick `seq` (2 links, 1 ms ticks).
+fn clean(seq: u64) -> MeasurementMsg {
+    let mut y = [0.0; MAX_DOF];
+    y[0] = 0.5;
+    y[1] = -0.25;
+    MeasurementMsg {
+        y,
+        flags: 0,
+        ..MeasurementMsg::gap(seq, 2, 2, tick_time(seq, 1e-3))
+    }
+}
+
+/// The attacker's record of a tick answered by an external program: the same message is
+/// delivered and not active, a changed one is an injection, a gap marker is missing (replayed
+/// when older messages came before it), a stamp that is not the tick's time is forged.
+#[test]
+fn the_attackers_record_of_an_external_answer_classifies_what_was_sent() {
+    let c = clean(7);
+    let same = fdi_attacker::external::record(&c, &c, false, 1e-3, 2);
+    assert_eq!((same.delivery, same.active), (Delivery::Delivered, false));
+    assert_eq!(same.y.as_slice(), &[0.5, -0.25]);
+    let mut biased = c;
+    biased.y[1] += 0.125;
+    let r = fdi_attacker::external::record(&c, &biased, false, 1e-3, 2);
+    assert_eq!((r.delivery, r.active), (Delivery::Delivered, true));
+    assert_eq!(r.alpha_position.as_slice(), &[0.0, 0.125]);
+    let gap = MeasurementMsg::gap(7, 2, 2, c.t);
+    assert_eq!(
+        fdi_attacker::external::record(&c, &gap, false, 1e-3, 2).delivery,
+        Delivery::Missing
+    );
+    let replay = fdi_attacker::external::record(&c, &gap, true, 1e-3, 2);
+    assert_eq!((replay.delivery, replay.active), (Delivery::Replayed, true));
+    assert!(replay.y.as_slice().is_empty());
+    let mut forged = c;
+    forged.t += 1e-3;
+    let f = fdi_attacker::external::record(&c, &forged, false, 1e-3, 2);
+    assert_eq!((f.delivery, f.active), (Delivery::Forged, true));
 }

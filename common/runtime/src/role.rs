@@ -26,8 +26,6 @@ pub enum Turn {
     Pending,
     /// Its part of the run is done.
     Done,
-    /// It saw the stop itself (a role that sleeps on its own, as a paced agent does).
-    Stopped,
 }
 
 /// How a driven role ended.
@@ -162,10 +160,8 @@ fn drive_running<X: Transport>(
     };
     running.begin(epoch_ns, trace)?;
     loop {
-        match running.turn(trace)? {
-            Turn::Done => break,
-            Turn::Stopped => return Ok(Ended::Stopped),
-            Turn::Pending => {}
+        if running.turn(trace)? == Turn::Done {
+            break;
         }
         if shutdown.requested() || launcher.stop_requested()? {
             return Ok(Ended::Stopped);
