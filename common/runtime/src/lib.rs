@@ -15,3 +15,4 @@
 pub mod ipc;
 pub mod process;
 pub mod role;
+pub mod stderr;

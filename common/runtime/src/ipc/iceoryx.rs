@@ -14,7 +14,10 @@ use iceoryx2::port::subscriber::{Subscriber, SubscriberCreateError};
 use iceoryx2::prelude::*;
 use iceoryx2::prelude::{ipc, ipc_threadsafe, local, local_threadsafe};
 
-use super::{check_prefix, IpcError, Payload, Sizing, Source, Stream, Transport, Wake};
+use super::transport::{
+    check_prefix, Bell, Inbox, IpcError, Outbox, Payload, Sizing, Source, Stream, Transport, Wake,
+    Waker,
+};
 
 /// The shared-memory transport between the processes of a run.
 pub type Shm = Iceoryx<ipc::Service>;
@@ -413,7 +416,7 @@ impl iceoryx2_log_types::Log for Iceoryx2Log {
                     .map(|n| n.to_string_lossy().into_owned())
             })
             .unwrap_or_else(|| "fdi".into());
-        crate::process::print_failure(format_args!(
+        crate::stderr::print_failure(format_args!(
             "{program}: {}",
             log_line(level, &origin.to_string(), &message.to_string())
         ));
@@ -484,7 +487,7 @@ pub struct IoxOutbox<S: Variant, T: Payload> {
     service: String,
 }
 
-impl<S: Variant, T: Payload> super::Outbox<T> for IoxOutbox<S, T> {
+impl<S: Variant, T: Payload> Outbox<T> for IoxOutbox<S, T> {
     fn send(&self, value: T) -> Result<usize, IpcError> {
         let err = |source: Source| IpcError::Send {
             service: self.service.clone(),
@@ -505,7 +508,7 @@ pub struct IoxInbox<S: Variant, T: Payload> {
     service: String,
 }
 
-impl<S: Variant, T: Payload> super::Inbox<T> for IoxInbox<S, T> {
+impl<S: Variant, T: Payload> Inbox<T> for IoxInbox<S, T> {
     /// Reads the shared-memory queue; no system call.
     fn has_messages(&self) -> Result<bool, IpcError> {
         self.port.has_samples().map_err(|e| IpcError::Receive {
@@ -534,7 +537,7 @@ pub struct IoxBell<S: Variant> {
     service: String,
 }
 
-impl<S: Variant> super::Bell for IoxBell<S> {
+impl<S: Variant> Bell for IoxBell<S> {
     fn ring(&self) -> Result<(), IpcError> {
         self.port.notify().map(|_| ()).map_err(|e| IpcError::Send {
             service: self.service.clone(),
@@ -565,7 +568,7 @@ impl<S: Variant> IoxWaker<S> {
     }
 }
 
-impl<S: Variant> super::Waker for IoxWaker<S>
+impl<S: Variant> Waker for IoxWaker<S>
 where
     Listener<S>: FileDescriptorBased,
 {
@@ -667,7 +670,7 @@ mod tests {
         assert!(cut.starts_with("iceoryx2 fatal error: o: é"), "{cut}");
     }
 
-    use super::super::{Bell as _, Inbox as _, Outbox as _, StatusMsg, Waker as _};
+    use super::super::StatusMsg;
     use super::*;
 
     fn prefix(tag: &str) -> String {

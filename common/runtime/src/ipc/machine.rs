@@ -7,7 +7,8 @@
 use std::path::{Path, PathBuf};
 
 use super::iceoryx::{root_dir, shm_dir};
-use super::{AlarmMsg, ControlMsg, MeasurementMsg, Sizing, StatusMsg, Stream, TorqueMsg};
+use super::msg::{AlarmMsg, ControlMsg, MeasurementMsg, StatusMsg, TorqueMsg};
+use super::transport::{Sizing, Stream};
 
 // The bounds below were measured on runs of 4, 16 and 32 agents (iceoryx2 0.10): the run's
 // files in the shared-memory folder add up to 12.1 MB for 32 agents (2.5 MB of it touched),

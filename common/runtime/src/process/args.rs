@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use super::Placement;
+use super::placement::Placement;
 
 /// Arguments the launcher passes to every process: the child parses them (clap), the launcher
 /// builds a child's command line from the same struct ([`ProcessArgs::to_args`]).

@@ -3,7 +3,10 @@
 use fdi_common::run_dir::Process;
 use std::time::Instant;
 
-use super::{ProcessArgs, ProcessError, RoleError, Shutdown, START_TIMEOUT, WAIT_SLICE};
+use super::args::ProcessArgs;
+use super::error::{ProcessError, RoleError};
+use super::shutdown::Shutdown;
+use super::wait::{START_TIMEOUT, WAIT_SLICE};
 use crate::ipc::{
     Bell as _, ControlMsg, Inbox as _, IpcError, Outbox as _, Role, Sizing, StatusMsg, Stream,
     Transport, Wake, Waker,

@@ -71,7 +71,7 @@ impl WaitStrategy {
     }
 
     /// How a relay of measurements (attacker, control center) waits for its next input: in
-    /// realtime it wakes at each arrival and at least every [`crate::process::LIVENESS_CHECK`]
+    /// realtime it wakes at each arrival and at least every [`super::liveness::LIVENESS_CHECK`]
     /// (to notice a silent agent); in lockstep as [`Self::wait_until`].
     pub fn wait_for_input(
         &self,
@@ -81,7 +81,7 @@ impl WaitStrategy {
     ) -> Result<bool, IpcError> {
         match clock {
             fdi_common::scenario::ClockMode::Realtime => {
-                waker.wait_precise(crate::process::LIVENESS_CHECK)
+                waker.wait_precise(super::liveness::LIVENESS_CHECK)
             }
             fdi_common::scenario::ClockMode::Lockstep => self.wait_until(waker, has_input),
         }
