@@ -14,7 +14,7 @@ use fdi_common::engine::{agent_record, tick_time};
 use fdi_common::model::{ModelConfig, Vector};
 use fdi_common::plant::{Measurement, Plant};
 use fdi_common::run_dir::Process;
-use fdi_common::scenario::{ClockMode, Resolved};
+use fdi_common::scenario::{AgentConfig, ClockMode, Resolved};
 use fdi_common::trace::{HopStamps, TraceRecord, TraceWriter};
 use fdi_runtime::ipc::msg::from_vector;
 use fdi_runtime::ipc::{
@@ -34,6 +34,15 @@ pub type AgentError = fdi_runtime::process::RoleError;
 pub struct Agent {
     pub id: u32,
     pub pace: Option<f64>,
+}
+
+impl Agent {
+    /// This agent's entry in the scenario.
+    fn config<'r>(&self, resolved: &'r Resolved) -> Result<&'r AgentConfig, AgentError> {
+        (resolved.scenario.agents.iter())
+            .find(|a| a.id == self.id)
+            .ok_or(AgentError::NotInScenario(self.id))
+    }
 }
 
 /// The agent's ports.
@@ -69,10 +78,7 @@ impl Role for Agent {
     }
 
     fn model<'r>(&self, resolved: &'r Resolved) -> Result<&'r ModelConfig, AgentError> {
-        (resolved.scenario.agents.iter())
-            .find(|a| a.id == self.id)
-            .map(|a| &a.model)
-            .ok_or(AgentError::NotInScenario(self.id))
+        self.config(resolved).map(|a| &a.model)
     }
 
     fn prepare<'a, X: Transport + 'a, const N: usize>(
@@ -81,9 +87,7 @@ impl Role for Agent {
         opened: &'a Opened<X, Ports<X>>,
     ) -> Result<Running<'a, X, N>, AgentError> {
         let s = &resolved.scenario;
-        let agent = (s.agents.iter())
-            .find(|a| a.id == self.id)
-            .ok_or(AgentError::NotInScenario(self.id))?;
+        let agent = self.config(resolved)?;
         let plant = Plant::<N>::new(s.plant_params(agent)).ok_or(AgentError::Dof(self.id))?;
         let ticks = resolved.ticks();
         Ok(Running {
