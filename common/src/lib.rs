@@ -29,6 +29,7 @@ pub mod memo;
 pub mod metrics;
 pub mod model;
 pub mod numerics;
+pub mod observe;
 pub mod overrides;
 pub mod plant;
 pub mod problem;

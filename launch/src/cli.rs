@@ -3,15 +3,14 @@
 use std::path::PathBuf;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use fdi_orchestrator::attacks::AttacksArgs;
-use fdi_orchestrator::bench::BenchCommand;
-use fdi_orchestrator::campaign::SweepArgs;
-use fdi_orchestrator::run::certs::CertsArgs;
-use fdi_orchestrator::run::serve::ServeArgs;
-use fdi_orchestrator::tables::TableArgs;
 
+use crate::commands::bench::BenchCommand;
+use crate::commands::certs::CertsArgs;
+use crate::commands::report::ExportFormat;
+use crate::commands::serve::ServeArgs;
+use crate::commands::sweep::SweepArgs;
+use crate::commands::tables::{AttacksArgs, TableArgs};
 use crate::commands::{detect::DetectArgs, run::RunArgs, validate::SchemaFormat};
-use fdi_report::export;
 use fdi_runtime::process::ProcessArgs;
 
 /// Testbed for false-data-injection attacks on a multi-agent robot system (Sargolzaei et al.).
@@ -102,8 +101,8 @@ pub enum TraceCommand {
     /// Export every trace of a run directory, one file per process with a row per record.
     Export {
         run_dir: PathBuf,
-        #[arg(long, value_enum, default_value_t = export::Format::Csv)]
-        format: export::Format,
+        #[arg(long, value_enum, default_value_t = ExportFormat::Csv)]
+        format: ExportFormat,
     },
 }
 

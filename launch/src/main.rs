@@ -5,6 +5,7 @@
 
 mod cli;
 mod commands;
+mod terminal;
 
 use clap::Parser;
 use fdi_common::stop::{Interrupted, Stop, SIGINT, SIGTERM};
@@ -12,13 +13,15 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use cli::{Command, ProcessRole, RunsCommand, TraceCommand};
-use fdi_orchestrator::{attacks, bench, campaign, run::outputs, run::runs, run::serve, tables};
-use fdi_report::{export, report};
 
 fn main() -> ExitCode {
     // Before any thread or Zenoh session exists (runs across hosts; no cost otherwise).
     fdi_net::choose_zenoh_threads();
     let cli = cli::Cli::parse();
+    terminal::install(match cli.command {
+        Command::Serve(_) => "fdi-launch serve",
+        _ => "fdi-launch",
+    });
     let stop = Stop::new();
     if handles_interrupts(&cli.command) {
         for sig in [SIGINT, SIGTERM] {
@@ -62,30 +65,29 @@ fn main() -> ExitCode {
 /// Runs `command`; `stop` is raised by SIGINT/SIGTERM for the commands that run or report
 /// ([`handles_interrupts`]).
 fn dispatch(command: Command, stop: &Stop) -> Result<ExitCode> {
-    let done = |r: Result<()>| r.map(|()| ExitCode::SUCCESS);
     match command {
         Command::Run(args) => commands::run::run(&args, stop),
-        Command::Serve(args) => serve::serve(&args, stop),
-        Command::Certs(args) => done(fdi_orchestrator::run::certs::certs(&args)),
+        Command::Serve(args) => commands::serve::serve(&args, stop),
+        Command::Certs(args) => commands::certs::certs(&args),
         Command::Validate { scenario } => commands::validate::validate(&scenario),
-        Command::Sweep(args) => campaign::sweep(&args, stop),
+        Command::Sweep(args) => commands::sweep::sweep(&args, stop),
         Command::Schema { format } => commands::validate::schema(format),
-        Command::Table1(args) => tables::table1(&args, stop),
-        Command::Table2(args) => tables::table2(&args, stop),
-        Command::Attacks(args) => attacks::attacks(&args, stop),
+        Command::Table1(args) => commands::tables::table1(&args, stop),
+        Command::Table2(args) => commands::tables::table2(&args, stop),
+        Command::Attacks(args) => commands::tables::attacks(&args, stop),
         Command::Report { run_dir, robots } => {
-            done(report::report(&run_dir, &robots.unwrap_or_default(), stop))
+            commands::report::report(&run_dir, &robots.unwrap_or_default(), stop)
         }
         Command::Detect(args) => commands::detect::detect(&args, stop),
         Command::Trace(TraceCommand::Export { run_dir, format }) => {
-            done(export::export(&run_dir, format))
+            commands::report::export(&run_dir, format)
         }
-        Command::Runs(RunsCommand::List { out, json }) => done(outputs::print_list(&out, json)),
+        Command::Runs(RunsCommand::List { out, json }) => commands::runs::list(&out, json),
         Command::Runs(RunsCommand::Prune { keep, out, dry_run }) => {
-            done(runs::print_prune(&out, keep, dry_run))
+            commands::runs::prune(&out, keep, dry_run)
         }
-        Command::Bench(b) => bench::bench(&b, stop),
-        Command::BenchPeer { args } => done(bench::floor::peer_main(&args)),
+        Command::Bench(b) => commands::bench::bench(&b, stop),
+        Command::BenchPeer { args } => commands::bench::peer(&args),
         Command::Process { role, args } => Ok(match role {
             ProcessRole::Agent => fdi_agent::main_with(args),
             ProcessRole::Attacker => fdi_attacker::main_with(args),

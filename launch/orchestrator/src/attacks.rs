@@ -7,45 +7,37 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::io::Write as _;
 use std::path::PathBuf;
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Mutex;
 
 use anyhow::{anyhow, Context, Result};
-use clap::Args;
 use fdi_common::detect;
 use fdi_common::engine::{run_inproc_any, RunSummary};
 use fdi_common::metrics::{AgentMetrics, DetectorMetrics};
+use fdi_common::observe::{Finish, Progress, Work};
 use fdi_common::records::TickRecord;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use serde::Serialize;
 
 use crate::tables::{rmse_chart, MadeWith, Owned, Table};
 use fdi_report::output::{csv_bytes, md_table_head, rmse_cell};
 use fdi_report::plot::PALETTE;
 
-#[derive(Debug, Args)]
-pub struct AttacksArgs {
-    /// Folder that receives `attacks.md`, `.csv`, `.json` and the bar chart; default a new
+/// How to make the attack-class table (`fdi-launch attacks`).
+#[derive(Debug, Clone, Default)]
+pub struct AttacksOptions {
+    /// Folder that receives `attacks.md`, `.csv`, `.json` and the bar chart; `None`: a new
     /// folder `runs/<timestamp>-attacks`.
-    #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Shorten every run to this many seconds (default: each scenario's own, 40 s). Most
-    /// classes start at 10 s: a shorter run shows them without an onset.
-    #[arg(long, allow_negative_numbers = true)]
+    /// Shorten every run to this many seconds (`None`: each scenario's own, 40 s).
     pub duration_s: Option<f64>,
-    /// Print JSON instead of markdown.
-    #[arg(long)]
-    pub json: bool,
-    /// Base scenario (default: the embedded paper scenario): its robots, gains and numerics
+    /// Base scenario (`None`: the embedded paper scenario): its robots, gains and numerics
     /// under every class (a class's own scenario file gives its attack and detectors only).
-    #[arg(long, value_name = "FILE")]
     pub scenario: Option<PathBuf>,
-    #[command(flatten)]
     pub numerics: crate::request::NumericsArgs,
-    #[command(flatten)]
     pub set: crate::request::SetArgs,
+    /// Told the runs' progress.
+    pub progress: fdi_common::observe::Observer,
 }
 
 /// Where a class's run comes from.
@@ -576,7 +568,7 @@ const DURING_THE_TABLE: &str =
 
 /// The table's folder, its base scenario (`--scenario`, the numerics flags and `--set`
 /// applied) and how it was made. `--set` of what the table sets itself is refused.
-fn base(args: &AttacksArgs) -> Result<(PathBuf, Resolved, MadeWith)> {
+fn base(args: &AttacksOptions) -> Result<(PathBuf, Resolved, MadeWith)> {
     let dir = args.out.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!(
             "{}-{}",
@@ -604,8 +596,9 @@ fn base(args: &AttacksArgs) -> Result<(PathBuf, Resolved, MadeWith)> {
     Ok((dir, base, made))
 }
 
-/// `fdi-launch attacks`.
-pub fn attacks(args: &AttacksArgs, stop: &Stop) -> Result<ExitCode> {
+/// The attack-class table: every shipped class under both controllers, in-process; written
+/// into its folder, returned.
+pub fn attacks(args: &AttacksOptions, stop: &Stop) -> Result<Table> {
     stop.check(fdi_common::stop::BEFORE_THE_START)?;
     let (dir, base, made) = base(args)?;
     // Every class resolves before anything runs: a broken one stops the table at once.
@@ -622,7 +615,7 @@ pub fn attacks(args: &AttacksArgs, stop: &Stop) -> Result<ExitCode> {
             ]
         })
         .collect();
-    let results = run_all(&jobs, &base, args, stop)?;
+    let results = run_all(&jobs, &base, args, stop, &*args.progress)?;
     let mut rows = Vec::new();
     for (i, c) in CLASSES.iter().enumerate() {
         let [t, p] = [ControllerMode::Traditional, ControllerMode::Proposed].map(|m| {
@@ -677,29 +670,25 @@ pub fn attacks(args: &AttacksArgs, stop: &Stop) -> Result<ExitCode> {
             ],
         ),
         made,
+        dir,
     };
-    table.publish(args.json, &dir)
+    table.write()?;
+    Ok(table)
 }
 
-/// Runs every job on up to two threads, with a progress bar on stderr (hidden when stderr is not
-/// a terminal, or with `--json`). Stops at the first error or interrupt.
+/// Runs every job on up to two threads, telling `bar` each run done. Stops at the first error
+/// or interrupt.
 fn run_all(
     jobs: &[(usize, ControllerMode)],
     base: &Resolved,
-    args: &AttacksArgs,
+    args: &AttacksOptions,
     stop: &Stop,
+    bar: &dyn Progress,
 ) -> Result<Vec<Option<Outcome>>> {
-    let bar = if args.json {
-        ProgressBar::hidden()
-    } else {
-        ProgressBar::with_draw_target(Some(jobs.len() as u64), ProgressDrawTarget::stderr())
-    };
-    bar.set_style(
-        ProgressStyle::with_template(
-            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} runs | {msg}",
-        )
-        .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
+    bar.begin(Work::Runs {
+        total: jobs.len() as u64,
+        what: "attack table".into(),
+    });
     let threads = std::thread::available_parallelism()
         .map_or(1, std::num::NonZeroUsize::get)
         .clamp(1, 2);
@@ -726,8 +715,7 @@ fn run_all(
                         if let Ok(mut r) = results.lock() {
                             r[k] = Some(o);
                         }
-                        bar.set_message(format!("{} ({})", class.name, mode.as_str()));
-                        bar.inc(1);
+                        bar.step(&format!("{} ({})", class.name, mode.as_str()));
                     }
                     Err(e) => {
                         if let Ok(mut f) = failure.lock() {
@@ -739,13 +727,14 @@ fn run_all(
             });
         }
     });
-    bar.finish_and_clear();
     if let Some(e) = failure
         .into_inner()
         .map_err(|_| anyhow!("a run thread panicked"))?
     {
+        bar.finish(Finish::Stopped);
         return Err(e);
     }
+    bar.finish(Finish::Done);
     stop.check(DURING_THE_TABLE)?;
     results
         .into_inner()

@@ -276,8 +276,8 @@ fn the_short_run_fixture_reads_whole_and_joins_every_tick() {
     let joined = join::join_run(&resolved(), dir.path(), 0.0, |_| {}).expect("joined");
     assert_eq!(joined.summary.ticks, 20, "{:?}", joined.warnings);
     assert!(joined.warnings.is_empty(), "{:?}", joined.warnings);
-    export::export(dir.path(), export::Format::Csv).expect("exported");
-    export::export(dir.path(), export::Format::Mcap).expect("exported");
+    export::export(dir.path(), export::Format::Csv, &mut |_| {}).expect("exported");
+    export::export(dir.path(), export::Format::Mcap, &mut |_| {}).expect("exported");
     replayer::check_recording(&resolved(), dir.path()).expect("replayable");
 }
 
@@ -315,7 +315,7 @@ proptest! {
         }
 
         for format in [export::Format::Csv, export::Format::Mcap] {
-            let (exported, big, grew) = measured(|| export::export(dir.path(), format));
+            let (exported, big, grew) = measured(|| export::export(dir.path(), format, &mut |_| {}));
             prop_assert!(big <= MAX_ONE_ALLOCATION && grew <= MAX_LIVE_GROWTH, "export {format:?}: {big} / {grew} bytes");
             if damage.is_some() {
                 let text = exported.as_ref().err().map(|e| format!("{e:#}")).unwrap_or_default();

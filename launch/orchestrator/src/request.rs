@@ -104,8 +104,8 @@ pub struct RunRequest {
     pub placement: Placement,
     /// The hosts a split run runs on (`--hosts FILE`).
     pub deployment: Option<Deployment>,
-    /// Show a progress bar (ipc runs).
-    pub progress: bool,
+    /// Told the run's ticks (ipc runs; a bar on the command line).
+    pub progress: fdi_common::observe::Observer,
     /// Serve the run live (`--live`).
     pub live: Option<crate::run::LiveServe>,
     /// A lockstep run slowed to this factor of real time (`--pace`).
@@ -130,7 +130,7 @@ impl RunRequest {
             traces: Traces::Full,
             placement: Placement::default(),
             deployment: None,
-            progress: false,
+            progress: fdi_common::observe::Observer::quiet(),
             live: None,
             pace: None,
         }
@@ -164,7 +164,7 @@ impl RunRequest {
 /// A raised `stop` stops the run at once: the summary then says it is partial.
 pub fn execute(request: &RunRequest, dir: &RunDir, stop: &Stop) -> Result<RunSummary> {
     let opts = crate::run::Options {
-        progress: request.progress,
+        progress: request.progress.clone(),
         placement: request.placement.clone(),
         traces: request.traces,
         stop: stop.clone(),

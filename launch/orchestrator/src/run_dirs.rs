@@ -86,8 +86,8 @@ pub fn create_named_run_dir(root: &Path, resolved: &Resolved, name: &str) -> Res
 /// processes started). Best effort: a folder that cannot be removed is named in a warning.
 pub fn remove_run_dir(dir: &Path) {
     if let Err(e) = std::fs::remove_dir_all(dir) {
-        eprintln!(
-            "fdi-launch: warning: the run directory {} of a run that did not start could not be removed: {e}",
+        log::warn!(
+            "the run directory {} of a run that did not start could not be removed: {e}",
             dir.display()
         );
     }

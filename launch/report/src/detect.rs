@@ -43,9 +43,14 @@ pub const CSV_HEADER: [&str; 15] = [
 ];
 
 /// Sweeps every detector's threshold over the recorded run in `run_dir` and writes `roc.csv`,
-/// the ROC and the delay figures into `out` (default `<run dir>/detect`); prints the summary
-/// and the files written.
-pub fn sweep_run(run_dir: &Path, out: Option<&Path>, points: u32, stop: &Stop) -> Result<()> {
+/// the ROC and the delay figures into `out` (default `<run dir>/detect`); says the summary
+/// (`log`), returns the files written.
+pub fn sweep_run(
+    run_dir: &Path,
+    out: Option<&Path>,
+    points: u32,
+    stop: &Stop,
+) -> Result<Vec<PathBuf>> {
     let out = out.map_or_else(|| run_dir.join("detect"), Path::to_path_buf);
     let (resolved, recorded, summary) = record(run_dir, stop)?;
     let swept: Vec<Swept> = recorded
@@ -58,14 +63,10 @@ pub fn sweep_run(run_dir: &Path, out: Option<&Path>, points: u32, stop: &Stop) -
         .collect();
     stop.check(WHILE_SWEEPING)?;
     for w in cross_check(&swept, &summary) {
-        eprintln!("fdi-launch: warning: {w}");
+        log::warn!("{w}");
     }
     print_summary(&swept, recorded.control_period_s);
-    let written = write(&out, &resolved, &swept, recorded.control_period_s)?;
-    for p in written {
-        println!("{}", p.display());
-    }
-    Ok(())
+    write(&out, &resolved, &swept, recorded.control_period_s)
 }
 
 /// Joins the traces of `run_dir` and records every detector's statistic; the summary the join
@@ -91,10 +92,7 @@ fn record(run_dir: &Path, stop: &Stop) -> Result<(Resolved, Recorded, RunSummary
             run_dir.display()
         );
     }
-    eprintln!(
-        "fdi-launch: detect: joining the traces of {}",
-        run_dir.display()
-    );
+    log::info!("detect: joining the traces of {}", run_dir.display());
     let mut recorder = Recorder::for_scenario(&resolved);
     let mut records = 0u64;
     let joined = join::join_run_until(
@@ -109,7 +107,7 @@ fn record(run_dir: &Path, stop: &Stop) -> Result<(Resolved, Recorded, RunSummary
     )
     .with_context(|| format!("joining the traces in {}", traces.display()))?;
     for w in &joined.warnings {
-        eprintln!("fdi-launch: warning: {w}");
+        log::warn!("{w}");
     }
     if records == 0 {
         bail!(
@@ -118,14 +116,14 @@ fn record(run_dir: &Path, stop: &Stop) -> Result<(Resolved, Recorded, RunSummary
         );
     }
     let recorded = recorder.finish();
-    eprintln!(
-        "fdi-launch: detect: {records} tick records of {} robots",
+    log::info!(
+        "detect: {records} tick records of {} robots",
         resolved.agent_count()
     );
     for (id, n) in &recorded.s_hat_mismatches {
         if *n > 0 {
-            eprintln!(
-                "fdi-launch: warning: robot {id}: the ‖Ŝ‖ alarm replayed at its threshold differs from the center's recorded alarm at {n} ticks (the records are not every tick the center computed, in order)"
+            log::warn!(
+                "robot {id}: the ‖Ŝ‖ alarm replayed at its threshold differs from the center's recorded alarm at {n} ticks (the records are not every tick the center computed, in order)"
             );
         }
     }
@@ -182,13 +180,13 @@ fn rate(x: Option<f64>, undefined: &str) -> String {
     x.map_or(undefined.to_string(), |x| format!("{x:.4}"))
 }
 
-/// The pooled figures of every detector at its configured threshold, on stderr.
+/// Says the pooled figures of every detector at its configured threshold.
 fn print_summary(swept: &[Swept], dt: f64) {
     for s in swept {
         let grid = s.points.len();
         let Some(at) = s.points.iter().find(|p| p.configured) else {
-            eprintln!(
-                "fdi-launch: detect: {}: {grid} thresholds, no configured threshold",
+            log::info!(
+                "detect: {}: {grid} thresholds, no configured threshold",
                 s.name
             );
             continue;
@@ -197,8 +195,8 @@ fn print_summary(swept: &[Swept], dt: f64) {
         let delay = t
             .mean_delay_s()
             .map_or("none detected".to_string(), |d| format!("{d:.3} s"));
-        eprintln!(
-            "fdi-launch: detect: {}: {grid} thresholds; at its threshold {}: TPR {}, FPR {}, {} false alarms/min, mean delay {delay} ({} of {} onsets detected, {} with the alarm already on), {} ticks without verdict",
+        log::info!(
+            "detect: {}: {grid} thresholds; at its threshold {}: TPR {}, FPR {}, {} false alarms/min, mean delay {delay} ({} of {} onsets detected, {} with the alarm already on), {} ticks without verdict",
             s.name,
             detect_figures::short(at.threshold),
             rate(t.tpr(), "undefined (no watched tick in force)"),
@@ -215,8 +213,8 @@ fn print_summary(swept: &[Swept], dt: f64) {
         .iter()
         .all(|s| s.points.iter().all(|p| p.pooled.onsets == 0))
     {
-        eprintln!(
-            "fdi-launch: detect: the run has no attack onset: the true-positive rate and the detection delay are undefined (left empty in roc.csv, with a note); only false-positive rates and false alarms are measured"
+        log::info!(
+            "detect: the run has no attack onset: the true-positive rate and the detection delay are undefined (left empty in roc.csv, with a note); only false-positive rates and false alarms are measured"
         );
     }
 }
@@ -305,8 +303,8 @@ fn write(out: &Path, resolved: &Resolved, swept: &[Swept], dt: f64) -> Result<Ve
             crate::plot::save_figure(&fig, &out.join("roc"), detect_figures::ROC_SIZE)
                 .context("figure roc")?,
         ),
-        None => eprintln!(
-            "fdi-launch: detect: no ROC figure: no threshold has both a true- and a false-positive rate"
+        None => log::info!(
+            "detect: no ROC figure: no threshold has both a true- and a false-positive rate"
         ),
     }
     match detect_figures::delay(swept, &title) {
@@ -314,8 +312,8 @@ fn write(out: &Path, resolved: &Resolved, swept: &[Swept], dt: f64) -> Result<Ve
             crate::plot::save_figure(&fig, &out.join("delay"), detect_figures::DELAY_SIZE)
                 .context("figure delay")?,
         ),
-        None => eprintln!(
-            "fdi-launch: detect: no delay figure: no threshold detected an onset where a false-positive rate is defined"
+        None => log::info!(
+            "detect: no delay figure: no threshold detected an onset where a false-positive rate is defined"
         ),
     }
     Ok(written)

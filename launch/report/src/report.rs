@@ -93,7 +93,8 @@ pub const FIGURES: [(&str, &str); 6] = [
 /// and the wall time, which the traces do not hold, come from `summary.json` when it is there.
 /// `per_robot` chooses the robots that get their own figures (the team figure comes with a
 /// team of more than [`team::HANDFUL`]).
-pub fn report(run_dir: &Path, per_robot: &PerRobot, stop: &Stop) -> Result<()> {
+/// Returns the path of the report's `report.md`.
+pub fn report(run_dir: &Path, per_robot: &PerRobot, stop: &Stop) -> Result<PathBuf> {
     let scenario_path = RunDir::new(run_dir).scenario();
     let resolved = scenario::load_file(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
@@ -215,19 +216,17 @@ fn rejoin(
     Ok((series, summary))
 }
 
-/// Prints the report's warnings, writes it, and names its `report.md`.
+/// Says the report's warnings, writes it, and returns its `report.md`.
 fn write_and_name(
     run_dir: &Path,
     run: (&Resolved, &RunSummary),
     gathered: Gathered<'_>,
     stop: &Stop,
-) -> Result<()> {
+) -> Result<PathBuf> {
     for w in gathered.warnings {
-        eprintln!("fdi-launch: warning: {w}");
+        log::warn!("{w}");
     }
-    let md = write(run_dir, run, gathered, stop)?;
-    println!("report {}", md.display());
-    Ok(())
+    write(run_dir, run, gathered, stop)
 }
 
 /// `decimate=K` / `none`, in words.

@@ -29,7 +29,7 @@ pub struct DetectArgs {
     #[arg(long, default_value_t = 60, value_parser = clap::value_parser!(u32).range(2..=100_000))]
     pub points: u32,
     /// A scenario TARGET: the engine of its run (as `run --engine`; default ipc).
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = super::values::engine())]
     pub engine: Option<Engine>,
     /// A scenario TARGET: its overrides (as `run`).
     #[command(flatten)]
@@ -102,6 +102,8 @@ pub fn detect(args: &DetectArgs, stop: &Stop) -> Result<ExitCode> {
         }
         (done.dir, Some(done.code))
     };
-    sweep_run(&run_dir, args.out.as_deref(), args.points, stop)?;
+    for written in sweep_run(&run_dir, args.out.as_deref(), args.points, stop)? {
+        println!("{}", written.display());
+    }
     Ok(run_code.unwrap_or(ExitCode::SUCCESS))
 }

@@ -25,7 +25,7 @@ pub struct RunArgs {
     /// (`run --live 127.0.0.1:8765 FILE`, `run FILE --live 127.0.0.1:8765`).
     #[arg(hide = true)]
     pub live_addr: Option<String>,
-    #[arg(long, value_enum, default_value_t = Engine::Ipc)]
+    #[arg(long, value_parser = super::values::engine(), default_value_t = Engine::Ipc)]
     pub engine: Engine,
     #[command(flatten)]
     pub overrides: Overrides,
@@ -107,9 +107,44 @@ impl std::str::FromStr for LiveAt {
 /// `run`.
 pub fn run(args: &RunArgs, stop: &Stop) -> Result<ExitCode> {
     if let Some(recorded) = &args.replay {
-        return fdi_orchestrator::run::replayer::replay_run(recorded, &args.out, args.json, stop);
+        return replay(recorded, args, stop);
     }
     run_scenario(args, stop).map(|done| done.code)
+}
+
+/// `run --replay RUN_DIR`: the recorded run's control center again, its digest compared.
+fn replay(recorded: &std::path::Path, args: &RunArgs, stop: &Stop) -> Result<ExitCode> {
+    let progress = crate::terminal::progress(!args.json);
+    let replayed =
+        fdi_orchestrator::run::replayer::replay_run(recorded, &args.out, &progress, stop)?;
+    let (want, got) = (
+        &replayed.recorded_trace_digest,
+        &replayed.summary.trace_digest,
+    );
+    if args.json {
+        let mut v = serde_json::to_value(&replayed.summary)?;
+        v["run_dir"] = serde_json::Value::String(replayed.dir.display().to_string());
+        v["replay_of"] = serde_json::Value::String(recorded.display().to_string());
+        v["recorded_trace_digest"] = serde_json::Value::String(want.clone());
+        v["digests_match"] = serde_json::Value::Bool(replayed.matches());
+        println!("{v}");
+    } else {
+        println!("recorded trace digest {want}");
+        println!("replayed trace digest {got}");
+        println!(
+            "{}",
+            ["digests DIFFER", "digests match"][usize::from(replayed.matches())]
+        );
+        println!("run directory {}", replayed.dir.display());
+    }
+    if replayed.matches() {
+        Ok(ExitCode::SUCCESS)
+    } else {
+        eprintln!(
+            "fdi-launch: the replayed control center differs from the recording ({got} ≠ {want})"
+        );
+        Ok(ExitCode::FAILURE)
+    }
 }
 
 /// The request of `run`'s flags, checked before anything starts: the overrides, the placement,
@@ -141,7 +176,7 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
         .map(|addr| fdi_orchestrator::run::LiveServe::new(addr, args.live_rate, args.live_wait))
         .transpose()?;
     request.pace = args.pace;
-    request.progress = !args.json;
+    request.progress = crate::terminal::progress(!args.json);
     Ok(request)
 }
 

@@ -6,28 +6,29 @@ use super::placement::Placement;
 
 /// Arguments the launcher passes to every process: the child parses them (clap), the launcher
 /// builds a child's command line from the same struct ([`ProcessArgs::to_args`]).
-#[derive(Debug, Clone, PartialEq, clap::Args)]
+#[derive(Debug, Clone, PartialEq)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct ProcessArgs {
     /// Run prefix (iceoryx2 `global.prefix`): isolates this run's services.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub prefix: String,
     /// Resolved scenario file of the run.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub scenario: PathBuf,
     /// Trace file this process writes.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub trace: PathBuf,
     /// Agent id (agents only).
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub agent: Option<u32>,
     /// Pid of the launcher: the process stops when it dies.
-    #[arg(long)]
+    #[cfg_attr(feature = "clap", arg(long))]
     pub launcher_pid: Option<u32>,
-    #[command(flatten)]
+    #[cfg_attr(feature = "clap", command(flatten))]
     pub placement: Placement,
     /// Lockstep runs: the agents measure tick k no sooner than t_k / FACTOR s of wall time
     /// after the start (`run --pace`, for watching; the run's numbers are the same).
-    #[arg(long, value_name = "FACTOR")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "FACTOR"))]
     pub pace: Option<f64>,
 }
 
@@ -63,7 +64,8 @@ impl ProcessArgs {
     }
 }
 
-#[cfg(test)]
+// The parser is the programs' (the `clap` feature, on in the workspace's test build).
+#[cfg(all(test, feature = "clap"))]
 mod args_tests {
     use super::ProcessArgs;
     use crate::process::{CpuList, Placement};

@@ -1,15 +1,16 @@
 //! Where and how a run's processes are scheduled: CPU affinity and SCHED_FIFO.
 
 /// Where and how a run's processes are scheduled (`--rt-priority`, `--cpus`).
-#[derive(Debug, Clone, Default, PartialEq, Eq, clap::Args)]
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::Args))]
 pub struct Placement {
     /// Realtime runs: every process of the run under SCHED_FIFO at this priority (1–99)
     /// instead of the time-sharing default. Needs CAP_SYS_NICE or an RLIMIT_RTPRIO of at least
     /// the priority.
-    #[arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99))]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "PRIORITY", value_parser = clap::value_parser!(u8).range(1..=99)))]
     pub rt_priority: Option<u8>,
     /// Every process of the run only on these CPUs (a list such as `1`, `0,2` or `0-3`).
-    #[arg(long, value_name = "LIST")]
+    #[cfg_attr(feature = "clap", arg(long, value_name = "LIST"))]
     pub cpus: Option<CpuList>,
 }
 

@@ -41,7 +41,6 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::{anyhow, bail, Context, Result};
-use clap::{Parser, ValueEnum};
 use fdi_common::scenario::MAX_DOF;
 use fdi_runtime::ipc::{
     monotonic_ns, Bell as _, Inbox as _, MeasurementMsg, Outbox as _, Shm, Sizing, Stream,
@@ -153,9 +152,8 @@ pub fn run_floor(opts: &FloorOptions) -> Result<FloorResult> {
     run_floor_with(opts, &self_command)
 }
 
-/// The peer side: `args` are the arguments after `bench-peer` (see the module documentation).
-pub fn peer_main(args: &[String]) -> Result<()> {
-    let a = PeerArgs::try_parse_from(args).map_err(|e| anyhow!("bench-peer: {e}"))?;
+/// The peer side (`bench-peer`, see the module documentation).
+pub fn peer_main(a: &PeerSpec) -> Result<()> {
     if a.parent_pid.is_some() {
         rustix::process::set_parent_process_death_signal(Some(rustix::process::Signal::TERM))
             .context("asking for SIGTERM on the parent's death")?;
@@ -216,15 +214,18 @@ const PAYLOAD_BYTES: usize = std::mem::size_of::<MeasurementMsg>();
 /// Highest latency the histograms track, ns (larger values are recorded as this).
 const HIGHEST_NS: u64 = 60_000_000_000;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-enum PeerKind {
+/// What a peer process of the floor measures with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PeerKind {
     IpcPair,
     IpcChain,
     UdsPair,
 }
 
 impl PeerKind {
-    fn name(self) -> &'static str {
+    pub const ALL: [Self; 3] = [Self::IpcPair, Self::IpcChain, Self::UdsPair];
+
+    pub fn name(self) -> &'static str {
         match self {
             Self::IpcPair => "ipc-pair",
             Self::IpcChain => "ipc-chain",
@@ -233,15 +234,18 @@ impl PeerKind {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-enum PeerRole {
+/// Which process of its case a peer is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PeerRole {
     Pong,
     Attacker,
     Center,
 }
 
 impl PeerRole {
-    fn name(self) -> &'static str {
+    pub const ALL: [Self; 3] = [Self::Pong, Self::Attacker, Self::Center];
+
+    pub fn name(self) -> &'static str {
         match self {
             Self::Pong => "pong",
             Self::Attacker => "attacker",
@@ -250,26 +254,39 @@ impl PeerRole {
     }
 }
 
-/// Arguments of `bench-peer`.
-#[derive(Debug, Parser)]
-#[command(name = "bench-peer", no_binary_name = true)]
-struct PeerArgs {
-    #[arg(value_enum)]
-    kind: PeerKind,
-    #[arg(value_enum)]
-    role: PeerRole,
+/// What a peer process does: the arguments of `bench-peer` ([`PeerSpec::to_args`]), which the
+/// command line parses back into this.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PeerSpec {
+    pub kind: PeerKind,
+    pub role: PeerRole,
     /// iceoryx2 run prefix (ipc kinds).
-    #[arg(long)]
-    prefix: Option<String>,
+    pub prefix: Option<String>,
     /// Folder of the sockets (uds-pair).
-    #[arg(long)]
-    dir: Option<PathBuf>,
+    pub dir: Option<PathBuf>,
     /// Spin budget of the wait strategy, µs.
-    #[arg(long, default_value_t = DEFAULT_SPIN_US)]
-    spin_us: u64,
+    pub spin_us: u64,
     /// Stop when this process is no longer the parent.
-    #[arg(long)]
-    parent_pid: Option<u32>,
+    pub parent_pid: Option<u32>,
+}
+
+impl PeerSpec {
+    /// The arguments after `bench-peer`: `KIND ROLE [--prefix P] [--dir D] --spin-us N
+    /// [--parent-pid PID]`.
+    pub fn to_args(&self) -> Vec<String> {
+        let mut out = vec![self.kind.name().to_string(), self.role.name().to_string()];
+        if let Some(p) = &self.prefix {
+            out.extend(["--prefix".into(), p.clone()]);
+        }
+        if let Some(d) = &self.dir {
+            out.extend(["--dir".into(), d.display().to_string()]);
+        }
+        out.extend(["--spin-us".into(), self.spin_us.to_string()]);
+        if let Some(pid) = self.parent_pid {
+            out.extend(["--parent-pid".into(), pid.to_string()]);
+        }
+        out
+    }
 }
 
 /// Where one iceoryx2 process reads, writes and wakes.
@@ -379,6 +396,11 @@ impl HopRecorder {
     }
 }
 
+/// A spin budget in whole µs (saturating).
+fn spin_us(spin: Duration) -> u64 {
+    u64::try_from(spin.as_micros()).unwrap_or(u64::MAX)
+}
+
 /// How peers are started: a command running `bench-peer` with `args`.
 type PeerCommand<'a> = &'a dyn Fn(&[String]) -> Result<Command>;
 
@@ -399,7 +421,7 @@ fn run_floor_with(opts: &FloorOptions, peer: PeerCommand<'_>) -> Result<FloorRes
     Ok(FloorResult {
         iterations: opts.iterations,
         warmup: opts.warmup,
-        spin_us: u64::try_from(opts.spin.as_micros()).unwrap_or(u64::MAX),
+        spin_us: spin_us(opts.spin),
         payload_bytes: PAYLOAD_BYTES,
         ipc_ping_pong,
         ipc_chain,
@@ -419,10 +441,7 @@ struct PrefixCleanup(String);
 impl Drop for PrefixCleanup {
     fn drop(&mut self) {
         if let Err(e) = Shm::remove_leftovers(&self.0) {
-            eprintln!(
-                "fdi-launch: warning: cleaning up run prefix {}: {e}",
-                self.0
-            );
+            log::warn!("cleaning up run prefix {}: {e}", self.0);
         }
     }
 }
@@ -540,19 +559,15 @@ fn ipc_case(opts: &FloorOptions, kind: PeerKind, peer: PeerCommand<'_>) -> Resul
         let ports = IpcPorts::open(&transport, Route::initiator(kind))?;
         let mut peers = Peers::default();
         for role in roles {
-            peers.spawn(
-                peer,
-                &[
-                    kind.name().to_string(),
-                    role.name().to_string(),
-                    "--prefix".into(),
-                    prefix.clone(),
-                    "--spin-us".into(),
-                    opts.spin.as_micros().to_string(),
-                    "--parent-pid".into(),
-                    std::process::id().to_string(),
-                ],
-            )?;
+            let spec = PeerSpec {
+                kind,
+                role: *role,
+                prefix: Some(prefix.clone()),
+                dir: None,
+                spin_us: spin_us(opts.spin),
+                parent_pid: Some(std::process::id()),
+            };
+            peers.spawn(peer, &spec.to_args())?;
         }
         ipc_connect(&ports, &mut peers)?;
         let paced_from = monotonic_ns();
@@ -730,19 +745,15 @@ fn uds_case(opts: &FloorOptions, peer: PeerCommand<'_>) -> Result<FloorCase> {
     let mut rec = HopRecorder::new(2)?;
     let sock = UnixDatagram::bind(&a).with_context(|| format!("binding {}", a.display()))?;
     let mut peers = Peers::default();
-    peers.spawn(
-        peer,
-        &[
-            PeerKind::UdsPair.name().to_string(),
-            PeerRole::Pong.name().to_string(),
-            "--dir".into(),
-            dir.path().display().to_string(),
-            "--spin-us".into(),
-            opts.spin.as_micros().to_string(),
-            "--parent-pid".into(),
-            std::process::id().to_string(),
-        ],
-    )?;
+    let spec = PeerSpec {
+        kind: PeerKind::UdsPair,
+        role: PeerRole::Pong,
+        prefix: None,
+        dir: Some(dir.path().to_path_buf()),
+        spin_us: spin_us(opts.spin),
+        parent_pid: Some(std::process::id()),
+    };
+    peers.spawn(peer, &spec.to_args())?;
     let mut buf = [0u8; PAYLOAD_BYTES];
     // The peer greets once its socket is bound; it is connected to ours already.
     {
@@ -867,26 +878,7 @@ mod tests {
     }
 
     #[test]
-    fn peer_arguments_parse_and_name_the_routes() {
-        let args: Vec<String> = [
-            "ipc-chain",
-            "center",
-            "--prefix",
-            "fdi1_fl0_",
-            "--spin-us",
-            "0",
-            "--parent-pid",
-            "42",
-        ]
-        .iter()
-        .map(|s| s.to_string())
-        .collect();
-        let a = PeerArgs::try_parse_from(&args).expect("parses");
-        assert_eq!(
-            (a.kind, a.role, a.spin_us, a.parent_pid),
-            (PeerKind::IpcChain, PeerRole::Center, 0, Some(42))
-        );
-        assert_eq!(a.prefix.as_deref(), Some("fdi1_fl0_"));
+    fn peer_routes_close_their_rings() {
         // The ring closes: each process's output is the next one's input, and it wakes that one.
         let ring = [
             Route::initiator(PeerKind::IpcChain),
@@ -905,16 +897,15 @@ mod tests {
         assert_eq!((pair[0].output, pair[0].next), (pair[1].input, pair[1].own));
         assert_eq!((pair[1].output, pair[1].next), (pair[0].input, pair[0].own));
         assert!(Route::of(PeerKind::IpcPair, PeerRole::Center).is_none());
-        // The default spin is the runtime's; unknown kinds are refused.
-        let d = PeerArgs::try_parse_from(["uds-pair", "pong", "--dir", "/tmp/x"]).expect("parses");
-        assert_eq!(d.spin_us, DEFAULT_SPIN_US);
-        assert!(PeerArgs::try_parse_from(["tcp", "pong"]).is_err());
-        assert!(peer_main(&[
-            "ipc-pair".into(),
-            "center".into(),
-            "--prefix".into(),
-            "p_".into()
-        ])
+        // A role its kind has not is refused.
+        assert!(peer_main(&PeerSpec {
+            kind: PeerKind::IpcPair,
+            role: PeerRole::Center,
+            prefix: Some("p_".into()),
+            dir: None,
+            spin_us: 0,
+            parent_pid: None,
+        })
         .is_err());
     }
 

@@ -7,12 +7,11 @@ pub mod probe;
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use anyhow::{bail, Context, Result};
-use clap::{Args, Subcommand};
 use fdi_common::attack::{AttackProfile, Channel, CovertEntry, MessageAttack};
 use fdi_common::engine::RunSummary;
+use fdi_common::observe::Observer;
 use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::stop::Stop;
 use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
@@ -21,98 +20,60 @@ use serde::Serialize;
 
 use crate::run::{execute, Engine};
 
-#[derive(Debug, Subcommand)]
-pub enum BenchCommand {
-    /// Per-hop latency, control-center compute time, end-to-end sensor → actuation latency,
-    /// deadline misses and control-period jitter of a realtime run.
-    Latency(LatencyArgs),
-    /// Lockstep speed over IPC against the in-process engine, same scenario, same invocation.
-    Lockstep(LockstepArgs),
-    /// The transport floor (iceoryx2 ping-pong, a 3-hop chain, a Unix-socket ping-pong) with the
-    /// runtime's wait strategy, and the runtime's per-hop latency as a ratio to it.
-    Transport(TransportArgs),
-}
-
-#[derive(Debug, Args)]
-pub struct TransportArgs {
+/// `bench transport`: the transport floor and the runtime's hops against it.
+#[derive(Debug, Clone)]
+pub struct TransportOptions {
     /// Round trips per transport.
-    #[arg(long, default_value_t = 20_000, allow_negative_numbers = true)]
     pub iterations: u64,
-    /// Spin before blocking, µs. Default 0: the realtime runtime's event-driven strategy, which
-    /// the runtime's latency is measured with.
-    #[arg(long, default_value_t = 0, allow_negative_numbers = true)]
+    /// Spin before blocking, µs (0: the realtime runtime's event-driven strategy, which the
+    /// runtime's latency is measured with).
     pub spin_us: u64,
     /// Agents and seconds of the realtime run measured beside the floor.
-    #[arg(long, default_value_t = 1, allow_negative_numbers = true)]
     pub agents: usize,
-    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
     pub duration_s: f64,
-    #[arg(long)]
-    pub json: bool,
-    #[arg(long, default_value = "runs")]
+    /// Folder that receives the run directory.
     pub out: PathBuf,
 }
 
-#[derive(Debug, Args)]
-pub struct LatencyArgs {
+/// `bench latency`: a realtime run measured.
+#[derive(Debug, Clone)]
+pub struct LatencyOptions {
     /// Number of agents (the paper's four robots, repeated).
-    #[arg(long, default_value_t = 4, allow_negative_numbers = true)]
     pub agents: usize,
     /// Simulated (= wall-clock) duration, s.
-    #[arg(long, default_value_t = 30.0, allow_negative_numbers = true)]
     pub duration_s: f64,
     /// Control rate, Hz.
-    #[arg(long, default_value_t = 1000.0, allow_negative_numbers = true)]
     pub rate_hz: f64,
-    #[arg(long)]
-    pub json: bool,
     /// Folder that receives the run directory.
-    #[arg(long, default_value = "runs")]
     pub out: PathBuf,
     /// Placement of the run's processes (and of the timer probe beside them).
-    #[command(flatten)]
     pub placement: crate::run::runtime::Placement,
-    /// Split the measured run over hosts (a deployment file, docs/multi-host.md): the hops
-    /// between hosts include the network, the stamps are moved to the coordinator's clock by
-    /// the offset measured at the start, and end-to-end is one clock's (the agent's).
-    #[arg(long, value_name = "FILE")]
+    /// Split the measured run over the hosts of this deployment file (docs/multi-host.md).
     pub hosts: Option<PathBuf>,
-    /// Serve the measured run live (as `run --live`), to measure what a viewer costs.
-    #[arg(long, value_name = "ADDR", num_args = 0..=1, require_equals = true, default_missing_value = fdi_live::Options::DEFAULT_ADDR)]
+    /// Serve the measured run live at this address (as `run --live`).
     pub live: Option<std::net::SocketAddr>,
-    /// Start the measured run once a viewer subscribed (as `run --live-wait`), at most SECONDS.
-    #[arg(long, value_name = "SECONDS", requires = "live")]
+    /// Start the measured run once a viewer subscribed, at most this many seconds.
     pub live_wait: Option<f64>,
+    /// Told the run's ticks.
+    pub progress: Observer,
 }
 
-#[derive(Debug, Args)]
-pub struct LockstepArgs {
-    /// Agent counts to measure (repeat the flag or separate with commas).
-    #[arg(long, value_delimiter = ',', default_values_t = vec![1usize, 4, 16, 64])]
+/// `bench lockstep`: lockstep speed over IPC against the in-process engine.
+#[derive(Debug, Clone)]
+pub struct LockstepOptions {
+    /// Agent counts to measure.
     pub agents: Vec<usize>,
-    /// Simulated duration of each run, s (the paper's experiment is 40 s).
-    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    /// Simulated duration of each run, s.
     pub duration_s: f64,
-    #[arg(long)]
-    pub json: bool,
-    /// Keep the traces of the measured runs (by default only their summaries stay).
-    #[arg(long)]
+    /// Keep the traces of the measured runs (otherwise only their summaries stay).
     pub keep_traces: bool,
-    #[arg(long, default_value = "runs")]
+    /// Folder that receives the benchmark's folder.
     pub out: PathBuf,
     /// Attack of the runs instead of the paper's: a preset name or a profile file for the
-    /// paper's four robots (every copy of a robot gets its attack), e.g. `actuator-bias`, whose
-    /// torques go through the attacker (the extra hop).
-    #[arg(long)]
+    /// paper's four robots.
     pub attack: Option<String>,
-}
-
-pub fn bench(b: &BenchCommand, stop: &Stop) -> Result<ExitCode> {
-    match b {
-        BenchCommand::Latency(a) => latency(a, stop),
-        BenchCommand::Lockstep(a) => lockstep(a, stop),
-        BenchCommand::Transport(a) => transport(a, stop),
-    }
+    /// Told the IPC runs' ticks.
+    pub progress: Observer,
 }
 
 /// The paper scenario with `n` agents: agent `i` is a copy of paper robot `(i − 1) % 4 + 1`,
@@ -189,48 +150,51 @@ fn percentiles(h: &Histogram<u64>) -> Percentiles {
     }
 }
 
+/// Per-hop latencies.
 #[derive(Debug, Serialize)]
-struct Hops {
-    agent_to_attacker: Percentiles,
-    attacker_to_center: Percentiles,
-    center_to_agent: Percentiles,
+pub struct Hops {
+    pub agent_to_attacker: Percentiles,
+    pub attacker_to_center: Percentiles,
+    pub center_to_agent: Percentiles,
 }
 
 #[derive(Debug, Serialize)]
-struct LatencyReport {
-    agents: usize,
-    rate_hz: f64,
-    duration_s: f64,
-    ticks: u64,
-    e2e_us: Percentiles,
-    hops_us: Hops,
-    attacker_processing_us: Percentiles,
-    center_compute_us: Percentiles,
+/// What `bench latency` measured (`latency.json`).
+pub struct LatencyReport {
+    pub agents: usize,
+    pub rate_hz: f64,
+    pub duration_s: f64,
+    pub ticks: u64,
+    pub e2e_us: Percentiles,
+    pub hops_us: Hops,
+    pub attacker_processing_us: Percentiles,
+    pub center_compute_us: Percentiles,
     /// |actual − nominal| interval between two consecutive measurements of an agent.
-    period_jitter_us: Percentiles,
-    deadline_misses: u64,
-    deadline_miss_ratio: f64,
+    pub period_jitter_us: Percentiles,
+    pub deadline_misses: u64,
+    pub deadline_miss_ratio: f64,
     /// Torques that never reached their agent (of every tick but the last, whose torque no
     /// step uses and which is left out of the latencies).
-    lost_ticks: u64,
+    pub lost_ticks: u64,
     /// Scheduling of the run's processes: `SCHED_OTHER` or `SCHED_FIFO <priority>`, and
     /// `on CPUs <list>` when confined.
-    scheduling: String,
+    pub scheduling: String,
     /// The machine beside the run: how late a timer thread of the launcher woke at every
     /// period boundary (same scheduling as the run).
-    timer_probe_late_us: Percentiles,
+    pub timer_probe_late_us: Percentiles,
     /// Wake-ups of that thread late by 1 ms or more: stalls of the machine itself.
-    timer_probe_stalls_over_1ms: u64,
+    pub timer_probe_stalls_over_1ms: u64,
     /// Deadline misses whose window (from the due command's measurement to the step that
     /// missed it) overlaps a stall of the timer thread of 0.5 ms or more.
-    deadline_misses_in_machine_stalls: u64,
+    pub deadline_misses_in_machine_stalls: u64,
     /// Share of all steps whose window overlaps such a stall (what chance alone would give).
-    steps_in_machine_stalls_ratio: f64,
-    run_dir: String,
+    pub steps_in_machine_stalls_ratio: f64,
+    pub run_dir: String,
 }
 
-/// Measures a realtime run and returns its latency report (written into its run directory).
-fn measure_latency(a: &LatencyArgs, stop: &Stop) -> Result<LatencyReport> {
+/// Measures a realtime run and returns its latency report (written into its run directory:
+/// `latency.json`, `latency.csv`, the histogram figure).
+pub fn latency(a: &LatencyOptions, stop: &Stop) -> Result<LatencyReport> {
     let r = latency_scenario(a)?;
     let period_ns = (r.scenario.control_period_s * 1e9) as i64;
     let run = run_beside_probe(a, &r, period_ns, stop)?;
@@ -257,7 +221,7 @@ fn measure_latency(a: &LatencyArgs, stop: &Stop) -> Result<LatencyReport> {
 
 /// The scenario of `bench latency`: the scaled paper scenario on the realtime clock, at the
 /// asked rate and duration.
-fn latency_scenario(a: &LatencyArgs) -> Result<Resolved> {
+fn latency_scenario(a: &LatencyOptions) -> Result<Resolved> {
     if !(a.rate_hz.is_finite() && a.rate_hz > 0.0) {
         bail!("--rate-hz must be a positive number, got {}", a.rate_hz);
     }
@@ -276,7 +240,7 @@ fn latency_scenario(a: &LatencyArgs) -> Result<Resolved> {
 }
 
 /// The live server `a` asks for.
-fn live_serve(a: &LatencyArgs) -> Result<Option<crate::run::LiveServe>> {
+fn live_serve(a: &LatencyOptions) -> Result<Option<crate::run::LiveServe>> {
     a.live
         .map(|addr| {
             crate::run::LiveServe::new(addr, fdi_live::Options::DEFAULT_RATE_HZ, a.live_wait)
@@ -294,7 +258,7 @@ struct MeasuredRun {
 /// Runs `r` over IPC in a run directory of its own, with the timer probe running beside it
 /// under the same placement.
 fn run_beside_probe(
-    a: &LatencyArgs,
+    a: &LatencyOptions,
     r: &Resolved,
     period_ns: i64,
     stop: &Stop,
@@ -314,7 +278,7 @@ fn run_beside_probe(
             Engine::Ipc,
             Some(&dir),
             &crate::run::Options {
-                progress: !a.json,
+                progress: a.progress.clone(),
                 placement: placement.clone(),
                 traces: crate::run::Traces::Full,
                 stop: stop.clone(),
@@ -498,7 +462,7 @@ struct Stalls {
 
 /// The latency report of a measured run, as printed and written to `latency.json`.
 fn latency_report(
-    a: &LatencyArgs,
+    a: &LatencyOptions,
     run: &MeasuredRun,
     lat: &Latencies,
     stalls: &Stalls,
@@ -537,31 +501,25 @@ fn latency_report(
     }
 }
 
-fn latency(a: &LatencyArgs, stop: &Stop) -> Result<ExitCode> {
-    let report = measure_latency(a, stop)?;
-    if a.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        print_latency(&report);
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
 #[derive(Debug, Serialize)]
-struct TransportReport {
-    floor: crate::bench::floor::FloorResult,
+/// What `bench transport` measured.
+pub struct TransportReport {
+    pub floor: crate::bench::floor::FloorResult,
     /// The iceoryx2 3-hop chain at the runtime's rate (one round trip per 1 ms period): its
     /// processes sleep between messages, as the runtime's do between ticks.
-    paced_chain: crate::bench::floor::FloorCase,
-    runtime_hops_p50_us: [f64; 3],
+    pub paced_chain: crate::bench::floor::FloorCase,
+    pub runtime_hops_p50_us: [f64; 3],
     /// Runtime per-hop p50 over the back-to-back 3-hop chain's per-hop p50, per hop.
-    runtime_over_floor: [f64; 3],
+    pub runtime_over_floor: [f64; 3],
     /// Runtime per-hop p50 over the paced 3-hop chain's per-hop p50, per hop.
-    runtime_over_paced_floor: [f64; 3],
-    runtime_run_dir: String,
+    pub runtime_over_paced_floor: [f64; 3],
+    pub runtime_run_dir: String,
+    /// Round trips of the paced chain (as many as the runtime run has ticks).
+    pub paced_round_trips: u64,
 }
 
-fn transport(a: &TransportArgs, stop: &Stop) -> Result<ExitCode> {
+/// The transport floor, the paced chain and a realtime run's hops against them.
+pub fn transport(a: &TransportOptions, stop: &Stop) -> Result<TransportReport> {
     let floor = crate::bench::floor::run_floor(&crate::bench::floor::FloorOptions {
         iterations: a.iterations,
         warmup: (a.iterations / 20).max(100),
@@ -576,17 +534,17 @@ fn transport(a: &TransportArgs, stop: &Stop) -> Result<ExitCode> {
         spin: std::time::Duration::from_micros(a.spin_us),
         pace: Some(std::time::Duration::from_millis(1)),
     })?;
-    let rt = measure_latency(
-        &LatencyArgs {
+    let rt = latency(
+        &LatencyOptions {
             agents: a.agents,
             duration_s: a.duration_s,
             rate_hz: 1000.0,
-            json: true,
             out: a.out.clone(),
             placement: Default::default(),
             hosts: None,
             live: None,
             live_wait: None,
+            progress: Observer::quiet(),
         },
         stop,
     )?;
@@ -597,48 +555,19 @@ fn transport(a: &TransportArgs, stop: &Stop) -> Result<ExitCode> {
     ];
     let base = floor.ipc_chain.per_hop.p50_us;
     let paced = paced_chain.per_hop.p50_us;
-    let report = TransportReport {
+    Ok(TransportReport {
         runtime_over_floor: hops.map(|h| h / base),
         runtime_over_paced_floor: hops.map(|h| h / paced),
         runtime_hops_p50_us: hops,
         floor,
         paced_chain,
         runtime_run_dir: rt.run_dir,
-    };
-    if a.json {
-        println!("{}", serde_json::to_string(&report)?);
-    } else {
-        println!("{}", report.floor.to_markdown());
-        let p = &report.paced_chain.per_hop;
-        println!(
-            "iceoryx2 3-hop chain at the runtime's rate (one round trip per 1 ms, {} round trips): per hop p50 {:.1}, p90 {:.1}, p99 {:.1}, p99.9 {:.1}, max {:.1} µs",
-            paced_trips, p.p50_us, p.p90_us, p.p99_us, p.p999_us, p.max_us
-        );
-        println!();
-        println!("Runtime (realtime, {} agent(s), {} s) per-hop p50 against the 3-hop chain's per-hop p50, back to back ({base:.1} µs) and at the runtime's rate ({paced:.1} µs):", a.agents, a.duration_s);
-        println!();
-        println!("| hop | runtime p50 (µs) | ratio to back-to-back floor | ratio to paced floor |");
-        println!("|---|---|---|---|");
-        for (i, name) in [
-            "agent -> attacker",
-            "attacker -> control center",
-            "control center -> agent",
-        ]
-        .iter()
-        .enumerate()
-        {
-            println!(
-                "| {name} | {:.1} | {:.2} | {:.2} |",
-                report.runtime_hops_p50_us[i],
-                report.runtime_over_floor[i],
-                report.runtime_over_paced_floor[i]
-            );
-        }
-    }
-    Ok(ExitCode::SUCCESS)
+        paced_round_trips: paced_trips,
+    })
 }
 
-fn latency_rows(r: &LatencyReport) -> Vec<(&'static str, Percentiles)> {
+/// The report's latencies by name, in the order of its table and CSV.
+pub fn latency_rows(r: &LatencyReport) -> Vec<(&'static str, Percentiles)> {
     vec![
         ("end-to-end sensor -> actuation", r.e2e_us),
         ("hop agent -> attacker", r.hops_us.agent_to_attacker),
@@ -734,65 +663,42 @@ fn latency_histogram_png(dir: &Path, hists: &[(&str, &Histogram<u64>)]) -> Resul
     Ok(())
 }
 
-fn print_latency(r: &LatencyReport) {
-    println!(
-        "Realtime latency: {} agents at {} Hz for {} s ({} ticks), {}",
-        r.agents, r.rate_hz, r.duration_s, r.ticks, r.scheduling
-    );
-    println!();
-    println!("| µs | p50 | p90 | p99 | p99.9 | max |");
-    println!("|---|---|---|---|---|---|");
-    for (name, p) in latency_rows(r) {
-        println!(
-            "| {name} | {:.1} | {:.1} | {:.1} | {:.1} | {:.1} |",
-            p.p50, p.p90, p.p99, p.p999, p.max
-        );
-    }
-    println!();
-    println!(
-        "deadline misses {} of {} agent-ticks ({:.4} %), lost ticks {}",
-        r.deadline_misses,
-        r.ticks * r.agents as u64,
-        100.0 * r.deadline_miss_ratio,
-        r.lost_ticks
-    );
-    println!(
-        "machine stalls: timer threads beside the run (one per CPU) woke >= 1 ms late {} \
-         times; {} of the deadline misses fall in a stall of >= 0.5 ms (as do {:.2} % of all steps)",
-        r.timer_probe_stalls_over_1ms,
-        r.deadline_misses_in_machine_stalls,
-        100.0 * r.steps_in_machine_stalls_ratio
-    );
-    println!("run directory {}", r.run_dir);
-}
-
 #[derive(Debug, Serialize)]
-struct LockstepRow {
-    agents: usize,
-    processes: usize,
-    sim_s: f64,
-    ticks: u64,
-    inproc_wall_s: f64,
-    ipc_wall_s: f64,
-    ipc_over_inproc: f64,
-    ipc_realtime_factor: f64,
-    ipc_ticks_per_s: f64,
-    bit_identical: bool,
+/// One agent count of `bench lockstep`.
+pub struct LockstepRow {
+    pub agents: usize,
+    pub processes: usize,
+    pub sim_s: f64,
+    pub ticks: u64,
+    pub inproc_wall_s: f64,
+    pub ipc_wall_s: f64,
+    pub ipc_over_inproc: f64,
+    pub ipc_realtime_factor: f64,
+    pub ipc_ticks_per_s: f64,
+    pub bit_identical: bool,
 }
 
-fn lockstep(a: &LockstepArgs, stop: &Stop) -> Result<ExitCode> {
+/// What `bench lockstep` measured: a row per agent count, and the folder of its runs
+/// (`lockstep.json` there).
+#[derive(Debug)]
+pub struct Lockstep {
+    pub rows: Vec<LockstepRow>,
+    pub dir: PathBuf,
+}
+
+/// Each agent count on both engines, one after the other (`lockstep.json` written).
+pub fn lockstep(a: &LockstepOptions, stop: &Stop) -> Result<Lockstep> {
     let root = a
         .out
         .join(format!("{}-bench-lockstep", crate::run_dirs::timestamp()));
     let mut rows = Vec::new();
     for &n in &a.agents {
         let row = lockstep_row(a, &root, n, stop)?;
-        if !a.json {
-            eprintln!(
-                "{n} agents: ipc {:.3} s, inproc {:.3} s",
-                row.ipc_wall_s, row.inproc_wall_s
-            );
-        }
+        log::info!(
+            "bench lockstep: {n} agents: ipc {:.3} s, inproc {:.3} s",
+            row.ipc_wall_s,
+            row.inproc_wall_s
+        );
         rows.push(row);
     }
     std::fs::write(
@@ -800,20 +706,12 @@ fn lockstep(a: &LockstepArgs, stop: &Stop) -> Result<ExitCode> {
         serde_json::to_string_pretty(&rows)? + "\n",
     )
     .context("writing lockstep.json")?;
-    if a.json {
-        println!(
-            "{}",
-            serde_json::json!({ "duration_s": a.duration_s, "rows": rows, "dir": root.display().to_string() })
-        );
-    } else {
-        print_lockstep(a.duration_s, &rows, &root);
-    }
-    Ok(ExitCode::SUCCESS)
+    Ok(Lockstep { rows, dir: root })
 }
 
 /// Runs the scaled paper scenario with `n` agents on the in-process engine, then over IPC, each
 /// into a run directory under `root` (without its traces unless `--keep-traces`).
-fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize, stop: &Stop) -> Result<LockstepRow> {
+fn lockstep_row(a: &LockstepOptions, root: &Path, n: usize, stop: &Stop) -> Result<LockstepRow> {
     let mut r = scaled_paper(n, a.attack.as_deref())?;
     r.scenario.duration_s = a.duration_s;
     let dir_in = crate::run_dirs::create_run_dir(root, &named(&r, "inproc"))?;
@@ -829,7 +727,7 @@ fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize, stop: &Stop) -> Result<
         Engine::Ipc,
         Some(&dir_ipc),
         &crate::run::Options {
-            progress: !a.json,
+            progress: a.progress.clone(),
             ..crate::run::Options::quiet(crate::run::Traces::Full, stop)
         },
     )
@@ -851,32 +749,6 @@ fn lockstep_row(a: &LockstepArgs, root: &Path, n: usize, stop: &Stop) -> Result<
         ipc_ticks_per_s: ipc.ticks as f64 / ipc.wall_s,
         bit_identical: ipc.trace_digest == inproc.trace_digest,
     })
-}
-
-/// The lockstep table, as markdown on stdout.
-fn print_lockstep(duration_s: f64, rows: &[LockstepRow], root: &Path) {
-    println!(
-        "Lockstep speed, {} s simulated per run (both engines write their traces)",
-        duration_s
-    );
-    println!();
-    println!("| agents | processes | in-process wall (s) | IPC wall (s) | IPC / in-process | IPC × real time | IPC ticks/s | bit-identical |");
-    println!("|---|---|---|---|---|---|---|---|");
-    for r in rows {
-        println!(
-            "| {} | {} | {:.3} | {:.3} | {:.2} | {:.1} | {:.0} | {} |",
-            r.agents,
-            r.processes,
-            r.inproc_wall_s,
-            r.ipc_wall_s,
-            r.ipc_over_inproc,
-            r.ipc_realtime_factor,
-            r.ipc_ticks_per_s,
-            r.bit_identical
-        );
-    }
-    println!();
-    println!("results in {}", root.display());
 }
 
 fn named(r: &Resolved, engine: &str) -> Resolved {

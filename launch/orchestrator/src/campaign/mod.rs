@@ -40,13 +40,12 @@ pub(crate) use tables::sig;
 use std::collections::BTreeSet;
 use std::num::NonZeroUsize;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
 use fdi_common::engine::RunSummary;
+use fdi_common::observe::{Observer, Progress};
 use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::stop::Stop;
 use serde::{Deserialize, Serialize};
@@ -61,38 +60,38 @@ use store::{load_stored, stored_path, write_atomic, Stored};
 pub const DURING_THE_CAMPAIGN: &str =
     "during the campaign: the finished runs are stored, a rerun runs only the others";
 
-#[derive(Debug, Args)]
-pub struct SweepArgs {
+/// A campaign to run (`fdi-launch sweep`): its file, how, and where.
+#[derive(Debug, Clone)]
+pub struct SweepOptions {
     /// Campaign TOML file: a base scenario and axes (see `scenarios/campaigns/`).
     pub campaign: PathBuf,
-    /// Runs at a time (default: the number of CPUs).
-    #[arg(long)]
+    /// Runs at a time (`None`: the number of CPUs).
     pub jobs: Option<NonZeroUsize>,
-    /// The engine of every run: in-process (one thread per run) or ipc (processes per run).
-    #[arg(long, value_enum, default_value_t = Engine::Inproc)]
+    /// The engine of every run.
     pub engine: Engine,
-    /// The campaign folder; default `runs/campaigns/<name>`.
-    #[arg(long)]
+    /// The campaign folder (`None`: `runs/campaigns/<name>`).
     pub out: Option<PathBuf>,
-    /// What each run keeps: `none` (the summary only; no run directory), `full` (a run
-    /// directory per run under `<out>/runs/`), `decimate=K`.
-    #[arg(long, default_value_t = Traces::None)]
+    /// What each run keeps: [`Traces::None`] (the summary only; no run directory), `Full` (a
+    /// run directory per run under `<out>/runs/`), `Decimate(K)`.
     pub traces: Traces,
-    /// Run only shard K of N (`K/N`, from 1): a part of the campaign's runs that depends on the
-    /// campaign alone, balanced by expected cost; every shard stores its results in one `--out`
-    /// (a shared folder), and `--aggregate` makes the tables. `auto`: K and N from a Slurm
-    /// array job (`SLURM_ARRAY_TASK_*`) or a Kubernetes Indexed Job (`JOB_COMPLETION_INDEX`,
-    /// with `FDI_SHARD_COUNT`).
-    #[arg(long, value_name = "K/N|auto", conflicts_with_all = ["aggregate", "status"])]
+    /// Run only this shard of the campaign ([`shard::ShardArg`]).
     pub shard: Option<shard::ShardArg>,
-    /// Run nothing: make the tables and figures from the results in `--out`, and name the runs
-    /// missing with the shard that owns each (exit status 1 when some are).
-    #[arg(long, conflicts_with = "status")]
+    /// Run nothing: make the tables and figures from the results in `out`, and name the runs
+    /// missing with the shard that owns each.
     pub aggregate: bool,
-    /// Run nothing: per shard, its runs done of its total, its failures with their errors, and
-    /// the time left estimated from the finished runs.
-    #[arg(long)]
+    /// Run nothing: per shard, its runs done of its total, its failures, the time left.
     pub status: bool,
+    /// Told the runs' progress.
+    pub progress: Observer,
+}
+
+/// How a campaign (or its shard, or its aggregation) ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ended {
+    /// Every run it was to make is there.
+    Whole,
+    /// Some runs failed or are missing (said, with their causes).
+    Incomplete,
 }
 
 #[derive(Debug, Deserialize)]
@@ -791,22 +790,23 @@ fn default_out(name: &str) -> PathBuf {
 /// Runs a campaign (`fdi-launch sweep`): the runs not stored yet, then its tables and figures.
 /// With `--shard`, only the shard's runs and no tables; with `--aggregate` or `--status`, no
 /// runs.
-pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
+pub fn sweep(args: &SweepOptions, stop: &Stop, said: &mut dyn FnMut(&str)) -> Result<Ended> {
+    let progress = &*args.progress;
     let plan = plan(&args.campaign, args.engine)?;
     let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
     if args.status {
-        return status::print(&plan, &out, args.engine);
+        return status::print(&plan, &out, args.engine, said);
     }
     if args.aggregate {
-        return aggregate(args, &plan, &out);
+        return aggregate(args, &plan, &out, said);
     }
     if let Some(shard) = args.shard {
-        return run_shard(args, &plan, &out, shard.resolve()?, stop);
+        return run_shard(args, &plan, &out, shard.resolve()?, (stop, progress), said);
     }
     prepare_out(&out)?;
     copy_campaign(args, &out)?;
     let all = plan.unique_jobs(|_| true);
-    println!(
+    said(&format!(
         "campaign {}: {} runs ({} points × {} seeds), engine {}, {}",
         plan.name,
         plan.jobs.len(),
@@ -814,23 +814,23 @@ pub fn sweep(args: &SweepArgs, stop: &Stop) -> Result<ExitCode> {
         plan.seeds,
         args.engine.as_str(),
         plural(args.jobs.unwrap_or_else(runner::default_jobs).get(), "job")
-    );
-    let tally = run_batch(args, &plan, &out, &all, None, stop)?;
+    ));
+    let tally = run_batch(args, &plan, &out, &all, None, (stop, progress), said)?;
     let results: Vec<Option<RunSummary>> = plan
         .jobs
         .iter()
         .map(|j| load_stored(&out, &j.key))
         .collect();
     let tables = tables::write_outputs(&plan, &results, &out)?;
-    println!(
+    said(&format!(
         "{}; {} of {} runs in the tables",
         tally.said(),
         results.iter().filter(|r| r.is_some()).count(),
         plan.jobs.len()
-    );
-    println!("campaign folder {}", out.display());
+    ));
+    said(&format!("campaign folder {}", out.display()));
     for t in tables {
-        println!("  {}", t.display());
+        said(&format!("  {}", t.display()));
     }
     campaign_end(tally.signal, &tally.failed)
 }
@@ -843,12 +843,13 @@ fn plural(n: usize, what: &str) -> String {
 /// Shard `shard` of the campaign: its runs not stored yet, its record kept in
 /// `shards/K-of-N.json` as they end, under its lease; no table (`--aggregate` makes them).
 fn run_shard(
-    args: &SweepArgs,
+    args: &SweepOptions,
     plan: &Plan,
     out: &Path,
     shard: shard::Shard,
-    stop: &Stop,
-) -> Result<ExitCode> {
+    (stop, progress): (&Stop, &dyn Progress),
+    said: &mut dyn FnMut(&str),
+) -> Result<Ended> {
     prepare_out(out)?;
     let hash = shard::campaign_hash(plan);
     let expected = shard::Expected {
@@ -862,14 +863,14 @@ fn run_shard(
     let owners = shard::owners(plan, shard.count);
     let owned = plan.unique_jobs(|i| owners[i] == shard.index);
     let jobs = args.jobs.unwrap_or_else(runner::default_jobs).get();
-    println!(
+    said(&format!(
         "campaign {}, shard {shard}: {} of the campaign's {} runs, engine {}, {}",
         plan.name,
         owned.len(),
         plan.unique_jobs(|_| true).len(),
         args.engine.as_str(),
         plural(jobs, "job")
-    );
+    ));
     let now = shard::unix_now();
     let record = shard::Record {
         campaign: plan.name.clone(),
@@ -888,21 +889,34 @@ fn run_shard(
         skipped: 0,
         failures: Vec::new(),
     };
-    let tally = run_batch(args, plan, out, &owned, Some((record, lease.lost())), stop)?;
-    println!("{}", tally.said());
-    println!(
+    let tally = run_batch(
+        args,
+        plan,
+        out,
+        &owned,
+        Some((record, lease.lost())),
+        (stop, progress),
+        said,
+    )?;
+    said(&tally.said());
+    said(&format!(
         "shard {shard} of campaign folder {}: once every shard is done, `fdi-launch sweep {} --aggregate --out {}` makes the tables",
         out.display(),
         args.campaign.display(),
         out.display()
-    );
+    ));
     campaign_end(tally.signal, &tally.failed)
 }
 
 /// `fdi-launch sweep CAMPAIGN --aggregate`: the tables and figures from the results in the
 /// folder, and the runs missing, each with the shard that owns it. Fails (after writing the
 /// tables of what is there) when a run is missing.
-fn aggregate(args: &SweepArgs, plan: &Plan, out: &Path) -> Result<ExitCode> {
+fn aggregate(
+    args: &SweepOptions,
+    plan: &Plan,
+    out: &Path,
+    said: &mut dyn FnMut(&str),
+) -> Result<Ended> {
     if !out.join("points").is_dir() {
         bail!(
             "--aggregate: {} holds no results (no points/ folder): run the campaign or its shards into it first",
@@ -923,8 +937,8 @@ fn aggregate(args: &SweepArgs, plan: &Plan, out: &Path) -> Result<ExitCode> {
     let done = results.iter().filter(|r| r.is_some()).count();
     // The missing runs first: the tables of what is there may fail (no result at all).
     if done < plan.jobs.len() {
-        eprintln!(
-            "fdi-launch: {} of {} runs are missing:\n{}",
+        log::info!(
+            "{} of {} runs are missing:\n{}",
             plan.jobs.len() - done,
             plan.jobs.len(),
             status::missing(plan, &results, count, &records, out)
@@ -932,20 +946,20 @@ fn aggregate(args: &SweepArgs, plan: &Plan, out: &Path) -> Result<ExitCode> {
     }
     copy_campaign(args, out)?;
     let tables = tables::write_outputs(plan, &results, out)?;
-    println!(
+    said(&format!(
         "campaign {}: {done} of {} runs in the tables{}",
         plan.name,
         plan.jobs.len(),
         count.map_or(String::new(), |n| format!(" (from {} shards)", n))
-    );
-    println!("campaign folder {}", out.display());
+    ));
+    said(&format!("campaign folder {}", out.display()));
     for t in tables {
-        println!("  {}", t.display());
+        said(&format!("  {}", t.display()));
     }
     Ok(if done == plan.jobs.len() {
-        ExitCode::SUCCESS
+        Ended::Whole
     } else {
-        ExitCode::FAILURE
+        Ended::Incomplete
     })
 }
 
@@ -959,7 +973,7 @@ fn prepare_out(out: &Path) -> Result<()> {
 }
 
 /// A copy of the campaign file in its folder (`campaign.toml`), written whole.
-fn copy_campaign(args: &SweepArgs, out: &Path) -> Result<()> {
+fn copy_campaign(args: &SweepOptions, out: &Path) -> Result<()> {
     let text = std::fs::read(&args.campaign)
         .with_context(|| format!("reading {}", args.campaign.display()))?;
     write_atomic(&out.join("campaign.toml"), &text)
@@ -970,12 +984,13 @@ fn copy_campaign(args: &SweepArgs, out: &Path) -> Result<()> {
 /// stored yet; stores each result as it ends, and keeps a shard's record up to date (with the
 /// flag its lease raises when it is lost: the batch then starts no more runs).
 fn run_batch(
-    args: &SweepArgs,
+    args: &SweepOptions,
     plan: &Plan,
     out: &Path,
     owned: &[usize],
     shard: Option<(shard::Record, Arc<AtomicBool>)>,
-    stop: &Stop,
+    (stop, progress): (&Stop, &dyn Progress),
+    said: &mut dyn FnMut(&str),
 ) -> Result<Tally> {
     let todo: Vec<usize> = owned
         .iter()
@@ -983,7 +998,10 @@ fn run_batch(
         .filter(|&i| load_stored(out, &plan.jobs[i].key).is_none())
         .collect();
     let skipped = owned.len() - todo.len();
-    println!("{skipped} already done (skipped), {} to run", todo.len());
+    said(&format!(
+        "{skipped} already done (skipped), {} to run",
+        todo.len()
+    ));
     let (record, lost) = shard.unzip();
     let mut tally = Tally {
         out: out.to_path_buf(),
@@ -1002,6 +1020,7 @@ fn run_batch(
         &todo,
         args.jobs.unwrap_or_else(runner::default_jobs),
         &plan.name,
+        progress,
         stop,
         |&i| run_one(&plan.jobs[i], &plan.name, args, &runs_root, stop),
         |n, result| tally.record(&plan.jobs[todo[n]], result),
@@ -1062,7 +1081,7 @@ impl Tally {
                 Some(interrupted) => self.signal = Some(interrupted.signal),
                 None => {
                     let error = fdi_report::output::describe_error(&e);
-                    eprintln!("fdi-launch: the run {} failed: {error}", job.label);
+                    log::info!("the run {} failed: {error}", job.label);
                     self.failed.push(shard::Failure {
                         run: job.label.clone(),
                         key: job.key[..16].to_string(),
@@ -1092,7 +1111,7 @@ impl Tally {
             r.state = end;
         }
         if let Err(e) = r.save(&self.out) {
-            eprintln!("fdi-launch: warning: the shard's record: {e:#}");
+            log::warn!("the shard's record: {e:#}");
         }
     }
 
@@ -1113,7 +1132,7 @@ impl Tally {
 }
 
 /// How a campaign ends: interrupted by `signal`, failed when some runs did, else success.
-fn campaign_end(signal: Option<i32>, failed: &[shard::Failure]) -> Result<ExitCode> {
+fn campaign_end(signal: Option<i32>, failed: &[shard::Failure]) -> Result<Ended> {
     if let Some(signal) = signal {
         return Err(fdi_common::stop::Interrupted {
             signal,
@@ -1123,21 +1142,21 @@ fn campaign_end(signal: Option<i32>, failed: &[shard::Failure]) -> Result<ExitCo
     }
     if !failed.is_empty() {
         let runs: Vec<&str> = failed.iter().map(|f| f.run.as_str()).collect();
-        eprintln!(
-            "fdi-launch: {} runs failed ({}); a rerun runs them again",
+        log::info!(
+            "{} runs failed ({}); a rerun runs them again",
             failed.len(),
             runs.join("; ")
         );
-        return Ok(ExitCode::FAILURE);
+        return Ok(Ended::Incomplete);
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(Ended::Whole)
 }
 
 /// One run of the campaign: whole, or an error.
 fn run_one(
     job: &Job,
     name: &str,
-    args: &SweepArgs,
+    args: &SweepOptions,
     runs_root: &Path,
     stop: &Stop,
 ) -> Result<RunSummary> {

@@ -1,6 +1,6 @@
 //! The parallel runner of campaigns and of the seeded tables: jobs on `--jobs` worker threads
-//! (each in-process run is single-threaded; an ipc run is its own processes), a progress bar
-//! with done/total and ETA, and a clean stop on SIGINT/SIGTERM: no job starts once a signal is
+//! (each in-process run is single-threaded; an ipc run is its own processes), its progress told
+//! (done of total), and a clean stop on SIGINT/SIGTERM: no job starts once a signal is
 //! pending, the jobs in flight end (an ipc run is stopped by its runtime, an in-process run
 //! finishes), and every result that came back is handed to `done`.
 
@@ -10,8 +10,8 @@ use std::sync::mpsc;
 
 use anyhow::Result;
 use fdi_common::engine::RunSummary;
+use fdi_common::observe::{Finish, Progress, Work};
 use fdi_common::stop::Stop;
-use indicatif::{ProgressBar, ProgressStyle};
 
 /// The default of `--jobs`: the number of CPUs this process may use.
 pub fn default_jobs() -> NonZeroUsize {
@@ -34,17 +34,15 @@ pub fn run_parallel<J: Sync>(
     jobs: &[J],
     workers: NonZeroUsize,
     what: &str,
+    progress: &dyn Progress,
     stop: &Stop,
     run: impl Fn(&J) -> Result<RunSummary> + Sync,
     mut done: impl FnMut(usize, Result<RunSummary>) -> Result<()>,
 ) -> Result<Outcome> {
-    let bar = ProgressBar::new(jobs.len() as u64);
-    if let Ok(style) = ProgressStyle::with_template(
-        "{msg} [{bar:30}] {pos}/{len} done, {elapsed} elapsed, ETA {eta}",
-    ) {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar.set_message(what.to_string());
+    progress.begin(Work::Runs {
+        total: jobs.len() as u64,
+        what: what.to_string(),
+    });
     let stop_run = stop;
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
@@ -71,7 +69,7 @@ pub fn run_parallel<J: Sync>(
         }
         drop(tx);
         for (i, result) in rx {
-            bar.inc(1);
+            progress.step("");
             if failure.is_none() {
                 if let Err(e) = done(i, result) {
                     stop.store(true, Ordering::SeqCst);
@@ -80,10 +78,15 @@ pub fn run_parallel<J: Sync>(
             }
         }
     });
-    bar.finish_and_clear();
     if let Some(e) = failure {
+        progress.finish(Finish::Stopped);
         return Err(e);
     }
+    progress.finish(if stop_run.pending().is_some() {
+        Finish::Stopped
+    } else {
+        Finish::Done
+    });
     let not_started = jobs.len() - started.load(Ordering::SeqCst).min(jobs.len());
     Ok(Outcome {
         interrupted: stop_run.pending(),

@@ -320,13 +320,13 @@ pub fn records(out: &Path) -> Result<Vec<Record>> {
             .and_then(|t| serde_json::from_str::<Record>(&t).map_err(|e| e.to_string()));
         match read {
             Ok(r) if r.shard == shard => out.push(r),
-            Ok(r) => eprintln!(
-                "fdi-launch: warning: {} holds the record of shard {}, not of {shard}: left out",
+            Ok(r) => log::warn!(
+                "{} holds the record of shard {}, not of {shard}: left out",
                 path.display(),
                 r.shard
             ),
-            Err(e) => eprintln!(
-                "fdi-launch: warning: {} is not a shard record that can be read ({e}): left out (its shard writes it anew)",
+            Err(e) => log::warn!(
+                "{} is not a shard record that can be read ({e}): left out (its shard writes it anew)",
                 path.display()
             ),
         }
@@ -524,9 +524,7 @@ impl Lease {
                         bail!(refusal);
                     }
                     if !said {
-                        eprintln!(
-                            "fdi-launch: {refusal}; waiting for it to go stale (--shard auto)"
-                        );
+                        log::info!("{refusal}; waiting for it to go stale (--shard auto)");
                         said = true;
                     }
                     std::thread::sleep(Duration::from_secs(5));
@@ -593,8 +591,8 @@ impl Lease {
             if std::fs::read(path).ok().as_deref() != Some(bytes.as_slice()) {
                 continue;
             }
-            eprintln!(
-                "fdi-launch: shard {shard}: taking over the lease {}: {why}",
+            log::info!(
+                "shard {shard}: taking over the lease {}: {why}",
                 path.display()
             );
             match std::fs::remove_file(path) {
@@ -620,7 +618,7 @@ impl Lease {
                 // Woken by the drop (or its sender going away), else every RENEW_EVERY.
                 while let Err(mpsc::RecvTimeoutError::Timeout) = rx.recv_timeout(RENEW_EVERY) {
                     if let Err(e) = renew(&p, &file) {
-                        eprintln!("fdi-launch: {e}; this shard starts no more runs");
+                        log::info!("{e}; this shard starts no more runs");
                         l.store(true, Ordering::SeqCst);
                         break;
                     }

@@ -4,7 +4,6 @@
 
 use std::fmt::Write as _;
 use std::path::Path;
-use std::process::ExitCode;
 
 use anyhow::Result;
 use fdi_common::engine::RunSummary;
@@ -51,8 +50,13 @@ impl Progress {
     }
 }
 
-/// Prints the campaign's progress in `out`, shard by shard.
-pub(super) fn print(plan: &Plan, out: &Path, engine: Engine) -> Result<ExitCode> {
+/// Says the campaign's progress in `out`, shard by shard.
+pub(super) fn print(
+    plan: &Plan,
+    out: &Path,
+    engine: Engine,
+    said: &mut dyn FnMut(&str),
+) -> Result<super::Ended> {
     let records = shard::records(out)?;
     let hash = shard::campaign_hash(plan);
     let expected = shard::Expected {
@@ -68,13 +72,13 @@ pub(super) fn print(plan: &Plan, out: &Path, engine: Engine) -> Result<ExitCode>
     let total = unique.len();
     let done = unique.iter().filter(|&&i| results[i].is_some()).count();
     let Some(count) = shard::count_of(&records, out)? else {
-        println!(
+        said(&format!(
             "campaign {}: {done} of {total} runs done in {}; no shard has started there (no {}/K-of-N.json)",
             plan.name,
             out.display(),
             shard::SHARDS
-        );
-        return Ok(ExitCode::SUCCESS);
+        ));
+        return Ok(super::Ended::Whole);
     };
     let shards = progress(plan, out, &results, count, records)?;
     let walls: Vec<f64> = results.iter().flatten().map(|s| s.wall_s).collect();
@@ -84,19 +88,19 @@ pub(super) fn print(plan: &Plan, out: &Path, engine: Engine) -> Result<ExitCode>
         .filter_map(|p| p.record.as_ref())
         .map(|r| r.failures.len())
         .sum();
-    println!(
+    said(&format!(
         "campaign {}: {done} of {total} runs done, {failed} failed, in {count} shards ({})",
         plan.name,
         out.display()
-    );
-    println!("{}", table(&shards, mean));
+    ));
+    said(&table(&shards, mean));
     for p in &shards {
         for f in p.record.iter().flat_map(|r| &r.failures) {
-            println!("shard {} failed: {}: {}", p.shard, f.run, f.error);
+            said(&format!("shard {} failed: {}: {}", p.shard, f.run, f.error));
         }
     }
-    println!("{}", time_left(&shards, mean, walls.len()));
-    Ok(ExitCode::SUCCESS)
+    said(&time_left(&shards, mean, walls.len()));
+    Ok(super::Ended::Whole)
 }
 
 /// Each shard's progress, in shard order.

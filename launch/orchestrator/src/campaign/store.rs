@@ -29,8 +29,8 @@ pub(super) fn load_stored(out: &Path, key: &str) -> Option<RunSummary> {
         Ok(s) if s.key == key => Some(s.summary),
         Ok(_) => None,
         Err(e) => {
-            eprintln!(
-                "fdi-launch: warning: {} is not a result that can be read ({e}): its run counts as not done",
+            log::warn!(
+                "{} is not a result that can be read ({e}): its run counts as not done",
                 p.display()
             );
             None

@@ -17,22 +17,6 @@ use rcgen::{
 
 use crate::run::hosts::{CertFiles, Lab, LabSecurity};
 
-/// `fdi-launch certs`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct CertsArgs {
-    /// The deployment file: a certificate for each of its hosts.
-    #[arg(long)]
-    pub hosts: PathBuf,
-    /// Where to write them (default: the file's `certs` folder). A CA already there signs the
-    /// new certificates; no file is ever overwritten.
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// How many days the new host certificates are valid (from an hour before now, for clocks
-    /// a little behind). Renew one by removing its pair and running this again.
-    #[arg(long, default_value_t = 365, value_parser = clap::value_parser!(u32).range(1..=3650))]
-    pub days: u32,
-}
-
 /// How many days a CA made here is valid.
 pub const CA_DAYS: u32 = 3650;
 
@@ -141,29 +125,21 @@ pub fn make(lab: &Lab, out: &Path, days: u32) -> Result<Vec<PathBuf>> {
     Ok(made)
 }
 
-/// `fdi-launch certs`: makes the lab's certificates and says which files go to which host.
-pub fn certs(args: &CertsArgs) -> Result<()> {
-    let lab = Lab::load(&args.hosts)?;
-    let out = match (&args.out, &lab.security) {
-        (Some(out), _) => out.clone(),
+/// The lab's certificates for the hosts of the deployment file `hosts`, made in `out` (`None`:
+/// the file's `certs` folder), the hosts' valid for `days`: the files made (none when every
+/// host has its certificate already).
+pub fn certs(hosts: &Path, out: Option<&Path>, days: u32) -> Result<(PathBuf, Vec<PathBuf>)> {
+    let lab = Lab::load(hosts)?;
+    let out = match (out, &lab.security) {
+        (Some(out), _) => out.to_path_buf(),
         (None, LabSecurity::Tls { certs }) => certs.clone(),
         (None, LabSecurity::Insecure) => bail!(
             "{} says `insecure = true` and names no `certs` folder: give --out",
             lab.source
         ),
     };
-    let made = make(&lab, &out, args.days)?;
-    if made.is_empty() {
-        println!("{}: every host has its certificate already", out.display());
-    }
-    for p in &made {
-        println!("made {}", p.display());
-    }
-    println!(
-        "Copy to each host `ca.pem` and its own `<host>.pem` and `<host>.key` (into the folder \
-         its deployment file names); keep `ca.key` on this machine only."
-    );
-    Ok(())
+    let made = make(&lab, &out, days)?;
+    Ok((out, made))
 }
 
 #[cfg(test)]

@@ -124,7 +124,7 @@ impl Subscriber {
                             s.readers
                         }
                         Some(Err(e)) => {
-                            eprintln!("fdi-launch: warning: live view: {p}: {e:#}");
+                            log::warn!("live view: {p}: {e:#}");
                             Vec::new()
                         }
                         None => Vec::new(),
@@ -213,8 +213,8 @@ impl Fetched {
             Err(mpsc::RecvTimeoutError::Timeout) => return false,
             Err(mpsc::RecvTimeoutError::Disconnected) => "the subscription ended".into(),
         };
-        eprintln!(
-            "fdi-launch: warning: live view: the stream of the trace of {} stopped ({broken}): \
+        log::warn!(
+            "live view: the stream of the trace of {} stopped ({broken}): \
              the rest is read once the run is over",
             self.process
         );
@@ -237,8 +237,8 @@ impl Read for Fetched {
                 let came = (self.chunks.as_ref()).is_some_and(|c| c.try_recv().is_ok());
                 if self.position == 0 && !came {
                     // (No stream, or its host never sent: the viewer saw it only after the end.)
-                    eprintln!(
-                        "fdi-launch: warning: live view: the stream of the trace of {} delivered \
+                    log::warn!(
+                        "live view: the stream of the trace of {} delivered \
                          nothing during the run: its records are read from the fetched copy",
                         self.process
                     );
@@ -452,7 +452,7 @@ pub fn follow_run(
         },
     )?;
     for w in walked.warnings() {
-        eprintln!("fdi-launch: warning: live view: {w}");
+        log::warn!("live view: {w}");
     }
     Ok(())
 }

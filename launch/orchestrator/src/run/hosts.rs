@@ -169,7 +169,7 @@ impl Lab {
                     let checked = check_validity(p, now)
                         .with_context(|| format!("{}: `certs`", self.source))?;
                     if let Some(warning) = checked {
-                        eprintln!("fdi-launch: warning: {warning}");
+                        log::warn!("{warning}");
                     }
                 }
                 Ok(Security::Tls {

@@ -24,9 +24,9 @@ pub mod volume;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
-use clap::ValueEnum;
 use fdi_common::attack::Attacker;
 use fdi_common::engine::{run_inproc_any_until, tick_inproc_any_with, Books, Partial, RunSummary};
+use fdi_common::observe::Observer;
 use fdi_common::records::TickRecord;
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
@@ -37,7 +37,7 @@ use fdi_report::output;
 pub use fdi_report::traces::Traces;
 
 /// Which engine runs the scenario.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Engine {
     /// One process per agent, an attacker and a control center over iceoryx2 shared memory.
     Ipc,
@@ -46,11 +46,46 @@ pub enum Engine {
 }
 
 impl Engine {
+    /// Every engine, in the order the command line lists them.
+    pub const ALL: [Self; 2] = [Self::Ipc, Self::Inproc];
+
     pub fn as_str(self) -> &'static str {
         match self {
             Self::Ipc => "ipc",
             Self::Inproc => "inproc",
         }
+    }
+
+    /// What the engine is, in a line (the command line's help).
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Ipc => {
+                "One process per agent, an attacker and a control center over iceoryx2 shared memory"
+            }
+            Self::Inproc => "Everything on one thread, no IPC (the oracle)",
+        }
+    }
+}
+
+impl std::fmt::Display for Engine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+/// A name that is no engine's.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("`{0}` is no engine (the engines: ipc, inproc)")]
+pub struct UnknownEngine(pub String);
+
+impl std::str::FromStr for Engine {
+    type Err = UnknownEngine;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|e| e.as_str() == s)
+            .ok_or_else(|| UnknownEngine(s.to_string()))
     }
 }
 
@@ -120,7 +155,8 @@ impl InprocTraces {
 /// run directory keeps, the stop that interrupts it, its live server and its pace.
 #[derive(Debug, Clone, Default)]
 pub struct Options {
-    pub progress: bool,
+    /// Told the run's ticks (a bar on the command line).
+    pub progress: Observer,
     pub placement: runtime::Placement,
     pub traces: Traces,
     pub stop: Stop,
@@ -184,19 +220,19 @@ fn start_live(
     };
     let (live, feed) =
         fdi_live::Live::start(r, &l.options(r, engine, opts.pace)).context(runtime::DidNotStart)?;
-    eprintln!(
-        "fdi-launch: live at ws://{} (Foxglove: Open connection, Foxglove WebSocket; layouts in \
+    log::info!(
+        "live at ws://{} (Foxglove: Open connection, Foxglove WebSocket; layouts in \
          examples/live)",
         live.addr()
     );
     if let Some(wait) = l.wait {
-        eprintln!(
-            "fdi-launch: waiting for a viewer to subscribe (at most {} s)",
+        log::info!(
+            "waiting for a viewer to subscribe (at most {} s)",
             wait.as_secs_f64()
         );
         if !live.wait_for_viewer(wait, &opts.stop) {
-            eprintln!(
-                "fdi-launch: no viewer subscribed within {} s: the run starts",
+            log::info!(
+                "no viewer subscribed within {} s: the run starts",
                 wait.as_secs_f64()
             );
         }
@@ -252,7 +288,7 @@ impl Options {
     /// No progress bar, default placement, `traces` kept, interrupted by `stop`.
     pub fn quiet(traces: Traces, stop: &Stop) -> Self {
         Self {
-            progress: false,
+            progress: Observer::quiet(),
             placement: runtime::Placement::default(),
             traces,
             stop: stop.clone(),
@@ -368,8 +404,8 @@ fn execute_inproc_watched<A: Attacker>(
 /// Marks `s` as a run interrupted by `signal` after its start (`how`: what was stopped), and
 /// says so on stderr: the run directory keeps what was recorded, its metrics cover it.
 fn interrupted(s: &mut RunSummary, r: &Resolved, signal: i32, how: &str) {
-    eprintln!(
-        "fdi-launch: interrupted by {} after {:.3} s of {} s simulated: {how}; the run directory keeps what was recorded",
+    log::info!(
+        "interrupted by {} after {:.3} s of {} s simulated: {how}; the run directory keeps what was recorded",
         runtime::signal_name(signal),
         s.sim_s,
         r.scenario.duration_s,
@@ -538,8 +574,8 @@ pub fn execute_on(
             // (A run without a directory has no viewer: campaigns, benchmarks.)
             let summary = execute(r, engine, Some(&scratch), &scratch_opts);
             if let Err(e) = std::fs::remove_dir_all(&scratch) {
-                eprintln!(
-                    "fdi-launch: warning: the scratch run directory {} could not be removed: {e}",
+                log::warn!(
+                    "the scratch run directory {} could not be removed: {e}",
                     scratch.display()
                 );
             }
@@ -556,7 +592,7 @@ fn execute_ipc(
     opts: &Options,
     deployment: Option<&hosts::Deployment>,
 ) -> Result<RunSummary> {
-    let (progress, placement, traces) = (opts.progress, &opts.placement, opts.traces);
+    let (progress, placement, traces) = (opts.progress.clone(), &opts.placement, opts.traces);
     let (live, feed) = start_live(r, Engine::Ipc, opts)?.unzip();
     let opts = runtime::IpcOptions {
         run_dir: dir.to_path_buf(),
@@ -600,11 +636,11 @@ fn execute_ipc(
         joined.summary.placement = Some(placement.describe());
     }
     for w in &joined.warnings {
-        eprintln!("fdi-launch: warning: {w}");
+        log::warn!("{w}");
     }
     if !outcome.leftovers.is_empty() {
-        eprintln!(
-            "fdi-launch: warning: {} shared-memory files of run {} could not be removed",
+        log::warn!(
+            "{} shared-memory files of run {} could not be removed",
             outcome.leftovers.len(),
             outcome.prefix
         );
@@ -654,14 +690,14 @@ fn run_followed<T>(
                     .and_then(|t| follow::follow_run(r, &t, (feed, &watcher), actuation, stop))
             });
         if let Err(e) = &follower {
-            eprintln!("fdi-launch: warning: the live view could not start its thread: {e}");
+            log::warn!("the live view could not start its thread: {e}");
         }
         let result = run();
         over.set();
         match follower.map(std::thread::ScopedJoinHandle::join) {
             Ok(Ok(Ok(()))) | Err(_) => {}
-            Ok(Ok(Err(e))) => eprintln!("fdi-launch: warning: the live view stopped: {e:#}"),
-            Ok(Err(_)) => eprintln!("fdi-launch: warning: the live view's thread panicked"),
+            Ok(Ok(Err(e))) => log::warn!("the live view stopped: {e:#}"),
+            Ok(Err(_)) => log::warn!("the live view's thread panicked"),
         }
         result
     })

@@ -285,7 +285,7 @@ pub(super) fn date(t: SystemTime) -> String {
 }
 
 /// The count of each kind, in the order of [`Kind`]: `3 run, 1 table1`.
-fn counts(outputs: &[Output]) -> String {
+pub fn counts(outputs: &[Output]) -> String {
     let mut kinds: Vec<Kind> = outputs.iter().map(|o| o.kind).collect();
     kinds.sort();
     kinds.dedup();
@@ -339,45 +339,4 @@ pub fn table(listing: &Listing) -> String {
         line([&r[0], &r[1], &r[2], &r[3], &r[4]]);
     }
     text
-}
-
-/// `runs list`: the table, what else the folder holds, and the total as `du -s` counts it.
-pub fn print_list(out: &Path, json: bool) -> Result<()> {
-    let listing = list(out)?;
-    if json {
-        println!("{}", serde_json::to_string(&listing)?);
-        return Ok(());
-    }
-    if listing.outputs.is_empty() {
-        println!("no output folders of fdi-launch in {}", out.display());
-    } else {
-        print!("{}", table(&listing));
-    }
-    if !listing.other.is_empty() {
-        let bytes: u64 = listing.other.iter().map(|o| o.bytes).sum();
-        println!(
-            "{} other entries ({}), not made by fdi-launch: `runs prune` leaves them alone",
-            listing.other.len(),
-            ByteSize::b(bytes)
-        );
-    }
-    for p in &listing.unreadable {
-        eprintln!(
-            "fdi-launch: warning: {} could not be read: its space is not counted",
-            p.display()
-        );
-    }
-    println!(
-        "{} output folders in {} ({}); {} on disk in all, as `du -s` counts it (the blocks \
-         allocated, a file with several hard links once)",
-        listing.outputs.len(),
-        out.display(),
-        if listing.outputs.is_empty() {
-            "none".into()
-        } else {
-            counts(&listing.outputs)
-        },
-        ByteSize::b(listing.bytes)
-    );
-    Ok(())
 }

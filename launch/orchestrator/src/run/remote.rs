@@ -76,7 +76,9 @@ impl HostLink {
         let name = h.name.clone();
         let events = net.subscribe(&keys::said(&h.name, prefix, "events"), move |_, bytes| {
             match serde_json::from_slice::<HostEvent>(&bytes) {
-                Ok(HostEvent::Line { text }) => eprintln!("{name}: {text}"),
+                Ok(HostEvent::Line { text }) => {
+                    log::info!(target: fdi_common::observe::VERBATIM, "{name}: {text}");
+                }
                 Ok(HostEvent::Exited { label, raw, ended }) => {
                     if let Some(s) = lock(&st).get(&label) {
                         lock(s).exit = Some((raw, ended));
@@ -93,9 +95,7 @@ impl HostLink {
                 Ok(HostEvent::Refused { count, first }) => {
                     *lock(&rf) = (count, first);
                 }
-                Err(e) => eprintln!(
-                    "fdi-launch: warning: host `{name}` sent an event that is not one ({e})"
-                ),
+                Err(e) => log::warn!("host `{name}` sent an event that is not one ({e})"),
             }
         })?;
         Ok(Self {
@@ -274,7 +274,7 @@ impl Remote {
             )
         })?;
         if let Some(warning) = net.unfiltered() {
-            eprintln!("fdi-launch: warning: {warning}");
+            log::warn!("{warning}");
         }
         let token = net.token(&keys::said(&me, prefix, "coordinator"))?;
         let clock = net.answer_clock(&keys::asked(&me, "*", prefix, "clock"))?;
@@ -294,8 +294,8 @@ impl Remote {
                     .filter(|h| !h.alive.load(Ordering::SeqCst))
                     .map(|h| format!("`{}`", h.host.name))
                     .collect();
-                eprintln!(
-                    "fdi-launch: waiting for the serve of host {} (at most {:.0} s: a serve whose \
+                log::info!(
+                    "waiting for the serve of host {} (at most {:.0} s: a serve whose \
                      network was cut may take up to 30 s to hear a new coordinator; \
                      docs/multi-host.md)",
                     missing.join(", "),

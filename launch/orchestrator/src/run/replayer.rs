@@ -7,7 +7,6 @@
 //! [`fdi_runtime::role`]).
 
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
@@ -266,9 +265,30 @@ pub fn check_recording(r: &Resolved, recorded: &Path) -> Result<Vec<std::path::P
     Ok(copies)
 }
 
+/// What a replay made: the replayed run's summary and directory beside the recording's digest.
+#[derive(Debug)]
+pub struct Replayed {
+    pub summary: fdi_common::engine::RunSummary,
+    pub dir: std::path::PathBuf,
+    /// The trace digest of the recorded run.
+    pub recorded_trace_digest: String,
+}
+
+impl Replayed {
+    /// The replayed control center gave the recorded run's trace digest.
+    pub fn matches(&self) -> bool {
+        self.summary.trace_digest == self.recorded_trace_digest
+    }
+}
+
 /// `run --replay RUN_DIR`: re-runs the recorded run's control center on its recorded tampered
 /// measurements in a fresh run directory under `out`, and compares the trace digests.
-pub fn replay_run(recorded: &Path, out: &Path, json: bool, stop: &Stop) -> Result<ExitCode> {
+pub fn replay_run(
+    recorded: &Path,
+    out: &Path,
+    progress: &fdi_common::observe::Observer,
+    stop: &Stop,
+) -> Result<Replayed> {
     let summary_path = RunDir::new(recorded).summary();
     // Bounded, and only from a regular file, like scenario files.
     let text = scenario::read_limited(&summary_path).map_err(anyhow::Error::msg)?;
@@ -299,7 +319,7 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool, stop: &Stop) -> Resul
                 &r,
                 &crate::run::runtime::IpcOptions {
                     run_dir: dir.clone(),
-                    progress: !json,
+                    progress: progress.clone(),
                     replay: true,
                     placement: crate::run::runtime::Placement::default(),
                     pipes: false,
@@ -314,34 +334,12 @@ pub fn replay_run(recorded: &Path, out: &Path, json: bool, stop: &Stop) -> Resul
     let mut joined = fdi_report::join::join_run(&r, &dir, outcome.wall_s, |_| {})?;
     joined.summary.engine = "replay".into();
     for w in &joined.warnings {
-        eprintln!("fdi-launch: warning: {w}");
+        log::warn!("{w}");
     }
     fdi_report::output::write_summary(&dir, &joined.summary)?;
-    let want = &recorded_summary.trace_digest;
-    let got = &joined.summary.trace_digest;
-    let matches = want == got;
-    if json {
-        let mut v = serde_json::to_value(&joined.summary)?;
-        v["run_dir"] = serde_json::Value::String(dir.display().to_string());
-        v["replay_of"] = serde_json::Value::String(recorded.display().to_string());
-        v["recorded_trace_digest"] = serde_json::Value::String(want.clone());
-        v["digests_match"] = serde_json::Value::Bool(matches);
-        println!("{v}");
-    } else {
-        println!("recorded trace digest {want}");
-        println!("replayed trace digest {got}");
-        println!(
-            "{}",
-            ["digests DIFFER", "digests match"][usize::from(matches)]
-        );
-        println!("run directory {}", dir.display());
-    }
-    if matches {
-        Ok(ExitCode::SUCCESS)
-    } else {
-        eprintln!(
-            "fdi-launch: the replayed control center differs from the recording ({got} ≠ {want})"
-        );
-        Ok(ExitCode::FAILURE)
-    }
+    Ok(Replayed {
+        summary: joined.summary,
+        dir,
+        recorded_trace_digest: recorded_summary.trace_digest,
+    })
 }

@@ -13,8 +13,7 @@
 use std::io;
 use std::path::{Path, PathBuf};
 
-use anyhow::{bail, Context, Result};
-use bytesize::ByteSize;
+use anyhow::{Context, Result};
 
 use super::disk::usage_of;
 
@@ -268,79 +267,6 @@ pub fn prune(out: &Path, keep: usize, dry_run: bool) -> Result<Pruned> {
         }
     }
     Ok(pruned)
-}
-
-/// How many causes of one run directory are printed (the rest are counted).
-const CAUSES_SHOWN: usize = 5;
-
-/// `runs prune`, printed. An error at the end when something could not be removed whole (each
-/// named on stderr with its cause).
-pub fn print_prune(out: &Path, keep: usize, dry_run: bool) -> Result<()> {
-    if !out.is_dir() {
-        bail!("{}: not a folder of run directories", out.display());
-    }
-    let p = prune(out, keep, dry_run)?;
-    let verb = if dry_run { "would remove" } else { "removed" };
-    for r in &p.removed {
-        println!(
-            "{verb} {} ({}, {})",
-            r.path.display(),
-            ByteSize::b(r.bytes),
-            r.status
-        );
-    }
-    for t in &p.cleared {
-        println!(
-            "{verb} {} (left half-removed by an earlier prune)",
-            t.display()
-        );
-    }
-    for f in &p.failed {
-        for (path, e) in f.causes.iter().take(CAUSES_SHOWN) {
-            eprintln!(
-                "fdi-launch: could not remove {}: {}",
-                path.display(),
-                fdi_report::io_cause::describe(e)
-            );
-        }
-        if f.causes.len() > CAUSES_SHOWN {
-            eprintln!(
-                "fdi-launch: … and {} more paths under {}",
-                f.causes.len() - CAUSES_SHOWN,
-                f.left.display()
-            );
-        }
-        if f.left == f.path {
-            eprintln!("fdi-launch: {} is left as it was", f.path.display());
-        } else {
-            eprintln!(
-                "fdi-launch: what is left of {} stays as {} (`runs list` shows it, the next `runs prune` tries again)",
-                f.path.display(),
-                f.left.display()
-            );
-        }
-    }
-    let freed: u64 = p.removed.iter().map(|r| r.bytes).sum();
-    println!(
-        "{verb} {} run directories, {} {}; kept the {} newest",
-        p.removed.len(),
-        ByteSize::b(freed),
-        if dry_run { "would be freed" } else { "freed" },
-        p.kept
-    );
-    if !p.failed.is_empty() {
-        let names: Vec<String> = p
-            .failed
-            .iter()
-            .map(|f| f.left.display().to_string())
-            .collect();
-        bail!(
-            "{} run directories could not be removed whole (the paths and causes are above): {}",
-            p.failed.len(),
-            names.join(", ")
-        );
-    }
-    Ok(())
 }
 
 #[cfg(test)]

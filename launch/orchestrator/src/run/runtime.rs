@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{bail, Context, Result};
 use fdi_common::engine::LostAgent;
+use fdi_common::observe::{Finish, Observer, Progress, Work};
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::stop::{Interrupted, Stop, BEFORE_THE_START};
@@ -15,7 +16,6 @@ use fdi_runtime::ipc::{
     Stream, Transport, Wake, Waker as _,
 };
 use fdi_runtime::process::procfs;
-use indicatif::{ProgressBar, ProgressDrawTarget, ProgressState, ProgressStyle};
 
 use crate::run::supervisor::{Child, Supervisor};
 
@@ -146,7 +146,8 @@ struct Supervised {
 pub struct IpcOptions {
     /// The run directory: `scenario.toml` is read from it, traces go to `traces/`.
     pub run_dir: PathBuf,
-    pub progress: bool,
+    /// Told the run's ticks as the control center reports them.
+    pub progress: Observer,
     /// Replay mode (`run --replay`): only the control center runs, fed by a replayer process
     /// that plays back `traces/attacker.trace` of `run_dir` (already copied there).
     pub replay: bool,
@@ -199,7 +200,7 @@ impl<X: Transport> Launcher<X> {
 
     /// A host of a split run that is gone: before the start or in lockstep it ends the run
     /// (its message); in a started realtime run its agents are lost and the run goes on.
-    fn host_lost(&mut self, done: &mut [bool], bar: &ProgressBar) -> Option<String> {
+    fn host_lost(&mut self, done: &mut [bool], bar: &dyn Progress) -> Option<String> {
         if let Some(failed) = self.remote.as_ref()?.failure() {
             return Some(failed);
         }
@@ -232,15 +233,10 @@ impl<X: Transport> Launcher<X> {
                 }),
             }
         }
-        let line = format!(
-            "fdi-launch: {}; its agents are lost, the run goes on",
+        bar.line(&format!(
+            "{}; its agents are lost, the run goes on",
             lost.message()
-        );
-        if bar.is_hidden() {
-            eprintln!("{line}");
-        } else {
-            bar.println(line);
-        }
+        ));
         None
     }
 
@@ -358,7 +354,7 @@ impl<X: Transport> Launcher<X> {
 
     /// Reads the processes' status reports: progress (the control center's), done, agents
     /// lost and rejoined (realtime).
-    fn take_status(&mut self, done: &mut [bool], bar: &ProgressBar, dt: f64) -> Result<()> {
+    fn take_status(&mut self, done: &mut [bool], bar: &dyn Progress, dt: f64) -> Result<()> {
         let (mut lost, mut rejoined) = (Vec::new(), Vec::new());
         let procs = &self.procs;
         let progress = &mut self.progress;
@@ -374,7 +370,7 @@ impl<X: Transport> Launcher<X> {
                 progress.1 = Instant::now();
             }
             if Role::from_code(m.role) == Some(Role::Center) {
-                bar.set_position(m.tick);
+                bar.at(m.tick);
             }
             if m.kind == StatusMsg::DONE {
                 if let Some(i) = procs.iter().position(|p| matches_status(p.meta.wake, &m)) {
@@ -407,8 +403,8 @@ impl<X: Transport> Launcher<X> {
                     rejoined_t_s: None,
                 }),
             }
-            bar.println(format!(
-                "fdi-launch: agent {agent} lost at t = {t:.3} s; the run goes on"
+            bar.line(&format!(
+                "agent {agent} lost at t = {t:.3} s; the run goes on"
             ));
         }
         for (agent, t) in rejoined {
@@ -426,9 +422,7 @@ impl<X: Transport> Launcher<X> {
             let gap = x.t_s.map_or(String::new(), |from| {
                 format!(" after a gap of {:.3} s", t - from)
             });
-            bar.println(format!(
-                "fdi-launch: agent {agent} rejoined at t = {t:.3} s{gap}"
-            ));
+            bar.line(&format!("agent {agent} rejoined at t = {t:.3} s{gap}"));
         }
         Ok(())
     }
@@ -494,7 +488,7 @@ impl<X: Transport> Launcher<X> {
         self.procs.kill_rest();
         // What the programs outside the project started goes with them, named.
         for line in self.procs.end_programs(GRACE) {
-            eprintln!("fdi-launch: {line}");
+            log::info!("{line}");
         }
     }
 }
@@ -638,7 +632,7 @@ fn run_and_tear_down<X: Transport>(
     // Every child has exited: what they printed is relayed whole before we go on, unless
     // a process that left a program's group still holds its output.
     for line in launcher.procs.drain_stderr(OUTPUT_WAIT) {
-        eprintln!("fdi-launch: warning: {line}");
+        log::warn!("{line}");
     }
     let (remote_left, hosts, network) = release_remote(opts, launcher);
     let r = match r {
@@ -700,12 +694,12 @@ fn release_remote<X: Transport>(
         hosts.extend(remote.describe());
         if launcher.started {
             for p in remote.fetch_traces(&opts.run_dir) {
-                eprintln!("fdi-launch: warning: {p}");
+                log::warn!("{p}");
             }
         }
         let released = remote.release();
         for p in released.problems {
-            eprintln!("fdi-launch: warning: {p}");
+            log::warn!("{p}");
         }
         remote_left = released.leftovers;
         network = Some(released.network);
@@ -727,24 +721,24 @@ fn spawn_and_supervise<X: Transport>(
     await_ready(l)?;
     spawn_externals(resolved, opts, prefix, scenario_path, l)?;
     await_ready(l)?;
-    let bar = progress_bar(
-        resolved.ticks(),
-        resolved.scenario.control_period_s,
-        opts.progress,
-    );
+    let bar = &*opts.progress;
+    bar.begin(Work::Ticks {
+        total: resolved.ticks(),
+        period_s: resolved.scenario.control_period_s,
+    });
     if let Some(remote) = &l.remote {
         remote.await_routes()?;
     }
     let started = start_run(resolved, transport, l)?;
     let stall_timeout = stall_timeout_of(resolved, l.remote.as_ref(), opts.pace);
-    let (wall_s, interrupted) = supervise(resolved, l, &bar, started, stall_timeout)?;
+    let (wall_s, interrupted) = supervise(resolved, l, bar, started, stall_timeout)?;
     if interrupted.is_some() {
         return Ok(Supervised {
             wall_s,
             interrupted,
         });
     }
-    bar.finish_and_clear();
+    bar.finish(Finish::Done);
     release_and_reap(l)?;
     Ok(Supervised {
         wall_s,
@@ -796,7 +790,7 @@ fn spawn_roles<X: Transport>(
             .with_context(|| format!("reading {}", scenario_path.display()))?;
         remote.start_hosts(&scenario, remote_procs, &mut l.procs)?;
         for line in remote.describe() {
-            eprintln!("fdi-launch: {line}");
+            log::info!("{line}");
         }
     }
     Ok(())
@@ -975,7 +969,7 @@ fn await_ready<X: Transport>(l: &mut Launcher<X>) -> Result<()> {
         if let Some(stall) = l.stalled() {
             bail!("{stall} (before the start)");
         }
-        if let Some(lost) = l.host_lost(&mut [], &ProgressBar::hidden()) {
+        if let Some(lost) = l.host_lost(&mut [], &fdi_common::observe::Quiet) {
             bail!("{lost} (before the start)");
         }
         // The run's own processes get READY_TIMEOUT; a program outside the project its
@@ -1048,7 +1042,7 @@ fn start_run<X: Transport>(
 fn supervise<X: Transport>(
     resolved: &Resolved,
     l: &mut Launcher<X>,
-    bar: &ProgressBar,
+    bar: &dyn Progress,
     started: Instant,
     stall_timeout: Duration,
 ) -> Result<(f64, Option<i32>)> {
@@ -1060,7 +1054,7 @@ fn supervise<X: Transport>(
     let mut own_done: Option<Instant> = None;
     let interrupted = |l: &mut Launcher<X>| {
         l.interrupt().map(|signal| {
-            bar.abandon();
+            bar.finish(Finish::Stopped);
             l.teardown();
             (started.elapsed().as_secs_f64(), Some(signal))
         })
@@ -1073,7 +1067,7 @@ fn supervise<X: Transport>(
         }
         l.take_status(&mut done, bar, dt)?;
         if let Some(lost) = l.host_lost(&mut done, bar) {
-            bar.abandon();
+            bar.finish(Finish::Stopped);
             bail!("run stopped: {lost}");
         }
         if let Some(failed) = l.poll_children() {
@@ -1082,11 +1076,11 @@ fn supervise<X: Transport>(
             if let Some(end) = interrupted(l) {
                 return Ok(end);
             }
-            bar.abandon();
+            bar.finish(Finish::Stopped);
             bail!("run stopped: {failed}");
         }
         if let Some(early) = l.ended_early(&mut done)? {
-            bar.abandon();
+            bar.finish(Finish::Stopped);
             bail!("run stopped: {early}");
         }
         // The simulation ends when every process has reported done (its trace is flushed by
@@ -1098,16 +1092,16 @@ fn supervise<X: Transport>(
             return Ok((started.elapsed().as_secs_f64(), None));
         }
         if let Some(late) = l.external_late(&done, &mut own_done) {
-            bar.abandon();
+            bar.finish(Finish::Stopped);
             bail!("run stopped: {late}");
         }
         if let Some(stall) = l.stalled() {
-            bar.abandon();
+            bar.finish(Finish::Stopped);
             l.teardown();
             bail!("run stalled: {stall} (processes: {})", l.exits());
         }
         if let Some(stall) = l.no_progress(resolved, stall_timeout) {
-            bar.abandon();
+            bar.finish(Finish::Stopped);
             let waiting = l.not_done(&done);
             l.teardown();
             bail!(
@@ -1188,56 +1182,8 @@ fn matches_status(wake: Wake, m: &StatusMsg) -> bool {
     }
 }
 
-/// The bar of a run of `ticks` ticks of `dt` s: the simulated time and the speed come from its
-/// position (the control center's last tick), so that the first frame shows them too
-/// (`sim 0.0 s`), and the speed is a whole number of ticks per second with the share of real
-/// time (`33420 ticks/s, 33.4× real time`; indicatif's own `{per_sec}` shows `33,420.1417/s`).
-fn progress_bar(ticks: u64, dt: f64, enabled: bool) -> ProgressBar {
-    if !enabled {
-        return ProgressBar::hidden();
-    }
-    let bar = ProgressBar::with_draw_target(Some(ticks), ProgressDrawTarget::stderr());
-    let style = ProgressStyle::with_template(
-        "{spinner} [{elapsed_precise}] {bar:30} sim {sim} | {pos}/{len} ticks | {speed} | ETA {eta}",
-    )
-    .map(|s| {
-        s.with_key("sim", move |st: &ProgressState, w: &mut dyn std::fmt::Write| {
-            let _ = write!(w, "{:.1} s", st.pos() as f64 * dt);
-        })
-        .with_key("speed", move |st: &ProgressState, w: &mut dyn std::fmt::Write| {
-            let _ = write!(w, "{}", speed(st.per_sec(), dt));
-        })
-    })
-    .unwrap_or_else(|_| ProgressStyle::default_bar());
-    bar.set_style(style);
-    bar
-}
-
-/// A run's speed in words: `33420 ticks/s, 33.4× real time` (`… ticks/s` alone before the
-/// first estimate or with a period of 0).
-fn speed(ticks_per_s: f64, dt: f64) -> String {
-    let real = ticks_per_s * dt;
-    if ticks_per_s.is_finite() && ticks_per_s > 0.0 && real.is_finite() && real > 0.0 {
-        format!("{ticks_per_s:.0} ticks/s, {real:.1}× real time")
-    } else {
-        "… ticks/s".into()
-    }
-}
-
 #[cfg(test)]
 mod tests {
-    /// Regression (issue 33): the bar showed `33,420.1417/s`.
-    #[test]
-    fn the_speed_is_whole_ticks_per_second_and_the_share_of_real_time() {
-        assert_eq!(
-            super::speed(33_420.141_7, 1e-3),
-            "33420 ticks/s, 33.4× real time"
-        );
-        assert_eq!(super::speed(950.6, 1e-3), "951 ticks/s, 1.0× real time");
-        assert_eq!(super::speed(0.0, 1e-3), "… ticks/s");
-        assert_eq!(super::speed(f64::NAN, 1e-3), "… ticks/s");
-    }
-
     /// Regression (issue 51): a valid realtime run of one 40 s tick reports its progress once,
     /// at its end, and was stopped as stalled by the 10 s watchdog. A realtime run's stall
     /// timeout is at least twice the wall time between two of its reports, plus the 10 s.

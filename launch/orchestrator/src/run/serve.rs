@@ -9,7 +9,6 @@ use fdi_common::stop::Stop;
 use std::collections::BTreeMap;
 use std::os::unix::process::ExitStatusExt;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{mpsc, Arc};
 use std::time::{Duration, Instant};
@@ -30,23 +29,19 @@ use crate::run::hosts::{
 use crate::run::supervisor::Supervisor;
 use crate::run::trace_stream::Streamer;
 
-/// `fdi-launch serve`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct ServeArgs {
+/// A host's share of split runs (`fdi-launch serve`).
+#[derive(Debug, Clone)]
+pub struct ServeOptions {
     /// The deployment file: the lab's hosts, their endpoints and certificates. The serve
     /// listens on its own host's endpoint and takes runs only from the lab's hosts.
-    #[arg(long)]
     pub hosts: PathBuf,
     /// This host's name, as the deployment file names it (`hosts.<name>`).
-    #[arg(long)]
     pub name: String,
     /// Where a run's processes keep their traces until the coordinator has them (a folder per
-    /// run, removed at its release, or by the next serve if this one is killed). Default: the
+    /// run, removed at its release, or by the next serve if this one is killed). `None`: the
     /// system's temporary folder.
-    #[arg(long)]
     pub work_dir: Option<PathBuf>,
-    /// Serve this many runs, then exit (default: until interrupted).
-    #[arg(long)]
+    /// Serve this many runs, then return (`None`: until the stop is raised).
     pub runs: Option<u64>,
 }
 
@@ -72,7 +67,9 @@ struct Owner {
     prefix: String,
 }
 
-pub fn serve(args: &ServeArgs, stop: &Stop) -> Result<ExitCode> {
+/// Serves split runs until `stop` is raised (or `runs` were served); says what it does
+/// (`log`).
+pub fn serve(args: &ServeOptions, stop: &Stop) -> Result<()> {
     net::check_host_name(&args.name).map_err(|e| anyhow::anyhow!("--name: {e}"))?;
     let lab = Lab::load(&args.hosts)?;
     let me = lab.host(&args.name)?.clone();
@@ -80,7 +77,7 @@ pub fn serve(args: &ServeArgs, stop: &Stop) -> Result<ExitCode> {
     std::fs::create_dir_all(&base)
         .with_context(|| format!("creating the work folder {}", base.display()))?;
     for line in reap_stale(&base) {
-        eprintln!("fdi-launch serve: {line}");
+        log::info!("{line}");
     }
     let net = Net::open(&NetConfig {
         listen: vec![me.endpoint.clone()],
@@ -89,12 +86,12 @@ pub fn serve(args: &ServeArgs, stop: &Stop) -> Result<ExitCode> {
     })
     .with_context(|| format!("host `{}`", me.name))?;
     if let Some(warning) = net.unfiltered() {
-        eprintln!("fdi-launch serve: warning: {warning}");
+        log::warn!("{warning}");
     }
     let _token = net.token(&keys::serve(&me.name))?;
     let requests = net.requests(&keys::run_requests(&me.name))?;
-    eprintln!(
-        "fdi-launch serve: host `{}` listens on {} ({}); waiting for runs (Ctrl-C stops)",
+    log::info!(
+        "host `{}` listens on {} ({}); waiting for runs (Ctrl-C stops)",
         me.name,
         me.endpoint,
         if lab.authenticated() {
@@ -115,11 +112,8 @@ pub fn serve(args: &ServeArgs, stop: &Stop) -> Result<ExitCode> {
             continue;
         };
         match serving.run(request, &requests, stop) {
-            Ok(said) => eprintln!("fdi-launch serve: {said}"),
-            Err(e) => eprintln!(
-                "fdi-launch serve: {}",
-                fdi_report::output::describe_error(&e)
-            ),
+            Ok(said) => log::info!("{said}"),
+            Err(e) => log::info!("{}", fdi_report::output::describe_error(&e)),
         }
         served += 1;
         if args.runs.is_some_and(|n| served >= n) {
@@ -127,13 +121,13 @@ pub fn serve(args: &ServeArgs, stop: &Stop) -> Result<ExitCode> {
         }
     }
     if let Some(sig) = stop.take() {
-        eprintln!(
-            "fdi-launch serve: host `{}` stops ({})",
+        log::info!(
+            "host `{}` stops ({})",
             me.name,
             crate::run::runtime::signal_name(sig)
         );
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(())
 }
 
 /// Removes the work folders in `base` of runs whose serve is gone (killed before it could
@@ -216,8 +210,8 @@ impl Serving<'_> {
         let result = match started {
             Ok((run, reply)) => {
                 let labels: Vec<&str> = run.reply.pids.iter().map(|(l, _)| l.as_str()).collect();
-                eprintln!(
-                    "fdi-launch serve: run {} of `{}`: started {}",
+                log::info!(
+                    "run {} of `{}`: started {}",
                     r.prefix,
                     r.coordinator,
                     labels.join(", ")
@@ -239,10 +233,7 @@ impl Serving<'_> {
         // However the run ended here (its processes and bridge are gone by now), nothing of it
         // stays on this host.
         if let Err(e) = Shm::remove_leftovers(&r.prefix) {
-            eprintln!(
-                "fdi-launch serve: run {}: removing its files: {e}",
-                r.prefix
-            );
+            log::info!("run {}: removing its files: {e}", r.prefix);
         }
         result.map_err(|e| e.context(format!("run {}", r.prefix)))
     }
@@ -631,7 +622,7 @@ impl HostRun {
     fn tell_trouble(&mut self, failed: &mut bool) {
         if let Some(text) = self.bridge.as_ref().and_then(|b| b.failure()) {
             if !std::mem::replace(failed, true) {
-                eprintln!("fdi-launch serve: run {}: {text}", self.prefix);
+                log::info!("run {}: {text}", self.prefix);
                 self.send(&HostEvent::Failed { text });
             }
         }
@@ -722,7 +713,7 @@ impl HostRun {
         self.procs.kill_rest();
         self.report_exits();
         for line in self.procs.drain_stderr(crate::run::runtime::OUTPUT_WAIT) {
-            eprintln!("fdi-launch serve: warning: {line}");
+            log::warn!("{line}");
         }
     }
 

@@ -156,7 +156,7 @@ fn stream(mut streams: Vec<Stream>, stop: &AtomicBool) {
             match s.step(&mut buf) {
                 Ok(g) => grew |= g,
                 Err(e) => {
-                    eprintln!("fdi-launch serve: the live view's stream stopped: {e:#}");
+                    log::info!("the live view's stream stopped: {e:#}");
                     return;
                 }
             }

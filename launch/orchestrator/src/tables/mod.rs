@@ -3,12 +3,11 @@
 use fdi_common::stop::Stop;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use clap::Args;
 use fdi_common::delay::DelayProfile;
 use fdi_common::engine::RunSummary;
+use fdi_common::observe::Observer;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 use serde::Serialize;
 
@@ -20,35 +19,27 @@ use plotters::style::RGBColor;
 mod verdict;
 use verdict::{Cell, Verdict};
 
-#[derive(Debug, Args)]
-pub struct TableArgs {
-    #[arg(long, value_enum, default_value_t = Engine::Ipc)]
+/// How to make Table I or II (`fdi-launch table1`, `table2`).
+#[derive(Debug, Clone)]
+pub struct TableOptions {
     pub engine: Engine,
-    /// Base scenario (default: the embedded paper scenario): its robots, gains and numerics. Its
-    /// attack and duration are replaced by the table's (the paper's attack, 40 s), and the header
-    /// names what differs from the paper's calibration.
-    #[arg(long, value_name = "FILE")]
+    /// Base scenario (`None`: the embedded paper scenario): its robots, gains and numerics. Its
+    /// attack and duration are replaced by the table's (the paper's attack, 40 s), and the
+    /// header names what differs from the paper's calibration.
     pub scenario: Option<PathBuf>,
-    #[command(flatten)]
     pub numerics: crate::request::NumericsArgs,
-    #[command(flatten)]
     pub set: crate::request::SetArgs,
-    /// Print JSON instead of markdown.
-    #[arg(long)]
-    pub json: bool,
     /// Shorten every run to this many seconds (the paper's tables use 40 s).
-    #[arg(long, allow_negative_numbers = true)]
     pub duration_s: Option<f64>,
     /// Folder that receives the table's run directories.
-    #[arg(long, default_value = "runs")]
     pub out: PathBuf,
     /// Run every entry with N seeds (the scenario's seed, seed + 1, …, seed + N − 1) and give
     /// each cell as mean ± 95 % confidence interval (Student t) over them.
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..=10_000))]
     pub seeds: Option<u32>,
-    /// With --seeds: runs at a time (default: the number of CPUs).
-    #[arg(long, requires = "seeds")]
+    /// With `seeds`: runs at a time (default: the number of CPUs).
     pub jobs: Option<std::num::NonZeroUsize>,
+    /// Told the runs' progress.
+    pub progress: Observer,
 }
 
 /// Table I of the paper: (robot, traditional, proposed) RMSE in rad.
@@ -98,7 +89,7 @@ struct Table2Row {
 /// and numerics options that differ from the paper's calibration. Every table shows it in its
 /// header (markdown), a leading `#` comment (CSV) and a `made_with` field (JSON).
 #[derive(Debug, Clone, Serialize)]
-pub(crate) struct MadeWith {
+pub struct MadeWith {
     /// `the embedded paper scenario` or the file given.
     pub scenario: String,
     /// What the table replaced in the base scenario, e.g. `attack `none` → `paper``.
@@ -112,7 +103,7 @@ pub(crate) struct MadeWith {
 /// A field that a table sets itself in every run (its keys, the indices left out:
 /// `agents.delay` is every agent's delay), and what the table does with it: `--set` there is
 /// refused, as the table would silently undo it.
-pub(crate) struct Owned {
+pub struct Owned {
     pub keys: &'static [&'static str],
     pub why: &'static str,
 }
@@ -149,7 +140,7 @@ fn refuse_owned(set: &crate::request::SetArgs, owned: &[Owned]) -> Result<()> {
 }
 
 /// The fields Tables I and II set themselves.
-fn owned_by_tables(args: &TableArgs) -> Vec<Owned> {
+fn owned_by_tables(args: &TableOptions) -> Vec<Owned> {
     let mut owned = vec![
         Owned {
             keys: &["attack"],
@@ -246,7 +237,7 @@ impl MadeWith {
 
 /// The base scenario of Tables I and II: the given one (or the paper's), under the paper's
 /// attack, for the paper's 40 s unless `--duration-s` says otherwise.
-fn base(args: &TableArgs, owned: &[Owned]) -> Result<(Resolved, MadeWith)> {
+fn base(args: &TableOptions, owned: &[Owned]) -> Result<(Resolved, MadeWith)> {
     let (mut r, mut made) =
         MadeWith::load(args.scenario.as_deref(), &args.numerics, &args.set, owned)?;
     let paper = scenario::paper()?;
@@ -317,7 +308,7 @@ fn robots(r: &Resolved) -> Vec<u32> {
 /// Runs one table entry; ipc runs keep their run directory under the table's folder.
 fn run_case(
     r: &Resolved,
-    args: &TableArgs,
+    args: &TableOptions,
     dir: &std::path::Path,
     case: &str,
     progress: bool,
@@ -336,7 +327,14 @@ fn run_case(
                     r,
                     args.engine,
                     Some(&d),
-                    &crate::run::Options { progress, ..quiet },
+                    &crate::run::Options {
+                        progress: if progress {
+                            args.progress.clone()
+                        } else {
+                            Observer::quiet()
+                        },
+                        ..quiet
+                    },
                 ),
             )
             .and_then(crate::run::require_whole)?;
@@ -344,8 +342,8 @@ fn run_case(
                 if e.downcast_ref::<fdi_common::stop::Interrupted>().is_some() {
                     return Err(e);
                 }
-                eprintln!(
-                    "fdi-launch: warning: the report of {} could not be made: {}",
+                log::warn!(
+                    "the report of {} could not be made: {}",
                     d.display(),
                     fdi_report::output::describe_error(&e)
                 );
@@ -357,7 +355,7 @@ fn run_case(
 
 /// The folder of one table: `<out>/<timestamp>-<name>`, then the `--set` edits
 /// (`-controller_beta_10`).
-fn table_dir(args: &TableArgs, name: &str) -> PathBuf {
+fn table_dir(args: &TableOptions, name: &str) -> PathBuf {
     args.out.join(format!(
         "{}-{}",
         crate::run_dirs::timestamp(),
@@ -381,7 +379,9 @@ fn robot_rmse(s: &RunSummary, robot: u32) -> f64 {
         .unwrap_or(f64::NAN)
 }
 
-pub fn table1(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
+/// Table I: every robot's RMSE under the traditional and the proposed controller, beside the
+/// paper's; written into its folder, returned.
+pub fn table1(args: &TableOptions, stop: &Stop) -> Result<Table> {
     let mut owned = owned_by_tables(args);
     owned.push(Owned {
         keys: &["controller", "mode"],
@@ -395,7 +395,7 @@ pub fn table1(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
     let run_mode = |mode: ControllerMode| {
         let mut r = base.clone();
         r.scenario.controller.mode = mode;
-        run_case(&r, args, &dir, mode.as_str(), !args.json, stop)
+        run_case(&r, args, &dir, mode.as_str(), true, stop)
     };
     let traditional = run_mode(ControllerMode::Traditional)?;
     let proposed = run_mode(ControllerMode::Proposed)?;
@@ -408,8 +408,10 @@ pub fn table1(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
         json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows, "verdict": verdict }),
         chart: table1_chart(args.engine, &rows),
         made,
+        dir,
     };
-    table.publish(args.json, &dir)
+    table.write()?;
+    Ok(table)
 }
 
 /// Table I's rows: the base scenario's robots, their RMSE in the two runs beside the paper's.
@@ -602,8 +604,8 @@ pub(crate) fn rmse_chart(
     }
 }
 
-/// One table as written and printed.
-pub(crate) struct Table {
+/// One table: what is written into its folder, and what the command line prints.
+pub struct Table {
     /// File stem: `table1`, `table2`, `attacks`.
     pub name: &'static str,
     /// The markdown, without the leading `# ` of its file.
@@ -614,24 +616,14 @@ pub(crate) struct Table {
     pub chart: BarChart,
     /// How the table was made.
     pub made: MadeWith,
+    /// The folder it is written into.
+    pub dir: PathBuf,
 }
 
 impl Table {
-    /// Writes the table into `dir` and prints it: its JSON with `--json`, else its markdown
-    /// and where it was written.
-    pub fn publish(&self, json: bool, dir: &Path) -> Result<ExitCode> {
-        self.write(dir)?;
-        if json {
-            println!("{}", self.json);
-        } else {
-            print!("{}", self.md);
-            println!("\ntable written to {}", dir.display());
-        }
-        Ok(ExitCode::SUCCESS)
-    }
-
-    /// Writes `<name>.md`, `.csv`, `.json` and the bar chart (`.png`, `.svg`) into `dir`.
-    fn write(&self, dir: &Path) -> Result<()> {
+    /// Writes `<name>.md`, `.csv`, `.json` and the bar chart (`.png`, `.svg`) into its folder.
+    pub(crate) fn write(&self) -> Result<()> {
+        let dir = &self.dir;
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let write = |ext: &str, bytes: &[u8]| -> Result<()> {
             let p = dir.join(format!("{}.{ext}", self.name));
@@ -653,7 +645,9 @@ impl Table {
     }
 }
 
-pub fn table2(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
+/// Table II: robot 1's RMSE under the paper's four delays, beside the paper's; written into
+/// its folder, returned.
+pub fn table2(args: &TableOptions, stop: &Stop) -> Result<Table> {
     let mut owned = owned_by_tables(args);
     for keys in [&["agents", "delay"][..], &["defaults", "delay"]] {
         owned.push(Owned {
@@ -671,7 +665,7 @@ pub fn table2(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
     let mut rows = Vec::new();
     for (case, delay, paper_rmse) in paper_table2() {
         let r = table2_case(&base, delay);
-        let summary = run_case(&r, args, &dir, case, !args.json, stop)?;
+        let summary = run_case(&r, args, &dir, case, true, stop)?;
         rows.push(Table2Row {
             case,
             tau_ms: delay.describe_ms(),
@@ -687,8 +681,10 @@ pub fn table2(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
         json: serde_json::json!({ "engine": args.engine.as_str(), "made_with": made, "rows": rows, "verdict": verdict }),
         chart: table2_chart(args.engine, &rows),
         made,
+        dir,
     };
-    table.publish(args.json, &dir)
+    table.write()?;
+    Ok(table)
 }
 
 /// Table II is robot 1's: a base scenario without an agent 1 is refused, naming the file.
@@ -850,7 +846,7 @@ mod seeded {
 
     /// Runs every (scenario, case name) in parallel; every run must be whole.
     fn run_all(
-        args: &TableArgs,
+        args: &TableOptions,
         dir: &Path,
         cases: &[(Resolved, String)],
         stop: &Stop,
@@ -862,6 +858,7 @@ mod seeded {
             cases,
             workers,
             "runs",
+            &*args.progress,
             stop,
             |(r, case)| {
                 run_case(r, args, dir, case, false, stop).with_context(|| format!("the run {case}"))
@@ -926,13 +923,13 @@ mod seeded {
 
     /// Table I over seeds: each robot's RMSE, traditional and proposed, over `n` seeds.
     pub fn table1(
-        args: &TableArgs,
+        args: &TableOptions,
         paper: &Resolved,
         made: &MadeWith,
         dir: &Path,
         n: u32,
         stop: &Stop,
-    ) -> Result<ExitCode> {
+    ) -> Result<Table> {
         let seeds = seeds(paper.scenario.seed, n)?;
         let cases = cases1(paper, &seeds);
         let summaries = run_all(args, dir, &cases, stop)?;
@@ -1068,13 +1065,13 @@ mod seeded {
     /// Table II over seeds: robot 1's RMSE under each of the paper's delay cases, over `n`
     /// seeds.
     pub fn table2(
-        args: &TableArgs,
+        args: &TableOptions,
         paper: &Resolved,
         made: &MadeWith,
         dir: &Path,
         n: u32,
         stop: &Stop,
-    ) -> Result<ExitCode> {
+    ) -> Result<Table> {
         let seeds = seeds(paper.scenario.seed, n)?;
         let compare = is_papers_robot(paper, 1, false);
         let mut cases = Vec::new();
@@ -1176,17 +1173,17 @@ mod seeded {
         .context("writing table2.csv")
     }
 
-    /// Writes and prints a seeded table: its chart titled with the seeds (`over`, as words),
+    /// Writes a seeded table and returns it: its chart titled with the seeds (`over`, as words),
     /// its JSON with the engine, the seeds, the confidence level and the rows.
     fn publish<R: Serialize>(
-        args: &TableArgs,
+        args: &TableOptions,
         dir: &Path,
         name: &'static str,
         (md, csv, mut chart): (String, Vec<u8>, BarChart),
         made: &MadeWith,
         (over, seeds): (&str, &[u64]),
         (rows, verdict): (&R, &Verdict),
-    ) -> Result<ExitCode> {
+    ) -> Result<Table> {
         chart.title = format!("{} (mean over {over})", chart.title);
         let table = Table {
             name,
@@ -1202,8 +1199,10 @@ mod seeded {
             }),
             chart,
             made: made.clone(),
+            dir: dir.to_path_buf(),
         };
-        table.publish(args.json, dir)
+        table.write()?;
+        Ok(table)
     }
 }
 

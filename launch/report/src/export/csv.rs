@@ -38,7 +38,7 @@ use super::sources::{
 };
 use crate::columns;
 
-pub(super) fn export(run_dir: &Path) -> Result<()> {
+pub(super) fn export(run_dir: &Path, said: &mut dyn FnMut(&str)) -> Result<()> {
     let files = trace_files(run_dir)?;
     let dir = OutDir::open(run_dir)?;
     // Every CSV is written into a temporary folder in `RUN_DIR/export` (removed when dropped),
@@ -53,7 +53,7 @@ pub(super) fn export(run_dir: &Path) -> Result<()> {
                 tmp: tmp.path().to_path_buf(),
                 dir: dir.path.clone(),
             };
-            let failures = write(run_dir, &files, &out)?;
+            let failures = write(run_dir, &files, &out, said)?;
             out.commit()?;
             Ok(failures)
         });
@@ -89,14 +89,23 @@ impl Out {
 /// Writes every CSV of `files` (the traces of `run_dir`) into `out.tmp`, then the detectors'
 /// statistics. The failures of traces that could not be exported whole (their files hold what
 /// was read before); an error ends the export.
-fn write(run_dir: &Path, files: &[PathBuf], out: &Out) -> Result<Vec<String>> {
+fn write(
+    run_dir: &Path,
+    files: &[PathBuf],
+    out: &Out,
+    said: &mut dyn FnMut(&str),
+) -> Result<Vec<String>> {
     let mut events = Csv::create(out, "events.csv", &["process", "t_s", "message"])?;
     let mut failures = Vec::new();
     let mut run: Option<RunInfo> = None;
     for f in files {
         let mut n = 0;
         match export_file(f, out, &mut events, &mut run, &mut n) {
-            Ok(()) => println!("{} -> {}: {n} records", f.display(), out.dir.display()),
+            Ok(()) => said(&format!(
+                "{} -> {}: {n} records",
+                f.display(),
+                out.dir.display()
+            )),
             Err(e) if write_failure(&e).is_some() => return Err(e),
             Err(e) if n > 0 => failures.push(format!(
                 "{e:#} (the {n} records before it are exported to {})",
@@ -109,8 +118,11 @@ fn write(run_dir: &Path, files: &[PathBuf], out: &Out) -> Result<Vec<String>> {
     if let Some(info) = &run {
         let path = out.dir.join(DETECTORS_CSV);
         match detectors_csv(run_dir, info, out) {
-            Ok(Ok(n)) => println!("detector statistics -> {}: {n} ticks", path.display()),
-            Ok(Err(none)) => println!("{}: {none}", out.dir.display()),
+            Ok(Ok(n)) => said(&format!(
+                "detector statistics -> {}: {n} ticks",
+                path.display()
+            )),
+            Ok(Err(none)) => said(&format!("{}: {none}", out.dir.display())),
             Err(e) if write_failure(&e).is_some() => return Err(e),
             Err(e) => failures.push(format!("{e:#}")),
         }
@@ -615,8 +627,8 @@ mod tests {
     #[test]
     fn detectors_csv_holds_every_detectors_statistic_as_the_mcap_export_does() {
         let dir = fixture_copy();
-        export(dir.path()).expect("CSV exported");
-        super::super::mcap::export(dir.path()).expect("MCAP exported");
+        export(dir.path(), &mut |_| {}).expect("CSV exported");
+        super::super::mcap::export(dir.path(), &mut |_| {}).expect("MCAP exported");
         let (header, rows) = read(&dir.path().join("export/detectors.csv"));
         let names = fdi_common::detect::names();
         assert!(
@@ -710,7 +722,7 @@ mod tests {
     #[test]
     fn the_center_file_holds_time_desired_trajectory_and_true_s_in_tick_agent_order() {
         let dir = fixture_copy();
-        export(dir.path()).expect("exported");
+        export(dir.path(), &mut |_| {}).expect("exported");
         let trace = dir.path().join("traces/control-center.trace");
         let reader = TraceReader::open(&trace).expect("opens");
         let info = RunInfo::from_header(&trace, reader.header()).expect("its scenario");

@@ -74,7 +74,7 @@ pub(super) fn each_tick(
         )
     })?;
     for warning in &joined.warnings {
-        eprintln!("fdi-launch: warning: detector statistics: {warning}");
+        log::warn!("detector statistics: {warning}");
     }
     Ok(Ok(n))
 }

@@ -251,7 +251,7 @@ fn failure(path: &Path, first: &FirstError, e: mcap::McapError) -> anyhow::Error
     }
 }
 
-pub(super) fn export(run_dir: &Path) -> Result<()> {
+pub(super) fn export(run_dir: &Path, said: &mut dyn FnMut(&str)) -> Result<()> {
     let files = trace_files(run_dir)?;
     let dir = OutDir::open(run_dir)?;
     let out = dir.path.join("run.mcap");
@@ -266,7 +266,7 @@ pub(super) fn export(run_dir: &Path) -> Result<()> {
         .map_err(|e| WriteFailed::io(&out, e))
         .and_then(|tmp| {
             let (file, tmp) = tmp.into_parts();
-            let failures = write(run_dir, &files, &out, file)?;
+            let failures = write(run_dir, &files, &out, file, said)?;
             tmp.persist(&out)
                 .map_err(|e| WriteFailed::io(&out, e.error))?;
             Ok(failures)
@@ -282,7 +282,13 @@ pub(super) fn export(run_dir: &Path) -> Result<()> {
 
 /// Writes the MCAP file `out` into `file`, its temporary. The failures of traces that could not
 /// be exported whole (the file holds what was read before); an error ends the export.
-fn write(run_dir: &Path, files: &[PathBuf], out: &Path, file: File) -> Result<Vec<String>> {
+fn write(
+    run_dir: &Path,
+    files: &[PathBuf],
+    out: &Path,
+    file: File,
+    said: &mut dyn FnMut(&str),
+) -> Result<Vec<String>> {
     let mut w = Mcap::create(out, file)?;
     let mut failures = Vec::new();
     let mut run: Option<RunInfo> = None;
@@ -290,7 +296,11 @@ fn write(run_dir: &Path, files: &[PathBuf], out: &Path, file: File) -> Result<Ve
     for f in files {
         let mut n = 0;
         match export_file(f, &mut w, &mut run, &mut n) {
-            Ok(()) => println!("{} -> {}: {n} records", f.display(), out.display()),
+            Ok(()) => said(&format!(
+                "{} -> {}: {n} records",
+                f.display(),
+                out.display()
+            )),
             Err(e) if write_failure(&e).is_some() => return Err(e),
             Err(e) if n > 0 => failures.push(format!(
                 "{e:#} (the {n} records before it are exported to {})",
@@ -301,8 +311,11 @@ fn write(run_dir: &Path, files: &[PathBuf], out: &Path, file: File) -> Result<Ve
     }
     if let Some(info) = &run {
         match detectors(run_dir, info, &mut w) {
-            Ok(Ok(n)) => println!("detector statistics -> {}: {n} ticks", out.display()),
-            Ok(Err(none)) => println!("{}: {none}", out.display()),
+            Ok(Ok(n)) => said(&format!(
+                "detector statistics -> {}: {n} ticks",
+                out.display()
+            )),
+            Ok(Err(none)) => said(&format!("{}: {none}", out.display())),
             Err(e) if write_failure(&e).is_some() => return Err(e),
             Err(e) => failures.push(format!("{e:#}")),
         }
@@ -316,11 +329,11 @@ fn write(run_dir: &Path, files: &[PathBuf], out: &Path, file: File) -> Result<Ve
     } else {
         format!(" ({} without messages: {})", empty.len(), empty.join(", "))
     };
-    println!(
+    said(&format!(
         "{}: {messages} messages on {} topics{without}",
         out.display(),
         summary.channels.len()
-    );
+    ));
     Ok(failures)
 }
 
@@ -419,7 +432,7 @@ mod tests {
     #[test]
     fn every_topic_reads_back_with_the_run_s_message_count_schema_fields_and_tick_times() {
         let dir = fixture_copy();
-        export(dir.path()).expect("exported");
+        export(dir.path(), &mut |_| {}).expect("exported");
         let bytes = std::fs::read(dir.path().join("export/run.mcap")).expect("run.mcap");
         let want = expected(dir.path());
         let dt = fdi_common::scenario::load_file(
@@ -497,7 +510,7 @@ mod tests {
     #[test]
     fn the_header_names_the_profile_and_the_channels_are_the_live_view_s_topics() {
         let dir = fixture_copy();
-        export(dir.path()).expect("exported");
+        export(dir.path(), &mut |_| {}).expect("exported");
         let bytes = std::fs::read(dir.path().join("export/run.mcap")).expect("run.mcap");
         let want = expected(dir.path());
         let header = mcap::read::LinearReader::new(&bytes)

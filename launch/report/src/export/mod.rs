@@ -29,7 +29,8 @@ use std::path::Path;
 
 use anyhow::Result;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+/// The file format of an export.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Format {
     /// One CSV per process trace and record kind (pandas, MATLAB, a spreadsheet).
     Csv,
@@ -37,11 +38,12 @@ pub enum Format {
     Mcap,
 }
 
-/// `fdi-launch trace export RUN_DIR`.
-pub fn export(run_dir: &Path, format: Format) -> Result<()> {
+/// Exports the traces of `run_dir` (`fdi-launch trace export RUN_DIR`), saying what each
+/// trace gave (`said`, a line at a time: `<trace> -> <folder>: <n> records`) as it goes.
+pub fn export(run_dir: &Path, format: Format, said: &mut dyn FnMut(&str)) -> Result<()> {
     match format {
-        Format::Csv => csv::export(run_dir),
-        Format::Mcap => mcap::export(run_dir),
+        Format::Csv => csv::export(run_dir, said),
+        Format::Mcap => mcap::export(run_dir, said),
     }
 }
 
