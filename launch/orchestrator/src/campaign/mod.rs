@@ -1023,7 +1023,7 @@ fn run_batch(
         progress,
         stop,
         |&i| run_one(&plan.jobs[i], &plan.name, args, &runs_root, stop),
-        |n, result| tally.record(&plan.jobs[todo[n]], result),
+        |n, end| tally.record(&plan.jobs[todo[n]], end),
     );
     let outcome = match outcome {
         Ok(o) => o,
@@ -1062,14 +1062,16 @@ struct Tally {
 impl Tally {
     /// Records the end of `job`: a summary is stored in `points/`, a failure named. An error
     /// (a result that cannot be stored, a shard's lease lost) stops the batch.
-    fn record(&mut self, job: &Job, result: Result<RunSummary>) -> Result<()> {
-        match result {
-            Ok(summary) => {
+    /// Stores a run's result, or counts its failure; an interrupted run is neither: the next
+    /// attempt runs it again.
+    fn record(&mut self, job: &Job, end: RunEnd) -> Result<()> {
+        match end {
+            RunEnd::Whole(summary) => {
                 let stored = Stored {
                     key: job.key.clone(),
                     engine: self.engine.as_str().into(),
                     run: job.label.clone(),
-                    summary,
+                    summary: *summary,
                 };
                 write_atomic(
                     &stored_path(&self.out, &job.key),
@@ -1077,18 +1079,16 @@ impl Tally {
                 )?;
                 self.ran += 1;
             }
-            Err(e) => match e.downcast_ref::<fdi_common::stop::Interrupted>() {
-                Some(interrupted) => self.signal = Some(interrupted.signal),
-                None => {
-                    let error = fdi_report::output::describe_error(&e);
-                    log::info!("the run {} failed: {error}", job.label);
-                    self.failed.push(shard::Failure {
-                        run: job.label.clone(),
-                        key: job.key[..16].to_string(),
-                        error,
-                    });
-                }
-            },
+            RunEnd::Interrupted(signal) => self.signal = Some(signal),
+            RunEnd::Failed(e) => {
+                let error = fdi_report::output::describe_error(&e);
+                log::info!("the run {} failed: {error}", job.label);
+                self.failed.push(shard::Failure {
+                    run: job.label.clone(),
+                    key: job.key[..16].to_string(),
+                    error,
+                });
+            }
         }
         self.save_record(None);
         if self.lost.as_ref().is_some_and(|l| l.load(Ordering::SeqCst)) {
@@ -1152,30 +1152,44 @@ fn campaign_end(signal: Option<i32>, failed: &[shard::Failure]) -> Result<Ended>
     Ok(Ended::Whole)
 }
 
-/// One run of the campaign: whole, or an error.
-fn run_one(
-    job: &Job,
-    name: &str,
-    args: &SweepOptions,
-    runs_root: &Path,
-    stop: &Stop,
-) -> Result<RunSummary> {
+/// How one run of the campaign ended.
+enum RunEnd {
+    Whole(Box<RunSummary>),
+    /// Stopped by this signal (SIGINT, SIGTERM): not a failure of the run.
+    Interrupted(i32),
+    Failed(anyhow::Error),
+}
+
+/// One run of the campaign: whole, interrupted (its summary says by which signal, or the stop
+/// was raised before it began), or failed.
+fn run_one(job: &Job, name: &str, args: &SweepOptions, runs_root: &Path, stop: &Stop) -> RunEnd {
     let opts = crate::run::Options::quiet(args.traces, stop);
     let summary = match args.traces {
         Traces::None => execute(&job.resolved, args.engine, None, &opts),
         _ => {
             let mut named = job.resolved.clone();
             named.scenario.name = format!("{name}-{}", &job.key[..12]);
-            let dir = crate::run_dirs::create_run_dir(runs_root, &named)?;
-            crate::run_dirs::discard_if_not_started(
-                &dir,
-                execute(&named, args.engine, Some(&dir), &opts),
-            )
+            crate::run_dirs::create_run_dir(runs_root, &named).and_then(|dir| {
+                crate::run_dirs::discard_if_not_started(
+                    &dir,
+                    execute(&named, args.engine, Some(&dir), &opts),
+                )
+            })
         }
     };
-    summary
-        .and_then(crate::run::require_whole)
-        .with_context(|| format!("the run {}", job.label))
+    let failed = |e: anyhow::Error| RunEnd::Failed(e.context(format!("the run {}", job.label)));
+    match summary {
+        Ok(s) => match s.partial.as_ref().and_then(|p| p.signal) {
+            Some(signal) => RunEnd::Interrupted(signal),
+            None => {
+                crate::run::require_whole(s).map_or_else(failed, |s| RunEnd::Whole(Box::new(s)))
+            }
+        },
+        Err(e) => match stop.pending() {
+            Some(signal) => RunEnd::Interrupted(signal),
+            None => failed(e),
+        },
+    }
 }
 
 #[cfg(test)]

@@ -9,7 +9,6 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc;
 
 use anyhow::Result;
-use fdi_common::engine::RunSummary;
 use fdi_common::observe::{Finish, Progress, Work};
 use fdi_common::stop::Stop;
 
@@ -30,14 +29,14 @@ pub struct Outcome {
 /// Runs `run` on every job, `workers` at a time, and hands each result to `done` (on this
 /// thread, in the order they finish). An error from `done` stops the batch (no new job starts)
 /// and is returned once the jobs in flight are back.
-pub fn run_parallel<J: Sync>(
+pub fn run_parallel<J: Sync, T: Send>(
     jobs: &[J],
     workers: NonZeroUsize,
     what: &str,
     progress: &dyn Progress,
     stop: &Stop,
-    run: impl Fn(&J) -> Result<RunSummary> + Sync,
-    mut done: impl FnMut(usize, Result<RunSummary>) -> Result<()>,
+    run: impl Fn(&J) -> T + Sync,
+    mut done: impl FnMut(usize, T) -> Result<()>,
 ) -> Result<Outcome> {
     progress.begin(Work::Runs {
         total: jobs.len() as u64,
@@ -50,7 +49,7 @@ pub fn run_parallel<J: Sync>(
     let mut failure = None;
     let workers = workers.get().min(jobs.len()).max(1);
     std::thread::scope(|scope| {
-        let (tx, rx) = mpsc::channel::<(usize, Result<RunSummary>)>();
+        let (tx, rx) = mpsc::channel::<(usize, T)>();
         for _ in 0..workers {
             let tx = tx.clone();
             let (next, stop, started, run, stop_run) = (&next, &stop, &started, &run, stop_run);

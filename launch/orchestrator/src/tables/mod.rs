@@ -339,7 +339,8 @@ fn run_case(
             )
             .and_then(crate::run::require_whole)?;
             if let Err(e) = fdi_report::report::write_report(&d, r, &summary, stop) {
-                if e.downcast_ref::<fdi_common::stop::Interrupted>().is_some() {
+                // Stopped by the signal: the table stops too.
+                if stop.pending().is_some() {
                     return Err(e);
                 }
                 log::warn!(
