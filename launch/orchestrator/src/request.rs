@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use fdi_common::attack::Attacker;
 use fdi_common::engine::RunSummary;
 pub use fdi_common::overrides::{NumericsArgs, Overrides, SetArgs};
@@ -12,7 +12,8 @@ use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::stop::{Stop, BEFORE_THE_START};
 
 use crate::run::hosts::Deployment;
-use crate::run::runtime::{DidNotStart, Placement};
+use crate::run::runtime::Placement;
+use crate::run::RunError;
 use crate::run::{Engine, Traces};
 
 /// The command line's overrides on an engine: [`Overrides::apply`], and a name for the run.
@@ -173,8 +174,7 @@ pub fn execute(request: &RunRequest, dir: &RunDir, stop: &Stop) -> Result<RunSum
     };
     let run = stop
         .check(BEFORE_THE_START)
-        .map_err(anyhow::Error::from)
-        .context(DidNotStart)
+        .map_err(RunError::not_started)
         .and_then(|()| {
             crate::run::execute_on(
                 &request.resolved,
@@ -200,20 +200,21 @@ pub fn execute_with<A: Attacker>(
     attacker: &mut A,
 ) -> Result<RunSummary> {
     let run = if request.engine != Engine::Inproc || request.deployment.is_some() {
-        Err(anyhow::anyhow!(DidNotStart).context(format!(
-            "a run with an attacker of its own needs the in-process engine on one host, not \
+        Err(RunError::NotStarted(
+            anyhow::anyhow!(crate::run::runtime::DID_NOT_START).context(format!(
+                "a run with an attacker of its own needs the in-process engine on one host, not \
              the {} engine{}",
-            request.engine.as_str(),
-            if request.deployment.is_some() {
-                " over hosts"
-            } else {
-                ""
-            }
-        )))
+                request.engine.as_str(),
+                if request.deployment.is_some() {
+                    " over hosts"
+                } else {
+                    ""
+                }
+            )),
+        ))
     } else {
         stop.check(BEFORE_THE_START)
-            .map_err(anyhow::Error::from)
-            .context(DidNotStart)
+            .map_err(RunError::not_started)
             .and_then(|()| {
                 crate::run::execute_inproc_with(
                     &request.resolved,

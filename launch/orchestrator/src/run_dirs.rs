@@ -94,16 +94,12 @@ pub fn remove_run_dir(dir: &Path) {
 }
 
 /// Passes `result` on; when it is the error of a run that did not start
-/// ([`crate::run::runtime::DidNotStart`]), removes the run directory `dir` made for it first.
-pub fn discard_if_not_started<T>(dir: &Path, result: Result<T>) -> Result<T> {
-    if let Err(e) = &result {
-        if e.downcast_ref::<crate::run::runtime::DidNotStart>()
-            .is_some()
-        {
-            remove_run_dir(dir);
-        }
+/// ([`crate::run::RunError::NotStarted`]), removes the run directory `dir` made for it first.
+pub fn discard_if_not_started<T>(dir: &Path, result: Result<T, crate::run::RunError>) -> Result<T> {
+    if let Err(crate::run::RunError::NotStarted(_)) = &result {
+        remove_run_dir(dir);
     }
-    result
+    Ok(result?)
 }
 
 #[cfg(test)]

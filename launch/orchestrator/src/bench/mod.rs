@@ -731,6 +731,7 @@ fn lockstep_row(a: &LockstepOptions, root: &Path, n: usize, stop: &Stop) -> Resu
             ..crate::run::Options::quiet(crate::run::Traces::Full, stop)
         },
     )
+    .map_err(anyhow::Error::from)
     .and_then(crate::run::require_whole)?;
     if !a.keep_traces {
         for d in [&dir_in, &dir_ipc] {

@@ -1165,7 +1165,7 @@ enum RunEnd {
 fn run_one(job: &Job, name: &str, args: &SweepOptions, runs_root: &Path, stop: &Stop) -> RunEnd {
     let opts = crate::run::Options::quiet(args.traces, stop);
     let summary = match args.traces {
-        Traces::None => execute(&job.resolved, args.engine, None, &opts),
+        Traces::None => execute(&job.resolved, args.engine, None, &opts).map_err(Into::into),
         _ => {
             let mut named = job.resolved.clone();
             named.scenario.name = format!("{name}-{}", &job.key[..12]);

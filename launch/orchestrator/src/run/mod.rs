@@ -31,6 +31,7 @@ use fdi_common::records::TickRecord;
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{Kept, TraceRecord, TraceWriter};
+pub use runtime::RunError;
 
 use fdi_common::stop::{Interrupted, Stop, DURING_THE_RUN};
 use fdi_report::output;
@@ -214,12 +215,12 @@ fn start_live(
     r: &Resolved,
     engine: Engine,
     opts: &Options,
-) -> Result<Option<(fdi_live::Live, fdi_live::Feed)>> {
+) -> Result<Option<(fdi_live::Live, fdi_live::Feed)>, RunError> {
     let Some(l) = &opts.live else {
         return Ok(None);
     };
-    let (live, feed) =
-        fdi_live::Live::start(r, &l.options(r, engine, opts.pace)).context(runtime::DidNotStart)?;
+    let (live, feed) = fdi_live::Live::start(r, &l.options(r, engine, opts.pace))
+        .map_err(RunError::not_started)?;
     log::info!(
         "live at ws://{} (Foxglove: Open connection, Foxglove WebSocket; layouts in \
          examples/live)",
@@ -318,7 +319,7 @@ pub fn execute_inproc_with<A: Attacker>(
     dir: &Path,
     traces: Traces,
     attacker: &mut A,
-) -> Result<RunSummary> {
+) -> Result<RunSummary, RunError> {
     let opts = Options {
         traces,
         ..Options::default()
@@ -332,7 +333,7 @@ fn execute_inproc_watched<A: Attacker>(
     dir: &Path,
     opts: &Options,
     attacker: &mut A,
-) -> Result<RunSummary> {
+) -> Result<RunSummary, RunError> {
     inproc_runs(r)?;
     let traces = opts.traces;
     let kept = match traces {
@@ -341,7 +342,7 @@ fn execute_inproc_watched<A: Attacker>(
         Traces::None => None,
     };
     let writers = match kept {
-        Some(kept) => Some(InprocTraces::create(dir, r, kept).context(runtime::DidNotStart)?),
+        Some(kept) => Some(InprocTraces::create(dir, r, kept).map_err(RunError::not_started)?),
         None => None,
     };
     let (live, feed) = start_live(r, Engine::Inproc, opts)?.unzip();
@@ -520,7 +521,7 @@ pub fn execute(
     engine: Engine,
     run_dir: Option<&Path>,
     opts: &Options,
-) -> Result<RunSummary> {
+) -> Result<RunSummary, RunError> {
     execute_on(r, engine, run_dir, opts, None)
 }
 
@@ -532,15 +533,16 @@ pub fn execute_on(
     run_dir: Option<&Path>,
     opts: &Options,
     deployment: Option<&hosts::Deployment>,
-) -> Result<RunSummary> {
+) -> Result<RunSummary, RunError> {
     let traces = opts.traces;
     if deployment.is_some()
         && (engine != Engine::Ipc || run_dir.is_none() || traces != Traces::Full)
     {
-        anyhow::bail!(
+        return Err(anyhow::anyhow!(
             "a run split over hosts (--hosts) needs the ipc engine and full traces (the remote \
              traces are fetched whole at the end)"
-        );
+        )
+        .into());
     }
     check_pace(r, opts.pace)?;
     if engine == Engine::Inproc {
@@ -591,7 +593,7 @@ fn execute_ipc(
     dir: &Path,
     opts: &Options,
     deployment: Option<&hosts::Deployment>,
-) -> Result<RunSummary> {
+) -> Result<RunSummary, RunError> {
     let (progress, placement, traces) = (opts.progress.clone(), &opts.placement, opts.traces);
     let (live, feed) = start_live(r, Engine::Ipc, opts)?.unzip();
     let opts = runtime::IpcOptions {
@@ -614,8 +616,8 @@ fn execute_ipc(
         // `traces` says.
         std::fs::create_dir_all(RunDir::new(dir).traces())
             .context("creating the traces folder")
-            .context(runtime::DidNotStart)?;
-        let tap = tap::Tap::create(r, dir, traces).context(runtime::DidNotStart)?;
+            .map_err(RunError::not_started)?;
+        let tap = tap::Tap::create(r, dir, traces).map_err(RunError::not_started)?;
         let (outcome, tapped) = tap.run(r, feed, || runtime::run_ipc(r, &opts));
         let outcome = outcome?;
         let joined = tapped
@@ -647,7 +649,10 @@ fn execute_ipc(
     }
     output::write_run_summary(dir, &joined.summary, traces)?;
     if let Some(e) = write_error {
-        bail!("a trace could not be kept: {e}; summary.json covers every tick of the run");
+        return Err(anyhow::anyhow!(
+            "a trace could not be kept: {e}; summary.json covers every tick of the run"
+        )
+        .into());
     }
     Ok(joined.summary)
 }
@@ -657,7 +662,7 @@ fn run_ipc_followed(
     r: &Resolved,
     opts: &runtime::IpcOptions,
     live: Option<(&fdi_live::Live, fdi_live::Feed)>,
-) -> Result<runtime::IpcOutcome> {
+) -> Result<runtime::IpcOutcome, RunError> {
     match live {
         Some(live) => run_followed(
             (r, Engine::Ipc),

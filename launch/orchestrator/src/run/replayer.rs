@@ -310,7 +310,7 @@ pub fn replay_run(
         std::fs::copy(from, &to)
             .map(|_| ())
             .with_context(|| format!("copying {} to {}", from.display(), to.display()))
-            .context(crate::run::runtime::DidNotStart)
+            .map_err(crate::run::RunError::not_started)
     });
     let outcome = crate::run_dirs::discard_if_not_started(
         &dir,

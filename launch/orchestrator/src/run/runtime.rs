@@ -105,14 +105,41 @@ pub fn reap_stale_runs() -> usize {
     n
 }
 
-/// Marks the error of a run that failed before its start was broadcast: nothing was recorded,
-/// and the caller removes the run directory it made for it (`anyhow::Error::downcast_ref`).
-#[derive(Debug, Clone, Copy)]
-pub struct DidNotStart;
+/// What a run that did not start says first (a refused run, a machine that cannot carry it,
+/// a stop before the start).
+pub const DID_NOT_START: &str = "the run did not start";
 
-impl std::fmt::Display for DidNotStart {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str("the run did not start")
+/// A run that failed: before its start was broadcast (nothing of it was recorded: the caller
+/// removes the run directory it made for it, [`crate::run_dirs::discard_if_not_started`]) or
+/// after. It becomes its cause when it meets an `anyhow::Error` (`?`), whose text says which
+/// ([`DID_NOT_START`]), and whose chain still holds what the cause holds (an
+/// `fdi_common::stop::Interrupted`, say).
+#[derive(Debug)]
+pub enum RunError {
+    /// Refused or failed before its start.
+    NotStarted(anyhow::Error),
+    /// Failed once started (or before, without anything to remove).
+    Failed(anyhow::Error),
+}
+
+impl RunError {
+    /// `e`, the cause of a run that did not start, said so.
+    pub fn not_started(e: impl Into<anyhow::Error>) -> Self {
+        Self::NotStarted(e.into().context(DID_NOT_START))
+    }
+}
+
+impl From<anyhow::Error> for RunError {
+    fn from(e: anyhow::Error) -> Self {
+        Self::Failed(e)
+    }
+}
+
+impl From<RunError> for anyhow::Error {
+    fn from(e: RunError) -> Self {
+        match e {
+            RunError::NotStarted(e) | RunError::Failed(e) => e,
+        }
     }
 }
 
@@ -494,17 +521,20 @@ impl<X: Transport> Launcher<X> {
 }
 
 /// Runs the resolved scenario in `opts.run_dir` (which must already hold `scenario.toml`).
-pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome> {
+pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome, RunError> {
     reap_stale_runs();
     let prefix = new_prefix();
     let run_dir = RunDir::new(&opts.run_dir);
     let scenario_path = run_dir.scenario();
     std::fs::create_dir_all(run_dir.traces()).context("creating the traces folder")?;
-    opts.stop.check(BEFORE_THE_START).context(DidNotStart)?;
-    let sizing = check_machine(resolved, &prefix)?;
+    opts.stop
+        .check(BEFORE_THE_START)
+        .map_err(RunError::not_started)?;
+    let sizing = check_machine(resolved, &prefix).map_err(RunError::not_started)?;
 
     let ended = {
-        let (transport, mut launcher) = open_launcher(resolved, opts, &prefix, sizing)?;
+        let (transport, mut launcher) =
+            open_launcher(resolved, opts, &prefix, sizing).map_err(RunError::not_started)?;
         run_and_tear_down(
             resolved,
             opts,
@@ -554,9 +584,7 @@ fn check_machine(resolved: &Resolved, prefix: &str) -> Result<ipc::Sizing> {
     // internal error.
     let external =
         resolved.scenario.roles.attacker.is_some() || resolved.scenario.roles.monitor.is_some();
-    ipc::machine::check(sizing, external, prefix)
-        .context("the machine cannot carry this run")
-        .context(DidNotStart)?;
+    ipc::machine::check(sizing, external, prefix).context("the machine cannot carry this run")?;
     Ok(sizing)
 }
 
@@ -580,7 +608,7 @@ fn open_launcher(
         Ok(opened) => opened,
         Err(e) => {
             Shm::remove_leftovers(prefix).ok();
-            return Err(anyhow::Error::new(e).context(DidNotStart));
+            return Err(anyhow::Error::new(e));
         }
     };
     let launcher = Launcher {
@@ -602,7 +630,7 @@ fn open_launcher(
 
 /// How a run ended, once its processes are torn down.
 struct Ended {
-    result: Result<Supervised>,
+    result: Result<Supervised, RunError>,
     lost: Vec<LostAgent>,
     exits: String,
     /// Files of the run left on the other hosts.
@@ -636,8 +664,9 @@ fn run_and_tear_down<X: Transport>(
     }
     let (remote_left, hosts, network) = release_remote(opts, launcher);
     let r = match r {
-        Err(e) if !launcher.started => Err(e.context(DidNotStart)),
-        r => r,
+        Err(e) if !launcher.started => Err(RunError::not_started(e)),
+        Err(e) => Err(RunError::Failed(e)),
+        Ok(supervised) => Ok(supervised),
     };
     Ended {
         result: r,

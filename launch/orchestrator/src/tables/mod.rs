@@ -316,7 +316,7 @@ fn run_case(
 ) -> Result<RunSummary> {
     let quiet = crate::run::Options::quiet(crate::run::Traces::Full, stop);
     match args.engine {
-        Engine::Inproc => execute(r, args.engine, None, &quiet),
+        Engine::Inproc => Ok(execute(r, args.engine, None, &quiet)?),
         Engine::Ipc => {
             let mut named = r.clone();
             named.scenario.name = case.into();
