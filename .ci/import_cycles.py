@@ -4,7 +4,7 @@
 A module is a file (`foo.rs`, `foo/mod.rs`). File A imports B when A names B through `crate::`,
 `super::`, `self::` or a child module's path (`use`, a path in code, a `pub use` re-export); a
 path is resolved to the longest module file it names, so an item re-exported through a parent
-counts as an import of that parent. Tests (`#[cfg(test)]` modules, inline or files) are left
+counts as an import of that parent. Tests (`#[cfg(test)]` or `#[cfg(all(test, …))]` modules, inline or files) are left
 out: they are not the crate's structure. Prints every circle with the imports inside it and
 exits 1 when there is one, 0 otherwise. No dependency beyond Python's standard library.
 """
@@ -70,7 +70,9 @@ def expand_use(tree):
     go([], tree)
     return out
 
-TEST_MOD = re.compile(r'#\[cfg\(test\)\]\s*(?:pub(?:\([^)]*\))?\s+)?mod\s+\w+\s*\{')
+# `#[cfg(test)]`, or `#[cfg(all(test, …))]` (a test that needs a feature).
+TEST_CFG = r'#\[cfg\((?:test|all\(test\b[^\]]*\))\)\]'
+TEST_MOD = re.compile(TEST_CFG + r'\s*(?:pub(?:\([^)]*\))?\s+)?mod\s+\w+\s*\{')
 
 def drop_test_modules(src):
     """The bodies of `#[cfg(test)] mod name { ... }`: tests are not the module structure."""
@@ -88,7 +90,7 @@ def drop_test_modules(src):
     return ''.join(out)
 
 def test_children(src):
-    return set(re.findall(r'#\[cfg\(test\)\]\s*(?:pub(?:\([^)]*\))?\s+)?mod\s+(\w+)\s*;', strip(src)))
+    return set(re.findall(TEST_CFG + r'\s*(?:pub(?:\([^)]*\))?\s+)?mod\s+(\w+)\s*;', strip(src)))
 
 def edges(mods, me, src):
     src = drop_test_modules(strip(src))

@@ -2,8 +2,8 @@
 //! line's [`Overrides`] becomes a [`RunRequest`]; [`execute`] runs it on an engine — in-process,
 //! or as processes over shared memory on one host or several ([`run`]) — into a run directory
 //! ([`fdi_common::run_dir::RunDir`]), and stops at once when its [`Stop`] is raised. The tables
-//! ([`tables`], [`attacks`]), campaigns ([`campaign`]) and the
-//! benchmarks ([`bench`]) are built on runs; what they write is made by `fdi-report`.
+//! and benchmarks (`fdi-tables`) and the campaigns (`fdi-campaign`) are built on runs; what
+//! they all write is made by `fdi-report`.
 //!
 //! The paper's experiment under another attack, in-process, and its RMSE per robot:
 //!
@@ -37,13 +37,9 @@
 //! executable, so a program of your own needs them installed there (`cargo build --release`
 //! puts them in `target/release/`). `examples/gain_study.rs` is a small parameter study.
 
-pub mod attacks;
-pub mod bench;
-pub mod campaign;
 pub mod request;
 pub mod run;
 pub mod run_dirs;
-pub mod tables;
 
 #[cfg(test)]
 mod damage_tests;

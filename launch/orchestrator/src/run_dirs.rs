@@ -94,9 +94,12 @@ pub fn remove_run_dir(dir: &Path) {
 }
 
 /// Passes `result` on; when it is the error of a run that did not start
-/// ([`crate::run::RunError::NotStarted`]), removes the run directory `dir` made for it first.
-pub fn discard_if_not_started<T>(dir: &Path, result: Result<T, crate::run::RunError>) -> Result<T> {
-    if let Err(crate::run::RunError::NotStarted(_)) = &result {
+/// ([`crate::run::error::RunError::NotStarted`]), removes the run directory `dir` made for it first.
+pub fn discard_if_not_started<T>(
+    dir: &Path,
+    result: Result<T, crate::run::error::RunError>,
+) -> Result<T> {
+    if let Err(crate::run::error::RunError::NotStarted(_)) = &result {
         remove_run_dir(dir);
     }
     Ok(result?)

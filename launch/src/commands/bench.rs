@@ -1,5 +1,5 @@
 //! `fdi-launch bench latency|lockstep|transport`: the measurements of
-//! `fdi_orchestrator::bench`, printed as markdown (or JSON with `--json`).
+//! `fdi_tables::bench`, printed as markdown (or JSON with `--json`).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -7,12 +7,12 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::{Args, Subcommand};
 use fdi_common::stop::Stop;
-use fdi_orchestrator::bench::floor::{self, PeerKind, PeerRole, PeerSpec};
-use fdi_orchestrator::bench::{
+use fdi_orchestrator::run::runtime::Placement;
+use fdi_tables::bench::floor::{self, PeerKind, PeerRole, PeerSpec};
+use fdi_tables::bench::{
     self, LatencyOptions, LatencyReport, Lockstep, LockstepOptions, TransportOptions,
     TransportReport,
 };
-use fdi_orchestrator::run::runtime::Placement;
 
 #[derive(Debug, Subcommand)]
 pub enum BenchCommand {
@@ -265,7 +265,7 @@ fn print_lockstep(duration_s: f64, measured: &Lockstep) {
 }
 
 /// The arguments of the hidden `bench-peer` (a peer process of `bench transport`, started by
-/// `fdi_orchestrator::bench::floor` with [`PeerSpec::to_args`]).
+/// `fdi_tables::bench::floor` with [`PeerSpec::to_args`]).
 #[derive(Debug, clap::Parser)]
 #[command(name = "bench-peer", no_binary_name = true)]
 struct PeerArgs {

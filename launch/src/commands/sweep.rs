@@ -1,5 +1,5 @@
 //! `fdi-launch sweep CAMPAIGN`: a campaign, a shard of it, its aggregation or its status
-//! (`fdi_orchestrator::campaign`), printed.
+//! (`fdi_campaign`), printed.
 
 use std::num::NonZeroUsize;
 use std::path::PathBuf;
@@ -7,8 +7,8 @@ use std::process::ExitCode;
 
 use anyhow::Result;
 use clap::Args;
+use fdi_campaign::{self as campaign, shard::ShardArg, Ended, SweepOptions};
 use fdi_common::stop::Stop;
-use fdi_orchestrator::campaign::{self, shard::ShardArg, Ended, SweepOptions};
 use fdi_orchestrator::Engine;
 use fdi_report::traces::Traces;
 

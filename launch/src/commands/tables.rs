@@ -1,5 +1,5 @@
 //! `fdi-launch table1`, `table2` and `attacks`: the paper's tables and the attack-class table,
-//! made by `fdi_orchestrator::tables` and `fdi_orchestrator::attacks`, printed here.
+//! made by `fdi_tables::tables` and `fdi_tables::attacks`, printed here.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -7,9 +7,9 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::Args;
 use fdi_common::stop::Stop;
-use fdi_orchestrator::attacks::AttacksOptions;
-use fdi_orchestrator::tables::{Table, TableOptions};
 use fdi_orchestrator::{Engine, NumericsArgs, SetArgs};
+use fdi_tables::attacks::AttacksOptions;
+use fdi_tables::tables::{Table, TableOptions};
 
 /// `table1`, `table2`.
 #[derive(Debug, Args)]
@@ -85,13 +85,13 @@ pub struct AttacksArgs {
 
 /// `table1`.
 pub fn table1(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
-    let table = fdi_orchestrator::tables::table1(&args.options(), stop)?;
+    let table = fdi_tables::tables::table1(&args.options(), stop)?;
     print(&table, args.json)
 }
 
 /// `table2`.
 pub fn table2(args: &TableArgs, stop: &Stop) -> Result<ExitCode> {
-    let table = fdi_orchestrator::tables::table2(&args.options(), stop)?;
+    let table = fdi_tables::tables::table2(&args.options(), stop)?;
     print(&table, args.json)
 }
 
@@ -105,7 +105,7 @@ pub fn attacks(args: &AttacksArgs, stop: &Stop) -> Result<ExitCode> {
         set: args.set.clone(),
         progress: crate::terminal::progress(!args.json),
     };
-    let table = fdi_orchestrator::attacks::attacks(&options, stop)?;
+    let table = fdi_tables::attacks::attacks(&options, stop)?;
     print(&table, args.json)
 }
 

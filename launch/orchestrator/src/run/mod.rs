@@ -6,6 +6,7 @@
 
 pub mod certs;
 pub mod disk;
+pub mod error;
 pub mod follow;
 pub mod hosts;
 pub mod outputs;
@@ -24,6 +25,7 @@ pub mod volume;
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
+pub use error::RunError;
 use fdi_common::attack::Attacker;
 use fdi_common::engine::{run_inproc_any_until, tick_inproc_any_with, Books, Partial, RunSummary};
 use fdi_common::observe::Observer;
@@ -31,7 +33,6 @@ use fdi_common::records::TickRecord;
 use fdi_common::run_dir::{Process, RunDir};
 use fdi_common::scenario::{ClockMode, Resolved};
 use fdi_common::trace::{Kept, TraceRecord, TraceWriter};
-pub use runtime::RunError;
 
 use fdi_common::stop::{Interrupted, Stop, DURING_THE_RUN};
 use fdi_report::output;

@@ -320,7 +320,7 @@ fn aggregate_markdown(plan: &Plan, aggregate: &[Aggregate], families: &[String])
 }
 
 /// Four significant digits.
-pub(crate) fn sig(x: f64) -> String {
+pub fn sig(x: f64) -> String {
     if x == 0.0 || !x.is_finite() {
         return format!("{x}");
     }

@@ -18,7 +18,7 @@ use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
 use hdrhistogram::Histogram;
 use serde::Serialize;
 
-use crate::run::{execute, Engine};
+use fdi_orchestrator::run::{execute, Engine};
 
 /// `bench transport`: the transport floor and the runtime's hops against it.
 #[derive(Debug, Clone)]
@@ -47,7 +47,7 @@ pub struct LatencyOptions {
     /// Folder that receives the run directory.
     pub out: PathBuf,
     /// Placement of the run's processes (and of the timer probe beside them).
-    pub placement: crate::run::runtime::Placement,
+    pub placement: fdi_orchestrator::run::runtime::Placement,
     /// Split the measured run over the hosts of this deployment file (docs/multi-host.md).
     pub hosts: Option<PathBuf>,
     /// Serve the measured run live at this address (as `run --live`).
@@ -240,10 +240,14 @@ fn latency_scenario(a: &LatencyOptions) -> Result<Resolved> {
 }
 
 /// The live server `a` asks for.
-fn live_serve(a: &LatencyOptions) -> Result<Option<crate::run::LiveServe>> {
+fn live_serve(a: &LatencyOptions) -> Result<Option<fdi_orchestrator::run::LiveServe>> {
     a.live
         .map(|addr| {
-            crate::run::LiveServe::new(addr, fdi_live::Options::DEFAULT_RATE_HZ, a.live_wait)
+            fdi_orchestrator::run::LiveServe::new(
+                addr,
+                fdi_live::Options::DEFAULT_RATE_HZ,
+                a.live_wait,
+            )
         })
         .transpose()
 }
@@ -264,23 +268,23 @@ fn run_beside_probe(
     stop: &Stop,
 ) -> Result<MeasuredRun> {
     let placement = &a.placement;
-    crate::run::check_placement(r, Engine::Ipc, placement)?;
-    let dir = crate::run_dirs::create_run_dir(&a.out, r)?;
+    fdi_orchestrator::run::check_placement(r, Engine::Ipc, placement)?;
+    let dir = fdi_orchestrator::run_dirs::create_run_dir(&a.out, r)?;
     let deployment = match &a.hosts {
-        Some(path) => Some(crate::run::hosts::Deployment::load(path, r)?),
+        Some(path) => Some(fdi_orchestrator::run::hosts::Deployment::load(path, r)?),
         None => None,
     };
     let probe = crate::bench::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
-    let summary = crate::run_dirs::discard_if_not_started(
+    let summary = fdi_orchestrator::run_dirs::discard_if_not_started(
         &dir,
-        crate::run::execute_on(
+        fdi_orchestrator::run::execute_on(
             r,
             Engine::Ipc,
             Some(&dir),
-            &crate::run::Options {
+            &fdi_orchestrator::run::Options {
                 progress: a.progress.clone(),
                 placement: placement.clone(),
-                traces: crate::run::Traces::Full,
+                traces: fdi_orchestrator::run::Traces::Full,
                 stop: stop.clone(),
                 live: live_serve(a)?,
                 pace: None,
@@ -289,7 +293,7 @@ fn run_beside_probe(
         ),
     );
     let wakeups = probe.finish();
-    let (summary, wakeups) = (crate::run::require_whole(summary?)?, wakeups?);
+    let (summary, wakeups) = (fdi_orchestrator::run::require_whole(summary?)?, wakeups?);
     Ok(MeasuredRun {
         dir,
         summary,
@@ -688,9 +692,10 @@ pub struct Lockstep {
 
 /// Each agent count on both engines, one after the other (`lockstep.json` written).
 pub fn lockstep(a: &LockstepOptions, stop: &Stop) -> Result<Lockstep> {
-    let root = a
-        .out
-        .join(format!("{}-bench-lockstep", crate::run_dirs::timestamp()));
+    let root = a.out.join(format!(
+        "{}-bench-lockstep",
+        fdi_orchestrator::run_dirs::timestamp()
+    ));
     let mut rows = Vec::new();
     for &n in &a.agents {
         let row = lockstep_row(a, &root, n, stop)?;
@@ -714,25 +719,25 @@ pub fn lockstep(a: &LockstepOptions, stop: &Stop) -> Result<Lockstep> {
 fn lockstep_row(a: &LockstepOptions, root: &Path, n: usize, stop: &Stop) -> Result<LockstepRow> {
     let mut r = scaled_paper(n, a.attack.as_deref())?;
     r.scenario.duration_s = a.duration_s;
-    let dir_in = crate::run_dirs::create_run_dir(root, &named(&r, "inproc"))?;
+    let dir_in = fdi_orchestrator::run_dirs::create_run_dir(root, &named(&r, "inproc"))?;
     let inproc = execute(
         &r,
         Engine::Inproc,
         Some(&dir_in),
-        &crate::run::Options::quiet(crate::run::Traces::Full, stop),
+        &fdi_orchestrator::run::Options::quiet(fdi_orchestrator::run::Traces::Full, stop),
     )?;
-    let dir_ipc = crate::run_dirs::create_run_dir(root, &named(&r, "ipc"))?;
+    let dir_ipc = fdi_orchestrator::run_dirs::create_run_dir(root, &named(&r, "ipc"))?;
     let ipc = execute(
         &r,
         Engine::Ipc,
         Some(&dir_ipc),
-        &crate::run::Options {
+        &fdi_orchestrator::run::Options {
             progress: a.progress.clone(),
-            ..crate::run::Options::quiet(crate::run::Traces::Full, stop)
+            ..fdi_orchestrator::run::Options::quiet(fdi_orchestrator::run::Traces::Full, stop)
         },
     )
     .map_err(anyhow::Error::from)
-    .and_then(crate::run::require_whole)?;
+    .and_then(fdi_orchestrator::run::require_whole)?;
     if !a.keep_traces {
         for d in [&dir_in, &dir_ipc] {
             let _ = std::fs::remove_dir_all(fdi_common::run_dir::RunDir::new(d).traces());

@@ -34,8 +34,8 @@ pub struct AttacksOptions {
     /// Base scenario (`None`: the embedded paper scenario): its robots, gains and numerics
     /// under every class (a class's own scenario file gives its attack and detectors only).
     pub scenario: Option<PathBuf>,
-    pub numerics: crate::request::NumericsArgs,
-    pub set: crate::request::SetArgs,
+    pub numerics: fdi_orchestrator::request::NumericsArgs,
+    pub set: fdi_orchestrator::request::SetArgs,
     /// Told the runs' progress.
     pub progress: fdi_common::observe::Observer,
 }
@@ -236,7 +236,7 @@ fn run_one(
     if let Some(d) = duration_s {
         r.scenario.duration_s = d;
     }
-    let r = crate::run::check_overrides(r)?;
+    let r = fdi_orchestrator::run::check_overrides(r)?;
     let mut missing_inputs = BTreeMap::new();
     let summary = run_inproc_any(&r, |rec: &TickRecord| {
         if rec.center.missing_input {
@@ -572,7 +572,7 @@ fn base(args: &AttacksOptions) -> Result<(PathBuf, Resolved, MadeWith)> {
     let dir = args.out.clone().unwrap_or_else(|| {
         PathBuf::from("runs").join(format!(
             "{}-{}",
-            crate::run_dirs::timestamp(),
+            fdi_orchestrator::run_dirs::timestamp(),
             crate::tables::edited_name("attacks", &args.set)
         ))
     });

@@ -12,7 +12,7 @@ use super::plan::Plan;
 use super::shard::{self, Record, Shard, State};
 use super::store::load_stored;
 use super::tables::sig;
-use crate::run::Engine;
+use fdi_orchestrator::run::Engine;
 
 /// At most this many runs are named per shard; the others are counted.
 const NAMED: usize = 8;
@@ -56,7 +56,7 @@ pub(super) fn print(
     out: &Path,
     engine: Engine,
     said: &mut dyn FnMut(&str),
-) -> Result<super::Ended> {
+) -> Result<()> {
     let records = shard::records(out)?;
     let hash = shard::campaign_hash(plan);
     let expected = shard::Expected {
@@ -78,7 +78,7 @@ pub(super) fn print(
             out.display(),
             shard::SHARDS
         ));
-        return Ok(super::Ended::Whole);
+        return Ok(());
     };
     let shards = progress(plan, out, &results, count, records)?;
     let walls: Vec<f64> = results.iter().flatten().map(|s| s.wall_s).collect();
@@ -100,7 +100,7 @@ pub(super) fn print(
         }
     }
     said(&time_left(&shards, mean, walls.len()));
-    Ok(super::Ended::Whole)
+    Ok(())
 }
 
 /// Each shard's progress, in shard order.

@@ -12,7 +12,7 @@ use anyhow::{anyhow, Result};
 use fdi_runtime::ipc::{monotonic_ns, sleep_until_ns};
 use fdi_runtime::process::CpuList;
 
-use crate::run::runtime::Placement;
+use fdi_orchestrator::run::runtime::Placement;
 use hdrhistogram::Histogram;
 
 /// Wake-ups at least this late are kept as stalls, ns.

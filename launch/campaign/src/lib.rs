@@ -35,7 +35,7 @@ pub mod status;
 pub mod store;
 pub mod tables;
 
-pub(crate) use tables::sig;
+pub use tables::sig;
 
 use std::collections::BTreeSet;
 use std::num::NonZeroUsize;
@@ -51,8 +51,8 @@ use fdi_common::stop::Stop;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
-use crate::run::{execute, Engine, Traces};
 use fdi_common::field_path::{show, FieldPath, PathError};
+use fdi_orchestrator::run::{execute, Engine, Traces};
 use plan::{Axis, Job, Plan, Point, MAX_RUNS};
 use store::{load_stored, stored_path, write_atomic, Stored};
 
@@ -586,7 +586,7 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
         name: &name_of,
         text: &text,
     };
-    if crate::run_dirs::safe_name(&file.name).is_empty() {
+    if fdi_orchestrator::run_dirs::safe_name(&file.name).is_empty() {
         bail!(
             "{}: is empty: the campaign's folder is runs/campaigns/<name>",
             src.at("name")
@@ -779,12 +779,12 @@ impl Expansion<'_> {
 }
 
 /// The folder of a campaign without `--out`: `runs/campaigns/<name>`, the name made one
-/// component of the path by the rule of run folders ([`crate::run_dirs::safe_name`]), so that
+/// component of the path by the rule of run folders ([`fdi_orchestrator::run_dirs::safe_name`]), so that
 /// `../x` or `/x` stays under `runs/campaigns/` (an empty name is refused by [`plan`]).
 fn default_out(name: &str) -> PathBuf {
     PathBuf::from("runs")
         .join("campaigns")
-        .join(crate::run_dirs::safe_name(name))
+        .join(fdi_orchestrator::run_dirs::safe_name(name))
 }
 
 /// Runs a campaign (`fdi-launch sweep`): the runs not stored yet, then its tables and figures.
@@ -795,7 +795,8 @@ pub fn sweep(args: &SweepOptions, stop: &Stop, said: &mut dyn FnMut(&str)) -> Re
     let plan = plan(&args.campaign, args.engine)?;
     let out = args.out.clone().unwrap_or_else(|| default_out(&plan.name));
     if args.status {
-        return status::print(&plan, &out, args.engine, said);
+        status::print(&plan, &out, args.engine, said)?;
+        return Ok(Ended::Whole);
     }
     if args.aggregate {
         return aggregate(args, &plan, &out, said);
@@ -1163,14 +1164,14 @@ enum RunEnd {
 /// One run of the campaign: whole, interrupted (its summary says by which signal, or the stop
 /// was raised before it began), or failed.
 fn run_one(job: &Job, name: &str, args: &SweepOptions, runs_root: &Path, stop: &Stop) -> RunEnd {
-    let opts = crate::run::Options::quiet(args.traces, stop);
+    let opts = fdi_orchestrator::run::Options::quiet(args.traces, stop);
     let summary = match args.traces {
         Traces::None => execute(&job.resolved, args.engine, None, &opts).map_err(Into::into),
         _ => {
             let mut named = job.resolved.clone();
             named.scenario.name = format!("{name}-{}", &job.key[..12]);
-            crate::run_dirs::create_run_dir(runs_root, &named).and_then(|dir| {
-                crate::run_dirs::discard_if_not_started(
+            fdi_orchestrator::run_dirs::create_run_dir(runs_root, &named).and_then(|dir| {
+                fdi_orchestrator::run_dirs::discard_if_not_started(
                     &dir,
                     execute(&named, args.engine, Some(&dir), &opts),
                 )
@@ -1181,9 +1182,8 @@ fn run_one(job: &Job, name: &str, args: &SweepOptions, runs_root: &Path, stop: &
     match summary {
         Ok(s) => match s.partial.as_ref().and_then(|p| p.signal) {
             Some(signal) => RunEnd::Interrupted(signal),
-            None => {
-                crate::run::require_whole(s).map_or_else(failed, |s| RunEnd::Whole(Box::new(s)))
-            }
+            None => fdi_orchestrator::run::require_whole(s)
+                .map_or_else(failed, |s| RunEnd::Whole(Box::new(s))),
         },
         Err(e) => match stop.pending() {
             Some(signal) => RunEnd::Interrupted(signal),
@@ -1488,7 +1488,7 @@ mod tests {
             // The rule of run folders, one function for both.
             assert_eq!(
                 out.file_name().and_then(|n| n.to_str()),
-                Some(crate::run_dirs::safe_name(name).as_str())
+                Some(fdi_orchestrator::run_dirs::safe_name(name).as_str())
             );
         }
         assert_eq!(default_out("beta-sweep"), campaigns.join("beta-sweep"));

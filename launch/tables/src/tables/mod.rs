@@ -11,7 +11,7 @@ use fdi_common::observe::Observer;
 use fdi_common::scenario::{self, ControllerMode, Resolved};
 use serde::Serialize;
 
-use crate::run::{execute, Engine};
+use fdi_orchestrator::run::{execute, Engine};
 use fdi_report::output::{csv_bytes, md_table_head};
 use fdi_report::plot::{BarChart, PALETTE};
 use plotters::style::RGBColor;
@@ -27,8 +27,8 @@ pub struct TableOptions {
     /// attack and duration are replaced by the table's (the paper's attack, 40 s), and the
     /// header names what differs from the paper's calibration.
     pub scenario: Option<PathBuf>,
-    pub numerics: crate::request::NumericsArgs,
-    pub set: crate::request::SetArgs,
+    pub numerics: fdi_orchestrator::request::NumericsArgs,
+    pub set: fdi_orchestrator::request::SetArgs,
     /// Shorten every run to this many seconds (the paper's tables use 40 s).
     pub duration_s: Option<f64>,
     /// Folder that receives the table's run directories.
@@ -109,7 +109,7 @@ pub struct Owned {
 }
 
 /// The field paths of `set` that reach a field of `owned` (or a table holding one).
-fn refuse_owned(set: &crate::request::SetArgs, owned: &[Owned]) -> Result<()> {
+fn refuse_owned(set: &fdi_orchestrator::request::SetArgs, owned: &[Owned]) -> Result<()> {
     let mut problems = Vec::new();
     for e in &set.set {
         let target = e.path.target();
@@ -171,15 +171,15 @@ impl MadeWith {
     /// how it differs from the paper's.
     pub fn load(
         scenario: Option<&Path>,
-        numerics: &crate::request::NumericsArgs,
-        set: &crate::request::SetArgs,
+        numerics: &fdi_orchestrator::request::NumericsArgs,
+        set: &fdi_orchestrator::request::SetArgs,
         owned: &[Owned],
     ) -> Result<(Resolved, Self)> {
         refuse_owned(set, owned)?;
-        let mut r = crate::request::load(scenario)?;
+        let mut r = fdi_orchestrator::request::load(scenario)?;
         numerics.apply(&mut r.scenario);
         let r = set.apply(r, &numerics.fields())?;
-        let r = crate::run::check_overrides(r)?;
+        let r = fdi_orchestrator::run::check_overrides(r)?;
         let made = Self {
             scenario: scenario.map_or_else(
                 || "the embedded paper scenario".into(),
@@ -257,7 +257,7 @@ fn base(args: &TableOptions, owned: &[Owned]) -> Result<(Resolved, MadeWith)> {
         ));
         r.scenario.duration_s = duration;
     }
-    Ok((crate::run::check_overrides(r)?, made))
+    Ok((fdi_orchestrator::run::check_overrides(r)?, made))
 }
 
 /// True when robot `id` of `r` is the paper's robot `id`: same model and trajectory, and the
@@ -314,20 +314,20 @@ fn run_case(
     progress: bool,
     stop: &Stop,
 ) -> Result<RunSummary> {
-    let quiet = crate::run::Options::quiet(crate::run::Traces::Full, stop);
+    let quiet = fdi_orchestrator::run::Options::quiet(fdi_orchestrator::run::Traces::Full, stop);
     match args.engine {
         Engine::Inproc => Ok(execute(r, args.engine, None, &quiet)?),
         Engine::Ipc => {
             let mut named = r.clone();
             named.scenario.name = case.into();
-            let d = crate::run_dirs::create_run_dir(dir, &named)?;
-            let summary = crate::run_dirs::discard_if_not_started(
+            let d = fdi_orchestrator::run_dirs::create_run_dir(dir, &named)?;
+            let summary = fdi_orchestrator::run_dirs::discard_if_not_started(
                 &d,
                 execute(
                     r,
                     args.engine,
                     Some(&d),
-                    &crate::run::Options {
+                    &fdi_orchestrator::run::Options {
                         progress: if progress {
                             args.progress.clone()
                         } else {
@@ -337,7 +337,7 @@ fn run_case(
                     },
                 ),
             )
-            .and_then(crate::run::require_whole)?;
+            .and_then(fdi_orchestrator::run::require_whole)?;
             if let Err(e) = fdi_report::report::write_report(&d, r, &summary, stop) {
                 // Stopped by the signal: the table stops too.
                 if stop.pending().is_some() {
@@ -359,17 +359,17 @@ fn run_case(
 fn table_dir(args: &TableOptions, name: &str) -> PathBuf {
     args.out.join(format!(
         "{}-{}",
-        crate::run_dirs::timestamp(),
+        fdi_orchestrator::run_dirs::timestamp(),
         edited_name(name, &args.set)
     ))
 }
 
-/// `name`, then each `--set` edit, as one component of a path ([`crate::run_dirs::safe_name`]).
-pub(crate) fn edited_name(name: &str, set: &crate::request::SetArgs) -> String {
+/// `name`, then each `--set` edit, as one component of a path ([`fdi_orchestrator::run_dirs::safe_name`]).
+pub(crate) fn edited_name(name: &str, set: &fdi_orchestrator::request::SetArgs) -> String {
     let parts: Vec<String> = std::iter::once(name.to_string())
         .chain(set.name_parts())
         .collect();
-    crate::run_dirs::safe_name(&parts.join("-"))
+    fdi_orchestrator::run_dirs::safe_name(&parts.join("-"))
 }
 
 /// The RMSE of `robot` in a run, NaN when the run has none.
@@ -778,8 +778,8 @@ fn table2_chart(engine: Engine, rows: &[Table2Row]) -> BarChart {
 /// over N runs, on the campaigns' parallel runner.
 mod seeded {
     use super::*;
-    use crate::campaign::runner;
-    use crate::campaign::stats::{self, Stats};
+    use fdi_campaign::runner;
+    use fdi_campaign::stats::{self, Stats};
 
     /// A cell of a seeded table, as its JSON holds it.
     #[derive(Debug, Serialize)]
@@ -822,11 +822,9 @@ mod seeded {
         /// `0.0084 ± 0.0001`, or the mean alone for one seed.
         fn md(&self) -> String {
             match (self.ci_low, self.ci_high) {
-                (Some(lo), Some(hi)) => format!(
-                    "{:.4} ± {}",
-                    self.mean,
-                    crate::campaign::sig((hi - lo) / 2.0)
-                ),
+                (Some(lo), Some(hi)) => {
+                    format!("{:.4} ± {}", self.mean, fdi_campaign::sig((hi - lo) / 2.0))
+                }
                 _ => format!("{:.4}", self.mean),
             }
         }

@@ -48,7 +48,7 @@ use fdi_runtime::ipc::{
 };
 use fdi_runtime::process::{WaitStrategy, DEFAULT_SPIN_US, WAIT_SLICE};
 
-use crate::run::supervisor::Supervisor;
+use fdi_orchestrator::run::supervisor::Supervisor;
 use hdrhistogram::Histogram;
 use serde::Serialize;
 
