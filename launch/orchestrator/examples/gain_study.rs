@@ -7,13 +7,35 @@
 //!
 //! Each run is a run directory (traces, summary) in a scratch folder that is removed at the end;
 //! `fdi-launch sweep` does the same with statistics over seeds, resumably, from a campaign file.
+//! The libraries print nothing: what they have to say (a warning, a note) goes through the `log`
+//! facade, which this program prints on stderr ([`Warnings`]; any logger will do).
 
 use anyhow::{Context, Result};
 use fdi_common::scenario::ControllerMode;
 use fdi_common::stop::Stop;
 use fdi_orchestrator::{execute, Engine, Overrides, RunRequest};
 
+/// The libraries' warnings and notes on stderr.
+struct Warnings;
+
+impl log::Log for Warnings {
+    fn enabled(&self, m: &log::Metadata) -> bool {
+        m.level() <= log::Level::Info && m.target().starts_with("fdi")
+    }
+
+    fn log(&self, record: &log::Record) {
+        if self.enabled(record.metadata()) {
+            eprintln!("gain_study: {}: {}", record.level(), record.args());
+        }
+    }
+
+    fn flush(&self) {}
+}
+
 fn main() -> Result<()> {
+    if log::set_logger(&Warnings).is_ok() {
+        log::set_max_level(log::LevelFilter::Info);
+    }
     let duration_s: f64 = match std::env::args().nth(1) {
         Some(a) => a
             .parse()
