@@ -13,6 +13,11 @@ static BAR: Mutex<Option<ProgressBar>> = Mutex::new(None);
 /// The program's name before each line (`fdi-launch`, `fdi-launch serve`).
 static PROGRAM: OnceLock<&'static str> = OnceLock::new();
 
+/// The program's name before each line.
+fn program() -> &'static str {
+    PROGRAM.get().copied().unwrap_or("fdi-launch")
+}
+
 fn bar() -> MutexGuard<'static, Option<ProgressBar>> {
     BAR.lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
@@ -39,7 +44,7 @@ impl log::Log for Lines {
         if !self.enabled(record.metadata()) {
             return;
         }
-        let program = PROGRAM.get().copied().unwrap_or("fdi-launch");
+        let program = program();
         let text = record.args();
         if record.target() == VERBATIM {
             say(&text.to_string());
@@ -93,8 +98,7 @@ impl Progress for Bar {
     }
 
     fn line(&self, text: &str) {
-        let program = PROGRAM.get().copied().unwrap_or("fdi-launch");
-        say(&format!("{program}: {text}"));
+        say(&format!("{}: {text}", program()));
     }
 
     fn finish(&self, how: Finish) {

@@ -269,9 +269,9 @@ fn print_lockstep(duration_s: f64, measured: &Lockstep) {
 #[derive(Debug, clap::Parser)]
 #[command(name = "bench-peer", no_binary_name = true)]
 struct PeerArgs {
-    #[arg(value_parser = peer_kind())]
+    #[arg(value_parser = super::values::one_of(PeerKind::ALL, PeerKind::name, |_| None))]
     kind: PeerKind,
-    #[arg(value_parser = peer_role())]
+    #[arg(value_parser = super::values::one_of(PeerRole::ALL, PeerRole::name, |_| None))]
     role: PeerRole,
     /// iceoryx2 run prefix (ipc kinds).
     #[arg(long)]
@@ -285,26 +285,6 @@ struct PeerArgs {
     /// Stop when this process is no longer the parent.
     #[arg(long)]
     parent_pid: Option<u32>,
-}
-
-fn peer_kind() -> impl clap::builder::TypedValueParser<Value = PeerKind> {
-    use clap::builder::TypedValueParser as _;
-    clap::builder::PossibleValuesParser::new(PeerKind::ALL.map(PeerKind::name)).try_map(|s| {
-        PeerKind::ALL
-            .into_iter()
-            .find(|k| k.name() == s)
-            .ok_or_else(|| format!("no peer kind `{s}`"))
-    })
-}
-
-fn peer_role() -> impl clap::builder::TypedValueParser<Value = PeerRole> {
-    use clap::builder::TypedValueParser as _;
-    clap::builder::PossibleValuesParser::new(PeerRole::ALL.map(PeerRole::name)).try_map(|s| {
-        PeerRole::ALL
-            .into_iter()
-            .find(|r| r.name() == s)
-            .ok_or_else(|| format!("no peer role `{s}`"))
-    })
 }
 
 impl PeerArgs {

@@ -4,12 +4,29 @@
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
 use fdi_orchestrator::Engine;
 
+/// A value of the closed set `all`, by its `name`, listed in the help with its `help`.
+pub fn one_of<T: Copy + Send + Sync + 'static, const N: usize>(
+    all: [T; N],
+    name: fn(T) -> &'static str,
+    help: fn(T) -> Option<&'static str>,
+) -> impl TypedValueParser<Value = T> {
+    PossibleValuesParser::new(all.map(|v| {
+        let value = PossibleValue::new(name(v));
+        match help(v) {
+            Some(h) => value.help(h),
+            None => value,
+        }
+    }))
+    .try_map(move |s| {
+        all.into_iter()
+            .find(|v| name(*v) == s)
+            .ok_or_else(|| format!("`{s}` is not one of the values"))
+    })
+}
+
 /// `--engine`: the engines by their names.
 pub fn engine() -> impl TypedValueParser<Value = Engine> {
-    PossibleValuesParser::new(
-        Engine::ALL.map(|e| PossibleValue::new(e.as_str()).help(e.describe())),
-    )
-    .try_map(|s| s.parse::<Engine>())
+    one_of(Engine::ALL, Engine::as_str, |e| Some(e.describe()))
 }
 
 #[cfg(test)]

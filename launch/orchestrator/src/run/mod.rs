@@ -77,7 +77,7 @@ impl std::fmt::Display for Engine {
 
 /// A name that is no engine's.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("`{0}` is no engine (the engines: ipc, inproc)")]
+#[error("`{0}` is no engine (the engines: {all})", all = Engine::ALL.map(Engine::as_str).join(", "))]
 pub struct UnknownEngine(pub String);
 
 impl std::str::FromStr for Engine {
