@@ -11,8 +11,8 @@ use fdi_common::run_dir::RunDir;
 use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::stop::{Stop, BEFORE_THE_START};
 
-use crate::run::hosts::Deployment;
 use crate::run::runtime::Placement;
+use crate::run::split::Split;
 use crate::run::RunError;
 use crate::run::{Engine, Traces};
 
@@ -104,7 +104,7 @@ pub struct RunRequest {
     /// Real-time priority and CPUs of the ipc engine's processes.
     pub placement: Placement,
     /// The hosts a split run runs on (`--hosts FILE`).
-    pub deployment: Option<Deployment>,
+    pub split: Option<std::sync::Arc<dyn Split>>,
     /// Told the run's ticks (ipc runs; a bar on the command line).
     pub progress: fdi_common::observe::Observer,
     /// Serve the run live (`--live`).
@@ -130,17 +130,17 @@ impl RunRequest {
             engine,
             traces: Traces::Full,
             placement: Placement::default(),
-            deployment: None,
+            split: None,
             progress: fdi_common::observe::Observer::quiet(),
             live: None,
             pace: None,
         }
     }
 
-    /// Splits the run over the hosts of `deployment` (`--hosts`); its directory's name says so
+    /// Splits the run over the hosts of `split` (`--hosts`); its directory's name says so
     /// (`<name>-hosts`), apart from the same scenario's runs on one host.
-    pub fn over_hosts(mut self, deployment: Deployment) -> Self {
-        self.deployment = Some(deployment);
+    pub fn over_hosts(mut self, split: std::sync::Arc<dyn Split>) -> Self {
+        self.split = Some(split);
         self.name.push_str("-hosts");
         self
     }
@@ -181,7 +181,7 @@ pub fn execute(request: &RunRequest, dir: &RunDir, stop: &Stop) -> Result<RunSum
                 request.engine,
                 Some(dir.path()),
                 &opts,
-                request.deployment.as_ref(),
+                request.split.as_ref(),
             )
         });
     crate::run_dirs::discard_if_not_started(dir.path(), run)
@@ -199,13 +199,13 @@ pub fn execute_with<A: Attacker>(
     stop: &Stop,
     attacker: &mut A,
 ) -> Result<RunSummary> {
-    let run = if request.engine != Engine::Inproc || request.deployment.is_some() {
+    let run = if request.engine != Engine::Inproc || request.split.is_some() {
         Err(RunError::NotStarted(
             anyhow::anyhow!(crate::run::runtime::DID_NOT_START).context(format!(
                 "a run with an attacker of its own needs the in-process engine on one host, not \
              the {} engine{}",
                 request.engine.as_str(),
-                if request.deployment.is_some() {
+                if request.split.is_some() {
                     " over hosts"
                 } else {
                     ""

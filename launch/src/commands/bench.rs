@@ -118,7 +118,7 @@ fn latency(a: &LatencyArgs, stop: &Stop) -> Result<()> {
             rate_hz: a.rate_hz,
             out: a.out.clone(),
             placement: a.placement.clone(),
-            hosts: a.hosts.clone(),
+            hosts: a.hosts.as_deref().map(fdi_split::hosts_file),
             live: a.live,
             live_wait: a.live_wait,
             progress: crate::terminal::progress(!a.json),

@@ -1,5 +1,5 @@
 //! `fdi-launch certs`: the lab's certificates for the hosts of a deployment file
-//! (`fdi_orchestrator::run::certs`), and which files go to which host.
+//! (`fdi_split::certs`), and which files go to which host.
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -25,8 +25,7 @@ pub struct CertsArgs {
 
 /// `certs`.
 pub fn certs(args: &CertsArgs) -> Result<ExitCode> {
-    let (out, made) =
-        fdi_orchestrator::run::certs::certs(&args.hosts, args.out.as_deref(), args.days)?;
+    let (out, made) = fdi_split::certs::certs(&args.hosts, args.out.as_deref(), args.days)?;
     if made.is_empty() {
         println!("{}: every host has its certificate already", out.display());
     }

@@ -10,7 +10,7 @@ use anyhow::Result;
 use fdi_common::engine::RunSummary;
 use fdi_common::stop::{Interrupted, Stop, BEFORE_THE_START, DURING_THE_RUN};
 use fdi_orchestrator::run::runtime::Placement;
-use fdi_orchestrator::run::{check_placement, hosts::Deployment, volume};
+use fdi_orchestrator::run::{check_placement, volume};
 use fdi_orchestrator::{execute, Engine, Overrides, RunRequest};
 use fdi_report::output::{self, describe_error};
 use fdi_report::report;
@@ -166,8 +166,8 @@ fn request(args: &RunArgs) -> Result<RunRequest> {
         !args.no_space_check,
     )?;
     if let Some(path) = &args.hosts {
-        let deployment = Deployment::load(path, r)?;
-        request = request.over_hosts(deployment);
+        let split = fdi_split::load(path, r)?;
+        request = request.over_hosts(split);
     }
     request.traces = args.traces;
     request.placement = args.placement.clone();

@@ -1,4 +1,4 @@
-//! `fdi-launch serve`: this host's share of split runs (`fdi_orchestrator::run::serve`).
+//! `fdi-launch serve`: this host's share of split runs (`fdi_split::serve`).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -6,7 +6,7 @@ use std::process::ExitCode;
 use anyhow::Result;
 use clap::Args;
 use fdi_common::stop::Stop;
-use fdi_orchestrator::run::serve::ServeOptions;
+use fdi_split::serve::ServeOptions;
 
 /// `serve`.
 #[derive(Debug, Clone, Args)]
@@ -30,7 +30,7 @@ pub struct ServeArgs {
 
 /// `serve`.
 pub fn serve(args: &ServeArgs, stop: &Stop) -> Result<ExitCode> {
-    fdi_orchestrator::run::serve::serve(
+    fdi_split::serve::serve(
         &ServeOptions {
             hosts: args.hosts.clone(),
             name: args.name.clone(),

@@ -6,7 +6,7 @@
 //! every 100 ms or 64 KiB), and a viewer that comes late sees the run from its start.
 //!
 //! In a run split over hosts, the traces of the processes on other hosts come as their hosts'
-//! serves stream them once subscribed ([`crate::run::trace_stream`]), and at the end from the
+//! serves stream them once subscribed ([`crate::run::split::RemoteTraces`]), and at the end from the
 //! copies the run fetched; the coordinator serves every robot's topics.
 
 use std::cell::RefCell;
@@ -26,8 +26,7 @@ use fdi_common::trace::TraceReader;
 use fdi_report::join::{Feed, Sources};
 
 use crate::run::relay::lock;
-use crate::run::remote::RemoteTraces;
-use crate::run::trace_stream::Received;
+use crate::run::split::{Received, RemoteTraces};
 
 /// How long a follower sleeps when it reached what was written so far.
 const POLL: Duration = Duration::from_millis(20);
@@ -92,13 +91,13 @@ impl Read for Growing {
 
 /// Where the follower finds the traces of a split run's processes on other hosts: set once
 /// the coordinator reached them, emptied when it fetches them at the end.
-pub type RemoteSlot = Arc<Mutex<Option<RemoteTraces>>>;
+pub type RemoteSlot = Arc<Mutex<Option<Arc<dyn RemoteTraces>>>>;
 
 /// A subscription the [`Subscriber`] is asked for: the process, its number of readers, and
 /// where to answer.
 type Ask = (Process, usize, mpsc::Sender<Vec<Received>>);
 
-/// Subscribes to the streams of the remote traces ([`crate::run::trace_stream`]) on a thread
+/// Subscribes to the streams of the remote traces ([`RemoteTraces`]) on a thread
 /// of its own at the run's priority, which holds the subscriptions until every `Subscriber` is
 /// dropped. The follower runs under SCHED_IDLE, and a Zenoh call takes locks of the session
 /// that a thread the busy run starves must not hold.
@@ -120,7 +119,7 @@ impl Subscriber {
                     let remote = lock(&traces).clone();
                     let streams = match remote.map(|t| t.subscribe(p, readers)) {
                         Some(Ok(s)) => {
-                            held.push(s.subscription);
+                            held.push(s.held);
                             s.readers
                         }
                         Some(Err(e)) => {
@@ -151,7 +150,7 @@ impl Subscriber {
 
     /// The processes on other hosts, once the coordinator reached them.
     fn elsewhere(&self) -> Option<BTreeSet<Process>> {
-        lock(&self.slot).as_ref().map(RemoteTraces::processes)
+        lock(&self.slot).as_ref().map(|t| t.processes())
     }
 }
 

@@ -1,28 +1,25 @@
 //! Run orchestration: a resolved scenario on an engine. The multi-process runtime (spawn,
-//! supervise, tear down: [`runtime`]), the relay of the children's stderr ([`relay`]), runs
-//! split over hosts ([`hosts`], [`remote`], [`serve`]) and the replay of a recorded attacker
+//! supervise, tear down: [`runtime`]), the relay of the children's stderr ([`relay`]), the
+//! seam of runs split over hosts ([`split`]; `fdi-split` implements it) and the replay of a recorded attacker
 //! ([`replayer`]); the in-process engine is `fdi_common::engine`, the join of traces into tick
 //! records `fdi_report::join`.
 
-pub mod certs;
 pub mod disk;
 pub mod error;
 pub mod follow;
-pub mod hosts;
 pub mod outputs;
 pub mod program;
 pub mod relay;
-pub mod remote;
 pub mod replayer;
 pub mod runs;
 pub mod runtime;
-pub mod serve;
+pub mod split;
 pub mod supervisor;
 pub mod tap;
-pub mod trace_stream;
 pub mod volume;
 
 use std::path::Path;
+use std::sync::Arc;
 
 use anyhow::{bail, Context, Result};
 pub use error::RunError;
@@ -526,19 +523,17 @@ pub fn execute(
     execute_on(r, engine, run_dir, opts, None)
 }
 
-/// [`execute`], the run split over the hosts of `deployment` (`--hosts FILE`, the ipc engine
+/// [`execute`], the run split over the hosts of `split` (`--hosts FILE`, the ipc engine
 /// with full traces only).
 pub fn execute_on(
     r: &Resolved,
     engine: Engine,
     run_dir: Option<&Path>,
     opts: &Options,
-    deployment: Option<&hosts::Deployment>,
+    split: Option<&Arc<dyn split::Split>>,
 ) -> Result<RunSummary, RunError> {
     let traces = opts.traces;
-    if deployment.is_some()
-        && (engine != Engine::Ipc || run_dir.is_none() || traces != Traces::Full)
-    {
+    if split.is_some() && (engine != Engine::Ipc || run_dir.is_none() || traces != Traces::Full) {
         return Err(anyhow::anyhow!(
             "a run split over hosts (--hosts) needs the ipc engine and full traces (the remote \
              traces are fetched whole at the end)"
@@ -584,7 +579,7 @@ pub fn execute_on(
             }
             summary
         }
-        (Engine::Ipc, Some(dir)) => execute_ipc(r, dir, opts, deployment),
+        (Engine::Ipc, Some(dir)) => execute_ipc(r, dir, opts, split),
     }
 }
 
@@ -593,7 +588,7 @@ fn execute_ipc(
     r: &Resolved,
     dir: &Path,
     opts: &Options,
-    deployment: Option<&hosts::Deployment>,
+    split: Option<&Arc<dyn split::Split>>,
 ) -> Result<RunSummary, RunError> {
     let (progress, placement, traces) = (opts.progress.clone(), &opts.placement, opts.traces);
     let (live, feed) = start_live(r, Engine::Ipc, opts)?.unzip();
@@ -603,10 +598,10 @@ fn execute_ipc(
         replay: false,
         placement: placement.clone(),
         pipes: traces != Traces::Full,
-        deployment: deployment.cloned(),
+        split: split.cloned(),
         stop: opts.stop.clone(),
         pace: opts.pace,
-        remote_traces: (live.is_some() && deployment.is_some()).then(Default::default),
+        remote_traces: (live.is_some() && split.is_some()).then(Default::default),
     };
     let (outcome, mut joined, write_error) = if !opts.pipes {
         let outcome = run_ipc_followed(r, &opts, live.as_ref().zip(feed))?;

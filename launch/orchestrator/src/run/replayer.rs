@@ -323,7 +323,7 @@ pub fn replay_run(
                     replay: true,
                     placement: crate::run::runtime::Placement::default(),
                     pipes: false,
-                    deployment: None,
+                    split: None,
                     stop: stop.clone(),
                     pace: None,
                     remote_traces: None,

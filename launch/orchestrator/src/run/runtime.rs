@@ -19,17 +19,18 @@ use fdi_runtime::ipc::{
 };
 use fdi_runtime::process::procfs;
 
+use crate::run::split::{Hosts, Split};
 use crate::run::supervisor::{Child, Supervisor};
 
 /// Grace period between SIGTERM and SIGKILL when a run is torn down.
-pub(crate) const GRACE: Duration = Duration::from_secs(2);
+pub const GRACE: Duration = Duration::from_secs(2);
 /// How long the end of the children's output is awaited once they are gone (the output of a
 /// program outside the project may be held open by a process that left its group).
-pub(crate) const OUTPUT_WAIT: Duration = Duration::from_secs(1);
+pub const OUTPUT_WAIT: Duration = Duration::from_secs(1);
 /// How long the processes may take to report ready.
 const READY_TIMEOUT: Duration = Duration::from_secs(30);
 /// A process stopped (SIGSTOP) this long stalls the run: the launcher stops it with a message.
-pub(crate) const STALL_LIMIT: Duration = Duration::from_secs(1);
+pub const STALL_LIMIT: Duration = Duration::from_secs(1);
 /// A started run that makes no progress for this long (no report of the control center, which
 /// reports every 500 ticks, and no process done) is stopped, named: whatever holds it (a lost
 /// or forged frame between hosts, a process that waits for what never comes).
@@ -52,7 +53,7 @@ type Proc = Child<Slot>;
 /// The role binaries: the sibling `fdi-agent` etc. when they are at least as new as this
 /// executable, else this executable in the hidden multi-call mode (`fdi-launch process ROLE`),
 /// which is always consistent with the launcher.
-pub(crate) fn role_command(role: &str) -> Result<Command> {
+pub fn role_command(role: &str) -> Result<Command> {
     let me = std::env::current_exe().context("locating fdi-launch")?;
     let sibling = me.with_file_name(format!("fdi-{role}"));
     let modified = |p: &Path| std::fs::metadata(p).and_then(|m| m.modified()).ok();
@@ -148,7 +149,7 @@ pub struct IpcOptions {
     /// (`traces/<process>.pipe`) instead of the trace files.
     pub pipes: bool,
     /// The run is split over hosts (`--hosts FILE`): where each process runs.
-    pub deployment: Option<crate::run::hosts::Deployment>,
+    pub split: Option<std::sync::Arc<dyn Split>>,
     /// The launcher's stop.
     pub stop: Stop,
     /// A lockstep run paced for watching (`--pace FACTOR`): the agents' argument.
@@ -173,7 +174,9 @@ struct Launcher<X: Transport> {
     /// The start was broadcast: from then on the run records.
     started: bool,
     /// The other hosts of a split run.
-    remote: Option<crate::run::remote::Remote>,
+    remote: Option<Box<dyn Hosts>>,
+    /// Where each process of a split run runs.
+    split: Option<std::sync::Arc<dyn Split>>,
     /// The last tick the control center reported, and when any process last said it moved
     /// on (or the start).
     progress: (u64, Instant),
@@ -199,17 +202,14 @@ impl<X: Transport> Launcher<X> {
         let ran_only_agents = self
             .procs
             .iter()
-            .filter(|p| p.host() == Some(lost.host.name.as_str()))
+            .filter(|p| p.host() == Some(lost.name.as_str()))
             .all(|p| matches!(p.meta.wake, Wake::Agent(_)));
         if !(self.realtime && self.started && ran_only_agents) {
-            return Some(lost.message());
+            return Some(lost.message);
         }
-        let reason = format!(
-            "host `{}` ({}) unreachable",
-            lost.host.name, lost.host.endpoint
-        );
+        let reason = format!("host `{}` ({}) unreachable", lost.name, lost.endpoint);
         for (i, p) in self.procs.iter().enumerate() {
-            if p.host() == Some(lost.host.name.as_str()) {
+            if p.host() == Some(lost.name.as_str()) {
                 done[i] = true;
             }
         }
@@ -226,7 +226,7 @@ impl<X: Transport> Launcher<X> {
         }
         bar.line(&format!(
             "{}; its agents are lost, the run goes on",
-            lost.message()
+            lost.message
         ));
         None
     }
@@ -274,17 +274,14 @@ impl<X: Transport> Launcher<X> {
         let refusals = self
             .remote
             .as_ref()
-            .map(crate::run::remote::Remote::refusals)
+            .map(|r| r.refusals())
             .unwrap_or_default();
         let network = if self.remote.is_none() {
             String::new()
         } else if refusals.is_empty() {
             "; no frame was refused on the network path".into()
         } else {
-            let said: Vec<String> = refusals
-                .iter()
-                .map(|(h, n, first)| format!("host `{h}` refused {n} frames, the first: {first}"))
-                .collect();
+            let said: Vec<String> = refusals.iter().map(ToString::to_string).collect();
             format!(
                 "; frames were refused on the network path ({}): a forged, duplicated or \
                  reordered frame stops a lockstep run",
@@ -586,6 +583,7 @@ fn open_launcher(
         stop: opts.stop.clone(),
         started: false,
         remote: None,
+        split: opts.split.clone(),
         progress: (0, Instant::now()),
         said_done: std::collections::BTreeSet::new(),
     };
@@ -649,12 +647,9 @@ fn connect_remote<X: Transport>(
     prefix: &str,
     launcher: &mut Launcher<X>,
 ) -> Result<()> {
-    match &opts.deployment {
-        Some(d) => crate::run::remote::Remote::connect(d.clone(), prefix)
-            .and_then(|mut r| {
-                r.start_bridge(fdi_runtime::process::sizing_for(resolved))?;
-                Ok(r)
-            })
+    match &opts.split {
+        Some(split) => split
+            .connect(prefix, fdi_runtime::process::sizing_for(resolved))
             .map(|r| {
                 if let Some(slot) = &opts.remote_traces {
                     *crate::run::relay::lock(slot) = Some(r.traces());
@@ -723,7 +718,7 @@ fn spawn_and_supervise<X: Transport>(
         remote.await_routes()?;
     }
     let started = start_run(resolved, transport, l)?;
-    let stall_timeout = stall_timeout_of(resolved, l.remote.as_ref(), opts.pace);
+    let stall_timeout = stall_timeout_of(resolved, l.split.as_deref(), opts.pace);
     let (wall_s, interrupted) = supervise(resolved, l, bar, started, stall_timeout)?;
     if interrupted.is_some() {
         return Ok(Supervised {
@@ -762,17 +757,9 @@ fn spawn_roles<X: Transport>(
             Some(id) => format!("agent {id}"),
             None => rp.role.clone(),
         };
-        if let Some(d) = l.remote.as_ref().map(|r| &r.deployment) {
-            if !d.is_local(rp.wake) {
-                let p = crate::run::hosts::RemoteProcess::of(rp.wake).with_context(|| {
-                    format!("{label} cannot run on a host other than the coordinating one")
-                })?;
-                let slot = Slot {
-                    wake: rp.wake,
-                    ready: false,
-                    external: None,
-                };
-                remote_procs.push((p, rp.wake, slot));
+        if let Some(split) = &l.split {
+            if !split.is_local(rp.wake) {
+                remote_procs.push((rp.wake, label));
                 continue;
             }
         }
@@ -781,7 +768,14 @@ fn spawn_roles<X: Transport>(
     if let Some(remote) = &mut l.remote {
         let scenario = std::fs::read_to_string(scenario_path)
             .with_context(|| format!("reading {}", scenario_path.display()))?;
-        remote.start_hosts(&scenario, remote_procs, &mut l.procs)?;
+        for (wake, label, child) in remote.start_hosts(&scenario, remote_procs)? {
+            let slot = Slot {
+                wake,
+                ready: false,
+                external: None,
+            };
+            l.procs.adopt_remote(label, slot, child);
+        }
         for line in remote.describe() {
             log::info!("{line}");
         }
@@ -1108,14 +1102,10 @@ fn supervise<X: Transport>(
 /// How long a started run may go without progress before it is stopped as stalled: the
 /// deployment's `stall_timeout_s` (split runs) or [`STALL_TIMEOUT`], and never less than what a
 /// program that takes a role may take to answer, plus a second.
-fn stall_timeout_of(
-    resolved: &Resolved,
-    remote: Option<&crate::run::remote::Remote>,
-    pace: Option<f64>,
-) -> Duration {
+fn stall_timeout_of(resolved: &Resolved, split: Option<&dyn Split>, pace: Option<f64>) -> Duration {
     let roles = &resolved.scenario.roles;
-    let mut base = remote
-        .and_then(|r| r.deployment.stall_timeout)
+    let mut base = split
+        .and_then(Split::stall_timeout)
         .unwrap_or(STALL_TIMEOUT);
     // A paced or realtime run reports its progress every `PROGRESS_EVERY` ticks (or once, at
     // its end, when it has fewer) at its pace: twice that long without a report is a stall (a

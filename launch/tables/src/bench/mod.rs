@@ -49,7 +49,7 @@ pub struct LatencyOptions {
     /// Placement of the run's processes (and of the timer probe beside them).
     pub placement: fdi_orchestrator::run::runtime::Placement,
     /// Split the measured run over the hosts of this deployment file (docs/multi-host.md).
-    pub hosts: Option<PathBuf>,
+    pub hosts: Option<fdi_orchestrator::run::split::HostsFile>,
     /// Serve the measured run live at this address (as `run --live`).
     pub live: Option<std::net::SocketAddr>,
     /// Start the measured run once a viewer subscribed, at most this many seconds.
@@ -270,10 +270,7 @@ fn run_beside_probe(
     let placement = &a.placement;
     fdi_orchestrator::run::check_placement(r, Engine::Ipc, placement)?;
     let dir = fdi_orchestrator::run_dirs::create_run_dir(&a.out, r)?;
-    let deployment = match &a.hosts {
-        Some(path) => Some(fdi_orchestrator::run::hosts::Deployment::load(path, r)?),
-        None => None,
-    };
+    let split = a.hosts.as_ref().map(|h| h.split_for(r)).transpose()?;
     let probe = crate::bench::probe::TimerProbe::start(period_ns.unsigned_abs(), placement);
     let summary = fdi_orchestrator::run_dirs::discard_if_not_started(
         &dir,
@@ -289,7 +286,7 @@ fn run_beside_probe(
                 live: live_serve(a)?,
                 pace: None,
             },
-            deployment.as_ref(),
+            split.as_ref(),
         ),
     );
     let wakeups = probe.finish();

@@ -4,7 +4,7 @@
 //! access control knows it by) and its endpoint's address as subject alternative name (what
 //! the hosts connecting to it check). A host's certificate is valid for `--days` (365 by
 //! default), the CA for [`CA_DAYS`]; a split run checks both before it opens its session
-//! ([`crate::run::hosts::check_validity`]).
+//! ([`crate::hosts::check_validity`]).
 
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
@@ -15,7 +15,7 @@ use rcgen::{
     Issuer, KeyPair, KeyUsagePurpose,
 };
 
-use crate::run::hosts::{CertFiles, Lab, LabSecurity};
+use crate::hosts::{CertFiles, Lab, LabSecurity};
 
 /// How many days a CA made here is valid.
 pub const CA_DAYS: u32 = 3650;
@@ -145,7 +145,7 @@ pub fn certs(hosts: &Path, out: Option<&Path>, days: u32) -> Result<(PathBuf, Ve
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::run::hosts::{check_validity, Host};
+    use crate::hosts::{check_validity, Host};
 
     fn lab(names: &[&str]) -> Lab {
         Lab {

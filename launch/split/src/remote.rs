@@ -17,12 +17,13 @@ use fdi_net::{
 };
 use fdi_runtime::ipc::{ShmShared, Sizing, Wake};
 
-use crate::run::hosts::{
+use crate::hosts::{
     wake_word, Deployment, Host, HostCommand, HostEvent, Released, RemoteProcess, RunReply,
     RunRequest,
 };
-use crate::run::relay::lock;
-use crate::run::supervisor::{Remote as RemoteChild, RemoteState, Stopper, Supervisor};
+use fdi_orchestrator::run::relay::lock;
+use fdi_orchestrator::run::split::{self, Hosts, LostHost, Refusals, Subscribed};
+use fdi_orchestrator::run::supervisor::{Remote as RemoteChild, RemoteState, Stopper};
 
 /// After how long without every host's serve the coordinator says it is waiting (it waits
 /// [`Deployment::reach_timeout`] in all).
@@ -35,8 +36,8 @@ const TRACE_TIMEOUT: Duration = Duration::from_secs(60);
 /// end of a query is sent on the serve's Zenoh thread, the one that empties its queue
 /// ([`fdi_net::ONE_RUNTIME_THREAD`]): an answer that fills the queue can leave it
 /// waiting for room only it can make (seen with pieces asked during a run,
-/// [`crate::run::trace_stream`]).
-pub const TRACE_PIECE: u64 = crate::run::trace_stream::CHUNK as u64;
+/// [`crate::trace_stream`]).
+pub const TRACE_PIECE: u64 = crate::trace_stream::CHUNK as u64;
 /// How long every route between the hosts may take to be known before the start.
 const ROUTES_TIMEOUT: Duration = Duration::from_secs(10);
 
@@ -120,7 +121,7 @@ impl HostLink {
 }
 
 /// The traces of a run's processes on other hosts, as the live view subscribes to their
-/// streams ([`crate::run::trace_stream`]) during the run.
+/// streams ([`crate::trace_stream`]) during the run.
 #[derive(Debug, Clone)]
 pub struct RemoteTraces {
     net: Net,
@@ -129,24 +130,19 @@ pub struct RemoteTraces {
     hosts: BTreeMap<Process, String>,
 }
 
-impl RemoteTraces {
-    /// The processes that run on other hosts.
-    pub fn processes(&self) -> std::collections::BTreeSet<Process> {
+impl split::RemoteTraces for RemoteTraces {
+    fn processes(&self) -> std::collections::BTreeSet<Process> {
         self.hosts.keys().copied().collect()
     }
 
-    /// Subscribes to the stream of the trace of `process` its host sends once subscribed
-    /// ([`crate::run::trace_stream`]), for `readers` readers.
-    pub fn subscribe(
-        &self,
-        process: Process,
-        readers: usize,
-    ) -> Result<crate::run::trace_stream::Subscribed> {
+    /// The stream of the trace of `process` its host sends once subscribed
+    /// ([`crate::trace_stream`]).
+    fn subscribe(&self, process: Process, readers: usize) -> Result<Subscribed> {
         let host = self
             .hosts
             .get(&process)
             .with_context(|| format!("{process} runs on no other host"))?;
-        crate::run::trace_stream::subscribe(&self.net, (host, &self.prefix), process, readers)
+        crate::trace_stream::subscribe(&self.net, (host, &self.prefix), process, readers)
     }
 }
 
@@ -169,16 +165,15 @@ impl std::fmt::Debug for Remote {
     }
 }
 
-/// Adopts the processes host `link` says it started (`reply`) into `supervisor`, each stopped
-/// through the host's command key (`cmd`).
-fn adopt<M>(
+/// The processes host `link` says it started (`reply`), each stopped through the host's
+/// command key (`cmd`): their wake-up events, labels and handles.
+fn adopted(
     link: &HostLink,
     reply: &RunReply,
     cmd: &Arc<fdi_net::NetOutbox>,
-    metas: &mut BTreeMap<String, M>,
-    supervisor: &mut Supervisor<M>,
-) -> Result<()> {
-    for (p, _) in &link.processes {
+) -> Result<Vec<(Wake, String, RemoteChild)>> {
+    let mut adopted = Vec::new();
+    for (p, wake) in &link.processes {
         let pid = reply
             .pids
             .iter()
@@ -205,52 +200,18 @@ fn adopt<M>(
                 let _ = cmd.put(&body);
             }
         }));
-        let Some(meta) = metas.remove(&p.label) else {
-            continue;
-        };
-        supervisor.adopt_remote(
+        adopted.push((
+            *wake,
             p.label.clone(),
-            meta,
             RemoteChild {
                 host: link.host.name.clone(),
                 pid,
                 state,
                 stop,
             },
-        );
+        ));
     }
-    Ok(())
-}
-
-/// What the release of the hosts left.
-#[derive(Debug)]
-pub struct Releasing {
-    /// Files that could not be removed, `host:path`.
-    pub leftovers: Vec<String>,
-    pub problems: Vec<String>,
-    pub network: fdi_common::engine::NetworkPath,
-}
-
-/// A host that is gone, with the processes it ran.
-#[derive(Debug, Clone)]
-pub struct LostHost {
-    pub host: Host,
-    pub labels: Vec<String>,
-    pub agents: Vec<u32>,
-}
-
-impl LostHost {
-    /// The message of a run stopped by it.
-    pub fn message(&self) -> String {
-        format!(
-            "host `{}` ({}) is unreachable: its `fdi-launch serve` died or the network to it \
-             was cut (nothing heard from it for the {:.1} s Zenoh lease); it ran {}",
-            self.host.name,
-            self.host.endpoint,
-            net::LEASE.as_secs_f64(),
-            self.labels.join(", ")
-        )
-    }
+    Ok(adopted)
 }
 
 impl Remote {
@@ -335,24 +296,6 @@ impl Remote {
         keys::asked(host, &self.deployment.coordinator.name, &self.prefix, what)
     }
 
-    /// The traces of the run's processes on the other hosts, for the live view.
-    pub fn traces(&self) -> RemoteTraces {
-        let coordinator = &self.deployment.coordinator.name;
-        let hosts = self
-            .deployment
-            .layout
-            .host_of
-            .iter()
-            .filter(|(_, h)| *h != coordinator)
-            .filter_map(|(w, h)| Some((RemoteProcess::of(*w)?.process, h.clone())))
-            .collect();
-        RemoteTraces {
-            net: self.net.clone(),
-            prefix: self.prefix.clone(),
-            hosts,
-        }
-    }
-
     /// Starts the coordinator's bridge: before the local processes, so that none of what
     /// they send to other hosts is lost.
     pub fn start_bridge(&mut self, sizing: Sizing) -> Result<()> {
@@ -375,15 +318,57 @@ impl Remote {
         Ok(())
     }
 
+    /// Fetches the trace `name` of host `l` into `path`, piece by piece.
+    fn fetch_trace(&self, l: &HostLink, name: &str, path: &Path) -> Result<()> {
+        use std::io::Write as _;
+        let key = self.ask(&l.host.name, "traces");
+        let mut file = std::io::BufWriter::new(
+            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
+        );
+        let mut offset = 0u64;
+        loop {
+            let ask = format!("{name} {offset}");
+            let piece = self.net.request(&key, ask.as_bytes(), TRACE_TIMEOUT)?;
+            file.write_all(&piece)
+                .with_context(|| format!("writing {}", path.display()))?;
+            offset += piece.len() as u64;
+            if (piece.len() as u64) < TRACE_PIECE {
+                break;
+            }
+        }
+        file.flush()
+            .with_context(|| format!("writing {}", path.display()))?;
+        Ok(())
+    }
+}
+
+impl Hosts for Remote {
+    /// The traces of the run's processes on the other hosts, for the live view.
+    fn traces(&self) -> Arc<dyn split::RemoteTraces> {
+        let coordinator = &self.deployment.coordinator.name;
+        let hosts = self
+            .deployment
+            .layout
+            .host_of
+            .iter()
+            .filter(|(_, h)| *h != coordinator)
+            .filter_map(|(w, h)| Some((RemoteProcess::of(*w)?.process, h.clone())))
+            .collect();
+        Arc::new(RemoteTraces {
+            net: self.net.clone(),
+            prefix: self.prefix.clone(),
+            hosts,
+        })
+    }
+
     /// Asks each host to run its processes (`procs`: the run's processes that are not on
-    /// this host, with their wake-up events), and adopts them into `procs_sup` once it says
-    /// they are started.
-    pub fn start_hosts<M>(
+    /// this host, with how messages name them), and gives each back once its host says it is
+    /// started. A process that only the coordinating host can run is refused, named.
+    fn start_hosts(
         &mut self,
         scenario: &str,
-        procs: Vec<(RemoteProcess, Wake, M)>,
-        supervisor: &mut Supervisor<M>,
-    ) -> Result<()> {
+        procs: Vec<(Wake, String)>,
+    ) -> Result<Vec<(Wake, String, RemoteChild)>> {
         let layout: Vec<(String, String)> = self
             .deployment
             .layout
@@ -391,14 +376,17 @@ impl Remote {
             .iter()
             .map(|(w, h)| (wake_word(*w), h.clone()))
             .collect();
-        let mut metas: BTreeMap<String, M> = BTreeMap::new();
-        for (p, wake, meta) in procs {
+        for (wake, label) in procs {
+            let p = RemoteProcess::of(wake).with_context(|| {
+                format!("{label} cannot run on a host other than the coordinating one")
+            })?;
             let host = self.deployment.host_of(wake).to_string();
-            if let Some(link) = self.hosts.iter_mut().find(|l| l.host.name == host) {
-                metas.insert(p.label.clone(), meta);
-                link.processes.push((p, wake));
-            }
+            let link = (self.hosts.iter_mut())
+                .find(|l| l.host.name == host)
+                .with_context(|| format!("{label}: its host `{host}` is not one of the run's"))?;
+            link.processes.push((p, wake));
         }
+        let mut started = Vec::new();
         for link in &mut self.hosts {
             let request = RunRequest {
                 version: env!("CARGO_PKG_VERSION").into(),
@@ -432,15 +420,15 @@ impl Remote {
                 &self.prefix,
                 &format!("cmd/{}", link.host.name),
             ))?);
-            adopt(link, &reply, &cmd, &mut metas, supervisor)?;
+            started.extend(adopted(link, &reply, &cmd)?);
             link.reply = Some(reply);
         }
-        Ok(())
+        Ok(started)
     }
 
     /// Why the run cannot go on across hosts, if it cannot: the coordinator's bridge stopped, or
     /// a host said its own did.
-    pub fn failure(&self) -> Option<String> {
+    fn failure(&self) -> Option<String> {
         if let Some(f) = self.bridge.as_ref().and_then(|b| b.failure()) {
             return Some(format!(
                 "host `{}` (the coordinator): {f}",
@@ -456,29 +444,33 @@ impl Remote {
 
     /// The frames refused so far on the network path, per host that refused any: (host,
     /// count, the first described).
-    pub fn refusals(&self) -> Vec<(String, u64, String)> {
+    fn refusals(&self) -> Vec<Refusals> {
         let mut all = Vec::new();
         if let Some(b) = &self.bridge {
-            let n = b.counts().refused;
-            if n > 0 {
-                all.push((
-                    self.deployment.coordinator.name.clone(),
-                    n,
-                    b.first_refusal().unwrap_or_default(),
-                ));
+            let count = b.counts().refused;
+            if count > 0 {
+                all.push(Refusals {
+                    host: self.deployment.coordinator.name.clone(),
+                    count,
+                    first: b.first_refusal().unwrap_or_default(),
+                });
             }
         }
         for l in &self.hosts {
-            let (n, first) = lock(&l.refused).clone();
-            if n > 0 {
-                all.push((l.host.name.clone(), n, first));
+            let (count, first) = lock(&l.refused).clone();
+            if count > 0 {
+                all.push(Refusals {
+                    host: l.host.name.clone(),
+                    count,
+                    first,
+                });
             }
         }
         all
     }
 
     /// A host that is gone since the last call (each reported once).
-    pub fn lost_host(&mut self) -> Option<LostHost> {
+    fn lost_host(&mut self) -> Option<LostHost> {
         let link = self
             .hosts
             .iter_mut()
@@ -487,23 +479,28 @@ impl Remote {
         for s in lock(&link.states).values() {
             lock(s).host_lost = true;
         }
+        let labels: Vec<&str> = link.processes.iter().map(|(p, _)| &*p.label).collect();
         Some(LostHost {
-            host: link.host.clone(),
-            labels: link
-                .processes
-                .iter()
-                .map(|(p, _)| p.label.clone())
-                .collect(),
+            name: link.host.name.clone(),
+            endpoint: link.host.endpoint.clone(),
             agents: link
                 .processes
                 .iter()
                 .filter_map(|(p, _)| p.process.agent())
                 .collect(),
+            message: format!(
+                "host `{}` ({}) is unreachable: its `fdi-launch serve` died or the network to \
+                 it was cut (nothing heard from it for the {:.1} s Zenoh lease); it ran {}",
+                link.host.name,
+                link.host.endpoint,
+                net::LEASE.as_secs_f64(),
+                labels.join(", ")
+            ),
         })
     }
 
     /// The coordinating host's line for the report: the processes it ran.
-    pub fn describe_coordinator(&self) -> String {
+    fn describe_coordinator(&self) -> String {
         let here = &self.deployment.coordinator;
         let procs: Vec<String> = self
             .deployment
@@ -526,7 +523,7 @@ impl Remote {
     }
 
     /// Lines for the report: each host, its processes and its clock against ours.
-    pub fn describe(&self) -> Vec<String> {
+    fn describe(&self) -> Vec<String> {
         self.hosts
             .iter()
             .map(|l| {
@@ -550,7 +547,7 @@ impl Remote {
     /// Fetches the traces of every reachable host into `run_dir/traces`. A host that is gone
     /// keeps its traces: for each of its agents a `<name>.lost` note says so, which the join
     /// reads (those agents' ticks count as missing). Problems are returned, one per trace.
-    pub fn fetch_traces(&mut self, run_dir: &Path) -> Vec<String> {
+    fn fetch_traces(&mut self, run_dir: &Path) -> Vec<String> {
         // A host gone by now is one lost, whether or not it was noticed during the run.
         while self.lost_host().is_some() {}
         let mut problems = Vec::new();
@@ -584,33 +581,10 @@ impl Remote {
         problems
     }
 
-    /// Fetches the trace `name` of host `l` into `path`, piece by piece.
-    fn fetch_trace(&self, l: &HostLink, name: &str, path: &Path) -> Result<()> {
-        use std::io::Write as _;
-        let key = self.ask(&l.host.name, "traces");
-        let mut file = std::io::BufWriter::new(
-            std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?,
-        );
-        let mut offset = 0u64;
-        loop {
-            let ask = format!("{name} {offset}");
-            let piece = self.net.request(&key, ask.as_bytes(), TRACE_TIMEOUT)?;
-            file.write_all(&piece)
-                .with_context(|| format!("writing {}", path.display()))?;
-            offset += piece.len() as u64;
-            if (piece.len() as u64) < TRACE_PIECE {
-                break;
-            }
-        }
-        file.flush()
-            .with_context(|| format!("writing {}", path.display()))?;
-        Ok(())
-    }
-
     /// Waits until every route of the run is known to Zenoh (each host's bridge has a
     /// subscriber for every key it sends on): a sample sent before would be lost. Names the
     /// host and the keys still unmatched after [`ROUTES_TIMEOUT`].
-    pub fn await_routes(&self) -> Result<()> {
+    fn await_routes(&self) -> Result<()> {
         let began = Instant::now();
         loop {
             let mut unmatched: Vec<(String, Vec<String>)> = Vec::new();
@@ -656,11 +630,12 @@ impl Remote {
     /// Releases every reachable host (each removes what the run left there) and stops the
     /// bridge. Returns what could not be removed (`host:path`), problems, and the run's
     /// network path.
-    pub fn release(mut self) -> Releasing {
+    fn release(self: Box<Self>) -> split::Released {
+        let mut this = *self;
         let (mut leftovers, mut problems) = (Vec::new(), Vec::new());
-        for l in self.hosts.iter().filter(|l| l.reachable()) {
-            let key = self.ask(&l.host.name, "release");
-            match self
+        for l in this.hosts.iter().filter(|l| l.reachable()) {
+            let key = this.ask(&l.host.name, "release");
+            match this
                 .net
                 .request(&key, &[], Duration::from_secs(10))
                 .map_err(anyhow::Error::from)
@@ -674,30 +649,43 @@ impl Remote {
             }
         }
         // Counted before the bridge stops (its counts go with it).
-        let refusals = self.refusals();
-        if let Some(b) = self.bridge.take() {
+        let refusals = this.refusals();
+        if let Some(b) = this.bridge.take() {
             if let Err(e) = b.stop() {
                 problems.push(format!("the coordinator's bridge: {e}"));
             }
         }
         let network = fdi_common::engine::NetworkPath {
-            authenticated: self.deployment.lab.authenticated(),
-            refused_frames: refusals.iter().map(|(_, n, _)| n).sum(),
-            refusals: refusals
-                .iter()
-                .map(|(h, n, first)| format!("host `{h}` refused {n} frames, the first: {first}"))
-                .collect(),
+            authenticated: this.deployment.lab.authenticated(),
+            refused_frames: refusals.iter().map(|r| r.count).sum(),
+            refusals: refusals.iter().map(Refusals::to_string).collect(),
         };
         // Closing the session waits for its connectors, and one still trying an unreachable
         // host waits for the network's timeout (seconds): the session is closed aside, the run
         // has nothing more to say on it.
         let _ = std::thread::Builder::new()
             .name("zenoh close".into())
-            .spawn(move || drop(self));
-        Releasing {
+            .spawn(move || drop(this));
+        split::Released {
             leftovers,
             problems,
             network,
         }
+    }
+}
+
+impl split::Split for Deployment {
+    fn is_local(&self, wake: Wake) -> bool {
+        Deployment::is_local(self, wake)
+    }
+
+    fn stall_timeout(&self) -> Option<Duration> {
+        self.stall_timeout
+    }
+
+    fn connect(&self, prefix: &str, sizing: Sizing) -> Result<Box<dyn Hosts>> {
+        let mut remote = Remote::connect(self.clone(), prefix)?;
+        remote.start_bridge(sizing)?;
+        Ok(Box::new(remote))
     }
 }

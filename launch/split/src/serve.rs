@@ -22,12 +22,12 @@ use fdi_runtime::ipc::{check_prefix, Shm, ShmShared, Transport as _, Wake};
 use fdi_runtime::process::{sizing_for, Placement, ProcessArgs};
 use serde::{Deserialize, Serialize};
 
-use crate::run::hosts::{
+use crate::hosts::{
     parse_wake, put_json, HostCommand, HostEvent, Lab, Released, RemoteProcess, RunReply,
     RunRequest,
 };
-use crate::run::supervisor::Supervisor;
-use crate::run::trace_stream::Streamer;
+use crate::trace_stream::Streamer;
+use fdi_orchestrator::run::supervisor::Supervisor;
 
 /// A host's share of split runs (`fdi-launch serve`).
 #[derive(Debug, Clone)]
@@ -47,7 +47,7 @@ pub struct ServeOptions {
 
 /// How long the coordinator's liveliness may stay unseen once a run is taken.
 const COORDINATOR_SEEN_TIMEOUT: Duration = Duration::from_secs(5);
-use crate::run::runtime::{GRACE, STALL_LIMIT};
+use fdi_orchestrator::run::runtime::{GRACE, STALL_LIMIT};
 
 /// The largest run request taken: a scenario file of the largest size and its layout.
 pub const MAX_REQUEST_BYTES: usize = MAX_FILE_BYTES as usize + (64 << 10);
@@ -124,7 +124,7 @@ pub fn serve(args: &ServeOptions, stop: &Stop) -> Result<()> {
         log::info!(
             "host `{}` stops ({})",
             me.name,
-            crate::run::runtime::signal_name(sig)
+            fdi_orchestrator::run::runtime::signal_name(sig)
         );
     }
     Ok(())
@@ -340,7 +340,7 @@ fn share(
         let p = RemoteProcess::of(*wake).with_context(|| {
             format!(
                 "the run request places `{}` on this host: it runs on the coordinating host only",
-                crate::run::hosts::wake_word(*wake)
+                crate::hosts::wake_word(*wake)
             )
         })?;
         mine.push(p);
@@ -468,7 +468,7 @@ impl HostRun {
             if !trace.starts_with(dir.path()) {
                 bail!("{} would be outside the run's folder", trace.display());
             }
-            let mut cmd = crate::run::runtime::role_command(p.role)?;
+            let mut cmd = fdi_orchestrator::run::runtime::role_command(p.role)?;
             let child = ProcessArgs {
                 prefix: r.prefix.clone(),
                 scenario: scenario.clone(),
@@ -674,7 +674,10 @@ impl HostRun {
         self.stop_processes();
         let (_, leftovers, _) = self.clean_up();
         let why = match interrupted {
-            Some(sig) => format!("interrupted by {}", crate::run::runtime::signal_name(sig)),
+            Some(sig) => format!(
+                "interrupted by {}",
+                fdi_orchestrator::run::runtime::signal_name(sig)
+            ),
             None => format!(
                 "the coordinator `{}` is unreachable (nothing heard for the {:.1} s lease)",
                 self.coordinator,
@@ -712,7 +715,10 @@ impl HostRun {
         }
         self.procs.kill_rest();
         self.report_exits();
-        for line in self.procs.drain_stderr(crate::run::runtime::OUTPUT_WAIT) {
+        for line in self
+            .procs
+            .drain_stderr(fdi_orchestrator::run::runtime::OUTPUT_WAIT)
+        {
             log::warn!("{line}");
         }
     }
@@ -754,14 +760,13 @@ fn trace_piece_asked(ask: &[u8], processes: &[Process]) -> Result<(Process, u64)
     Ok((process, offset))
 }
 
-/// The piece of `path` from `offset` on, at most [`crate::run::remote::TRACE_PIECE`] bytes.
+/// The piece of `path` from `offset` on, at most [`crate::remote::TRACE_PIECE`] bytes.
 fn read_piece(path: &std::path::Path, offset: u64) -> std::io::Result<Vec<u8>> {
     use std::io::{Read as _, Seek as _};
     let mut f = std::fs::File::open(path)?;
     f.seek(std::io::SeekFrom::Start(offset))?;
     let mut piece = Vec::new();
-    f.take(crate::run::remote::TRACE_PIECE)
-        .read_to_end(&mut piece)?;
+    f.take(crate::remote::TRACE_PIECE).read_to_end(&mut piece)?;
     Ok(piece)
 }
 

@@ -20,7 +20,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result};
 use fdi_common::run_dir::Process;
-use fdi_net::{keys, Net, NetOutbox, Subscription};
+use fdi_net::{keys, Net, NetOutbox};
+pub use fdi_orchestrator::run::split::{Chunk, Received, Subscribed};
 
 /// The most trace bytes in one chunk: well inside one of Zenoh's batches (64 KiB), so that a
 /// chunk never holds the run's frames back for long.
@@ -29,9 +30,6 @@ pub const CHUNK: usize = 32 << 10;
 const POLL: Duration = Duration::from_millis(20);
 /// How often a streamer asks whether the coordinator subscribed.
 const MATCH_POLL: Duration = Duration::from_millis(100);
-
-/// A piece of a trace: where it begins in the trace, and its bytes.
-pub type Chunk = (u64, Vec<u8>);
 
 /// The key the trace of `process` is streamed on by `host` in the run `prefix`.
 pub fn key(host: &str, prefix: &str, process: Process) -> String {
@@ -169,19 +167,10 @@ fn stream(mut streams: Vec<Stream>, stop: &AtomicBool) {
     }
 }
 
-/// What the stream of a trace brings: a chunk, or a description of what came that was not one.
-pub type Received = mpsc::Receiver<Result<Chunk, String>>;
-
-/// The coordinator's subscription to the stream of one remote trace: its chunks, in order, to
-/// each of its readers; dropping `subscription` ends it.
-pub struct Subscribed {
-    pub readers: Vec<Received>,
-    pub subscription: Subscription,
-}
-
 /// Subscribes to the stream of the trace of `process` on host `host` in the run `prefix`, for
 /// `readers` readers (one subscription: its host begins to stream once it sees one, so a
-/// second, later, could miss the first chunks).
+/// second, later, could miss the first chunks): the chunks in order to each reader; dropping
+/// what it holds (the subscription) ends them.
 pub fn subscribe(
     net: &Net,
     (host, prefix): (&str, &str),
@@ -198,7 +187,7 @@ pub fn subscribe(
     })?;
     Ok(Subscribed {
         readers,
-        subscription,
+        held: Box::new(subscription),
     })
 }
 
