@@ -7,7 +7,6 @@
 //! whatever commands have arrived (a command due but missing is a deadline miss: the last one is
 //! held), then publish measurement `k`.
 
-use std::process::ExitCode;
 use std::time::Duration;
 
 use fdi_common::engine::{agent_record, tick_time};
@@ -399,10 +398,10 @@ impl<X: Transport, const N: usize> Running<'_, X, N> {
     }
 }
 
-/// Entry point of the `fdi-agent` binary (and of `fdi-launch`'s multi-call fallback).
-pub fn main_with(args: ProcessArgs) -> ExitCode {
+/// The process of the `fdi-agent` binary (and of `fdi-launch process agent`).
+pub fn run_process(args: ProcessArgs) -> Result<role::Ended, role::Failed> {
     match args.agent {
-        Some(id) => role::main_with(
+        Some(id) => role::run_process(
             &Agent {
                 id,
                 pace: args.pace,
@@ -411,7 +410,7 @@ pub fn main_with(args: ProcessArgs) -> ExitCode {
         ),
         None => {
             process::print_failure(format_args!("fdi-agent ?: {}", AgentError::MissingId));
-            ExitCode::FAILURE
+            Err(role::Failed)
         }
     }
 }

@@ -1,5 +1,7 @@
 //! `fdi-agent`: one agent process, started by `fdi-launch`.
 
+use std::process::ExitCode;
+
 use clap::Parser;
 use fdi_runtime::process::ProcessArgs;
 
@@ -13,6 +15,9 @@ struct Cli {
     args: ProcessArgs,
 }
 
-fn main() -> std::process::ExitCode {
-    fdi_agent::main_with(Cli::parse().args)
+fn main() -> ExitCode {
+    match fdi_agent::run_process(Cli::parse().args) {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(_) => ExitCode::FAILURE,
+    }
 }

@@ -6,8 +6,6 @@
 //! event-driven in both clocks. One [`Role`] of the run (its lifecycle and process shell:
 //! [`fdi_runtime::role`]).
 
-use std::process::ExitCode;
-
 pub mod external;
 
 use external::{External, ExternalPorts};
@@ -610,7 +608,7 @@ impl<'a, X: Transport, const N: usize> Relay<'a, X, N> {
     }
 }
 
-/// Entry point of the `fdi-attacker` binary.
-pub fn main_with(args: ProcessArgs) -> ExitCode {
-    role::main_with(&Attacker, &args)
+/// The process of the `fdi-attacker` binary (and of `fdi-launch process attacker`).
+pub fn run_process(args: ProcessArgs) -> Result<role::Ended, role::Failed> {
+    role::run_process(&Attacker, &args)
 }

@@ -5,8 +5,6 @@
 //! independent, so the result does not depend on the order in which agents arrive). One
 //! [`Role`] of the run (its lifecycle and process shell: [`fdi_runtime::role`]).
 
-use std::process::ExitCode;
-
 pub mod monitor;
 
 use monitor::{Monitor, MonitorPorts};
@@ -534,7 +532,8 @@ impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
     }
 }
 
-/// Entry point of the `fdi-control-center` binary.
-pub fn main_with(args: ProcessArgs) -> ExitCode {
-    role::main_with(&ControlCenter, &args)
+/// The process of the `fdi-control-center` binary (and of `fdi-launch process
+/// control-center`).
+pub fn run_process(args: ProcessArgs) -> Result<role::Ended, role::Failed> {
+    role::run_process(&ControlCenter, &args)
 }

@@ -88,12 +88,19 @@ fn dispatch(command: Command, stop: &Stop) -> Result<ExitCode> {
         }
         Command::Bench(b) => commands::bench::bench(&b, stop),
         Command::BenchPeer { args } => commands::bench::peer(&args),
-        Command::Process { role, args } => Ok(match role {
-            ProcessRole::Agent => fdi_agent::main_with(args),
-            ProcessRole::Attacker => fdi_attacker::main_with(args),
-            ProcessRole::ControlCenter => fdi_control_center::main_with(args),
-            ProcessRole::Replayer => fdi_orchestrator::run::replayer::main_with(&args),
-        }),
+        Command::Process { role, args } => {
+            let ended = match role {
+                ProcessRole::Agent => fdi_agent::run_process(args),
+                ProcessRole::Attacker => fdi_attacker::run_process(args),
+                ProcessRole::ControlCenter => fdi_control_center::run_process(args),
+                ProcessRole::Replayer => fdi_orchestrator::run::replayer::run_process(&args),
+            };
+            Ok(if ended.is_ok() {
+                ExitCode::SUCCESS
+            } else {
+                ExitCode::FAILURE
+            })
+        }
     }
 }
 

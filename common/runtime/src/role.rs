@@ -6,11 +6,9 @@
 //! launcher's start, then turned and waited on until its part of the run is done, and ended
 //! (what it says on record, its trace flushed, done reported, its ports held until the
 //! launcher's stop). [`drive`] does this on any transport — shared memory between processes
-//! ([`main_with`], what each role's binary runs), or in-process between threads (the tests) —
+//! ([`run_process`], what each role's binary runs), or in-process between threads (the tests) —
 //! and checks the stop (a signal, the launcher's death or its stop message) between every turn
 //! and wait, so no role writes its own loop around them.
-
-use std::process::ExitCode;
 
 use fdi_common::model::{EulerLagrange, ForLinks, ModelConfig};
 use fdi_common::scenario::Resolved;
@@ -36,6 +34,11 @@ pub enum Ended {
     /// Stopped before the end (a signal, the launcher's death or its stop).
     Stopped,
 }
+
+/// A role's process failed; its failure is said on stderr, naming the program (the launcher
+/// relays it). The program exits with a failure status.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Failed;
 
 /// What a role says at its end: the ticks it reports done with, and a note on record at `t`.
 #[derive(Debug, Clone, PartialEq)]
@@ -176,7 +179,8 @@ fn drive_running<X: Transport>(
 /// The process shell of every role: SIGINT/SIGTERM and the launcher's death handled, placed
 /// on its CPUs, the run's scenario read, its ports opened on shared memory, its trace created,
 /// then [`drive`]n; a failure is printed on stderr (the launcher relays it) naming the program.
-pub fn main_with<R: Role>(role: &R, args: &ProcessArgs) -> ExitCode {
+/// The program's `main` turns what it returns into its exit status.
+pub fn run_process<R: Role>(role: &R, args: &ProcessArgs) -> Result<Ended, Failed> {
     let result = process::start(args).and_then(|(shutdown, resolved)| {
         let opened = open::<R, Shm>(role, &args.prefix, &resolved)?;
         let mut trace = match role.trace_name() {
@@ -187,11 +191,8 @@ pub fn main_with<R: Role>(role: &R, args: &ProcessArgs) -> ExitCode {
         };
         drive(role, &resolved, &opened, &shutdown, &mut trace)
     });
-    match result {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(e) => {
-            process::print_failure(format_args!("{}: {e}", role.program()));
-            ExitCode::FAILURE
-        }
-    }
+    result.map_err(|e| {
+        process::print_failure(format_args!("{}: {e}", role.program()));
+        Failed
+    })
 }

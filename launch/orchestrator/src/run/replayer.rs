@@ -231,9 +231,9 @@ impl<X: Transport> role::Running for Replay<'_, X> {
     }
 }
 
-/// Entry point of `fdi-launch process replayer`.
-pub fn main_with(args: &ProcessArgs) -> std::process::ExitCode {
-    role::main_with(
+/// The process of `fdi-launch process replayer`.
+pub fn run_process(args: &ProcessArgs) -> Result<role::Ended, role::Failed> {
+    role::run_process(
         &Replayer {
             recording: args.trace.clone(),
         },

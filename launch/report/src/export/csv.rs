@@ -33,8 +33,7 @@ use fdi_common::trace::{HopStamps, TraceReader, TraceRecord};
 
 use super::detectors;
 use super::sources::{
-    abandoned, failed, read_sorted, scan, stem, trace_files, write_failure, Kind, OutDir, RunInfo,
-    Sorted, WriteFailed,
+    failed, read_sorted, scan, stem, trace_files, Kind, OutDir, RunInfo, Sorted, Writes,
 };
 use crate::columns;
 
@@ -47,11 +46,12 @@ pub(super) fn export(run_dir: &Path, said: &mut dyn FnMut(&str)) -> Result<()> {
     let written = tempfile::Builder::new()
         .prefix(".csv.")
         .tempdir_in(&dir.path)
-        .map_err(|e| WriteFailed::io(&dir.path, e))
+        .map_err(|e| dir.writes.io(&dir.path, e))
         .and_then(|tmp| {
             let out = Out {
                 tmp: tmp.path().to_path_buf(),
                 dir: dir.path.clone(),
+                writes: dir.writes.clone(),
             };
             let failures = write(run_dir, &files, &out, said)?;
             out.commit()?;
@@ -61,7 +61,7 @@ pub(super) fn export(run_dir: &Path, said: &mut dyn FnMut(&str)) -> Result<()> {
         Ok(failures) => failed(failures),
         Err(e) => {
             dir.discard();
-            Err(abandoned(e, "CSV"))
+            Err(dir.writes.abandoned(e, "CSV"))
         }
     }
 }
@@ -70,17 +70,19 @@ pub(super) fn export(run_dir: &Path, said: &mut dyn FnMut(&str)) -> Result<()> {
 struct Out {
     tmp: PathBuf,
     dir: PathBuf,
+    writes: Writes,
 }
 
 impl Out {
     /// Moves every file written into place. A rename within one folder of one file system
     /// needs no space; one that fails anyway is named.
     fn commit(&self) -> Result<()> {
-        let entries = std::fs::read_dir(&self.tmp).map_err(|e| WriteFailed::io(&self.dir, e))?;
+        let failed = |path: &Path, e| self.writes.io(path, e);
+        let entries = std::fs::read_dir(&self.tmp).map_err(|e| failed(&self.dir, e))?;
         for e in entries {
-            let name = e.map_err(|e| WriteFailed::io(&self.dir, e))?.file_name();
+            let name = e.map_err(|e| failed(&self.dir, e))?.file_name();
             let to = self.dir.join(&name);
-            std::fs::rename(self.tmp.join(&name), &to).map_err(|e| WriteFailed::io(&to, e))?;
+            std::fs::rename(self.tmp.join(&name), &to).map_err(|e| failed(&to, e))?;
         }
         Ok(())
     }
@@ -106,7 +108,7 @@ fn write(
                 f.display(),
                 out.dir.display()
             )),
-            Err(e) if write_failure(&e).is_some() => return Err(e),
+            Err(e) if out.writes.failed() => return Err(e),
             Err(e) if n > 0 => failures.push(format!(
                 "{e:#} (the {n} records before it are exported to {})",
                 out.dir.display()
@@ -123,7 +125,7 @@ fn write(
                 path.display()
             )),
             Ok(Err(none)) => said(&format!("{}: {none}", out.dir.display())),
-            Err(e) if write_failure(&e).is_some() => return Err(e),
+            Err(e) if out.writes.failed() => return Err(e),
             Err(e) => failures.push(format!("{e:#}")),
         }
     }
@@ -199,6 +201,7 @@ impl Row {
 struct Csv {
     /// The file it becomes, for the messages.
     path: PathBuf,
+    writes: Writes,
     out: csv::Writer<File>,
     row: Row,
 }
@@ -207,9 +210,10 @@ impl Csv {
     /// The file `name` of the export `out`, with its header row.
     fn create<H: AsRef<[u8]>>(out: &Out, name: &str, header: &[H]) -> Result<Self> {
         let path = out.dir.join(name);
-        let file = File::create(out.tmp.join(name)).map_err(|e| WriteFailed::io(&path, e))?;
+        let file = File::create(out.tmp.join(name)).map_err(|e| out.writes.io(&path, e))?;
         let mut c = Self {
             path,
+            writes: out.writes.clone(),
             out: csv::WriterBuilder::new()
                 .buffer_capacity(1 << 16)
                 .from_writer(file),
@@ -231,8 +235,8 @@ impl Csv {
     /// is a fault of this program, not of the trace).
     fn failure(&self, e: csv::Error) -> anyhow::Error {
         match e.into_kind() {
-            csv::ErrorKind::Io(e) => WriteFailed::io(&self.path, e),
-            other => WriteFailed::other(&self.path, format!("{other:?}")),
+            csv::ErrorKind::Io(e) => self.writes.io(&self.path, e),
+            other => self.writes.other(&self.path, format!("{other:?}")),
         }
     }
 
@@ -241,8 +245,8 @@ impl Csv {
         let file = self
             .out
             .into_inner()
-            .map_err(|e| WriteFailed::io(&self.path, e.into_error()))?;
-        file.sync_all().map_err(|e| WriteFailed::io(&self.path, e))
+            .map_err(|e| self.writes.io(&self.path, e.into_error()))?;
+        file.sync_all().map_err(|e| self.writes.io(&self.path, e))
     }
 }
 

@@ -25,9 +25,7 @@ use fdi_common::trace::TraceReader;
 use serde_json::Value;
 
 use super::detectors;
-use super::sources::{
-    abandoned, failed, read_sorted, stem, trace_files, write_failure, OutDir, WriteFailed,
-};
+use super::sources::{failed, read_sorted, stem, trace_files, OutDir, Writes};
 use crate::topics::{self, json_schema, log_time_ns, record, topic_name, RunInfo, Schema, Sink};
 
 /// The chunk size of the MCAP file, bytes: messages are written to the file a chunk at a time
@@ -43,6 +41,8 @@ struct Mcap {
     w: mcap::Writer<BufWriter<Noted>>,
     /// The first error of the file beneath the writer.
     first: FirstError,
+    /// The export's writes.
+    writes: Writes,
     channels: BTreeMap<(u32, &'static str), u16>,
     sequence: u32,
     buf: Vec<u8>,
@@ -116,7 +116,7 @@ impl Seek for Noted {
 
 impl Mcap {
     /// Writes the MCAP file `path` into `file` (its temporary).
-    fn create(path: &Path, file: File) -> Result<Self> {
+    fn create(path: &Path, file: File, writes: &Writes) -> Result<Self> {
         let first = FirstError::default();
         let noted = Noted {
             file,
@@ -124,11 +124,12 @@ impl Mcap {
         };
         let w = options()
             .create(BufWriter::with_capacity(1 << 16, noted))
-            .map_err(|e| failure(path, &first, e))?;
+            .map_err(|e| failure(writes, path, &first, e))?;
         Ok(Self {
             path: path.to_path_buf(),
             w,
             first,
+            writes: writes.clone(),
             channels: BTreeMap::new(),
             sequence: 0,
             buf: Vec::with_capacity(1 << 10),
@@ -140,17 +141,17 @@ impl Mcap {
         if let Some(c) = self.channels.get(&(agent, name)) {
             return Ok(*c);
         }
-        let (path, first) = (&self.path, &self.first);
+        let (path, first, writes) = (&self.path, &self.first, &self.writes);
         let text = serde_json::to_vec(&json_schema(schema)).context("a schema")?;
         let s = self
             .w
             .add_schema(schema.name, "jsonschema", &text)
-            .map_err(|e| failure(path, first, e))?;
+            .map_err(|e| failure(writes, path, first, e))?;
         let topic = topic_name(agent, name);
         let c = self
             .w
             .add_channel(s, &topic, "json", &BTreeMap::new())
-            .map_err(|e| failure(path, first, e))?;
+            .map_err(|e| failure(writes, path, first, e))?;
         self.channels.insert((agent, name), c);
         Ok(c)
     }
@@ -188,7 +189,7 @@ impl Mcap {
                 name: "fdi-mas".into(),
                 metadata: m,
             })
-            .map_err(|e| failure(&self.path, &self.first, e))
+            .map_err(|e| failure(&self.writes, &self.path, &self.first, e))
     }
 
     /// Closes the file whole (summary, footer) and waits until every byte is on disk.
@@ -196,16 +197,16 @@ impl Mcap {
         let summary = self
             .w
             .finish()
-            .map_err(|e| failure(&self.path, &self.first, e))?;
+            .map_err(|e| failure(&self.writes, &self.path, &self.first, e))?;
         let noted = self
             .w
             .into_inner()
             .into_inner()
-            .map_err(|e| WriteFailed::io(&self.path, e.into_error()))?;
+            .map_err(|e| self.writes.io(&self.path, e.into_error()))?;
         noted
             .file
             .sync_all()
-            .map_err(|e| WriteFailed::io(&self.path, e))?;
+            .map_err(|e| self.writes.io(&self.path, e))?;
         Ok(summary)
     }
 }
@@ -234,20 +235,20 @@ impl Sink for Mcap {
                 },
                 &self.buf,
             )
-            .map_err(|e| failure(&self.path, &self.first, e))
+            .map_err(|e| failure(&self.writes, &self.path, &self.first, e))
     }
 }
 
 /// A failure of the MCAP writer: every one ends the file (the writer refuses any later write),
 /// so every one abandons the export, named by its cause: the file's own first error when it
 /// had one (the `mcap` crate may have wrapped it), else the writer's.
-fn failure(path: &Path, first: &FirstError, e: mcap::McapError) -> anyhow::Error {
+fn failure(writes: &Writes, path: &Path, first: &FirstError, e: mcap::McapError) -> anyhow::Error {
     if let Some(os) = first.borrow_mut().take() {
-        return WriteFailed::io(path, os);
+        return writes.io(path, os);
     }
     match e {
-        mcap::McapError::Io(e) => WriteFailed::io(path, e),
-        e => WriteFailed::other(path, e),
+        mcap::McapError::Io(e) => writes.io(path, e),
+        e => writes.other(path, e),
     }
 }
 
@@ -263,19 +264,19 @@ pub(super) fn export(run_dir: &Path, said: &mut dyn FnMut(&str)) -> Result<()> {
         // As `File::create` would make it (the umask applies), not only for its owner.
         .permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666))
         .tempfile_in(&dir.path)
-        .map_err(|e| WriteFailed::io(&out, e))
+        .map_err(|e| dir.writes.io(&out, e))
         .and_then(|tmp| {
             let (file, tmp) = tmp.into_parts();
-            let failures = write(run_dir, &files, &out, file, said)?;
+            let failures = write(run_dir, &files, (&out, file, &dir.writes), said)?;
             tmp.persist(&out)
-                .map_err(|e| WriteFailed::io(&out, e.error))?;
+                .map_err(|e| dir.writes.io(&out, e.error))?;
             Ok(failures)
         });
     match written {
         Ok(failures) => failed(failures),
         Err(e) => {
             dir.discard();
-            Err(abandoned(e, "MCAP"))
+            Err(dir.writes.abandoned(e, "MCAP"))
         }
     }
 }
@@ -285,11 +286,10 @@ pub(super) fn export(run_dir: &Path, said: &mut dyn FnMut(&str)) -> Result<()> {
 fn write(
     run_dir: &Path,
     files: &[PathBuf],
-    out: &Path,
-    file: File,
+    (out, file, writes): (&Path, File, &Writes),
     said: &mut dyn FnMut(&str),
 ) -> Result<Vec<String>> {
-    let mut w = Mcap::create(out, file)?;
+    let mut w = Mcap::create(out, file, writes)?;
     let mut failures = Vec::new();
     let mut run: Option<RunInfo> = None;
     let mut empty = Vec::new();
@@ -301,7 +301,7 @@ fn write(
                 f.display(),
                 out.display()
             )),
-            Err(e) if write_failure(&e).is_some() => return Err(e),
+            Err(e) if writes.failed() => return Err(e),
             Err(e) if n > 0 => failures.push(format!(
                 "{e:#} (the {n} records before it are exported to {})",
                 out.display()
@@ -316,7 +316,7 @@ fn write(
                 out.display()
             )),
             Ok(Err(none)) => said(&format!("{}: {none}", out.display())),
-            Err(e) if write_failure(&e).is_some() => return Err(e),
+            Err(e) if writes.failed() => return Err(e),
             Err(e) => failures.push(format!("{e:#}")),
         }
         w.metadata(info)?;
@@ -548,7 +548,7 @@ mod tests {
         let dir = tempfile::tempdir().expect("scratch");
         let path = dir.path().join("run.mcap");
         let file = File::create(&path).expect("a file");
-        let mut w = Mcap::create(&path, file).expect("a writer");
+        let mut w = Mcap::create(&path, file, &Writes::default()).expect("a writer");
         let q: Vec<f64> = (0..6).map(|i| f64::from(i) * 0.1).collect();
         let mut largest = 0;
         for k in 0..40_000u64 {

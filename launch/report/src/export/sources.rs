@@ -2,10 +2,12 @@
 //! ([`RunInfo`]), each trace's records sorted by tick ([`Sorted`]), and the output folder
 //! written whole or not at all ([`OutDir`]).
 
+use std::cell::RefCell;
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt;
 use std::io;
 use std::path::{Path, PathBuf};
+use std::rc::Rc;
 
 pub(super) use crate::topics::RunInfo;
 use anyhow::{bail, Context, Result};
@@ -26,19 +28,21 @@ pub(super) fn trace_files(run_dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
-/// The export folder `RUN_DIR/export`, made if need be.
+/// The export folder `RUN_DIR/export`, made if need be, and the export's writes into it.
 pub(super) struct OutDir {
     pub(super) path: PathBuf,
     /// This export made it: an abandoned export removes it again.
     pub(super) made: bool,
+    pub(super) writes: Writes,
 }
 
 impl OutDir {
     pub(super) fn open(run_dir: &Path) -> Result<Self> {
         let path = run_dir.join("export");
         let made = !path.is_dir();
-        std::fs::create_dir_all(&path).map_err(|e| WriteFailed::io(&path, e))?;
-        Ok(Self { path, made })
+        let writes = Writes::default();
+        std::fs::create_dir_all(&path).map_err(|e| writes.io(&path, e))?;
+        Ok(Self { path, made, writes })
     }
 
     /// After an abandoned export: removes the folder if this export made it (and it is empty).
@@ -49,29 +53,12 @@ impl OutDir {
     }
 }
 
-/// A write of the export's own files that failed (a full disk, a read-only folder): it ends the
-/// whole export, whose temporary files are then removed. `path` is the file the export was
-/// making (its final name).
+/// A write of the export's own files that failed (a full disk, a read-only folder). `path` is
+/// the file the export was making (its final name).
 #[derive(Debug)]
-pub(super) struct WriteFailed {
-    pub(super) path: PathBuf,
-    pub(super) cause: String,
-}
-
-impl WriteFailed {
-    pub(super) fn io(path: &Path, e: io::Error) -> anyhow::Error {
-        anyhow::Error::new(Self {
-            path: path.to_path_buf(),
-            cause: crate::io_cause::describe(&e),
-        })
-    }
-
-    pub(super) fn other(path: &Path, cause: impl fmt::Display) -> anyhow::Error {
-        anyhow::Error::new(Self {
-            path: path.to_path_buf(),
-            cause: cause.to_string(),
-        })
-    }
+struct WriteFailed {
+    path: PathBuf,
+    cause: String,
 }
 
 impl fmt::Display for WriteFailed {
@@ -80,21 +67,50 @@ impl fmt::Display for WriteFailed {
     }
 }
 
-impl std::error::Error for WriteFailed {}
+/// The writes of one export, which its writers share, and the first of them that failed: a
+/// failed write ends the whole export (its temporary files are then removed), where a trace
+/// that cannot be read whole only ends that trace's part. An error met while exporting is told
+/// apart by asking [`Writes::failed`], not by looking into the error.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Writes(Rc<RefCell<Option<WriteFailed>>>);
 
-/// The failed write that `e` comes from, if it does.
-pub(super) fn write_failure(e: &anyhow::Error) -> Option<&WriteFailed> {
-    e.chain().find_map(|c| c.downcast_ref::<WriteFailed>())
-}
+impl Writes {
+    /// The file `path` could not be written: `e`, in words a person can act on.
+    pub(super) fn io(&self, path: &Path, e: io::Error) -> anyhow::Error {
+        self.fail(WriteFailed {
+            path: path.to_path_buf(),
+            cause: crate::io_cause::describe(&e),
+        })
+    }
 
-/// The error of an export abandoned on `e` (its temporary files already removed): a failed
-/// write says so, naming the file and the cause; any other error is `e`.
-pub(super) fn abandoned(e: anyhow::Error, format: &str) -> anyhow::Error {
-    match write_failure(&e) {
-        Some(w) => anyhow::anyhow!(
-            "{w}: the {format} export is abandoned, its temporary files removed (nothing partial is left)"
-        ),
-        None => e,
+    /// The file `path` could not be written, for another `cause` than the operating system's.
+    pub(super) fn other(&self, path: &Path, cause: impl fmt::Display) -> anyhow::Error {
+        self.fail(WriteFailed {
+            path: path.to_path_buf(),
+            cause: cause.to_string(),
+        })
+    }
+
+    fn fail(&self, w: WriteFailed) -> anyhow::Error {
+        let e = anyhow::anyhow!("{w}");
+        self.0.borrow_mut().get_or_insert(w);
+        e
+    }
+
+    /// Whether a write of the export failed (which ends it).
+    pub(super) fn failed(&self) -> bool {
+        self.0.borrow().is_some()
+    }
+
+    /// The error of an export abandoned on `e` (its temporary files already removed): a failed
+    /// write says so, naming the file and the cause; any other error is `e`.
+    pub(super) fn abandoned(&self, e: anyhow::Error, format: &str) -> anyhow::Error {
+        match &*self.0.borrow() {
+            Some(w) => anyhow::anyhow!(
+                "{w}: the {format} export is abandoned, its temporary files removed (nothing partial is left)"
+            ),
+            None => e,
+        }
     }
 }
 
