@@ -127,16 +127,16 @@ pub fn open_run(py: Python<'_>, run_dir: PathBuf, ticks: bool) -> PyResult<RunRe
         .agents
         .iter()
         .any(|a| resolved.attack.attacks_torque_of(a.id));
-    let path = run_dir.clone();
+    let run = RunDir::new(&run_dir);
     let joined = py.detach(move || -> anyhow::Result<_> {
-        fdi_report::traces::require_every_tick(&path, "reading its ticks")?;
+        fdi_report::traces::require_every_tick(&run, "reading its ticks")?;
         let mut columns = ticks.then(|| Columns::new(&resolved, routed));
-        let joined = fdi_report::join::join_run(&resolved, &path, f64::NAN, |r| {
+        let joined = fdi_report::join::join_run(&resolved, &run, f64::NAN, |r| {
             if let Some(c) = &mut columns {
                 c.push(r);
             }
         })?;
-        let written = std::fs::read_to_string(RunDir::new(&path).summary())
+        let written = std::fs::read_to_string(run.summary())
             .ok()
             .and_then(|text| serde_json::from_str::<RunSummary>(&text).ok());
         Ok((joined, written, columns))

@@ -13,6 +13,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::path::{Path, PathBuf};
 
+use fdi_common::run_dir::RunDir;
 use fdi_common::scenario::{self, Resolved};
 use fdi_common::trace::{TraceError, TraceReader};
 use proptest::prelude::*;
@@ -273,12 +274,13 @@ fn the_short_run_fixture_reads_whole_and_joins_every_tick() {
         );
     }
     let dir = copy_fixture();
-    let joined = join::join_run(&resolved(), dir.path(), 0.0, |_| {}).expect("joined");
+    let joined =
+        join::join_run(&resolved(), &RunDir::new(dir.path()), 0.0, |_| {}).expect("joined");
     assert_eq!(joined.summary.ticks, 20, "{:?}", joined.warnings);
     assert!(joined.warnings.is_empty(), "{:?}", joined.warnings);
-    export::export(dir.path(), export::Format::Csv, &mut |_| {}).expect("exported");
-    export::export(dir.path(), export::Format::Mcap, &mut |_| {}).expect("exported");
-    replayer::check_recording(&resolved(), dir.path()).expect("replayable");
+    export::export(&RunDir::new(dir.path()), export::Format::Csv, &mut |_| {}).expect("exported");
+    export::export(&RunDir::new(dir.path()), export::Format::Mcap, &mut |_| {}).expect("exported");
+    replayer::check_recording(&resolved(), &RunDir::new(dir.path())).expect("replayable");
 }
 
 proptest! {
@@ -292,7 +294,7 @@ proptest! {
         let dir = copy_fixture();
         let traces = fixture_traces();
         let name = traces[file.index(traces.len())].file_name().expect("name").to_owned();
-        let path = fdi_common::run_dir::RunDir::new(dir.path()).traces().join(&name);
+        let path = RunDir::new(dir.path()).traces().join(&name);
         let mut bytes = std::fs::read(&path).expect("read");
         apply(&mut bytes, &m);
         std::fs::write(&path, &bytes).expect("write");
@@ -304,7 +306,7 @@ proptest! {
             prop_assert!(d.offset().is_some() && names_file_and_offset(&d.to_string(), &path), "{d}");
         }
 
-        let (joined, big, grew) = measured(|| join::join_run(&r, dir.path(), 0.0, |_| {}));
+        let (joined, big, grew) = measured(|| join::join_run(&r, &RunDir::new(dir.path()), 0.0, |_| {}));
         prop_assert!(big <= MAX_ONE_ALLOCATION && grew <= MAX_LIVE_GROWTH, "report's join: {big} / {grew} bytes");
         let text = match &joined {
             Ok(j) => j.warnings.join("\n"),
@@ -315,7 +317,7 @@ proptest! {
         }
 
         for format in [export::Format::Csv, export::Format::Mcap] {
-            let (exported, big, grew) = measured(|| export::export(dir.path(), format, &mut |_| {}));
+            let (exported, big, grew) = measured(|| export::export(&RunDir::new(dir.path()), format, &mut |_| {}));
             prop_assert!(big <= MAX_ONE_ALLOCATION && grew <= MAX_LIVE_GROWTH, "export {format:?}: {big} / {grew} bytes");
             if damage.is_some() {
                 let text = exported.as_ref().err().map(|e| format!("{e:#}")).unwrap_or_default();
@@ -325,7 +327,7 @@ proptest! {
 
         // The replay reads the attacker trace and checks the agents'; the center's is re-made.
         if name != "control-center.trace" {
-            let (checked, big, grew) = measured(|| replayer::check_recording(&r, dir.path()));
+            let (checked, big, grew) = measured(|| replayer::check_recording(&r, &RunDir::new(dir.path())));
             prop_assert!(big <= MAX_ONE_ALLOCATION && grew <= MAX_LIVE_GROWTH, "replay check: {big} / {grew} bytes");
             if damage.is_some() {
                 let text = checked.as_ref().err().map(|e| format!("{e:#}")).unwrap_or_default();

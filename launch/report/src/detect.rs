@@ -46,12 +46,13 @@ pub const CSV_HEADER: [&str; 15] = [
 /// the ROC and the delay figures into `out` (default `<run dir>/detect`); says the summary
 /// (`log`), returns the files written.
 pub fn sweep_run(
-    run_dir: &Path,
+    run: &RunDir,
     out: Option<&Path>,
     points: u32,
     stop: &Stop,
 ) -> Result<Vec<PathBuf>> {
-    let out = out.map_or_else(|| run_dir.join("detect"), Path::to_path_buf);
+    let run_dir = run.path();
+    let out = out.map_or_else(|| run.file("detect"), Path::to_path_buf);
     let (resolved, recorded, summary) = record(run_dir, stop)?;
     let swept: Vec<Swept> = recorded
         .detectors
@@ -83,7 +84,7 @@ fn record(run_dir: &Path, stop: &Stop) -> Result<(Resolved, Recorded, RunSummary
     }
     let resolved = scenario::load_file(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
-    crate::traces::require_every_tick(run_dir, "detect")?;
+    crate::traces::require_every_tick(&RunDir::new(run_dir), "detect")?;
     let traces = dir.traces();
     if !traces.is_dir() {
         bail!(

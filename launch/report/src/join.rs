@@ -168,11 +168,11 @@ pub struct Joined {
 /// Joins the traces in `run_dir` and summarizes them.
 pub fn join_run(
     resolved: &Resolved,
-    run_dir: &Path,
+    run: &RunDir,
     wall_s: f64,
     sink: impl FnMut(&TickRecord),
 ) -> Result<Joined> {
-    join_run_until(resolved, run_dir, wall_s, sink, || Ok(()))
+    join_run_until(resolved, run.path(), wall_s, sink, || Ok(()))
 }
 
 /// The traces of a run's processes, each read ahead as the join needs.

@@ -4,6 +4,8 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use fdi_common::run_dir::RunDir;
+
 use anyhow::{Context, Result};
 use fdi_common::detect;
 use fdi_common::engine::RunSummary;
@@ -87,14 +89,20 @@ pub fn describe_onsets(onsets: &[fdi_common::metrics::Onset]) -> String {
 }
 
 /// Writes `summary.json`, `rmse.md` and `rmse.csv`.
-pub fn write_summary(dir: &Path, s: &RunSummary) -> Result<()> {
+pub fn write_summary(run: &RunDir, s: &RunSummary) -> Result<()> {
+    let dir = run.path();
     write_summary_json(dir, serde_json::to_value(s)?)?;
     write_tables(dir, s)
 }
 
 /// [`write_summary`] of a run that kept `traces` of its traces: `summary.json` says so in its
 /// `traces` field (`full`, `decimate=K`, `none`); its metrics and digest cover every tick.
-pub fn write_run_summary(dir: &Path, s: &RunSummary, traces: crate::traces::Traces) -> Result<()> {
+pub fn write_run_summary(
+    run: &RunDir,
+    s: &RunSummary,
+    traces: crate::traces::Traces,
+) -> Result<()> {
+    let dir = run.path();
     let mut v = serde_json::to_value(s)?;
     v["traces"] = serde_json::Value::String(traces.to_string());
     write_summary_json(dir, v)?;

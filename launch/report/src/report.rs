@@ -94,7 +94,8 @@ pub const FIGURES: [(&str, &str); 6] = [
 /// `per_robot` chooses the robots that get their own figures (the team figure comes with a
 /// team of more than [`team::HANDFUL`]).
 /// Returns the path of the report's `report.md`.
-pub fn report(run_dir: &Path, per_robot: &PerRobot, stop: &Stop) -> Result<PathBuf> {
+pub fn report(run: &RunDir, per_robot: &PerRobot, stop: &Stop) -> Result<PathBuf> {
+    let run_dir = run.path();
     let scenario_path = RunDir::new(run_dir).scenario();
     let resolved = scenario::load_file(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
@@ -102,7 +103,7 @@ pub fn report(run_dir: &Path, per_robot: &PerRobot, stop: &Stop) -> Result<PathB
     let mut warnings = Vec::new();
     let summary_path = RunDir::new(run_dir).summary();
     let stored = read_stored_summary(&summary_path, &mut warnings);
-    let kept = crate::traces::recorded(run_dir)?;
+    let kept = crate::traces::recorded(run)?;
     if kept != Recorded::Full {
         // Decimated or no traces: only the run's summary covers every tick.
         let Some(s) = stored else {
@@ -271,12 +272,13 @@ fn gather(
 
 /// Called at the end of every `run`, with the run's summary.
 pub fn write_report(
-    run_dir: &Path,
+    run: &RunDir,
     resolved: &Resolved,
     summary: &RunSummary,
     stop: &Stop,
 ) -> Result<()> {
-    let kept = crate::traces::recorded(run_dir)?;
+    let run_dir = run.path();
+    let kept = crate::traces::recorded(run)?;
     let figured = figured(resolved, &PerRobot::Auto)?;
     let (series, warnings) = gather(run_dir, resolved, kept, stop)?;
     let gathered = Gathered {

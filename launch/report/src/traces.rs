@@ -4,6 +4,8 @@
 use std::fmt;
 use std::num::NonZeroU32;
 use std::path::Path;
+
+use fdi_common::run_dir::RunDir;
 use std::str::FromStr;
 
 use anyhow::{bail, Result};
@@ -83,11 +85,12 @@ fn summary_says(run_dir: &Path) -> Option<String> {
 /// What `run_dir` keeps of its traces: `none` when its summary says so, else what the headers
 /// of its trace files say (they must agree). A trace that cannot be read is left to the reader
 /// that needs it, which names the damage.
-pub fn recorded(run_dir: &Path) -> Result<Recorded> {
+pub fn recorded(run: &RunDir) -> Result<Recorded> {
+    let run_dir = run.path();
     if summary_says(run_dir).as_deref() == Some("none") {
         return Ok(Recorded::None);
     }
-    let dir = fdi_common::run_dir::RunDir::new(run_dir).traces();
+    let dir = run.traces();
     let Ok(entries) = std::fs::read_dir(&dir) else {
         return Ok(Recorded::Full);
     };
@@ -122,8 +125,9 @@ pub fn recorded(run_dir: &Path) -> Result<Recorded> {
 
 /// Refuses a run directory whose traces do not hold every tick, for `what` (`detect`, `run
 /// --replay`): they need every record.
-pub fn require_every_tick(run_dir: &Path, what: &str) -> Result<()> {
-    match recorded(run_dir)? {
+pub fn require_every_tick(run: &RunDir, what: &str) -> Result<()> {
+    let run_dir = run.path();
+    match recorded(run)? {
         Recorded::Full => Ok(()),
         Recorded::Decimated(k) => bail!(
             "{}: its traces keep every {k}-th tick only (`--traces decimate={k}`); {what} needs every tick: run it again with `--traces full`",

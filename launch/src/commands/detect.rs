@@ -1,6 +1,7 @@
 //! `fdi-launch detect TARGET`: a run directory is swept as it is; a scenario is run first, by
 //! `run`'s own code path, then its run directory is swept (`fdi_report::detect`).
 
+use fdi_common::run_dir::RunDir;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -102,7 +103,12 @@ pub fn detect(args: &DetectArgs, stop: &Stop) -> Result<ExitCode> {
         }
         (done.dir, Some(done.code))
     };
-    for written in sweep_run(&run_dir, args.out.as_deref(), args.points, stop)? {
+    for written in sweep_run(
+        &RunDir::new(&run_dir),
+        args.out.as_deref(),
+        args.points,
+        stop,
+    )? {
         println!("{}", written.display());
     }
     Ok(run_code.unwrap_or(ExitCode::SUCCESS))

@@ -1,6 +1,7 @@
 //! `fdi-launch report RUN_DIR` and `fdi-launch trace export RUN_DIR`: what `fdi-report` makes
 //! of a run directory, named here.
 
+use fdi_common::run_dir::RunDir;
 use std::path::Path;
 use std::process::ExitCode;
 
@@ -21,7 +22,7 @@ pub enum ExportFormat {
 
 /// `report`: the report made again, its `report.md` named.
 pub fn report(run_dir: &Path, robots: &PerRobot, stop: &Stop) -> Result<ExitCode> {
-    let md = fdi_report::report::report(run_dir, robots, stop)?;
+    let md = fdi_report::report::report(&RunDir::new(run_dir), robots, stop)?;
     println!("report {}", md.display());
     Ok(ExitCode::SUCCESS)
 }
@@ -32,6 +33,8 @@ pub fn export(run_dir: &Path, format: ExportFormat) -> Result<ExitCode> {
         ExportFormat::Csv => export::Format::Csv,
         ExportFormat::Mcap => export::Format::Mcap,
     };
-    export::export(run_dir, format, &mut |line| println!("{line}"))?;
+    export::export(&RunDir::new(run_dir), format, &mut |line| {
+        println!("{line}")
+    })?;
     Ok(ExitCode::SUCCESS)
 }

@@ -1,6 +1,7 @@
 //! `fdi-launch run`: a scenario (or `--replay` of a recorded run) into a run directory, its
 //! report, its summary on stdout and its exit status.
 
+use fdi_common::run_dir::RunDir;
 use std::path::PathBuf;
 
 use clap::Args;
@@ -294,7 +295,7 @@ pub fn run_scenario(args: &RunArgs, stop: &Stop) -> Result<RunDone> {
         }
     }
     // The report is written whole or not at all; an interrupt stops it at once.
-    let report = match report::write_report(&dir, r, &summary, stop) {
+    let report = match report::write_report(&RunDir::new(&dir), r, &summary, stop) {
         Err(e) if e.downcast_ref::<Interrupted>().is_some() => return Err(e),
         other => other,
     };

@@ -396,7 +396,7 @@ fn execute_inproc_watched<A: Attacker>(
             interrupted(&mut summary, r, signal, "the in-process engine stopped");
         }
     }
-    output::write_run_summary(dir, &summary, traces)?;
+    output::write_run_summary(&RunDir::new(dir), &summary, traces)?;
     Ok(summary)
 }
 
@@ -605,7 +605,7 @@ fn execute_ipc(
     };
     let (outcome, mut joined, write_error) = if !opts.pipes {
         let outcome = run_ipc_followed(r, &opts, live.as_ref().zip(feed))?;
-        let joined = fdi_report::join::join_run(r, dir, outcome.wall_s, |_| {})?;
+        let joined = fdi_report::join::join_run(r, &RunDir::new(dir), outcome.wall_s, |_| {})?;
         (outcome, joined, None)
     } else {
         // Joined online: the processes write into pipes, the launcher keeps what
@@ -643,7 +643,7 @@ fn execute_ipc(
             outcome.prefix
         );
     }
-    output::write_run_summary(dir, &joined.summary, traces)?;
+    output::write_run_summary(&RunDir::new(dir), &joined.summary, traces)?;
     if let Some(e) = write_error {
         return Err(anyhow::anyhow!(
             "a trace could not be kept: {e}; summary.json covers every tick of the run"

@@ -252,13 +252,13 @@ fn check_trace(path: &Path) -> Result<()> {
 
 /// Checks the traces of the recorded run `recorded` that a replay reads (the attacker's, played
 /// back, and the agents', copied): every one must read to its end. Returns their paths.
-pub fn check_recording(r: &Resolved, recorded: &Path) -> Result<Vec<std::path::PathBuf>> {
+pub fn check_recording(r: &Resolved, recorded: &RunDir) -> Result<Vec<std::path::PathBuf>> {
     fdi_report::traces::require_every_tick(recorded, "run --replay")?;
-    let attacker = RunDir::new(recorded).trace(Process::Attacker);
+    let attacker = recorded.trace(Process::Attacker);
     load_recording(r, &attacker)?;
     let mut copies = vec![attacker];
     for a in &r.scenario.agents {
-        let p = RunDir::new(recorded).trace(Process::Agent(a.id));
+        let p = recorded.trace(Process::Agent(a.id));
         check_trace(&p)?;
         copies.push(p);
     }
@@ -299,7 +299,7 @@ pub fn replay_run(
         .with_context(|| format!("reading {}", scenario_path.display()))?;
     // The center is event-driven: the replay is lockstep whatever the recording's clock.
     r.scenario.clock = scenario::ClockMode::Lockstep;
-    let copies = check_recording(&r, recorded)?;
+    let copies = check_recording(&r, &RunDir::new(recorded))?;
     // Named apart from the runs of the same scenario (`<timestamp>-<name>-replay`).
     let dir =
         crate::run_dirs::create_named_run_dir(out, &r, &format!("{}-replay", r.scenario.name))?;
@@ -331,12 +331,12 @@ pub fn replay_run(
             )
         }),
     )?;
-    let mut joined = fdi_report::join::join_run(&r, &dir, outcome.wall_s, |_| {})?;
+    let mut joined = fdi_report::join::join_run(&r, &RunDir::new(&dir), outcome.wall_s, |_| {})?;
     joined.summary.engine = "replay".into();
     for w in &joined.warnings {
         log::warn!("{w}");
     }
-    fdi_report::output::write_summary(&dir, &joined.summary)?;
+    fdi_report::output::write_summary(&RunDir::new(&dir), &joined.summary)?;
     Ok(Replayed {
         summary: joined.summary,
         dir,

@@ -27,7 +27,7 @@ pub(super) fn each_tick(
     info: &RunInfo,
     mut emit: impl FnMut(&Tick) -> Result<()>,
 ) -> Result<Result<u64, String>> {
-    if let Recorded::Decimated(k) = recorded(run_dir)? {
+    if let Recorded::Decimated(k) = recorded(&fdi_common::run_dir::RunDir::new(run_dir))? {
         return Ok(Err(format!(
             "no detector statistics: the traces keep every {k}-th tick only \
              (`--traces decimate={k}`) and the detectors need every tick"

@@ -419,9 +419,12 @@ mod tests {
             }
         }
         let info = scenario.expect("a trace");
-        join::join_run(&info.resolved, dir, 0.0, |r| {
-            add(r.agent.agent, &["detectors"])
-        })
+        join::join_run(
+            &info.resolved,
+            &fdi_common::run_dir::RunDir::new(dir),
+            0.0,
+            |r| add(r.agent.agent, &["detectors"]),
+        )
         .expect("joined");
         if events > 0 {
             want.insert("/events".into(), events);

@@ -25,7 +25,7 @@ mod detectors;
 mod mcap;
 mod sources;
 
-use std::path::Path;
+use fdi_common::run_dir::RunDir;
 
 use anyhow::Result;
 
@@ -40,7 +40,8 @@ pub enum Format {
 
 /// Exports the traces of `run_dir` (`fdi-launch trace export RUN_DIR`), saying what each
 /// trace gave (`said`, a line at a time: `<trace> -> <folder>: <n> records`) as it goes.
-pub fn export(run_dir: &Path, format: Format, said: &mut dyn FnMut(&str)) -> Result<()> {
+pub fn export(run: &RunDir, format: Format, said: &mut dyn FnMut(&str)) -> Result<()> {
+    let run_dir = run.path();
     match format {
         Format::Csv => csv::export(run_dir, said),
         Format::Mcap => mcap::export(run_dir, said),
@@ -53,9 +54,8 @@ mod tests {
     use fdi_common::trace::{TraceHeader, TraceWriter, FORMAT_VERSION};
 
     use super::sources::*;
-    use super::*;
     use fdi_common::trace::{TraceReader, TraceRecord};
-    use std::path::PathBuf;
+    use std::path::{Path, PathBuf};
 
     /// A scratch run directory holding the fixture `testdata/short-run` (scenario and traces).
     pub(super) fn fixture_copy() -> tempfile::TempDir {

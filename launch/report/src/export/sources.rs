@@ -38,7 +38,7 @@ pub(super) struct OutDir {
 
 impl OutDir {
     pub(super) fn open(run_dir: &Path) -> Result<Self> {
-        let path = run_dir.join("export");
+        let path = fdi_common::run_dir::RunDir::new(run_dir).export();
         let made = !path.is_dir();
         let writes = Writes::default();
         std::fs::create_dir_all(&path).map_err(|e| writes.io(&path, e))?;

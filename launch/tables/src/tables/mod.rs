@@ -338,7 +338,12 @@ fn run_case(
                 ),
             )
             .and_then(fdi_orchestrator::run::require_whole)?;
-            if let Err(e) = fdi_report::report::write_report(&d, r, &summary, stop) {
+            if let Err(e) = fdi_report::report::write_report(
+                &fdi_common::run_dir::RunDir::new(&d),
+                r,
+                &summary,
+                stop,
+            ) {
                 // Stopped by the signal: the table stops too.
                 if stop.pending().is_some() {
                     return Err(e);
