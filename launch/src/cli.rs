@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 
 use crate::commands::bench::BenchCommand;
 use crate::commands::certs::CertsArgs;
+use crate::commands::model::ModelArgs;
 use crate::commands::report::ExportFormat;
 use crate::commands::serve::ServeArgs;
 use crate::commands::sweep::SweepArgs;
@@ -34,6 +35,10 @@ pub enum Command {
     /// Run a campaign: a base scenario and axes of values for its fields (a parameter sweep,
     /// Monte Carlo over seeds), in parallel and resumably, with statistics and figures.
     Sweep(SweepArgs),
+    /// A robot from its URDF file: its moving joints (the order of q), their limits, the links'
+    /// masses, and at one state its inertia M(q), Coriolis matrix V(q, q̇), gravity G(q) and
+    /// friction F(q̇) — what to check before a run, or compare with another tool (--json).
+    Model(ModelArgs),
     /// Print the JSON Schema (draft 7) of a file format: `scenario` or `attack` (a profile).
     /// The shipped copies are `scenarios/schema/*.schema.json`; docs/scenarios.md is the reference.
     Schema {

@@ -17,6 +17,7 @@ mod interrupted_counts;
 mod live;
 mod long_horizon;
 mod machine;
+mod model;
 mod multihost;
 mod paper;
 mod protocol;

@@ -1,0 +1,339 @@
+//! The dynamics of a [`Chain`] for any number of joints, in the root link's frame:
+//!
+//! * `M(q)` by the composite-rigid-body algorithm: for each joint `j`, the links it carries
+//!   (the composite body `j`) moved by a unit rate of `j` alone; their momentum, seen at joint
+//!   `i ≤ j`, is `M_ij`;
+//! * `V(q, q̇)` from the Christoffel symbols of `M`, `V_ij = Σ_k ½ (∂M_ij/∂q_k + ∂M_ik/∂q_j −
+//!   ∂M_jk/∂q_i) q̇_k`, so that `Ṁ − 2V` is skew-symmetric; `∂M/∂q_k` is exact, from
+//!   `M = Σ_b m_b J_vᵀ J_v + J_ωᵀ I_b J_ω` and the derivatives of the links' Jacobians;
+//! * `G(q) = ∂U/∂q` for the potential `U = −Σ_b m_b gᵀ p_b`;
+//! * `F(q̇)`: each joint's viscous damping and Coulomb friction, the latter smoothed over
+//!   [`COULOMB_VELOCITY`] (`friction · tanh(q̇ / COULOMB_VELOCITY)`).
+
+use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Vector3};
+
+use super::{Chain, Frame, Motion};
+use crate::model::robot::{EulerLagrange, Matrix, Vector};
+
+/// The joint speed, rad/s or m/s, over which a joint's Coulomb friction rises to its full
+/// value (`tanh`): a step at zero would make the arm's equations stiff.
+pub const COULOMB_VELOCITY: f64 = 0.01;
+
+/// The arm's terms at one state `(q, q̇)`: what `fdi-launch model` shows.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dynamics {
+    pub inertia: DMatrix<f64>,
+    pub coriolis: DMatrix<f64>,
+    pub gravity: DVector<f64>,
+    pub friction: DVector<f64>,
+}
+
+/// Where everything is at one `q`, in the root link's frame.
+struct Pose {
+    /// Each moving joint's origin and unit axis.
+    origin: Vec<Vector3<f64>>,
+    axis: Vec<Vector3<f64>>,
+    /// Each body's centre of mass and inertia about it.
+    com: Vec<Vector3<f64>>,
+    inertia: Vec<Matrix3<f64>>,
+}
+
+/// The skew matrix of `v`: `skew(v) x = v × x`.
+fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+impl Chain {
+    fn pose(&self, q: &[f64]) -> Pose {
+        let mut child = Vec::with_capacity(self.joints.len());
+        let (mut origin, mut axis) = (Vec::new(), Vec::new());
+        let mut at = Frame::IDENTITY;
+        for (j, &qj) in self.joints.iter().zip(q) {
+            let frame = at.then(&j.placement);
+            origin.push(frame.p);
+            axis.push(frame.r * j.axis);
+            at = frame.then(&Frame::motion(j.motion, &j.axis, qj));
+            child.push(at);
+        }
+        let (com, inertia) = (self.bodies.iter())
+            .map(|b| {
+                let f = &child[b.rides_on];
+                (f.r * b.com + f.p, f.r * b.inertia * f.r.transpose())
+            })
+            .unzip();
+        Pose {
+            origin,
+            axis,
+            com,
+            inertia,
+        }
+    }
+
+    /// `M(q)` by the composite-rigid-body algorithm.
+    pub fn inertia(&self, q: &[f64]) -> DMatrix<f64> {
+        let n = self.dof();
+        let pose = self.pose(q);
+        let mut m = DMatrix::zeros(n, n);
+        // The composite body of joint j: mass, first moment and inertia about the root's origin.
+        let (mut mass, mut first, mut second) = (0.0, Vector3::zeros(), Matrix3::zeros());
+        let mut by_joint: Vec<Vec<usize>> = vec![Vec::new(); n];
+        for (b, body) in self.bodies.iter().enumerate() {
+            by_joint[body.rides_on].push(b);
+        }
+        for j in (0..n).rev() {
+            for &b in &by_joint[j] {
+                let (mb, p) = (self.bodies[b].mass, pose.com[b]);
+                mass += mb;
+                first += mb * p;
+                second += pose.inertia[b]
+                    + mb * (p.norm_squared() * Matrix3::identity() - p * p.transpose());
+            }
+            let (z, o) = (pose.axis[j], pose.origin[j]);
+            // The composite's momentum when joint j alone moves at a unit rate: linear, and
+            // angular about the root's origin.
+            let (linear, angular) = match self.joints[j].motion {
+                Motion::Revolute => (
+                    z.cross(&first) - mass * z.cross(&o),
+                    second * z - first.cross(&z.cross(&o)),
+                ),
+                Motion::Prismatic => (mass * z, first.cross(&z)),
+            };
+            for i in 0..=j {
+                let zi = pose.axis[i];
+                m[(i, j)] = match self.joints[i].motion {
+                    Motion::Revolute => zi.dot(&(angular - pose.origin[i].cross(&linear))),
+                    Motion::Prismatic => zi.dot(&linear),
+                };
+                m[(j, i)] = m[(i, j)];
+            }
+        }
+        m
+    }
+
+    /// `∂M/∂q_k` for every `k`, exact.
+    pub fn inertia_derivatives(&self, q: &[f64]) -> Vec<DMatrix<f64>> {
+        let n = self.dof();
+        let pose = self.pose(q);
+        let mut d = vec![DMatrix::zeros(n, n); n];
+        for (b, body) in self.bodies.iter().enumerate() {
+            let a = body.rides_on;
+            let (p, iw) = (pose.com[b], pose.inertia[b]);
+            let (jv, jw) = self.jacobian(&pose, p, a);
+            for (k, dk) in d.iter_mut().enumerate().take(a + 1) {
+                let (zk, ok) = (pose.axis[k], pose.origin[k]);
+                let revolute_k = self.joints[k].motion == Motion::Revolute;
+                let dp = if revolute_k { zk.cross(&(p - ok)) } else { zk };
+                let (mut djv, mut djw) = (Matrix3xX::zeros(n), Matrix3xX::zeros(n));
+                for j in 0..=a {
+                    let (zj, oj) = (pose.axis[j], pose.origin[j]);
+                    let moved = k < j;
+                    let dz = if moved && revolute_k {
+                        zk.cross(&zj)
+                    } else {
+                        Vector3::zeros()
+                    };
+                    let d_o = match (moved, revolute_k) {
+                        (false, _) => Vector3::zeros(),
+                        (true, true) => zk.cross(&(oj - ok)),
+                        (true, false) => zk,
+                    };
+                    match self.joints[j].motion {
+                        Motion::Revolute => {
+                            djv.set_column(j, &(dz.cross(&(p - oj)) + zj.cross(&(dp - d_o))));
+                            djw.set_column(j, &dz);
+                        }
+                        Motion::Prismatic => djv.set_column(j, &dz),
+                    }
+                }
+                let diw = if revolute_k {
+                    skew(&zk) * iw - iw * skew(&zk)
+                } else {
+                    Matrix3::zeros()
+                };
+                let lin = jv.transpose() * &djv;
+                let ang = jw.transpose() * iw * &djw;
+                *dk += body.mass * (&lin + lin.transpose())
+                    + &ang
+                    + ang.transpose()
+                    + jw.transpose() * diw * &jw;
+            }
+        }
+        d
+    }
+
+    /// The linear and angular Jacobians of the point `p` of a body riding on joint `a`.
+    fn jacobian(&self, pose: &Pose, p: Vector3<f64>, a: usize) -> (Matrix3xX<f64>, Matrix3xX<f64>) {
+        let n = self.dof();
+        let (mut jv, mut jw) = (Matrix3xX::zeros(n), Matrix3xX::zeros(n));
+        for j in 0..=a {
+            let z = pose.axis[j];
+            match self.joints[j].motion {
+                Motion::Revolute => {
+                    jv.set_column(j, &z.cross(&(p - pose.origin[j])));
+                    jw.set_column(j, &z);
+                }
+                Motion::Prismatic => jv.set_column(j, &z),
+            }
+        }
+        (jv, jw)
+    }
+
+    /// `M(q)` from the links' Jacobians, `Σ_b m_b J_vᵀ J_v + J_ωᵀ I_b J_ω`: what
+    /// [`Chain::inertia_derivatives`] differentiates (the tests hold it to
+    /// [`Chain::inertia`]).
+    pub fn inertia_from_jacobians(&self, q: &[f64]) -> DMatrix<f64> {
+        let n = self.dof();
+        let pose = self.pose(q);
+        let mut m = DMatrix::zeros(n, n);
+        for (b, body) in self.bodies.iter().enumerate() {
+            let (jv, jw) = self.jacobian(&pose, pose.com[b], body.rides_on);
+            m += body.mass * jv.transpose() * &jv + jw.transpose() * pose.inertia[b] * &jw;
+        }
+        m
+    }
+
+    /// `Ṁ(q, q̇) = Σ_k ∂M/∂q_k q̇_k`.
+    pub fn inertia_rate(&self, q: &[f64], qd: &[f64]) -> DMatrix<f64> {
+        let n = self.dof();
+        (self.inertia_derivatives(q).iter())
+            .zip(qd)
+            .fold(DMatrix::zeros(n, n), |acc, (d, v)| acc + d * *v)
+    }
+
+    /// `V(q, q̇)` from the Christoffel symbols of `M`.
+    pub fn coriolis(&self, q: &[f64], qd: &[f64]) -> DMatrix<f64> {
+        let n = self.dof();
+        let d = self.inertia_derivatives(q);
+        DMatrix::from_fn(n, n, |i, j| {
+            (0..n)
+                .map(|k| 0.5 * (d[k][(i, j)] + d[j][(i, k)] - d[i][(j, k)]) * qd[k])
+                .sum()
+        })
+    }
+
+    /// `G(q)` under the chain's gravity.
+    pub fn gravity(&self, q: &[f64]) -> DVector<f64> {
+        let n = self.dof();
+        let pose = self.pose(q);
+        let g = self.gravity;
+        DVector::from_fn(n, |i, _| {
+            let (z, o) = (pose.axis[i], pose.origin[i]);
+            let carried = (self.bodies.iter().enumerate()).filter(|(_, b)| b.rides_on >= i);
+            let force: f64 = carried
+                .map(|(b, body)| {
+                    let moved = match self.joints[i].motion {
+                        Motion::Revolute => z.cross(&(pose.com[b] - o)),
+                        Motion::Prismatic => z,
+                    };
+                    body.mass * g.dot(&moved)
+                })
+                .sum();
+            -force
+        })
+    }
+
+    /// The potential energy `U(q) = −Σ_b m_b gᵀ p_b` (zero with every centre of mass at the
+    /// root's origin), whose gradient is `G`.
+    pub fn potential_energy(&self, q: &[f64]) -> f64 {
+        let pose = self.pose(q);
+        (self.bodies.iter().zip(&pose.com))
+            .map(|(b, p)| -b.mass * self.gravity.dot(p))
+            .sum()
+    }
+
+    /// `F(q̇)`: viscous damping and smoothed Coulomb friction of each joint.
+    pub fn friction(&self, qd: &[f64]) -> DVector<f64> {
+        DVector::from_iterator(
+            self.dof(),
+            (self.joints.iter())
+                .zip(qd)
+                .map(|(j, v)| j.damping * v + j.friction * (v / COULOMB_VELOCITY).tanh()),
+        )
+    }
+
+    /// Every term at `(q, q̇)`; refused when either has the wrong length or a value that is
+    /// not finite.
+    pub fn dynamics(&self, q: &[f64], qd: &[f64]) -> Result<Dynamics, String> {
+        let n = self.dof();
+        for (what, v) in [("q", q), ("q̇", qd)] {
+            if v.len() != n {
+                return Err(format!(
+                    "{what} has {} values, the arm {n} joints ({})",
+                    v.len(),
+                    self.joint_names().join(", ")
+                ));
+            }
+            if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+                return Err(format!("{what} has {x}, not finite"));
+            }
+        }
+        Ok(Dynamics {
+            inertia: self.inertia(q),
+            coriolis: self.coriolis(q, qd),
+            gravity: self.gravity(q),
+            friction: self.friction(qd),
+        })
+    }
+}
+
+/// A URDF arm of `N` joints: the [`EulerLagrange`] dynamics of its [`Chain`].
+#[derive(Debug, Clone)]
+pub struct UrdfArm<const N: usize> {
+    chain: Chain,
+}
+
+impl<const N: usize> UrdfArm<N> {
+    /// The arm of `chain`; `None` when it does not move `N` joints.
+    pub fn new(chain: Chain) -> Option<Self> {
+        (chain.dof() == N).then_some(Self { chain })
+    }
+
+    pub fn chain(&self) -> &Chain {
+        &self.chain
+    }
+}
+
+fn fixed<const N: usize>(m: &DMatrix<f64>) -> Matrix<N> {
+    Matrix::<N>::from_iterator(m.iter().copied())
+}
+
+fn fixed_vector<const N: usize>(v: &DVector<f64>) -> Vector<N> {
+    Vector::<N>::from_iterator(v.iter().copied())
+}
+
+impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
+    fn problems(&self) -> Vec<(&'static str, String)> {
+        let m = self.chain.inertia(&[0.0; N]);
+        if m.clone().cholesky().is_none() {
+            return vec![(
+                "path",
+                format!(
+                    "the inertia of `{}` at q = 0 is not positive definite: a moving link \
+                     without mass or inertia",
+                    self.chain.name
+                ),
+            )];
+        }
+        Vec::new()
+    }
+
+    fn inertia(&self, q: &Vector<N>) -> Matrix<N> {
+        fixed(&self.chain.inertia(q.as_slice()))
+    }
+
+    fn inertia_rate(&self, q: &Vector<N>, qd: &Vector<N>) -> Matrix<N> {
+        fixed(&self.chain.inertia_rate(q.as_slice(), qd.as_slice()))
+    }
+
+    fn coriolis(&self, q: &Vector<N>, qd: &Vector<N>) -> Matrix<N> {
+        fixed(&self.chain.coriolis(q.as_slice(), qd.as_slice()))
+    }
+
+    fn gravity(&self, q: &Vector<N>) -> Vector<N> {
+        fixed_vector(&self.chain.gravity(q.as_slice()))
+    }
+
+    fn friction(&self, qd: &Vector<N>) -> Vector<N> {
+        fixed_vector(&self.chain.friction(qd.as_slice()))
+    }
+}
