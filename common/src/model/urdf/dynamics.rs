@@ -12,7 +12,7 @@
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Vector3};
 
-use super::{Chain, Frame, Motion};
+use super::chain::{Chain, Frame, Motion};
 use crate::model::robot::{EulerLagrange, Matrix, Vector};
 
 /// The joint speed, rad/s or m/s, over which a joint's Coulomb friction rises to its full

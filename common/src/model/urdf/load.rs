@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 use nalgebra::{Matrix3, Vector3};
 use urdf_rs::JointType;
 
-use super::{Body, Chain, Frame, Joint, Motion, UrdfSpec, MAX_JOINTS};
+use super::chain::{Body, Chain, Frame, Joint, Motion, UrdfSpec, MAX_JOINTS};
 
 /// Why a URDF file gives no arm.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
