@@ -7,6 +7,7 @@
 pub mod robot;
 pub mod three_link;
 pub mod two_link;
+#[cfg(feature = "urdf")]
 pub mod urdf;
 
 use serde::{Deserialize, Serialize};
