@@ -175,8 +175,6 @@ struct Launcher<X: Transport> {
     started: bool,
     /// The other hosts of a split run.
     remote: Option<Box<dyn Hosts>>,
-    /// Where each process of a split run runs.
-    split: Option<std::sync::Arc<dyn Split>>,
     /// The last tick the control center reported, and when any process last said it moved
     /// on (or the start).
     progress: (u64, Instant),
@@ -583,7 +581,6 @@ fn open_launcher(
         stop: opts.stop.clone(),
         started: false,
         remote: None,
-        split: opts.split.clone(),
         progress: (0, Instant::now()),
         said_done: std::collections::BTreeSet::new(),
     };
@@ -718,7 +715,7 @@ fn spawn_and_supervise<X: Transport>(
         remote.await_routes()?;
     }
     let started = start_run(resolved, transport, l)?;
-    let stall_timeout = stall_timeout_of(resolved, l.split.as_deref(), opts.pace);
+    let stall_timeout = stall_timeout_of(resolved, opts.split.as_deref(), opts.pace);
     let (wall_s, interrupted) = supervise(resolved, l, bar, started, stall_timeout)?;
     if interrupted.is_some() {
         return Ok(Supervised {
@@ -757,7 +754,7 @@ fn spawn_roles<X: Transport>(
             Some(id) => format!("agent {id}"),
             None => rp.role.clone(),
         };
-        if let Some(split) = &l.split {
+        if let Some(split) = &opts.split {
             if !split.is_local(rp.wake) {
                 remote_procs.push((rp.wake, label));
                 continue;
