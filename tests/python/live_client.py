@@ -15,7 +15,8 @@ Modes:
   leave       disconnect after --leave-after messages.
 
 With --until-k K, a reading client disconnects once every subscribed topic brought a message of
-tick K or later (the server then need not linger for it).
+tick K or later and the time broadcasts reached the newest message's time (the server then need
+not linger for it).
 """
 
 import argparse
@@ -121,6 +122,7 @@ async def run(args):
                 if args.until_k is not None and json.loads(text).get("k", -1) >= args.until_k:
                     short.discard(topic)
                     if not short:
+                        await last_times(ws, out)
                         await ws.close()
                         break
             elif op == TIME:
@@ -129,6 +131,29 @@ async def run(args):
     except websockets.exceptions.ConnectionClosedError:
         pass
     write(args.out, out)
+
+
+async def last_times(ws, out):
+    """Reads on, at most 10 s, until the time broadcasts caught up with the messages received.
+
+    The server sends a time broadcast and a message on two queues of its own (control and
+    data), so the time of a tick may arrive after that tick's messages; each queue keeps its
+    order, so once the time of the latest message came, every earlier one did. Only time
+    broadcasts are recorded here: the messages past --until-k are not.
+    """
+    newest = max((ts for msgs in out["messages"].values() for ts, _ in msgs), default=0)
+    end = time.monotonic() + 10
+    while not out["times"] or out["times"][-1] < newest:
+        left = end - time.monotonic()
+        if left <= 0:
+            return
+        try:
+            frame = await asyncio.wait_for(ws.recv(), timeout=left)
+        except (asyncio.TimeoutError, websockets.exceptions.ConnectionClosed):
+            return
+        if isinstance(frame, bytes) and frame[0] == TIME:
+            (ts,) = struct.unpack_from("<Q", frame, 1)
+            out["times"].append(ts)
 
 
 def write(path, value):
