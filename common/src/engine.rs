@@ -369,7 +369,7 @@ pub fn evaluator_for(resolved: &Resolved) -> Evaluator {
     let evaluator = Evaluator::new(
         s.agents
             .iter()
-            .map(|a| (a.id, a.trajectory.clone(), a.model)),
+            .map(|a| (a.id, a.trajectory.clone(), a.model.clone())),
     )
     .with_detectors(&s.detectors, s.control_period_s, &s.controller);
     match s.roles.monitor_name() {

@@ -44,3 +44,4 @@ pub mod time;
 pub mod trace;
 pub mod trajectory;
 pub mod units;
+pub mod urdf_files;

@@ -338,6 +338,11 @@ pub struct Scenario {
     /// run's own processes take every role).
     #[serde(default, skip_serializing_if = "crate::roles::RolesConfig::is_default")]
     pub roles: crate::roles::RolesConfig,
+    /// `[urdf_files]`: the texts of the URDF files the models name (`kind = "urdf"`), by their
+    /// `path` as written. Filled when the scenario is read (each file once, however many agents
+    /// share it), so that a run's scenario carries its robots; a file may also set it.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub urdf_files: BTreeMap<String, String>,
 }
 
 /// Every problem found in a scenario file.
@@ -673,7 +678,7 @@ impl Scenario {
             run_seed: self.seed,
             control_period_s: self.control_period_s,
             substeps: self.physics_substeps,
-            model: agent.model,
+            model: agent.model.clone(),
             delay: agent.delay,
             noise: self.noise,
             disturbance: self.disturbance.clone(),
@@ -687,7 +692,7 @@ impl Scenario {
             run_seed: self.seed,
             control_period_s: self.control_period_s,
             controller: self.controller,
-            model: agent.model,
+            model: agent.model.clone(),
             trajectory: agent.trajectory.clone(),
             delay: agent.delay,
         }
@@ -1023,8 +1028,19 @@ fn parse_collecting<T: serde::de::DeserializeOwned>(
     source_name: &str,
     reference: Option<&toml::Table>,
 ) -> Result<Collected<T>, ScenarioError> {
+    parse_prepared(text, source_name, reference, |_| {})
+}
+
+/// [`parse_collecting`], `prepare` changing the document before `[defaults]` is applied.
+fn parse_prepared<T: serde::de::DeserializeOwned>(
+    text: &str,
+    source_name: &str,
+    reference: Option<&toml::Table>,
+    prepare: impl FnOnce(&mut toml::Table),
+) -> Result<Collected<T>, ScenarioError> {
     let mut value: toml::Table = toml::from_str(text)
         .map_err(|e| ScenarioError::one(source_name, "<file>", toml_syntax_error(text, &e)))?;
+    prepare(&mut value);
     let inherited = apply_agent_defaults(&mut value);
     Ok(crate::collect::collect(value, reference, &inherited))
 }
@@ -1065,8 +1081,15 @@ fn load_text(
     };
     // The embedded paper scenario stands in for wrong or missing values, to read on.
     let reference = toml::from_str::<toml::Table>(PAPER_SCENARIO).ok();
-    let mut read = parse_collecting::<Scenario>(text, source_name, reference.as_ref())?;
-    let mut problems = locate(std::mem::take(&mut read.problems));
+    // The models' URDF files, read first: a model is made from its file's text.
+    let (mut urdf_problems, mut unread) = (Vec::new(), Vec::new());
+    let mut read = parse_prepared::<Scenario>(text, source_name, reference.as_ref(), |doc| {
+        (urdf_problems, unread) = crate::urdf_files::read_into(doc, base_dir);
+    })?;
+    // A model left without its text fails to read: its file's problem says why, once.
+    read.problems.retain(|p| !unread.contains(&p.path));
+    let mut problems = locate(urdf_problems);
+    problems.extend(locate(std::mem::take(&mut read.problems)));
     let Some(scenario) = read.value.take() else {
         return Err(ScenarioError {
             source_name: source_name.into(),
@@ -1131,6 +1154,15 @@ fn resolve_attack(scenario: &Scenario, base_dir: Option<&Path>) -> (AttackProfil
         }
     }
     (attack, problems)
+}
+
+/// Loads and validates a scenario a run wrote (a run directory's `scenario.toml`, the scenario
+/// a split run sends its hosts): read without its folder, so that it reads no other file (its
+/// attack is inline, its URDF texts are in its `urdf_files`).
+pub fn load_written(path: &Path) -> Result<Resolved, ScenarioError> {
+    let name = path.display().to_string();
+    let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
+    load_str(&text, &name, None)
 }
 
 /// Loads and validates a scenario file.

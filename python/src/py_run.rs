@@ -121,7 +121,7 @@ pub fn run(py: Python<'_>, scenario: &Scenario, ticks: bool) -> PyResult<RunResu
 #[pyo3(signature = (run_dir, ticks = true))]
 pub fn open_run(py: Python<'_>, run_dir: PathBuf, ticks: bool) -> PyResult<RunResult> {
     let dir = RunDir::new(&run_dir);
-    let resolved = scenario::load_file(&dir.scenario()).map_err(|e| scenario_error(py, &e))?;
+    let resolved = scenario::load_written(&dir.scenario()).map_err(|e| scenario_error(py, &e))?;
     let routed = resolved
         .scenario
         .agents

@@ -51,8 +51,30 @@ fn lockstep_ipc_digest_equals_the_in_process_digest() {
 /// the traces carry three joints per agent.
 #[test]
 fn three_link_lockstep_ipc_digest_equals_the_in_process_digest() {
-    let dir = Scratch::new("three-link");
-    let scenario = fdi_tests::repo_path("scenarios/three-link.toml");
+    ipc_equals_inproc("scenarios/three-link.toml", 3);
+}
+
+/// Arms read from a URDF file (the paper's, `kind = "urdf"`): over IPC in lockstep, the
+/// in-process digest, though each process reads only the run's scenario (which carries the
+/// URDF's text, not its path).
+#[test]
+fn urdf_arms_lockstep_ipc_digest_equals_the_in_process_digest() {
+    let (_dir, run_dir) = ipc_equals_inproc("scenarios/paper-urdf.toml", 2);
+    let written = fdi_common::scenario::load_written(&run_dir.join("scenario.toml"))
+        .expect("the run's scenario reads without its folder");
+    assert_eq!(written.scenario.urdf_files.len(), 1);
+    let urdf = &written.scenario.urdf_files["robots/paper-two-link.urdf"];
+    let shipped =
+        std::fs::read_to_string(fdi_tests::repo_path("scenarios/robots/paper-two-link.urdf"))
+            .expect("the shipped URDF");
+    assert_eq!(urdf, &shipped);
+}
+
+/// Runs `scenario` for 2 s over IPC and in process: the same digest and RMSE, `joints` joints
+/// in agent 2's trace. The output folder and the IPC run's directory in it.
+fn ipc_equals_inproc(scenario: &str, joints: usize) -> (Scratch, std::path::PathBuf) {
+    let dir = Scratch::new("robot-class");
+    let scenario = fdi_tests::repo_path(scenario);
     let scenario = scenario.to_string_lossy();
     let args = |engine: &'static str| {
         [
@@ -78,11 +100,12 @@ fn three_link_lockstep_ipc_digest_equals_the_in_process_digest() {
     assert_eq!(ipc["ticks"], 2000);
     let run_dir = fdi_tests::run_dir_of(&ipc);
     let records = fdi_tests::trace_records(&run_dir.join("traces/agent-2.trace"));
-    let joints = records.iter().find_map(|r| match r {
+    let found = records.iter().find_map(|r| match r {
         fdi_common::trace::TraceRecord::Agent(a) => Some(a.q.as_slice().len()),
         _ => None,
     });
-    assert_eq!(joints, Some(3));
+    assert_eq!(found, Some(joints));
+    (dir, run_dir)
 }
 
 /// The transforms of the clean signal over the real processes: a profile with a scale, a sign

@@ -123,7 +123,7 @@ pub(super) fn twins(mut params: PlantParams, entry: &CovertEntry) -> Option<Box<
         position_std_rad: 0.0,
         velocity_std_rad_s: 0.0,
     };
-    let model = params.model;
+    let model = params.model.clone();
     model.with_links(Build { params, entry })
 }
 

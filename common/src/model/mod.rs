@@ -3,6 +3,7 @@
 //! A new robot is one new file implementing [`EulerLagrange`] for its number of links, one
 //! variant of [`ModelConfig`] and one arm of [`ModelConfig::with_links`]: everything else (the
 //! plant, the control center, the processes, the launcher) is generic over the number of links.
+//! A robot of a URDF file needs none of that ([`urdf`], `kind = "urdf"`).
 
 pub mod robot;
 pub mod three_link;
@@ -18,13 +19,17 @@ pub use two_link::{TwoLink, TwoLinkParams};
 
 /// The robot of one agent (`model = { kind = "…", … }` in a scenario): one variant per model
 /// file, its parameters defaulting field by field.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(tag = "kind", rename_all = "kebab-case")]
 pub enum ModelConfig {
     /// Two-link planar manipulator (eq. 67); parameters default to the paper's.
     TwoLink(TwoLinkParams),
     /// Three-link planar arm; parameters default to [`ThreeLinkParams::DEFAULT`].
     ThreeLink(ThreeLinkParams),
+    /// An arm of a URDF file (`path` relative to the scenario file; docs/model.md, "Your own
+    /// arm"), moving one of [`urdf::JOINT_COUNTS`] joints.
+    #[cfg(feature = "urdf")]
+    Urdf(urdf::UrdfModel),
 }
 
 /// Work that is generic over the number of links, run by [`ModelConfig::with_links`] with the
@@ -38,9 +43,15 @@ impl ModelConfig {
     /// Runs `work` with this model's number of links and the model: the one place that maps a
     /// model kind to its number of links.
     pub fn with_links<W: ForLinks>(&self, work: W) -> W::Output {
-        match *self {
-            Self::TwoLink(p) => work.call::<2>(Box::new(TwoLink::new(p))),
-            Self::ThreeLink(p) => work.call::<3>(Box::new(ThreeLink::new(p))),
+        match self {
+            Self::TwoLink(p) => work.call::<2>(Box::new(TwoLink::new(*p))),
+            Self::ThreeLink(p) => work.call::<3>(Box::new(ThreeLink::new(*p))),
+            #[cfg(feature = "urdf")]
+            Self::Urdf(m) => match m.arm() {
+                urdf::AnyArm::Two(a) => work.call::<2>(a.clone()),
+                urdf::AnyArm::Three(a) => work.call::<3>(a.clone()),
+                urdf::AnyArm::Six(a) => work.call::<6>(a.clone()),
+            },
         }
     }
 

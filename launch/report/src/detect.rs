@@ -82,7 +82,7 @@ fn record(run_dir: &Path, stop: &Stop) -> Result<(Resolved, Recorded, RunSummary
             run_dir.display()
         );
     }
-    let resolved = scenario::load_file(&scenario_path)
+    let resolved = scenario::load_written(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
     crate::traces::require_every_tick(&RunDir::new(run_dir), "detect")?;
     let traces = dir.traces();

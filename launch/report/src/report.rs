@@ -97,7 +97,7 @@ pub const FIGURES: [(&str, &str); 6] = [
 pub fn report(run: &RunDir, per_robot: &PerRobot, stop: &Stop) -> Result<PathBuf> {
     let run_dir = run.path();
     let scenario_path = RunDir::new(run_dir).scenario();
-    let resolved = scenario::load_file(&scenario_path)
+    let resolved = scenario::load_written(&scenario_path)
         .with_context(|| format!("reading the scenario of run {}", run_dir.display()))?;
     let figured = figured(&resolved, per_robot)?;
     let mut warnings = Vec::new();

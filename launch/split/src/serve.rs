@@ -441,7 +441,7 @@ impl HostRun {
         let scenario = run_dir.scenario();
         std::fs::write(&scenario, &r.scenario).context("writing the run's scenario")?;
         std::fs::create_dir_all(run_dir.traces()).context("making traces/")?;
-        let resolved = fdi_common::scenario::load_file(&scenario)
+        let resolved = fdi_common::scenario::load_written(&scenario)
             .map_err(|e| anyhow::anyhow!("the run's scenario: {e}"))?;
         let (host_of, mine) = share(r, here, serving.lab, &resolved)?;
         let layout = Layout::new(host_of, &resolved);

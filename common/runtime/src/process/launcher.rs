@@ -193,7 +193,7 @@ pub fn connect<X: Transport>(
 pub fn start(args: &ProcessArgs) -> Result<(Shutdown, fdi_common::scenario::Resolved), RoleError> {
     let shutdown = Shutdown::install(args.launcher_pid).map_err(RoleError::Signals)?;
     args.placement.apply().map_err(RoleError::Scheduling)?;
-    let resolved = fdi_common::scenario::load_file(&args.scenario)?;
+    let resolved = fdi_common::scenario::load_written(&args.scenario)?;
     Ok((shutdown, resolved))
 }
 

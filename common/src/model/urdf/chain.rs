@@ -32,6 +32,12 @@ pub struct UrdfSpec {
     /// Gravity in the root link's frame, m/s².
     #[serde(default = "default_gravity")]
     pub gravity: [f64; 3],
+    /// The file's text, put in by the scenario's loader (read from `path`, or from the
+    /// scenario's `urdf_files`); never written: a run's scenario holds each text once, in its
+    /// `urdf_files`.
+    #[serde(default, rename = "urdf_text", skip_serializing)]
+    #[schemars(skip)]
+    pub text: Option<String>,
 }
 
 fn default_gravity() -> [f64; 3] {
@@ -48,6 +54,7 @@ impl UrdfSpec {
             tip: None,
             lock: BTreeMap::new(),
             gravity: GRAVITY,
+            text: None,
         }
     }
 }

@@ -13,6 +13,7 @@
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Vector3};
 
 use super::chain::{Chain, Frame, Motion};
+use super::rigid::Rigid;
 use crate::model::robot::{EulerLagrange, Matrix, Vector};
 
 /// The joint speed, rad/s or m/s, over which a joint's Coulomb friction rises to its full
@@ -276,16 +277,23 @@ impl Chain {
     }
 }
 
-/// A URDF arm of `N` joints: the [`EulerLagrange`] dynamics of its [`Chain`].
-#[derive(Debug, Clone)]
+/// A URDF arm of `N` joints: the [`EulerLagrange`] dynamics of its [`Chain`]. `M`, `G`, the
+/// bias forces, `M⁻¹` and the forward dynamics come from its [`Rigid`] form (no heap, one
+/// placement of the links for `M` and the bias together, Cholesky for `M⁻¹`); `V` and `Ṁ` from
+/// the chain's Christoffel symbols.
+#[derive(Debug, Clone, PartialEq)]
 pub struct UrdfArm<const N: usize> {
     chain: Chain,
+    rigid: Rigid<N>,
 }
 
 impl<const N: usize> UrdfArm<N> {
     /// The arm of `chain`; `None` when it does not move `N` joints.
     pub fn new(chain: Chain) -> Option<Self> {
-        (chain.dof() == N).then_some(Self { chain })
+        (chain.dof() == N).then(|| Self {
+            rigid: Rigid::new(&chain),
+            chain,
+        })
     }
 
     pub fn chain(&self) -> &Chain {
@@ -295,10 +303,6 @@ impl<const N: usize> UrdfArm<N> {
 
 fn fixed<const N: usize>(m: &DMatrix<f64>) -> Matrix<N> {
     Matrix::<N>::from_iterator(m.iter().copied())
-}
-
-fn fixed_vector<const N: usize>(v: &DVector<f64>) -> Vector<N> {
-    Vector::<N>::from_iterator(v.iter().copied())
 }
 
 impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
@@ -318,7 +322,7 @@ impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
     }
 
     fn inertia(&self, q: &Vector<N>) -> Matrix<N> {
-        fixed(&self.chain.inertia(q.as_slice()))
+        self.rigid.inertia(q)
     }
 
     fn inertia_rate(&self, q: &Vector<N>, qd: &Vector<N>) -> Matrix<N> {
@@ -330,10 +334,51 @@ impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
     }
 
     fn gravity(&self, q: &Vector<N>) -> Vector<N> {
-        fixed_vector(&self.chain.gravity(q.as_slice()))
+        self.rigid.coriolis_and_gravity(q, &Vector::<N>::zeros())
     }
 
     fn friction(&self, qd: &Vector<N>) -> Vector<N> {
-        fixed_vector(&self.chain.friction(qd.as_slice()))
+        Vector::<N>::from_fn(|i, _| {
+            let j = &self.chain.joints[i];
+            j.damping * qd[i] + j.friction * (qd[i] / COULOMB_VELOCITY).tanh()
+        })
+    }
+
+    fn inverse_inertia(&self, q: &Vector<N>) -> Matrix<N> {
+        let m = self.rigid.inertia(q);
+        match m.cholesky() {
+            Some(c) => c.inverse(),
+            // Not positive definite: no number stands in for it (the run reports the
+            // non-finite state).
+            None => Matrix::<N>::from_element(f64::NAN),
+        }
+    }
+
+    fn bias_forces(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
+        self.rigid.coriolis_and_gravity(q, qd) + self.friction(qd)
+    }
+
+    fn drift(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
+        let (m, bias) = self.rigid.inertia_and_bias(q, qd);
+        -solve(m, bias + self.friction(qd))
+    }
+
+    fn acceleration(
+        &self,
+        q: &Vector<N>,
+        qd: &Vector<N>,
+        torque: &Vector<N>,
+        disturbance: &Vector<N>,
+    ) -> Vector<N> {
+        let (m, bias) = self.rigid.inertia_and_bias(q, qd);
+        solve(m, torque - bias - self.friction(qd) - disturbance)
+    }
+}
+
+/// `M⁻¹ b` by Cholesky; not a number when `M` is not positive definite.
+fn solve<const N: usize>(m: Matrix<N>, b: Vector<N>) -> Vector<N> {
+    match m.cholesky() {
+        Some(c) => c.solve(&b),
+        None => Vector::<N>::from_element(f64::NAN),
     }
 }

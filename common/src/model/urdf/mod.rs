@@ -13,10 +13,13 @@
 //! non-finite or negative number (docs/model.md, "Your own arm").
 
 mod chain;
+mod config;
 mod dynamics;
 mod load;
+mod rigid;
 
 pub use chain::{Body, Chain, Joint, Motion, UrdfSpec, GRAVITY, MAX_JOINTS};
+pub use config::{AnyArm, UrdfModel, JOINT_COUNTS};
 pub use dynamics::{Dynamics, UrdfArm, COULOMB_VELOCITY};
 pub use load::UrdfError;
 

@@ -311,6 +311,84 @@ proptest! {
     }
 }
 
+/// `‖a − b‖∞ ≤ tol · max(‖b‖∞, 1)`.
+fn near(a: &[f64], b: &[f64], tol: f64) -> bool {
+    let scale = b.iter().fold(1.0f64, |m, x| m.max(x.abs()));
+    a.iter().zip(b).all(|(x, y)| (x - y).abs() <= tol * scale)
+}
+
+/// The arm's hot path (its rigid form: `M`, `G`, the bias forces, the forward dynamics and
+/// `M⁻¹`) against the chain's reference methods at `(q, q̇)`; the first term that differs.
+fn rigid_differs<const N: usize>(c: &Chain, q: &[f64], qd: &[f64]) -> Option<&'static str> {
+    let arm = UrdfArm::<N>::new(c.clone()).expect("N joints");
+    let (qv, qdv) = (
+        Vector::<N>::from_column_slice(q),
+        Vector::<N>::from_column_slice(qd),
+    );
+    let m = c.inertia(q);
+    let bias = c.coriolis(q, qd) * nalgebra::DVector::from_column_slice(qd)
+        + c.gravity(q)
+        + c.friction(qd);
+    let u = nalgebra::DVector::from_fn(N, |i, _| 1.0 - 0.3 * i as f64);
+    let d = nalgebra::DVector::from_fn(N, |i, _| 0.05 * i as f64);
+    let qdd = m
+        .clone()
+        .lu()
+        .solve(&(&u - &bias - &d))
+        .expect("M invertible");
+    let inv = m.clone().try_inverse().expect("M invertible");
+    let uv = Vector::<N>::from_column_slice(u.as_slice());
+    let dv = Vector::<N>::from_column_slice(d.as_slice());
+    let own = |v: &[f64]| v.to_vec();
+    let checks: [(&'static str, Vec<f64>, Vec<f64>); 6] = [
+        ("M", own(arm.inertia(&qv).as_slice()), own(m.as_slice())),
+        (
+            "G",
+            own(arm.gravity(&qv).as_slice()),
+            own(c.gravity(q).as_slice()),
+        ),
+        (
+            "V q̇ + G + F",
+            own(arm.bias_forces(&qv, &qdv).as_slice()),
+            own(bias.as_slice()),
+        ),
+        (
+            "q̈",
+            own(arm.acceleration(&qv, &qdv, &uv, &dv).as_slice()),
+            own(qdd.as_slice()),
+        ),
+        (
+            "drift",
+            own((-arm.drift(&qv, &qdv)).as_slice()),
+            own((&inv * &bias).as_slice()),
+        ),
+        (
+            "M⁻¹",
+            own(arm.inverse_inertia(&qv).as_slice()),
+            own(inv.as_slice()),
+        ),
+    ];
+    // M to rounding; what goes through M⁻¹ within what its condition number allows.
+    let tol = |what: &str| if what == "M" { 1e-12 } else { 1e-9 };
+    let differs = checks
+        .iter()
+        .find(|(what, ours, theirs)| !near(ours, theirs, tol(what)))
+        .map(|(what, _, _)| *what);
+    differs
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn the_rigid_form_is_the_chain_s_reference((q, qd) in state(5)) {
+        let c = spatial();
+        prop_assert_eq!(rigid_differs::<5>(&c, &q, &qd), None);
+        let paper = chain(PAPER, &spec());
+        prop_assert_eq!(rigid_differs::<2>(&paper, &q[..2], &qd[..2]), None);
+    }
+}
+
 #[test]
 fn the_free_arm_keeps_its_energy() {
     let mut s = spec();
@@ -457,6 +535,16 @@ fn every_arm_agrees_with_pinocchio_at_its_reference_states() {
             agrees(&pick(&v), &st.coriolis_qd, &what("V q̇"));
             agrees(&pick(&g), &st.gravity, &what("G"));
             agrees(&pick(&qdd), &st.acceleration, &what("q̈"));
+            // The hot path a run takes is the chain's reference, so Pinocchio's too.
+            let differs = match n {
+                2 => rigid_differs::<2>(&c, &q, &qd),
+                3 => rigid_differs::<3>(&c, &q, &qd),
+                5 => rigid_differs::<5>(&c, &q, &qd),
+                6 => rigid_differs::<6>(&c, &q, &qd),
+                7 => rigid_differs::<7>(&c, &q, &qd),
+                _ => panic!("{}: {n} joints, not among the shipped arms'", arm.name),
+            };
+            assert_eq!(differs, None, "{}", what("the rigid form"));
         }
     }
 }

@@ -295,7 +295,7 @@ pub fn replay_run(
     let recorded_summary: fdi_common::engine::RunSummary = serde_json::from_str(&text)
         .with_context(|| format!("{}: not a run summary", summary_path.display()))?;
     let scenario_path = RunDir::new(recorded).scenario();
-    let mut r = scenario::load_file(&scenario_path)
+    let mut r = scenario::load_written(&scenario_path)
         .with_context(|| format!("reading {}", scenario_path.display()))?;
     // The center is event-driven: the replay is lockstep whatever the recording's clock.
     r.scenario.clock = scenario::ClockMode::Lockstep;

@@ -438,7 +438,7 @@ mod tests {
         export(dir.path(), &mut |_| {}).expect("exported");
         let bytes = std::fs::read(dir.path().join("export/run.mcap")).expect("run.mcap");
         let want = expected(dir.path());
-        let dt = fdi_common::scenario::load_file(
+        let dt = fdi_common::scenario::load_written(
             &fdi_common::run_dir::RunDir::new(dir.path()).scenario(),
         )
         .expect("the fixture's scenario")

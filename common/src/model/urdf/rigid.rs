@@ -1,0 +1,182 @@
+//! The dynamics of a [`Chain`] of `N` joints without a heap, for the run's hot path (the
+//! plant's integrator, the observer and the controller ask them every tick): the links riding
+//! on a joint merged into one rigid body, `M(q)` by the composite-rigid-body algorithm and
+//! `V(q, q̇) q̇ + G(q)` by the recursive Newton–Euler algorithm at `q̈ = 0` (`V q̇` is the same
+//! vector for every factorization of the Coriolis terms, the Christoffel one included).
+//! [`Chain`]'s own methods are the reference the tests hold these to.
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::chain::{Chain, Frame, Motion};
+use crate::model::robot::{Matrix, Vector};
+
+/// A [`Chain`] of `N` joints, one rigid body per joint.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Rigid<const N: usize> {
+    placement: [Frame; N],
+    axis: [Vector3<f64>; N],
+    motion: [Motion; N],
+    /// The body riding on each joint: its mass, its centre of mass and its inertia about it,
+    /// in the frame of the joint's child.
+    mass: [f64; N],
+    com: [Vector3<f64>; N],
+    inertia: [Matrix3<f64>; N],
+    gravity: Vector3<f64>,
+}
+
+/// Where the joints and bodies are at one `q`, in the root link's frame.
+struct Placed<const N: usize> {
+    /// Each joint's origin (its child's origin too) and unit axis.
+    origin: [Vector3<f64>; N],
+    axis: [Vector3<f64>; N],
+    /// Each joint's child's origin.
+    child: [Vector3<f64>; N],
+    /// Each body's centre of mass and inertia about it.
+    com: [Vector3<f64>; N],
+    inertia: [Matrix3<f64>; N],
+}
+
+impl<const N: usize> Rigid<N> {
+    /// `chain`, which moves `N` joints (the caller checked).
+    pub(crate) fn new(chain: &Chain) -> Self {
+        let mut r = Self {
+            placement: std::array::from_fn(|j| chain.joints[j].placement),
+            axis: std::array::from_fn(|j| chain.joints[j].axis),
+            motion: std::array::from_fn(|j| chain.joints[j].motion),
+            mass: [0.0; N],
+            com: [Vector3::zeros(); N],
+            inertia: [Matrix3::zeros(); N],
+            gravity: chain.gravity,
+        };
+        for j in 0..N {
+            let riding = || chain.bodies.iter().filter(move |b| b.rides_on == j);
+            let mass: f64 = riding().map(|b| b.mass).sum();
+            if mass > 0.0 {
+                let com = riding().map(|b| b.mass * b.com).sum::<Vector3<f64>>() / mass;
+                r.com[j] = com;
+                r.mass[j] = mass;
+            }
+            // Each body's inertia moved to the common centre of mass (parallel axes).
+            r.inertia[j] = riding()
+                .map(|b| {
+                    let d = b.com - r.com[j];
+                    b.inertia
+                        + b.mass * (d.norm_squared() * Matrix3::identity() - d * d.transpose())
+                })
+                .sum();
+        }
+        r
+    }
+
+    fn place(&self, q: &Vector<N>) -> Placed<N> {
+        let mut p = Placed {
+            origin: [Vector3::zeros(); N],
+            axis: [Vector3::zeros(); N],
+            child: [Vector3::zeros(); N],
+            com: [Vector3::zeros(); N],
+            inertia: [Matrix3::zeros(); N],
+        };
+        let mut at = Frame::IDENTITY;
+        for j in 0..N {
+            let frame = at.then(&self.placement[j]);
+            p.origin[j] = frame.p;
+            p.axis[j] = frame.r * self.axis[j];
+            at = frame.then(&Frame::motion(self.motion[j], &self.axis[j], q[j]));
+            p.child[j] = at.p;
+            p.com[j] = at.r * self.com[j] + at.p;
+            p.inertia[j] = at.r * self.inertia[j] * at.r.transpose();
+        }
+        p
+    }
+
+    /// `M(q)`.
+    pub(crate) fn inertia(&self, q: &Vector<N>) -> Matrix<N> {
+        self.inertia_placed(&self.place(q))
+    }
+
+    fn inertia_placed(&self, p: &Placed<N>) -> Matrix<N> {
+        let mut m = Matrix::<N>::zeros();
+        // The composite body of joint j: mass, first moment and inertia about the root's origin.
+        let (mut mass, mut first, mut second) = (0.0, Vector3::zeros(), Matrix3::zeros());
+        for j in (0..N).rev() {
+            let (mb, c) = (self.mass[j], p.com[j]);
+            mass += mb;
+            first += mb * c;
+            second +=
+                p.inertia[j] + mb * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
+            let (z, o) = (p.axis[j], p.origin[j]);
+            // The composite's momentum when joint j alone moves at a unit rate: linear, and
+            // angular about the root's origin.
+            let (linear, angular) = match self.motion[j] {
+                Motion::Revolute => (
+                    z.cross(&first) - mass * z.cross(&o),
+                    second * z - first.cross(&z.cross(&o)),
+                ),
+                Motion::Prismatic => (mass * z, first.cross(&z)),
+            };
+            for i in 0..=j {
+                let zi = p.axis[i];
+                m[(i, j)] = match self.motion[i] {
+                    Motion::Revolute => zi.dot(&(angular - p.origin[i].cross(&linear))),
+                    Motion::Prismatic => zi.dot(&linear),
+                };
+                m[(j, i)] = m[(i, j)];
+            }
+        }
+        m
+    }
+
+    /// `V(q, q̇) q̇ + G(q)`: the joint forces that hold the arm at `q̈ = 0`.
+    pub(crate) fn coriolis_and_gravity(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
+        self.coriolis_and_gravity_placed(&self.place(q), qd)
+    }
+
+    fn coriolis_and_gravity_placed(&self, p: &Placed<N>, qd: &Vector<N>) -> Vector<N> {
+        // Forward: each body's angular velocity and acceleration, and the acceleration of its
+        // joint's child's origin, the root accelerating by −g (gravity as an inertial force).
+        let (mut w, mut alpha, mut a) = (Vector3::zeros(), Vector3::zeros(), -self.gravity);
+        let mut before = Vector3::zeros();
+        let (mut force, mut moment) = ([Vector3::zeros(); N], [Vector3::zeros(); N]);
+        for j in 0..N {
+            let (z, r) = (p.axis[j], p.child[j] - before);
+            // The child's origin as a point of the previous body, then its own motion.
+            a += alpha.cross(&r) + w.cross(&w.cross(&r));
+            let rate = z * qd[j];
+            match self.motion[j] {
+                Motion::Revolute => {
+                    alpha += w.cross(&rate);
+                    w += rate;
+                }
+                Motion::Prismatic => a += 2.0 * w.cross(&rate),
+            }
+            before = p.child[j];
+            let d = p.com[j] - p.child[j];
+            let at_com = a + alpha.cross(&d) + w.cross(&w.cross(&d));
+            force[j] = self.mass[j] * at_com;
+            let i = p.inertia[j];
+            moment[j] = i * alpha + w.cross(&(i * w));
+        }
+        // Backward: what joint j carries, the bodies from j to the tip, about its axis.
+        let mut out = Vector::<N>::zeros();
+        let (mut total, mut about_origin) = (Vector3::zeros(), Vector3::zeros());
+        for j in (0..N).rev() {
+            total += force[j];
+            about_origin += p.com[j].cross(&force[j]) + moment[j];
+            let (z, o) = (p.axis[j], p.origin[j]);
+            out[j] = match self.motion[j] {
+                Motion::Revolute => z.dot(&(about_origin - o.cross(&total))),
+                Motion::Prismatic => z.dot(&total),
+            };
+        }
+        out
+    }
+
+    /// `M(q)` and `V(q, q̇) q̇ + G(q)` from one placement.
+    pub(crate) fn inertia_and_bias(&self, q: &Vector<N>, qd: &Vector<N>) -> (Matrix<N>, Vector<N>) {
+        let p = self.place(q);
+        (
+            self.inertia_placed(&p),
+            self.coriolis_and_gravity_placed(&p, qd),
+        )
+    }
+}
