@@ -288,6 +288,15 @@ mod tests {
         assert_eq!(s, "[1.5,-2.25]");
         let back: Joints = serde_json::from_str(&s).expect("deserialize");
         assert_eq!(back, j);
-        assert!(serde_json::from_str::<Joints>("[1,2,3,4,5,6,7]").is_err());
+        let full: Vec<String> = (0..MAX_DOF).map(|i| i.to_string()).collect();
+        let fits = format!("[{}]", full.join(","));
+        assert_eq!(
+            serde_json::from_str::<Joints>(&fits)
+                .map(|j| j.as_slice().len())
+                .ok(),
+            Some(MAX_DOF)
+        );
+        let over = format!("[{},{MAX_DOF}]", full.join(","));
+        assert!(serde_json::from_str::<Joints>(&over).is_err());
     }
 }

@@ -246,14 +246,18 @@ mod tests {
         assert_eq!(p[0].path, "agents[0].model.path");
         assert!(p[0].message.contains("missing.urdf"), "{p:?}");
 
-        let panda = repo().join("common/testdata/urdf/panda.urdf");
-        let p = load(&format!(
-            "path = {:?}, lock = {{ panda_finger_joint1 = 0.0, panda_finger_joint2 = 0.0 }}",
-            panda.display().to_string()
-        ));
+        std::fs::write(
+            dir.path().join("pendulum.urdf"),
+            "<robot name=\"pendulum\"><link name=\"a\"/><link name=\"b\"><inertial>\
+             <mass value=\"1\"/><inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" \
+             izz=\"1\"/></inertial></link><joint name=\"j\" type=\"continuous\"><parent \
+             link=\"a\"/><child link=\"b\"/><axis xyz=\"0 0 1\"/></joint></robot>",
+        )
+        .expect("write");
+        let p = load("path = \"pendulum.urdf\"");
         assert_eq!(p[0].path, "agents[0].model", "{p:?}");
         assert!(
-            p[0].message.contains("moves 7 joints") && p[0].message.contains("2, 3 or 6"),
+            p[0].message.contains("moves 1 joint;") && p[0].message.contains("2, 3, 4, 5, 6 or 7"),
             "{p:?}"
         );
         // Every other agent has two links: the paper's.

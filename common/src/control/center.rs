@@ -5,7 +5,9 @@ use crate::model::{EulerLagrange, Matrix, ModelConfig, Vector};
 use crate::rng::{stream, Purpose};
 use crate::trajectory::{Reference, TrajectoryConfig};
 
-use super::config::{ControllerConfig, ControllerMode, ObserverInput as ObserverInputMode};
+use super::config::{
+    ControllerConfig, ControllerMode, GainScaling, ObserverInput as ObserverInputMode,
+};
 use super::detection::Detector;
 use super::estimator::{NnEstimator, NnParams};
 use super::observer::{Observer, ObserverInput};
@@ -60,6 +62,8 @@ pub struct CenterOutput<const N: usize> {
 /// Per-agent state of the control center.
 #[derive(Debug)]
 pub struct CenterAgent<const N: usize> {
+    /// The diagonal of `K` in `u = K r̂`.
+    gains: Vector<N>,
     params: CenterParams,
     model: Box<dyn EulerLagrange<N>>,
     sent: DelayLine<N>,
@@ -91,7 +95,15 @@ impl<const N: usize> CenterAgent<N> {
         let mut rng = stream(params.run_seed, params.agent_id, Purpose::NnInit);
         let estimator = NnEstimator::new(NnParams::from_controller(c), c.initial_v_range, &mut rng);
         let detector = Detector::new(c.detection.threshold, c.detection.hold_s);
+        let gains = match c.gain_scaling {
+            GainScaling::Unit => Vector::<N>::from_element(c.gain_k),
+            GainScaling::Inertia => {
+                let q0 = params.trajectory.reference::<N>(0.0).q;
+                model.inertia(&q0).diagonal() * c.gain_k
+            }
+        };
         Some(Self {
+            gains,
             params,
             model,
             sent: DelayLine::new(),
@@ -249,7 +261,7 @@ impl<const N: usize> CenterAgent<N> {
         let psi1 = x.reference.q - x.y;
         let psi1_dot = x.reference.qd - x.yd;
         let r_hat = psi1_dot + psi1 * c.beta - x.a * x.e_u + x.s_hat;
-        let mut u = r_hat * c.gain_k;
+        let mut u = r_hat.component_mul(&self.gains);
         let rejected_torque = u.iter().any(|x| !x.is_finite());
         if rejected_torque {
             self.rejected_torques += 1;

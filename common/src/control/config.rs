@@ -38,6 +38,28 @@ impl std::str::FromStr for ControllerMode {
     }
 }
 
+/// How the gain `k` of `u = K r̂` (14) becomes the diagonal matrix `K` of an agent.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, schemars::JsonSchema,
+)]
+#[serde(rename_all = "kebab-case")]
+pub enum GainScaling {
+    /// `K = k I`: the paper's (the default).
+    #[default]
+    Unit,
+    /// `K = k diag(M(q_d(0)))`: each joint's gain scaled by its own inertia at the start of
+    /// its reference, so that one `k` serves joints whose inertias differ a hundredfold (an
+    /// arm's wrist and its shoulder) and arms of different sizes (docs/model.md, "Gains of
+    /// other arms").
+    Inertia,
+}
+
+impl GainScaling {
+    pub(crate) fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
 /// What the observer (22) takes as its input `u_τ` over its Euler step `[t_k, t_k + Δ]`
 /// (docs/model.md, "Numerics of the delayed input").
 #[derive(
@@ -133,6 +155,10 @@ pub struct ControllerConfig {
     /// of the observer's input `u_τ` ([`ObserverInput`]).
     #[serde(default, skip_serializing_if = "ObserverInput::is_default")]
     pub observer_input: ObserverInput,
+    /// `gain_scaling`: `"unit"` (default, `K = k I`, the paper's) or `"inertia"`
+    /// (`K = k diag(M(q_d(0)))` per agent, for arms whose joints' inertias differ widely).
+    #[serde(default, skip_serializing_if = "GainScaling::is_default")]
+    pub gain_scaling: GainScaling,
 }
 
 /// Robust modifications of the update laws (37), (38) (beyond the paper): the scenario's

@@ -8,7 +8,9 @@ pub mod estimator;
 pub mod observer;
 
 pub use center::{CenterAgent, CenterOutput, CenterParams};
-pub use config::{ControllerConfig, ControllerMode, DetectionConfig, ObserverInput, UpdateLaw};
+pub use config::{
+    ControllerConfig, ControllerMode, DetectionConfig, GainScaling, ObserverInput, UpdateLaw,
+};
 pub use detection::Detector;
 pub use estimator::{NnEstimator, NnParams};
 pub use observer::Observer;

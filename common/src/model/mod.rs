@@ -50,7 +50,10 @@ impl ModelConfig {
             Self::Urdf(m) => match m.arm() {
                 urdf::AnyArm::Two(a) => work.call::<2>(a.clone()),
                 urdf::AnyArm::Three(a) => work.call::<3>(a.clone()),
+                urdf::AnyArm::Four(a) => work.call::<4>(a.clone()),
+                urdf::AnyArm::Five(a) => work.call::<5>(a.clone()),
                 urdf::AnyArm::Six(a) => work.call::<6>(a.clone()),
+                urdf::AnyArm::Seven(a) => work.call::<7>(a.clone()),
             },
         }
     }

@@ -1062,7 +1062,15 @@ fn parameters(r: &Resolved, s: &RunSummary) -> [(&'static str, String); 13] {
         ("clock", s.clock.clone()),
         (
             "controller",
-            format!("{} (k = {}, β = {})", s.controller, c.gain_k, c.beta),
+            match c.gain_scaling {
+                fdi_common::control::GainScaling::Unit => {
+                    format!("{} (k = {}, β = {})", s.controller, c.gain_k, c.beta)
+                }
+                fdi_common::control::GainScaling::Inertia => format!(
+                    "{} (K = {} · diag M(q_d(0)), β = {})",
+                    s.controller, c.gain_k, c.beta
+                ),
+            },
         ),
         (
             "numerics",

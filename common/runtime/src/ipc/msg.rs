@@ -647,8 +647,8 @@ mod tests {
     /// Half the payloads wholly ordinary, half with any entries.
     fn any_array() -> impl Strategy<Value = [f64; MAX_DOF]> {
         prop_oneof![
-            prop::array::uniform6(-10.0f64..10.0),
-            prop::array::uniform6(any_f64()),
+            prop::array::uniform::<_, MAX_DOF>(-10.0f64..10.0),
+            prop::array::uniform::<_, MAX_DOF>(any_f64()),
         ]
     }
 
@@ -658,7 +658,7 @@ mod tests {
         prop_oneof![6 => Just(1u32), 1 => 0u32..8, 1 => any::<u32>()]
     }
     fn any_dof() -> impl Strategy<Value = u32> {
-        prop_oneof![6 => Just(2u32), 1 => 0u32..16, 1 => any::<u32>()]
+        prop_oneof![6 => Just(2u32), 1 => 0u32..24, 1 => any::<u32>()]
     }
     /// `None`: the expected one; `Some(x)`: `x` as is.
     fn any_seq() -> impl Strategy<Value = Option<u64>> {
@@ -848,7 +848,7 @@ mod tests {
         let m = MeasurementMsg {
             seq: 0,
             agent: 1,
-            dof: 7,
+            dof: MAX_DOF as u32 + 1,
             t: 0.0,
             y: [0.0; MAX_DOF],
             yd: [0.0; MAX_DOF],
@@ -859,13 +859,20 @@ mod tests {
             reserved: 0,
         };
         // Even a receiver configured for more links than a payload holds never slices past it.
+        let over = MAX_DOF as u32 + 1;
         assert_eq!(
-            validate_measurement(&m, 7, |_| true, 0),
-            Err(MsgError::DofOutOfRange { agent: 1, dof: 7 })
+            validate_measurement(&m, over as usize, |_| true, 0),
+            Err(MsgError::DofOutOfRange {
+                agent: 1,
+                dof: over
+            })
         );
-        let m6 = MeasurementMsg { dof: 6, ..m };
-        let v = validate_measurement(&m6, 6, |_| true, 0).expect("6 links fit");
-        assert_eq!(v.y.len(), 6);
+        let full = MeasurementMsg {
+            dof: MAX_DOF as u32,
+            ..m
+        };
+        let v = validate_measurement(&full, MAX_DOF, |_| true, 0).expect("a full payload fits");
+        assert_eq!(v.y.len(), MAX_DOF);
         assert_eq!(
             validate_measurement(&MeasurementMsg { dof: u32::MAX, ..m }, 2, |_| true, 0),
             Err(MsgError::DofOutOfRange {

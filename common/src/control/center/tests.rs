@@ -268,3 +268,32 @@ fn a_missing_first_measurement_holds_the_initial_zero() {
     );
     assert_eq!(gaps.missing_inputs, 1);
 }
+
+#[test]
+fn inertia_gain_scaling_gives_each_joint_k_times_its_inertia_at_the_reference_s_start() {
+    let r = paper().expect("the embedded paper scenario is valid");
+    let s = &r.scenario;
+    let mut p = s.center_params(&s.agents[0]);
+    p.controller.mode = ControllerMode::Traditional;
+    let unit = CenterAgent::<2>::new(p.clone()).expect("a two-link model");
+    p.controller.gain_scaling = GainScaling::Inertia;
+    let scaled = CenterAgent::<2>::new(p.clone()).expect("a two-link model");
+    let q0 = p.trajectory.reference::<2>(0.0).q;
+    let m = p.model.build::<2>().expect("two links").inertia(&q0);
+    assert_eq!(unit.gains, Vector::<2>::from_element(p.controller.gain_k));
+    assert_eq!(scaled.gains, m.diagonal() * p.controller.gain_k);
+    // The joints' inertias differ, so do their gains: the torques are r̂ scaled joint by joint.
+    assert!(m[(0, 0)] > 2.0 * m[(1, 1)], "{m}");
+    let (mut unit, mut scaled) = (unit, scaled);
+    let y = Vector::<2>::new(0.05, -0.03);
+    let (a, b) = (unit.tick(0.0, &y, &y), scaled.tick(0.0, &y, &y));
+    for i in 0..2 {
+        assert!(
+            (b.u[i] - a.u[i] * m[(i, i)]).abs() <= 1e-12 * b.u[i].abs().max(1.0),
+            "joint {i}: {} against {} · {}",
+            b.u[i],
+            a.u[i],
+            m[(i, i)]
+        );
+    }
+}

@@ -10,14 +10,20 @@ use super::dynamics::UrdfArm;
 
 /// The numbers of moving joints a URDF arm of a run may have: the math is generic over the
 /// number of joints, and each count is compiled into every role (docs/model.md, "Your own arm").
-pub const JOINT_COUNTS: [usize; 3] = [2, 3, 6];
+pub const JOINT_COUNTS: [usize; 6] = [2, 3, 4, 5, 6, 7];
+
+// The messages and records carry every joint of the largest arm.
+const _: () = assert!(JOINT_COUNTS[JOINT_COUNTS.len() - 1] <= crate::limits::MAX_DOF);
 
 /// A URDF arm of one of the [`JOINT_COUNTS`], its number of joints in its type.
 #[derive(Debug, Clone, PartialEq)]
 pub enum AnyArm {
     Two(Box<UrdfArm<2>>),
     Three(Box<UrdfArm<3>>),
+    Four(Box<UrdfArm<4>>),
+    Five(Box<UrdfArm<5>>),
     Six(Box<UrdfArm<6>>),
+    Seven(Box<UrdfArm<7>>),
 }
 
 impl AnyArm {
@@ -27,13 +33,17 @@ impl AnyArm {
         let arm = match dof {
             2 => UrdfArm::new(chain).map(|a| Self::Two(Box::new(a))),
             3 => UrdfArm::new(chain).map(|a| Self::Three(Box::new(a))),
+            4 => UrdfArm::new(chain).map(|a| Self::Four(Box::new(a))),
+            5 => UrdfArm::new(chain).map(|a| Self::Five(Box::new(a))),
             6 => UrdfArm::new(chain).map(|a| Self::Six(Box::new(a))),
+            7 => UrdfArm::new(chain).map(|a| Self::Seven(Box::new(a))),
             _ => None,
         };
         arm.ok_or_else(|| {
             format!(
-                "`{name}` moves {dof} joints; a run's arms move {} joints (lock the others \
+                "`{name}` moves {dof} joint{}; a run's arms move {} joints (lock the others \
                  with `lock = {{ JOINT = VALUE }}`)",
+                if dof == 1 { "" } else { "s" },
                 counts_text()
             )
         })
@@ -43,12 +53,15 @@ impl AnyArm {
         match self {
             Self::Two(a) => a.chain(),
             Self::Three(a) => a.chain(),
+            Self::Four(a) => a.chain(),
+            Self::Five(a) => a.chain(),
             Self::Six(a) => a.chain(),
+            Self::Seven(a) => a.chain(),
         }
     }
 }
 
-/// [`JOINT_COUNTS`] as text: `2, 3 or 6`.
+/// [`JOINT_COUNTS`] as text: `2, 3, 4, 5, 6 or 7`.
 fn counts_text() -> String {
     let all: Vec<String> = JOINT_COUNTS.iter().map(ToString::to_string).collect();
     match all.split_last() {
