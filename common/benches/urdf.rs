@@ -1,5 +1,6 @@
 //! Cost of a URDF arm's dynamics (`cargo bench -p fdi-common --bench urdf`): `M(q)`, `V(q, q̇)`,
-//! `G(q)` and the forward dynamics `q̈` (what the plant's integrator asks four times a tick) of
+//! `G(q)`, `M⁻¹`, the bias forces `V q̇ + G + F` and the forward dynamics `q̈` (what the plant's
+//! integrator asks four times a tick) of
 //! the paper's two-link arm written as a URDF, beside the hand-written model, and of a Panda
 //! (7 joints, `common/testdata/urdf/panda.urdf`, its fingers locked). Measured, not asserted:
 //! docs/performance.md has the figures.
@@ -33,6 +34,12 @@ fn terms<const N: usize>(c: &mut Criterion, name: &str, model: &dyn EulerLagrang
     });
     c.bench_function(&format!("{name}/gravity"), |b| {
         b.iter(|| black_box(model.gravity(black_box(&q))));
+    });
+    c.bench_function(&format!("{name}/inverse inertia"), |b| {
+        b.iter(|| black_box(model.inverse_inertia(black_box(&q))));
+    });
+    c.bench_function(&format!("{name}/bias forces"), |b| {
+        b.iter(|| black_box(model.bias_forces(black_box(&q), black_box(&qd))));
     });
     c.bench_function(&format!("{name}/acceleration"), |b| {
         b.iter(|| black_box(model.acceleration(black_box(&q), black_box(&qd), &u, &zero)));

@@ -330,7 +330,7 @@ impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
     }
 
     fn coriolis(&self, q: &Vector<N>, qd: &Vector<N>) -> Matrix<N> {
-        fixed(&self.chain.coriolis(q.as_slice(), qd.as_slice()))
+        self.rigid.coriolis(q, qd)
     }
 
     fn gravity(&self, q: &Vector<N>) -> Vector<N> {

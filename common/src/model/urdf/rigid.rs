@@ -5,7 +5,7 @@
 //! vector for every factorization of the Coriolis terms, the Christoffel one included).
 //! [`Chain`]'s own methods are the reference the tests hold these to.
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, SMatrix, Vector3};
 
 use super::chain::{Chain, Frame, Motion};
 use crate::model::robot::{Matrix, Vector};
@@ -171,6 +171,75 @@ impl<const N: usize> Rigid<N> {
         out
     }
 
+    /// `V(q, q̇)`, the Christoffel-symbol Coriolis matrix, without `∂M/∂q`: summed over the
+    /// bodies, `m Jᵥᵀ J̇ᵥ` (the Jacobian of a point is a gradient, so this part is the
+    /// Christoffel one) and `J_ωᵀ I J̇_ω + J_ωᵀ B J_ω` with
+    /// `B = ½ (ω× I − I ω× − (I ω)×)`, the rotational part whose `B ω = ω × I ω` and for
+    /// which `Ṁ − 2V` is skew-symmetric (the tests hold it to the chain's Christoffel `V`).
+    pub(crate) fn coriolis(&self, q: &Vector<N>, qd: &Vector<N>) -> Matrix<N> {
+        let p = self.place(q);
+        // The angular velocity of the body before each joint (the one its axis is fixed in),
+        // and of each joint's own body.
+        let mut before = [Vector3::zeros(); N];
+        let mut own = [Vector3::zeros(); N];
+        let mut w = Vector3::zeros();
+        for j in 0..N {
+            before[j] = w;
+            if self.motion[j] == Motion::Revolute {
+                w += p.axis[j] * qd[j];
+            }
+            own[j] = w;
+        }
+        let axis_rate: [Vector3<f64>; N] = std::array::from_fn(|j| before[j].cross(&p.axis[j]));
+        // The velocity of a point fixed in the body of joint `k` (every joint up to `k` moves it).
+        let velocity = |x: &Vector3<f64>, k: usize| -> Vector3<f64> {
+            (0..=k).fold(Vector3::zeros(), |v, i| {
+                v + match self.motion[i] {
+                    Motion::Revolute => p.axis[i].cross(&(x - p.origin[i])) * qd[i],
+                    Motion::Prismatic => p.axis[i] * qd[i],
+                }
+            })
+        };
+        // Each joint's origin is fixed in the body before it.
+        let origin_rate: [Vector3<f64>; N] = std::array::from_fn(|j| match j {
+            0 => Vector3::zeros(),
+            _ => velocity(&p.origin[j], j - 1),
+        });
+        let mut out = Matrix::<N>::zeros();
+        for (b, w) in own.iter().enumerate() {
+            let c = p.com[b];
+            let c_rate = velocity(&c, b);
+            let (mut jv, mut jv_rate) =
+                (SMatrix::<f64, 3, N>::zeros(), SMatrix::<f64, 3, N>::zeros());
+            let (mut jw, mut jw_rate) =
+                (SMatrix::<f64, 3, N>::zeros(), SMatrix::<f64, 3, N>::zeros());
+            for j in 0..=b {
+                let (z, z_rate) = (p.axis[j], axis_rate[j]);
+                match self.motion[j] {
+                    Motion::Revolute => {
+                        let r = c - p.origin[j];
+                        jv.set_column(j, &z.cross(&r));
+                        jv_rate.set_column(
+                            j,
+                            &(z_rate.cross(&r) + z.cross(&(c_rate - origin_rate[j]))),
+                        );
+                        jw.set_column(j, &z);
+                        jw_rate.set_column(j, &z_rate);
+                    }
+                    Motion::Prismatic => {
+                        jv.set_column(j, &z);
+                        jv_rate.set_column(j, &z_rate);
+                    }
+                }
+            }
+            let i = p.inertia[b];
+            let half = 0.5 * (skew(w) * i - i * skew(w) - skew(&(i * w)));
+            out += self.mass[b] * jv.transpose() * jv_rate
+                + jw.transpose() * (i * jw_rate + half * jw);
+        }
+        out
+    }
+
     /// `M(q)` and `V(q, q̇) q̇ + G(q)` from one placement.
     pub(crate) fn inertia_and_bias(&self, q: &Vector<N>, qd: &Vector<N>) -> (Matrix<N>, Vector<N>) {
         let p = self.place(q);
@@ -179,4 +248,9 @@ impl<const N: usize> Rigid<N> {
             self.coriolis_and_gravity_placed(&p, qd),
         )
     }
+}
+
+/// The skew matrix of `v`: `skew(v) x = v × x`.
+fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }

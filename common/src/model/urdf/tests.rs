@@ -340,7 +340,7 @@ fn rigid_differs<const N: usize>(c: &Chain, q: &[f64], qd: &[f64]) -> Option<&'s
     let uv = Vector::<N>::from_column_slice(u.as_slice());
     let dv = Vector::<N>::from_column_slice(d.as_slice());
     let own = |v: &[f64]| v.to_vec();
-    let checks: [(&'static str, Vec<f64>, Vec<f64>); 6] = [
+    let checks: [(&'static str, Vec<f64>, Vec<f64>); 7] = [
         ("M", own(arm.inertia(&qv).as_slice()), own(m.as_slice())),
         (
             "G",
@@ -367,9 +367,20 @@ fn rigid_differs<const N: usize>(c: &Chain, q: &[f64], qd: &[f64]) -> Option<&'s
             own(arm.inverse_inertia(&qv).as_slice()),
             own(inv.as_slice()),
         ),
+        (
+            "V",
+            own(arm.coriolis(&qv, &qdv).as_slice()),
+            own(c.coriolis(q, qd).as_slice()),
+        ),
     ];
-    // M to rounding; what goes through M⁻¹ within what its condition number allows.
-    let tol = |what: &str| if what == "M" { 1e-12 } else { 1e-9 };
+    // M and V to rounding; what goes through M⁻¹ within what its condition number allows.
+    let tol = |what: &str| {
+        if what == "M" || what == "V" {
+            1e-12
+        } else {
+            1e-9
+        }
+    };
     let differs = checks
         .iter()
         .find(|(what, ours, theirs)| !near(ours, theirs, tol(what)))
