@@ -13,7 +13,7 @@
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Vector3};
 
 use super::chain::{Chain, Frame, Motion};
-use super::rigid::Rigid;
+use super::rigid::{felt, unit_rate_momentum, Rigid};
 use crate::model::robot::{EulerLagrange, Matrix, Vector};
 
 /// The joint speed, rad/s or m/s, over which a joint's Coulomb friction rises to its full
@@ -89,22 +89,10 @@ impl Chain {
                 second += pose.inertia[b]
                     + mb * (p.norm_squared() * Matrix3::identity() - p * p.transpose());
             }
-            let (z, o) = (pose.axis[j], pose.origin[j]);
-            // The composite's momentum when joint j alone moves at a unit rate: linear, and
-            // angular about the root's origin.
-            let (linear, angular) = match self.joints[j].motion {
-                Motion::Revolute => (
-                    z.cross(&first) - mass * z.cross(&o),
-                    second * z - first.cross(&z.cross(&o)),
-                ),
-                Motion::Prismatic => (mass * z, first.cross(&z)),
-            };
+            let joint = |k: usize| (self.joints[k].motion, pose.axis[k], pose.origin[k]);
+            let momentum = unit_rate_momentum(joint(j), (mass, &first, &second));
             for i in 0..=j {
-                let zi = pose.axis[i];
-                m[(i, j)] = match self.joints[i].motion {
-                    Motion::Revolute => zi.dot(&(angular - pose.origin[i].cross(&linear))),
-                    Motion::Prismatic => zi.dot(&linear),
-                };
+                m[(i, j)] = felt(joint(i), momentum);
                 m[(j, i)] = m[(i, j)];
             }
         }

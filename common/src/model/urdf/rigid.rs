@@ -104,22 +104,10 @@ impl<const N: usize> Rigid<N> {
             first += mb * c;
             second +=
                 p.inertia[j] + mb * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
-            let (z, o) = (p.axis[j], p.origin[j]);
-            // The composite's momentum when joint j alone moves at a unit rate: linear, and
-            // angular about the root's origin.
-            let (linear, angular) = match self.motion[j] {
-                Motion::Revolute => (
-                    z.cross(&first) - mass * z.cross(&o),
-                    second * z - first.cross(&z.cross(&o)),
-                ),
-                Motion::Prismatic => (mass * z, first.cross(&z)),
-            };
+            let joint = (self.motion[j], p.axis[j], p.origin[j]);
+            let momentum = unit_rate_momentum(joint, (mass, &first, &second));
             for i in 0..=j {
-                let zi = p.axis[i];
-                m[(i, j)] = match self.motion[i] {
-                    Motion::Revolute => zi.dot(&(angular - p.origin[i].cross(&linear))),
-                    Motion::Prismatic => zi.dot(&linear),
-                };
+                m[(i, j)] = felt((self.motion[i], p.axis[i], p.origin[i]), momentum);
                 m[(j, i)] = m[(i, j)];
             }
         }
@@ -253,4 +241,33 @@ impl<const N: usize> Rigid<N> {
 /// The skew matrix of `v`: `skew(v) x = v × x`.
 fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// The momentum of a composite body (its mass, first moment and inertia about the root's
+/// origin) when one joint (how it moves, its unit axis, its origin) alone moves at a unit rate:
+/// linear, and angular about the root's origin. The column of `M` that joint owns, before
+/// [`felt`] projects it on each joint.
+pub(super) fn unit_rate_momentum(
+    (motion, z, o): (Motion, Vector3<f64>, Vector3<f64>),
+    (mass, first, second): (f64, &Vector3<f64>, &Matrix3<f64>),
+) -> (Vector3<f64>, Vector3<f64>) {
+    match motion {
+        Motion::Revolute => (
+            z.cross(first) - mass * z.cross(&o),
+            second * z - first.cross(&z.cross(&o)),
+        ),
+        Motion::Prismatic => (mass * z, first.cross(&z)),
+    }
+}
+
+/// What a joint (how it moves, its unit axis, its origin) bears of a momentum (linear, and
+/// angular about the root's origin): an entry of `M`.
+pub(super) fn felt(
+    (motion, z, o): (Motion, Vector3<f64>, Vector3<f64>),
+    (linear, angular): (Vector3<f64>, Vector3<f64>),
+) -> f64 {
+    match motion {
+        Motion::Revolute => z.dot(&(angular - o.cross(&linear))),
+        Motion::Prismatic => z.dot(&linear),
+    }
 }
