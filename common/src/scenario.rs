@@ -1160,16 +1160,19 @@ fn resolve_attack(scenario: &Scenario, base_dir: Option<&Path>) -> (AttackProfil
 /// a split run sends its hosts): read without its folder, so that it reads no other file (its
 /// attack is inline, its URDF texts are in its `urdf_files`).
 pub fn load_written(path: &Path) -> Result<Resolved, ScenarioError> {
-    let name = path.display().to_string();
-    let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
-    load_str(&text, &name, None)
+    load_path(path, None)
 }
 
 /// Loads and validates a scenario file.
 pub fn load_file(path: &Path) -> Result<Resolved, ScenarioError> {
+    load_path(path, path.parent())
+}
+
+/// The scenario file at `path`, its other files read from `base_dir` ([`load_str`]).
+fn load_path(path: &Path, base_dir: Option<&Path>) -> Result<Resolved, ScenarioError> {
     let name = path.display().to_string();
     let text = read_limited(path).map_err(|e| ScenarioError::one(&name, "<file>", e))?;
-    load_str(&text, &name, path.parent())
+    load_str(&text, &name, base_dir)
 }
 
 /// The embedded paper scenario.

@@ -48,17 +48,6 @@ impl AnyArm {
             )
         })
     }
-
-    pub fn chain(&self) -> &Chain {
-        match self {
-            Self::Two(a) => a.chain(),
-            Self::Three(a) => a.chain(),
-            Self::Four(a) => a.chain(),
-            Self::Five(a) => a.chain(),
-            Self::Six(a) => a.chain(),
-            Self::Seven(a) => a.chain(),
-        }
-    }
 }
 
 /// [`JOINT_COUNTS`] as text: `2, 3, 4, 5, 6 or 7`.
@@ -90,10 +79,6 @@ impl UrdfModel {
         })
     }
 
-    pub fn spec(&self) -> &UrdfSpec {
-        &self.spec
-    }
-
     pub fn arm(&self) -> &AnyArm {
         &self.arm
     }
@@ -102,9 +87,9 @@ impl UrdfModel {
 impl TryFrom<UrdfSpec> for UrdfModel {
     type Error = String;
 
-    fn try_from(spec: UrdfSpec) -> Result<Self, String> {
-        match &spec.text {
-            Some(text) => Self::new(spec.clone(), text),
+    fn try_from(mut spec: UrdfSpec) -> Result<Self, String> {
+        match spec.text.take() {
+            Some(text) => Self::new(spec, &text),
             None => Err(format!(
                 "{}: the URDF file was not read (a model of kind \"urdf\" is read with its \
                  scenario, its `path` relative to the scenario file)",

@@ -265,10 +265,10 @@ impl Chain {
     }
 }
 
-/// A URDF arm of `N` joints: the [`EulerLagrange`] dynamics of its [`Chain`]. `M`, `G`, the
-/// bias forces, `M⁻¹` and the forward dynamics come from its [`Rigid`] form (no heap, one
-/// placement of the links for `M` and the bias together, Cholesky for `M⁻¹`); `V` and `Ṁ` from
-/// the chain's Christoffel symbols.
+/// A URDF arm of `N` joints: the [`EulerLagrange`] dynamics of its [`Chain`]. `M`, `V`, `G`,
+/// the bias forces, `M⁻¹` and the forward dynamics come from its [`Rigid`] form (no heap, one
+/// placement of the links for `M` and the bias together, Cholesky for `M⁻¹`); `Ṁ` from the
+/// chain's `∂M/∂q`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct UrdfArm<const N: usize> {
     chain: Chain,

@@ -2,7 +2,8 @@
 //! plant's integrator, the observer and the controller ask them every tick): the links riding
 //! on a joint merged into one rigid body, `M(q)` by the composite-rigid-body algorithm and
 //! `V(q, q̇) q̇ + G(q)` by the recursive Newton–Euler algorithm at `q̈ = 0` (`V q̇` is the same
-//! vector for every factorization of the Coriolis terms, the Christoffel one included).
+//! vector for every factorization of the Coriolis terms, the Christoffel one included), and the
+//! Christoffel `V` itself from the bodies' Jacobians and their rates ([`Rigid::coriolis`]).
 //! [`Chain`]'s own methods are the reference the tests hold these to.
 
 use nalgebra::{Matrix3, SMatrix, Vector3};
@@ -26,7 +27,7 @@ pub(crate) struct Rigid<const N: usize> {
 
 /// Where the joints and bodies are at one `q`, in the root link's frame.
 struct Placed<const N: usize> {
-    /// Each joint's origin (its child's origin too) and unit axis.
+    /// Each joint's origin and unit axis.
     origin: [Vector3<f64>; N],
     axis: [Vector3<f64>; N],
     /// Each joint's child's origin.
