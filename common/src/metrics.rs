@@ -556,6 +556,7 @@ mod tests {
             units: AngleUnit::Rad,
             ramp_rate: 0.0,
             links: vec![LinkTrajectory::Constant { value: 0.0 }; 2],
+            start: Vec::new(),
         }
     }
 

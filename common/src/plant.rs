@@ -11,6 +11,7 @@ use crate::memo::Recent;
 use crate::model::{EulerLagrange, ModelConfig, Vector};
 use crate::rng::{stream, Purpose};
 use crate::time::tick_time;
+use crate::trajectory::pose;
 use crate::units::AngleUnit;
 use serde::{Deserialize, Serialize};
 
@@ -26,6 +27,9 @@ pub struct PlantParams {
     pub delay: DelayProfile,
     pub noise: NoiseConfig,
     pub disturbance: DisturbanceConfig,
+    /// The pose the robot starts from at rest, rad, one value per joint (the trajectory's
+    /// `start`); empty: the origin.
+    pub start: Vec<f64>,
 }
 
 /// A measurement as the sensor produced it (before any attack).
@@ -76,9 +80,11 @@ pub struct Plant<const N: usize> {
 }
 
 impl<const N: usize> Plant<N> {
-    /// Starts at rest at `q = q̇ = 0`. `None` when the model does not have `N` links.
+    /// Starts at rest at `q = start`, `q̇ = 0`. `None` when the model or the start pose does not
+    /// have `N` links.
     pub fn new(params: PlantParams) -> Option<Self> {
         let model = params.model.build::<N>()?;
+        let q = pose::<N>(&params.start)?;
         let noise_rng = stream(params.run_seed, params.agent_id, Purpose::SensorNoise);
         let normal = |std: f64| (std > 0.0).then(|| Normal::new(0.0, std).ok()).flatten();
         Some(Self {
@@ -86,7 +92,7 @@ impl<const N: usize> Plant<N> {
             noise_qd: normal(params.noise.velocity_std_rad_s),
             params,
             model,
-            q: Vector::<N>::zeros(),
+            q,
             qd: Vector::<N>::zeros(),
             commands: DelayLine::new(),
             noise_rng,

@@ -670,8 +670,8 @@ impl Scenario {
         self.agents.iter().map(|a| (a.id, a.model.dof())).collect()
     }
 
-    /// The plant of `agent` in this scenario (its seed, period, sub-steps, sensor noise and
-    /// disturbance): what the agent process integrates.
+    /// The plant of `agent` in this scenario (its seed, period, sub-steps, sensor noise,
+    /// disturbance and start pose): what the agent process integrates.
     pub fn plant_params(&self, agent: &AgentConfig) -> PlantParams {
         PlantParams {
             agent_id: agent.id,
@@ -682,6 +682,7 @@ impl Scenario {
             delay: agent.delay,
             noise: self.noise,
             disturbance: self.disturbance.clone(),
+            start: agent.trajectory.start_rad(),
         }
     }
 
@@ -1005,6 +1006,47 @@ fn agent_trajectory_problems(i: usize, a: &AgentConfig) -> Vec<Problem> {
                     format!("must be finite, got {v}"),
                 );
             }
+        }
+    }
+    let start = &a.trajectory.start;
+    if !start.is_empty() && start.len() != dof {
+        push(
+            at("trajectory.start"),
+            format!(
+                "needs {dof} entries (one per joint) or none, found {}",
+                start.len()
+            ),
+        );
+    }
+    for (l, v) in start.iter().enumerate() {
+        if !v.is_finite() {
+            push(
+                at(&format!("trajectory.start[{l}]")),
+                format!("must be finite, got {v}"),
+            );
+        }
+    }
+    out.extend(joint_limit_problems(i, a));
+    out
+}
+
+/// Agent `i`'s trajectory within its arm's joint limits (a URDF arm's): the least and greatest
+/// `q_d` of each joint over all time ([`TrajectoryConfig::envelope`]).
+fn joint_limit_problems(i: usize, a: &AgentConfig) -> Vec<Problem> {
+    let mut out = Vec::new();
+    for (l, (joint, limits)) in a.model.joint_limits().into_iter().enumerate() {
+        let (Some((lo, hi)), Some((min, max))) = (limits, a.trajectory.envelope(l)) else {
+            continue;
+        };
+        if min < lo || max > hi {
+            out.push(Problem {
+                path: format!("agents[{i}].trajectory.links[{l}]"),
+                message: format!(
+                    "q_d of joint `{joint}` goes from {min:.4} to {max:.4} (start + f(t) g(t) \
+                     over the run), outside the joint's limits [{lo:.4}, {hi:.4}] in the URDF; \
+                     move it with `trajectory.start` or a smaller amplitude"
+                ),
+            });
         }
     }
     out

@@ -1,8 +1,10 @@
 //! Desired trajectories `q_d(t)` with exact first and second derivatives.
 //!
-//! Each link follows `q_d = f(t) · g(t)` where `f` is a cosine, sine or constant and
-//! `g(t) = 1 − e^{−c t³}` is the paper's smooth start (c = 0.01; `ramp_rate = 0` disables it).
-//! Derivatives follow the product rule exactly: `q̇ = ḟg + fġ`, `q̈ = f̈g + 2ḟġ + fg̈`.
+//! Each link follows `q_d = s + f(t) · g(t)` where `s` is the joint's start (the pose the robot
+//! starts from at rest; the origin when `start` is left out, as in the paper), `f` is a cosine,
+//! sine or constant and `g(t) = 1 − e^{−c t³}` is the paper's smooth start (c = 0.01;
+//! `ramp_rate = 0` disables it). Derivatives follow the product rule exactly:
+//! `q̇ = ḟg + fġ`, `q̈ = f̈g + 2ḟġ + fg̈`.
 
 use serde::{Deserialize, Serialize};
 
@@ -99,6 +101,19 @@ impl LinkTrajectory {
         }
     }
 
+    /// The least and greatest `f(t)` over all `t`, in the trajectory's units.
+    pub fn range(&self) -> (f64, f64) {
+        match *self {
+            Self::Cosine {
+                amplitude, offset, ..
+            }
+            | Self::Sine {
+                amplitude, offset, ..
+            } => (offset - amplitude.abs(), offset + amplitude.abs()),
+            Self::Constant { value } => (value, value),
+        }
+    }
+
     /// Every parameter of the waveform, for validation.
     pub fn parameters(&self) -> Vec<(&'static str, f64)> {
         match *self {
@@ -135,6 +150,11 @@ pub struct TrajectoryConfig {
     pub ramp_rate: f64,
     /// One entry per link.
     pub links: Vec<LinkTrajectory>,
+    /// Where each joint starts, at rest, in the units above: `q_d = start + f(t) g(t)`, and the
+    /// robot and the control center's observer begin there. Left out: every joint at 0 (the
+    /// paper's robots). An arm whose joint limits exclude 0 (a Panda's fourth joint) needs it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub start: Vec<f64>,
 }
 
 /// Reference `(q_d, q̇_d, q̈_d)` at one instant, in rad, rad/s, rad/s².
@@ -146,6 +166,36 @@ pub struct Reference<const N: usize> {
 }
 
 impl TrajectoryConfig {
+    /// `start` in rad (empty when it is left out).
+    pub fn start_rad(&self) -> Vec<f64> {
+        let scale = self.units.to_rad();
+        self.start.iter().map(|s| scale * s).collect()
+    }
+
+    /// The pose the robot starts from at rest (rad): `start`, or the origin when it is left out;
+    /// `None` when `start` has another number of joints than `N`.
+    pub fn start_position<const N: usize>(&self) -> Option<Vector<N>> {
+        pose(&self.start_rad())
+    }
+
+    /// The least and greatest `q_d` of link `l` over all `t` (rad): `start + f g` with `g` from
+    /// 0 to 1 (only 1 without the ramp) and `f` over its range. `None` for a link the trajectory
+    /// does not have.
+    pub fn envelope(&self, l: usize) -> Option<(f64, f64)> {
+        let (lo, hi) = self.links.get(l)?.range();
+        let (lo, hi) = if self.ramp_rate > 0.0 {
+            (lo.min(0.0), hi.max(0.0))
+        } else {
+            (lo, hi)
+        };
+        let start = match self.start.as_slice() {
+            [] => 0.0,
+            s => *s.get(l)?,
+        };
+        let scale = self.units.to_rad();
+        Some((scale * (start + lo), scale * (start + hi)))
+    }
+
     /// `q_d, q̇_d, q̈_d` at `t`. Links beyond `links.len()` stay at zero (validation forbids it).
     /// `q_d(t)` alone, what [`Self::reference`] gives as `q` (the same operations), without
     /// the derivatives: what the metrics compare the true state with every tick.
@@ -159,9 +209,19 @@ impl TrajectoryConfig {
         };
         let mut q = Vector::<N>::zeros();
         for (i, link) in self.links.iter().take(N).enumerate() {
-            q[i] = scale * (link.value(t) * g);
+            q[i] = scale * self.started(i, link.value(t) * g);
         }
         q
+    }
+
+    /// `start[i] + moved`, or `moved` when `start` is left out: the paper's `q_d` keeps its
+    /// bits (`x + 0` is not `x` for `x = −0`). NaN (a non-finite reference, reported) for a
+    /// joint a `start` lacks, which validation refuses.
+    fn started(&self, i: usize, moved: f64) -> f64 {
+        match self.start.as_slice() {
+            [] => moved,
+            s => s.get(i).map_or(f64::NAN, |s| s + moved),
+        }
     }
 
     pub fn reference<const N: usize>(&self, t: f64) -> Reference<N> {
@@ -184,11 +244,21 @@ impl TrajectoryConfig {
         };
         for (i, link) in self.links.iter().take(N).enumerate() {
             let (f, fd, fdd) = link.eval(t);
-            r.q[i] = scale * (f * g);
+            r.q[i] = scale * self.started(i, f * g);
             r.qd[i] = scale * (fd * g + f * gd);
             r.qdd[i] = scale * (fdd * g + 2.0 * fd * gd + f * gdd);
         }
         r
+    }
+}
+
+/// The pose of `rad` (one value per joint), or the origin when it is empty; `None` when it has
+/// another number of joints than `N`.
+pub fn pose<const N: usize>(rad: &[f64]) -> Option<Vector<N>> {
+    match rad {
+        [] => Some(Vector::<N>::zeros()),
+        s if s.len() == N => Some(Vector::<N>::from_column_slice(s)),
+        _ => None,
     }
 }
 
@@ -215,6 +285,7 @@ mod tests {
                     offset: 10.0,
                 },
             ],
+            start: Vec::new(),
         }
     }
 
@@ -236,6 +307,7 @@ mod tests {
                     offset: 0.0,
                 },
             ],
+            start: Vec::new(),
         }
     }
 
@@ -257,14 +329,16 @@ mod tests {
 
     proptest::proptest! {
         /// The metrics' `position` is the controller's `reference().q` to the bit, whatever the
-        /// shape, phase, offset, ramp and time (arguments far beyond `[−π, π]` included).
+        /// shape, phase, offset, start, ramp and time (arguments far beyond `[−π, π]`
+        /// included), and it stays within the envelope validation checks against joint limits.
         #[test]
-        fn position_is_the_reference_s_q_to_the_bit(
+        fn position_is_the_reference_s_q_to_the_bit_and_within_the_envelope(
             t in 0.0..5000.0f64,
             amplitude in -100.0..100.0f64,
             w in -20.0..20.0f64,
             phase in -7.0..7.0f64,
             offset in -50.0..50.0f64,
+            start in proptest::option::of(proptest::collection::vec(-180.0..180.0f64, 3)),
             ramp in proptest::prop_oneof![proptest::strategy::Just(0.0), 0.0..1.0f64],
         ) {
             let traj = TrajectoryConfig {
@@ -275,10 +349,15 @@ mod tests {
                     LinkTrajectory::Sine { amplitude, omega_rad_s: w, phase_rad: phase, offset },
                     LinkTrajectory::Constant { value: offset },
                 ],
+                start: start.unwrap_or_default(),
             };
             let (p, r) = (traj.position::<3>(t), traj.reference::<3>(t).q);
             for i in 0..3 {
                 proptest::prop_assert_eq!(p[i].to_bits(), r[i].to_bits());
+                let (lo, hi) = traj.envelope(i).expect("a link of the trajectory");
+                // Rounding of the scale's product: a few ulps of the values involved.
+                let slack = 1e-12 * (1.0 + lo.abs().max(hi.abs()));
+                proptest::prop_assert!(lo - slack <= p[i] && p[i] <= hi + slack, "{lo} {} {hi}", p[i]);
             }
         }
     }
@@ -288,6 +367,44 @@ mod tests {
         let r = paper_robot2().reference::<2>(0.0);
         assert_eq!(r.q, Vector::<2>::zeros());
         assert_eq!(r.qd, Vector::<2>::zeros());
+        assert_eq!(
+            paper_robot2().start_position::<2>(),
+            Some(Vector::<2>::zeros())
+        );
+    }
+
+    #[test]
+    fn a_start_pose_moves_q_d_and_its_envelope_and_is_where_the_robot_begins() {
+        let traj = TrajectoryConfig {
+            start: vec![10.0, -20.0],
+            ..paper_robot2()
+        };
+        let start = Vector::<2>::new(10f64.to_radians(), -20f64.to_radians());
+        let r = traj.reference::<2>(0.0);
+        assert_relative_eq!(r.q, start, epsilon = 1e-15);
+        assert_eq!(r.qd, Vector::<2>::zeros());
+        assert_eq!(traj.start_position::<2>().expect("two joints"), r.q);
+        // Later the reference is the paper's plus the start, derivatives unchanged.
+        let (moved, paper) = (traj.reference::<2>(7.3), paper_robot2().reference::<2>(7.3));
+        assert_relative_eq!(moved.q, paper.q + start, epsilon = 1e-14);
+        assert_eq!((moved.qd, moved.qdd), (paper.qd, paper.qdd));
+        // Link 1: 30 sin + 20 in [−10, 50] deg, from 0 by the ramp, then + 10; link 2:
+        // 20 sin + 10 in [−10, 30] deg, then − 20.
+        let deg = |(lo, hi): (f64, f64)| (lo.to_degrees(), hi.to_degrees());
+        let e0 = deg(traj.envelope(0).expect("link 1"));
+        let e1 = deg(traj.envelope(1).expect("link 2"));
+        assert_relative_eq!(e0.0, 0.0, epsilon = 1e-12);
+        assert_relative_eq!(e0.1, 60.0, epsilon = 1e-12);
+        assert_relative_eq!(e1.0, -30.0, epsilon = 1e-12);
+        assert_relative_eq!(e1.1, 10.0, epsilon = 1e-12);
+        assert_eq!(traj.envelope(2), None);
+        // A start of another number of joints is no pose, and gives no reference either.
+        let short = TrajectoryConfig {
+            start: vec![1.0],
+            ..paper_robot2()
+        };
+        assert_eq!(short.start_position::<2>(), None);
+        assert!(short.reference::<2>(1.0).q[1].is_nan());
     }
 
     #[test]

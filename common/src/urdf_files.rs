@@ -228,6 +228,65 @@ mod tests {
 
     #[cfg(feature = "urdf")]
     #[test]
+    fn a_trajectory_beyond_a_urdf_joint_s_limits_is_named_and_the_start_pose_brings_it_in() {
+        use crate::model::Vector;
+        let folder = repo().join("scenarios");
+        let shipped = std::fs::read_to_string(folder.join("panda-team.toml")).expect("read");
+        let load = |text: &str| crate::scenario::load_str(text, "panda-team.toml", Some(&folder));
+        let r = load(&shipped).expect("the shipped Panda team");
+        // The robot and its observer begin at the start pose, q_d too.
+        let a = &r.scenario.agents[0];
+        let ready = [0.0, -45.0, 0.0, -135.0, 0.0, 90.0, 45.0].map(f64::to_radians);
+        let plant = crate::plant::Plant::<7>::new(r.scenario.plant_params(a)).expect("plant");
+        assert_eq!(plant.q, Vector::<7>::from_column_slice(&ready));
+        let center = crate::control::center::CenterAgent::<7>::new(r.scenario.center_params(a))
+            .expect("center");
+        assert_eq!(center.observer().q, plant.q);
+        assert_eq!(a.trajectory.reference::<7>(0.0).q, plant.q);
+
+        let start = "start = [0.0, -45.0, 0.0, -135.0, 0.0, 90.0, 45.0]";
+        assert!(shipped.contains(start));
+        let problems = |text: &str| load(text).expect_err("refused").problems;
+        // Without its start, robot 1's fourth joint (limits [−3.0718, −0.0698]) and sixth
+        // ([−0.0175, 3.7525]) would swing about 0.
+        let p = problems(&shipped.replacen(start, "", 1));
+        let named: Vec<_> = p.iter().map(|p| p.path.as_str()).collect();
+        assert_eq!(
+            named,
+            [
+                "agents[0].trajectory.links[3]",
+                "agents[0].trajectory.links[5]"
+            ],
+            "{p:?}"
+        );
+        assert!(
+            p[0].message.contains("`panda_joint4`") && p[0].message.contains("[-3.0718, -0.0698]"),
+            "{p:?}"
+        );
+        // A start near a limit: joint 1 at 160 deg swings to 180 deg, beyond 2.8973 rad.
+        let p = problems(&shipped.replacen(
+            start,
+            "start = [160.0, -45.0, 0.0, -135.0, 0.0, 90.0, 45.0]",
+            1,
+        ));
+        assert_eq!(p.len(), 1, "{p:?}");
+        assert_eq!(p[0].path, "agents[0].trajectory.links[0]");
+        assert!(p[0].message.contains("`panda_joint1`"), "{p:?}");
+        // A start of the wrong length, or not finite.
+        let p = problems(&shipped.replacen(start, "start = [0.0, -45.0]", 1));
+        assert_eq!(p.len(), 1, "{p:?}");
+        assert_eq!(p[0].path, "agents[0].trajectory.start");
+        assert!(p[0].message.contains("needs 7 entries"), "{p:?}");
+        let p = problems(&shipped.replacen(
+            start,
+            "start = [0.0, -45.0, 0.0, -135.0, 0.0, nan, 45.0]",
+            1,
+        ));
+        assert_eq!(p[0].path, "agents[0].trajectory.start[5]", "{p:?}");
+    }
+
+    #[cfg(feature = "urdf")]
+    #[test]
     fn a_missing_urdf_an_arm_of_another_joint_count_and_a_broken_one_are_named_once() {
         let dir = tempfile::tempdir().expect("tempdir");
         let paper = crate::scenario::PAPER_SCENARIO;

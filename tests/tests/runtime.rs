@@ -71,56 +71,19 @@ fn urdf_arms_lockstep_ipc_digest_equals_the_in_process_digest() {
     assert_eq!(urdf, &shipped);
 }
 
-/// The largest arm a run has: two Pandas (seven joints, from a URDF of the test data, the
-/// fingers locked) under gravity and the paper's attack, the traditional controller with the
-/// inertia-scaled gains, over IPC
+/// The largest arm a run has: the shipped team of four Pandas (scenarios/panda-team.toml: seven
+/// joints from a URDF, the fingers locked, each starting from its `start` pose) under gravity
+/// and the paper's attack, the traditional controller with the inertia-scaled gains, over IPC
 /// in lockstep, give the in-process digest; the messages and traces carry seven joints.
 #[test]
 fn seven_joint_urdf_arms_lockstep_ipc_digest_equals_the_in_process_digest() {
-    let dir = Scratch::new("panda");
-    let panda = fdi_tests::repo_path("common/testdata/urdf/panda.urdf");
-    let paper = fdi_common::scenario::PAPER_SCENARIO;
-    let links = |each: &str| [each; 7].join(", ");
-    let scenario = paper
-        .replacen("name = \"paper\"", "name = \"pandas\"", 1)
-        // The observer and estimator are not calibrated for an arm under gravity yet
-        // (docs/model.md, "Gains of other arms").
-        .replacen("mode = \"proposed\"", "mode = \"traditional\"", 1)
-        .replacen("beta = 30.0", "beta = 60.0\ngain_scaling = \"inertia\"", 1)
-        .replacen("gain_k = 21.0", "gain_k = 60.0", 1)
-        .replacen(
-            "links = [{ amplitude = 0.2, omega_rad_s = 0.1 }, { amplitude = 0.1, omega_rad_s = 0.25 }]",
-            &format!("links = [{}]", links("{ amplitude = 0.2, omega_rad_s = 0.1 }")),
-            1,
-        );
-    // Two agents, each a Panda on a cosine about its home pose.
-    let agents = scenario.find("[[agents]]").expect("the paper's agents");
-    let home = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785];
-    let reference: Vec<String> = home
-        .iter()
-        .map(|h| {
-            format!("{{ shape = \"cosine\", amplitude = 0.3, omega_rad_s = 1.0, offset = {h} }}")
-        })
-        .collect();
-    let mut text = scenario[..agents].to_string();
-    for id in 1..=2 {
-        text += &format!(
-            "[[agents]]\nid = {id}\nmodel = {{ kind = \"urdf\", path = {:?}, lock = {{ \
-             panda_finger_joint1 = 0.0, panda_finger_joint2 = 0.0 }} }}\ndelay = {{ kind = \
-             \"sine\", amplitude_s = 0.002, offset_s = 0.003, rate_rad_s = 0.5 }}\n\
-             trajectory = {{ units = \"rad\", ramp_rate = 0.01, links = [{}] }}\n",
-            panda.display().to_string(),
-            reference.join(", ")
-        );
-    }
-    let file = dir.0.join("pandas.toml");
-    std::fs::write(&file, text).expect("the scenario");
+    let file = fdi_tests::repo_path("scenarios/panda-team.toml");
     let (_out, run_dir) = ipc_equals_inproc(&file, 7, 2);
     // A run that stayed bounded: its numbers are results, not those of a diverged arm.
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(run_dir.join("summary.json")).expect("summary.json"))
             .expect("the summary is JSON");
-    for id in ["1", "2"] {
+    for id in ["1", "2", "3", "4"] {
         let rmse = &summary["metrics"][id]["rmse_rad"];
         assert!(
             rmse.as_f64().is_some_and(|r| r < 0.1),

@@ -88,7 +88,8 @@ pub struct CenterAgent<const N: usize> {
 }
 
 impl<const N: usize> CenterAgent<N> {
-    /// `None` when the model has another number of links than `N`.
+    /// The observer starts at the trajectory's start pose. `None` when the model or the start
+    /// pose has another number of links than `N`.
     pub fn new(params: CenterParams) -> Option<Self> {
         let model = params.model.build::<N>()?;
         let c = &params.controller;
@@ -102,12 +103,13 @@ impl<const N: usize> CenterAgent<N> {
                 model.inertia(&q0).diagonal() * c.gain_k
             }
         };
+        let observer = Observer::at(params.trajectory.start_position::<N>()?, Vector::zeros());
         Some(Self {
             gains,
             params,
             model,
             sent: DelayLine::new(),
-            observer: Observer::default(),
+            observer,
             estimator,
             detector,
             psi2_prev: Vector::<N>::zeros(),
@@ -124,6 +126,12 @@ impl<const N: usize> CenterAgent<N> {
 }
 
 impl<const N: usize> CenterAgent<N> {
+    /// The observer's state (tests).
+    #[cfg(test)]
+    pub(crate) fn observer(&self) -> &Observer<N> {
+        &self.observer
+    }
+
     pub fn agent_id(&self) -> u32 {
         self.params.agent_id
     }

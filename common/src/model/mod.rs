@@ -58,6 +58,23 @@ impl ModelConfig {
         }
     }
 
+    /// The name and limits (rad, or m for a prismatic joint) of each joint, in the order of
+    /// `q`, of an arm that has them: a URDF arm's (`None` for a joint the URDF gives none); the
+    /// hand-written arms' joints turn freely (empty).
+    pub fn joint_limits(&self) -> Vec<(String, Option<(f64, f64)>)> {
+        match self {
+            Self::TwoLink(_) | Self::ThreeLink(_) => Vec::new(),
+            #[cfg(feature = "urdf")]
+            Self::Urdf(m) => m
+                .arm()
+                .chain()
+                .joints
+                .iter()
+                .map(|j| (j.name.clone(), j.limits))
+                .collect(),
+        }
+    }
+
     /// Number of links.
     pub fn dof(&self) -> usize {
         struct Links;

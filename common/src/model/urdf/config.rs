@@ -50,6 +50,20 @@ impl AnyArm {
     }
 }
 
+impl AnyArm {
+    /// The arm's joints and links as the URDF gave them.
+    pub fn chain(&self) -> &Chain {
+        match self {
+            Self::Two(a) => a.chain(),
+            Self::Three(a) => a.chain(),
+            Self::Four(a) => a.chain(),
+            Self::Five(a) => a.chain(),
+            Self::Six(a) => a.chain(),
+            Self::Seven(a) => a.chain(),
+        }
+    }
+}
+
 /// [`JOINT_COUNTS`] as text: `2, 3, 4, 5, 6 or 7`.
 fn counts_text() -> String {
     let all: Vec<String> = JOINT_COUNTS.iter().map(ToString::to_string).collect();
