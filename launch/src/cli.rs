@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand, ValueEnum};
 
 use crate::commands::bench::BenchCommand;
 use crate::commands::certs::CertsArgs;
+use crate::commands::layout::LayoutArgs;
 use crate::commands::model::ModelArgs;
 use crate::commands::report::ExportFormat;
 use crate::commands::serve::ServeArgs;
@@ -39,6 +40,9 @@ pub enum Command {
     /// masses, and at one state its inertia M(q), Coriolis matrix V(q, q̇), gravity G(q) and
     /// friction F(q̇) — what to check before a run, or compare with another tool (--json).
     Model(ModelArgs),
+    /// Print the layout of a run's figures for a viewer (Foxglove or PlotJuggler), made for the
+    /// robots of a scenario: one tab per figure, one plot per robot, one series per joint.
+    Layout(LayoutArgs),
     /// Print the JSON Schema (draft 7) of a file format: `scenario` or `attack` (a profile).
     /// The shipped copies are `scenarios/schema/*.schema.json`; docs/scenarios.md is the reference.
     Schema {

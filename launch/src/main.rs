@@ -73,6 +73,7 @@ fn dispatch(command: Command, stop: &Stop) -> Result<ExitCode> {
         Command::Sweep(args) => commands::sweep::sweep(&args, stop),
         Command::Schema { format } => commands::validate::schema(format),
         Command::Model(args) => commands::model::model(&args),
+        Command::Layout(args) => commands::layout::layout(&args),
         Command::Table1(args) => commands::tables::table1(&args, stop),
         Command::Table2(args) => commands::tables::table2(&args, stop),
         Command::Attacks(args) => commands::tables::attacks(&args, stop),

@@ -489,8 +489,9 @@ fn viewers_that_never_read_leave_or_send_garbage_change_nothing_of_the_run() {
 }
 
 /// Whether `path` (`/agent<id>/<topic>` then, after `sep`, `field` or `field[i]`) names a field
-/// of a topic of the paper's run; its index within the robots' links.
-fn field_exists(path: &str, sep: char) -> Result<(), String> {
+/// of a topic of a run of `robots` (their ids and joint counts); its index within the robot's
+/// joints.
+fn field_exists(path: &str, sep: char, robots: &BTreeMap<u32, usize>) -> Result<(), String> {
     use fdi_report::topics::{topics, Ty};
     let rest = path
         .strip_prefix("/agent")
@@ -499,9 +500,9 @@ fn field_exists(path: &str, sep: char) -> Result<(), String> {
         .split_once('/')
         .ok_or_else(|| format!("{path}: no topic"))?;
     let id: u32 = id.parse().map_err(|_| format!("{path}: agent {id}"))?;
-    if !(1..=4).contains(&id) {
-        return Err(format!("{path}: the paper has robots 1-4"));
-    }
+    let joints = *robots
+        .get(&id)
+        .ok_or_else(|| format!("{path}: the run has no robot {id}"))?;
     let (topic, field) = rest
         .rsplit_once(sep)
         .ok_or_else(|| format!("{path}: no field"))?;
@@ -525,8 +526,8 @@ fn field_exists(path: &str, sep: char) -> Result<(), String> {
         .find(|(n, _, _)| *n == field)
         .ok_or_else(|| format!("{path}: {topic} has no field {field}"))?;
     match (ty, index) {
-        (Ty::Nums, Some(i)) if i < 2 => Ok(()),
-        (Ty::Nums, _) => Err(format!("{path}: a link of the paper's two")),
+        (Ty::Nums, Some(i)) if i < joints => Ok(()),
+        (Ty::Nums, _) => Err(format!("{path}: a joint of the robot's {joints}")),
         (_, None) => Ok(()),
         (_, Some(_)) => Err(format!("{path}: {field} is not an array")),
     }
@@ -558,19 +559,10 @@ fn xml_texts(xml: &str, tag: &str) -> Vec<String> {
         .collect()
 }
 
-#[test]
-fn the_shipped_layouts_name_only_fields_of_the_run_s_topics_and_the_paper_s_bounds() {
-    use fdi_report::report::{PAPER_POSITION_BOUND_RAD, PAPER_VELOCITY_BOUND_RAD_S};
-    let bounds = [
-        PAPER_POSITION_BOUND_RAD,
-        -PAPER_POSITION_BOUND_RAD,
-        PAPER_VELOCITY_BOUND_RAD_S,
-        -PAPER_VELOCITY_BOUND_RAD_S,
-    ];
-    // Foxglove: every plot path is a field of a topic, or a reference line at a paper bound.
-    let text = std::fs::read_to_string(repo_path("examples/live/paper-figures.foxglove.json"))
-        .expect("the Foxglove layout");
-    let layout: Value = serde_json::from_str(&text).expect("JSON");
+/// The number of field paths and of bound lines of a Foxglove layout, every path checked
+/// against the topics of `robots` and every bound against the paper's.
+fn check_foxglove(text: &str, robots: &BTreeMap<u32, usize>, bounds: &[f64]) -> (usize, usize) {
+    let layout: Value = serde_json::from_str(text).expect("JSON");
     let mut fields = 0;
     let mut lines = 0;
     for (id, config) in layout["configById"].as_object().expect("configById") {
@@ -582,21 +574,23 @@ fn the_shipped_layouts_name_only_fields_of_the_run_s_topics_and_the_paper_s_boun
                     lines += 1;
                 }
                 Err(_) => {
-                    field_exists(value, '.').unwrap_or_else(|e| panic!("{id}: {e}"));
+                    field_exists(value, '.', robots).unwrap_or_else(|e| panic!("{id}: {e}"));
                     fields += 1;
                 }
             }
         }
     }
-    assert_eq!((fields, lines), (64, 16), "every robot's four figures");
-    // PlotJuggler: every curve is a field of a topic, or a series made from one (the bounds).
-    let xml = std::fs::read_to_string(repo_path("examples/live/paper-figures.plotjuggler.xml"))
-        .expect("the PlotJuggler layout");
-    let snippets = xml_values(&xml, "snippet", "name");
-    for source in xml_texts(&xml, "linked_source") {
-        field_exists(&source, '/').unwrap_or_else(|e| panic!("{e}"));
+    (fields, lines)
+}
+
+/// The number of curves and of bound series of a PlotJuggler layout, checked as
+/// [`check_foxglove`] does.
+fn check_plotjuggler(xml: &str, robots: &BTreeMap<u32, usize>, bounds: &[f64]) -> (usize, usize) {
+    let snippets = xml_values(xml, "snippet", "name");
+    for source in xml_texts(xml, "linked_source") {
+        field_exists(&source, '/', robots).unwrap_or_else(|e| panic!("{e}"));
     }
-    for f in xml_texts(&xml, "function") {
+    for f in xml_texts(xml, "function") {
         let x: f64 = f
             .trim()
             .strip_prefix("return ")
@@ -604,20 +598,83 @@ fn the_shipped_layouts_name_only_fields_of_the_run_s_topics_and_the_paper_s_boun
             .unwrap_or_else(|| panic!("{f}: a bound"));
         assert!(bounds.contains(&x), "{x} is no bound of the paper");
     }
-    let curves = xml_values(&xml, "curve", "name");
-    assert_eq!(curves.len(), 80, "every robot's four figures");
+    let curves = xml_values(xml, "curve", "name");
     for c in &curves {
         if !snippets.contains(c) {
-            field_exists(c, '/').unwrap_or_else(|e| panic!("{e}"));
+            field_exists(c, '/', robots).unwrap_or_else(|e| panic!("{e}"));
         }
     }
-    assert_eq!(snippets.len(), 16);
-    // The check can fail: a renamed topic or field is refused.
-    assert!(field_exists("/agent1/tracking_error.e_rad[0]", '.').is_ok());
-    assert!(field_exists("/agent1/tracking_errors.e_rad[0]", '.').is_err());
-    assert!(field_exists("/agent1/tracking_error/e_rads[0]", '/').is_err());
-    assert!(field_exists("/agent5/estimate.s_hat_rad_s[0]", '.').is_err());
-    assert!(field_exists("/agent1/estimate.s_hat_rad_s[2]", '.').is_err());
+    (curves.len(), snippets.len())
+}
+
+/// `fdi-launch layout` with `args`: its stdout.
+fn layout(args: &[&str]) -> String {
+    let mut all = vec!["layout"];
+    all.extend_from_slice(args);
+    let out = launch_plain(&all, WATCHDOG);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).expect("UTF-8")
+}
+
+#[test]
+fn the_layouts_name_only_fields_of_the_run_s_topics_and_the_paper_s_bounds() {
+    use fdi_report::report::{PAPER_POSITION_BOUND_RAD, PAPER_VELOCITY_BOUND_RAD_S};
+    let bounds = [
+        PAPER_POSITION_BOUND_RAD,
+        -PAPER_POSITION_BOUND_RAD,
+        PAPER_VELOCITY_BOUND_RAD_S,
+        -PAPER_VELOCITY_BOUND_RAD_S,
+    ];
+    let paper: BTreeMap<u32, usize> = (1..=4).map(|id| (id, 2)).collect();
+    // The shipped layouts are what the command makes for the paper's scenario.
+    let text = std::fs::read_to_string(repo_path("examples/live/paper-figures.foxglove.json"))
+        .expect("the Foxglove layout");
+    assert_eq!(
+        text,
+        layout(&[]),
+        "regenerate: fdi-launch layout > examples/live/…"
+    );
+    let xml = std::fs::read_to_string(repo_path("examples/live/paper-figures.plotjuggler.xml"))
+        .expect("the PlotJuggler layout");
+    assert_eq!(xml, layout(&["--viewer", "plotjuggler"]));
+    // Foxglove: every plot path is a field of a topic, or a reference line at a paper bound;
+    // PlotJuggler: every curve is a field of a topic, or a series made from one (the bounds).
+    assert_eq!(
+        check_foxglove(&text, &paper, &bounds),
+        (64, 16),
+        "every robot's four figures"
+    );
+    assert_eq!(check_plotjuggler(&xml, &paper, &bounds), (80, 16));
+    // A team of Pandas: seven joints in every robot's plots.
+    let pandas: BTreeMap<u32, usize> = (1..=4).map(|id| (id, 7)).collect();
+    let team = repo_path("scenarios/panda-team.toml");
+    let team = team.to_str().expect("a UTF-8 path");
+    let text = layout(&[team]);
+    assert_eq!(
+        check_foxglove(&text, &pandas, &bounds),
+        (4 * 7 * 6 + 4 * 4, 16)
+    );
+    assert!(text.contains("/agent4/torque/applied.u_nm[6]"));
+    let xml = layout(&[team, "--viewer", "plotjuggler"]);
+    assert_eq!(
+        check_plotjuggler(&xml, &pandas, &bounds),
+        (4 * 7 * 6 + 4 * 4 + 16, 16)
+    );
+    // The check can fail: a renamed topic or field, a robot or a joint the run lacks.
+    assert!(field_exists("/agent1/tracking_error.e_rad[0]", '.', &paper).is_ok());
+    assert!(field_exists("/agent1/tracking_errors.e_rad[0]", '.', &paper).is_err());
+    assert!(field_exists("/agent1/tracking_error/e_rads[0]", '/', &paper).is_err());
+    assert!(field_exists("/agent5/estimate.s_hat_rad_s[0]", '.', &paper).is_err());
+    assert!(field_exists("/agent1/estimate.s_hat_rad_s[2]", '.', &paper).is_err());
+    assert!(field_exists("/agent1/estimate.s_hat_rad_s[6]", '.', &pandas).is_ok());
+    assert!(field_exists("/agent1/estimate.s_hat_rad_s[7]", '.', &pandas).is_err());
+    // The Panda team's layout is not the paper's: the paper's check refuses it.
+    let refused = std::panic::catch_unwind(|| check_foxglove(&text, &paper, &bounds));
+    assert!(refused.is_err(), "the paper's robots have two joints");
 }
 
 /// A run that keeps no traces is served from the records as they are made: the launcher's join

@@ -15,6 +15,7 @@
 //! least priority ([`yield_to_the_run`]).
 
 pub mod door;
+pub mod layout;
 
 use std::collections::BTreeMap;
 use std::net::{Ipv4Addr, SocketAddr};

@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod certs;
 pub mod detect;
+pub mod layout;
 pub mod model;
 pub mod report;
 pub mod run;
