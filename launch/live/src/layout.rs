@@ -93,13 +93,12 @@ pub fn figures(robots: &[Robot]) -> Vec<Tab> {
         per_robot("Velocity error (Fig. 3b)", &|r| {
             error_plot(r, "e_dot_rad_s", "velocity", PAPER_VELOCITY_BOUND_RAD_S)
         }),
-        per_robot("Attack estimate (Fig. 5)", &|r| Plot {
-            title: format!("Robot {}: Ŝ against the true S, rad/s", r.id),
-            series: [
+        per_robot("Attack estimate (Fig. 5)", &|r| {
+            two_per_joint(
+                format!("Robot {}: Ŝ against the true S, rad/s", r.id),
                 joint_series(r, "estimate", "s_hat_rad_s", "Ŝ link"),
                 joint_series(r, "attack", "s_true_rad_s", "S link"),
-            ]
-            .concat(),
+            )
         }),
         per_robot("Alarms and attacks", &|r| Plot {
             title: format!("Robot {}: ‖Ŝ‖ alarm, attack in force", r.id),
@@ -121,15 +120,22 @@ pub fn figures(robots: &[Robot]) -> Vec<Tab> {
             })
             .collect(),
         }),
-        per_robot("Torques", &|r| Plot {
-            title: format!("Robot {}: torque sent and applied, N·m", r.id),
-            series: [
+        per_robot("Torques", &|r| {
+            two_per_joint(
+                format!("Robot {}: torque sent and applied, N·m", r.id),
                 joint_series(r, "torque/sent", "u_nm", "sent link"),
                 joint_series(r, "torque/applied", "u_nm", "applied link"),
-            ]
-            .concat(),
+            )
         }),
     ]
+}
+
+/// A plot of two fields per joint: every joint's `first`, then every joint's `second`.
+fn two_per_joint(title: String, first: Vec<Series>, second: Vec<Series>) -> Plot {
+    Plot {
+        title,
+        series: [first, second].concat(),
+    }
 }
 
 /// `field[j]` of `topic` for every joint `j` of `r`, labelled `<label> <j + 1>`.
