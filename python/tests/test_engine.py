@@ -32,6 +32,16 @@ def test_overrides_are_the_command_line_s(fdi_launch, tmp_path):
     assert fdi_mas.run(s, ticks=False).digest == summary["trace_digest"]
 
 
+def test_a_team_of_urdf_arms_runs_as_on_the_command_line(fdi_launch, tmp_path):
+    scenario = pathlib.Path(__file__).parents[2] / "scenarios" / "panda-team.toml"
+    summary, _ = cli_run(fdi_launch, tmp_path, str(scenario), "--duration-s", "0.5")
+    s = fdi_mas.Scenario.load(str(scenario), duration_s=0.5)
+    assert (s.links, len(s.agents)) == (7, 4)
+    r = fdi_mas.run(s)
+    assert r.digest == summary["trace_digest"]
+    assert r.ticks is not None and len(r.ticks["q7_rad"]) == 4 * 500
+
+
 def test_open_run_reads_a_command_line_run_as_run_gives_it(fdi_launch, tmp_path):
     summary, run_dir = cli_run(fdi_launch, tmp_path, "--duration-s", "0.5")
     opened = fdi_mas.open_run(run_dir)
