@@ -62,6 +62,25 @@ pub fn metrics_table(s: &RunSummary) -> String {
     t
 }
 
+/// A line per robot whose control center reset its observer and estimator (their state
+/// became non-finite, docs/faults.md): the estimate `Ŝ` and the alarms of such a robot are not
+/// the estimator's at work, whatever its RMSE says.
+pub fn state_reset_warnings(s: &RunSummary) -> Vec<String> {
+    s.metrics
+        .iter()
+        .filter(|(_, m)| m.state_resets > 0)
+        .map(|(id, m)| {
+            format!(
+                "robot {id}: the control center reset its observer and estimator {} time{} \
+                 (their state became non-finite): its Ŝ and alarms are not the estimator's at \
+                 work (report.md: state resets)",
+                m.state_resets,
+                if m.state_resets == 1 { "" } else { "s" }
+            )
+        })
+        .collect()
+}
+
 /// Onsets as `t: time to detect` (`never` when undetected); a long train is summarised.
 pub fn describe_onsets(onsets: &[fdi_common::metrics::Onset]) -> String {
     let one = |o: &fdi_common::metrics::Onset| {
@@ -533,6 +552,26 @@ pub fn sample_summary() -> RunSummary {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn every_robot_whose_state_was_reset_is_named_with_its_count() {
+        let mut s = super::sample_summary();
+        let lines = super::state_reset_warnings(&s);
+        assert_eq!(lines.len(), 2);
+        assert!(lines[0].starts_with("robot 1: ") && lines[0].contains(" 5 times "));
+        if let Some(m) = s.metrics.get_mut("2") {
+            m.state_resets = 1;
+        }
+        if let Some(m) = s.metrics.get_mut("1") {
+            m.state_resets = 0;
+        }
+        let lines = super::state_reset_warnings(&s);
+        assert_eq!(lines.len(), 1);
+        assert!(
+            lines[0].starts_with("robot 2: ") && lines[0].contains(" 1 time "),
+            "{lines:?}"
+        );
+    }
+
     #[test]
     fn rmse_csv_has_a_header_and_a_row_per_robot() {
         let bytes = super::rmse_csv(&super::sample_summary()).expect("csv");
