@@ -88,10 +88,15 @@ pub fn figures(robots: &[Robot]) -> Vec<Tab> {
     };
     vec![
         per_robot("Position error (Figs. 3a, 4, 6a)", &|r| {
-            error_plot(r, "e_rad", "position", PAPER_POSITION_BOUND_RAD)
+            let (id, bound) = (r.id, PAPER_POSITION_BOUND_RAD);
+            let title = format!("Robot {id}: position error q_d - q, rad (paper: ±{bound})");
+            error_plot(r, title, "e_rad", "position", bound)
         }),
+        // The paper states the velocity bound for robot 1.
         per_robot("Velocity error (Fig. 3b)", &|r| {
-            error_plot(r, "e_dot_rad_s", "velocity", PAPER_VELOCITY_BOUND_RAD_S)
+            let (id, bound) = (r.id, PAPER_VELOCITY_BOUND_RAD_S);
+            let title = format!("Robot {id}: velocity error, rad/s (paper, robot 1: ±{bound})");
+            error_plot(r, title, "e_dot_rad_s", "velocity", bound)
         }),
         per_robot("Attack estimate (Fig. 5)", &|r| {
             two_per_joint(
@@ -153,19 +158,15 @@ fn joint_series(r: Robot, topic: &'static str, field: &'static str, label: &str)
         .collect()
 }
 
-/// A tracking error of every joint of `r` with the paper's bound `±bound` (the paper states
-/// the velocity bound for robot 1).
-fn error_plot(r: Robot, field: &'static str, what: &'static str, bound: f64) -> Plot {
-    let title = match what {
-        "position" => format!(
-            "Robot {}: position error q_d - q, rad (paper: ±{bound})",
-            r.id
-        ),
-        _ => format!(
-            "Robot {}: velocity error, rad/s (paper, robot 1: ±{bound})",
-            r.id
-        ),
-    };
+/// `title`: a tracking error `field` of every joint of `r` with the paper's bound `±bound` on
+/// `what` (position or velocity).
+fn error_plot(
+    r: Robot,
+    title: String,
+    field: &'static str,
+    what: &'static str,
+    bound: f64,
+) -> Plot {
     let mut series = joint_series(r, "tracking_error", field, "link");
     let of = Field {
         agent: r.id,
@@ -190,9 +191,18 @@ const COLOURS: [&str; 9] = [
 ];
 const BOUND_COLOUR: &str = "#7f7f7f";
 
-/// The colour of the `i`-th field series of a plot.
-fn colour(i: usize) -> &'static str {
-    COLOURS[i % COLOURS.len()]
+impl Plot {
+    /// Each series with its colour: the field series take [`COLOURS`] in turn, the bounds grey.
+    fn coloured(&self) -> impl Iterator<Item = (&Series, &'static str)> {
+        let mut fields = 0;
+        self.series.iter().map(move |s| match s {
+            Series::Field { .. } => {
+                fields += 1;
+                (s, COLOURS[(fields - 1) % COLOURS.len()])
+            }
+            Series::Bound { .. } => (s, BOUND_COLOUR),
+        })
+    }
 }
 
 #[derive(Serialize)]
@@ -231,28 +241,20 @@ pub fn foxglove(tabs: &[Tab]) -> serde_json::Value {
         for plot in &tab.plots {
             n += 1;
             let id = format!("Plot!fdi{n}");
-            let mut fields = 0;
             let paths = plot
-                .series
-                .iter()
-                .map(|s| match s {
-                    Series::Field { field, label } => {
-                        fields += 1;
-                        FoxglovePath {
-                            value: field.path('.'),
-                            enabled: true,
-                            timestamp_method: "receiveTime",
-                            label: label.clone(),
-                            color: colour(fields - 1),
-                        }
-                    }
-                    Series::Bound { value, .. } => FoxglovePath {
-                        value: value.to_string(),
+                .coloured()
+                .map(|(s, color)| {
+                    let (value, label) = match s {
+                        Series::Field { field, label } => (field.path('.'), label.clone()),
+                        Series::Bound { value, .. } => (value.to_string(), "paper bound".into()),
+                    };
+                    FoxglovePath {
+                        value,
                         enabled: true,
                         timestamp_method: "receiveTime",
-                        label: "paper bound".into(),
-                        color: BOUND_COLOUR,
-                    },
+                        label,
+                        color,
+                    }
                 })
                 .collect();
             let panel = FoxglovePlot {
@@ -333,17 +335,13 @@ pub fn plotjuggler(tabs: &[Tab]) -> String {
                  top=\"1\" bottom=\"-1\"/>\n       <limitY/>",
                 escape(&plot.title)
             );
-            let mut fields = 0;
-            for s in &plot.series {
-                let (name, colour) = match s {
-                    Series::Field { field, .. } => {
-                        fields += 1;
-                        (field.path('/'), colour(fields - 1))
-                    }
+            for (s, colour) in plot.coloured() {
+                let name = match s {
+                    Series::Field { field, .. } => field.path('/'),
                     Series::Bound { value, of, what } => {
                         let name = format!("paper bound: robot {} {what} {value:+}", of.agent);
                         bounds.push((name.clone(), *value, of.path('/')));
-                        (name, BOUND_COLOUR)
+                        name
                     }
                 };
                 let _ = writeln!(

@@ -48,9 +48,7 @@ impl AnyArm {
             )
         })
     }
-}
 
-impl AnyArm {
     /// The arm's joints and links as the URDF gave them.
     pub fn chain(&self) -> &Chain {
         match self {
