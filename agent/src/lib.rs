@@ -10,7 +10,7 @@
 use std::time::Duration;
 
 use fdi_common::engine::{agent_record, tick_time};
-use fdi_common::model::{ModelConfig, Vector};
+use fdi_common::model::Vector;
 use fdi_common::plant::{Measurement, Plant};
 use fdi_common::run_dir::Process;
 use fdi_common::scenario::{AgentConfig, ClockMode, Resolved};
@@ -54,7 +54,7 @@ pub struct Ports<X: Transport> {
 
 impl Role for Agent {
     type Ports<X: Transport> = Ports<X>;
-    type Running<'a, X: Transport + 'a, const N: usize> = Running<'a, X, N>;
+    type Running<'a, X: Transport + 'a> = role::Boxed<'a>;
 
     fn identity(&self) -> (ipc::Role, Wake) {
         (ipc::Role::Agent, Wake::Agent(self.id))
@@ -76,11 +76,21 @@ impl Role for Agent {
         })
     }
 
-    fn model<'r>(&self, resolved: &'r Resolved) -> Result<&'r ModelConfig, AgentError> {
-        self.config(resolved).map(|a| &a.model)
+    /// Its robot's state, with the robot's number of links.
+    fn prepare<'a, X: Transport + 'a>(
+        &'a self,
+        resolved: &'a Resolved,
+        opened: &'a Opened<X, Ports<X>>,
+    ) -> Result<role::Boxed<'a>, AgentError> {
+        let dof = self.config(resolved)?.model.dof();
+        fdi_common::with_joint_count!(dof, N => self.running::<X, N>(resolved, opened).map(role::Boxed::new))
+            .ok_or(AgentError::Dof(self.id))?
     }
+}
 
-    fn prepare<'a, X: Transport + 'a, const N: usize>(
+impl Agent {
+    /// Its state over a run whose robot has `N` links.
+    fn running<'a, X: Transport + 'a, const N: usize>(
         &'a self,
         resolved: &'a Resolved,
         opened: &'a Opened<X, Ports<X>>,

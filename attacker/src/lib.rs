@@ -47,7 +47,7 @@ pub struct Attacker;
 
 impl Role for Attacker {
     type Ports<X: Transport> = Ports<X>;
-    type Running<'a, X: Transport + 'a, const N: usize> = Relay<'a, X, N>;
+    type Running<'a, X: Transport + 'a> = Relay<'a, X>;
 
     fn identity(&self) -> (ipc::Role, Wake) {
         (ipc::Role::Attacker, Wake::Attacker)
@@ -69,11 +69,11 @@ impl Role for Attacker {
         Ports::open(transport, resolved)
     }
 
-    fn prepare<'a, X: Transport + 'a, const N: usize>(
+    fn prepare<'a, X: Transport + 'a>(
         &'a self,
         resolved: &'a Resolved,
         opened: &'a Opened<X, Ports<X>>,
-    ) -> Result<Relay<'a, X, N>, AttackerError> {
+    ) -> Result<Relay<'a, X>, AttackerError> {
         Ok(Relay::new(resolved, opened, Target::all(resolved)))
     }
 }
@@ -126,6 +126,8 @@ pub struct Actuation<X: Transport> {
 #[derive(Debug)]
 struct Target {
     id: u32,
+    /// Its robot's number of links.
+    dof: usize,
     attack: AgentAttack,
     /// Next measurement due.
     next: u64,
@@ -143,6 +145,7 @@ impl Target {
             .iter()
             .map(|a| Self {
                 id: a.id,
+                dof: a.model.dof(),
                 attack: resolved.agent_attack(a.id),
                 next: 0,
                 routed: resolved.attack.attacks_torque_of(a.id).then(|| {
@@ -314,9 +317,31 @@ fn relay_torque<X: Transport, const N: usize>(
     Ok(())
 }
 
+/// Admits the torque `m` for `target`, whose robot has `N` links, and relays it on `out`:
+/// whether it was admitted (a refused one moves nothing on).
+fn admit_and_relay_torque<X: Transport, const N: usize>(
+    target: &mut Target,
+    m: &TorqueMsg,
+    received: u64,
+    out: &X::Outbox<TorqueMsg>,
+    (ticks, dt, clock): (u64, f64, ClockMode),
+    trace: &mut TraceWriter,
+) -> Result<bool, AttackerError> {
+    let Some((i, next)) = target.routed else {
+        return Ok(false);
+    };
+    let Ok(command) = process::admit_torque::<N>(m, target.id, next, (ticks, dt), clock) else {
+        return Ok(false);
+    };
+    target.routed = Some((i, m.seq + 1));
+    let command = command.torque.map(|(u, _)| u);
+    relay_torque::<X, N>(target, (m, command), received, out, dt, trace)?;
+    Ok(true)
+}
+
 /// Admits and relays every torque waiting on the actuation path; rings each agent that got
 /// one. Returns the messages refused.
-fn relay_torques<X: Transport, const N: usize>(
+fn relay_torques<X: Transport>(
     targets: &mut [Target],
     actuation: &Actuation<X>,
     (ticks, dt, clock): (u64, f64, ClockMode),
@@ -331,22 +356,22 @@ fn relay_torques<X: Transport, const N: usize>(
             refused += 1;
             return;
         };
-        let Some((i, next)) = target.routed else {
+        let Some((i, _)) = target.routed else {
             refused += 1;
             return;
         };
-        let Ok(command) = process::admit_torque::<N>(&m, target.id, next, (ticks, dt), clock)
-        else {
-            refused += 1;
-            return;
-        };
-        target.routed = Some((i, m.seq + 1));
-        let command = command.torque.map(|(u, _)| u);
         let out = &actuation.agents[i].1;
-        if let Err(e) = relay_torque::<X, N>(target, (&m, command), received, out, dt, trace) {
-            failure.get_or_insert(e);
+        let relayed = fdi_common::with_joint_count!(target.dof, N => {
+            admit_and_relay_torque::<X, N>(target, &m, received, out, (ticks, dt, clock), trace)
+        });
+        match relayed {
+            Some(Ok(true)) => answered[i] = true,
+            Some(Ok(false)) | None => refused += 1,
+            Some(Err(e)) => {
+                failure.get_or_insert(e);
+                answered[i] = true;
+            }
         }
-        answered[i] = true;
     })?;
     if let Some(e) = failure {
         return Err(e);
@@ -361,7 +386,7 @@ fn relay_torques<X: Transport, const N: usize>(
 
 /// The attacker over a run: the agents it relays for, what it refused, the checks of what
 /// arrives, the program that takes its role (if any), and the run's timing.
-pub struct Relay<'a, X: Transport, const N: usize> {
+pub struct Relay<'a, X: Transport> {
     resolved: &'a Resolved,
     ports: &'a Ports<X>,
     conn: &'a Connection<X>,
@@ -379,7 +404,7 @@ pub struct Relay<'a, X: Transport, const N: usize> {
     end_ns: u64,
 }
 
-impl<X: Transport, const N: usize> role::Running for Relay<'_, X, N> {
+impl<X: Transport> role::Running for Relay<'_, X> {
     /// The run started at `epoch_ns`: the agents' liveness counts from then, and the program
     /// that takes the attacker role (if any) is given its time from then.
     fn begin(&mut self, epoch_ns: u64, _: &mut TraceWriter) -> Result<(), AttackerError> {
@@ -389,7 +414,11 @@ impl<X: Transport, const N: usize> role::Running for Relay<'_, X, N> {
         self.end_ns = process::realtime_end_ns(epoch_ns, s.duration_s, self.dt);
         let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
         self.external = match (&s.roles.attacker, &self.ports.external) {
-            (Some(role), Some(_)) => Some(External::new(role, &ids, N, self.dt, self.realtime)),
+            // Validation gives a program in the role a team of one joint count.
+            (Some(role), Some(_)) => {
+                let dof = self.targets.first().map_or(0, |t| t.dof);
+                Some(External::new(role, &ids, dof, self.dt, self.realtime))
+            }
             _ => None,
         };
         Ok(())
@@ -429,8 +458,8 @@ impl<X: Transport, const N: usize> role::Running for Relay<'_, X, N> {
     }
 }
 
-impl<'a, X: Transport, const N: usize> Relay<'a, X, N> {
-    /// The state of a run, for agents of `N` links (its clocks are set at the start).
+impl<'a, X: Transport> Relay<'a, X> {
+    /// The state of a run (its clocks are set at the start).
     fn new(resolved: &'a Resolved, opened: &'a Opened<X, Ports<X>>, targets: Vec<Target>) -> Self {
         let s = &resolved.scenario;
         let ticks = resolved.ticks();
@@ -485,7 +514,9 @@ impl<'a, X: Transport, const N: usize> Relay<'a, X, N> {
             };
             // A gap marker or forged stamp from elsewhere is relayed as the tick's message:
             // the attack acts on what the agent sent, and the center judges it again.
-            if process::admit_measurement(&m, N, sequence, dt, trace) == process::Admission::Refused
+            let dof = targets[i].dof;
+            if process::admit_measurement(&m, dof, sequence, dt, trace)
+                == process::Admission::Refused
             {
                 *refused += 1;
                 return;
@@ -499,7 +530,11 @@ impl<'a, X: Transport, const N: usize> Relay<'a, X, N> {
                 }
                 _ => {
                     relayed += 1;
-                    relay::<X, N>(&mut targets[i], &m, received, ports, dt, trace)
+                    let target = &mut targets[i];
+                    fdi_common::with_joint_count!(dof, N => {
+                        relay::<X, N>(target, &m, received, ports, dt, trace)
+                    })
+                    .unwrap_or(Ok(()))
                 }
             };
             if let Err(e) = result {
@@ -539,7 +574,7 @@ impl<'a, X: Transport, const N: usize> Relay<'a, X, N> {
     fn take_torques(&mut self, trace: &mut TraceWriter) -> Result<(), AttackerError> {
         if let Some(actuation) = &self.ports.actuation {
             let clock = self.resolved.scenario.clock;
-            self.refused += relay_torques::<X, N>(
+            self.refused += relay_torques::<X>(
                 &mut self.targets,
                 actuation,
                 (self.ticks, self.dt, clock),

@@ -3,9 +3,9 @@
 //! floating-point operations as the multi-process runtime. It is the oracle for tests and the
 //! floor for the IPC overhead benchmark.
 //!
-//! The attacker is a value: [`run_inproc`] and [`run_inproc_any`] run the scenario's attack
-//! profile ([`crate::attack::ProfileAttacker`]); [`run_inproc_with`] and
-//! [`run_inproc_any_with`] run any [`Attacker`] a caller supplies.
+//! The attacker is a value: [`run_inproc_any`] runs the scenario's attack profile
+//! ([`crate::attack::ProfileAttacker`]); [`run_inproc_any_with`] runs any [`Attacker`] a caller
+//! supplies. Each robot runs with its own number of joints: a team may mix arms.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -16,12 +16,11 @@ use crate::attack::{Attacker, Injection, Sent, TorqueInjection};
 use crate::control::{CenterAgent, CenterOutput};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::Vector;
-use crate::model::{EulerLagrange, ForLinks};
 use crate::plant::{Measurement, Plant, StepReport};
 use crate::records::{
     ActuationRecord, AgentRecord, AttackRecord, CenterRecord, Joints, TickRecord, TraceDigest,
 };
-use crate::scenario::Resolved;
+use crate::scenario::{AgentConfig, Resolved, Scenario};
 
 /// The time of tick `k` ([`crate::time`], where the pieces the engine runs take it too).
 pub use crate::time::tick_time;
@@ -387,7 +386,9 @@ pub enum EngineError {
     NoAgents,
 }
 
-/// [`run_inproc`] with the number of links of the run's agents.
+/// Runs `resolved` to the end on this thread; `sink` sees every joined tick record in digest
+/// order (tick, then agent order of the scenario). The attacker is the scenario's attack
+/// profile ([`Resolved::profile_attacker`]). Each robot runs with its own number of joints.
 pub fn run_inproc_any(
     resolved: &Resolved,
     sink: impl FnMut(&TickRecord),
@@ -395,8 +396,11 @@ pub fn run_inproc_any(
     run_inproc_any_with(resolved, &mut resolved.profile_attacker(), sink)
 }
 
-/// [`run_inproc_with`] with the number of links of the run's agents: runs `resolved` with
-/// `attacker` in place of the scenario's attack profile (whose `attack` is then ignored).
+/// [`run_inproc_any`] with `attacker` in place of the scenario's attack profile (whose
+/// `attack` is then ignored): at each tick and for each agent, in the scenario's agent order,
+/// the engine asks it for the measurement the control center receives, then, when it sits on
+/// the agent's torque path, for the torque the robot receives ([`Attacker`] says what its
+/// answers must say). The summary's `attack` is [`Attacker::name`].
 pub fn run_inproc_any_with<A: Attacker>(
     resolved: &Resolved,
     attacker: &mut A,
@@ -426,31 +430,6 @@ pub fn run_inproc_any_until<A: Attacker>(
         go_on,
     )?;
     Ok(books.summary(resolved, ticked.ticks, ticked.wall_s, attacker.name()))
-}
-
-/// Runs `resolved` to the end on this thread; `sink` sees every joined tick record in digest
-/// order (tick, then agent order of the scenario). The attacker is the scenario's attack
-/// profile ([`Resolved::profile_attacker`]).
-pub fn run_inproc<const N: usize>(
-    resolved: &Resolved,
-    sink: impl FnMut(&TickRecord),
-) -> Result<RunSummary, EngineError> {
-    run_inproc_with::<N, _>(resolved, &mut resolved.profile_attacker(), sink)
-}
-
-/// [`run_inproc`] with `attacker` in place of the scenario's attack profile: at each tick and
-/// for each agent, in the scenario's agent order, the engine asks it for the measurement the
-/// control center receives, then, when it sits on the agent's torque path, for the torque the
-/// robot receives ([`Attacker`] says what its answers must say). The summary's `attack` is
-/// [`Attacker::name`].
-pub fn run_inproc_with<const N: usize, A: Attacker>(
-    resolved: &Resolved,
-    attacker: &mut A,
-    mut sink: impl FnMut(&TickRecord),
-) -> Result<RunSummary, EngineError> {
-    let mut run = Lockstep::<N>::new(resolved)?;
-    while run.tick(attacker, &mut sink) {}
-    Ok(run.finish(resolved, attacker.name()))
 }
 
 /// The books of a run: the trace digest and the metrics of every joined tick record, in
@@ -498,35 +477,93 @@ impl Books {
     }
 }
 
+/// One robot's plant and its control center's pipeline, with the robot's number of joints.
+#[derive(Debug)]
+struct AgentLoop<const N: usize> {
+    plant: Plant<N>,
+    center: CenterAgent<N>,
+}
+
+crate::per_joint_count!(
+    /// An [`AgentLoop`] of any joint count: a team may mix robots.
+    #[derive(Debug)]
+    enum AnyLoop = AgentLoop
+);
+
+impl<const N: usize> AgentLoop<N> {
+    fn new(s: &Scenario, a: &AgentConfig) -> Option<Self> {
+        Some(Self {
+            plant: Plant::<N>::new(s.plant_params(a))?,
+            center: CenterAgent::<N>::new(s.center_params(a))?,
+        })
+    }
+
+    /// Tick `k` at `t` of this robot, with `attacker` ([`run_inproc_any_with`] says how it is
+    /// asked); `sink` sees its record.
+    fn tick<A: Attacker>(
+        &mut self,
+        attacker: &mut A,
+        (k, t): (u64, f64),
+        sink: &mut impl FnMut(&TickRecord),
+    ) {
+        let Self { plant, center } = self;
+        let id = plant.agent_id();
+        let (q, qd) = (plant.q, plant.qd);
+        let m = plant.measure();
+        let (sent, inj) = attacker.measurement::<N>(id, k, t, &m);
+        let out = center_tick(center, t, sent.usable().map(|(m, _)| m));
+        // A refused or missing command is counted by the plant; the run goes on.
+        let actuation = if attacker.on_torque_path(id) {
+            let (sent, tinj) = attacker.torque::<N>(id, k, t, &out.u);
+            let _ = plant.take_command(t, sent.usable().map(|(u, h)| (*u, h)));
+            Some(actuation_record(k, id, &sent, &tinj))
+        } else {
+            let _ = plant.take_command(t, Some((out.u, 0.0)));
+            None
+        };
+        let step = plant.advance(k);
+        sink(&TickRecord {
+            agent: agent_record(k, id, t, (&q, &qd), &m, &step),
+            attack: attack_record(k, id, &sent, &inj),
+            center: center_record(k, id, &out),
+            actuation,
+            monitor: None,
+        });
+    }
+}
+
 /// The in-process engine's ticking alone: every agent's plant, attacker and control center,
 /// tick by tick, each joined record handed to a sink. [`Lockstep`] is this with its [`Books`].
+/// Each robot runs with its own number of joints.
 #[derive(Debug)]
-pub struct Ticker<const N: usize> {
-    plants: Vec<Plant<N>>,
-    centers: Vec<CenterAgent<N>>,
+pub struct Ticker {
+    loops: Vec<AnyLoop>,
     control_period_s: f64,
     k: u64,
     ticks: u64,
     started: Instant,
 }
 
-impl<const N: usize> Ticker<N> {
+impl Ticker {
     /// The run of `resolved` at its start (tick 0 next).
     pub fn new(resolved: &Resolved) -> Result<Self, EngineError> {
         let s = &resolved.scenario;
-        let mut plants = Vec::with_capacity(s.agents.len());
-        let mut centers = Vec::with_capacity(s.agents.len());
+        if s.agents.is_empty() {
+            return Err(EngineError::NoAgents);
+        }
+        let mut loops = Vec::with_capacity(s.agents.len());
         for a in &s.agents {
-            let dof = || EngineError::ModelDof {
-                agent: a.id,
-                dof: N,
-            };
-            plants.push(Plant::<N>::new(s.plant_params(a)).ok_or_else(dof)?);
-            centers.push(CenterAgent::<N>::new(s.center_params(a)).ok_or_else(dof)?);
+            let dof = a.model.dof();
+            let agent =
+                crate::with_joint_count!(dof, N => AgentLoop::<N>::new(s, a).map(AnyLoop::from));
+            loops.push(
+                agent
+                    .flatten()
+                    .ok_or(EngineError::ModelDof { agent: a.id, dof })?,
+            );
         }
         Ok(Self {
-            plants,
-            centers,
+            loops,
             control_period_s: s.control_period_s,
             k: 0,
             ticks: resolved.ticks(),
@@ -550,8 +587,8 @@ impl<const N: usize> Ticker<N> {
     }
 
     /// Runs the next tick of every agent, in the scenario's agent order, with `attacker`
-    /// ([`run_inproc_with`] says how it is asked); `sink` sees each agent's record. False, and
-    /// nothing run, once every tick has run.
+    /// ([`run_inproc_any_with`] says how it is asked); `sink` sees each agent's record. False,
+    /// and nothing run, once every tick has run.
     pub fn tick<A: Attacker>(
         &mut self,
         attacker: &mut A,
@@ -562,46 +599,25 @@ impl<const N: usize> Ticker<N> {
         }
         let k = self.k;
         let t = tick_time(k, self.control_period_s);
-        for (plant, center) in self.plants.iter_mut().zip(&mut self.centers) {
-            let id = plant.agent_id();
-            let (q, qd) = (plant.q, plant.qd);
-            let m = plant.measure();
-            let (sent, inj) = attacker.measurement::<N>(id, k, t, &m);
-            let out = center_tick(center, t, sent.usable().map(|(m, _)| m));
-            // A refused or missing command is counted by the plant; the run goes on.
-            let actuation = if attacker.on_torque_path(id) {
-                let (sent, tinj) = attacker.torque::<N>(id, k, t, &out.u);
-                let _ = plant.take_command(t, sent.usable().map(|(u, h)| (*u, h)));
-                Some(actuation_record(k, id, &sent, &tinj))
-            } else {
-                let _ = plant.take_command(t, Some((out.u, 0.0)));
-                None
-            };
-            let step = plant.advance(k);
-            sink(&TickRecord {
-                agent: agent_record(k, id, t, (&q, &qd), &m, &step),
-                attack: attack_record(k, id, &sent, &inj),
-                center: center_record(k, id, &out),
-                actuation,
-                monitor: None,
-            });
+        for agent in &mut self.loops {
+            crate::on_joint_count!(AnyLoop, agent, a => a.tick(attacker, (k, t), &mut sink));
         }
         self.k += 1;
         true
     }
 }
 
-/// The in-process engine one tick at a time: what [`run_inproc_with`] runs to the end, for a
+/// The in-process engine one tick at a time: what [`run_inproc_any_with`] runs to the end, for a
 /// caller that decides between ticks (an environment whose agent acts every few ticks).
 /// Ticking it to the end and finishing it is, record for record and digest for digest,
-/// [`run_inproc_with`].
+/// [`run_inproc_any_with`].
 #[derive(Debug)]
-pub struct Lockstep<const N: usize> {
-    ticker: Ticker<N>,
+pub struct Lockstep {
+    ticker: Ticker,
     books: Books,
 }
 
-impl<const N: usize> Lockstep<N> {
+impl Lockstep {
     /// The run of `resolved` at its start (tick 0 next).
     pub fn new(resolved: &Resolved) -> Result<Self, EngineError> {
         Ok(Self {
@@ -661,87 +677,13 @@ pub struct Ticked {
 pub fn tick_inproc_any_with<A: Attacker>(
     resolved: &Resolved,
     attacker: &mut A,
-    sink: impl FnMut(&TickRecord),
-    go_on: impl FnMut() -> bool,
+    mut sink: impl FnMut(&TickRecord),
+    mut go_on: impl FnMut() -> bool,
 ) -> Result<Ticked, EngineError> {
-    struct Run<'a, A, F, G> {
-        resolved: &'a Resolved,
-        attacker: &'a mut A,
-        sink: F,
-        go_on: G,
-    }
-    impl<A: Attacker, F: FnMut(&TickRecord), G: FnMut() -> bool> ForLinks for Run<'_, A, F, G> {
-        type Output = Result<Ticked, EngineError>;
-        fn call<const N: usize>(mut self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            let mut ticker = Ticker::<N>::new(self.resolved)?;
-            while (self.go_on)() && ticker.tick(self.attacker, &mut self.sink) {}
-            Ok(Ticked {
-                ticks: ticker.k(),
-                wall_s: ticker.wall_s(),
-            })
-        }
-    }
-    resolved
-        .with_links(Run {
-            resolved,
-            attacker,
-            sink,
-            go_on,
-        })
-        .ok_or(EngineError::NoAgents)?
-}
-
-/// A [`Lockstep`] whatever the number of links of its robots ([`lockstep_any`]), driven by an
-/// attacker of type `A`: what a caller that does not know `N` holds (an environment over any
-/// scenario). Each method is [`Lockstep`]'s.
-pub trait AnyLockstep<A: Attacker>: Send + std::fmt::Debug {
-    /// Links of every robot of the run.
-    fn links(&self) -> usize;
-    /// [`Lockstep::k`].
-    fn k(&self) -> u64;
-    /// [`Lockstep::ticks`].
-    fn ticks(&self) -> u64;
-    /// [`Lockstep::evaluator`].
-    fn evaluator(&self) -> &Evaluator;
-    /// [`Lockstep::tick`].
-    fn tick(&mut self, attacker: &mut A, sink: &mut dyn FnMut(&TickRecord)) -> bool;
-    /// [`Lockstep::finish`].
-    fn finish(self: Box<Self>, resolved: &Resolved, attack: &str) -> RunSummary;
-}
-
-impl<const N: usize, A: Attacker> AnyLockstep<A> for Lockstep<N> {
-    fn links(&self) -> usize {
-        N
-    }
-    fn k(&self) -> u64 {
-        Lockstep::k(self)
-    }
-    fn ticks(&self) -> u64 {
-        Lockstep::ticks(self)
-    }
-    fn evaluator(&self) -> &Evaluator {
-        Lockstep::evaluator(self)
-    }
-    fn tick(&mut self, attacker: &mut A, sink: &mut dyn FnMut(&TickRecord)) -> bool {
-        Lockstep::tick(self, attacker, sink)
-    }
-    fn finish(self: Box<Self>, resolved: &Resolved, attack: &str) -> RunSummary {
-        Lockstep::finish(*self, resolved, attack)
-    }
-}
-
-/// The [`Lockstep`] of `resolved` with its robots' number of links, at its start.
-pub fn lockstep_any<A: Attacker + 'static>(
-    resolved: &Resolved,
-) -> Result<Box<dyn AnyLockstep<A>>, EngineError> {
-    struct Make<'a, A>(&'a Resolved, std::marker::PhantomData<A>);
-    impl<A: Attacker + 'static> ForLinks for Make<'_, A> {
-        type Output = Result<Box<dyn AnyLockstep<A>>, EngineError>;
-        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            Ok(Box::new(Lockstep::<N>::new(self.0)?))
-        }
-    }
-    resolved
-        .with_links(Make(resolved, std::marker::PhantomData))
-        .ok_or(EngineError::NoAgents)?
+    let mut ticker = Ticker::new(resolved)?;
+    while go_on() && ticker.tick(attacker, &mut sink) {}
+    Ok(Ticked {
+        ticks: ticker.k(),
+        wall_s: ticker.wall_s(),
+    })
 }

@@ -93,6 +93,28 @@ pub struct AgentConfig {
     pub trajectory: TrajectoryConfig,
     /// The known time-varying delay `τ(t)` of the torque channel.
     pub delay: DelayProfile,
+    /// `[agents.disturbance]`: this robot's own disturbance `d(t)`, one entry per joint, in
+    /// place of the scenario's `[disturbance]` (a team that mixes robots of different joint
+    /// counts gives one to each robot the scenario's does not fit).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub disturbance: Option<DisturbanceConfig>,
+    /// `[agents.gains]`: this robot's own `gain_k` and `gain_scaling` in place of
+    /// `[controller]`'s (a team of different robots needs gains per robot; `beta` stays the
+    /// team's: the detectors' residual `S = S₂ + β S₁` is read with it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gains: Option<AgentGains>,
+}
+
+/// `[agents.gains]`: a robot's own gains; a field left out is `[controller]`'s.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(deny_unknown_fields)]
+pub struct AgentGains {
+    /// `k` of `u = K r̂` for this robot.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain_k: Option<f64>,
+    /// How `k` becomes this robot's `K`: `"unit"` or `"inertia"`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gain_scaling: Option<crate::control::GainScaling>,
 }
 
 /// The keys of an agent that `[defaults]` can supply.
@@ -326,7 +348,8 @@ pub struct Scenario {
     /// Inherited by every agent that does not set the key itself.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub defaults: Option<AgentDefaults>,
-    /// `[[agents]]`: the robots, 1 to 256 of them, all with the same number of links.
+    /// `[[agents]]`: the robots, 1 to 256 of them, each with its own number of links (a team
+    /// may mix robots).
     pub agents: Vec<AgentConfig>,
     /// `[attack]`: the attack of the run.
     pub attack: AttackSource,
@@ -377,16 +400,12 @@ pub struct Resolved {
 }
 
 impl Resolved {
-    /// Runs `work` with the number of links every agent of the run has (validation makes them
-    /// share one) and the first agent's model; `None` for a run without agents.
-    pub fn with_links<W: crate::model::ForLinks>(&self, work: W) -> Option<W::Output> {
-        self.model().map(|m| m.with_links(work))
-    }
-
-    /// The model of the run's agents (the first agent's: validation makes every agent of a
-    /// run share one number of links); `None` for a run without agents.
-    pub fn model(&self) -> Option<&crate::model::ModelConfig> {
-        self.scenario.agents.first().map(|a| &a.model)
+    /// The number of links every robot of the run has; `None` for a team that mixes robots
+    /// of different joint counts, or a run without agents.
+    pub fn joint_count(&self) -> Option<usize> {
+        let mut dofs = self.scenario.agents.iter().map(|a| a.model.dof());
+        let first = dofs.next()?;
+        dofs.all(|d| d == first).then_some(first)
     }
 
     /// The attack on agent `agent_id` of the run: [`AgentAttack::compile`] of its profile, with
@@ -681,9 +700,26 @@ impl Scenario {
             model: agent.model.clone(),
             delay: agent.delay,
             noise: self.noise,
-            disturbance: self.disturbance.clone(),
+            disturbance: self.disturbance_of(agent).clone(),
             start: agent.trajectory.start_rad(),
         }
+    }
+
+    /// The controller of `agent`'s robot: `[controller]` with the robot's own
+    /// `[agents.gains]`.
+    pub fn controller_of(&self, agent: &AgentConfig) -> crate::control::ControllerConfig {
+        let mut c = self.controller;
+        if let Some(g) = agent.gains {
+            c.gain_k = g.gain_k.unwrap_or(c.gain_k);
+            c.gain_scaling = g.gain_scaling.unwrap_or(c.gain_scaling);
+        }
+        c
+    }
+
+    /// The disturbance `agent`'s robot feels: its own `[agents.disturbance]`, or the
+    /// scenario's `[disturbance]`.
+    pub fn disturbance_of<'a>(&'a self, agent: &'a AgentConfig) -> &'a DisturbanceConfig {
+        agent.disturbance.as_ref().unwrap_or(&self.disturbance)
     }
 
     /// The control-center side of `agent` in this scenario (its controller, seed and period).
@@ -692,7 +728,7 @@ impl Scenario {
             agent_id: agent.id,
             run_seed: self.seed,
             control_period_s: self.control_period_s,
-            controller: self.controller,
+            controller: self.controller_of(agent),
             model: agent.model.clone(),
             trajectory: agent.trajectory.clone(),
             delay: agent.delay,
@@ -715,9 +751,10 @@ impl Scenario {
             "detectors",
             self.duration_s,
             self.control_period_s,
-            self.agents.first().map(|a| a.model.dof()),
+            self.agents.iter().map(|a| a.model.dof()).max(),
         ));
         out.extend(self.roles.problems("roles"));
+        out.extend(self.mixed_team_role_problems());
         out
     }
 
@@ -835,21 +872,26 @@ impl Scenario {
     fn disturbance_value_problems(&self) -> Vec<Problem> {
         let mut out = Vec::new();
         let mut push = |path: String, message: String| out.push(Problem { path, message });
-        for (i, l) in self.disturbance.links.iter().enumerate() {
-            for (name, v) in [("amplitude", l.amplitude), ("omega_rad_s", l.omega_rad_s)] {
-                if !v.is_finite() {
-                    push(
-                        format!("disturbance.links[{i}].{name}"),
-                        format!("must be finite, got {v}"),
-                    );
+        let own = (self.agents.iter().enumerate()).filter_map(|(i, a)| {
+            Some((format!("agents[{i}].disturbance"), a.disturbance.as_ref()?))
+        });
+        for (at, d) in std::iter::once(("disturbance".to_string(), &self.disturbance)).chain(own) {
+            for (i, l) in d.links.iter().enumerate() {
+                for (name, v) in [("amplitude", l.amplitude), ("omega_rad_s", l.omega_rad_s)] {
+                    if !v.is_finite() {
+                        push(
+                            format!("{at}.links[{i}].{name}"),
+                            format!("must be finite, got {v}"),
+                        );
+                    }
                 }
             }
         }
         out
     }
 
-    /// `[[agents]]`: their number, then each agent in turn (ids unique, all with the first
-    /// agent's number of links).
+    /// `[[agents]]`: their number, then each agent in turn (ids unique, each its own number
+    /// of links).
     fn agents_problems(&self) -> Vec<Problem> {
         let mut out = Vec::new();
         let mut push = |path: String, message: String| out.push(Problem { path, message });
@@ -866,9 +908,16 @@ impl Scenario {
             );
         }
         let mut seen = BTreeMap::new();
-        let dof0 = self.agents.first().map(|a| a.model.dof());
         for (i, a) in self.agents.iter().enumerate() {
-            out.extend(agent_id_model_problems(i, a, dof0, &mut seen));
+            out.extend(agent_id_model_problems(i, a, &mut seen));
+            if let Some(k) = a.gains.and_then(|g| g.gain_k) {
+                if !(k.is_finite() && k > 0.0) {
+                    out.push(Problem {
+                        path: format!("agents[{i}].gains.gain_k"),
+                        message: format!("must be finite and > 0, got {k}"),
+                    });
+                }
+            }
             out.extend(agent_trajectory_problems(i, a));
             out.extend(delay_problems(&format!("agents[{i}].delay"), &a.delay));
         }
@@ -884,22 +933,58 @@ impl Scenario {
         }
     }
 
-    /// `[disturbance]`: one entry per link of the first agent.
+    /// Each robot's disturbance: one entry per link of the robot. The scenario's
+    /// `[disturbance]` is named once, for the first robot it does not fit.
     fn disturbance_length_problems(&self) -> Vec<Problem> {
         let mut out = Vec::new();
-        let mut push = |path: String, message: String| out.push(Problem { path, message });
-        if let Some(d) = self.agents.first().map(|a| a.model.dof()) {
-            if self.disturbance.links.len() != d {
-                push(
+        let mut shared_named = false;
+        for (i, a) in self.agents.iter().enumerate() {
+            let (d, found) = (a.model.dof(), self.disturbance_of(a).links.len());
+            if found == d {
+                continue;
+            }
+            let (path, message) = match &a.disturbance {
+                Some(_) => (
+                    format!("agents[{i}].disturbance.links"),
+                    format!("needs {d} entries (one per link), found {found}"),
+                ),
+                None if !std::mem::replace(&mut shared_named, true) => (
                     "disturbance.links".into(),
                     format!(
-                        "needs {d} entries (one per link), found {}",
-                        self.disturbance.links.len()
+                        "needs {d} entries (one per link of agents[{i}]), found {found}; a robot \
+                         of another joint count takes its own `[agents.disturbance]`"
                     ),
-                );
-            }
+                ),
+                None => continue,
+            };
+            out.push(Problem { path, message });
         }
         out
+    }
+
+    /// A program in a role (`[roles]`) is told one joint count for every robot
+    /// (docs/protocol.md): a team that mixes joint counts runs without one.
+    fn mixed_team_role_problems(&self) -> Vec<Problem> {
+        let dofs: std::collections::BTreeSet<usize> =
+            self.agents.iter().map(|a| a.model.dof()).collect();
+        if dofs.len() < 2 {
+            return Vec::new();
+        }
+        let counts: Vec<String> = dofs.iter().map(ToString::to_string).collect();
+        let roles = [
+            ("roles.attacker", self.roles.attacker.is_some()),
+            ("roles.monitor", self.roles.monitor.is_some()),
+        ];
+        (roles.iter().filter(|(_, set)| *set))
+            .map(|(path, _)| Problem {
+                path: (*path).into(),
+                message: format!(
+                    "a program in a role is told one joint count for every robot, and this \
+                     team mixes {} joints: run it with robots of one joint count",
+                    counts.join(" and ")
+                ),
+            })
+            .collect()
     }
 
     /// `[attack]`: exactly one source, a known preset, an inline profile that fits the agents.
@@ -938,11 +1023,10 @@ impl Scenario {
 }
 
 /// Agent `i`'s id (≥ 1, not in `seen` yet, which records it) and model (at most [`MAX_DOF`]
-/// links, as many as the first agent's `dof0`, its own parameters).
+/// links, its own parameters).
 fn agent_id_model_problems(
     i: usize,
     a: &AgentConfig,
-    dof0: Option<usize>,
     seen: &mut BTreeMap<u32, usize>,
 ) -> Vec<Problem> {
     let mut out = Vec::new();
@@ -962,12 +1046,6 @@ fn agent_id_model_problems(
         push(
             at("model"),
             format!("{dof} links exceed the maximum {MAX_DOF}"),
-        );
-    }
-    if Some(dof) != dof0 {
-        push(
-            at("model"),
-            "every agent of a run must have the same number of links".into(),
         );
     }
     for (f, m) in a.model.problems() {
@@ -1439,6 +1517,80 @@ pub fn line_column(text: &str, offset: usize) -> (usize, usize) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A team may mix robots of different joint counts: the paper's first two arms and the
+    /// three-link scenario's two. The scenario's two-entry disturbance does not fit the
+    /// three-link arms (named once, at the first), until they bring their own; gains per robot
+    /// are checked; a program in a role is refused for a mixed team.
+    #[test]
+    fn a_team_of_different_robots_validates_with_a_disturbance_and_gains_per_robot() {
+        let three_text = include_str!("../../scenarios/three-link.toml");
+        let three = load_str(three_text, "three-link.toml", None).expect("three-link");
+        let mut s = paper().expect("paper").scenario;
+        s.agents.truncate(2);
+        s.agents
+            .extend(three.scenario.agents.iter().take(2).cloned().map(|mut a| {
+                a.id += 2;
+                a
+            }));
+        let paths = |s: &Scenario| -> Vec<String> {
+            s.validate()
+                .iter()
+                .map(|p| format!("{}: {}", p.path, p.message))
+                .collect()
+        };
+        let said = paths(&s);
+        assert_eq!(said.len(), 1, "{said:#?}");
+        assert!(
+            said[0].starts_with(
+                "disturbance.links: needs 3 entries (one per link of agents[2]), found 2"
+            ),
+            "{said:#?}"
+        );
+        for a in &mut s.agents[2..] {
+            a.disturbance = Some(three.scenario.disturbance.clone());
+        }
+        assert_eq!(paths(&s), Vec::<String>::new());
+        let mut resolved = Resolved {
+            scenario: s.clone(),
+            attack: AttackProfile::default(),
+        };
+        assert_eq!(resolved.joint_count(), None);
+        resolved.scenario.agents.truncate(2);
+        assert_eq!(resolved.joint_count(), Some(2));
+        let center = |s: &Scenario, i: usize| s.center_params(&s.agents[i]).controller;
+        s.agents[3].gains = Some(AgentGains {
+            gain_k: Some(40.0),
+            gain_scaling: Some(crate::control::GainScaling::Inertia),
+        });
+        assert_eq!(center(&s, 2), s.controller);
+        assert_eq!(
+            (
+                center(&s, 3).gain_k,
+                center(&s, 3).gain_scaling,
+                center(&s, 3).beta
+            ),
+            (
+                40.0,
+                crate::control::GainScaling::Inertia,
+                s.controller.beta
+            )
+        );
+        s.agents[2].gains = Some(AgentGains {
+            gain_k: Some(-1.0),
+            gain_scaling: None,
+        });
+        s.agents[2].disturbance.as_mut().expect("set").links.pop();
+        s.roles.monitor = Some(toml::from_str("command = [\"judge\"]").expect("a role"));
+        let said = paths(&s);
+        for expected in [
+            "agents[2].gains.gain_k: must be finite and > 0, got -1",
+            "agents[2].disturbance.links: needs 3 entries (one per link), found 2",
+            "roles.monitor: a program in a role is told one joint count for every robot, and this team mixes 2 and 3 joints",
+        ] {
+            assert!(said.iter().any(|p| p.starts_with(expected)), "{expected}: {said:#?}");
+        }
+    }
 
     /// Regression (issue 18): syntax errors said only `TOML syntax: invalid float`, without
     /// where, although the code said they carried their line and column.

@@ -193,7 +193,7 @@ mod tests {
         use crate::model::{ModelConfig, TwoLinkParams, Vector};
         let r = crate::scenario::load_file(&repo().join("scenarios/paper-urdf.toml"))
             .expect("scenarios/paper-urdf.toml");
-        let urdf = r.model().expect("agents").clone();
+        let urdf = r.scenario.agents[0].model.clone();
         assert!(matches!(urdf, ModelConfig::Urdf(_)), "{urdf:?}");
         assert_eq!(urdf.dof(), 2);
         let ours = urdf.build::<2>().expect("two joints");

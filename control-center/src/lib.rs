@@ -1,4 +1,4 @@
-//! The control-center process: one [`CenterAgent`] per agent, fed by the attacker's (tampered)
+//! The control-center process: one [`CenterAgent`] per agent (with its robot's number of links), fed by the attacker's (tampered)
 //! measurements; each torque goes back to its agent stamped with its tick time, straight or,
 //! for an agent whose torques the run attacks, through the attacker. Purely
 //! event-driven: every agent's tick is computed as soon as its measurement arrives (agents are
@@ -9,7 +9,7 @@ pub mod monitor;
 
 use monitor::{Monitor, MonitorPorts};
 
-use fdi_common::control::CenterAgent;
+use fdi_common::control::{AnyCenterAgent, CenterAgent};
 use fdi_common::engine::{center_record, center_tick, tick_time};
 use fdi_common::plant::Measurement;
 use fdi_common::run_dir::Process;
@@ -52,7 +52,7 @@ pub struct ControlCenter;
 
 impl Role for ControlCenter {
     type Ports<X: Transport> = Ports<X>;
-    type Running<'a, X: Transport + 'a, const N: usize> = Center<'a, X, N>;
+    type Running<'a, X: Transport + 'a> = Center<'a, X>;
 
     fn identity(&self) -> (ipc::Role, Wake) {
         (ipc::Role::Center, Wake::Center)
@@ -74,15 +74,15 @@ impl Role for ControlCenter {
         Ports::open(transport, resolved)
     }
 
-    fn prepare<'a, X: Transport + 'a, const N: usize>(
+    fn prepare<'a, X: Transport + 'a>(
         &'a self,
         resolved: &'a Resolved,
         opened: &'a Opened<X, Ports<X>>,
-    ) -> Result<Center<'a, X, N>, CenterError> {
+    ) -> Result<Center<'a, X>, CenterError> {
         let s = &resolved.scenario;
         let slots = (s.agents.iter())
             .map(|a| {
-                CenterAgent::<N>::new(s.center_params(a))
+                AnyCenterAgent::new(s.center_params(a))
                     .map(|center| Slot { center, next: 0 })
                     .ok_or(CenterError::Dof(a.id))
             })
@@ -142,8 +142,8 @@ impl<X: Transport> Ports<X> {
 
 pub use fdi_runtime::process::PROGRESS_EVERY;
 
-struct Slot<const N: usize> {
-    center: CenterAgent<N>,
+struct Slot {
+    center: AnyCenterAgent,
     next: u64,
 }
 
@@ -177,19 +177,34 @@ impl Intake {
     }
 
     /// Admits measurement `m` (refused ones are counted) and controls its agent.
-    fn take<X: Transport, const N: usize>(
+    fn take<X: Transport>(
         &mut self,
         m: &MeasurementMsg,
-        slots: &mut [Slot<N>],
+        slots: &mut [Slot],
+        ports: &Ports<X>,
+        dt: f64,
+        trace: &mut TraceWriter,
+    ) {
+        let Some(i) = slots.iter().position(|x| x.center.agent_id() == m.agent) else {
+            self.refused += 1;
+            return;
+        };
+        let Slot { center, next } = &mut slots[i];
+        fdi_common::on_joint_count!(AnyCenterAgent, center, c => {
+            self.take_for(m, (i, c, next), ports, dt, trace)
+        });
+    }
+
+    /// [`Self::take`] for agent `i`, whose control center `center` has `N` links.
+    fn take_for<X: Transport, const N: usize>(
+        &mut self,
+        m: &MeasurementMsg,
+        (i, center, next): (usize, &mut CenterAgent<N>, &mut u64),
         ports: &Ports<X>,
         dt: f64,
         trace: &mut TraceWriter,
     ) {
         let received = monotonic_ns();
-        let Some(i) = slots.iter().position(|x| x.center.agent_id() == m.agent) else {
-            self.refused += 1;
-            return;
-        };
         let input = match process::admit_measurement(m, N, &mut self.sequence, dt, trace) {
             process::Admission::Use(()) => Some(Measurement {
                 y: to_vector::<N>(&m.y),
@@ -206,7 +221,7 @@ impl Intake {
         }
         let link = &ports.links[ports.route[i]];
         if let Err(e) = control(
-            &mut slots[i],
+            (center, next),
             (m, input.as_ref()),
             received,
             link,
@@ -219,20 +234,20 @@ impl Intake {
     }
 }
 
-/// Computes agent `slot`'s tick from the admitted message `m` (received at `received`) and
+/// Computes the tick of the agent of `center` (its next tick due: `next`) from the admitted message `m` (received at `received`) and
 /// its measurement (`None`: the tick's input is missing), sends the torque on `link`, stamped
 /// with its tick time, and records it.
 fn control<X: Transport, const N: usize>(
-    slot: &mut Slot<N>,
+    (center, next): (&mut CenterAgent<N>, &mut u64),
     (m, input): (&MeasurementMsg, Option<&Measurement<N>>),
     received: u64,
     link: &AgentLink<X>,
     dt: f64,
     trace: &mut TraceWriter,
 ) -> Result<(), CenterError> {
-    slot.next = m.seq + 1;
+    *next = m.seq + 1;
     let t = tick_time(m.seq, dt);
-    let out = center_tick(&mut slot.center, t, input);
+    let out = center_tick(center, t, input);
     let sent = link.torque.send(TorqueMsg {
         seq: m.seq,
         agent: m.agent,
@@ -279,8 +294,8 @@ fn announce_rejoined<X: Transport>(
 
 /// Reports progress to the launcher, over the agents controlled now, every
 /// [`PROGRESS_EVERY`] ticks and at the end.
-fn report_progress<X: Transport, const N: usize>(
-    slots: &[Slot<N>],
+fn report_progress<X: Transport>(
+    slots: &[Slot],
     liveness: &Liveness,
     reported: &mut u64,
     ticks: u64,
@@ -302,8 +317,8 @@ fn report_progress<X: Transport, const N: usize>(
 
 /// Realtime: records and reports every agent silent for [`process::lost_after_ns`] as lost
 /// (the others stay controlled).
-fn declare_lost<X: Transport, const N: usize>(
-    slots: &[Slot<N>],
+fn declare_lost<X: Transport>(
+    slots: &[Slot],
     liveness: &mut Liveness,
     now: u64,
     ticks: u64,
@@ -327,11 +342,11 @@ fn declare_lost<X: Transport, const N: usize>(
 
 /// The control center over a run: an agent controller per agent, the intake, the monitor (if
 /// any) and the run's timing.
-pub struct Center<'a, X: Transport, const N: usize> {
+pub struct Center<'a, X: Transport> {
     resolved: &'a Resolved,
     ports: &'a Ports<X>,
     conn: &'a Connection<X>,
-    slots: Vec<Slot<N>>,
+    slots: Vec<Slot>,
     intake: Intake,
     monitor: Option<Monitor>,
     /// Measurements the monitor let through, to be controlled.
@@ -345,7 +360,7 @@ pub struct Center<'a, X: Transport, const N: usize> {
     strategy: WaitStrategy,
 }
 
-impl<X: Transport, const N: usize> role::Running for Center<'_, X, N> {
+impl<X: Transport> role::Running for Center<'_, X> {
     /// The run started at `epoch_ns`: the agents' liveness counts from then, and the monitor
     /// program (if any) is given its time from then.
     fn begin(&mut self, epoch_ns: u64, _: &mut TraceWriter) -> Result<(), CenterError> {
@@ -393,11 +408,11 @@ impl<X: Transport, const N: usize> role::Running for Center<'_, X, N> {
             self.intake.refused,
             self.slots
                 .iter()
-                .map(|x| x.center.rejected_inputs)
+                .map(|x| x.center.rejected_inputs())
                 .sum::<u64>(),
             self.slots
                 .iter()
-                .map(|x| x.center.missing_inputs)
+                .map(|x| x.center.missing_inputs())
                 .sum::<u64>(),
         );
         let mut notes = Vec::new();
@@ -417,9 +432,9 @@ impl<X: Transport, const N: usize> role::Running for Center<'_, X, N> {
     }
 }
 
-impl<'a, X: Transport, const N: usize> Center<'a, X, N> {
+impl<'a, X: Transport> Center<'a, X> {
     /// The state of a run (its clocks are set at the start).
-    fn new(resolved: &'a Resolved, opened: &'a Opened<X, Ports<X>>, slots: Vec<Slot<N>>) -> Self {
+    fn new(resolved: &'a Resolved, opened: &'a Opened<X, Ports<X>>, slots: Vec<Slot>) -> Self {
         let s = &resolved.scenario;
         let ids: Vec<u32> = s.agents.iter().map(|a| a.id).collect();
         let ticks = resolved.ticks();

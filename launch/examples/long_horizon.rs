@@ -24,7 +24,7 @@ use clap::{Args, Parser, Subcommand};
 use fdi_common::attack::presets;
 use fdi_common::control::{NnEstimator, NnParams, Observer};
 use fdi_common::delay::DelayProfile;
-use fdi_common::engine::{run_inproc, RunSummary};
+use fdi_common::engine::{run_inproc_any, RunSummary};
 use fdi_common::model::Vector;
 use fdi_common::records::TickRecord;
 use fdi_common::rng::{stream, Purpose};
@@ -451,7 +451,7 @@ fn measure(r: &Resolved, window_s: f64) -> Result<Measured> {
         .map(|a| (a.id, Tracker::new(s, a, nn_params, per_window)))
         .collect();
     let mut mismatch: Option<String> = None;
-    let summary = run_inproc::<N>(r, |rec: &TickRecord| {
+    let summary = run_inproc_any(r, |rec: &TickRecord| {
         let id = rec.agent.agent;
         let Some(tr) = trackers.get_mut(&id) else {
             return;
@@ -541,7 +541,7 @@ fn delay_sweep(setup: &Setup, delays_ms: &[f64]) -> Result<()> {
         let mut s = setup.clone();
         s.delay_ms = Some(ms);
         let r = s.resolve()?;
-        let summary = run_inproc::<N>(&r, |_| {})?;
+        let summary = run_inproc_any(&r, |_| {})?;
         let (id, m) = summary
             .metrics
             .iter()
@@ -557,7 +557,7 @@ const PAPER_TABLE1_PROPOSED: [(u32, f64); 4] = [(1, 0.008), (2, 0.013), (3, 0.00
 
 /// Per agent id, RMSE (rad) and false alarms of one in-process run.
 fn rmse_and_alarms(setup: &Setup) -> Result<BTreeMap<u32, (f64, u64)>> {
-    let summary = run_inproc::<N>(&setup.resolve()?, |_| {})?;
+    let summary = run_inproc_any(&setup.resolve()?, |_| {})?;
     summary
         .metrics
         .iter()

@@ -4,7 +4,6 @@
 
 use std::collections::BTreeMap;
 
-use fdi_common::model::{EulerLagrange, ForLinks};
 use fdi_common::records::{true_s, Joints, TickRecord};
 use fdi_common::scenario::Resolved;
 use fdi_common::trajectory::TrajectoryConfig;
@@ -49,14 +48,10 @@ pub struct Columns {
 impl Columns {
     /// The columns of `resolved`'s records; `actuation`: its records carry the torque path's.
     pub fn new(resolved: &Resolved, actuation: bool) -> Self {
-        struct Pick;
-        impl ForLinks for Pick {
-            type Output = (usize, DesiredFn);
-            fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-                (N, desired::<N>)
-            }
-        }
-        let (links, desired) = resolved.with_links(Pick).unwrap_or((0, desired::<0>));
+        // The package takes teams of one joint count (`py_scenario::with_overrides`).
+        let (links, desired) = (resolved.joint_count())
+            .and_then(|n| fdi_common::with_joint_count!(n, N => (N, desired::<N> as DesiredFn)))
+            .unwrap_or((0, desired::<0>));
         let s = &resolved.scenario;
         let mut c = Self {
             links,

@@ -3,7 +3,7 @@
 //! injection to the scenario's own attack profile. Pure Rust: the Python classes wrap it.
 
 use fdi_common::attack::{Attacker, Injection, ProfileAttacker, Sent, TorqueInjection};
-use fdi_common::engine::{lockstep_any, AnyLockstep, RunSummary};
+use fdi_common::engine::{Lockstep, RunSummary};
 use fdi_common::model::Vector;
 use fdi_common::plant::Measurement;
 use fdi_common::records::TickRecord;
@@ -224,7 +224,7 @@ pub struct Episode {
     spec: Spec,
     links: usize,
     agents: Vec<u32>,
-    engine: Option<Box<dyn AnyLockstep<EnvAttacker>>>,
+    engine: Option<Lockstep>,
     attacker: EnvAttacker,
     seen: Seen,
     summary: Option<RunSummary>,
@@ -260,8 +260,10 @@ impl Episode {
     /// An episode of `resolved` at its start.
     pub fn new(resolved: Resolved, spec: Spec) -> Result<Self, String> {
         check(&resolved, &spec)?;
-        let engine = lockstep_any::<EnvAttacker>(&resolved).map_err(|e| e.to_string())?;
-        let links = engine.links();
+        let engine = Lockstep::new(&resolved).map_err(|e| e.to_string())?;
+        let links = resolved
+            .joint_count()
+            .ok_or("the environments take robots of one joint count; this team mixes them")?;
         let agents: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
         let attacker = EnvAttacker::new(&resolved, &spec, links);
         let n = agents.len();
@@ -407,7 +409,7 @@ impl Episode {
         let mut attacked = vec![0u64; agents.len()];
         for _ in 0..self.spec.decision_period {
             let mut i = 0;
-            let ran = engine.tick(&mut self.attacker, &mut |r: &TickRecord| {
+            let ran = engine.tick(&mut self.attacker, |r: &TickRecord| {
                 seen_record(seen, l, i, r);
                 attacked[i] += u64::from(fdi_common::detect::in_force(r));
                 i += 1;

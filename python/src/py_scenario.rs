@@ -162,6 +162,14 @@ pub fn with_overrides(
              the package runs the in-process engine, lockstep only",
         ));
     }
+    if r.joint_count().is_none() {
+        return Err(problem(
+            "agents",
+            "this team mixes robots of different joint counts; the package's environments, \
+             spaces and tick table take robots of one joint count (`fdi-launch run` runs a \
+             mixed team)",
+        ));
+    }
     Ok(r)
 }
 

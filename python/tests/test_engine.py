@@ -42,6 +42,13 @@ def test_a_team_of_urdf_arms_runs_as_on_the_command_line(fdi_launch, tmp_path):
     assert r.ticks is not None and len(r.ticks["q7_rad"]) == 4 * 500
 
 
+def test_a_team_of_different_joint_counts_is_refused_naming_the_agents():
+    scenario = pathlib.Path(__file__).parents[2] / "scenarios" / "mixed-team.toml"
+    with pytest.raises(fdi_mas.ScenarioError, match="agents: this team mixes robots") as e:
+        fdi_mas.Scenario.load(str(scenario))
+    assert "fdi-launch run" in str(e.value)
+
+
 def test_open_run_reads_a_command_line_run_as_run_gives_it(fdi_launch, tmp_path):
     summary, run_dir = cli_run(fdi_launch, tmp_path, "--duration-s", "0.5")
     opened = fdi_mas.open_run(run_dir)

@@ -3,7 +3,7 @@
 
 use fdi_common::attack::{presets, AgentAttack};
 use fdi_common::control::CenterAgent;
-use fdi_common::engine::{run_inproc, tick_time};
+use fdi_common::engine::{run_inproc_any, tick_time};
 use fdi_common::model::Vector;
 use fdi_common::plant::Plant;
 use fdi_common::records::TickRecord;
@@ -17,7 +17,7 @@ fn paper(duration_s: f64) -> Resolved {
 
 fn trace(r: &Resolved) -> (Vec<TickRecord>, String) {
     let mut v = Vec::new();
-    let s = run_inproc::<2>(r, |rec| v.push(*rec)).expect("engine runs");
+    let s = run_inproc_any(r, |rec| v.push(*rec)).expect("engine runs");
     (v, s.trace_digest)
 }
 
@@ -133,10 +133,10 @@ fn with_s_hat_forced_to_the_true_attack_the_controller_matches_the_attack_free_r
 #[test]
 fn proposed_beats_traditional_on_a_shortened_paper_run() {
     // 15 s covers robot 1's first two attack segments and robot 2's first switch.
-    let prop = run_inproc::<2>(&paper(15.0), |_| {}).expect("runs");
+    let prop = run_inproc_any(&paper(15.0), |_| {}).expect("runs");
     let mut t = paper(15.0);
     t.scenario.controller.mode = ControllerMode::Traditional;
-    let trad = run_inproc::<2>(&t, |_| {}).expect("runs");
+    let trad = run_inproc_any(&t, |_| {}).expect("runs");
     for id in ["1", "2", "3"] {
         let (p, q) = (prop.rmse_rad[id], trad.rmse_rad[id]);
         assert!(q > 1.5 * p, "robot {id}: traditional {q} vs proposed {p}");
@@ -261,7 +261,7 @@ fn execute_with_writes_the_run_directory_of_a_supplied_attacker_on_the_inproc_en
 /// three-link scenario.
 #[test]
 fn the_engine_ticked_from_outside_is_the_whole_run_and_its_alarms_are_the_records() {
-    use fdi_common::engine::{lockstep_any, run_inproc_any};
+    use fdi_common::engine::{run_inproc_any, Lockstep};
     let three = scenario::load_file(
         &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios/three-link.toml"),
     )
@@ -271,11 +271,11 @@ fn the_engine_ticked_from_outside_is_the_whole_run_and_its_alarms_are_the_record
         let mut whole = Vec::new();
         let expected = run_inproc_any(&r, |rec| whole.push(*rec)).expect("runs");
         let mut attacker = r.profile_attacker();
-        let mut engine = lockstep_any(&r).expect("an engine");
+        let mut engine = Lockstep::new(&r).expect("an engine");
         let mut stepped = Vec::new();
         let mut alarms = 0u64;
         let mut ticks = 0u64;
-        while engine.tick(&mut attacker, &mut |rec| stepped.push(*rec)) {
+        while engine.tick(&mut attacker, |rec| stepped.push(*rec)) {
             ticks += 1;
             for a in &r.scenario.agents {
                 let on = engine.evaluator().alarm(a.id, 0).expect("a known agent");
@@ -287,7 +287,7 @@ fn the_engine_ticked_from_outside_is_the_whole_run_and_its_alarms_are_the_record
         assert_eq!(ticks, r.ticks());
         assert_eq!(engine.k(), r.ticks());
         assert!(
-            !engine.tick(&mut attacker, &mut |_| {}),
+            !engine.tick(&mut attacker, |_| {}),
             "nothing runs after the end"
         );
         let got = engine.finish(&r, "paper");
@@ -342,8 +342,7 @@ fn books_kept_from_the_records_are_the_whole_run_s() {
 
 /// The evaluator's answers for an agent and a detector it does not have.
 fn engine_unknown(r: &Resolved) -> (Option<bool>, Option<(f64, bool)>) {
-    let engine = fdi_common::engine::lockstep_any::<fdi_common::attack::ProfileAttacker>(r)
-        .expect("an engine");
+    let engine = fdi_common::engine::Lockstep::new(r).expect("an engine");
     let ev = engine.evaluator();
     let detectors = fdi_common::detect::names().len();
     assert_eq!(ev.alarm(r.scenario.agents[0].id, detectors), None);

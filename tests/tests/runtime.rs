@@ -92,6 +92,66 @@ fn seven_joint_urdf_arms_lockstep_ipc_digest_equals_the_in_process_digest() {
     }
 }
 
+/// A team of different robots (scenarios/mixed-team.toml: two seven-joint Pandas and two of
+/// the paper's two-link arms, each with its own gains and disturbance) over IPC in lockstep
+/// gives the in-process digest; each robot's trace carries its own number of joints, and the
+/// CSV export has a column per joint of the largest arm, empty for the smaller arms.
+#[test]
+fn a_mixed_team_lockstep_ipc_digest_equals_the_in_process_digest() {
+    let file = fdi_tests::repo_path("scenarios/mixed-team.toml");
+    let (out, run_dir) = ipc_equals_inproc(&file, 7, 1);
+    let joints = |agent: u32| {
+        let trace = run_dir.join(format!("traces/agent-{agent}.trace"));
+        let records = fdi_tests::trace_records(&trace);
+        let mut counts: Vec<usize> = (records.iter())
+            .filter_map(|r| match r {
+                fdi_common::trace::TraceRecord::Agent(a) => Some(a.q.as_slice().len()),
+                _ => None,
+            })
+            .collect();
+        counts.dedup();
+        counts
+    };
+    assert_eq!(
+        [joints(1), joints(2), joints(3), joints(4)],
+        [vec![7], vec![7], vec![2], vec![2]]
+    );
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run_dir.join("summary.json")).expect("summary.json"))
+            .expect("the summary is JSON");
+    for id in ["1", "2", "3", "4"] {
+        let rmse = &summary["metrics"][id]["rmse_rad"];
+        assert!(
+            rmse.as_f64().is_some_and(|r| r < 0.1),
+            "robot {id}: RMSE {rmse}"
+        );
+    }
+    let export =
+        fdi_tests::launch_plain(&["trace", "export", &run_dir.to_string_lossy()], WATCHDOG);
+    assert!(
+        export.status.success(),
+        "{}",
+        String::from_utf8_lossy(&export.stderr)
+    );
+    for (agent, empty) in [(1, false), (3, true)] {
+        let file = run_dir.join(format!("export/agent-{agent}.csv"));
+        let text = std::fs::read_to_string(&file).expect("the agent's CSV");
+        let header: Vec<&str> = text.lines().next().expect("a header").split(',').collect();
+        let q7 = header
+            .iter()
+            .position(|c| *c == "q7_rad")
+            .expect("a q7 column");
+        for row in text.lines().skip(1).take(40) {
+            assert_eq!(
+                row.split(',').nth(q7) == Some(""),
+                empty,
+                "agent {agent}: {row}"
+            );
+        }
+    }
+    drop(out);
+}
+
 /// Runs `scenario` for 2 s over IPC and in process: the same digest and RMSE, `joints` joints
 /// in agent `agent`'s trace. The output folder and the IPC run's directory in it.
 fn ipc_equals_inproc(

@@ -1,8 +1,9 @@
 //! One lifecycle for every role of a run (agent, attacker, control center, replayer), and the
 //! process shell that drives it, written once.
 //!
-//! A role is opened (its ports on the run's transport), prepared for the run's number of links
-//! (before it reports ready: a role that cannot run fails before the start), begun at the
+//! A role is opened (its ports on the run's transport), prepared for the run (each robot with
+//! its own number of links; before it reports ready: a role that cannot run fails before the
+//! start), begun at the
 //! launcher's start, then turned and waited on until its part of the run is done, and ended
 //! (what it says on record, its trace flushed, done reported, its ports held until the
 //! launcher's stop). [`drive`] does this on any transport — shared memory between processes
@@ -10,7 +11,6 @@
 //! and checks the stop (a signal, the launcher's death or its stop message) between every turn
 //! and wait, so no role writes its own loop around them.
 
-use fdi_common::model::{EulerLagrange, ForLinks, ModelConfig};
 use fdi_common::scenario::Resolved;
 use fdi_common::trace::TraceWriter;
 
@@ -56,13 +56,13 @@ pub struct Opened<X: Transport, P> {
 }
 
 /// One role of a run. Its ports are opened on a connection the shell makes
-/// ([`Role::identity`]); its state over a run of agents of `N` links is
-/// [`Role::Running`].
+/// ([`Role::identity`]); its state over a run is [`Role::Running`] (a role whose state
+/// depends on a robot's number of links picks it in [`Role::prepare`]: [`Boxed`]).
 pub trait Role {
     /// Its own ports on the transport `X`.
     type Ports<X: Transport>;
-    /// Its state over a run whose agents have `N` links.
-    type Running<'a, X: Transport + 'a, const N: usize>: Running
+    /// Its state over a run.
+    type Running<'a, X: Transport + 'a>: Running
     where
         Self: 'a;
 
@@ -79,16 +79,12 @@ pub trait Role {
         transport: &X,
         resolved: &Resolved,
     ) -> Result<Self::Ports<X>, RoleError>;
-    /// The model whose number of links it runs with: the run's agents'.
-    fn model<'r>(&self, resolved: &'r Resolved) -> Result<&'r ModelConfig, RoleError> {
-        resolved.model().ok_or(RoleError::NoAgents)
-    }
     /// Its state for the run, before it reports ready.
-    fn prepare<'a, X: Transport + 'a, const N: usize>(
+    fn prepare<'a, X: Transport + 'a>(
         &'a self,
         resolved: &'a Resolved,
         opened: &'a Opened<X, Self::Ports<X>>,
-    ) -> Result<Self::Running<'a, X, N>, RoleError>;
+    ) -> Result<Self::Running<'a, X>, RoleError>;
 }
 
 /// A role over a run, from the launcher's start to its end.
@@ -101,6 +97,54 @@ pub trait Running {
     fn wait(&mut self) -> Result<(), RoleError>;
     /// Once done: the ticks it reports done with, and its note on record.
     fn end(self, trace: &mut TraceWriter) -> Result<End, RoleError>;
+}
+
+/// A [`Running`] role whose type is chosen at run time (an agent's, by its robot's number of
+/// links).
+pub struct Boxed<'a>(Box<dyn BoxedRunning + 'a>);
+
+impl<'a> Boxed<'a> {
+    pub fn new(running: impl Running + 'a) -> Self {
+        Self(Box::new(running))
+    }
+}
+
+/// [`Running`] behind a box: its end takes the box.
+trait BoxedRunning {
+    fn begin(&mut self, epoch_ns: u64, trace: &mut TraceWriter) -> Result<(), RoleError>;
+    fn turn(&mut self, trace: &mut TraceWriter) -> Result<Turn, RoleError>;
+    fn wait(&mut self) -> Result<(), RoleError>;
+    fn end(self: Box<Self>, trace: &mut TraceWriter) -> Result<End, RoleError>;
+}
+
+impl<R: Running> BoxedRunning for R {
+    fn begin(&mut self, epoch_ns: u64, trace: &mut TraceWriter) -> Result<(), RoleError> {
+        Running::begin(self, epoch_ns, trace)
+    }
+    fn turn(&mut self, trace: &mut TraceWriter) -> Result<Turn, RoleError> {
+        Running::turn(self, trace)
+    }
+    fn wait(&mut self) -> Result<(), RoleError> {
+        Running::wait(self)
+    }
+    fn end(self: Box<Self>, trace: &mut TraceWriter) -> Result<End, RoleError> {
+        Running::end(*self, trace)
+    }
+}
+
+impl Running for Boxed<'_> {
+    fn begin(&mut self, epoch_ns: u64, trace: &mut TraceWriter) -> Result<(), RoleError> {
+        self.0.begin(epoch_ns, trace)
+    }
+    fn turn(&mut self, trace: &mut TraceWriter) -> Result<Turn, RoleError> {
+        self.0.turn(trace)
+    }
+    fn wait(&mut self) -> Result<(), RoleError> {
+        self.0.wait()
+    }
+    fn end(self, trace: &mut TraceWriter) -> Result<End, RoleError> {
+        self.0.end(trace)
+    }
 }
 
 /// Connects `role` in the run `prefix` and opens its ports.
@@ -126,27 +170,8 @@ pub fn drive<R: Role, X: Transport>(
     shutdown: &Shutdown,
     trace: &mut TraceWriter,
 ) -> Result<Ended, RoleError> {
-    struct Drive<'a, R: Role, X: Transport> {
-        role: &'a R,
-        resolved: &'a Resolved,
-        opened: &'a Opened<X, R::Ports<X>>,
-        shutdown: &'a Shutdown,
-        trace: &'a mut TraceWriter,
-    }
-    impl<R: Role, X: Transport> ForLinks for Drive<'_, R, X> {
-        type Output = Result<Ended, RoleError>;
-        fn call<const N: usize>(self, _: Box<dyn EulerLagrange<N>>) -> Self::Output {
-            let running = self.role.prepare::<X, N>(self.resolved, self.opened)?;
-            drive_running(running, &self.opened.conn, self.shutdown, self.trace)
-        }
-    }
-    role.model(resolved)?.with_links(Drive {
-        role,
-        resolved,
-        opened,
-        shutdown,
-        trace,
-    })
+    let running = role.prepare::<X>(resolved, opened)?;
+    drive_running(running, &opened.conn, shutdown, trace)
 }
 
 fn drive_running<X: Transport>(

@@ -1,6 +1,6 @@
 //! The attacker as a value: what the man in the middle does to each agent's messages at each
-//! tick. The in-process engine takes one ([`crate::engine::run_inproc_with`],
-//! [`crate::engine::run_inproc_any_with`]); the scenario's attack profile is one
+//! tick. The in-process engine takes one ([`crate::engine::run_inproc_any_with`],
+//! [`crate::engine::tick_inproc_any_with`]); the scenario's attack profile is one
 //! ([`super::ProfileAttacker`], what the engine runs by default).
 
 use crate::attack::injection::{Injection, TorqueInjection};

@@ -359,6 +359,35 @@ impl<const N: usize> CenterAgent<N> {
     }
 }
 
+crate::per_joint_count!(
+    /// A [`CenterAgent`] of any number of links: the control center of a team that mixes
+    /// robots holds one per robot.
+    #[derive(Debug)]
+    pub enum AnyCenterAgent = CenterAgent
+);
+
+impl AnyCenterAgent {
+    /// [`CenterAgent::new`] with the number of links of `params`' model.
+    pub fn new(params: CenterParams) -> Option<Self> {
+        let dof = params.model.dof();
+        crate::with_joint_count!(dof, N => CenterAgent::<N>::new(params).map(Self::from)).flatten()
+    }
+
+    pub fn agent_id(&self) -> u32 {
+        crate::on_joint_count!(AnyCenterAgent, self, c => c.agent_id())
+    }
+
+    /// [`CenterAgent::rejected_inputs`].
+    pub fn rejected_inputs(&self) -> u64 {
+        crate::on_joint_count!(AnyCenterAgent, self, c => c.rejected_inputs)
+    }
+
+    /// [`CenterAgent::missing_inputs`].
+    pub fn missing_inputs(&self) -> u64 {
+        crate::on_joint_count!(AnyCenterAgent, self, c => c.missing_inputs)
+    }
+}
+
 /// What steps 1–4 of a tick work out, for the steps after them.
 struct TickInputs<const N: usize> {
     t: f64,

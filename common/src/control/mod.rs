@@ -7,7 +7,7 @@ pub mod detection;
 pub mod estimator;
 pub mod observer;
 
-pub use center::{CenterAgent, CenterOutput, CenterParams};
+pub use center::{AnyCenterAgent, CenterAgent, CenterOutput, CenterParams};
 pub use config::{
     ControllerConfig, ControllerMode, DetectionConfig, GainScaling, ObserverInput, UpdateLaw,
 };

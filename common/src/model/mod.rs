@@ -5,6 +5,7 @@
 //! plant, the control center, the processes, the launcher) is generic over the number of links.
 //! A robot of a URDF file needs none of that ([`urdf`], `kind = "urdf"`).
 
+pub mod joint_count;
 pub mod robot;
 pub mod three_link;
 pub mod two_link;

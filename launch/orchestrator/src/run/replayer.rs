@@ -104,7 +104,7 @@ pub struct Ports<X: Transport> {
 
 impl Role for Replayer {
     type Ports<X: Transport> = Ports<X>;
-    type Running<'a, X: Transport + 'a, const N: usize> = Replay<'a, X>;
+    type Running<'a, X: Transport + 'a> = Replay<'a, X>;
 
     fn identity(&self) -> (ipc::Role, Wake) {
         (ipc::Role::Attacker, Wake::Attacker)
@@ -131,7 +131,7 @@ impl Role for Replayer {
         })
     }
 
-    fn prepare<'a, X: Transport + 'a, const N: usize>(
+    fn prepare<'a, X: Transport + 'a>(
         &'a self,
         resolved: &'a Resolved,
         opened: &'a Opened<X, Ports<X>>,
