@@ -1242,9 +1242,14 @@ fn resolve_attack(scenario: &Scenario, base_dir: Option<&Path>) -> (AttackProfil
     let mut problems = Vec::new();
     let mut attack = AttackProfile::default();
     if let Some(name) = &scenario.attack.preset {
-        attack = presets::preset(name)
-            .unwrap_or_default()
-            .for_agents(&scenario.agent_dofs());
+        if let Some(p) = presets::preset(name) {
+            let (p, found) = preset_for(p, name, scenario);
+            attack = p;
+            problems.extend(found.into_iter().map(|p| Problem {
+                path: format!("attack.{}", p.path),
+                message: p.message,
+            }));
+        }
     } else if let Some(p) = &scenario.attack.profile {
         attack = p.clone();
     } else if let Some(file) = &scenario.attack.file {
@@ -1391,12 +1396,37 @@ pub fn validate_attack_alone(path: &Path) -> Result<AttackProfile, ScenarioError
     }
 }
 
+/// The preset `name` (`profile`) on the agents of `scenario`: the channels of its agents, and
+/// a problem for each that names a link the agent's robot does not have (a preset written for
+/// two-link arms on a one-joint pendulum), at `preset(NAME).channels[i]…`.
+fn preset_for(
+    profile: AttackProfile,
+    name: &str,
+    scenario: &Scenario,
+) -> (AttackProfile, Vec<Problem>) {
+    let profile = profile.for_agents(&scenario.agent_dofs());
+    let problems = (profile.problems(&scenario.agent_dofs()).into_iter())
+        .map(|(path, message)| Problem {
+            path: format!("preset({name}).{path}"),
+            message,
+        })
+        .collect();
+    (profile, problems)
+}
+
 /// `--attack` argument: a preset name or a file path. A preset keeps only the channels of
 /// agents in the scenario (the shipped presets are written for the paper's four robots); a file
 /// must name only agents of the scenario.
 pub fn attack_from_arg(arg: &str, scenario: &Scenario) -> Result<AttackProfile, ScenarioError> {
     if let Some(p) = presets::preset(arg) {
-        return Ok(p.for_agents(&scenario.agent_dofs()));
+        let (p, problems) = preset_for(p, arg, scenario);
+        return match problems.is_empty() {
+            true => Ok(p),
+            false => Err(ScenarioError {
+                source_name: format!("--attack {arg}"),
+                problems,
+            }),
+        };
     }
     let path = Path::new(arg);
     // `Path::exists` is false for any error (a symlink loop, no permission): only a name that

@@ -305,18 +305,24 @@ mod tests {
         assert_eq!(p[0].path, "agents[0].model.path");
         assert!(p[0].message.contains("missing.urdf"), "{p:?}");
 
-        std::fs::write(
-            dir.path().join("pendulum.urdf"),
-            "<robot name=\"pendulum\"><link name=\"a\"/><link name=\"b\"><inertial>\
-             <mass value=\"1\"/><inertia ixx=\"1\" ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" \
-             izz=\"1\"/></inertial></link><joint name=\"j\" type=\"continuous\"><parent \
-             link=\"a\"/><child link=\"b\"/><axis xyz=\"0 0 1\"/></joint></robot>",
-        )
-        .expect("write");
-        let p = load("path = \"pendulum.urdf\"");
+        // Thirteen joints: one more than the largest joint count.
+        let mut snake = String::from("<robot name=\"snake13\"><link name=\"l0\"/>");
+        for i in 1..=13 {
+            snake.push_str(&format!(
+                "<link name=\"l{i}\"><inertial><mass value=\"1\"/><inertia ixx=\"1\" \
+                 ixy=\"0\" ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link>\
+                 <joint name=\"j{i}\" type=\"continuous\"><parent link=\"l{}\"/><child \
+                 link=\"l{i}\"/><axis xyz=\"0 0 1\"/></joint>",
+                i - 1
+            ));
+        }
+        snake.push_str("</robot>");
+        std::fs::write(dir.path().join("snake13.urdf"), snake).expect("write");
+        let p = load("path = \"snake13.urdf\"");
         assert_eq!(p[0].path, "agents[0].model", "{p:?}");
         assert!(
-            p[0].message.contains("moves 1 joint;") && p[0].message.contains("2, 3, 4, 5, 6 or 7"),
+            p[0].message
+                .contains("13 joints move, at most 12 may: lock the others"),
             "{p:?}"
         );
         // Every other agent has two links: the paper's.

@@ -28,7 +28,7 @@ import time
 
 import iceoryx2 as iox
 
-MAX_DOF = 7
+MAX_DOF = 12
 GAP = 1  # flags bit 0 of MeasurementMsg and TorqueMsg: a gap marker, no data
 START, STOP = 1, 2  # ControlMsg.command
 READY, PROGRESS, DONE, LOST, REJOINED = 1, 2, 3, 4, 5  # StatusMsg.kind

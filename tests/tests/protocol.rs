@@ -1105,14 +1105,14 @@ fn an_altered_page_is_reported() {
             "a wrong array length",
             altered(
                 &doc,
-                "| `y` | 24 | `[f64; 7]` |",
+                "| `y` | 24 | `[f64; 12]` |",
                 "| `y` | 24 | `[f64; 5]` |",
             ),
-            "MeasurementMsg.y: type `[f64; 5]` has 40 bytes, the field 56",
+            "MeasurementMsg.y: type `[f64; 5]` has 40 bytes, the field 96",
         ),
         (
             "a field left out",
-            altered(&doc, "| `reserved` | 132 | `u32` | 0 |\n", ""),
+            altered(&doc, "| `reserved` | 172 | `u32` | 0 |\n", ""),
             "TorqueMsg.reserved: a field of the struct the table leaves out",
         ),
         (
@@ -1213,7 +1213,7 @@ fn the_table_parser_reads_cells_and_skips_code_blocks() {
     assert_eq!(t[0].lead, "type name `x`, 8 bytes, alignment 8");
     assert_eq!(t[0].rows, vec![vec!["a", "0", "u64", "first"]]);
     assert_eq!(type_line(&t[0].lead), Some(("x".into(), 8, 8)));
-    assert_eq!(doc_type("[f64; MAX_DOF]"), Some(("[f64; 7]".into(), 56)));
+    assert_eq!(doc_type("[f64; MAX_DOF]"), Some(("[f64; 12]".into(), 96)));
     assert_eq!(eval("n·burst", 3, 400), Some(1200));
     assert_eq!(eval("n + 6", 3, 400), Some(9));
     assert_eq!(eval("2 · x", 3, 400), None);

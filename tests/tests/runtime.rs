@@ -152,6 +152,32 @@ fn a_mixed_team_lockstep_ipc_digest_equals_the_in_process_digest() {
     drop(out);
 }
 
+/// The smallest and the largest joint count a robot may have, in one team
+/// (common/testdata/urdf/joint-counts.toml: two twelve-joint arms, a one-joint pendulum and
+/// the paper's arm, an attack on joints 11 and 12 and on the pendulum's joint): over IPC in
+/// lockstep, the in-process digest; each trace carries its robot's joints, and the attack's
+/// records its injection on joint 12.
+#[test]
+fn every_joint_count_from_1_to_12_runs_over_ipc_as_in_process() {
+    let file = fdi_tests::repo_path("common/testdata/urdf/joint-counts.toml");
+    let (_out, run_dir) = ipc_equals_inproc(&file, 12, 1);
+    let records =
+        |name: &str| fdi_tests::trace_records(&run_dir.join(format!("traces/{name}.trace")));
+    let pendulum = records("agent-2");
+    assert!(pendulum.iter().all(|r| match r {
+        fdi_common::trace::TraceRecord::Agent(a) => a.q.as_slice().len() == 1,
+        _ => true,
+    }));
+    let injected = records("attacker").iter().any(|r| match r {
+        fdi_common::trace::TraceRecord::Attack(a) if a.agent == 1 => {
+            let alpha = a.alpha_position.as_slice();
+            alpha.len() == 12 && alpha[11] != 0.0 && alpha[0] == 0.0
+        }
+        _ => false,
+    });
+    assert!(injected, "robot 1's joint 12 is attacked");
+}
+
 /// Runs `scenario` for 2 s over IPC and in process: the same digest and RMSE, `joints` joints
 /// in agent `agent`'s trace. The output folder and the IPC run's directory in it.
 fn ipc_equals_inproc(

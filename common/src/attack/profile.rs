@@ -340,8 +340,9 @@ impl AttackProfile {
                 let message = match dof {
                     _ if link == 0 => Some("link 0 does not exist (links are 1-based)".to_string()),
                     Some(d) if link as usize > d => Some(format!(
-                        "link {link} does not exist (links are 1-based, agent {} has {d} links)",
-                        ch.agent
+                        "link {link} does not exist (links are 1-based, agent {} has {d} link{})",
+                        ch.agent,
+                        if d == 1 { "" } else { "s" }
                     )),
                     _ => None,
                 };

@@ -48,14 +48,10 @@ impl ModelConfig {
             Self::TwoLink(p) => work.call::<2>(Box::new(TwoLink::new(*p))),
             Self::ThreeLink(p) => work.call::<3>(Box::new(ThreeLink::new(*p))),
             #[cfg(feature = "urdf")]
-            Self::Urdf(m) => match m.arm() {
-                urdf::AnyArm::Two(a) => work.call::<2>(a.clone()),
-                urdf::AnyArm::Three(a) => work.call::<3>(a.clone()),
-                urdf::AnyArm::Four(a) => work.call::<4>(a.clone()),
-                urdf::AnyArm::Five(a) => work.call::<5>(a.clone()),
-                urdf::AnyArm::Six(a) => work.call::<6>(a.clone()),
-                urdf::AnyArm::Seven(a) => work.call::<7>(a.clone()),
-            },
+            Self::Urdf(m) => {
+                use urdf::AnyArm;
+                crate::on_joint_count!(AnyArm, m.arm(), a => work.call(a.clone()))
+            }
         }
     }
 

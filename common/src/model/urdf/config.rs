@@ -9,37 +9,25 @@ use super::chain::{Chain, UrdfSpec};
 use super::dynamics::UrdfArm;
 
 /// The numbers of moving joints a URDF arm of a run may have: the math is generic over the
-/// number of joints, and each count is compiled into every role (docs/model.md, "Your own arm").
-pub const JOINT_COUNTS: [usize; 6] = [2, 3, 4, 5, 6, 7];
+/// number of joints, and each count is compiled into every role (docs/model.md, "Your own arm";
+/// the counts are `crate::model::joint_count`'s).
+pub const JOINT_COUNTS: [usize; 12] = [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12];
 
 // The messages and records carry every joint of the largest arm.
 const _: () = assert!(JOINT_COUNTS[JOINT_COUNTS.len() - 1] <= crate::limits::MAX_DOF);
 
-/// A URDF arm of one of the [`JOINT_COUNTS`], its number of joints in its type.
-#[derive(Debug, Clone, PartialEq)]
-pub enum AnyArm {
-    Two(Box<UrdfArm<2>>),
-    Three(Box<UrdfArm<3>>),
-    Four(Box<UrdfArm<4>>),
-    Five(Box<UrdfArm<5>>),
-    Six(Box<UrdfArm<6>>),
-    Seven(Box<UrdfArm<7>>),
-}
+crate::per_joint_count!(
+    /// A URDF arm of one of the [`JOINT_COUNTS`], its number of joints in its type.
+    #[derive(Debug, Clone, PartialEq)]
+    pub enum AnyArm = UrdfArm
+);
 
 impl AnyArm {
     /// The arm of `chain`; an error naming the robot when no [`JOINT_COUNTS`] fits it.
     pub fn new(chain: Chain) -> Result<Self, String> {
         let (name, dof) = (chain.name.clone(), chain.dof());
-        let arm = match dof {
-            2 => UrdfArm::new(chain).map(|a| Self::Two(Box::new(a))),
-            3 => UrdfArm::new(chain).map(|a| Self::Three(Box::new(a))),
-            4 => UrdfArm::new(chain).map(|a| Self::Four(Box::new(a))),
-            5 => UrdfArm::new(chain).map(|a| Self::Five(Box::new(a))),
-            6 => UrdfArm::new(chain).map(|a| Self::Six(Box::new(a))),
-            7 => UrdfArm::new(chain).map(|a| Self::Seven(Box::new(a))),
-            _ => None,
-        };
-        arm.ok_or_else(|| {
+        let arm = crate::with_joint_count!(dof, N => UrdfArm::<N>::new(chain).map(Self::from));
+        arm.flatten().ok_or_else(|| {
             format!(
                 "`{name}` moves {dof} joint{}; a run's arms move {} joints (lock the others \
                  with `lock = {{ JOINT = VALUE }}`)",
@@ -51,18 +39,11 @@ impl AnyArm {
 
     /// The arm's joints and links as the URDF gave them.
     pub fn chain(&self) -> &Chain {
-        match self {
-            Self::Two(a) => a.chain(),
-            Self::Three(a) => a.chain(),
-            Self::Four(a) => a.chain(),
-            Self::Five(a) => a.chain(),
-            Self::Six(a) => a.chain(),
-            Self::Seven(a) => a.chain(),
-        }
+        crate::on_joint_count!(AnyArm, self, a => a.chain())
     }
 }
 
-/// [`JOINT_COUNTS`] as text: `2, 3, 4, 5, 6 or 7`.
+/// [`JOINT_COUNTS`] as text: `1, 2, … 11 or 12`.
 fn counts_text() -> String {
     let all: Vec<String> = JOINT_COUNTS.iter().map(ToString::to_string).collect();
     match all.split_last() {

@@ -547,14 +547,8 @@ fn every_arm_agrees_with_pinocchio_at_its_reference_states() {
             agrees(&pick(&g), &st.gravity, &what("G"));
             agrees(&pick(&qdd), &st.acceleration, &what("q̈"));
             // The hot path a run takes is the chain's reference, so Pinocchio's too.
-            let differs = match n {
-                2 => rigid_differs::<2>(&c, &q, &qd),
-                3 => rigid_differs::<3>(&c, &q, &qd),
-                5 => rigid_differs::<5>(&c, &q, &qd),
-                6 => rigid_differs::<6>(&c, &q, &qd),
-                7 => rigid_differs::<7>(&c, &q, &qd),
-                _ => panic!("{}: {n} joints, not among the shipped arms'", arm.name),
-            };
+            let differs = crate::with_joint_count!(n, N => rigid_differs::<N>(&c, &q, &qd))
+                .unwrap_or_else(|| panic!("{}: {n} joints, not a joint count", arm.name));
             assert_eq!(differs, None, "{}", what("the rigid form"));
         }
     }
