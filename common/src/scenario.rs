@@ -837,6 +837,9 @@ impl Scenario {
         for p in c
             .update_law
             .problems("controller.update_law", self.control_period_s)
+            .into_iter()
+            .chain(c.computed_torque.problems("controller.computed_torque"))
+            .chain(c.gated.problems("controller.gated"))
         {
             push(p.path, p.message);
         }

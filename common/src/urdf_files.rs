@@ -239,9 +239,11 @@ mod tests {
         let ready = [0.0, -45.0, 0.0, -135.0, 0.0, 90.0, 45.0].map(f64::to_radians);
         let plant = crate::plant::Plant::<7>::new(r.scenario.plant_params(a)).expect("plant");
         assert_eq!(plant.q, Vector::<7>::from_column_slice(&ready));
-        let center = crate::control::center::CenterAgent::<7>::new(r.scenario.center_params(a))
-            .expect("center");
-        assert_eq!(center.observer().q, plant.q);
+        let params = r.scenario.center_params(a);
+        let model = params.model.build::<7>().expect("seven joints");
+        let center = crate::control::paper::Paper::<7>::traditional(&params, model.as_ref())
+            .expect("the traditional controller");
+        assert_eq!(center.prediction().0, plant.q);
         assert_eq!(a.trajectory.reference::<7>(0.0).q, plant.q);
 
         let start = "start = [0.0, -45.0, 0.0, -135.0, 0.0, 90.0, 45.0]";

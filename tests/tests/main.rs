@@ -5,6 +5,7 @@
 #![allow(clippy::too_many_lines)]
 
 mod attacks_table;
+mod controllers;
 mod detect;
 mod diverged_report;
 mod docs;

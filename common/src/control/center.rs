@@ -1,42 +1,53 @@
-//! The control center's per-agent pipeline for one tick (docs/model.md, "Control center", steps 1–10).
+//! The control center's per-agent pipeline for one tick (docs/model.md, "Control center", steps
+//! 1–10): what every controller shares around the scenario's [`Controller`] (`[controller]
+//! mode`).
 
-use crate::delay::{DelayLine, DelayProfile};
-use crate::model::{EulerLagrange, Matrix, ModelConfig, Vector};
-use crate::rng::{stream, Purpose};
-use crate::trajectory::{Reference, TrajectoryConfig};
+use crate::delay::DelayLine;
+use crate::model::{EulerLagrange, Vector};
+use crate::trajectory::Reference;
 
-use super::config::{
-    ControllerConfig, ControllerMode, GainScaling, ObserverInput as ObserverInputMode,
-};
+use super::computed_torque;
+pub use super::config::CenterParams;
+use super::config::{ControllerMode, ObserverInput as ObserverInputMode};
+use super::controller::{Controller, Estimate, Tick};
 use super::detection::Detector;
-use super::estimator::{NnEstimator, NnParams};
-use super::observer::{Observer, ObserverInput};
+use super::gated;
+use super::list::with_controllers;
+use super::paper;
+
+/// Declares [`build`] of the list of controllers.
+macro_rules! declare_build {
+    ($($(#[$doc:meta])* $variant:ident = $name:literal => $make:path;)*) => {
+        /// The controller `mode` of `params` for a robot of `model`; `None` when its state
+        /// cannot be made for the robot (a start pose of another number of joints).
+        fn build<const N: usize>(
+            mode: ControllerMode,
+            params: &CenterParams,
+            model: &dyn EulerLagrange<N>,
+        ) -> Option<Box<dyn Controller<N>>> {
+            match mode {
+                $(ControllerMode::$variant => {
+                    $make(params, model).map(|c| Box::new(c) as Box<dyn Controller<N>>)
+                })*
+            }
+        }
+    };
+}
+with_controllers!(declare_build);
 
 /// Largest measurement magnitude accepted (rad, rad/s); larger values are treated like
 /// non-finite ones: rejected, counted, last good value held.
 pub const MAX_ABS_MEASUREMENT: f64 = 1e6;
-
-/// Everything that configures one agent's pipeline ([`crate::scenario::Scenario::center_params`]
-/// takes it from a scenario).
-#[derive(Debug, Clone)]
-pub struct CenterParams {
-    pub agent_id: u32,
-    pub run_seed: u64,
-    pub control_period_s: f64,
-    pub controller: ControllerConfig,
-    pub model: ModelConfig,
-    pub trajectory: TrajectoryConfig,
-    pub delay: DelayProfile,
-}
 
 /// What one tick produced.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CenterOutput<const N: usize> {
     /// Torque `u_k` to send, stamped `t_k`; always finite.
     pub u: Vector<N>,
-    /// Attack estimate `Ŝ` used in this tick (zero in traditional mode).
+    /// Attack estimate `Ŝ` used in this tick (zero for a controller without one).
     pub s_hat: Vector<N>,
-    /// Observer estimate after this tick's step.
+    /// The controller's estimate of the state after this tick (its observer's, or the state
+    /// it predicted).
     pub q_hat: Vector<N>,
     pub qd_hat: Vector<N>,
     pub qdd_hat: Vector<N>,
@@ -44,13 +55,15 @@ pub struct CenterOutput<const N: usize> {
     /// step `[t_k, t_k + Δ]` (or its sample at `t_k − τ(t_k)`, per `observer_input`).
     pub e_u: Vector<N>,
     pub u_tau: Vector<N>,
+    /// The alarm: on `‖Ŝ‖` (docs/model.md, step 9), or the controller's own (the `gated`
+    /// controller's gate).
     pub alarm: bool,
     /// The measurement was rejected (non-finite or absurd) and the last good one used.
     pub rejected_input: bool,
     /// The computed torque was non-finite and the last good one was sent instead.
     pub rejected_torque: bool,
-    /// The observer or estimator state became non-finite in this tick and was reset
-    /// ([`CenterAgent`]'s recovery policy).
+    /// The controller's state (observer, estimator) became non-finite in this tick and was
+    /// reset ([`Controller::reset`]).
     pub state_reset: bool,
     /// The history of sent torques did not reach back to `t − τ(t)`: `e_u` and `u_τ` of the
     /// previous tick were held (a counted miss; cannot happen with `|τ̇| < 1`).
@@ -62,15 +75,11 @@ pub struct CenterOutput<const N: usize> {
 /// Per-agent state of the control center.
 #[derive(Debug)]
 pub struct CenterAgent<const N: usize> {
-    /// The diagonal of `K` in `u = K r̂`.
-    gains: Vector<N>,
     params: CenterParams,
     model: Box<dyn EulerLagrange<N>>,
+    controller: Box<dyn Controller<N>>,
     sent: DelayLine<N>,
-    observer: Observer<N>,
-    estimator: NnEstimator<N>,
     detector: Detector,
-    psi2_prev: Vector<N>,
     last_good: (Vector<N>, Vector<N>),
     last_u: Vector<N>,
     /// `(e_u, u_τ)` of the last tick whose history lookup succeeded.
@@ -79,7 +88,7 @@ pub struct CenterAgent<const N: usize> {
     pub rejected_inputs: u64,
     /// Number of torques replaced because they were non-finite.
     pub rejected_torques: u64,
-    /// Number of resets of non-finite observer or estimator state.
+    /// Number of resets of the controller's non-finite state.
     pub state_resets: u64,
     /// Number of ticks whose `e_u`, `u_τ` were held because the history was pruned too far.
     pub history_misses: u64,
@@ -88,31 +97,19 @@ pub struct CenterAgent<const N: usize> {
 }
 
 impl<const N: usize> CenterAgent<N> {
-    /// The observer starts at the trajectory's start pose. `None` when the model or the start
-    /// pose has another number of links than `N`.
+    /// The scenario's controller for this robot (an observer starts at the trajectory's start
+    /// pose). `None` when the model or the start pose has another number of links than `N`.
     pub fn new(params: CenterParams) -> Option<Self> {
         let model = params.model.build::<N>()?;
+        let controller = build::<N>(params.controller.mode, &params, model.as_ref())?;
         let c = &params.controller;
-        let mut rng = stream(params.run_seed, params.agent_id, Purpose::NnInit);
-        let estimator = NnEstimator::new(NnParams::from_controller(c), c.initial_v_range, &mut rng);
         let detector = Detector::new(c.detection.threshold, c.detection.hold_s);
-        let gains = match c.gain_scaling {
-            GainScaling::Unit => Vector::<N>::from_element(c.gain_k),
-            GainScaling::Inertia => {
-                let q0 = params.trajectory.reference::<N>(0.0).q;
-                model.inertia(&q0).diagonal() * c.gain_k
-            }
-        };
-        let observer = Observer::at(params.trajectory.start_position::<N>()?, Vector::zeros());
         Some(Self {
-            gains,
             params,
             model,
+            controller,
             sent: DelayLine::new(),
-            observer,
-            estimator,
             detector,
-            psi2_prev: Vector::<N>::zeros(),
             last_good: (Vector::<N>::zeros(), Vector::<N>::zeros()),
             last_u: Vector::<N>::zeros(),
             last_history: (Vector::<N>::zeros(), Vector::<N>::zeros()),
@@ -126,12 +123,6 @@ impl<const N: usize> CenterAgent<N> {
 }
 
 impl<const N: usize> CenterAgent<N> {
-    /// The observer's state (tests).
-    #[cfg(test)]
-    pub(crate) fn observer(&self) -> &Observer<N> {
-        &self.observer
-    }
-
     pub fn agent_id(&self) -> u32 {
         self.params.agent_id
     }
@@ -147,7 +138,7 @@ impl<const N: usize> CenterAgent<N> {
     }
 
     /// [`Self::tick`] with `Ŝ` replaced by `s_override` when given (an oracle for tests and
-    /// ablations: the weights are then not updated).
+    /// ablations: a controller that estimates the attack then does not learn).
     pub fn tick_with_estimate(
         &mut self,
         t: f64,
@@ -174,37 +165,72 @@ impl<const N: usize> CenterAgent<N> {
         s_override: Option<&Vector<N>>,
     ) -> CenterOutput<N> {
         let rejected_input = input.is_some_and(|(y, yd)| self.accept_measurement(y, yd));
-        let x = self.tick_inputs(t, s_override);
-        let (u, rejected_torque) = self.torque(&x);
+        let x = self.tick_inputs(t);
+        let tick = Tick {
+            t,
+            dt: self.params.control_period_s,
+            y: &x.y,
+            yd: &x.yd,
+            reference: &x.reference,
+            trajectory: &self.params.trajectory,
+            e_u: &x.e_u,
+            delay: &self.params.delay,
+            model: self.model.as_ref(),
+            s_override,
+        };
+        let command = self.controller.command(&tick);
+        // 5: a non-finite torque is counted and replaced by the last one sent.
+        let rejected_torque = command.u.iter().any(|v| !v.is_finite());
+        let u = if rejected_torque {
+            self.rejected_torques += 1;
+            self.last_u
+        } else {
+            command.u
+        };
 
-        // History of sent torques: u_k is in force from t_k on (the observer's input below
+        // History of sent torques: u_k is in force from t_k on (the controller's input below
         // may reach it when τ < Δ).
         if self.sent.push(t, u).is_ok() {
             self.last_u = u;
         }
 
         let u_tau = self.delayed_input_over_step(&x);
-        self.note_history(&x, u_tau);
-        let psi2 = self.observe(&x, &u_tau);
-        self.learn(&psi2, s_override);
-        let state_reset = self.recover_non_finite_state(&psi2, &x);
+        // The last good history, or the miss counted.
+        if !x.history_miss {
+            self.last_history = (x.e_u, u_tau);
+        } else {
+            self.history_misses += 1;
+        }
+        let mut estimate = self.controller.update(&tick, &u_tau);
+        // 10: non-finite state never sticks.
+        let state_reset = !self.controller.is_finite();
+        if state_reset {
+            self.state_resets += 1;
+            estimate = self.controller.reset(&x.y, &x.yd);
+        }
 
         // Drop what no future query reaches: the next tick's query `t' − τ(t')` is later than
         // this one's (`|τ̇| < 1`), and the line keeps one entry of margin besides.
         self.sent.prune_before(x.query);
 
         // 9: detection.
-        let alarm = self.detector.update(t, x.s_hat.norm());
+        let s_alarm = self.detector.update(t, command.s_hat.norm());
+        let Estimate {
+            q_hat,
+            qd_hat,
+            qdd_hat,
+            alarm,
+        } = estimate;
 
         CenterOutput {
             u,
-            s_hat: x.s_hat,
-            q_hat: self.observer.q,
-            qd_hat: self.observer.qd,
-            qdd_hat: self.observer.qdd,
+            s_hat: command.s_hat,
+            q_hat,
+            qd_hat,
+            qdd_hat,
             e_u: x.e_u,
             u_tau,
-            alarm,
+            alarm: alarm.unwrap_or(s_alarm),
             rejected_input,
             rejected_torque,
             state_reset,
@@ -229,53 +255,25 @@ impl<const N: usize> CenterAgent<N> {
         rejected_input
     }
 
-    /// Steps 1–4 at `t` with the measurement in use: the reference, `A`, `e_u` and `Ŝ`.
-    fn tick_inputs(&mut self, t: f64, s_override: Option<&Vector<N>>) -> TickInputs<N> {
+    /// Steps 1 and 3 at `t` with the measurement in use: the reference and `e_u` over the
+    /// zero-order-held history of sent `u`.
+    fn tick_inputs(&mut self, t: f64) -> TickInputs<N> {
         let (y, yd) = self.last_good;
-
-        // 1–3: reference, A = M(q_d)⁻¹, e_u over the zero-order-held history of sent u.
         let reference = self.params.trajectory.reference::<N>(t);
-        let a: Matrix<N> = self.model.inverse_inertia(&reference.q);
         let query = t - self.params.delay.tau(t);
         let (e_u, history_miss) = match self.sent.integral(query, t) {
             Ok(e_u) => (e_u, false),
             Err(_) => (self.last_history.0, true),
         };
-
-        // 4: NN estimate from the previous tick's Ψ2 (no algebraic loop).
-        let s_hat = match (s_override, self.params.controller.mode) {
-            (Some(s), _) => *s,
-            (None, ControllerMode::Proposed) => self.estimator.estimate(&self.psi2_prev),
-            (None, ControllerMode::Traditional) => Vector::<N>::zeros(),
-        };
-
         TickInputs {
             t,
             y,
             yd,
             reference,
-            a,
             query,
             e_u,
             history_miss,
-            s_hat,
         }
-    }
-
-    /// 5: r̂ = Ψ̇1 + β Ψ1 − A e_u + Ŝ, u = k r̂. A non-finite u is counted and replaced by the
-    /// last one sent. The torque, and whether it was replaced.
-    fn torque(&mut self, x: &TickInputs<N>) -> (Vector<N>, bool) {
-        let c = self.params.controller;
-        let psi1 = x.reference.q - x.y;
-        let psi1_dot = x.reference.qd - x.yd;
-        let r_hat = psi1_dot + psi1 * c.beta - x.a * x.e_u + x.s_hat;
-        let mut u = r_hat.component_mul(&self.gains);
-        let rejected_torque = u.iter().any(|x| !x.is_finite());
-        if rejected_torque {
-            self.rejected_torques += 1;
-            u = self.last_u;
-        }
-        (u, rejected_torque)
     }
 
     /// The observer's input `u_τ` for its step over [t_k, t_k + Δ] (step 6); the last good one
@@ -303,59 +301,6 @@ impl<const N: usize> CenterAgent<N> {
                 _ => self.last_history.1,
             },
         }
-    }
-
-    /// Keeps this tick's `(e_u, u_τ)` as the last good history, or counts the miss.
-    fn note_history(&mut self, x: &TickInputs<N>, u_tau: Vector<N>) {
-        if !x.history_miss {
-            self.last_history = (x.e_u, u_tau);
-        } else {
-            self.history_misses += 1;
-        }
-    }
-
-    /// 6: the observer's step over [t_k, t_k + Δ] with the delayed input `u_tau`; its Ψ2.
-    fn observe(&mut self, x: &TickInputs<N>, u_tau: &Vector<N>) -> Vector<N> {
-        let c = self.params.controller;
-        let input = ObserverInput {
-            y: &x.y,
-            yd: &x.yd,
-            s_hat: &x.s_hat,
-            reference: &x.reference,
-            a: &x.a,
-            e_u: &x.e_u,
-            u_tau,
-            beta: c.beta,
-            l1: c.observer_gain_l1,
-            l2: c.observer_gain_l2,
-        };
-        self.observer
-            .step(self.model.as_ref(), &input, self.params.control_period_s)
-    }
-
-    /// 7: weights (proposed mode, unless `Ŝ` is overridden); `psi2` is the next tick's NN input.
-    fn learn(&mut self, psi2: &Vector<N>, s_override: Option<&Vector<N>>) {
-        if self.params.controller.mode == ControllerMode::Proposed && s_override.is_none() {
-            self.estimator.update(psi2, self.params.control_period_s);
-        }
-        self.psi2_prev = *psi2;
-    }
-
-    /// 10: non-finite observer or estimator state never sticks. Recovery policy: the
-    /// estimator restarts from its initial weights (Ŵ = 0, V̂ = V̂(0)), the observer from the
-    /// measurement in use (q̂ = y, q̂̇ = ẏ), and the next NN input from Ψ2 = 0. Whether it
-    /// reset.
-    fn recover_non_finite_state(&mut self, psi2: &Vector<N>, x: &TickInputs<N>) -> bool {
-        let state_reset = !(self.observer.is_finite()
-            && self.estimator.is_finite()
-            && psi2.iter().all(|x| x.is_finite()));
-        if state_reset {
-            self.state_resets += 1;
-            self.estimator.reset();
-            self.observer = Observer::at(x.y, x.yd);
-            self.psi2_prev = Vector::<N>::zeros();
-        }
-        state_reset
     }
 }
 
@@ -388,21 +333,18 @@ impl AnyCenterAgent {
     }
 }
 
-/// What steps 1–4 of a tick work out, for the steps after them.
+/// What steps 1 and 3 of a tick work out, for the steps after them.
 struct TickInputs<const N: usize> {
     t: f64,
     /// The measurement in use: this tick's, or the last good one if this tick's was rejected.
     y: Vector<N>,
     yd: Vector<N>,
     reference: Reference<N>,
-    /// `A = M(q_d)⁻¹`.
-    a: Matrix<N>,
     /// `t − τ(t)`: where `e_u`'s integral starts.
     query: f64,
     e_u: Vector<N>,
     /// The history did not reach back to `query`: `e_u` is the last good one.
     history_miss: bool,
-    s_hat: Vector<N>,
 }
 
 #[cfg(test)]

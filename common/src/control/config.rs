@@ -4,38 +4,62 @@ use serde::{Deserialize, Serialize};
 
 use crate::problem::Problem;
 
-/// Controller variant (docs/model.md, "Control center", step 8).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
-#[serde(rename_all = "kebab-case")]
-pub enum ControllerMode {
-    /// Observer + NN attack estimate `Ŝ` in (12) and (23).
-    Proposed,
-    /// The paper's baseline: `Ŝ ≡ 0`, weights not updated.
-    Traditional,
-}
+use crate::delay::DelayProfile;
+use crate::model::ModelConfig;
+use crate::trajectory::TrajectoryConfig;
 
-impl ControllerMode {
-    /// Every mode, in the order the help lists them.
-    pub const ALL: [Self; 2] = [Self::Proposed, Self::Traditional];
+use super::list::with_controllers;
 
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Proposed => "proposed",
-            Self::Traditional => "traditional",
+/// Declares [`ControllerMode`] of the list of controllers.
+macro_rules! declare_mode {
+    ($($(#[$doc:meta])* $variant:ident = $name:literal => $make:path;)*) => {
+        /// The controller of a scenario (`[controller] mode`): one of the registered ones
+        /// (docs/model.md, "Controllers").
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
+        pub enum ControllerMode {
+            $($(#[$doc])* #[serde(rename = $name)] $variant,)*
         }
-    }
+
+        impl ControllerMode {
+            /// Every controller, in the order of the list.
+            pub const ALL: [Self; [$($name),*].len()] = [$(Self::$variant),*];
+
+            pub fn as_str(self) -> &'static str {
+                match self {
+                    $(Self::$variant => $name,)*
+                }
+            }
+        }
+    };
 }
+with_controllers!(declare_mode);
 
 impl std::str::FromStr for ControllerMode {
     type Err = String;
 
-    /// The names of a scenario file: `proposed` or `traditional`.
+    /// A registered controller's name.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         Self::ALL
             .into_iter()
             .find(|c| c.as_str() == s)
-            .ok_or_else(|| format!("`{s}` is not a controller mode: proposed or traditional"))
+            .ok_or_else(|| {
+                let known: Vec<&str> = Self::ALL.iter().map(|c| c.as_str()).collect();
+                format!("`{s}` is not a controller: {}", known.join(", "))
+            })
     }
+}
+
+/// Everything that configures one agent's pipeline ([`crate::scenario::Scenario::center_params`]
+/// takes it from a scenario).
+#[derive(Debug, Clone)]
+pub struct CenterParams {
+    pub agent_id: u32,
+    pub run_seed: u64,
+    pub control_period_s: f64,
+    pub controller: ControllerConfig,
+    pub model: ModelConfig,
+    pub trajectory: TrajectoryConfig,
+    pub delay: DelayProfile,
 }
 
 /// How the gain `k` of `u = K r̂` (14) becomes the diagonal matrix `K` of an agent.
@@ -159,6 +183,14 @@ pub struct ControllerConfig {
     /// (`K = k diag(M(q_d(0)))` per agent, for arms whose joints' inertias differ widely).
     #[serde(default, skip_serializing_if = "GainScaling::is_default")]
     pub gain_scaling: GainScaling,
+    /// `[controller.computed_torque]`: the `computed-torque` controller's `omega_n_rad_s` and
+    /// `zeta` (used by that controller only).
+    #[serde(default, skip_serializing_if = "ComputedTorqueConfig::is_default")]
+    pub computed_torque: ComputedTorqueConfig,
+    /// `[controller.gated]`: the `gated` controller's `threshold_rad` and `hold_s` (used by
+    /// that controller only).
+    #[serde(default, skip_serializing_if = "GatedConfig::is_default")]
+    pub gated: GatedConfig,
 }
 
 /// Robust modifications of the update laws (37), (38) (beyond the paper): the scenario's
@@ -229,6 +261,86 @@ impl UpdateLaw {
                 "leakage_w_per_s",
                 format!("leakage_w_per_s × control_period_s must stay below 1 (one Euler step must not overshoot zero), got {l} × {control_period_s}"),
             );
+        }
+        out
+    }
+}
+
+/// `[controller.computed_torque]`: the closed loop's natural frequency and damping.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct ComputedTorqueConfig {
+    /// `ω_n`, rad/s: `K_p = ω_n²`, `K_d = 2 ζ ω_n` (default 20).
+    pub omega_n_rad_s: f64,
+    /// `ζ`: damping ratio (default 1, critically damped).
+    pub zeta: f64,
+}
+
+impl Default for ComputedTorqueConfig {
+    fn default() -> Self {
+        Self {
+            omega_n_rad_s: 20.0,
+            zeta: 1.0,
+        }
+    }
+}
+
+impl ComputedTorqueConfig {
+    pub(crate) fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Every problem of the values, with field paths below `at`.
+    pub fn problems(&self, at: &str) -> Vec<Problem> {
+        [("omega_n_rad_s", self.omega_n_rad_s), ("zeta", self.zeta)]
+            .into_iter()
+            .filter(|(_, v)| !(v.is_finite() && *v > 0.0))
+            .map(|(name, v)| Problem {
+                path: format!("{at}.{name}"),
+                message: format!("must be finite and > 0, got {v}"),
+            })
+            .collect()
+    }
+}
+
+/// `[controller.gated]`: the gate's threshold and hold time.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[serde(default, deny_unknown_fields)]
+pub struct GatedConfig {
+    /// The residual `‖y − q̂‖` above which the gate starts to shut, rad (default 0.01).
+    pub threshold_rad: f64,
+    /// How long the residual must stay above the threshold, s (default 0.01).
+    pub hold_s: f64,
+}
+
+impl Default for GatedConfig {
+    fn default() -> Self {
+        Self {
+            threshold_rad: 0.01,
+            hold_s: 0.01,
+        }
+    }
+}
+
+impl GatedConfig {
+    pub(crate) fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+
+    /// Every problem of the values, with field paths below `at`.
+    pub fn problems(&self, at: &str) -> Vec<Problem> {
+        let mut out = Vec::new();
+        if !(self.threshold_rad.is_finite() && self.threshold_rad > 0.0) {
+            out.push(Problem {
+                path: format!("{at}.threshold_rad"),
+                message: format!("must be finite and > 0, got {}", self.threshold_rad),
+            });
+        }
+        if !(self.hold_s.is_finite() && self.hold_s >= 0.0) {
+            out.push(Problem {
+                path: format!("{at}.hold_s"),
+                message: format!("must be finite and ≥ 0, got {}", self.hold_s),
+            });
         }
         out
     }

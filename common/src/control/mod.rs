@@ -2,15 +2,21 @@
 //! (38), controller (12), (14) and the detection alarm. Pure: no I/O, no clocks.
 
 pub mod center;
+pub mod computed_torque;
 pub mod config;
+pub mod controller;
 pub mod detection;
 pub mod estimator;
+pub mod gated;
+mod list;
 pub mod observer;
+pub mod paper;
 
 pub use center::{AnyCenterAgent, CenterAgent, CenterOutput, CenterParams};
 pub use config::{
     ControllerConfig, ControllerMode, DetectionConfig, GainScaling, ObserverInput, UpdateLaw,
 };
+pub use controller::{Command, Controller, Estimate, Tick};
 pub use detection::Detector;
 pub use estimator::{NnEstimator, NnParams};
 pub use observer::Observer;

@@ -1,4 +1,5 @@
 use super::*;
+use crate::delay::DelayProfile;
 use crate::scenario::paper;
 
 /// Agent 1 of the paper's scenario, as the control-center process builds it.
@@ -274,14 +275,22 @@ fn inertia_gain_scaling_gives_each_joint_k_times_its_inertia_at_the_reference_s_
     let r = paper().expect("the embedded paper scenario is valid");
     let s = &r.scenario;
     let mut p = s.center_params(&s.agents[0]);
+    use crate::control::{paper::Paper, ControllerMode, GainScaling};
     p.controller.mode = ControllerMode::Traditional;
+    let model = p.model.build::<2>().expect("two links");
     let unit = CenterAgent::<2>::new(p.clone()).expect("a two-link model");
+    let unit_gains = *Paper::traditional(&p, model.as_ref())
+        .expect("made")
+        .gains();
     p.controller.gain_scaling = GainScaling::Inertia;
     let scaled = CenterAgent::<2>::new(p.clone()).expect("a two-link model");
+    let scaled_gains = *Paper::traditional(&p, model.as_ref())
+        .expect("made")
+        .gains();
     let q0 = p.trajectory.reference::<2>(0.0).q;
-    let m = p.model.build::<2>().expect("two links").inertia(&q0);
-    assert_eq!(unit.gains, Vector::<2>::from_element(p.controller.gain_k));
-    assert_eq!(scaled.gains, m.diagonal() * p.controller.gain_k);
+    let m = model.inertia(&q0);
+    assert_eq!(unit_gains, Vector::<2>::from_element(p.controller.gain_k));
+    assert_eq!(scaled_gains, m.diagonal() * p.controller.gain_k);
     // The joints' inertias differ, so do their gains: the torques are r̂ scaled joint by joint.
     assert!(m[(0, 0)] > 2.0 * m[(1, 1)], "{m}");
     let (mut unit, mut scaled) = (unit, scaled);
