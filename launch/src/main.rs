@@ -77,6 +77,7 @@ fn dispatch(command: Command, stop: &Stop) -> Result<ExitCode> {
         Command::Table1(args) => commands::tables::table1(&args, stop),
         Command::Table2(args) => commands::tables::table2(&args, stop),
         Command::Attacks(args) => commands::tables::attacks(&args, stop),
+        Command::Score(args) => commands::score::score(&args, stop),
         Command::Report { run_dir, robots } => {
             commands::report::report(&run_dir, &robots.unwrap_or_default(), stop)
         }
@@ -119,6 +120,7 @@ fn handles_interrupts(command: &Command) -> bool {
             | Command::Table1(_)
             | Command::Table2(_)
             | Command::Attacks(_)
+            | Command::Score(_)
             | Command::Serve(_)
             | Command::Bench(_)
     )

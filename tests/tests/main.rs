@@ -28,6 +28,7 @@ mod runs_list;
 mod runtime;
 mod scenarios;
 mod schema;
+mod score;
 mod set_overrides;
 mod shards;
 mod slurm;

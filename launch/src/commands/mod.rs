@@ -9,6 +9,7 @@ pub mod model;
 pub mod report;
 pub mod run;
 pub mod runs;
+pub mod score;
 pub mod serve;
 pub mod sweep;
 pub mod tables;

@@ -68,7 +68,7 @@ impl Source {
 
     /// The class's scenario on `base` (before the table's controller and duration): the base
     /// with the class's attack (and, for a scenario file of its own, its detectors).
-    fn resolve(self, base: &Resolved) -> Result<Resolved> {
+    pub(crate) fn resolve(self, base: &Resolved) -> Result<Resolved> {
         Ok(match self {
             Self::Preset(name) => {
                 let profile = scenario::attack_from_arg(name, &base.scenario)?;

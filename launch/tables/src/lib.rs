@@ -8,4 +8,5 @@
 
 pub mod attacks;
 pub mod bench;
+pub mod score;
 pub mod tables;
