@@ -534,7 +534,8 @@ impl<'a, X: Transport> Relay<'a, X> {
                     fdi_common::with_joint_count!(dof, N => {
                         relay::<X, N>(target, &m, received, ports, dt, trace)
                     })
-                    .unwrap_or(Ok(()))
+                    // A robot of no joint count a model has: no relay, said as the run's failure.
+                    .unwrap_or(Err(AttackerError::Dof(m.agent)))
                 }
             };
             if let Err(e) = result {

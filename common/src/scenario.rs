@@ -403,9 +403,10 @@ impl Resolved {
     /// The number of links every robot of the run has; `None` for a team that mixes robots
     /// of different joint counts, or a run without agents.
     pub fn joint_count(&self) -> Option<usize> {
-        let mut dofs = self.scenario.agents.iter().map(|a| a.model.dof());
-        let first = dofs.next()?;
-        dofs.all(|d| d == first).then_some(first)
+        let counts = self.scenario.joint_counts();
+        (counts.len() == 1)
+            .then(|| counts.first().copied())
+            .flatten()
     }
 
     /// The attack on agent `agent_id` of the run: [`AgentAttack::compile`] of its profile, with
@@ -682,6 +683,11 @@ impl Scenario {
             }
         }
         out
+    }
+
+    /// The numbers of links the team's robots have, each once.
+    pub fn joint_counts(&self) -> std::collections::BTreeSet<usize> {
+        self.agents.iter().map(|a| a.model.dof()).collect()
     }
 
     /// Ids and link counts of the agents.
@@ -968,8 +974,7 @@ impl Scenario {
     /// A program in a role (`[roles]`) is told one joint count for every robot
     /// (docs/protocol.md): a team that mixes joint counts runs without one.
     fn mixed_team_role_problems(&self) -> Vec<Problem> {
-        let dofs: std::collections::BTreeSet<usize> =
-            self.agents.iter().map(|a| a.model.dof()).collect();
+        let dofs = self.joint_counts();
         if dofs.len() < 2 {
             return Vec::new();
         }

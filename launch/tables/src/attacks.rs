@@ -252,22 +252,22 @@ fn run_one(
 
 /// One detector's outcome on one robot: its onsets sorted by what became of them.
 #[derive(Debug, Clone, Serialize)]
-struct Detection {
+pub(crate) struct Detection {
     onsets: usize,
     /// Detected by an alarm of the detector's own, after the onset.
-    detected: usize,
+    pub(crate) detected: usize,
     /// The alarm was already on at the tick before the onset (no detection of its own).
     already_on: usize,
     /// The attack ended before the detector started watching.
     not_watched: usize,
     /// Mean time to detect over the `detected` onsets, s; `None` when none was.
-    mean_time_to_detect_s: Option<f64>,
+    pub(crate) mean_time_to_detect_s: Option<f64>,
     /// `None` when the detector watched no attack-free time.
     false_alarms_per_min: Option<f64>,
 }
 
 impl Detection {
-    fn of(d: &DetectorMetrics) -> Self {
+    pub(crate) fn of(d: &DetectorMetrics) -> Self {
         let (mut detected, mut already_on, mut not_watched, mut sum) = (0, 0, 0, 0.0);
         for (i, o) in d.onsets.iter().enumerate() {
             match o.time_to_detect_s {
@@ -297,7 +297,7 @@ impl Detection {
     }
 
     /// Onsets the detector watched and did not find on already.
-    fn judged(&self) -> usize {
+    pub(crate) fn judged(&self) -> usize {
         self.onsets - self.already_on - self.not_watched
     }
 

@@ -16,7 +16,7 @@ use fdi_common::scenario::{self, Resolved};
 use fdi_common::stop::Stop;
 use serde::{Deserialize, Serialize};
 
-use crate::attacks::CLASSES;
+use crate::attacks::{Class, Detection, CLASSES};
 
 /// The suite's version: a change of its classes, seeds, scenario, duration or formula is a new
 /// version, and rows of two versions are not compared.
@@ -106,24 +106,36 @@ pub fn score(options: &ScoreOptions, stop: &Stop) -> Result<Scored> {
     let base = scenario::paper().map_err(|e| anyhow!("{e}"))?;
     let mut cells = Vec::new();
     let mut false_alarms = Vec::new();
+    let (none, attacks): (Vec<&Class>, Vec<&Class>) =
+        CLASSES.iter().partition(|c| c.name == "none");
+    let none = none
+        .first()
+        .ok_or_else(|| anyhow!("no attack-free class"))?;
     for seed in SEEDS {
-        let reference = run(&base, "none", options.controller, seed, stop)?;
-        false_alarms.extend(
-            (reference.metrics.values())
-                .map(|m| detector(m, &options.detector).and_then(|d| d.false_alarms_per_min)),
-        );
-        for class in CLASSES.iter().filter(|c| c.name != "none") {
-            let attacked = run(&base, class.name, options.controller, seed, stop)?;
+        let reference = run(&base, none, options.controller, seed, stop)?;
+        for (robot, m) in &reference.metrics {
+            let d = detector(m, &options.detector).ok_or_else(|| {
+                anyhow!(
+                    "the attack-free run has no detector `{}` on robot {robot}",
+                    options.detector
+                )
+            })?;
+            false_alarms.extend(d.false_alarms_per_min);
+        }
+        for &class in &attacks {
+            let attacked = run(&base, class, options.controller, seed, stop)?;
             cells.push(cell(class, seed, &reference, &attacked, &options.detector)?);
         }
     }
-    let fa: Vec<f64> = false_alarms.into_iter().flatten().collect();
     let row = Row {
         suite: SUITE.into(),
         controller: options.controller.as_str().into(),
         detector: options.detector.clone(),
         seeds: SEEDS.to_vec(),
-        score: overall(&cells, fa.iter().sum::<f64>() / fa.len().max(1) as f64),
+        score: overall(
+            &cells,
+            false_alarms.iter().sum::<f64>() / false_alarms.len().max(1) as f64,
+        ),
         cells,
     };
     let dir = options.out.clone().unwrap_or_else(|| {
@@ -146,14 +158,12 @@ pub fn score(options: &ScoreOptions, stop: &Stop) -> Result<Scored> {
 /// One run of the suite: the paper's scenario under `class`'s attack at `seed`.
 fn run(
     base: &Resolved,
-    class: &str,
+    class: &Class,
     controller: ControllerMode,
     seed: u64,
     stop: &Stop,
 ) -> Result<RunSummary> {
     stop.check("during the score: nothing is written")?;
-    let class = (CLASSES.iter().find(|c| c.name == class))
-        .ok_or_else(|| anyhow!("no attack class `{class}`"))?;
     let mut r = class.source.resolve(base)?;
     r.scenario.controller.mode = controller;
     r.scenario.seed = seed;
@@ -169,7 +179,7 @@ fn detector<'a>(
 
 /// The cell of `class` at `seed` from its run and the attack-free run of the same seed.
 fn cell(
-    class: &crate::attacks::Class,
+    class: &Class,
     seed: u64,
     reference: &RunSummary,
     attacked: &RunSummary,
@@ -202,20 +212,12 @@ fn cell(
                 class.name
             )
         })?;
-        for (i, o) in d.onsets.iter().enumerate() {
-            let already_on = d.alarm_on_at_onset.get(i) == Some(&true);
-            let watched = d
-                .watched_from_s
-                .is_some_and(|from| o.until_s.is_none_or(|u| u > from));
-            if already_on || !watched {
-                continue;
-            }
-            onsets += 1;
-            if let Some(x) = o.time_to_detect_s {
-                detected += 1;
-                delay += x;
-            }
-        }
+        let d = Detection::of(d);
+        onsets += d.judged();
+        detected += d.detected;
+        delay += d
+            .mean_time_to_detect_s
+            .map_or(0.0, |m| m * d.detected as f64);
     }
     Ok(Cell {
         class: class.name.into(),
@@ -269,8 +271,7 @@ fn markdown(row: &Row) -> String {
     );
     for class in CLASSES.iter().filter(|c| c.name != "none") {
         let of: Vec<&Cell> = row.cells.iter().filter(|c| c.class == class.name).collect();
-        let n = of.len().max(1) as f64;
-        let ratio = of.iter().map(|c| c.rmse_ratio).sum::<f64>() / n;
+        let ratio = class_ratio(row, class.name);
         let worst = of.iter().map(|c| c.worst_error_rad).fold(0.0, f64::max);
         let diverged: usize = of.iter().map(|c| c.diverged).sum();
         let worst = match diverged {
@@ -308,14 +309,17 @@ pub fn compare(a: &Row, b: &Row) -> Result<String> {
         b.score.false_alarms_per_min,
     );
     for class in CLASSES.iter().filter(|c| c.name != "none") {
-        let mean = |r: &Row| {
-            let of: Vec<f64> = (r.cells.iter())
-                .filter(|c| c.class == class.name)
-                .map(|c| c.rmse_ratio)
-                .collect();
-            of.iter().sum::<f64>() / of.len().max(1) as f64
-        };
-        let _ = writeln!(md, "| {} | {:.3} | {:.3} |", class.name, mean(a), mean(b));
+        let (x, y) = (class_ratio(a, class.name), class_ratio(b, class.name));
+        let _ = writeln!(md, "| {} | {x:.3} | {y:.3} |", class.name);
     }
     Ok(md)
+}
+
+/// The RMSE ratio of `class` in `row`: the mean over its seeds' cells.
+fn class_ratio(row: &Row, class: &str) -> f64 {
+    let of: Vec<f64> = (row.cells.iter())
+        .filter(|c| c.class == class)
+        .map(|c| c.rmse_ratio)
+        .collect();
+    of.iter().sum::<f64>() / of.len().max(1) as f64
 }
