@@ -6,14 +6,11 @@ use crate::delay::DelayLine;
 use crate::model::{EulerLagrange, Vector};
 use crate::trajectory::Reference;
 
-use super::computed_torque;
 pub use super::config::CenterParams;
 use super::config::{ControllerMode, ObserverInput as ObserverInputMode};
 use super::controller::{Controller, Estimate, Tick};
 use super::detection::Detector;
-use super::gated;
 use super::list::with_controllers;
-use super::paper;
 
 /// Declares [`build`] of the list of controllers.
 macro_rules! declare_build {

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use crate::problem::Problem;
 
 use crate::delay::DelayProfile;
-use crate::model::ModelConfig;
+use crate::model::{EulerLagrange, ModelConfig, Vector};
 use crate::trajectory::TrajectoryConfig;
 
 use super::list::with_controllers;
@@ -60,6 +60,21 @@ pub struct CenterParams {
     pub model: ModelConfig,
     pub trajectory: TrajectoryConfig,
     pub delay: DelayProfile,
+}
+
+impl CenterParams {
+    /// The diagonal of `K` in a law `u = K r` of the robot `model`: `k` per joint, or
+    /// `k diag(M(q_d(0)))` ([`GainScaling`]).
+    pub fn gains<const N: usize>(&self, model: &dyn EulerLagrange<N>) -> Vector<N> {
+        let c = &self.controller;
+        match c.gain_scaling {
+            GainScaling::Unit => Vector::<N>::from_element(c.gain_k),
+            GainScaling::Inertia => {
+                let q0 = self.trajectory.reference::<N>(0.0).q;
+                model.inertia(&q0).diagonal() * c.gain_k
+            }
+        }
+    }
 }
 
 /// How the gain `k` of `u = K r̂` (14) becomes the diagonal matrix `K` of an agent.

@@ -5,7 +5,7 @@
 use crate::model::{EulerLagrange, Matrix, Vector};
 use crate::rng::{stream, Purpose};
 
-use super::config::{CenterParams, ControllerConfig, GainScaling};
+use super::config::{CenterParams, ControllerConfig};
 use super::controller::{Command, Controller, Estimate, Tick};
 use super::estimator::{NnEstimator, NnParams};
 use super::observer::{Observer, ObserverInput};
@@ -44,13 +44,7 @@ impl<const N: usize> Paper<N> {
         let c = &params.controller;
         let mut rng = stream(params.run_seed, params.agent_id, Purpose::NnInit);
         let estimator = NnEstimator::new(NnParams::from_controller(c), c.initial_v_range, &mut rng);
-        let gains = match c.gain_scaling {
-            GainScaling::Unit => Vector::<N>::from_element(c.gain_k),
-            GainScaling::Inertia => {
-                let q0 = params.trajectory.reference::<N>(0.0).q;
-                model.inertia(&q0).diagonal() * c.gain_k
-            }
-        };
+        let gains = params.gains(model);
         let observer = Observer::at(params.trajectory.start_position::<N>()?, Vector::zeros());
         Some(Self {
             estimating,
