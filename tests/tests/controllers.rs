@@ -112,6 +112,45 @@ fn the_gated_controller_detects_the_onsets_and_tracks_better_than_the_law_it_gat
     }
 }
 
+/// `pd`, the traditional law without its delay compensation `− A e_u`: at the paper's delay
+/// (τ between 1 and 5 ms) it tracks as the traditional law does, but with the delay's offset at
+/// 10 ms (τ between 8 and 12 ms) the robots it controls leave their trajectories while the
+/// traditional law keeps them within a centiradian: what the paper's (12) buys.
+#[test]
+fn the_pd_controller_without_delay_compensation_loses_the_robots_the_traditional_law_holds() {
+    let run = |c, offset: Option<f64>| {
+        let mut r = paper_with(c, "none", 10.0);
+        for (a, o) in r.scenario.agents.iter_mut().zip(std::iter::repeat(offset)) {
+            match (&mut a.delay, o) {
+                (_, None) => {}
+                (fdi_common::delay::DelayProfile::Sine { offset_s, .. }, Some(o)) => *offset_s = o,
+                (other, _) => panic!("the paper's delays are sines, got {other:?}"),
+            }
+        }
+        run_inproc_any(&r, |_| {}).expect("runs")
+    };
+    let (pd, tr) = (
+        run(ControllerMode::Pd, None),
+        run(ControllerMode::Traditional, None),
+    );
+    for robot in 1..=4 {
+        let (p, t) = (rmse(&pd, robot), rmse(&tr, robot));
+        assert!(
+            p < 0.02 && t < 0.02,
+            "robot {robot}: pd {p}, traditional {t}"
+        );
+    }
+    let (pd, tr) = (
+        run(ControllerMode::Pd, Some(0.010)),
+        run(ControllerMode::Traditional, Some(0.010)),
+    );
+    for robot in 1..=4 {
+        let (p, t) = (rmse(&pd, robot), rmse(&tr, robot));
+        assert!(t < 0.02, "robot {robot}: traditional {t}");
+        assert!(p.is_nan() || p >= 0.1, "robot {robot}: pd {p} (NaN: diverged)");
+    }
+}
+
 #[test]
 fn an_unknown_controller_lists_the_known_ones_and_their_tables_are_validated() {
     let text = scenario::PAPER_SCENARIO.replacen("mode = \"proposed\"", "mode = \"sliding\"", 1);

@@ -165,7 +165,7 @@ fn a_set_that_does_not_fit_is_refused_naming_its_path_and_value() {
         ),
         (
             &["--set", "controller.mode=traditonal"],
-            &["controller.mode: unknown variant `traditonal` (did you mean `traditional`?), expected one of `proposed`, `traditional`, `computed-torque`, `gated`"],
+            &["controller.mode: unknown variant `traditonal` (did you mean `traditional`?), expected one of `proposed`, `traditional`, `computed-torque`, `gated`, `pd`"],
         ),
         (
             &["--set", "agents[7].id=8"],

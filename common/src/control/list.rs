@@ -18,6 +18,8 @@ macro_rules! with_controllers {
             /// The traditional controller whose measurement a residual detector gates: the
             /// observer's prediction stands in for it while the alarm is on.
             Gated = "gated" => super::gated::Gated::new;
+            /// The traditional law without its delay compensation: PD on the measurement.
+            Pd = "pd" => super::pd::Pd::new;
         }
     };
 }

@@ -11,6 +11,7 @@ pub mod gated;
 mod list;
 pub mod observer;
 pub mod paper;
+pub mod pd;
 
 pub use center::{AnyCenterAgent, CenterAgent, CenterOutput, CenterParams};
 pub use config::{
