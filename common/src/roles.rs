@@ -7,6 +7,9 @@
 //! * `[roles.monitor]`: a program taps the tampered measurements and the torques and publishes
 //!   one verdict (alarm, statistic) per agent and tick; the control center records them and
 //!   the report lists the monitor beside the built-in detectors.
+//! * `[roles.controller]`: a program decides the control center's torques (`[controller] mode
+//!   = "external"`): the control center shows it each tick (the measurement in use, the
+//!   reference, `e_u`, the model's terms) and sends the torque it answers.
 
 use serde::{Deserialize, Serialize};
 
@@ -30,6 +33,10 @@ pub struct RolesConfig {
     /// `[roles.monitor]`: a program judges every tick of every agent (a detector).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub monitor: Option<ExternalRole>,
+    /// `[roles.controller]`: a program decides the control center's torques (with
+    /// `[controller] mode = "external"`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller: Option<ExternalRole>,
 }
 
 impl RolesConfig {
@@ -40,7 +47,11 @@ impl RolesConfig {
     /// Every problem of the table, each naming its field under `at` (`roles`).
     pub fn problems(&self, at: &str) -> Vec<Problem> {
         let mut out = Vec::new();
-        for (name, role) in [("attacker", &self.attacker), ("monitor", &self.monitor)] {
+        for (name, role) in [
+            ("attacker", &self.attacker),
+            ("monitor", &self.monitor),
+            ("controller", &self.controller),
+        ] {
             if let Some(r) = role {
                 out.extend(r.problems(&format!("{at}.{name}")));
             }
@@ -76,7 +87,7 @@ pub struct ExternalRole {
     /// prefix and parameters in its environment (`FDI_*`, docs/protocol.md).
     pub command: Vec<String>,
     /// Its name in messages and, for a monitor, in the report (default: `monitor` for a
-    /// monitor, the program's file name for an attacker).
+    /// monitor, the program and its first argument otherwise).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub name: Option<String>,
     /// Lockstep: longest wait for its next message before the run stops naming it, s (default
@@ -85,7 +96,7 @@ pub struct ExternalRole {
     pub timeout_s: Option<f64>,
     /// Realtime: how late after the message it answers its answer may come, ms (default 5);
     /// later ones are counted and reported (an attacker's tick goes to the control center as
-    /// a gap marker instead).
+    /// a gap marker instead; a controller's tick holds the last good torque).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub deadline_ms: Option<f64>,
 }
@@ -183,6 +194,10 @@ mod tests {
                 deadline_ms: Some(f64::NAN),
                 ..role(&["python3", "m.py"])
             }),
+            controller: Some(ExternalRole {
+                timeout_s: Some(-1.0),
+                ..role(&["python3", "c.py"])
+            }),
         };
         let paths: Vec<String> = roles
             .problems("roles")
@@ -195,6 +210,7 @@ mod tests {
                 "roles.attacker.command",
                 "roles.attacker.timeout_s",
                 "roles.monitor.deadline_ms",
+                "roles.controller.timeout_s",
                 "roles.monitor.name"
             ]
         );
@@ -210,6 +226,7 @@ mod tests {
         let roles = RolesConfig {
             attacker: None,
             monitor: Some(r),
+            controller: None,
         };
         assert_eq!(roles.monitor_name(), Some(DEFAULT_MONITOR_NAME));
     }

@@ -855,6 +855,24 @@ impl Scenario {
                 format!("must be in 1..=64, got {}", c.hidden_neurons),
             );
         }
+        let external = c.mode == crate::control::ControllerMode::External;
+        match (external, self.roles.controller.is_some()) {
+            (true, false) => push(
+                "controller.mode".into(),
+                "`external` takes its torques from a program: name it in `[roles.controller] \
+                 command` (docs/protocol.md, \"The controller program\")"
+                    .into(),
+            ),
+            (false, true) => push(
+                "roles.controller".into(),
+                format!(
+                    "a program takes the controller role, so `controller.mode = \"{}\"` would \
+                     not be used: set `mode = \"external\"`",
+                    c.mode.as_str()
+                ),
+            ),
+            _ => {}
+        }
         out
     }
 
@@ -982,6 +1000,7 @@ impl Scenario {
         let roles = [
             ("roles.attacker", self.roles.attacker.is_some()),
             ("roles.monitor", self.roles.monitor.is_some()),
+            ("roles.controller", self.roles.controller.is_some()),
         ];
         (roles.iter().filter(|(_, set)| *set))
             .map(|(path, _)| Problem {

@@ -5,11 +5,13 @@
 //! independent, so the result does not depend on the order in which agents arrive). One
 //! [`Role`] of the run (its lifecycle and process shell: [`fdi_runtime::role`]).
 
+pub mod controller;
 pub mod monitor;
 
+use controller::{ControllerPorts, ControllerProgram};
 use monitor::{Monitor, MonitorPorts};
 
-use fdi_common::control::{AnyCenterAgent, CenterAgent};
+use fdi_common::control::{AnyCenterAgent, CenterAgent, CenterOutput};
 use fdi_common::engine::{center_record, center_tick, tick_time};
 use fdi_common::plant::Measurement;
 use fdi_common::run_dir::Process;
@@ -44,6 +46,8 @@ pub struct Ports<X: Transport> {
     pub route: Vec<usize>,
     /// The monitor program (`[roles.monitor]`), when the run has one.
     pub monitor: Option<MonitorPorts<X>>,
+    /// The controller program (`[roles.controller]`), when the run has one.
+    pub controller: Option<ControllerPorts<X>>,
 }
 
 /// The control center of a run.
@@ -119,11 +123,16 @@ impl<X: Transport> Ports<X> {
             Some(_) => Some(MonitorPorts::open(transport)?),
             None => None,
         };
+        let controller = match resolved.scenario.roles.controller {
+            Some(_) => Some(ControllerPorts::open(transport)?),
+            None => None,
+        };
         Ok(Self {
             tampered: transport.subscriber(Stream::Tampered)?,
             links,
             route,
             monitor,
+            controller,
         })
     }
 
@@ -176,11 +185,12 @@ impl Intake {
         }
     }
 
-    /// Admits measurement `m` (refused ones are counted) and controls its agent.
+    /// Admits measurement `m` (refused ones are counted) and controls its agent, or queues
+    /// it for the controller `program`.
     fn take<X: Transport>(
         &mut self,
         m: &MeasurementMsg,
-        slots: &mut [Slot],
+        (slots, program): (&mut [Slot], Option<&mut ControllerProgram>),
         ports: &Ports<X>,
         dt: f64,
         trace: &mut TraceWriter,
@@ -191,7 +201,7 @@ impl Intake {
         };
         let Slot { center, next } = &mut slots[i];
         fdi_common::on_joint_count!(AnyCenterAgent, center, c => {
-            self.take_for(m, (i, c, next), ports, dt, trace)
+            self.take_for(m, (i, c, next), program, ports, dt, trace)
         });
     }
 
@@ -200,6 +210,7 @@ impl Intake {
         &mut self,
         m: &MeasurementMsg,
         (i, center, next): (usize, &mut CenterAgent<N>, &mut u64),
+        program: Option<&mut ControllerProgram>,
         ports: &Ports<X>,
         dt: f64,
         trace: &mut TraceWriter,
@@ -219,6 +230,10 @@ impl Intake {
         if let Some(silent) = self.liveness.seen(i, received) {
             self.rejoined.push((i, silent, m.seq));
         }
+        if let Some(p) = program {
+            p.queue(i, m, input.is_some(), received);
+            return;
+        }
         let link = &ports.links[ports.route[i]];
         if let Err(e) = control(
             (center, next),
@@ -234,9 +249,9 @@ impl Intake {
     }
 }
 
-/// Computes the tick of the agent of `center` (its next tick due: `next`) from the admitted message `m` (received at `received`) and
-/// its measurement (`None`: the tick's input is missing), sends the torque on `link`, stamped
-/// with its tick time, and records it.
+/// Computes the tick of the agent of `center` (its next tick due: `next`) from the admitted
+/// message `m` (received at `received`) and its measurement (`None`: the tick's input is
+/// missing), and delivers the torque on `link`.
 fn control<X: Transport, const N: usize>(
     (center, next): (&mut CenterAgent<N>, &mut u64),
     (m, input): (&MeasurementMsg, Option<&Measurement<N>>),
@@ -248,6 +263,18 @@ fn control<X: Transport, const N: usize>(
     *next = m.seq + 1;
     let t = tick_time(m.seq, dt);
     let out = center_tick(center, t, input);
+    deliver(&out, (m, t), received, link, trace)
+}
+
+/// Sends the torque of tick `out` (the tick of the admitted message `m`, received at
+/// `received`, whose tick time is `t`) on `link`, stamped `t`, and records the tick.
+fn deliver<X: Transport, const N: usize>(
+    out: &CenterOutput<N>,
+    (m, t): (&MeasurementMsg, f64),
+    received: u64,
+    link: &AgentLink<X>,
+    trace: &mut TraceWriter,
+) -> Result<(), CenterError> {
     let sent = link.torque.send(TorqueMsg {
         seq: m.seq,
         agent: m.agent,
@@ -264,7 +291,7 @@ fn control<X: Transport, const N: usize>(
         reserved: 0,
     });
     // The record is written even when the send failed: the trace shows what was computed.
-    let written = trace.write(&TraceRecord::Center(center_record(m.seq, m.agent, &out)));
+    let written = trace.write(&TraceRecord::Center(center_record(m.seq, m.agent, out)));
     sent?;
     written?;
     Ok(())
@@ -349,6 +376,8 @@ pub struct Center<'a, X: Transport> {
     slots: Vec<Slot>,
     intake: Intake,
     monitor: Option<Monitor>,
+    /// The controller program (`[roles.controller]`), when the run has one.
+    program: Option<ControllerProgram>,
     /// Measurements the monitor let through, to be controlled.
     ready: Vec<MeasurementMsg>,
     /// The tick last reported to the launcher.
@@ -374,6 +403,16 @@ impl<X: Transport> role::Running for Center<'_, X> {
             }
             _ => None,
         };
+        self.program = match (&s.roles.controller, &self.ports.controller) {
+            (Some(role), Some(_)) => Some(ControllerProgram::new(
+                role,
+                &ids,
+                self.dt,
+                !self.realtime,
+                epoch_ns,
+            )),
+            _ => None,
+        };
         Ok(())
     }
 
@@ -395,6 +434,10 @@ impl<X: Transport> role::Running for Center<'_, X> {
                 Ok(ports.tampered.has_messages()?
                     || match &ports.monitor {
                         Some(m) => m.alarms.has_messages()?,
+                        None => false,
+                    }
+                    || match &ports.controller {
+                        Some(c) => c.answers.has_messages()?,
                         None => false,
                     })
             })?;
@@ -426,6 +469,9 @@ impl<X: Transport> role::Running for Center<'_, X> {
         if let Some(mon) = &self.monitor {
             notes.push(mon.summary(ticks));
         }
+        if let Some(p) = &self.program {
+            notes.push(p.summary());
+        }
         let note =
             (!notes.is_empty()).then(|| (self.resolved.scenario.duration_s, notes.join("; ")));
         Ok(End { ticks, note })
@@ -441,7 +487,7 @@ impl<'a, X: Transport> Center<'a, X> {
         let dt = s.control_period_s;
         let realtime = s.clock == ClockMode::Realtime;
         let intake = Intake::new(&ids, ticks, 0, dt);
-        let (monitor, end_ns) = (None, 0);
+        let (monitor, program, end_ns) = (None, None, 0);
         let strategy = WaitStrategy::for_clock(s.clock);
         Self {
             resolved,
@@ -450,6 +496,7 @@ impl<'a, X: Transport> Center<'a, X> {
             slots,
             intake,
             monitor,
+            program,
             ready: Vec::new(),
             reported: 0,
             ticks,
@@ -468,6 +515,7 @@ impl<'a, X: Transport> Center<'a, X> {
             slots,
             intake,
             monitor,
+            program,
             ready,
             dt,
             ..
@@ -481,17 +529,22 @@ impl<'a, X: Transport> Center<'a, X> {
                 arrived = ports.tampered.drain(|m| mon.admit(m, ready))?;
                 mon.take_verdicts(mp, trace, ready)?;
                 for m in ready.drain(..) {
-                    intake.take(&m, slots, ports, dt, trace);
+                    intake.take(&m, (slots, program.as_mut()), ports, dt, trace);
                 }
             }
             _ => {
                 ports
                     .tampered
-                    .drain(|m| intake.take(&m, slots, ports, dt, trace))?;
+                    .drain(|m| intake.take(&m, (slots, program.as_mut()), ports, dt, trace))?;
             }
         }
         if let Some(e) = intake.failure.take() {
             return Err(e);
+        }
+        if let (Some(p), Some(cp)) = (program, &ports.controller) {
+            if converse(p, cp, (slots, ports), &mut intake.answered, trace)? > 0 {
+                cp.bell.ring(&self.conn.transport)?;
+            }
         }
         Ok(arrived)
     }
@@ -545,6 +598,26 @@ impl<'a, X: Transport> Center<'a, X> {
         };
         Ok(controlled && judged)
     }
+}
+
+/// Asks the controller program `p` every tick it may be asked, closes every tick it answered
+/// (and asks the next ones), and holds the torque of every tick past its deadline (realtime)
+/// or fails past the timeout (lockstep). `answered` marks the agents that got a torque.
+/// Returns how many ticks were asked (the program is rung once for them).
+fn converse<X: Transport>(
+    p: &mut ControllerProgram,
+    cp: &ControllerPorts<X>,
+    (slots, ports): (&mut [Slot], &Ports<X>),
+    answered: &mut [bool],
+    trace: &mut TraceWriter,
+) -> Result<usize, CenterError> {
+    let mut asked = p.ask(cp, (slots, ports), answered, trace)?;
+    while p.take_answers(cp, (slots, ports), answered, trace)? > 0 {
+        asked += p.ask(cp, (slots, ports), answered, trace)?;
+    }
+    p.enforce(monotonic_ns(), (slots, ports), answered, trace)?;
+    asked += p.ask(cp, (slots, ports), answered, trace)?;
+    Ok(asked)
 }
 
 /// The process of the `fdi-control-center` binary (and of `fdi-launch process

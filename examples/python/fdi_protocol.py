@@ -1,6 +1,6 @@
 """The fdi-mas external-role protocol in Python (docs/protocol.md is the contract).
 
-What a program taking the attacker or the monitor role of a run needs: the wire types
+What a program taking the attacker, the monitor or the controller role of a run needs: the wire types
 (ctypes copies of the #[repr(C)] structs of common/runtime/src/ipc/msg.rs, same type names),
 the run's environment (FDI_*), the run's iceoryx2 node and services (opened, never created)
 and the handshake with the launcher:
@@ -33,16 +33,24 @@ GAP = 1  # flags bit 0 of MeasurementMsg and TorqueMsg: a gap marker, no data
 START, STOP = 1, 2  # ControlMsg.command
 READY, PROGRESS, DONE, LOST, REJOINED = 1, 2, 3, 4, 5  # StatusMsg.kind
 ROLE_AGENT, ROLE_ATTACKER, ROLE_CENTER, ROLE_MONITOR, ROLE_EXTERNAL_ATTACKER = 1, 2, 3, 4, 5
+ROLE_EXTERNAL_CONTROLLER = 6
+MISSING, REJECTED = 1, 2  # ControllerInMsg.flags: y, yd are the last good measurement
+ALARM, OWN_ALARM = 1, 2  # ControllerOutMsg.flags: its alarm is on; it has an alarm of its own
 
 # Per role: its StatusMsg.role code, its node name, the wake event it waits on.
 ROLES = {
     "attacker": (ROLE_EXTERNAL_ATTACKER, "external-attacker", "fdi/wake/external/attacker"),
     "monitor": (ROLE_MONITOR, "monitor", "fdi/wake/monitor"),
+    "controller": (ROLE_EXTERNAL_CONTROLLER, "external-controller",
+                   "fdi/wake/external/controller"),
 }
 WAIT_S = 0.05  # one timed wait on the wake event
 
 u32, u64, f64 = ctypes.c_uint32, ctypes.c_uint64, ctypes.c_double
 Joints = f64 * MAX_DOF  # only the first `dof` entries are meaningful, the rest 0
+# A matrix: MAX_DOF x MAX_DOF, row-major (entry (i, j) at i * MAX_DOF + j); only the first `dof`
+# rows and columns are meaningful, the rest 0.
+Matrix = f64 * (MAX_DOF * MAX_DOF)
 
 
 class MeasurementMsg(ctypes.Structure):
@@ -107,7 +115,42 @@ class AlarmMsg(ctypes.Structure):
         return "fdi_mas::AlarmMsg"
 
 
-MESSAGES = [MeasurementMsg, TorqueMsg, ControlMsg, StatusMsg, AlarmMsg]
+class ControllerInMsg(ctypes.Structure):
+    """What the control center shows the controller program of tick `seq` of `agent`: the
+    measurement in use (y, yd), the reference (q_d, qd_d, qdd_d), e_u, the delay tau(t), and the
+    model's terms M(q_d), M(q_d)^-1, M(y), V(y, yd) yd + G(y) + F(yd)."""
+
+    _fields_ = [
+        ("seq", u64), ("agent", u32), ("dof", u32), ("t", f64), ("tau", f64),
+        ("y", Joints), ("yd", Joints), ("q_d", Joints), ("qd_d", Joints), ("qdd_d", Joints),
+        ("e_u", Joints), ("inertia_ref", Matrix), ("inverse_inertia_ref", Matrix),
+        ("inertia", Matrix), ("bias", Joints), ("center_sent_ns", u64),
+        ("flags", u32), ("reserved", u32),
+    ]
+
+    @classmethod
+    def type_name(cls):
+        return "fdi_mas::ControllerInMsg"
+
+
+class ControllerOutMsg(ctypes.Structure):
+    """The controller program's answer to tick `seq` of `agent`: the torque `u` (N·m), its
+    attack estimate `s_hat` (0 without one), its own alarm in `flags` (ALARM | OWN_ALARM)."""
+
+    _fields_ = [
+        ("seq", u64), ("agent", u32), ("dof", u32), ("u", Joints), ("s_hat", Joints),
+        ("controller_sent_ns", u64), ("flags", u32), ("reserved", u32),
+    ]
+
+    @classmethod
+    def type_name(cls):
+        return "fdi_mas::ControllerOutMsg"
+
+
+MESSAGES = [
+    MeasurementMsg, TorqueMsg, ControlMsg, StatusMsg, AlarmMsg, ControllerInMsg,
+    ControllerOutMsg,
+]
 
 
 def monotonic_ns():
@@ -126,7 +169,7 @@ class Env:
             return environ[name]
 
         self.prefix = get("FDI_PREFIX")  # iceoryx2 global prefix of the run
-        self.role = get("FDI_ROLE")  # "attacker" or "monitor"
+        self.role = get("FDI_ROLE")  # "attacker", "monitor" or "controller"
         self.scenario = get("FDI_SCENARIO")  # the run's resolved scenario (TOML)
         self.run_dir = get("FDI_RUN_DIR")
         self.agents = [int(a) for a in get("FDI_AGENTS").split(",") if a]

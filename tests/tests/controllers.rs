@@ -29,7 +29,11 @@ fn rmse(s: &RunSummary, robot: u32) -> f64 {
 #[test]
 fn every_controller_over_ipc_in_lockstep_gives_the_in_process_digest() {
     let dir = Scratch::new("controllers");
-    for c in ControllerMode::ALL {
+    // `external` asks a program (tests/tests/external.rs).
+    for c in ControllerMode::ALL
+        .into_iter()
+        .filter(|c| *c != ControllerMode::External)
+    {
         let run = |engine: &str| {
             let args = [
                 "run",
@@ -147,7 +151,10 @@ fn the_pd_controller_without_delay_compensation_loses_the_robots_the_traditional
     for robot in 1..=4 {
         let (p, t) = (rmse(&pd, robot), rmse(&tr, robot));
         assert!(t < 0.02, "robot {robot}: traditional {t}");
-        assert!(p.is_nan() || p >= 0.1, "robot {robot}: pd {p} (NaN: diverged)");
+        assert!(
+            p.is_nan() || p >= 0.1,
+            "robot {robot}: pd {p} (NaN: diverged)"
+        );
     }
 }
 
@@ -181,4 +188,50 @@ fn an_unknown_controller_lists_the_known_ones_and_their_tables_are_validated() {
             "{expected}: {said:#?}"
         );
     }
+}
+
+/// `mode = "external"` takes its torques from `[roles.controller]`: each without the other is
+/// refused, naming the field; and the in-process engine refuses a program in a role.
+#[test]
+fn the_external_controller_and_its_program_come_together() {
+    let problems = |text: &str| -> Vec<String> {
+        match scenario::load_str(text, "s.toml", None) {
+            Ok(_) => Vec::new(),
+            Err(e) => e
+                .problems
+                .iter()
+                .map(|p| format!("{}: {}", p.path, p.message))
+                .collect(),
+        }
+    };
+    let external =
+        scenario::PAPER_SCENARIO.replacen("mode = \"proposed\"", "mode = \"external\"", 1);
+    let said = problems(&external);
+    assert!(
+        said.iter()
+            .any(|p| p.starts_with("controller.mode: `external` takes its torques from a program")),
+        "{said:#?}"
+    );
+    let program = "\n[roles.controller]\ncommand = [\"python3\", \"c.py\"]\n";
+    let said = problems(&format!("{}{program}", scenario::PAPER_SCENARIO));
+    assert!(
+        said.iter().any(|p| p.starts_with(
+            "roles.controller: a program takes the controller role, so `controller.mode = \"proposed\"` would not be used"
+        )),
+        "{said:#?}"
+    );
+    assert_eq!(
+        problems(&format!("{external}{program}")),
+        Vec::<String>::new()
+    );
+    let dir = Scratch::new("controllers-external-inproc");
+    let file = dir.0.join("s.toml");
+    std::fs::write(&file, format!("{external}{program}")).expect("writing");
+    let out = fdi_tests::spawn(
+        &["run", &file.display().to_string(), "--engine", "inproc"],
+        &dir.0,
+    );
+    let out = fdi_tests::wait_with_watchdog(out, WATCHDOG);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("roles"), "{err}");
 }

@@ -5,6 +5,8 @@
 //!   equivalent profile (`examples/python/bias-replay.toml`): same digest, same RMSEs;
 //! * a Python monitor's verdicts reach the report beside the built-in detectors, and a monitor
 //!   changes nothing of the run (same digest as without it);
+//! * the Python controller (the traditional law written again) gives the built-in traditional
+//!   controller's digest in lockstep; its bad answers hold the last good torque, counted;
 //! * a program that never says ready, dies, answers out of order, sends malformed messages, or
 //!   is too slow stops the run (or, in realtime, is counted) with a message naming it, and
 //!   leaves nothing behind.
@@ -265,6 +267,11 @@ fn run_with_script(role: &str, name: &str, script: &str, duration_s: f64, clock:
             let mut attack = toml::Table::new();
             attack.insert("preset".into(), "none".into());
             doc.insert("attack".into(), toml::Value::Table(attack));
+        }
+        if role == "controller" {
+            if let Some(c) = doc.get_mut("controller").and_then(|c| c.as_table_mut()) {
+                c.insert("mode".into(), "external".into());
+            }
         }
     });
     let scenario = scenario.display().to_string();
@@ -698,4 +705,191 @@ fn the_attackers_record_of_an_external_answer_classifies_what_was_sent() {
     forged.t += 1e-3;
     let f = fdi_attacker::external::record(&c, &forged, false, 1e-3, 2);
     assert_eq!((f.delivery, f.active), (Delivery::Forged, true));
+}
+
+// ---------------------------------------------------------------------------------------------
+// The controller program (`[roles.controller]`, docs/protocol.md, "The controller program")
+
+/// `examples/python/paper-python-controller.toml` for `duration_s` under `python`, with
+/// `args` added to the controller's command and `edit` applied; written into `dir`.
+fn python_controller(
+    python: &Path,
+    dir: &Path,
+    duration_s: f64,
+    args: &[&str],
+    edit: impl FnOnce(&mut toml::Table),
+) -> String {
+    let path = with_python(
+        "examples/python/paper-python-controller.toml",
+        python,
+        dir,
+        |doc| {
+            doc.insert("duration_s".into(), duration_s.into());
+            let role = doc
+                .get_mut("roles")
+                .and_then(|r| r.get_mut("controller"))
+                .and_then(|c| c.as_table_mut())
+                .expect("[roles.controller]");
+            if let Some(cmd) = role.get_mut("command").and_then(|c| c.as_array_mut()) {
+                cmd.extend(args.iter().map(|a| toml::Value::String(a.to_string())));
+            }
+            edit(doc);
+        },
+    );
+    path.display().to_string()
+}
+
+/// The closing note of the controller program named `name` in the control center's trace of
+/// the run of `summary`.
+fn controller_note(summary: &serde_json::Value, name: &str) -> String {
+    let run = fdi_common::run_dir::RunDir::new(run_dir_of(summary));
+    let recs = trace_records(&run.trace(fdi_common::run_dir::Process::Center));
+    closing_note(&recs, &format!("controller `{name}`")).expect("the controller's closing note")
+}
+
+/// The first number after `", "` in the part of `note` that contains `what`.
+fn count_in(note: &str, what: &str) -> u64 {
+    note.split(", ")
+        .find(|p| p.contains(what))
+        .and_then(|p| p.split(' ').find_map(|w| w.parse().ok()))
+        .unwrap_or_else(|| panic!("no count of `{what}` in {note}"))
+}
+
+/// Each robot's `rejected_torques` in `summary`, robots 1 to 4.
+fn rejected_torques(summary: &serde_json::Value) -> Vec<u64> {
+    (1..=4)
+        .map(|r| summary["metrics"][r.to_string()]["rejected_torques"].as_u64())
+        .collect::<Option<_>>()
+        .expect("rejected_torques per robot")
+}
+
+/// The Python re-implementation of the traditional law (`examples/python/controller.py`) gives
+/// the built-in traditional controller's run in lockstep, bit for bit, under the paper's
+/// attack: the same trace digest.
+#[test]
+fn the_python_controller_gives_the_digest_of_the_built_in_traditional_law() {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-controller");
+    let scenario = python_controller(&python, &s.0, 3.0, &[], |_| {});
+    let py = json(&launch(
+        &["run", &scenario, "--json"],
+        &s.0.join("py"),
+        WATCHDOG,
+    ));
+    assert_eq!(py["controller"], "external", "{py}");
+    let dir = s.0.join("builtin");
+    std::fs::create_dir_all(&dir).expect("a folder");
+    let builtin = python_controller(&python, &dir, 3.0, &[], |doc| {
+        doc.remove("roles");
+        if let Some(c) = doc.get_mut("controller").and_then(|c| c.as_table_mut()) {
+            c.insert("mode".into(), "traditional".into());
+        }
+    });
+    let rust = json(&launch(
+        &["run", &builtin, "--json"],
+        &s.0.join("rust"),
+        WATCHDOG,
+    ));
+    assert_eq!(rust["controller"], "traditional");
+    assert_eq!(digest(&py), digest(&rust));
+    assert_eq!(rejected_torques(&py), [0; 4]);
+    let note = controller_note(&py, "python-traditional");
+    assert!(
+        note.contains(": 12000 answers, 0 with a non-finite"),
+        "{note}"
+    );
+}
+
+/// An answer with non-finite torques, or of another number of joints than its robot's, sends
+/// the last good torque again: counted as a rejected torque, the first named on stderr, all
+/// counted in the closing note. The run goes on.
+#[test]
+fn a_controller_that_answers_non_finite_torques_or_the_wrong_joints_is_named_and_held() {
+    let Some(python) = python() else { return };
+    for (bad, what, said) in [
+        (
+            "non-finite",
+            "with a non-finite",
+            "a non-finite torque or Ŝ",
+        ),
+        (
+            "dof",
+            "with another number",
+            "an answer of 3 joints for a robot of 2",
+        ),
+    ] {
+        let s = Scratch::new(&format!("ext-controller-{bad}"));
+        let args = ["--bad", bad, "--bad-from", "600"];
+        let scenario = python_controller(&python, &s.0, 1.0, &args, |_| {});
+        let out = launch(&["run", &scenario, "--json"], &s.0.join("runs"), WATCHDOG);
+        let summary = json(&out);
+        assert_eq!(rejected_torques(&summary), [400; 4], "{bad}");
+        let err = stderr(&out);
+        assert!(err.contains("controller `python-traditional`"), "{err}");
+        assert!(err.contains(said), "{bad}: {err}");
+        let note = controller_note(&summary, "python-traditional");
+        assert_eq!(count_in(&note, what), 1600, "{note}");
+        // The robots stayed under control on the held torques.
+        for r in 1..=4 {
+            let e = summary["metrics"][r.to_string()]["max_abs_error_rad"].as_f64();
+            assert!(e.is_some_and(|e| e < 0.5), "robot {r}: {e:?}");
+        }
+    }
+}
+
+/// Lockstep waits for every answer: a controller that stops answering stops the run after its
+/// timeout, naming it and the tick; one that never says ready is named too.
+#[test]
+fn a_controller_that_stops_answering_or_never_says_ready_is_named() {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-controller-silent");
+    let args = ["--bad", "silent", "--bad-from", "300"];
+    let scenario = python_controller(&python, &s.0, 1.0, &args, |doc| {
+        if let Some(c) = doc
+            .get_mut("roles")
+            .and_then(|r| r.get_mut("controller"))
+            .and_then(|c| c.as_table_mut())
+        {
+            c.insert("timeout_s".into(), 2.0.into());
+        }
+    });
+    let child = fdi_tests::spawn(&["run", &scenario, "--json"], &s.0.join("runs"));
+    let pid = child.id();
+    let out = fdi_tests::wait_with_watchdog(child, WATCHDOG);
+    fdi_tests::assert_no_leftovers(pid);
+    assert_failed_naming(&out, "python-traditional", "no answer to tick 300 of agent");
+    let out = run_with_script(
+        "controller",
+        "never-ready",
+        "import time\ntime.sleep(60)\n",
+        1.0,
+        "lockstep",
+    );
+    assert_failed_naming(&out, "never-ready", "not ready after");
+}
+
+/// Realtime: a question unanswered at its deadline holds the last good torque (a rejected
+/// torque), counted late in the closing note; the run goes on to its end.
+#[test]
+fn realtime_a_silent_controller_holds_the_last_torque_past_each_deadline() {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-controller-realtime");
+    let args = ["--bad", "silent", "--bad-from", "1000"];
+    let scenario = python_controller(&python, &s.0, 2.0, &args, |doc| {
+        doc.insert("clock".into(), "realtime".into());
+    });
+    let out = launch(&["run", &scenario, "--json"], &s.0.join("runs"), WATCHDOG);
+    let summary = fdi_tests::json_realtime(&out);
+    let rejected = rejected_torques(&summary);
+    for r in &rejected {
+        // At least every tick from 1000 on; a loaded machine may make earlier answers late.
+        assert!((1000..=2000).contains(r), "{rejected:?}");
+    }
+    let note = controller_note(&summary, "python-traditional");
+    eprintln!("{note}");
+    assert_eq!(
+        count_in(&note, "ticks past the"),
+        rejected.iter().sum::<u64>(),
+        "every rejected torque is a tick past its deadline: {note}"
+    );
 }

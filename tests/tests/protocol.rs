@@ -21,8 +21,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use fdi_common::scenario::{ClockMode, MAX_DOF};
 use fdi_runtime::ipc::{
-    AlarmMsg, ControlMsg, Local, MeasurementMsg, Payload, Role, Sizing, StatusMsg, Stream,
-    TorqueMsg, Transport, Wake,
+    AlarmMsg, ControlMsg, ControllerInMsg, ControllerOutMsg, Local, MeasurementMsg, Payload, Role,
+    Sizing, StatusMsg, Stream, TorqueMsg, Transport, Wake,
 };
 use fdi_runtime::process::external::{ExternalKind, ENV_VARS, MONITOR_LAG};
 use iceoryx2::prelude::{
@@ -358,6 +358,36 @@ fn layouts() -> Vec<Layout> {
             statistic,
             monitor_sent_ns,
         }),
+        layout!(ControllerInMsg {
+            seq,
+            agent,
+            dof,
+            t,
+            tau,
+            y,
+            yd,
+            q_d,
+            qd_d,
+            qdd_d,
+            e_u,
+            inertia_ref,
+            inverse_inertia_ref,
+            inertia,
+            bias,
+            center_sent_ns,
+            flags,
+            reserved,
+        }),
+        layout!(ControllerOutMsg {
+            seq,
+            agent,
+            dof,
+            u,
+            s_hat,
+            controller_sent_ns,
+            flags,
+            reserved,
+        }),
     ]
 }
 
@@ -643,7 +673,9 @@ fn every_stream() -> Vec<Stream> {
             | Stream::Status
             | Stream::ExternalIn
             | Stream::ExternalOut
-            | Stream::Alarm => {}
+            | Stream::Alarm
+            | Stream::ControllerIn
+            | Stream::ControllerOut => {}
         }
     }
     let _: fn(Stream) = listed;
@@ -657,6 +689,8 @@ fn every_stream() -> Vec<Stream> {
         Stream::ExternalIn,
         Stream::ExternalOut,
         Stream::Alarm,
+        Stream::ControllerIn,
+        Stream::ControllerOut,
     ]
 }
 
@@ -669,7 +703,8 @@ fn every_wake() -> Vec<Wake> {
             | Wake::Center
             | Wake::Launcher
             | Wake::ExternalAttacker
-            | Wake::Monitor => {}
+            | Wake::Monitor
+            | Wake::ExternalController => {}
         }
     }
     let _: fn(Wake) = listed;
@@ -680,6 +715,7 @@ fn every_wake() -> Vec<Wake> {
         Wake::Launcher,
         Wake::ExternalAttacker,
         Wake::Monitor,
+        Wake::ExternalController,
     ]
 }
 
@@ -836,6 +872,8 @@ fn check_services(doc: &str) -> Vec<String> {
                 "ControlMsg" => pubsub_qos::<ControlMsg>(&run, &node, *s),
                 "StatusMsg" => pubsub_qos::<StatusMsg>(&run, &node, *s),
                 "AlarmMsg" => pubsub_qos::<AlarmMsg>(&run, &node, *s),
+                "ControllerInMsg" => pubsub_qos::<ControllerInMsg>(&run, &node, *s),
+                "ControllerOutMsg" => pubsub_qos::<ControllerOutMsg>(&run, &node, *s),
                 other => {
                     errors.push(format!("Stream::{s:?}: payload `{other}` is no message"));
                     continue;
@@ -906,6 +944,22 @@ fn check_constants(doc: &str) -> Vec<String> {
         ("StatusMsg::DONE", u64::from(StatusMsg::DONE)),
         ("StatusMsg::LOST", u64::from(StatusMsg::LOST)),
         ("StatusMsg::REJOINED", u64::from(StatusMsg::REJOINED)),
+        (
+            "ControllerInMsg::MISSING",
+            u64::from(ControllerInMsg::MISSING),
+        ),
+        (
+            "ControllerInMsg::REJECTED",
+            u64::from(ControllerInMsg::REJECTED),
+        ),
+        (
+            "ControllerOutMsg::ALARM",
+            u64::from(ControllerOutMsg::ALARM),
+        ),
+        (
+            "ControllerOutMsg::OWN_ALARM",
+            u64::from(ControllerOutMsg::OWN_ALARM),
+        ),
         ("MAX_DOF", MAX_DOF as u64),
         ("MONITOR_LAG", MONITOR_LAG),
     ]
@@ -973,14 +1027,15 @@ fn check_environment(doc: &str) -> Vec<String> {
     for (var, values) in [
         (
             "FDI_ROLE",
-            [
+            &[
                 ExternalKind::Attacker.as_str(),
                 ExternalKind::Monitor.as_str(),
-            ],
+                ExternalKind::Controller.as_str(),
+            ][..],
         ),
         (
             "FDI_CLOCK",
-            [ClockMode::Lockstep.as_str(), ClockMode::Realtime.as_str()],
+            &[ClockMode::Lockstep.as_str(), ClockMode::Realtime.as_str()][..],
         ),
     ] {
         for v in values {

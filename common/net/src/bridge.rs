@@ -9,8 +9,8 @@ use std::thread::JoinHandle;
 use std::time::Duration;
 
 use fdi_runtime::ipc::{
-    AlarmMsg, Bell as _, ControlMsg, Inbox as _, IpcError, MeasurementMsg, Outbox as _, Sizing,
-    StatusMsg, Stream, TorqueMsg, Transport, Wake, Waker as _,
+    AlarmMsg, Bell as _, ControlMsg, ControllerInMsg, ControllerOutMsg, Inbox as _, IpcError,
+    MeasurementMsg, Outbox as _, Sizing, StatusMsg, Stream, TorqueMsg, Transport, Wake, Waker as _,
 };
 
 use crate::error::{thread_error, NetError};
@@ -109,6 +109,8 @@ enum OutPort<X: Transport> {
     Control(X::Inbox<ControlMsg>),
     Status(X::Inbox<StatusMsg>),
     Alarm(X::Inbox<AlarmMsg>),
+    ControllerIn(X::Inbox<ControllerInMsg>),
+    ControllerOut(X::Inbox<ControllerOutMsg>),
 }
 
 /// The local publishing side of an inbound stream, by payload type.
@@ -118,6 +120,8 @@ enum InPort<X: Transport> {
     Control(X::Outbox<ControlMsg>),
     Status(X::Outbox<StatusMsg>),
     Alarm(X::Outbox<AlarmMsg>),
+    ControllerIn(X::Outbox<ControllerInMsg>),
+    ControllerOut(X::Outbox<ControllerOutMsg>),
 }
 
 #[derive(Clone, Copy)]
@@ -127,6 +131,8 @@ enum Kind {
     Control,
     Status,
     Alarm,
+    ControllerIn,
+    ControllerOut,
 }
 
 impl Kind {
@@ -138,6 +144,8 @@ impl Kind {
             Self::Control => std::mem::size_of::<ControlMsg>(),
             Self::Status => std::mem::size_of::<StatusMsg>(),
             Self::Alarm => std::mem::size_of::<AlarmMsg>(),
+            Self::ControllerIn => std::mem::size_of::<ControllerInMsg>(),
+            Self::ControllerOut => std::mem::size_of::<ControllerOutMsg>(),
         }
     }
 }
@@ -151,6 +159,8 @@ fn kind(stream: Stream) -> Kind {
         Stream::Control => Kind::Control,
         Stream::Status => Kind::Status,
         Stream::Alarm => Kind::Alarm,
+        Stream::ControllerIn => Kind::ControllerIn,
+        Stream::ControllerOut => Kind::ControllerOut,
     }
 }
 
@@ -162,6 +172,8 @@ impl<X: Transport> OutPort<X> {
             Kind::Control => Self::Control(t.subscriber(stream)?),
             Kind::Status => Self::Status(t.subscriber(stream)?),
             Kind::Alarm => Self::Alarm(t.subscriber(stream)?),
+            Kind::ControllerIn => Self::ControllerIn(t.subscriber(stream)?),
+            Kind::ControllerOut => Self::ControllerOut(t.subscriber(stream)?),
         })
     }
 
@@ -173,6 +185,8 @@ impl<X: Transport> OutPort<X> {
             Self::Control(p) => p.drain(|m| encode(m, by, batch)),
             Self::Status(p) => p.drain(|m| encode(m, by, batch)),
             Self::Alarm(p) => p.drain(|m| encode(m, by, batch)),
+            Self::ControllerIn(p) => p.drain(|m| encode(m, by, batch)),
+            Self::ControllerOut(p) => p.drain(|m| encode(m, by, batch)),
         }
     }
 }
@@ -185,6 +199,8 @@ impl<X: Transport> InPort<X> {
             Kind::Control => Self::Control(t.publisher(stream)?),
             Kind::Status => Self::Status(t.publisher(stream)?),
             Kind::Alarm => Self::Alarm(t.publisher(stream)?),
+            Kind::ControllerIn => Self::ControllerIn(t.publisher(stream)?),
+            Kind::ControllerOut => Self::ControllerOut(t.publisher(stream)?),
         })
     }
 
@@ -242,6 +258,12 @@ impl<X: Transport> InPort<X> {
             Self::Control(p) => admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop)),
             Self::Status(p) => admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop)),
             Self::Alarm(p) => admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop)),
+            Self::ControllerIn(p) => {
+                admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop))
+            }
+            Self::ControllerOut(p) => {
+                admit(at, bytes, by, admitted, refused, |m| p.send(m).map(drop))
+            }
         }
     }
 }

@@ -108,6 +108,16 @@ pub fn streams(
             only(&[Wake::Attacker]),
         ),
         (Stream::Alarm, only(&[Wake::Monitor]), only(&[Wake::Center])),
+        (
+            Stream::ControllerIn,
+            only(&[Wake::Center]),
+            only(&[Wake::ExternalController]),
+        ),
+        (
+            Stream::ControllerOut,
+            only(&[Wake::ExternalController]),
+            only(&[Wake::Center]),
+        ),
     ];
     for &id in &agents {
         // The control center publishes an agent's torques, or, when the run attacks them, the

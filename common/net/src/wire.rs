@@ -1,7 +1,10 @@
 //! Payloads on the network: their bytes are their `#[repr(C)]` layout, their stamps moved to
 //! the receiving host's clock, several in one batch.
 
-use fdi_runtime::ipc::{AlarmMsg, ControlMsg, MeasurementMsg, Payload, StatusMsg, TorqueMsg};
+use fdi_runtime::ipc::{
+    AlarmMsg, ControlMsg, ControllerInMsg, ControllerOutMsg, MeasurementMsg, Payload, StatusMsg,
+    TorqueMsg,
+};
 use zerocopy::{FromBytes, Immutable, IntoBytes, KnownLayout};
 
 use crate::error::NetError;
@@ -76,6 +79,26 @@ impl Carried for AlarmMsg {
 
     fn shift_clock(&mut self, by: i64) {
         shifted(&mut self.monitor_sent_ns, by);
+    }
+}
+
+impl Carried for ControllerInMsg {
+    fn order(&self) -> Option<(u32, u64)> {
+        Some((self.agent, self.seq))
+    }
+
+    fn shift_clock(&mut self, by: i64) {
+        shifted(&mut self.center_sent_ns, by);
+    }
+}
+
+impl Carried for ControllerOutMsg {
+    fn order(&self) -> Option<(u32, u64)> {
+        Some((self.agent, self.seq))
+    }
+
+    fn shift_clock(&mut self, by: i64) {
+        shifted(&mut self.controller_sent_ns, by);
     }
 }
 

@@ -3,18 +3,18 @@
 //! mode`).
 
 use crate::delay::DelayLine;
-use crate::model::{EulerLagrange, Vector};
+use crate::model::{EulerLagrange, Matrix, Vector};
 use crate::trajectory::Reference;
 
 pub use super::config::CenterParams;
 use super::config::{ControllerMode, ObserverInput as ObserverInputMode};
-use super::controller::{Controller, Estimate, Tick};
+use super::controller::{Answer, Controller, Estimate, Tick};
 use super::detection::Detector;
 use super::list::with_controllers;
 
 /// Declares [`build`] of the list of controllers.
 macro_rules! declare_build {
-    ($($(#[$doc:meta])* $variant:ident = $name:literal => $make:path;)*) => {
+    ($($(#[$doc:meta])* $variant:ident = $name:literal => $module:ident :: $ty:ident :: $make:ident;)*) => {
         /// The controller `mode` of `params` for a robot of `model`; `None` when its state
         /// cannot be made for the robot (a start pose of another number of joints).
         fn build<const N: usize>(
@@ -24,7 +24,8 @@ macro_rules! declare_build {
         ) -> Option<Box<dyn Controller<N>>> {
             match mode {
                 $(ControllerMode::$variant => {
-                    $make(params, model).map(|c| Box::new(c) as Box<dyn Controller<N>>)
+                    super::$module::$ty::$make(params, model)
+                        .map(|c| Box::new(c) as Box<dyn Controller<N>>)
                 })*
             }
         }
@@ -91,6 +92,8 @@ pub struct CenterAgent<const N: usize> {
     pub history_misses: u64,
     /// Number of ticks without a measurement ([`CenterAgent::tick_missing`]).
     pub missing_inputs: u64,
+    /// The tick asked of a controller program and not answered yet ([`CenterAgent::ask`]).
+    asked: Option<OpenTick<N>>,
 }
 
 impl<const N: usize> CenterAgent<N> {
@@ -115,6 +118,7 @@ impl<const N: usize> CenterAgent<N> {
             state_resets: 0,
             history_misses: 0,
             missing_inputs: 0,
+            asked: None,
         })
     }
 }
@@ -150,8 +154,39 @@ impl<const N: usize> CenterAgent<N> {
     /// delivered): the documented rule is to hold the last good measurement, as for a rejected
     /// one, and count the tick.
     pub fn tick_missing(&mut self, t: f64) -> CenterOutput<N> {
-        self.missing_inputs += 1;
         self.tick_on(t, None, None)
+    }
+
+    /// A tick whose torque a controller program decides (`[roles.controller]`), first half:
+    /// takes the measurement of the tick at `t` (`None`: missing) and returns what the program
+    /// is shown. The tick stays open until [`Self::answer`]; asking again first drops it.
+    pub fn ask(&mut self, t: f64, input: Option<(&Vector<N>, &Vector<N>)>) -> Question<N> {
+        let open = self.open_tick(t, input);
+        let x = &open.x;
+        let m = self.model.as_ref();
+        let question = Question {
+            t,
+            tau: self.params.delay.tau(t),
+            y: x.y,
+            yd: x.yd,
+            reference: x.reference,
+            e_u: x.e_u,
+            inertia_ref: m.inertia(&x.reference.q),
+            inverse_inertia_ref: m.inverse_inertia(&x.reference.q),
+            inertia: m.inertia(&x.y),
+            bias: m.bias_forces(&x.y, &x.yd),
+            missing: open.missing,
+            rejected: open.rejected_input,
+        };
+        self.asked = Some(open);
+        question
+    }
+
+    /// Second half: the program's answer to the open tick (`None`: no usable answer came, the
+    /// last good torque is held and counted). `None` when no tick is open.
+    pub fn answer(&mut self, answer: Option<&Answer<N>>) -> Option<CenterOutput<N>> {
+        let open = self.asked.take()?;
+        Some(self.close_tick(open, None, answer))
     }
 
     /// One tick from the measurement `input` (`None`: missing).
@@ -161,8 +196,38 @@ impl<const N: usize> CenterAgent<N> {
         input: Option<(&Vector<N>, &Vector<N>)>,
         s_override: Option<&Vector<N>>,
     ) -> CenterOutput<N> {
+        let open = self.open_tick(t, input);
+        self.close_tick(open, s_override, None)
+    }
+
+    /// Steps 1 and 3 of a tick: the measurement taken (rejected or missing ones counted, the
+    /// last good one in use), the reference and `e_u`.
+    fn open_tick(&mut self, t: f64, input: Option<(&Vector<N>, &Vector<N>)>) -> OpenTick<N> {
         let rejected_input = input.is_some_and(|(y, yd)| self.accept_measurement(y, yd));
-        let x = self.tick_inputs(t);
+        if input.is_none() {
+            self.missing_inputs += 1;
+        }
+        OpenTick {
+            x: self.tick_inputs(t),
+            rejected_input,
+            missing: input.is_none(),
+        }
+    }
+
+    /// The rest of the tick opened as `open`: the controller's command, the history, its
+    /// update, the resets and the alarm.
+    fn close_tick(
+        &mut self,
+        open: OpenTick<N>,
+        s_override: Option<&Vector<N>>,
+        answer: Option<&Answer<N>>,
+    ) -> CenterOutput<N> {
+        let OpenTick {
+            x,
+            rejected_input,
+            missing,
+        } = open;
+        let t = x.t;
         let tick = Tick {
             t,
             dt: self.params.control_period_s,
@@ -174,6 +239,7 @@ impl<const N: usize> CenterAgent<N> {
             delay: &self.params.delay,
             model: self.model.as_ref(),
             s_override,
+            answer,
         };
         let command = self.controller.command(&tick);
         // 5: a non-finite torque is counted and replaced by the last one sent.
@@ -232,7 +298,7 @@ impl<const N: usize> CenterAgent<N> {
             rejected_torque,
             state_reset,
             history_miss: x.history_miss,
-            missing_input: input.is_none(),
+            missing_input: missing,
         }
     }
 
@@ -330,7 +396,40 @@ impl AnyCenterAgent {
     }
 }
 
+/// A tick opened (steps 1 and 3) and not closed yet.
+#[derive(Debug)]
+struct OpenTick<const N: usize> {
+    x: TickInputs<N>,
+    rejected_input: bool,
+    missing: bool,
+}
+
+/// What a controller program is shown of a tick ([`CenterAgent::ask`]; docs/protocol.md,
+/// "The controller program").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Question<const N: usize> {
+    pub t: f64,
+    /// The known delay `τ(t)`.
+    pub tau: f64,
+    /// The measurement in use (this tick's, or the last good one).
+    pub y: Vector<N>,
+    pub yd: Vector<N>,
+    pub reference: Reference<N>,
+    pub e_u: Vector<N>,
+    /// `M(q_d)` and `A = M(q_d)⁻¹`.
+    pub inertia_ref: Matrix<N>,
+    pub inverse_inertia_ref: Matrix<N>,
+    /// `M(y)` and `V(y, ẏ) ẏ + G(y) + F(ẏ)` at the measurement in use.
+    pub inertia: Matrix<N>,
+    pub bias: Vector<N>,
+    /// The tick had no measurement / its measurement was rejected: `y`, `ẏ` are the last good
+    /// ones.
+    pub missing: bool,
+    pub rejected: bool,
+}
+
 /// What steps 1 and 3 of a tick work out, for the steps after them.
+#[derive(Debug)]
 struct TickInputs<const N: usize> {
     t: f64,
     /// The measurement in use: this tick's, or the last good one if this tick's was rejected.

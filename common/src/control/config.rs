@@ -12,7 +12,7 @@ use super::list::with_controllers;
 
 /// Declares [`ControllerMode`] of the list of controllers.
 macro_rules! declare_mode {
-    ($($(#[$doc:meta])* $variant:ident = $name:literal => $make:path;)*) => {
+    ($($(#[$doc:meta])* $variant:ident = $name:literal => $module:ident :: $ty:ident :: $make:ident;)*) => {
         /// The controller of a scenario (`[controller] mode`): one of the registered ones
         /// (docs/model.md, "Controllers").
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]

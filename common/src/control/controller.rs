@@ -42,6 +42,19 @@ pub struct Tick<'a, const N: usize> {
     /// `Ŝ` forced to this value (an oracle for tests and ablations): a controller that
     /// estimates the attack uses it in place of its estimate and does not learn.
     pub s_override: Option<&'a Vector<N>>,
+    /// A controller program's answer to this tick (`[roles.controller]`): what the `external`
+    /// controller sends. `None` for the others, and when no usable answer came (the last good
+    /// torque is then held).
+    pub answer: Option<&'a Answer<N>>,
+}
+
+/// A controller program's answer to a tick (`[roles.controller]`, docs/protocol.md, "The
+/// controller program").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Answer<const N: usize> {
+    pub command: Command<N>,
+    /// Its own alarm, if it has one.
+    pub alarm: Option<bool>,
 }
 
 /// A controller's command at a tick.

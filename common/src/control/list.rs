@@ -1,6 +1,7 @@
 //! The registered controllers (docs/model.md, "Controllers"): one line each,
-//! `Variant = "name" => constructor;` (its path from a sibling module), the constructor a `fn(&CenterParams, &dyn
-//! EulerLagrange<N>) -> Option<C>` of a type `C` implementing [`super::controller::Controller`].
+//! `Variant = "name" => module::Type::constructor;` (the module a sibling of this one), the
+//! constructor a `fn(&CenterParams, &dyn EulerLagrange<N>) -> Option<C>` of a type `C`
+//! implementing [`super::controller::Controller`].
 //! [`super::config::ControllerMode`] (the scenario's `mode`) and the pipeline's
 //! `super::center::build` are both made of this list.
 
@@ -9,17 +10,19 @@ macro_rules! with_controllers {
     ($then:ident) => {
         $then! {
             /// The paper's: observer, and the NN attack estimate `Ŝ` in (12) and (23).
-            Proposed = "proposed" => super::paper::Paper::proposed;
+            Proposed = "proposed" => paper::Paper::proposed;
             /// The paper's baseline: its observer, `Ŝ ≡ 0`, the weights not updated.
-            Traditional = "traditional" => super::paper::Paper::traditional;
+            Traditional = "traditional" => paper::Paper::traditional;
             /// Computed torque on the measured state predicted over the delay; no attack
             /// estimate.
-            ComputedTorque = "computed-torque" => super::computed_torque::ComputedTorque::new;
+            ComputedTorque = "computed-torque" => computed_torque::ComputedTorque::new;
             /// The traditional controller whose measurement a residual detector gates: the
             /// observer's prediction stands in for it while the alarm is on.
-            Gated = "gated" => super::gated::Gated::new;
+            Gated = "gated" => gated::Gated::new;
             /// The traditional law without its delay compensation: PD on the measurement.
-            Pd = "pd" => super::pd::Pd::new;
+            Pd = "pd" => pd::Pd::new;
+            /// A program outside the project decides the torques (`[roles.controller]`).
+            External = "external" => external::External::new;
         }
     };
 }

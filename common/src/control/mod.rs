@@ -7,17 +7,18 @@ pub mod config;
 pub mod controller;
 pub mod detection;
 pub mod estimator;
+pub mod external;
 pub mod gated;
 mod list;
 pub mod observer;
 pub mod paper;
 pub mod pd;
 
-pub use center::{AnyCenterAgent, CenterAgent, CenterOutput, CenterParams};
+pub use center::{AnyCenterAgent, CenterAgent, CenterOutput, CenterParams, Question};
 pub use config::{
     ControllerConfig, ControllerMode, DetectionConfig, GainScaling, ObserverInput, UpdateLaw,
 };
-pub use controller::{Command, Controller, Estimate, Tick};
+pub use controller::{Answer, Command, Controller, Estimate, Tick};
 pub use detection::Detector;
 pub use estimator::{NnEstimator, NnParams};
 pub use observer::Observer;

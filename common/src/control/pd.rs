@@ -107,6 +107,7 @@ mod tests {
                 delay: &params.delay,
                 model: model.as_ref(),
                 s_override: None,
+                answer: None,
             })
         };
         let c = command(&mut pd, Vector::zeros());

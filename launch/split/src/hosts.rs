@@ -497,6 +497,9 @@ fn place_the_rest(
     if roles.monitor.is_some() {
         all.push(Wake::Monitor);
     }
+    if roles.controller.is_some() {
+        all.push(Wake::ExternalController);
+    }
     for w in all {
         host_of.entry(w).or_insert_with(|| coordinator.to_string());
     }
@@ -552,6 +555,7 @@ pub fn wake_word(w: Wake) -> String {
         Wake::Launcher => "launcher".into(),
         Wake::ExternalAttacker => "external-attacker".into(),
         Wake::Monitor => "monitor".into(),
+        Wake::ExternalController => "external-controller".into(),
     }
 }
 
@@ -563,6 +567,7 @@ pub fn parse_wake(word: &str) -> Result<Wake> {
         "launcher" => Wake::Launcher,
         "external-attacker" => Wake::ExternalAttacker,
         "monitor" => Wake::Monitor,
+        "external-controller" => Wake::ExternalController,
         w => match w.strip_prefix("agent/").map(str::parse::<u32>) {
             Some(Ok(id)) => Wake::Agent(id),
             _ => bail!("`{w}` names no process of a run"),
@@ -600,7 +605,9 @@ impl RemoteProcess {
             Wake::Agent(id) => (Process::Agent(id), "agent"),
             Wake::Attacker => (Process::Attacker, Process::ATTACKER),
             Wake::Center => (Process::Center, Process::CENTER),
-            Wake::Launcher | Wake::ExternalAttacker | Wake::Monitor => return None,
+            Wake::Launcher | Wake::ExternalAttacker | Wake::Monitor | Wake::ExternalController => {
+                return None
+            }
         };
         let label = match process {
             Process::Agent(id) => format!("agent {id}"),

@@ -23,6 +23,8 @@
 //! | `fdi/external/attacker/in` | [`MeasurementMsg`] | attacker → external attacker program |
 //! | `fdi/external/attacker/out` | [`MeasurementMsg`] | external attacker program → attacker |
 //! | `fdi/alarm` | [`AlarmMsg`] | monitor program → control center |
+//! | `fdi/external/controller/in` | [`ControllerInMsg`] | control center → controller program |
+//! | `fdi/external/controller/out` | [`ControllerOutMsg`] | controller program → control center |
 //!
 //! docs/protocol.md is the contract external programs implement (layouts, handshake, rules);
 //! `tests/tests/protocol.rs` checks it against these types.
@@ -44,6 +46,9 @@ mod transport;
 
 pub use iceoryx::{root_dir, shm_dir, Local, LocalShared, Shm, ShmShared};
 pub use machine::MachineError;
-pub use msg::{AlarmMsg, ControlMsg, MeasurementMsg, Role, StatusMsg, TorqueMsg};
+pub use msg::{
+    AlarmMsg, ControlMsg, ControllerInMsg, ControllerOutMsg, MeasurementMsg, Role, StatusMsg,
+    TorqueMsg,
+};
 pub use prefix::RunPrefix;
 pub use transport::*;

@@ -187,6 +187,107 @@ pub struct AlarmMsg {
     pub monitor_sent_ns: u64,
 }
 
+/// Entries of a square matrix in a payload: [`MAX_DOF`]², row-major, of which the first
+/// `dof` rows and columns are meaningful (row `i` at `i · MAX_DOF`).
+pub const MATRIX_ENTRIES: usize = MAX_DOF * MAX_DOF;
+
+/// Copies the `N × N` matrix `m` into a payload array, row-major with rows of [`MAX_DOF`]
+/// entries (unused entries zero).
+pub fn from_matrix<const N: usize>(m: &fdi_common::model::Matrix<N>) -> [f64; MATRIX_ENTRIES] {
+    let mut a = [0.0; MATRIX_ENTRIES];
+    for i in 0..N {
+        for j in 0..N {
+            a[i * MAX_DOF + j] = m[(i, j)];
+        }
+    }
+    a
+}
+
+/// What the control center shows a controller program (`[roles.controller]`) of one tick of
+/// one agent: control center → controller program (docs/protocol.md, "The controller program").
+#[derive(
+    Debug, Clone, Copy, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+)]
+#[repr(C)]
+#[type_name("fdi_mas::ControllerInMsg")]
+pub struct ControllerInMsg {
+    /// Tick `k`.
+    pub seq: u64,
+    pub agent: u32,
+    pub dof: u32,
+    /// `t_k`, s.
+    pub t: f64,
+    /// The known delay `τ(t_k)` of the torque channel, s.
+    pub tau: f64,
+    /// The measurement in use (this tick's, or the last good one): `y`, rad, and `ẏ`, rad/s.
+    pub y: [f64; MAX_DOF],
+    pub yd: [f64; MAX_DOF],
+    /// The reference at `t_k`: `q_d`, `q̇_d`, `q̈_d`.
+    pub q_d: [f64; MAX_DOF],
+    pub qd_d: [f64; MAX_DOF],
+    pub qdd_d: [f64; MAX_DOF],
+    /// `e_u = ∫_{t−τ(t)}^{t} u ds` over the torques sent, N·m·s.
+    pub e_u: [f64; MAX_DOF],
+    /// `M(q_d)`, row-major ([`MATRIX_ENTRIES`]).
+    pub inertia_ref: [f64; MATRIX_ENTRIES],
+    /// `A = M(q_d)⁻¹`, row-major.
+    pub inverse_inertia_ref: [f64; MATRIX_ENTRIES],
+    /// `M(y)` at the measurement in use, row-major.
+    pub inertia: [f64; MATRIX_ENTRIES],
+    /// `V(y, ẏ) ẏ + G(y) + F(ẏ)` at the measurement in use, N·m.
+    pub bias: [f64; MAX_DOF],
+    /// CLOCK_MONOTONIC when the control center published, ns.
+    pub center_sent_ns: u64,
+    /// [`ControllerInMsg::MISSING`], [`ControllerInMsg::REJECTED`] or 0.
+    pub flags: u32,
+    pub reserved: u32,
+}
+
+impl ControllerInMsg {
+    /// The tick has no measurement (a gap marker, a forged stamp, a replay): `y`, `ẏ` are the
+    /// last good ones.
+    pub const MISSING: u32 = 1;
+    /// The tick's measurement was rejected (non-finite or absurd): `y`, `ẏ` are the last good
+    /// ones.
+    pub const REJECTED: u32 = 2;
+}
+
+/// A controller program's answer to one [`ControllerInMsg`]: the torque to send and its attack
+/// estimate (docs/protocol.md, "The controller program").
+#[derive(
+    Debug, Clone, Copy, PartialEq, ZeroCopySend, IntoBytes, FromBytes, Immutable, KnownLayout,
+)]
+#[repr(C)]
+#[type_name("fdi_mas::ControllerOutMsg")]
+pub struct ControllerOutMsg {
+    /// Tick `k` answered.
+    pub seq: u64,
+    pub agent: u32,
+    pub dof: u32,
+    /// The torque to send, N·m.
+    pub u: [f64; MAX_DOF],
+    /// Its attack estimate `Ŝ` (0 without one).
+    pub s_hat: [f64; MAX_DOF],
+    /// CLOCK_MONOTONIC when the program published, ns (0 if it does not say).
+    pub controller_sent_ns: u64,
+    /// [`ControllerOutMsg::ALARM`] and [`ControllerOutMsg::OWN_ALARM`] bits, or 0.
+    pub flags: u32,
+    pub reserved: u32,
+}
+
+impl ControllerOutMsg {
+    /// Its alarm is on at this tick (read with [`ControllerOutMsg::OWN_ALARM`]).
+    pub const ALARM: u32 = 1;
+    /// It has an alarm of its own: [`ControllerOutMsg::ALARM`] is recorded as the control
+    /// center's alarm in place of the alarm on `‖Ŝ‖`.
+    pub const OWN_ALARM: u32 = 2;
+
+    /// Its own alarm at this tick, if it has one.
+    pub fn alarm(&self) -> Option<bool> {
+        (self.flags & Self::OWN_ALARM != 0).then_some(self.flags & Self::ALARM != 0)
+    }
+}
+
 /// Which process a status message comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Role {
@@ -197,16 +298,19 @@ pub enum Role {
     Monitor,
     /// The external program that takes the attacker role.
     ExternalAttacker,
+    /// The controller program (`[roles.controller]`): the control center's torques.
+    ExternalController,
 }
 
 impl Role {
     /// Every role, for tables and checks.
-    pub const ALL: [Self; 5] = [
+    pub const ALL: [Self; 6] = [
         Self::Agent,
         Self::Attacker,
         Self::Center,
         Self::Monitor,
         Self::ExternalAttacker,
+        Self::ExternalController,
     ];
 
     pub fn code(self) -> u32 {
@@ -216,6 +320,7 @@ impl Role {
             Self::Center => 3,
             Self::Monitor => 4,
             Self::ExternalAttacker => 5,
+            Self::ExternalController => 6,
         }
     }
 

@@ -73,6 +73,10 @@ pub enum Stream {
     ExternalOut,
     /// The monitor program → control center: one verdict per agent and tick.
     Alarm,
+    /// Control center → the controller program: what it is shown of each tick.
+    ControllerIn,
+    /// The controller program → control center: the torque of each tick.
+    ControllerOut,
 }
 
 impl Stream {
@@ -88,6 +92,8 @@ impl Stream {
             Self::ExternalIn => "fdi/external/attacker/in".into(),
             Self::ExternalOut => "fdi/external/attacker/out".into(),
             Self::Alarm => "fdi/alarm".into(),
+            Self::ControllerIn => "fdi/external/controller/in".into(),
+            Self::ControllerOut => "fdi/external/controller/out".into(),
         }
     }
 }
@@ -103,6 +109,8 @@ pub enum Wake {
     ExternalAttacker,
     /// The monitor program (detectors outside the project).
     Monitor,
+    /// The controller program (the control center's torques decided outside the project).
+    ExternalController,
 }
 
 impl Wake {
@@ -114,6 +122,7 @@ impl Wake {
             Self::Launcher => "fdi/wake/launcher".into(),
             Self::ExternalAttacker => "fdi/wake/external/attacker".into(),
             Self::Monitor => "fdi/wake/monitor".into(),
+            Self::ExternalController => "fdi/wake/external/controller".into(),
         }
     }
 }
@@ -162,7 +171,11 @@ impl Sizing {
             Stream::Actuation => (1, 2, n * burst),
             Stream::Control => (1, n + 6, 8),
             Stream::Status => (n + 6, 2, 256),
-            Stream::ExternalIn | Stream::ExternalOut | Stream::Alarm => (1, 2, n * burst),
+            Stream::ExternalIn
+            | Stream::ExternalOut
+            | Stream::Alarm
+            | Stream::ControllerIn
+            | Stream::ControllerOut => (1, 2, n * burst),
         };
         (pubs + self.taps, subs + self.taps, buffer)
     }

@@ -60,6 +60,7 @@ impl<X: Transport> LateBell<X> {
 pub enum ExternalKind {
     Attacker,
     Monitor,
+    Controller,
 }
 
 impl ExternalKind {
@@ -68,6 +69,7 @@ impl ExternalKind {
         match self {
             Self::Attacker => "attacker",
             Self::Monitor => "monitor",
+            Self::Controller => "controller",
         }
     }
 }

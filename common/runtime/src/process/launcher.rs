@@ -158,6 +158,7 @@ pub fn node_name(wake: Wake) -> String {
         Wake::Launcher => "launcher".into(),
         Wake::ExternalAttacker => "external-attacker".into(),
         Wake::Monitor => "monitor".into(),
+        Wake::ExternalController => "external-controller".into(),
     }
 }
 

@@ -16,7 +16,7 @@ pub mod procfs;
 mod shutdown;
 mod wait;
 
-pub use crate::stderr::print_failure;
+pub use crate::stderr::{print_failure, print_warning};
 pub use admission::{admit_measurement, admit_torque, Admission, Command};
 pub use args::ProcessArgs;
 pub use error::{ProcessError, RoleError, PROGRESS_EVERY};

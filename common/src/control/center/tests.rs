@@ -1,4 +1,5 @@
 use super::*;
+use crate::control::Command;
 use crate::delay::DelayProfile;
 use crate::scenario::paper;
 
@@ -305,4 +306,61 @@ fn inertia_gain_scaling_gives_each_joint_k_times_its_inertia_at_the_reference_s_
             m[(i, i)]
         );
     }
+}
+
+/// Agent 1 of the paper's scenario with the controller `mode`.
+fn agent1_of(mode: ControllerMode) -> CenterAgent<2> {
+    let r = paper().expect("the embedded paper scenario is valid");
+    let s = &r.scenario;
+    let mut p = s.center_params(&s.agents[0]);
+    p.controller.mode = mode;
+    CenterAgent::<2>::new(p).expect("a two-link model")
+}
+
+/// A controller program answering what the traditional law computes from each question
+/// (`u = K (q̇_d − ẏ + β (q_d − y) − A e_u)`, with the question's `A`) gives the traditional
+/// controller's ticks exactly, missing and rejected measurements included; a tick without a
+/// usable answer holds the last good torque and counts it.
+#[test]
+fn asking_a_program_that_answers_the_traditional_law_gives_the_traditional_ticks() {
+    let (mut builtin, mut asked) = (
+        agent1_of(ControllerMode::Traditional),
+        agent1_of(ControllerMode::External),
+    );
+    let c = builtin.params.controller;
+    let dt = 1e-3;
+    for k in 0..300u32 {
+        let t = f64::from(k) * dt;
+        let y = Vector::<2>::new(0.3 * (t * 7.0).sin(), -0.2 + 0.1 * t);
+        let yd = Vector::<2>::new(2.1 * (t * 7.0).cos(), 0.1);
+        let input = match k % 50 {
+            10 => None,
+            20 => Some((Vector::<2>::from_element(f64::NAN), yd)),
+            _ => Some((y, yd)),
+        };
+        let want = match &input {
+            Some((y, yd)) => builtin.tick(t, y, yd),
+            None => builtin.tick_missing(t),
+        };
+        let q = asked.ask(t, input.as_ref().map(|(y, yd)| (y, yd)));
+        assert_eq!((q.missing, q.rejected), (k % 50 == 10, k % 50 == 20));
+        let r = q.reference;
+        let u = ((r.qd - q.yd) + (r.q - q.y) * c.beta - q.inverse_inertia_ref * q.e_u)
+            .component_mul(&Vector::<2>::from_element(c.gain_k));
+        let answer = Answer {
+            command: Command {
+                u,
+                s_hat: Vector::zeros(),
+            },
+            alarm: None,
+        };
+        let got = asked.answer(Some(&answer)).expect("a tick was open");
+        assert_eq!(got, want, "tick {k}");
+    }
+    assert_eq!(asked.answer(None), None, "no tick is open");
+    let last = asked.ask(0.3, None);
+    let held = asked.answer(None).expect("a tick was open");
+    assert!(held.rejected_torque && finite(&held.u), "{held:?}");
+    assert_eq!(asked.rejected_torques, 1);
+    assert_eq!(last.inertia_ref, asked.model.inertia(&last.reference.q));
 }

@@ -541,8 +541,7 @@ fn check_machine(resolved: &Resolved, prefix: &str) -> Result<ipc::Sizing> {
     // A full shared-memory folder, a read-only iceoryx2 folder or a low open-file limit is
     // named now, with its fix: past this point iceoryx2 reports them as a SIGBUS or an
     // internal error.
-    let external =
-        resolved.scenario.roles.attacker.is_some() || resolved.scenario.roles.monitor.is_some();
+    let external = resolved.has_external_roles();
     ipc::machine::check(sizing, external, prefix).context("the machine cannot carry this run")?;
     Ok(sizing)
 }
@@ -864,8 +863,8 @@ fn spawn_local<X: Transport>(
 
 /// Spawns the programs that take a role (`[roles]`), once the run's own processes are ready:
 /// every service they open exists by then. Each gets the run's prefix and parameters in its
-/// environment (docs/protocol.md). In replay mode only the monitor runs (the replayer stands in
-/// for the attacker).
+/// environment (docs/protocol.md). In replay mode the attacker program does not run (the
+/// replayer stands in for the attacker).
 fn spawn_externals<X: Transport>(
     resolved: &Resolved,
     opts: &IpcOptions,
@@ -888,6 +887,12 @@ fn spawn_externals<X: Transport>(
             roles.monitor.as_ref(),
             Wake::Monitor,
             "monitor",
+        ),
+        (
+            ExternalKind::Controller,
+            roles.controller.as_ref(),
+            Wake::ExternalController,
+            "controller",
         ),
     ] {
         let Some(role) = role else { continue };
@@ -1111,11 +1116,15 @@ fn stall_timeout_of(resolved: &Resolved, split: Option<&dyn Split>, pace: Option
     if let Some(p) = pace.or(realtime.then_some(1.0)) {
         base = base.max(STALL_TIMEOUT + reports_apart(resolved, p).saturating_mul(2));
     }
-    [roles.attacker.as_ref(), roles.monitor.as_ref()]
-        .into_iter()
-        .flatten()
-        .map(|r| r.timeout() + Duration::from_secs(1))
-        .fold(base, Duration::max)
+    [
+        roles.attacker.as_ref(),
+        roles.monitor.as_ref(),
+        roles.controller.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
+    .map(|r| r.timeout() + Duration::from_secs(1))
+    .fold(base, Duration::max)
 }
 
 /// How much wall time passes between two progress reports of a run of `resolved` at `pace` ×
@@ -1157,7 +1166,8 @@ fn matches_status(wake: Wake, m: &StatusMsg) -> bool {
         (Wake::Attacker, Some(Role::Attacker))
         | (Wake::Center, Some(Role::Center))
         | (Wake::ExternalAttacker, Some(Role::ExternalAttacker))
-        | (Wake::Monitor, Some(Role::Monitor)) => true,
+        | (Wake::Monitor, Some(Role::Monitor))
+        | (Wake::ExternalController, Some(Role::ExternalController)) => true,
         _ => false,
     }
 }
