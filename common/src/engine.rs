@@ -498,6 +498,18 @@ impl<const N: usize> AgentLoop<N> {
         })
     }
 
+    /// Sets its control center's torque correction: `N` entries, or none; else `Err(N)`.
+    fn set_correction(&mut self, c: &[f64]) -> Result<(), usize> {
+        match c.len() {
+            0 => self.center.set_correction(None),
+            n if n == N => self
+                .center
+                .set_correction(Some(Vector::<N>::from_column_slice(c))),
+            _ => return Err(N),
+        }
+        Ok(())
+    }
+
     /// Tick `k` at `t` of this robot, with `attacker` ([`run_inproc_any_with`] says how it is
     /// asked); `sink` sees its record.
     fn tick<A: Attacker>(
@@ -586,6 +598,25 @@ impl Ticker {
         self.started.elapsed().as_secs_f64()
     }
 
+    /// Sets the torque correction of agent `agent`'s control center
+    /// ([`CenterAgent::set_correction`]): `correction` holds one entry per joint of its robot,
+    /// or none (no correction). Errors naming the agent or the count when they do not fit.
+    pub fn set_correction(&mut self, agent: u32, correction: &[f64]) -> Result<(), String> {
+        let Some(l) = self
+            .loops
+            .iter_mut()
+            .find(|l| crate::on_joint_count!(AnyLoop, &**l, a => a.plant.agent_id()) == agent)
+        else {
+            return Err(format!("agent {agent} is not an agent of the run"));
+        };
+        crate::on_joint_count!(AnyLoop, l, a => a.set_correction(correction)).map_err(|n| {
+            format!(
+                "agent {agent}: a correction of {} entries for {n} joints",
+                correction.len()
+            )
+        })
+    }
+
     /// Runs the next tick of every agent, in the scenario's agent order, with `attacker`
     /// ([`run_inproc_any_with`] says how it is asked); `sink` sees each agent's record. False,
     /// and nothing run, once every tick has run.
@@ -639,6 +670,11 @@ impl Lockstep {
     /// The metrics so far (and, through them, each detector's alarm after the last tick).
     pub fn evaluator(&self) -> &Evaluator {
         self.books.evaluator()
+    }
+
+    /// [`Ticker::set_correction`].
+    pub fn set_correction(&mut self, agent: u32, correction: &[f64]) -> Result<(), String> {
+        self.ticker.set_correction(agent, correction)
     }
 
     /// [`Ticker::tick`], each record entered in the books before `sink` sees it.

@@ -11,7 +11,8 @@ and ``fdi-launch run --engine inproc`` on the same scenario give the same trace 
 
 Environments (Gymnasium 1.x, registered on import): ``fdi_mas/Attacker-v0``
 (:class:`fdi_mas.envs.AttackerEnv`), ``fdi_mas/Detector-v0``
-(:class:`fdi_mas.envs.DetectorEnv`); the PettingZoo parallel environment
+(:class:`fdi_mas.envs.DetectorEnv`), ``fdi_mas/Defender-v0``
+(:class:`fdi_mas.envs.DefenderEnv`); the PettingZoo parallel environment
 ``fdi_mas.envs.attack_defend_v0``; the vector environment
 :class:`fdi_mas.envs.VectorAttackerEnv`. docs/python.md has the details.
 """
@@ -46,6 +47,7 @@ def _register() -> None:
     for env_id, entry, vector in (
         ("fdi_mas/Attacker-v0", "fdi_mas.envs:AttackerEnv", "fdi_mas.envs:VectorAttackerEnv"),
         ("fdi_mas/Detector-v0", "fdi_mas.envs:DetectorEnv", None),
+        ("fdi_mas/Defender-v0", "fdi_mas.envs:DefenderEnv", None),
     ):
         if env_id not in gymnasium.registry:
             gymnasium.register(id=env_id, entry_point=entry, vector_entry_point=vector)

@@ -13,6 +13,10 @@ use fdi_common::scenario::Resolved;
 pub const CHANNELS: [&str; 3] = ["position", "velocity", "torque"];
 /// Index of the torque channel in [`CHANNELS`].
 const TORQUE: usize = 2;
+/// The defence's channel: a correction added to the torque each chosen robot's controller
+/// commands, at the control center (before the torque path), after the attack channels of an
+/// action.
+pub const CORRECTION: &str = "correction";
 
 /// What the learning agent acts on and how an episode is scored.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,6 +32,8 @@ pub struct Spec {
     pub detectors: Vec<usize>,
     /// Ticks per step.
     pub decision_period: u64,
+    /// The largest torque correction (N·m) of the [`CORRECTION`] channel, when an action has it.
+    pub correction: Option<f64>,
 }
 
 /// The attacker of an episode: the scenario's attack profile, plus the action's injection on
@@ -228,6 +234,8 @@ pub struct Episode {
     attacker: EnvAttacker,
     seen: Seen,
     summary: Option<RunSummary>,
+    /// Per chosen robot: its torque correction (N·m per link; the [`CORRECTION`] channel).
+    corrections: Vec<Vec<f64>>,
 }
 
 /// Whether the spec's robots are robots of the scenario and its channels and detectors exist.
@@ -253,6 +261,11 @@ fn check(resolved: &Resolved, spec: &Spec) -> Result<(), String> {
     if spec.decision_period == 0 {
         return Err("decision_period: at least 1 tick".into());
     }
+    if let Some(b) = spec.correction.filter(|b| !(b.is_finite() && *b >= 0.0)) {
+        return Err(format!(
+            "correction_budget: must be finite and ≥ 0 N·m, got {b}"
+        ));
+    }
     Ok(())
 }
 
@@ -267,6 +280,10 @@ impl Episode {
         let agents: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
         let attacker = EnvAttacker::new(&resolved, &spec, links);
         let n = agents.len();
+        let corrections = match spec.correction {
+            Some(_) => vec![vec![0.0; links]; spec.robots.len()],
+            None => Vec::new(),
+        };
         Ok(Self {
             seen: Seen {
                 t: 0.0,
@@ -280,6 +297,7 @@ impl Episode {
             engine: Some(engine),
             attacker,
             summary: None,
+            corrections,
         })
     }
 
@@ -305,9 +323,14 @@ impl Episode {
         &self.agents
     }
 
-    /// Entries of an action: robots × channels × links.
+    /// Channels of an action: the attack's, and the correction when the spec has it.
+    fn action_channels(&self) -> usize {
+        self.spec.channels.len() + usize::from(self.spec.correction.is_some())
+    }
+
+    /// Entries of an action: robots × channels (the correction last) × links.
     pub fn action_size(&self) -> usize {
-        self.spec.robots.len() * self.spec.channels.len() * self.links
+        self.spec.robots.len() * self.action_channels() * self.links
     }
 
     /// The next tick to run, and the ticks of the horizon.
@@ -347,7 +370,7 @@ impl Episode {
             return Err(format!(
                 "an action has {want} entries ({} robots × {} channels × {} links), got {}",
                 self.spec.robots.len(),
-                self.spec.channels.len(),
+                self.action_channels(),
                 self.links,
                 action.len()
             ));
@@ -377,17 +400,19 @@ impl Episode {
     /// [`Self::act`] for an action [`Self::check_action`] accepted.
     pub fn apply_action(&mut self, action: &[f64]) {
         let l = self.links;
-        let per_robot = self.spec.channels.len() * l;
-        for ((_, inj), a) in self
-            .attacker
-            .injections
-            .iter_mut()
-            .zip(action.chunks(per_robot.max(1)))
-        {
+        let per_robot = self.action_channels() * l;
+        for (r, a) in action.chunks(per_robot.max(1)).enumerate() {
+            let (_, inj) = &mut self.attacker.injections[r];
             for (c, values) in self.spec.channels.iter().zip(a.chunks(l.max(1))) {
                 let budget = self.spec.budget[*c];
                 for (dst, v) in inj[c * l..(c + 1) * l].iter_mut().zip(values) {
                     *dst = v * budget;
+                }
+            }
+            if let (Some(budget), Some(dst)) = (self.spec.correction, self.corrections.get_mut(r)) {
+                let values = &a[self.spec.channels.len() * l..];
+                for (d, v) in dst.iter_mut().zip(values) {
+                    *d = v * budget;
                 }
             }
         }
@@ -404,6 +429,10 @@ impl Episode {
             out.truncated = self.summary.as_ref().is_some_and(|s| s.partial.is_none());
             return out;
         };
+        for (id, c) in self.spec.robots.iter().zip(&self.corrections) {
+            // The robots and the links were checked when the episode was made.
+            let _ = engine.set_correction(*id, c);
+        }
         let (l, agents) = (self.links, &self.agents);
         let seen = &mut self.seen;
         let mut attacked = vec![0u64; agents.len()];

@@ -42,14 +42,27 @@ fn spec(
     channels: Vec<String>,
     budget: [f64; 3],
     detectors: Vec<String>,
-    decision_period: u64,
+    (decision_period, correction_budget): (u64, f64),
 ) -> PyResult<Spec> {
+    // The correction, the defence's channel, comes after the attack's.
+    let correction = channels
+        .iter()
+        .any(|c| c == episode::CORRECTION)
+        .then_some(correction_budget);
+    if correction.is_some() && channels.last().is_some_and(|c| c != episode::CORRECTION) {
+        return Err(PyValueError::new_err(format!(
+            "channels: {:?} comes after every attack channel",
+            episode::CORRECTION
+        )));
+    }
     let channels = channels
         .iter()
+        .filter(|c| *c != episode::CORRECTION)
         .map(|c| {
             CHANNELS.iter().position(|x| x == c).ok_or_else(|| {
                 PyValueError::new_err(format!(
-                    "channels: no channel {c:?}; the channels are {CHANNELS:?}"
+                    "channels: no channel {c:?}; the channels are {CHANNELS:?} and {:?}",
+                    episode::CORRECTION
                 ))
             })
         })
@@ -71,6 +84,7 @@ fn spec(
         budget,
         detectors,
         decision_period,
+        correction,
     })
 }
 
@@ -131,7 +145,7 @@ impl Episode {
 #[pymethods]
 impl Episode {
     #[new]
-    #[pyo3(signature = (scenario, robots, channels, budget, detectors, decision_period))]
+    #[pyo3(signature = (scenario, robots, channels, budget, detectors, decision_period, correction_budget = 0.0))]
     fn new(
         scenario: &Scenario,
         robots: Vec<u32>,
@@ -139,8 +153,15 @@ impl Episode {
         budget: [f64; 3],
         detectors: Vec<String>,
         decision_period: u64,
+        correction_budget: f64,
     ) -> PyResult<Self> {
-        let spec = spec(robots, channels, budget, detectors, decision_period)?;
+        let spec = spec(
+            robots,
+            channels,
+            budget,
+            detectors,
+            (decision_period, correction_budget),
+        )?;
         let e = episode::Episode::new(scenario.resolved.clone(), spec)
             .map_err(PyValueError::new_err)?;
         Ok(Self {
@@ -414,7 +435,13 @@ impl Batch {
         }
         let reward = episode::AttackerReward::new(damage_weight, stealth_weight, damage_scale_rad)
             .map_err(PyValueError::new_err)?;
-        let spec = spec(robots, channels, budget, detectors, decision_period)?;
+        if channels.iter().any(|c| c == episode::CORRECTION) {
+            return Err(PyValueError::new_err(format!(
+                "channels: the vector attacker environment takes attack channels, not {:?}",
+                episode::CORRECTION
+            )));
+        }
+        let spec = spec(robots, channels, budget, detectors, (decision_period, 0.0))?;
         let episodes = episodes(scenario, &spec, n)?;
         let per = episodes.first().map_or(0, |e| e.action_size());
         let envs = Arc::new(Envs {

@@ -11,7 +11,7 @@ from pettingzoo.test import parallel_api_test
 
 import fdi_mas
 from conftest import cli_run
-from fdi_mas.envs import AttackerEnv, DetectorEnv, VectorAttackerEnv, attack_defend_v0
+from fdi_mas.envs import AttackerEnv, DefenderEnv, DetectorEnv, VectorAttackerEnv, attack_defend_v0
 from fdi_mas.envs._common import ClosedEnvironmentError
 
 SHORT = fdi_mas.Scenario.paper(duration_s=0.3)
@@ -28,9 +28,10 @@ def run_episode(env, action):
             return total, steps, info
 
 
-def test_gymnasium_s_checker_passes_on_both_environments():
+def test_gymnasium_s_checker_passes_on_every_environment():
     check_env(AttackerEnv(SHORT), skip_render_check=True)
     check_env(DetectorEnv(SHORT), skip_render_check=True)
+    check_env(DefenderEnv(SHORT, decision_period=1), skip_render_check=True)
     check_env(AttackerEnv(SHORT, channels=("position", "velocity", "torque"), decision_period=10))
 
 
@@ -47,6 +48,8 @@ def test_the_registered_ids_make_the_environments():
     assert isinstance(env.unwrapped, AttackerEnv)
     env = gym.make("fdi_mas/Detector-v0", scenario=SHORT)
     assert isinstance(env.unwrapped, DetectorEnv)
+    env = gym.make("fdi_mas/Defender-v0", scenario=SHORT)
+    assert isinstance(env.unwrapped, DefenderEnv)
     vec = gym.make_vec("fdi_mas/Attacker-v0", num_envs=3, vectorization_mode="vector_entry_point", scenario=SHORT)
     assert vec.num_envs == 3
 
@@ -229,3 +232,32 @@ def test_a_vector_environment_too_large_for_the_memory_left_raises_memory_error(
     assert out.returncode == 0, out.stderr
     assert "MemoryError: 100000 environments need about" in out.stdout, out.stdout + out.stderr
     assert "still here" in out.stdout
+
+
+def test_the_defender_s_zero_corrections_give_the_command_line_s_digest(fdi_launch, tmp_path):
+    summary, _ = cli_run(fdi_launch, tmp_path, "--duration-s", "2", "--attack", "actuator-bias")
+    env = DefenderEnv(fdi_mas.Scenario.paper(duration_s=2.0), attacks=("actuator-bias",), vary_seed=False, decision_period=7)
+    _, steps, info = run_episode(env, np.zeros(env.action_space.shape))
+    assert steps == -(-2000 // 7)
+    assert info["digest"] == summary["trace_digest"]
+
+
+def test_the_defender_s_correction_reaches_the_torque_and_its_reward_counts_error_and_effort():
+    scenario = fdi_mas.Scenario.paper(duration_s=0.5)
+    env = DefenderEnv(scenario, attacks=("none",), vary_seed=False, decision_period=500, effort_weight=0.5)
+    zero, corrected = np.zeros(env.action_space.shape), np.full(env.action_space.shape, 0.5)
+    env.reset()
+    _, r0, _, _, i0 = env.step(zero)
+    env.reset()
+    _, r1, _, _, i1 = env.step(corrected)
+    # Without a correction: the attack-free run's own error, so its reward is -e/scale alone.
+    assert i0["effort"] == 0.0 and r0 == pytest.approx(-i0["tracking_error"] / env.error_scale)
+    assert i1["effort"] == 0.25 and r1 == pytest.approx(-i1["tracking_error"] / env.error_scale - 0.5 * 0.25)
+    assert i1["tracking_error"] != i0["tracking_error"], "the correction moved the robots"
+    # The torque the center records is the controller's plus the correction (N·m).
+    assert i1["digest"] != i0["digest"]
+    with pytest.raises(ValueError, match="outside"):
+        env.reset()
+        env.step(np.full(env.action_space.shape, 2.0))
+    with pytest.raises(ValueError, match="correction_budget"):
+        DefenderEnv(scenario, correction_budget=0.0)

@@ -1,6 +1,7 @@
-"""The training examples (examples/python/train_attacker.py, train_detector.py), in their short
-forms: each runs, prints one line of its curve per iteration, and the attacker's policy ends
-above the zero policy it starts from (seeded: the same numbers every run)."""
+"""The training examples (examples/python/train_attacker.py, train_detector.py,
+train_defender.py), in their short forms: each runs, prints one line of its curve per
+iteration, and the attacker's policy and the defence end above the zero policy they start from
+(seeded: the same numbers every run)."""
 
 from __future__ import annotations
 
@@ -41,3 +42,11 @@ def test_the_detector_example_prints_its_curve():
     c = curve(out)
     assert len(c) == 2, out
     assert "at the start (never alarming)" in out
+
+
+def test_the_defence_learns_to_track_better_than_correcting_nothing():
+    out = example("train_defender.py", "--iterations", "2", "--population", "6", "--elite", "2", "--duration-s", "4")
+    c = curve(out)
+    assert len(c) == 3, out
+    assert c[-1] > c[0], out
+    assert "at the start (no correction)" in out and "× the attack-free run's" in out

@@ -94,6 +94,9 @@ pub struct CenterAgent<const N: usize> {
     pub missing_inputs: u64,
     /// The tick asked of a controller program and not answered yet ([`CenterAgent::ask`]).
     asked: Option<OpenTick<N>>,
+    /// A correction added to every torque the controller commands, until changed
+    /// ([`CenterAgent::set_correction`]: a learned defence's action).
+    correction: Option<Vector<N>>,
 }
 
 impl<const N: usize> CenterAgent<N> {
@@ -119,6 +122,7 @@ impl<const N: usize> CenterAgent<N> {
             history_misses: 0,
             missing_inputs: 0,
             asked: None,
+            correction: None,
         })
     }
 }
@@ -126,6 +130,13 @@ impl<const N: usize> CenterAgent<N> {
 impl<const N: usize> CenterAgent<N> {
     pub fn agent_id(&self) -> u32 {
         self.params.agent_id
+    }
+
+    /// Adds `correction` (N·m per joint) to every torque the controller commands from the next
+    /// tick on, before the torque is checked and sent (`None`: none, the controller's torque
+    /// as it is). A learned defence acting at the control center (`fdi_mas/Defender-v0`).
+    pub fn set_correction(&mut self, correction: Option<Vector<N>>) {
+        self.correction = correction;
     }
 
     /// Desired trajectory at `t`.
@@ -241,7 +252,19 @@ impl<const N: usize> CenterAgent<N> {
             s_override,
             answer,
         };
-        let command = self.controller.command(&tick);
+        let mut command = self.controller.command(&tick);
+        if let Some(c) = &self.correction {
+            // A zero adds nothing, not even a change of a zero's sign: a correction of zeros
+            // leaves the run bit for bit as the controller's.
+            for (u, c) in command
+                .u
+                .iter_mut()
+                .zip(c.iter())
+                .filter(|(_, c)| **c != 0.0)
+            {
+                *u += c;
+            }
+        }
         // 5: a non-finite torque is counted and replaced by the last one sent.
         let rejected_torque = command.u.iter().any(|v| !v.is_finite());
         let u = if rejected_torque {

@@ -364,3 +364,29 @@ fn asking_a_program_that_answers_the_traditional_law_gives_the_traditional_ticks
     assert_eq!(asked.rejected_torques, 1);
     assert_eq!(last.inertia_ref, asked.model.inertia(&last.reference.q));
 }
+
+/// A torque correction (a learned defence's action) is added to the controller's torque: it is
+/// what is sent and what enters the history; zeros leave the ticks bit for bit as they were.
+#[test]
+fn a_correction_is_added_to_the_commanded_torque_and_zeros_change_nothing() {
+    let (mut plain, mut zeroed, mut corrected) = (agent1(), agent1(), agent1());
+    zeroed.set_correction(Some(Vector::zeros()));
+    let c = Vector::<2>::new(0.5, -0.25);
+    corrected.set_correction(Some(c));
+    let (y, yd) = (Vector::<2>::new(0.1, -0.1), Vector::<2>::new(0.0, 0.2));
+    let (a, b, d) = (
+        plain.tick(0.0, &y, &yd),
+        zeroed.tick(0.0, &y, &yd),
+        corrected.tick(0.0, &y, &yd),
+    );
+    assert_eq!(a, b);
+    assert_eq!(d.u, a.u + c);
+    for k in 1..50u32 {
+        let t = f64::from(k) * 1e-3;
+        assert_eq!(plain.tick(t, &y, &yd), zeroed.tick(t, &y, &yd), "tick {k}");
+        corrected.tick(t, &y, &yd);
+    }
+    corrected.set_correction(None);
+    let (a, d) = (plain.tick(0.05, &y, &yd), corrected.tick(0.05, &y, &yd));
+    assert_ne!(a.e_u, d.e_u, "the corrected torques are in the history");
+}
