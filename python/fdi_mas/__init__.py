@@ -47,7 +47,7 @@ def _register() -> None:
     for env_id, entry, vector in (
         ("fdi_mas/Attacker-v0", "fdi_mas.envs:AttackerEnv", "fdi_mas.envs:VectorAttackerEnv"),
         ("fdi_mas/Detector-v0", "fdi_mas.envs:DetectorEnv", None),
-        ("fdi_mas/Defender-v0", "fdi_mas.envs:DefenderEnv", None),
+        ("fdi_mas/Defender-v0", "fdi_mas.envs:DefenderEnv", "fdi_mas.envs:VectorDefenderEnv"),
     ):
         if env_id not in gymnasium.registry:
             gymnasium.register(id=env_id, entry_point=entry, vector_entry_point=vector)

@@ -100,6 +100,13 @@ def attacker_reward(
     stealth_weight: float,
     damage_scale_rad: float,
 ) -> float: ...
+def defender_reward(
+    ticks: int,
+    damage: float,
+    action: list[float],
+    error_scale_rad: float,
+    effort_weight: float,
+) -> float: ...
 
 _Outcome = tuple[int, float, int, list[int], bool, bool, bytes, bytes]
 
@@ -139,6 +146,18 @@ class Batch:
         damage_scale_rad: float,
         threads: int | None = None,
     ) -> None: ...
+    @staticmethod
+    def defender(
+        scenarios: list[Scenario],
+        n: int,
+        correction_budget: float,
+        decision_period: int,
+        error_scale_rad: float,
+        effort_weight: float,
+        seed: int,
+        vary_seed: bool,
+        threads: int | None = None,
+    ) -> Batch: ...
     def reset(self) -> bytes: ...
     def step(self, actions: bytes) -> tuple[bytearray, bytearray, bytearray, bytearray]: ...
     def digests(self) -> list[str | None]: ...

@@ -211,6 +211,60 @@ impl AttackerReward {
     }
 }
 
+/// The tracking term of a defence's step in which a robot diverged (its error is not a
+/// number): the ratio the scored benchmark counts for a diverged robot (docs/score.md).
+pub const DIVERGED_RATIO: f64 = 100.0;
+
+/// The defence's reward of a step (docs/python.md, "Rewards"):
+///
+/// `− e / error_scale_rad − effort_weight · mean(action²)`
+///
+/// where `e` is the step's mean over its ticks of `‖q_d − q‖` averaged over the robots (rad)
+/// and `error_scale_rad` the same mean over the whole attack-free run; `−DIVERGED_RATIO` for a
+/// step in which a robot diverged; 0 for a step of no tick (a reset).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DefenderReward {
+    pub error_scale_rad: f64,
+    pub effort_weight: f64,
+}
+
+impl DefenderReward {
+    /// The scale and weight, each checked: a finite scale above 0, a finite weight ≥ 0.
+    pub fn new(error_scale_rad: f64, effort_weight: f64) -> Result<Self, String> {
+        if !(error_scale_rad.is_finite() && error_scale_rad > 0.0) {
+            return Err(format!(
+                "error_scale must be a finite error above 0 rad, got {error_scale_rad}"
+            ));
+        }
+        if !(effort_weight.is_finite() && effort_weight >= 0.0) {
+            return Err(format!(
+                "effort_weight must be finite and ≥ 0, got {effort_weight}"
+            ));
+        }
+        Ok(Self {
+            error_scale_rad,
+            effort_weight,
+        })
+    }
+
+    /// The reward of a step that gave `o` under `action` (its entries in [−1, 1]).
+    pub fn of(&self, o: &Outcome, action: &[f64]) -> f64 {
+        if o.ticks == 0 {
+            return 0.0;
+        }
+        let e = o.damage / o.ticks as f64;
+        if !e.is_finite() {
+            return -DIVERGED_RATIO;
+        }
+        let effort = if action.is_empty() {
+            0.0
+        } else {
+            action.iter().map(|a| a * a).sum::<f64>() / action.len() as f64
+        };
+        -e / self.error_scale_rad - self.effort_weight * effort
+    }
+}
+
 /// The latest values each observer has seen, per robot in the scenario's order.
 #[derive(Debug, Clone)]
 struct Seen {

@@ -28,6 +28,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(py_scenario::presets, m)?)?;
     m.add_function(wrap_pyfunction!(py_scenario::detectors, m)?)?;
     m.add_function(wrap_pyfunction!(py_episode::attacker_reward, m)?)?;
+    m.add_function(wrap_pyfunction!(py_episode::defender_reward, m)?)?;
     m.add_function(wrap_pyfunction!(errors::panic_for_test, m)?)?;
     Ok(())
 }

@@ -249,22 +249,70 @@ struct Slot {
     reward: f64,
     terminated: bool,
     truncated: bool,
-    /// The attacker's view after the step.
+    /// The learner's view after the step (the attacker's, or the control center's).
     view: Vec<f64>,
+    /// The vector defender's draw of each episode's attack and seed (`None`: every episode is
+    /// the batch's scenario).
+    draw: Option<Draw>,
     /// The trace digest of the episode that ended at this step.
     ended_digest: Option<String>,
     /// Why the step failed (a reset refused).
     error: Option<String>,
 }
 
-/// What the batch's threads share: the environments, the step's actions, the reward's weights.
+/// How an environment of a batch draws its next episode: one of `scenarios` (one per attack),
+/// and with `vary_seed` a seed of its own, from its generator.
+#[derive(Debug)]
+struct Draw {
+    scenarios: Arc<Vec<fdi_common::scenario::Resolved>>,
+    vary_seed: bool,
+    rng: rand_chacha::ChaCha12Rng,
+}
+
+impl Draw {
+    fn next(&mut self) -> fdi_common::scenario::Resolved {
+        use rand::Rng as _;
+        let i = self.rng.random_range(0..self.scenarios.len().max(1));
+        let mut r = self.scenarios[i.min(self.scenarios.len() - 1)].clone();
+        if self.vary_seed {
+            r.scenario.seed = self.rng.random_range(0..(1u64 << 63));
+        }
+        r
+    }
+}
+
+/// A batch's learner, and so its reward and view.
+#[derive(Debug, Clone, Copy)]
+enum Learner {
+    Attacker(episode::AttackerReward),
+    Defender(episode::DefenderReward),
+}
+
+impl Learner {
+    fn reward(&self, o: &Outcome, action: &[f64]) -> f64 {
+        match self {
+            Self::Attacker(r) => r.of(o),
+            Self::Defender(r) => r.of(o, action),
+        }
+    }
+
+    /// Its view of `e` after the last tick, appended to `out`.
+    fn view(&self, e: &episode::Episode, out: &mut Vec<f64>) {
+        match self {
+            Self::Attacker(_) => e.attacker_view(out),
+            Self::Defender(_) => e.center_view(out),
+        }
+    }
+}
+
+/// What the batch's threads share: the environments, the step's actions, the learner.
 #[derive(Debug)]
 struct Envs {
     slots: Vec<Mutex<Slot>>,
     actions: RwLock<Vec<f64>>,
     /// Entries of one environment's action.
     per: usize,
-    reward: episode::AttackerReward,
+    learner: Learner,
 }
 
 impl Envs {
@@ -277,16 +325,22 @@ impl Envs {
                 continue; // a panic before: `step` reports the poisoned slot
             };
             let action = actions.get(i * self.per..(i + 1) * self.per).unwrap_or(&[]);
-            step_slot(&mut slot, action, &self.reward);
+            step_slot(&mut slot, action, &self.learner);
         }
     }
 }
 
+/// An environment back to its start, on its next draw when it draws its episodes.
+fn reset_slot(slot: &mut Slot) -> Result<(), String> {
+    slot.ended = false;
+    let next = slot.draw.as_mut().map(Draw::next);
+    slot.episode.reset(next)
+}
+
 /// One environment's step: its reward (zero for a reset), its end, its view.
-fn step_slot(slot: &mut Slot, action: &[f64], reward: &episode::AttackerReward) {
+fn step_slot(slot: &mut Slot, action: &[f64], learner: &Learner) {
     let o = if slot.ended {
-        slot.ended = false;
-        if let Err(e) = slot.episode.reset(None) {
+        if let Err(e) = reset_slot(slot) {
             slot.error = Some(e);
         }
         Outcome::default()
@@ -294,7 +348,7 @@ fn step_slot(slot: &mut Slot, action: &[f64], reward: &episode::AttackerReward) 
         slot.episode.apply_action(action);
         slot.episode.step()
     };
-    slot.reward = reward.of(&o);
+    slot.reward = learner.reward(&o, action);
     (slot.terminated, slot.truncated) = (o.terminated, o.truncated);
     slot.ended_digest = None;
     if o.terminated || o.truncated {
@@ -302,7 +356,7 @@ fn step_slot(slot: &mut Slot, action: &[f64], reward: &episode::AttackerReward) 
         slot.ended_digest = slot.episode.summary().map(|s| s.trace_digest.clone());
     }
     slot.view.clear();
-    slot.episode.attacker_view(&mut slot.view);
+    learner.view(&slot.episode, &mut slot.view);
 }
 
 /// The attacker's reward of a step of `ticks` ticks with `damage` and `alarm_ticks`
@@ -325,6 +379,28 @@ pub fn attacker_reward(
         alarm_ticks,
         ..episode::Outcome::default()
     }))
+}
+
+/// The defence's reward of a step of `ticks` ticks with `damage` under `action`
+/// (`episode::DefenderReward`): the one formula of `DefenderEnv` and the vector defender.
+#[pyfunction]
+pub fn defender_reward(
+    ticks: u64,
+    damage: f64,
+    action: Vec<f64>,
+    error_scale_rad: f64,
+    effort_weight: f64,
+) -> PyResult<f64> {
+    let reward = episode::DefenderReward::new(error_scale_rad, effort_weight)
+        .map_err(PyValueError::new_err)?;
+    Ok(reward.of(
+        &episode::Outcome {
+            ticks,
+            damage,
+            ..episode::Outcome::default()
+        },
+        &action,
+    ))
 }
 
 /// Many episodes of one spec stepped together on every core: the vector environment's engine.
@@ -362,6 +438,52 @@ fn float_bytes(v: &[f64]) -> Vec<u8> {
 }
 
 impl Batch {
+    /// A batch of `slots` (episodes and their draws) for `learner`, stepped on `threads`
+    /// threads (every core by default).
+    fn of_slots(
+        slots: Vec<(episode::Episode, Option<Draw>)>,
+        learner: Learner,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        let n = slots.len();
+        let per = slots.first().map_or(0, |(e, _)| e.action_size());
+        let envs = Arc::new(Envs {
+            slots: slots
+                .into_iter()
+                .map(|(episode, draw)| {
+                    Mutex::new(Slot {
+                        episode,
+                        ended: false,
+                        reward: 0.0,
+                        terminated: false,
+                        truncated: false,
+                        view: Vec::new(),
+                        draw,
+                        ended_digest: None,
+                        error: None,
+                    })
+                })
+                .collect(),
+            actions: RwLock::new(vec![0.0; n * per]),
+            per,
+            learner,
+        });
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let chunks = n.div_ceil(CHUNK);
+        let threads = threads.unwrap_or(cores).clamp(1, chunks);
+        let work = Arc::clone(&envs);
+        let team = Team::new(threads, chunks, Box::new(move |c| work.step_chunk(c)))
+            .map_err(engine_error)?;
+        Ok(Self {
+            inner: Mutex::new(Some(Stepping {
+                envs,
+                team,
+                digests: vec![None; n],
+            })),
+            threads,
+        })
+    }
+
     /// The open batch, locked.
     fn guard(&self) -> PyResult<std::sync::MutexGuard<'_, Option<Stepping>>> {
         self.inner.lock().map_err(|_| failed_earlier())
@@ -443,53 +565,81 @@ impl Batch {
         }
         let spec = spec(robots, channels, budget, detectors, (decision_period, 0.0))?;
         let episodes = episodes(scenario, &spec, n)?;
-        let per = episodes.first().map_or(0, |e| e.action_size());
-        let envs = Arc::new(Envs {
-            slots: episodes
-                .into_iter()
-                .map(|episode| {
-                    Mutex::new(Slot {
-                        episode,
-                        ended: false,
-                        reward: 0.0,
-                        terminated: false,
-                        truncated: false,
-                        view: Vec::new(),
-                        ended_digest: None,
-                        error: None,
-                    })
-                })
-                .collect(),
-            actions: RwLock::new(vec![0.0; n * per]),
-            per,
-            reward,
-        });
-        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        let chunks = n.div_ceil(CHUNK);
-        let threads = threads.unwrap_or(cores).clamp(1, chunks);
-        let work = Arc::clone(&envs);
-        let team = Team::new(threads, chunks, Box::new(move |c| work.step_chunk(c)))
-            .map_err(engine_error)?;
-        Ok(Self {
-            inner: Mutex::new(Some(Stepping {
-                envs,
-                team,
-                digests: vec![None; n],
-            })),
-            threads,
-        })
+        let slots = episodes.into_iter().map(|e| (e, None)).collect();
+        Self::of_slots(slots, Learner::Attacker(reward), threads)
     }
 
-    /// Every environment back to its start; their attacker views.
+    /// The vector defender's batch: `n` episodes whose robots' torques the action corrects
+    /// (`correction_budget` N·m for an action of 1), each episode's attack drawn from
+    /// `scenarios` (one per attack) and, with `vary_seed`, its seed, by each environment's
+    /// generator (seeded from `seed` and its index).
+    #[staticmethod]
+    #[pyo3(signature = (scenarios, n, correction_budget, decision_period, error_scale_rad, effort_weight, seed, vary_seed, threads = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn defender(
+        scenarios: Vec<PyRef<'_, Scenario>>,
+        n: usize,
+        correction_budget: f64,
+        decision_period: u64,
+        error_scale_rad: f64,
+        effort_weight: f64,
+        seed: u64,
+        vary_seed: bool,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        use rand::SeedableRng as _;
+        if n == 0 {
+            return Err(PyValueError::new_err("n: at least one environment"));
+        }
+        let Some(first) = scenarios.first() else {
+            return Err(PyValueError::new_err("scenarios: at least one"));
+        };
+        let reward = episode::DefenderReward::new(error_scale_rad, effort_weight)
+            .map_err(PyValueError::new_err)?;
+        let robots = first
+            .resolved
+            .scenario
+            .agents
+            .iter()
+            .map(|a| a.id)
+            .collect();
+        let channels = vec![episode::CORRECTION.to_string()];
+        let spec = spec(
+            robots,
+            channels,
+            [0.0; 3],
+            Vec::new(),
+            (decision_period, correction_budget),
+        )?;
+        let all: Arc<Vec<_>> = Arc::new(scenarios.iter().map(|s| s.resolved.clone()).collect());
+        let episodes = episodes(first, &spec, n)?;
+        let mut slots = Vec::with_capacity(n);
+        for (i, episode) in episodes.into_iter().enumerate() {
+            let mut rng = rand_chacha::ChaCha12Rng::seed_from_u64(seed);
+            rng.set_stream(i as u64);
+            let mut draw = Draw {
+                scenarios: Arc::clone(&all),
+                vary_seed,
+                rng,
+            };
+            let mut episode = episode;
+            episode
+                .reset(Some(draw.next()))
+                .map_err(PyValueError::new_err)?;
+            slots.push((episode, Some(draw)));
+        }
+        Self::of_slots(slots, Learner::Defender(reward), threads)
+    }
+
+    /// Every environment back to its start (the defender's on a new draw); their views.
     fn reset<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
         let guard = self.guard()?;
         let stepping = guard.as_ref().ok_or_else(closed)?;
         let mut view = Vec::new();
         for slot in &stepping.envs.slots {
             let mut slot = slot.lock().map_err(|_| failed_earlier())?;
-            slot.episode.reset(None).map_err(PyValueError::new_err)?;
-            slot.ended = false;
-            slot.episode.attacker_view(&mut view);
+            reset_slot(&mut slot).map_err(PyValueError::new_err)?;
+            stepping.envs.learner.view(&slot.episode, &mut view);
         }
         Ok(to_bytes(py, &view))
     }

@@ -11,7 +11,14 @@ from pettingzoo.test import parallel_api_test
 
 import fdi_mas
 from conftest import cli_run
-from fdi_mas.envs import AttackerEnv, DefenderEnv, DetectorEnv, VectorAttackerEnv, attack_defend_v0
+from fdi_mas.envs import (
+    AttackerEnv,
+    DefenderEnv,
+    DetectorEnv,
+    VectorAttackerEnv,
+    VectorDefenderEnv,
+    attack_defend_v0,
+)
 from fdi_mas.envs._common import ClosedEnvironmentError
 
 SHORT = fdi_mas.Scenario.paper(duration_s=0.3)
@@ -261,3 +268,34 @@ def test_the_defender_s_correction_reaches_the_torque_and_its_reward_counts_erro
         env.step(np.full(env.action_space.shape, 2.0))
     with pytest.raises(ValueError, match="correction_budget"):
         DefenderEnv(scenario, correction_budget=0.0)
+
+
+def test_the_vector_defender_gives_each_episode_the_single_one_s_digest_and_rewards():
+    scenario = fdi_mas.Scenario.paper(duration_s=0.2)
+    single = DefenderEnv(scenario, attacks=("actuator-bias",), vary_seed=False, decision_period=20)
+    single.reset()
+    action = np.full(single.action_space.shape, 0.25)
+    want = []
+    while True:
+        _, r, te, tr, info = single.step(action)
+        want.append(r)
+        if te or tr:
+            break
+    vec = VectorDefenderEnv(3, scenario, attacks=("actuator-bias",), vary_seed=False, decision_period=20, threads=2)
+    obs, _ = vec.reset(seed=0)
+    assert obs.shape == (3, single.observation_space.shape[0])
+    got = []
+    for _ in want:
+        _, rewards, term, trunc, _ = vec.step(np.broadcast_to(action, (3, *action.shape)))
+        got.append(rewards.copy())
+    assert np.array_equal(np.array(got), np.repeat(np.array(want)[:, None], 3, axis=1))
+    assert trunc.all() and not term.any()
+    assert vec.digests() == [info["digest"]] * 3
+    # Its draws: the same seed, the same episodes; several attacks are all drawn.
+    mixed = [VectorDefenderEnv(8, scenario, attacks=("none", "paper"), decision_period=200, seed=5) for _ in range(2)]
+    for v in mixed:
+        v.reset()
+        v.step(np.zeros((8, *action.shape)))
+    assert mixed[0].digests() == mixed[1].digests() and len(set(mixed[0].digests())) > 1
+    vec = gym.make_vec("fdi_mas/Defender-v0", num_envs=2, vectorization_mode="vector_entry_point", scenario=scenario)
+    assert vec.num_envs == 2

@@ -19,17 +19,6 @@ DEFAULT_ATTACKS = ("none", "paper", "actuator-bias", "scale", "stealthy-bias")
 #: The largest torque correction (N·m) an action of 1 gives, unless the constructor says
 #: otherwise.
 DEFAULT_CORRECTION_BUDGET = 1.0
-#: The tracking term of a step in which a robot diverged (its error is not a number): as the
-#: scored benchmark counts a diverged robot (docs/score.md).
-DIVERGED_RATIO = 100.0
-
-
-def defence_reward(mean_error: float, scale: float, action: np.ndarray, effort_weight: float) -> float:
-    """A step's reward: ``− mean_error / scale − effort_weight × mean(action²)``; the tracking
-    term is 1 for a step at the attack-free run's mean error."""
-    a = np.asarray(action, dtype=np.float64)
-    effort = float(np.mean(a * a)) if a.size else 0.0
-    return -mean_error / scale - effort_weight * effort
 
 
 class DefenderEnv(gym.Env):
@@ -143,13 +132,8 @@ class DefenderEnv(gym.Env):
         ticks, damage, _, attacked, terminated, truncated = out[:6]
         _, obs = _common.views(out)
         error = damage / ticks if ticks else 0.0
-        if not np.isfinite(error):
-            # A robot diverged (the episode terminates): the score's ratio for it.
-            reward = -DIVERGED_RATIO
-        elif ticks:
-            reward = defence_reward(error, self.error_scale, a, self.effort_weight)
-        else:
-            reward = 0.0
+        # The one formula, in Rust (the vector environment's too).
+        reward = _core.defender_reward(ticks, damage, a.ravel().tolist(), self.error_scale, self.effort_weight)
         info: dict[str, Any] = {
             "t_s": float(obs[0]),
             "attack": self.attack,

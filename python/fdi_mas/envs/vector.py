@@ -1,4 +1,5 @@
-"""A vector of :class:`~fdi_mas.envs.AttackerEnv` stepped inside Rust, on every core."""
+"""Vectors of :class:`~fdi_mas.envs.AttackerEnv` and :class:`~fdi_mas.envs.DefenderEnv`
+stepped inside Rust, on every core."""
 
 from __future__ import annotations
 
@@ -135,3 +136,64 @@ class VectorAttackerEnv(VectorEnv):
         if not self._closed:
             self._batch.close()
             self._closed = True
+
+
+class VectorDefenderEnv(VectorAttackerEnv):
+    """``num_envs`` :class:`~fdi_mas.envs.DefenderEnv` of one configuration, stepped together in
+    Rust on ``threads`` threads (every core by default), as :class:`VectorAttackerEnv` steps
+    attackers.
+
+    Spaces and reward are :class:`~fdi_mas.envs.DefenderEnv`'s (same arguments), batched. Each
+    environment draws its episodes' attacks (from ``attacks``) and, with ``vary_seed``, their
+    seeds with a generator of its own, seeded from ``seed`` and its index, in Rust: the same
+    ``seed`` gives the same episodes. Autoreset is Gymnasium's next-step mode, on a new draw.
+    ``digests()`` gives each environment's last ended episode's trace digest.
+    """
+
+    def __init__(  # noqa: PLR0913 (the single environment's arguments)
+        self,
+        num_envs: int,
+        scenario: _core.Scenario | None = None,
+        *,
+        attacks: Sequence[str] = ("none", "paper", "actuator-bias", "scale", "stealthy-bias"),
+        vary_seed: bool = True,
+        correction_budget: float = 1.0,
+        effort_weight: float = 0.1,
+        error_scale: float | None = None,
+        decision_period: int = 10,
+        seed: int = 0,
+        threads: int | None = None,
+        render_mode: str | None = None,
+    ) -> None:
+        _common.no_render(render_mode)
+        if int(num_envs) < 1:
+            raise ValueError(f"num_envs: at least 1, got {num_envs}")
+        self.num_envs = int(num_envs)
+        self.scenario = _common.scenario_of(scenario, None)
+        self.attacks = _common.names_of(list(attacks), _core.presets(), "attacks")
+        if not self.attacks:
+            raise ValueError("attacks: at least one attack profile")
+        robots = list(self.scenario.agents)
+        self.error_scale = _common.damage_scale_of(error_scale, self.scenario, robots)
+        self._batch = _core.Batch.defender(
+            [self.scenario.replace(attack=a) for a in self.attacks],
+            self.num_envs,
+            float(correction_budget),
+            int(_common.period_of(decision_period)),
+            self.error_scale,
+            float(effort_weight),
+            int(seed),
+            bool(vary_seed),
+            threads,
+        )
+        agents, links, _ = self._batch.shape()
+        self.observation_names = _common.observation_names(agents, links, _common.CENTER_PARTS)
+        self.single_observation_space = spaces.Box(
+            -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
+        )
+        self._action_shape = (len(agents), links)
+        self.single_action_space = spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float64)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._started = False
+        self._closed = False
