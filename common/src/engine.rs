@@ -384,6 +384,11 @@ pub enum EngineError {
     ModelDof { agent: u32, dof: usize },
     #[error("the scenario has no agents")]
     NoAgents,
+    #[error(
+        "controller `external` asks a program for its torques (`[roles.controller]`, over \
+         IPC): the in-process engine cannot run it; run it with `--engine ipc`"
+    )]
+    ExternalController,
 }
 
 /// Runs `resolved` to the end on this thread; `sink` sees every joined tick record in digest
@@ -562,6 +567,13 @@ impl Ticker {
         let s = &resolved.scenario;
         if s.agents.is_empty() {
             return Err(EngineError::NoAgents);
+        }
+        // Its ticks would go unanswered: every torque held at zero, a run of wrong numbers.
+        if s.agents
+            .iter()
+            .any(|a| s.controller_of(a).mode == crate::control::ControllerMode::External)
+        {
+            return Err(EngineError::ExternalController);
         }
         let mut loops = Vec::with_capacity(s.agents.len());
         for a in &s.agents {

@@ -234,4 +234,17 @@ fn the_external_controller_and_its_program_come_together() {
     let out = fdi_tests::wait_with_watchdog(out, WATCHDOG);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("roles"), "{err}");
+    // What bypasses the scenario's validation (a table's or the score's cells set the mode on
+    // a resolved scenario) meets the engine, which refuses the program it cannot ask: its
+    // ticks would go unanswered, every torque held at zero.
+    let e = run_inproc_any(&paper_with(ControllerMode::External, "none", 0.1), |_| {})
+        .expect_err("refused");
+    assert!(e.to_string().contains("--engine ipc"), "{e}");
+    let out = fdi_tests::spawn(&["score", "--controller", "external"], &dir.0);
+    let out = fdi_tests::wait_with_watchdog(out, WATCHDOG);
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && err.contains("in-process engine cannot run it"),
+        "{err}"
+    );
 }
