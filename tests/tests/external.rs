@@ -881,9 +881,17 @@ fn realtime_a_silent_controller_holds_the_last_torque_past_each_deadline() {
     let out = launch(&["run", &scenario, "--json"], &s.0.join("runs"), WATCHDOG);
     let summary = fdi_tests::json_realtime(&out);
     let rejected = rejected_torques(&summary);
-    for r in &rejected {
-        // At least every tick from 1000 on; a loaded machine may make earlier answers late.
-        assert!((1000..=2000).contains(r), "{rejected:?}");
+    for (robot, r) in (1..=4).zip(&rejected) {
+        // Every tick from 1000 on held its torque, unless its measurement never came (a robot
+        // a loaded machine made silent for a while: uncontrolled); a loaded machine may make
+        // earlier answers late too.
+        let uncontrolled = summary["metrics"][robot.to_string()]["uncontrolled_ticks"]
+            .as_u64()
+            .expect("uncontrolled_ticks");
+        assert!(
+            *r <= 2000 && r + uncontrolled >= 1000,
+            "robot {robot}: {r} held, {uncontrolled} uncontrolled"
+        );
     }
     let note = controller_note(&summary, "python-traditional");
     eprintln!("{note}");

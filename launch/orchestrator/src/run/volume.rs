@@ -31,6 +31,12 @@ pub fn estimate(r: &Resolved, ipc: bool, traces: Traces) -> Result<Estimate> {
     let mut sample = r.clone();
     sample.scenario.clock = ClockMode::Lockstep;
     sample.scenario.duration_s = SAMPLE_TICKS as f64 * r.scenario.control_period_s;
+    // A controller program is not asked in process; the records of a built-in law have its
+    // records' sizes (the same fields, numbers of fixed size).
+    let controller = &mut sample.scenario.controller;
+    if controller.mode == fdi_common::control::ControllerMode::External {
+        controller.mode = fdi_common::control::ControllerMode::Traditional;
+    }
     let (mut bytes, mut records, mut ticks) = (0u64, 0u64, 0u64);
     let mut failure = None;
     let latency = ipc && r.scenario.clock == ClockMode::Realtime;
