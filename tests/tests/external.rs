@@ -901,3 +901,58 @@ fn realtime_a_silent_controller_holds_the_last_torque_past_each_deadline() {
         "every rejected torque is a tick past its deadline: {note}"
     );
 }
+
+/// The same program on the Panda team (7 joints, gains scaled by each arm's inertia, which the
+/// program reads off the first question's `M(q_d)`): the built-in traditional law's digest too.
+#[test]
+fn the_python_controller_gives_the_built_in_digest_on_the_panda_team_too() {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-controller-panda");
+    let scenario = with_python("scenarios/panda-team.toml", &python, &s.0, |doc| {
+        doc.insert("duration_s".into(), 2.0.into());
+        let urdf = repo_path("scenarios/robots/panda.urdf")
+            .display()
+            .to_string();
+        let model = doc
+            .get_mut("defaults")
+            .and_then(|d| d.get_mut("model"))
+            .and_then(|m| m.as_table_mut())
+            .expect("[defaults] model");
+        model.insert("path".into(), urdf.into());
+        if let Some(c) = doc.get_mut("controller").and_then(|c| c.as_table_mut()) {
+            c.insert("mode".into(), "external".into());
+        }
+        let mut role = toml::Table::new();
+        let program = repo_path("examples/python/controller.py");
+        role.insert(
+            "command".into(),
+            toml::Value::Array(vec![
+                python.display().to_string().into(),
+                program.display().to_string().into(),
+            ]),
+        );
+        role.insert("name".into(), "python-traditional".into());
+        set_role(doc, "controller", toml::Value::Table(role), 2.0);
+    });
+    let py = json(&launch(
+        &["run", &scenario.display().to_string(), "--json"],
+        &s.0.join("py"),
+        WATCHDOG,
+    ));
+    let builtin = repo_path("scenarios/panda-team.toml").display().to_string();
+    let rust = json(&launch(
+        &[
+            "run",
+            &builtin,
+            "--duration-s",
+            "2",
+            "--engine",
+            "inproc",
+            "--json",
+        ],
+        &s.0.join("rust"),
+        WATCHDOG,
+    ));
+    assert_eq!(rust["controller"], "traditional");
+    assert_eq!(digest(&py), digest(&rust));
+}
