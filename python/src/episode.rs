@@ -288,8 +288,6 @@ pub struct Episode {
     attacker: EnvAttacker,
     seen: Seen,
     summary: Option<RunSummary>,
-    /// Per chosen robot: its torque correction (N·m per link; the [`CORRECTION`] channel).
-    corrections: Vec<Vec<f64>>,
 }
 
 /// Whether the spec's robots are robots of the scenario and its channels and detectors exist.
@@ -334,10 +332,6 @@ impl Episode {
         let agents: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
         let attacker = EnvAttacker::new(&resolved, &spec, links);
         let n = agents.len();
-        let corrections = match spec.correction {
-            Some(_) => vec![vec![0.0; links]; spec.robots.len()],
-            None => Vec::new(),
-        };
         Ok(Self {
             seen: Seen {
                 t: 0.0,
@@ -351,7 +345,6 @@ impl Episode {
             engine: Some(engine),
             attacker,
             summary: None,
-            corrections,
         })
     }
 
@@ -463,11 +456,17 @@ impl Episode {
                     *dst = v * budget;
                 }
             }
-            if let (Some(budget), Some(dst)) = (self.spec.correction, self.corrections.get_mut(r)) {
-                let values = &a[self.spec.channels.len() * l..];
-                for (d, v) in dst.iter_mut().zip(values) {
-                    *d = v * budget;
-                }
+            if let (Some(budget), Some(engine), Some(id)) = (
+                self.spec.correction,
+                self.engine.as_mut(),
+                self.spec.robots.get(r),
+            ) {
+                let c: Vec<f64> = a[self.spec.channels.len() * l..]
+                    .iter()
+                    .map(|v| v * budget)
+                    .collect();
+                // The robots and their links were checked when the episode was made.
+                let _ = engine.set_correction(*id, &c);
             }
         }
     }
@@ -483,10 +482,6 @@ impl Episode {
             out.truncated = self.summary.as_ref().is_some_and(|s| s.partial.is_none());
             return out;
         };
-        for (id, c) in self.spec.robots.iter().zip(&self.corrections) {
-            // The robots and the links were checked when the episode was made.
-            let _ = engine.set_correction(*id, c);
-        }
         let (l, agents) = (self.links, &self.agents);
         let seen = &mut self.seen;
         let mut attacked = vec![0u64; agents.len()];

@@ -272,8 +272,9 @@ struct Draw {
 impl Draw {
     fn next(&mut self) -> fdi_common::scenario::Resolved {
         use rand::Rng as _;
-        let i = self.rng.random_range(0..self.scenarios.len().max(1));
-        let mut r = self.scenarios[i.min(self.scenarios.len() - 1)].clone();
+        // `Batch::defender` makes a draw of one scenario at least.
+        let i = self.rng.random_range(0..self.scenarios.len());
+        let mut r = self.scenarios[i].clone();
         if self.vary_seed {
             r.scenario.seed = self.rng.random_range(0..(1u64 << 63));
         }

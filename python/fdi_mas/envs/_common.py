@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -177,3 +178,32 @@ def damage_scale_of(
     if not np.isfinite(scale) or scale <= 0.0:
         raise ValueError(f"damage_scale: a finite error above 0 rad, got {damage_scale}")
     return scale
+
+
+def draw_episode(
+    rng: np.random.Generator,
+    attacks: Sequence[str],
+    scenarios: Mapping[str, _core.Scenario],
+    vary_seed: bool,
+    attack: str | None = None,
+) -> tuple[str, _core.Scenario]:
+    """The next episode's attack (``attack``, or one of ``attacks`` drawn with ``rng``) and its
+    scenario (of ``scenarios``, one per attack), with a seed drawn with ``rng`` when
+    ``vary_seed``."""
+    if attack is None:
+        attack = attacks[int(rng.integers(len(attacks)))]
+    elif attack not in scenarios:
+        raise ValueError(f"options['attack']: {attack!r} is not one of {tuple(attacks)}")
+    scenario = scenarios[attack]
+    if vary_seed:
+        scenario = scenario.replace(seed=int(rng.integers(0, 2**63)))
+    return attack, scenario
+
+
+def add_summary(episode: Any, info: dict[str, Any]) -> None:
+    """Once the episode ended: its ``summary`` (the fields of ``summary.json``) and ``digest``
+    into ``info``."""
+    summary = episode.summary_json()
+    if summary is not None:
+        info["summary"] = json.loads(summary)
+        info["digest"] = info["summary"]["trace_digest"]

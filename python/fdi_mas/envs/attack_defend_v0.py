@@ -13,7 +13,6 @@ The attack profile under the attacker's injection is drawn at each reset from ``
 from __future__ import annotations
 
 import functools
-import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -134,10 +133,7 @@ class AttackDefendEnv(ParallelEnv):
         _common.check_open(self._episode)
         if seed is not None:
             self._rng = np.random.default_rng(seed)
-        attack = self.attacks[int(self._rng.integers(len(self.attacks)))]
-        scenario = self._scenarios[attack]
-        if self.vary_seed:
-            scenario = scenario.replace(seed=int(self._rng.integers(0, 2**63)))
+        attack, scenario = _common.draw_episode(self._rng, self.attacks, self._scenarios, self.vary_seed)
         self._episode.reset(scenario)
         self.attack = attack
         self.agents = list(self.possible_agents)
@@ -172,10 +168,7 @@ class AttackDefendEnv(ParallelEnv):
         obs = {ATTACKER: a_obs, DETECTOR: c_obs}
         info: dict[str, Any] = {"t_s": float(a_obs[0]), "attack": self.attack, "attacked_ticks": attacked}
         if terminated or truncated:
-            summary = self._episode.summary_json()
-            if summary is not None:
-                info["summary"] = json.loads(summary)
-                info["digest"] = info["summary"]["trace_digest"]
+            _common.add_summary(self._episode, info)
         infos = {a: dict(info) for a in self.agents}
         terms = {a: bool(terminated) for a in self.agents}
         truncs = {a: bool(truncated) for a in self.agents}

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -139,10 +138,7 @@ class AttackerEnv(gym.Env):
         }
         if terminated or truncated:
             self._ended = True
-            summary = self._episode.summary_json()
-            if summary is not None:
-                info["summary"] = json.loads(summary)
-                info["digest"] = info["summary"]["trace_digest"]
+            _common.add_summary(self._episode, info)
         return obs, float(reward), bool(terminated), bool(truncated), info
 
     def close(self) -> None:

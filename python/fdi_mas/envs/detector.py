@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from typing import Any
 
@@ -119,15 +118,9 @@ class DetectorEnv(gym.Env):
         ``vary_seed``, its seed, and goes back to the start."""
         super().reset(seed=seed)
         _common.check_open(self._episode)
-        options = options or {}
-        attack = options.get("attack")
-        if attack is None:
-            attack = self.attacks[int(self.np_random.integers(len(self.attacks)))]
-        elif attack not in self._scenarios:
-            raise ValueError(f"options['attack']: {attack!r} is not one of {tuple(self.attacks)}")
-        scenario = self._scenarios[attack]
-        if self.vary_seed:
-            scenario = scenario.replace(seed=int(self.np_random.integers(0, 2**63)))
+        attack, scenario = _common.draw_episode(
+            self.np_random, self.attacks, self._scenarios, self.vary_seed, (options or {}).get("attack")
+        )
         self._episode.reset(scenario)
         self.attack = attack
         self._ended = False
@@ -150,10 +143,7 @@ class DetectorEnv(gym.Env):
         info: dict[str, Any] = {"t_s": float(obs[0]), "attack": self.attack, "attacked_ticks": attacked}
         if terminated or truncated:
             self._ended = True
-            summary = self._episode.summary_json()
-            if summary is not None:
-                info["summary"] = json.loads(summary)
-                info["digest"] = info["summary"]["trace_digest"]
+            _common.add_summary(self._episode, info)
         return obs, reward, bool(terminated), bool(truncated), info
 
     def close(self) -> None:

@@ -14,6 +14,7 @@ from gymnasium.vector.utils import batch_space
 
 from fdi_mas import _core
 from fdi_mas.envs import _common
+from fdi_mas.envs.defender import DEFAULT_ATTACKS
 
 
 class VectorAttackerEnv(VectorEnv):
@@ -73,11 +74,19 @@ class VectorAttackerEnv(VectorEnv):
             threads,
         )
         agents, links, _ = self._batch.shape()
-        self.observation_names = _common.observation_names(agents, links, _common.ATTACKER_PARTS)
+        self._open(
+            _common.observation_names(agents, links, _common.ATTACKER_PARTS),
+            (len(self.robots), len(self.channels), links),
+        )
+
+    def _open(self, observation_names: list[str], action_shape: tuple[int, ...]) -> None:
+        """The spaces of a batch whose observations are named ``observation_names`` and whose
+        actions have ``action_shape``, at its start."""
+        self.observation_names = observation_names
         self.single_observation_space = spaces.Box(
             -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
         )
-        self._action_shape = (len(self.robots), len(self.channels), links)
+        self._action_shape = action_shape
         self.single_action_space = spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float64)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -155,7 +164,7 @@ class VectorDefenderEnv(VectorAttackerEnv):
         num_envs: int,
         scenario: _core.Scenario | None = None,
         *,
-        attacks: Sequence[str] = ("none", "paper", "actuator-bias", "scale", "stealthy-bias"),
+        attacks: Sequence[str] = DEFAULT_ATTACKS,
         vary_seed: bool = True,
         correction_budget: float = 1.0,
         effort_weight: float = 0.1,
@@ -187,13 +196,4 @@ class VectorDefenderEnv(VectorAttackerEnv):
             threads,
         )
         agents, links, _ = self._batch.shape()
-        self.observation_names = _common.observation_names(agents, links, _common.CENTER_PARTS)
-        self.single_observation_space = spaces.Box(
-            -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
-        )
-        self._action_shape = (len(agents), links)
-        self.single_action_space = spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float64)
-        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._started = False
-        self._closed = False
+        self._open(_common.observation_names(agents, links, _common.CENTER_PARTS), (len(agents), links))
