@@ -56,8 +56,9 @@ pub enum Command {
     /// The attack-class table of docs/attacks.md: every shipped attack class under the
     /// traditional and the proposed controller (in-process), RMSE and detection per detector.
     Attacks(AttacksArgs),
-    /// The scored benchmark (docs/score.md): a controller under every attack class at held-out
-    /// seeds, judged by a detector, scored into one row (`--compare` prints two side by side).
+    /// The scored benchmark (docs/score.md): a controller on the shipped teams under every
+    /// attack class at held-out seeds, judged by a detector, scored into one row (`--compare`
+    /// prints two side by side); a campaign, run whole or in shards (`--shard`, `--aggregate`).
     Score(crate::commands::score::ScoreArgs),
     /// Make the report of a run directory: figures (PNG, SVG), RMSE table, detection metrics,
     /// `report.md`. `run` does this by itself at the end of every run.

@@ -1,6 +1,9 @@
 //! The scored benchmark (`fdi-launch score`, docs/score.md): a controller's row is the same
-//! from two runs of the suite (what two labs with the same code get), two rows print side by
-//! side, and a wrong detector or row file is named before anything runs.
+//! from two runs of the suite (what two labs with the same code get), whether run whole or in
+//! shards and aggregated, two rows print side by side, and a wrong detector, team or row file
+//! is named before anything runs. The suite's team of the paper only: the Panda teams' runs
+//! take a minute a controller (the suite's plan of every team is a unit test of
+//! `fdi_campaign::score`).
 
 use std::time::Duration;
 
@@ -12,14 +15,26 @@ const WATCHDOG: Duration = Duration::from_secs(600);
 fn a_controller_s_row_is_the_same_from_two_runs_and_two_rows_compare() {
     let dir = Scratch::new("score");
     let out = |name: &str| dir.0.join(name);
-    let row = |controller: &str, name: &str| {
-        let folder = out(name);
-        let args = ["score", "--controller", controller, "--json"];
-        json(&launch(&args, &folder, WATCHDOG))
+    let suite = ["--controller", "traditional", "--teams", "paper"];
+    let row = |name: &str, more: &[&str]| {
+        let args = [&["score"][..], &suite[..], more].concat();
+        launch(&args, &out(name), WATCHDOG)
     };
-    let (a, b) = (row("traditional", "a"), row("traditional", "b"));
-    assert_eq!(a, b, "the same row from two runs");
-    assert_eq!(a["suite"], "fdi-mas-score-1");
+    let a = json(&row("a", &["--json"]));
+    // The same suite in two shards, then aggregated: each shard runs its part only.
+    for k in ["1/2", "2/2"] {
+        let shard = row("b", &["--shard", k]);
+        let said = String::from_utf8_lossy(&shard.stderr);
+        assert!(shard.status.success() && shard.stdout.is_empty(), "{said}");
+        assert!(
+            said.contains(&format!("shard {k}: 24 of the campaign's 48 runs")),
+            "{said}"
+        );
+    }
+    let b = json(&row("b", &["--aggregate", "--json"]));
+    assert_eq!(a, b, "the same row from a run whole and from two shards");
+    assert_eq!(a["suite"], "fdi-mas-score-2");
+    assert_eq!(a["teams"], serde_json::json!(["paper"]));
     assert_eq!(a["controller"], "traditional");
     let cells = a["cells"].as_array().expect("cells");
     // Every class of the attack table but the attack-free reference, at each of three seeds.
@@ -36,6 +51,8 @@ fn a_controller_s_row_is_the_same_from_two_runs_and_two_rows_compare() {
             "score",
             "--controller",
             "gated",
+            "--teams",
+            "paper",
             "--compare",
             &stored.to_string_lossy(),
             "--out",
@@ -55,17 +72,21 @@ fn a_controller_s_row_is_the_same_from_two_runs_and_two_rows_compare() {
 #[test]
 fn an_unknown_detector_or_a_file_that_is_no_row_is_named_before_anything_runs() {
     let dir = Scratch::new("score-bad");
-    let bad = launch(
-        &["score", "--detector", "psychic"],
-        dir.0.as_path(),
-        WATCHDOG,
-    );
+    let folder = dir.0.join("nothing");
+    let bad = launch(&["score", "--detector", "psychic"], &folder, WATCHDOG);
     let said = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success());
     assert!(
-        said.contains("unknown detector `psychic`") && said.contains("chi2"),
+        said.contains("suite.detector: unknown detector `psychic`") && said.contains("chi2"),
         "{said}"
     );
+    let bad = launch(&["score", "--teams", "paper,ur5"], &folder, WATCHDOG);
+    let said = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && said.contains("suite.teams[1]") && said.contains("panda"),
+        "{said}"
+    );
+    assert!(!folder.exists(), "nothing is written for a suite refused");
     let not_a_row = dir.0.join("not-a-row.json");
     std::fs::write(&not_a_row, "{\"suite\": 1}").expect("write");
     let bad = launch(

@@ -8,7 +8,7 @@ use std::process::Command;
 use std::time::Duration;
 
 use fdi_tests::slurm::{skip_reason, Cluster};
-use fdi_tests::{launch, launcher, repo_path, Scratch};
+use fdi_tests::{launch, launch_plain, launcher, repo_path, Scratch};
 
 const WATCHDOG: Duration = Duration::from_secs(600);
 
@@ -38,14 +38,62 @@ fn the_shipped_slurm_script_runs_a_campaign_as_an_array_job_and_aggregates_it() 
     );
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
 
-    // The script as a user runs it: from a working folder, with fdi-launch named by FDI_LAUNCH.
     let jobs = s.0.join("jobs");
-    std::fs::create_dir_all(&jobs).expect("jobs folder");
     let out = s.0.join("shared").join("on-slurm");
+    let all = submit_and_wait(&cluster, &c, &out, &jobs);
+    // Each array task ran its own shard, found from Slurm's environment.
+    for k in 1..=3 {
+        assert!(
+            all.contains(&format!(
+                "campaign on-slurm, shard {k}/3: 2 of the campaign's 6 runs"
+            )),
+            "{all}"
+        );
+    }
+    assert!(
+        all.contains("6 of 6 runs in the tables (from 3 shards)"),
+        "{all}"
+    );
+    same_tables(&whole, &out);
+
+    // The scored benchmark is a campaign too: its suite (the paper's team) as a campaign file,
+    // sent as an array job, gives in its aggregate the row of the suite run whole.
+    let suite = s.0.join("suite.toml");
+    let args = ["score", "--controller", "traditional", "--teams", "paper"];
+    let printed = launch_plain(&[&args[..], &["--campaign"]].concat(), WATCHDOG);
+    assert!(
+        printed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&printed.stderr)
+    );
+    std::fs::write(&suite, &printed.stdout).expect("the suite's campaign file");
+    let whole = s.0.join("suite-whole");
+    let o = launch(&[&args[..], &["--jobs", "2"]].concat(), &whole, WATCHDOG);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = s.0.join("shared").join("suite");
+    let all = submit_and_wait(&cluster, &suite, &out, &s.0.join("suite-jobs"));
+    assert!(
+        all.contains("48 of 48 runs in the tables (from 3 shards)"),
+        "{all}"
+    );
+    let row = |d: &Path| {
+        std::fs::read(d.join("score.json")).unwrap_or_else(|e| panic!("{}: {e}", d.display()))
+    };
+    assert!(
+        row(&whole) == row(&out),
+        "the row of the shards differs from the row run whole"
+    );
+}
+
+/// Submits `campaign` with the shipped script as an array job of 3 shards into `out`, from the
+/// working folder `jobs`, waits for its aggregate job to complete, and returns the jobs' logs.
+fn submit_and_wait(cluster: &Cluster, campaign: &Path, out: &Path, jobs: &Path) -> String {
+    // The script as a user runs it: from a working folder, with fdi-launch named by FDI_LAUNCH.
+    std::fs::create_dir_all(jobs).expect("jobs folder");
     let submitted = Command::new(repo_path("examples/cluster/slurm/submit.sh"))
-        .args([c.as_os_str(), out.as_os_str()])
+        .args([campaign.as_os_str(), out.as_os_str()])
         .args(["3", "--cpus-per-task=1"])
-        .current_dir(&jobs)
+        .current_dir(jobs)
         .env("SLURM_CONF", cluster.conf())
         .env("FDI_LAUNCH", launcher())
         .output()
@@ -64,7 +112,7 @@ fn the_shipped_slurm_script_runs_a_campaign_as_an_array_job_and_aggregates_it() 
     let ended = cluster.wait_for_end(aggregate, Duration::from_secs(300));
     let logs = || {
         let mut all = String::new();
-        for e in std::fs::read_dir(&jobs).expect("jobs folder").flatten() {
+        for e in std::fs::read_dir(jobs).expect("jobs folder").flatten() {
             let text = std::fs::read_to_string(e.path()).unwrap_or_default();
             all.push_str(&format!(
                 "--- {}:\n{text}\n",
@@ -79,21 +127,7 @@ fn the_shipped_slurm_script_runs_a_campaign_as_an_array_job_and_aggregates_it() 
         "the aggregate job did not complete:\n{}",
         logs()
     );
-    // Each array task ran its own shard, found from Slurm's environment.
-    let all = logs();
-    for k in 1..=3 {
-        assert!(
-            all.contains(&format!(
-                "campaign on-slurm, shard {k}/3: 2 of the campaign's 6 runs"
-            )),
-            "{all}"
-        );
-    }
-    assert!(
-        all.contains("6 of 6 runs in the tables (from 3 shards)"),
-        "{all}"
-    );
-    same_tables(&whole, &out);
+    logs()
 }
 
 fn same_tables(a: &Path, b: &Path) {

@@ -25,14 +25,17 @@
 //! the run's fully resolved scenario and engine (`points/<key>.json`, written atomically), so
 //! a rerun skips what is done and an edited campaign never reuses a stale result.
 
+pub mod classes;
 pub mod figures;
 pub mod flatten;
 pub mod plan;
 pub mod runner;
+pub mod score;
 pub mod shard;
 pub mod stats;
 pub mod status;
 pub mod store;
+pub mod suite;
 pub mod tables;
 
 pub use tables::sig;
@@ -49,11 +52,10 @@ use fdi_common::observe::{Observer, Progress};
 use fdi_common::scenario::{self, ClockMode, Resolved};
 use fdi_common::stop::Stop;
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 
 use fdi_common::field_path::{show, FieldPath, PathError};
 use fdi_orchestrator::run::{execute, Engine, Traces};
-use plan::{Axis, Job, Plan, Point, MAX_RUNS};
+use plan::{run_key, Axis, Job, Plan, Point, MAX_RUNS};
 use store::{load_stored, stored_path, write_atomic, Stored};
 
 /// What an interrupted campaign kept.
@@ -104,7 +106,11 @@ struct CampaignFile {
     mode: Mode,
     #[serde(default)]
     set: toml::Table,
+    #[serde(default)]
     axes: Vec<AxisFile>,
+    /// The scored benchmark in place of a base scenario and axes (docs/score.md).
+    #[serde(default)]
+    suite: Option<suite::SuiteFile>,
     /// Metrics (per robot, without `robot<id>.`) drawn against each axis; default: RMSE, max
     /// error, deadline misses and each detector's mean time to detect, false alarms, coverage.
     #[serde(default)]
@@ -348,7 +354,10 @@ fn swept(e: PathError) -> anyhow::Error {
 
 fn resolve_axes(file: &CampaignFile, src: &Source) -> Result<Vec<Axis>> {
     if file.axes.is_empty() {
-        bail!("{}: a campaign needs at least one [[axes]]", src.name);
+        bail!(
+            "{}: a campaign needs at least one [[axes]] (or a `[suite]`: docs/score.md)",
+            src.name
+        );
     }
     let mut axes = Vec::new();
     for (i, a) in file.axes.iter().enumerate() {
@@ -563,19 +572,6 @@ fn axis_value(
     Ok(toml::Value::Float(base * f))
 }
 
-/// The key of a run: SHA-256 over the launcher's version, the engine and the fully resolved
-/// scenario (attack inlined).
-fn run_key(r: &Resolved, engine: Engine) -> String {
-    let mut h = Sha256::new();
-    h.update(format!(
-        "fdi-launch {}\nengine {}\n",
-        env!("CARGO_PKG_VERSION"),
-        engine.as_str()
-    ));
-    h.update(r.to_toml());
-    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
-}
-
 /// Reads the campaign file and expands it into its points and runs, each run's scenario
 /// resolved and keyed.
 fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
@@ -594,6 +590,10 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
     }
     if let Some(why) = fdi_common::files::unprintable(&file.name) {
         bail!("{}: {why}", src.at("name"));
+    }
+    if let Some(suite) = &file.suite {
+        refuse_beside_suite(&file, &src)?;
+        return score::plan(&file.name, suite, engine, &|f| src.at(f));
     }
     let (base_text, base_name, base_dir) = read_base(campaign, &file)?;
     let base = scenario::load_str(&base_text, &base_name, base_dir.as_deref())?;
@@ -630,7 +630,27 @@ fn plan(campaign: &Path, engine: Engine) -> Result<Plan> {
         jobs,
         seeds,
         plots: file.plots,
+        suite: None,
     })
+}
+
+/// Refuses what a campaign of the suite cannot have beside its `[suite]`: the suite's runs
+/// are fixed, and a row is of the suite as it is.
+fn refuse_beside_suite(file: &CampaignFile, src: &Source) -> Result<()> {
+    let beside = [
+        ("scenario", file.scenario.is_some()),
+        ("set", !file.set.is_empty()),
+        ("axes", !file.axes.is_empty()),
+        ("plots", file.plots.is_some()),
+        ("mode", file.mode != Mode::Product),
+    ];
+    if let Some((key, _)) = beside.iter().find(|(_, there)| *there) {
+        bail!(
+            "{}: a campaign of the suite (`[suite]`) has no `{key}`: its teams, attacks and seeds are the suite's",
+            src.at(key)
+        );
+    }
+    Ok(())
 }
 
 /// The base scenario of a campaign: its text, its name for messages and its folder (the
@@ -822,13 +842,16 @@ pub fn sweep(args: &SweepOptions, stop: &Stop, said: &mut dyn FnMut(&str)) -> Re
         .iter()
         .map(|j| load_stored(&out, &j.key))
         .collect();
-    let tables = tables::write_outputs(&plan, &results, &out)?;
+    let mut tables = tables::write_outputs(&plan, &results, &out)?;
     said(&format!(
         "{}; {} of {} runs in the tables",
         tally.said(),
         results.iter().filter(|r| r.is_some()).count(),
         plan.jobs.len()
     ));
+    if let Some(suite) = &plan.suite {
+        tables.extend(score::write_row(suite, &results, &out, said)?);
+    }
     said(&format!("campaign folder {}", out.display()));
     for t in tables {
         said(&format!("  {}", t.display()));
@@ -946,7 +969,10 @@ fn aggregate(
         );
     }
     copy_campaign(args, out)?;
-    let tables = tables::write_outputs(plan, &results, out)?;
+    let mut tables = tables::write_outputs(plan, &results, out)?;
+    if let Some(suite) = &plan.suite {
+        tables.extend(score::write_row(suite, &results, out, said)?);
+    }
     said(&format!(
         "campaign {}: {done} of {} runs in the tables{}",
         plan.name,
@@ -1358,6 +1384,24 @@ mod tests {
         let name = file.display().to_string();
         assert!(e.starts_with(&name), "{e}");
         e.replacen(&name, "c.toml", 1)
+    }
+
+    /// A campaign of the suite has its runs from the suite: axes, edits or a base scenario beside
+    /// `[suite]` are refused, naming the key, as is a suite of another version.
+    #[test]
+    fn a_suite_campaign_with_axes_or_another_version_is_refused() {
+        let suite = "[suite]\nversion = \"fdi-mas-score-2\"\ncontroller = \"pd\"\n";
+        let e = refusal(&format!(
+            "name = \"x\"\n{suite}[[axes]]\npath = \"seed\"\nvalues = [1]\n"
+        ));
+        assert!(e.contains("c.toml: axes (line 5, column 3): a campaign of the suite (`[suite]`) has no `axes`"), "{e}");
+        let e = refusal(&format!("name = \"x\"\n[set]\nduration_s = 1.0\n{suite}"));
+        assert!(e.contains("has no `set`"), "{e}");
+        let e =
+            refusal("name = \"x\"\n[suite]\nversion = \"fdi-mas-score-1\"\ncontroller = \"pd\"\n");
+        assert!(e.contains("c.toml: suite.version (line 3, column 1): `fdi-mas-score-1` is not this launcher's suite"), "{e}");
+        let e = refusal("name = \"x\"\n");
+        assert!(e.contains("at least one [[axes]] (or a `[suite]`"), "{e}");
     }
 
     /// `a` = controller.beta [10, 20] and `b` = controller.beta [30] ran β = 30 twice and

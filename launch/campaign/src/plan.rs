@@ -4,6 +4,8 @@
 use std::collections::BTreeMap;
 
 use fdi_common::scenario::Resolved;
+use fdi_orchestrator::run::Engine;
+use sha2::{Digest, Sha256};
 
 use super::flatten::Cell;
 use super::stats::Stats;
@@ -59,6 +61,7 @@ pub(super) struct Point {
 }
 
 /// The campaign as resolved: its axes, points and runs.
+#[derive(Debug)]
 pub(super) struct Plan {
     pub(super) name: String,
     pub(super) axes: Vec<Axis>,
@@ -66,6 +69,8 @@ pub(super) struct Plan {
     pub(super) jobs: Vec<Job>,
     pub(super) seeds: usize,
     pub(super) plots: Option<Vec<String>>,
+    /// The suite a campaign of the scored benchmark is ([`crate::suite`]).
+    pub(super) suite: Option<crate::suite::SuitePlan>,
 }
 
 pub(super) fn toml_cell(v: &toml::Value) -> Cell {
@@ -121,4 +126,17 @@ pub(super) fn robots(columns: &[&String]) -> Vec<String> {
     ids.sort();
     ids.dedup();
     ids.into_iter().map(|(_, id)| id).collect()
+}
+
+/// The key of a run: SHA-256 over the launcher's version, the engine and the fully resolved
+/// scenario (attack inlined).
+pub(super) fn run_key(r: &Resolved, engine: Engine) -> String {
+    let mut h = Sha256::new();
+    h.update(format!(
+        "fdi-launch {}\nengine {}\n",
+        env!("CARGO_PKG_VERSION"),
+        engine.as_str()
+    ));
+    h.update(r.to_toml());
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
 }

@@ -1,12 +1,18 @@
-//! `fdi-launch score`: the scored benchmark of a controller (docs/score.md).
+//! `fdi-launch score`: the scored benchmark of a controller (docs/score.md), run as a campaign
+//! of the suite (`fdi_campaign::score`): whole, one shard of it, its aggregation or its status.
 
-use std::path::PathBuf;
+use std::num::NonZeroUsize;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
+use fdi_campaign::score;
+use fdi_campaign::suite::{SuiteFile, DEFAULT_DETECTOR};
+use fdi_campaign::{shard::ShardArg, Ended, SweepOptions};
 use fdi_common::control::ControllerMode;
 use fdi_common::stop::Stop;
-use fdi_tables::score::{self, Row, ScoreOptions};
+use fdi_orchestrator::Engine;
+use fdi_report::traces::Traces;
 
 use super::values::one_of;
 
@@ -18,11 +24,35 @@ pub struct ScoreArgs {
     pub controller: ControllerMode,
     /// The detector whose alarms are judged: `s_hat_norm` (the control center's own alarm; the
     /// `gated` controller's gate), `chi2`, `cusum`, `window_mean`.
-    #[arg(long, default_value = "s_hat_norm")]
+    #[arg(long, default_value = DEFAULT_DETECTOR)]
     pub detector: String,
-    /// Folder that receives `score.json` and `score.md`; default `runs/<timestamp>-score-<controller>`.
-    #[arg(long)]
+    /// The teams to run (comma-separated: `paper`, `panda`, `mixed`; default every one): a row
+    /// of some teams compares only with rows of the same teams.
+    #[arg(long, value_delimiter = ',')]
+    pub teams: Option<Vec<String>>,
+    /// The suite's folder (its campaign file, its runs' results, its tables, `score.json` and
+    /// `score.md`); default `runs/<timestamp>-score-<controller>`. Required with `--shard`,
+    /// `--aggregate` and `--status`, which work on one folder.
+    #[arg(long, required_if_eq_any = [("aggregate", "true"), ("status", "true")])]
     pub out: Option<PathBuf>,
+    /// Runs at a time (default: the number of CPUs).
+    #[arg(long)]
+    pub jobs: Option<NonZeroUsize>,
+    /// Run only shard K of N of the suite (`K/N`, or `auto` under Slurm or Kubernetes), as
+    /// `fdi-launch sweep --shard` does; `--aggregate` then makes the row.
+    #[arg(long, value_name = "K/N|auto", requires = "out", conflicts_with_all = ["aggregate", "status", "compare"])]
+    pub shard: Option<ShardArg>,
+    /// Run nothing: the row from the results the shards stored in `--out` (the runs missing
+    /// are named with the shard that owns each).
+    #[arg(long, conflicts_with = "status")]
+    pub aggregate: bool,
+    /// Run nothing: per shard, its runs done of its total and the time left.
+    #[arg(long, conflicts_with = "compare")]
+    pub status: bool,
+    /// Print the suite as a campaign file and run nothing (for `fdi-launch sweep` and the
+    /// cluster scripts of examples/cluster/).
+    #[arg(long, conflicts_with_all = ["shard", "aggregate", "status", "compare", "json"])]
+    pub campaign: bool,
     /// Print the row as JSON (one line) instead of markdown.
     #[arg(long)]
     pub json: bool,
@@ -31,37 +61,78 @@ pub struct ScoreArgs {
     pub compare: Option<PathBuf>,
 }
 
-/// Runs the suite, prints its row (and, with `--compare`, both rows side by side).
+/// Runs the suite (or a shard of it, or makes its row from what the shards stored), prints its
+/// row (and, with `--compare`, both rows side by side); exit status 1 when runs failed or are
+/// missing.
 pub fn score(args: &ScoreArgs, stop: &Stop) -> Result<ExitCode> {
+    let suite = SuiteFile::new(args.controller, &args.detector, args.teams.as_deref());
+    suite.checked()?;
+    let name = format!("score-{}", args.controller.as_str());
+    let text = suite.campaign_text(&name)?;
+    if args.campaign {
+        print!("{text}");
+        return Ok(ExitCode::SUCCESS);
+    }
     // The other row is read first: a wrong file stops before the suite runs.
-    let other: Option<Row> = match &args.compare {
-        Some(path) => {
-            let text = fdi_common::files::read_limited(path)
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            Some(
-                serde_json::from_str(&text)
-                    .with_context(|| format!("{}: not a score row", path.display()))?,
-            )
-        }
-        None => None,
+    let other = args.compare.as_deref().map(score::read_row).transpose()?;
+    let out = args.out.clone().unwrap_or_else(|| {
+        PathBuf::from("runs").join(format!(
+            "{}-score-{}",
+            fdi_orchestrator::run_dirs::timestamp(),
+            args.controller.as_str()
+        ))
+    });
+    let campaign = place_campaign(&out, &text)?;
+    let options = SweepOptions {
+        campaign,
+        jobs: args.jobs,
+        engine: Engine::Inproc,
+        out: Some(out.clone()),
+        traces: Traces::None,
+        shard: args.shard,
+        aggregate: args.aggregate,
+        status: args.status,
+        progress: crate::terminal::progress(true),
     };
-    let options = ScoreOptions {
-        controller: args.controller,
-        detector: args.detector.clone(),
-        out: args.out.clone(),
-    };
-    let scored = score::score(&options, stop)?;
+    // What the campaign says goes to the standard error: the standard output is the row's.
+    let ended = fdi_campaign::sweep(&options, stop, &mut |line| eprintln!("{line}"))?;
+    if ended == Ended::Incomplete {
+        return Ok(ExitCode::FAILURE);
+    }
+    if args.shard.is_some() || args.status {
+        return Ok(ExitCode::SUCCESS);
+    }
+    let row = score::read_row(&out.join("score.json"))?;
     if args.json {
-        println!("{}", serde_json::to_string(&scored.row)?);
+        println!("{}", serde_json::to_string(&row)?);
     } else {
-        print!("{}", scored.md);
-        println!(
-            "\nrow written to {}",
-            scored.dir.join("score.json").display()
-        );
+        print!("{}", score::markdown(&row));
+        println!("\nrow written to {}", out.join("score.json").display());
     }
     if let Some(other) = other {
-        print!("\n{}", score::compare(&scored.row, &other)?);
+        print!("\n{}", score::compare(&row, &other)?);
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The suite's campaign file in its folder `out` (written, or found there as the same text):
+/// a folder of another campaign is refused, naming it.
+fn place_campaign(out: &Path, text: &str) -> Result<PathBuf> {
+    let file = out.join("campaign.toml");
+    match std::fs::read_to_string(&file) {
+        Ok(there) if there == text => return Ok(file),
+        Ok(_) => bail!(
+            "{} holds another campaign than this suite's (another controller, detector or teams, or another launcher's suite): score into another --out, or run it with `fdi-launch sweep {}`",
+            file.display(),
+            file.display()
+        ),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => return Err(e).with_context(|| format!("reading {}", file.display())),
+    }
+    if out.exists() && !out.is_dir() {
+        bail!("--out {} is not a folder", out.display());
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    std::fs::write(&file, text).with_context(|| format!("writing {}", file.display()))?;
+    Ok(file)
 }

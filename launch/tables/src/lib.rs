@@ -8,5 +8,4 @@
 
 pub mod attacks;
 pub mod bench;
-pub mod score;
 pub mod tables;
