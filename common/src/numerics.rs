@@ -106,10 +106,29 @@ fn options(s: &Scenario) -> BTreeMap<String, String> {
             out.insert("controller".into(), format!("(unreadable: {e})"));
         }
     }
+    // A robot's own gains and disturbance stand in for the scenario's: compared too, or a run
+    // of other gains would be shown as the paper's.
+    let own = (s.agents.iter().enumerate()).flat_map(|(i, a)| {
+        [
+            (a.gains.is_some())
+                .then(|| (format!("agents[{i}].gains"), serde_json::to_value(a.gains))),
+            (a.disturbance.as_ref())
+                .map(|d| (format!("agents[{i}].disturbance"), serde_json::to_value(d))),
+        ]
+        .into_iter()
+        .flatten()
+    });
     for (at, value) in [
-        ("noise", serde_json::to_value(s.noise)),
-        ("disturbance", serde_json::to_value(&s.disturbance)),
-    ] {
+        ("noise".to_string(), serde_json::to_value(s.noise)),
+        (
+            "disturbance".to_string(),
+            serde_json::to_value(&s.disturbance),
+        ),
+    ]
+    .into_iter()
+    .chain(own)
+    {
+        let at = at.as_str();
         match value {
             Ok(v) => flatten(at, &v, &mut out),
             Err(e) => {
@@ -194,6 +213,28 @@ mod tests {
         let without_mode = differences_from_paper(&s, Compare::WithoutMode);
         assert_eq!(without_mode.len(), d.len() - 1);
         assert!(without_mode.iter().all(|d| d.field != "controller.mode"));
+    }
+
+    #[test]
+    fn a_robot_s_own_gains_and_disturbance_are_named() {
+        let mut s = paper();
+        s.agents[2].gains = Some(crate::scenario::AgentGains {
+            gain_k: Some(40.0),
+            gain_scaling: None,
+        });
+        s.agents[1].disturbance = Some(s.disturbance.clone());
+        let d = differences_from_paper(&s, Compare::WithMode);
+        let described: Vec<String> = d.iter().map(Difference::describe).collect();
+        assert!(
+            described.contains(&"agents[2].gains.gain_k = 40.0 (paper: none)".to_string()),
+            "{described:?}"
+        );
+        assert!(
+            described
+                .iter()
+                .any(|d| d.starts_with("agents[1].disturbance.")),
+            "{described:?}"
+        );
     }
 
     #[test]

@@ -33,6 +33,8 @@ pub use crate::problem::Problem;
 pub const MAX_AGENTS: usize = 256;
 /// `validate` warns about a controller gain more than this many times its calibration.
 pub const IMPLAUSIBLE_FACTOR: f64 = 100.0;
+/// The paper calibration's `gain_k` (docs/model.md, "Gains (the calibration)").
+const CALIBRATED_GAIN_K: f64 = 21.0;
 /// `validate` warns about a reference turning more than this per control period, rad.
 pub const MAX_PHASE_PER_PERIOD_RAD: f64 = 0.1;
 /// `validate` warns about an attack injecting more than this, rad or rad/s.
@@ -585,7 +587,7 @@ impl Scenario {
         let mut push = |path: String, message: String| out.push(Problem { path, message });
         let c = &self.controller;
         for (field, value, calibrated) in [
-            ("gain_k", c.gain_k, 21.0),
+            ("gain_k", c.gain_k, CALIBRATED_GAIN_K),
             ("beta", c.beta, 30.0),
             ("observer_gain_l1", c.observer_gain_l1, 0.01),
             ("observer_gain_l2", c.observer_gain_l2, 0.012),
@@ -597,6 +599,17 @@ impl Scenario {
                     format!("controller.{field}"),
                     format!("{value} is more than {IMPLAUSIBLE_FACTOR}× the calibration ({calibrated}): the closed loop may diverge (a run says so, and exits 4)"),
                 );
+            }
+        }
+        for (i, a) in self.agents.iter().enumerate() {
+            // A robot's own `k` stands in for `[controller]`'s: held to the same bound.
+            if let Some(k) = a.gains.and_then(|g| g.gain_k) {
+                if k.abs() > IMPLAUSIBLE_FACTOR * CALIBRATED_GAIN_K {
+                    push(
+                        format!("agents[{i}].gains.gain_k"),
+                        format!("{k} is more than {IMPLAUSIBLE_FACTOR}× the calibration ({CALIBRATED_GAIN_K}): the closed loop may diverge (a run says so, and exits 4)"),
+                    );
+                }
             }
         }
         let dt = self.control_period_s;
@@ -1770,6 +1783,24 @@ mod tests {
         assert!(at("channels[1]").is_some());
         assert_eq!(at("nothing.here"), None);
         assert_eq!(locate("not = [toml", "not"), None);
+    }
+
+    #[test]
+    fn a_robot_s_own_implausible_gain_is_a_warning_naming_it() {
+        let mut r = paper().expect("paper");
+        r.scenario.agents[1].gains = Some(AgentGains {
+            gain_k: Some(1e5),
+            gain_scaling: None,
+        });
+        let w = r.scenario.warnings(&r.attack);
+        assert_eq!(w.len(), 1, "{w:?}");
+        assert_eq!(w[0].path, "agents[1].gains.gain_k");
+        assert!(
+            w[0].message
+                .contains("100000 is more than 100× the calibration (21)"),
+            "{}",
+            w[0].message
+        );
     }
 
     #[test]

@@ -202,3 +202,20 @@ fn the_documented_table_is_the_one_the_command_makes() {
          difference:\n{first_difference}"
     );
 }
+
+/// A class that cannot run as short as `--duration-s` (the stealthy bias's detectors calibrate
+/// over 2 s) stops the table before any run, naming the class and the field.
+#[test]
+fn a_duration_too_short_for_a_class_is_refused_before_anything_runs() {
+    let dir = Scratch::new("attacks-short");
+    let out = launch(&["attacks", "--duration-s", "1"], &dir.0, WATCHDOG);
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{said}");
+    assert!(
+        said.contains("attack class `stealthy-bias`")
+            && said.contains("detectors.calibration_s")
+            && said.contains("duration_s = 1 s"),
+        "{said}"
+    );
+    assert!(!dir.0.join("attacks.csv").exists(), "a table was written");
+}

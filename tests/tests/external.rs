@@ -956,3 +956,60 @@ fn the_python_controller_gives_the_built_in_digest_on_the_panda_team_too() {
     assert_eq!(rust["controller"], "traditional");
     assert_eq!(digest(&py), digest(&rust));
 }
+
+/// A SIGKILLed launcher cannot end the programs it started, and a program need not watch its
+/// parent: the kernel sends it SIGTERM when the launcher dies (here a shell that never says
+/// ready, waited for by the launcher until it is killed).
+#[test]
+fn a_program_in_a_role_ends_when_its_launcher_is_sigkilled() {
+    let s = Scratch::new("ext-orphan");
+    let pid_file = s.0.join("program.pid");
+    let text = std::fs::read_to_string(repo_path("scenarios/paper.toml")).expect("the scenario");
+    let mut doc: toml::Table = toml::from_str(&text).expect("TOML");
+    let mut role = toml::Table::new();
+    let script = format!(
+        "echo $$ > {:?}; exec sleep 300",
+        pid_file.display().to_string()
+    );
+    role.insert(
+        "command".into(),
+        toml::Value::Array(vec!["sh".into(), "-c".into(), script.into()]),
+    );
+    role.insert("name".into(), "sleeper".into());
+    role.insert("timeout_s".into(), 120.0.into());
+    let attack: toml::Table = toml::from_str("preset = \"none\"").expect("TOML");
+    doc.insert("attack".into(), toml::Value::Table(attack));
+    set_role(&mut doc, "attacker", toml::Value::Table(role), 1.0);
+    let scenario = s.0.join("scenario.toml");
+    std::fs::write(&scenario, toml::to_string(&doc).expect("TOML out")).expect("writing");
+    let mut child = fdi_tests::spawn(&["run", &scenario.to_string_lossy()], &s.0.join("runs"));
+    let read_pid = || {
+        let text = std::fs::read_to_string(&pid_file).ok()?;
+        text.trim().parse::<u32>().ok()
+    };
+    let started = fdi_tests::wait_until(Duration::from_secs(60), || read_pid().is_some());
+    let launcher = child.id();
+    let others: Vec<u32> = (fdi_tests::children_of(launcher).into_iter())
+        .map(|c| c.0)
+        .collect();
+    fdi_tests::signal(launcher, "-KILL");
+    let _ = child.wait();
+    assert!(started, "the program never started");
+    let program = read_pid().expect("its pid");
+    assert!(
+        fdi_tests::wait_until(Duration::from_secs(30), || !fdi_tests::alive(program)),
+        "the program {program} outlived its SIGKILLed launcher {launcher}"
+    );
+    // The run's own processes end too (they watch their parent); what they leave is reaped
+    // by the next command once they are gone.
+    assert!(
+        fdi_tests::wait_until(Duration::from_secs(30), || others
+            .iter()
+            .all(|p| !fdi_tests::alive(*p))),
+        "orphans: {others:?}"
+    );
+    // The next command reaps what the killed launcher left of its run.
+    let v = fdi_tests::launch_plain(&["validate", &scenario.to_string_lossy()], WATCHDOG);
+    assert!(v.status.success(), "{}", String::from_utf8_lossy(&v.stderr));
+    fdi_tests::assert_no_leftovers(launcher);
+}

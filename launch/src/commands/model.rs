@@ -162,14 +162,17 @@ fn text(
         masses.join(", ")
     );
     let vector = |v: &[f64]| -> String {
-        let cells: Vec<String> = v.iter().map(|x| format!("{x:.6}")).collect();
+        let cells: Vec<String> = v.iter().map(|&x| six_places(x)).collect();
         format!("[{}]", cells.join(", "))
     };
     let _ = writeln!(out, "at q = {}, q̇ = {}:", vector(q), vector(qd));
     let matrix = |out: &mut String, name: &str, m: &DMatrix<f64>| {
         let _ = writeln!(out, "{name} =");
         for r in m.row_iter() {
-            let cells: Vec<String> = r.iter().map(|x| format!("{x:>13.6}")).collect();
+            let cells: Vec<String> = r
+                .iter()
+                .map(|&x| format!("{:>13}", six_places(x)))
+                .collect();
             let _ = writeln!(out, "  [{} ]", cells.join(""));
         }
     };
@@ -178,4 +181,25 @@ fn text(
     let _ = writeln!(out, "G(q) = {}", vector(terms.gravity.as_slice()));
     let _ = writeln!(out, "F(q̇) = {}", vector(terms.friction.as_slice()));
     out
+}
+
+/// `x` to six decimal places, without the sign of a value that rounds to zero (`-1e-17` is
+/// `0.000000`, not `-0.000000`).
+fn six_places(x: f64) -> String {
+    let s = format!("{x:.6}");
+    match s.strip_prefix('-') {
+        Some(rest) if rest.chars().all(|c| c == '0' || c == '.') => rest.to_string(),
+        _ => s,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_value_that_rounds_to_zero_is_printed_without_a_sign() {
+        assert_eq!(super::six_places(-1e-17), "0.000000");
+        assert_eq!(super::six_places(-0.0), "0.000000");
+        assert_eq!(super::six_places(-0.5), "-0.500000");
+        assert_eq!(super::six_places(-0.000002), "-0.000002");
+    }
 }

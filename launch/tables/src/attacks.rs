@@ -48,6 +48,22 @@ struct Outcome {
     missing_inputs: BTreeMap<u32, u64>,
 }
 
+/// The scenario of `class` on `base` under `mode`, shortened to `duration_s`, checked as
+/// the command line's overrides are.
+fn class_scenario(
+    class: &Class,
+    base: &Resolved,
+    mode: ControllerMode,
+    duration_s: Option<f64>,
+) -> Result<Resolved> {
+    let mut r = class.source.resolve(base)?;
+    r.scenario.controller.mode = mode;
+    if let Some(d) = duration_s {
+        r.scenario.duration_s = d;
+    }
+    fdi_orchestrator::run::check_overrides(r)
+}
+
 /// Runs one class under one controller, in-process.
 fn run_one(
     class: &Class,
@@ -55,12 +71,7 @@ fn run_one(
     mode: ControllerMode,
     duration_s: Option<f64>,
 ) -> Result<Outcome> {
-    let mut r = class.source.resolve(base)?;
-    r.scenario.controller.mode = mode;
-    if let Some(d) = duration_s {
-        r.scenario.duration_s = d;
-    }
-    let r = fdi_orchestrator::run::check_overrides(r)?;
+    let r = class_scenario(class, base, mode, duration_s)?;
     let mut missing_inputs = BTreeMap::new();
     let summary = run_inproc_any(&r, |rec: &TickRecord| {
         if rec.center.missing_input {
@@ -339,10 +350,10 @@ fn base(args: &AttacksOptions) -> Result<(PathBuf, Resolved, MadeWith)> {
 pub fn attacks(args: &AttacksOptions, stop: &Stop) -> Result<Table> {
     stop.check(fdi_common::stop::BEFORE_THE_START)?;
     let (dir, base, made) = base(args)?;
-    // Every class resolves before anything runs: a broken one stops the table at once.
+    // Every class's scenario is made and checked before anything runs: one that cannot run
+    // (a `--duration-s` shorter than its detectors' calibration) stops the table at once.
     for c in CLASSES {
-        c.source
-            .resolve(&base)
+        class_scenario(c, &base, ControllerMode::Proposed, args.duration_s)
             .with_context(|| format!("attack class `{}`", c.name))?;
     }
     let jobs: Vec<(usize, ControllerMode)> = (0..CLASSES.len())

@@ -10,6 +10,7 @@
 //! (issue 51: one that also cleared its environment outlived the run).
 
 use std::collections::{BTreeSet, HashMap};
+use std::os::unix::process::CommandExt;
 use std::process::Command;
 use std::time::{Duration, Instant};
 
@@ -46,6 +47,29 @@ pub fn spawn_noted(cmd: &mut Command) -> std::io::Result<std::process::Child> {
     let child = cmd.spawn()?;
     s.insert(child.id());
     Ok(child)
+}
+
+/// Has the kernel send the program `cmd` starts SIGTERM when the launcher dies, however it
+/// dies: a SIGKILL leaves the launcher no time to end its programs, and a program that does not
+/// watch its parent (the project's roles do, `fdi_runtime::process::shutdown`) would run on,
+/// orphaned. The signal comes when the thread that starts the program ends: the launcher's
+/// threads that start programs outlive their runs.
+#[allow(unsafe_code)]
+pub fn ends_with_the_launcher(cmd: &mut Command) {
+    let launcher = rustix::process::getpid();
+    // SAFETY: the closure runs in the child between fork and exec, where only
+    // async-signal-safe calls are allowed: it makes two system calls (prctl, getppid) and
+    // allocates nothing (an `Errno` becomes an `io::Error` without allocating).
+    unsafe {
+        cmd.pre_exec(move || {
+            rustix::process::set_parent_process_death_signal(Some(rustix::process::Signal::TERM))?;
+            // The launcher died before the call: the signal would never come.
+            if rustix::process::getppid() != Some(launcher) {
+                return Err(rustix::io::Errno::SRCH.into());
+            }
+            Ok(())
+        });
+    }
 }
 
 /// Notes that the child `pid` this process started was reaped by its owner.

@@ -221,6 +221,7 @@ impl<M> Supervisor<M> {
             .stdout(writer.try_clone().context("making a pipe for its output")?)
             .stderr(writer)
             .process_group(0);
+        crate::run::program::ends_with_the_launcher(&mut cmd);
         let child = crate::run::program::spawn_noted(&mut cmd).with_context(|| {
             format!(
                 "spawning {label} ({:?}: is the program installed and on PATH?)",
