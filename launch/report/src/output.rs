@@ -81,6 +81,29 @@ pub fn state_reset_warnings(s: &RunSummary) -> Vec<String> {
         .collect()
 }
 
+/// A line per robot some of whose torques the control center replaced by the last good one
+/// (computed non-finite, or a controller program's answer non-finite or of the wrong joint
+/// count, docs/faults.md): for those ticks the robot did not get its controller's torque.
+pub fn rejected_torque_warnings(s: &RunSummary) -> Vec<String> {
+    s.metrics
+        .iter()
+        .filter(|(_, m)| m.rejected_torques > 0)
+        .map(|(id, m)| {
+            format!(
+                "robot {id}: {} torque{} replaced by the last good one (non-finite, or a \
+                 controller program's answer of the wrong joint count): for those ticks it did \
+                 not get its controller's torque (rmse.md: rejected torques)",
+                m.rejected_torques,
+                if m.rejected_torques == 1 {
+                    " was"
+                } else {
+                    "s were"
+                }
+            )
+        })
+        .collect()
+}
+
 /// Onsets as `t: time to detect` (`never` when undetected); a long train is summarised.
 pub fn describe_onsets(onsets: &[fdi_common::metrics::Onset]) -> String {
     let one = |o: &fdi_common::metrics::Onset| {
@@ -552,6 +575,28 @@ pub fn sample_summary() -> RunSummary {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn every_robot_whose_torques_were_replaced_is_named_with_its_count() {
+        let mut s = super::sample_summary();
+        let lines = super::rejected_torque_warnings(&s);
+        assert_eq!(lines.len(), 2);
+        assert!(
+            lines[0].starts_with("robot 1: 4 torques were replaced"),
+            "{lines:?}"
+        );
+        for (id, n) in [("1", 0), ("2", 1)] {
+            if let Some(m) = s.metrics.get_mut(id) {
+                m.rejected_torques = n;
+            }
+        }
+        let lines = super::rejected_torque_warnings(&s);
+        assert_eq!(lines.len(), 1);
+        assert!(
+            lines[0].starts_with("robot 2: 1 torque was replaced"),
+            "{lines:?}"
+        );
+    }
+
     #[test]
     fn every_robot_whose_state_was_reset_is_named_with_its_count() {
         let mut s = super::sample_summary();

@@ -460,7 +460,10 @@ fn print_summary(s: &RunSummary) {
     for (id, t) in s.diverged() {
         eprintln!("fdi-launch: robot {id} diverged at t = {t:.3} s (its state left the bound of {} rad or became non-finite): its metrics are not results", fdi_common::metrics::DIVERGENCE_BOUND_RAD);
     }
-    for line in output::state_reset_warnings(s) {
+    for line in output::state_reset_warnings(s)
+        .into_iter()
+        .chain(output::rejected_torque_warnings(s))
+    {
         eprintln!("fdi-launch: warning: {line}");
     }
     println!("trace digest {}", s.trace_digest);
