@@ -56,7 +56,11 @@ class Scenario:
     @property
     def agents(self) -> list[int]: ...
     @property
-    def links(self) -> int: ...
+    def links(self) -> int:
+        """The most joints of a robot of the team (the tick table's columns per joint)."""
+    @property
+    def joint_counts(self) -> dict[int, int]:
+        """Each robot's joints, by id."""
     @property
     def duration_s(self) -> float: ...
     @property

@@ -35,8 +35,8 @@ pub struct Columns {
     links: usize,
     beta: f64,
     actuation: bool,
-    trajectories: BTreeMap<u32, TrajectoryConfig>,
-    desired: DesiredFn,
+    /// Each robot's trajectory and the `q_d` of its joint count.
+    trajectories: BTreeMap<u32, (TrajectoryConfig, DesiredFn)>,
     names: Vec<String>,
     data: Vec<Data>,
     scratch: Vec<f64>,
@@ -48,21 +48,20 @@ pub struct Columns {
 impl Columns {
     /// The columns of `resolved`'s records; `actuation`: its records carry the torque path's.
     pub fn new(resolved: &Resolved, actuation: bool) -> Self {
-        // The package takes teams of one joint count (`py_scenario::with_overrides`).
-        let (links, desired) = (resolved.joint_count())
-            .and_then(|n| fdi_common::with_joint_count!(n, N => (N, desired::<N> as DesiredFn)))
-            .unwrap_or((0, desired::<0>));
+        // A column per joint of the largest arm; a smaller arm's other columns are NaN.
         let s = &resolved.scenario;
+        let links = s.joint_counts().last().copied().unwrap_or(0);
         let mut c = Self {
             links,
             beta: s.controller.beta,
             actuation,
-            trajectories: s
-                .agents
-                .iter()
-                .map(|a| (a.id, a.trajectory.clone()))
+            trajectories: (s.agents.iter())
+                .filter_map(|a| {
+                    let n = a.model.dof();
+                    let f = fdi_common::with_joint_count!(n, N => desired::<N> as DesiredFn)?;
+                    Some((a.id, (a.trajectory.clone(), f)))
+                })
                 .collect(),
-            desired,
             names: Vec::new(),
             data: Vec::new(),
             scratch: vec![0.0; links],
@@ -97,8 +96,9 @@ impl Columns {
         row.int(i64::from(r.agent.agent));
         row.float(r.agent.t);
         match self.trajectories.get(&r.agent.agent) {
-            Some(traj) => {
-                (self.desired)(traj, r.agent.t, &mut self.scratch);
+            Some((traj, desired)) => {
+                self.scratch.fill(f64::NAN);
+                desired(traj, r.agent.t, &mut self.scratch);
                 row.floats(&self.scratch);
             }
             None => row.floats(&[]),

@@ -326,9 +326,10 @@ impl Episode {
     pub fn new(resolved: Resolved, spec: Spec) -> Result<Self, String> {
         check(&resolved, &spec)?;
         let engine = Lockstep::new(&resolved).map_err(|e| e.to_string())?;
-        let links = resolved
-            .joint_count()
-            .ok_or("the environments take robots of one joint count; this team mixes them")?;
+        let links = resolved.joint_count().ok_or(
+            "the environments take robots of one joint count (their spaces have an entry per \
+                 joint); this team mixes them: `fdi_mas.run` and `fdi-launch run` run it",
+        )?;
         let agents: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
         let attacker = EnvAttacker::new(&resolved, &spec, links);
         let n = agents.len();

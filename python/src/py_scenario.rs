@@ -162,14 +162,6 @@ pub fn with_overrides(
              the package runs the in-process engine, lockstep only",
         ));
     }
-    if r.joint_count().is_none() {
-        return Err(problem(
-            "agents",
-            "this team mixes robots of different joint counts; the package's environments, \
-             spaces and tick table take robots of one joint count (`fdi-launch run` runs a \
-             mixed team)",
-        ));
-    }
     Ok(r)
 }
 
@@ -219,14 +211,17 @@ impl Scenario {
         self.resolved.scenario.agents.iter().map(|a| a.id).collect()
     }
 
-    /// Links of every robot.
+    /// The most joints of a robot of the team: the tick table has a column per joint of it (a
+    /// smaller arm's other columns are NaN).
     #[getter]
     fn links(&self) -> usize {
-        self.resolved
-            .scenario
-            .agents
-            .first()
-            .map_or(0, |a| a.model.dof())
+        (self.resolved.scenario.joint_counts().last().copied()).unwrap_or(0)
+    }
+
+    /// Each robot's joints, by id.
+    #[getter]
+    fn joint_counts(&self) -> std::collections::BTreeMap<u32, usize> {
+        self.resolved.scenario.agent_dofs()
     }
 
     #[getter]

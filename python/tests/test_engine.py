@@ -42,11 +42,29 @@ def test_a_team_of_urdf_arms_runs_as_on_the_command_line(fdi_launch, tmp_path):
     assert r.ticks is not None and len(r.ticks["q7_rad"]) == 4 * 500
 
 
-def test_a_team_of_different_joint_counts_is_refused_naming_the_agents():
+def test_a_team_of_different_joint_counts_runs_as_on_the_command_line(fdi_launch, tmp_path):
     scenario = pathlib.Path(__file__).parents[2] / "scenarios" / "mixed-team.toml"
-    with pytest.raises(fdi_mas.ScenarioError, match="agents: this team mixes robots") as e:
-        fdi_mas.Scenario.load(str(scenario))
-    assert "fdi-launch run" in str(e.value)
+    summary, run_dir = cli_run(fdi_launch, tmp_path, str(scenario), "--duration-s", "0.5")
+    s = fdi_mas.Scenario.load(str(scenario), duration_s=0.5)
+    assert (s.links, s.joint_counts) == (7, {1: 7, 2: 7, 3: 2, 4: 2})
+    r = fdi_mas.run(s)
+    assert r.digest == summary["trace_digest"]
+    assert r.ticks is not None
+    agent = np.asarray(r.ticks["agent"])
+    # A column per joint of the largest arm; a two-link arm's other joints are NaN.
+    for name in ("q1_rad", "q2_rad"):
+        assert np.isfinite(np.asarray(r.ticks[name])).all(), name
+    q7 = np.asarray(r.ticks["q7_rad"])
+    assert np.isfinite(q7[agent <= 2]).all() and np.isnan(q7[agent >= 3]).all()
+    # The command line's run read back gives the same table.
+    opened = fdi_mas.open_run(run_dir)
+    assert opened.ticks is not None and list(opened.ticks) == list(r.ticks)
+    np.testing.assert_array_equal(np.asarray(opened.ticks["q7_rad"]), q7)
+    # The environments' spaces have an entry per joint: they take one joint count.
+    from fdi_mas.envs import AttackerEnv
+
+    with pytest.raises(ValueError, match="this team mixes them: `fdi_mas.run`"):
+        AttackerEnv(s)
 
 
 def test_open_run_reads_a_command_line_run_as_run_gives_it(fdi_launch, tmp_path):
