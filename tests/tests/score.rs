@@ -87,6 +87,16 @@ fn an_unknown_detector_or_a_file_that_is_no_row_is_named_before_anything_runs() 
         "{said}"
     );
     assert!(!folder.exists(), "nothing is written for a suite refused");
+    // `--status` and `--aggregate` run nothing: a folder without the suite is named, not made.
+    for what in ["--status", "--aggregate"] {
+        let bad = launch(&["score", what], &folder, WATCHDOG);
+        let said = String::from_utf8_lossy(&bad.stderr);
+        assert!(
+            !bad.status.success() && said.contains("holds no suite"),
+            "{said}"
+        );
+        assert!(!folder.exists(), "{what} made the folder");
+    }
     let not_a_row = dir.0.join("not-a-row.json");
     std::fs::write(&not_a_row, "{\"suite\": 1}").expect("write");
     let bad = launch(

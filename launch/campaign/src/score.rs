@@ -193,6 +193,16 @@ pub(crate) fn write_row(
 ) -> Result<Option<PathBuf>> {
     let missing = results.iter().filter(|r| r.is_none()).count();
     if missing > 0 {
+        // A row of an earlier, whole suite in this folder is not this one's.
+        for stale in ["score.json", "score.md"] {
+            match std::fs::remove_file(out.join(stale)) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    return Err(e)
+                        .with_context(|| format!("removing {}", out.join(stale).display()))
+                }
+                _ => {}
+            }
+        }
         said(&format!(
             "no score row: {missing} of the suite's {} runs have no result",
             results.len()
@@ -231,14 +241,18 @@ fn row(suite: &SuitePlan, results: &[Option<RunSummary>]) -> Result<Row> {
         for seed in SEEDS {
             let reference = result(team.name, "none", seed)?;
             for (robot, m) in &reference.metrics {
-                match m.diverged_at_s {
-                    Some(_) => clean_diverged += 1,
-                    None => clean_rmse.push(m.rmse_rad),
+                let at = || {
+                    format!(
+                        "team `{}`, seed {seed}, robot {robot} without attack",
+                        team.name
+                    )
+                };
+                let (rmse, rate) = attack_free(m, detector).with_context(at)?;
+                match rmse {
+                    Some(r) => clean_rmse.push(r),
+                    None => clean_diverged += 1,
                 }
-                let d = detector_of(m, detector).ok_or_else(|| {
-                    anyhow!("team `{}`: the attack-free run has no detector `{detector}` on robot {robot}", team.name)
-                })?;
-                alarms.extend(d.false_alarms_per_min);
+                alarms.push(rate);
             }
             for class in CLASSES.iter().filter(|c| c.name != "none") {
                 let attacked = result(team.name, class.name, seed)?;
@@ -263,16 +277,53 @@ fn row(suite: &SuitePlan, results: &[Option<RunSummary>]) -> Result<Row> {
         cells.extend(team_cells);
         all_alarms.extend(alarms);
     }
+    let score = overall(&cells, mean(&all_alarms));
+    all_finite(&score, &by_team)?;
     Ok(Row {
         suite: SUITE.into(),
         controller: suite.file.controller.as_str().into(),
         detector: detector.into(),
         teams: suite.teams.iter().map(|t| t.name.to_string()).collect(),
         seeds: SEEDS.to_vec(),
-        score: overall(&cells, mean(&all_alarms)),
+        score,
         cells,
         by_team,
     })
+}
+
+/// What a robot's attack-free run gives the row: its RMSE (`None`: it diverged) and its
+/// detector's false alarms per minute (a detector that watched no attack-free time has no rate:
+/// an error, not 0).
+fn attack_free(m: &AgentMetrics, detector: &str) -> Result<(Option<f64>, f64)> {
+    let rmse = match m.diverged_at_s {
+        Some(_) => None,
+        None if m.rmse_rad.is_finite() => Some(m.rmse_rad),
+        None => bail!("an RMSE of {} rad, and it did not diverge", m.rmse_rad),
+    };
+    let d =
+        detector_of(m, detector).ok_or_else(|| anyhow!("the run has no detector `{detector}`"))?;
+    let rate = (d.false_alarms_per_min)
+        .ok_or_else(|| anyhow!("the detector `{detector}` watched no attack-free time"))?;
+    Ok((rmse, rate))
+}
+
+/// Refuses a row whose overall figures (or a team's) are not numbers: a cell's are then no
+/// results, and a row of them would read as one.
+fn all_finite(score: &Score, by_team: &[TeamScore]) -> Result<()> {
+    for (what, s) in
+        std::iter::once(("all", score)).chain(by_team.iter().map(|t| (t.team.as_str(), &t.score)))
+    {
+        for (field, v) in [
+            ("tracking", s.tracking),
+            ("false_alarms_per_min", s.false_alarms_per_min),
+            ("overall", s.overall),
+        ] {
+            if !v.is_finite() {
+                bail!("the row's {field} of {what} is {v}: a cell's numbers are not results");
+            }
+        }
+    }
+    Ok(())
 }
 
 fn mean(xs: &[f64]) -> f64 {
@@ -313,12 +364,12 @@ fn cell(
             ratio += DIVERGED_RATIO;
             diverged += 1;
         } else {
-            let (a, b) = (m.rmse_rad, clean.rmse_rad);
-            if !(a.is_finite() && b.is_finite() && b > 0.0) {
-                bail!("{}: robot {robot} has an RMSE of {a} rad under the attack and {b} rad without it, and diverged in neither", at());
+            let (a, b, e) = (m.rmse_rad, clean.rmse_rad, m.max_abs_error_rad);
+            if !(a.is_finite() && a > 0.0 && b.is_finite() && b > 0.0 && e.is_finite()) {
+                bail!("{}: robot {robot} has an RMSE of {a} rad (worst error {e} rad) under the attack and {b} rad without it, and diverged in neither", at());
             }
             ratio += a / b;
-            worst = worst.max(m.max_abs_error_rad);
+            worst = worst.max(e);
         }
         let d = detector_of(m, detector_name)
             .ok_or_else(|| anyhow!("{}: the run has no detector `{detector_name}`", at()))?;
@@ -546,6 +597,34 @@ mod tests {
             .jobs
             .iter()
             .all(|j| j.resolved.scenario.controller.mode == ControllerMode::Traditional));
+    }
+
+    #[test]
+    fn a_row_is_not_left_from_an_earlier_suite_when_runs_are_missing_and_teams_keep_their_order() {
+        let file = SuiteFile::new(
+            ControllerMode::Pd,
+            DEFAULT_DETECTOR,
+            Some(&["panda".to_string(), "paper".to_string()]),
+        );
+        assert_eq!(file.teams, ["paper", "panda"], "the suite's order");
+        let at = |f: &str| f.to_string();
+        let plan = plan("s", &file, Engine::Inproc, &at).expect("plan");
+        let suite = plan.suite.as_ref().expect("a suite");
+        let dir = tempfile::tempdir().expect("a folder");
+        for stale in ["score.json", "score.md"] {
+            std::fs::write(dir.path().join(stale), "an earlier row").expect("writing");
+        }
+        let mut said = Vec::new();
+        let results: Vec<Option<RunSummary>> = vec![None; plan.jobs.len()];
+        let row = write_row(suite, &results, dir.path(), &mut |l| {
+            said.push(l.to_string())
+        });
+        assert!(matches!(row, Ok(None)), "{row:?}");
+        assert!(
+            said[0].starts_with("no score row: 96 of the suite's 96 runs"),
+            "{said:?}"
+        );
+        assert!(!dir.path().join("score.json").exists() && !dir.path().join("score.md").exists());
     }
 
     #[test]

@@ -39,7 +39,7 @@ pub(super) fn load_stored(out: &Path, key: &str) -> Option<RunSummary> {
 }
 
 /// Writes `bytes` to `path` whole or not at all (a temporary file in the same folder, renamed).
-pub(super) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     let dir = path.parent().unwrap_or(Path::new("."));
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     let mut tmp = tempfile::NamedTempFile::new_in(dir)

@@ -115,7 +115,15 @@ impl SuiteFile {
             version: SUITE.into(),
             controller,
             detector: detector.into(),
-            teams: teams.map_or_else(all_teams, <[String]>::to_vec),
+            // In the suite's order, whatever the order given: the same teams, the same file.
+            teams: teams.map_or_else(all_teams, |given| {
+                let mut t = given.to_vec();
+                // A name that is no team last (the check names it).
+                t.sort_by_key(|name| {
+                    (TEAMS.iter().position(|u| u.name == name.as_str())).unwrap_or(usize::MAX)
+                });
+                t
+            }),
         }
     }
 

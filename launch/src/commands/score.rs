@@ -40,14 +40,14 @@ pub struct ScoreArgs {
     pub jobs: Option<NonZeroUsize>,
     /// Run only shard K of N of the suite (`K/N`, or `auto` under Slurm or Kubernetes), as
     /// `fdi-launch sweep --shard` does; `--aggregate` then makes the row.
-    #[arg(long, value_name = "K/N|auto", requires = "out", conflicts_with_all = ["aggregate", "status", "compare"])]
+    #[arg(long, value_name = "K/N|auto", requires = "out", conflicts_with_all = ["aggregate", "status", "compare", "json"])]
     pub shard: Option<ShardArg>,
     /// Run nothing: the row from the results the shards stored in `--out` (the runs missing
     /// are named with the shard that owns each).
     #[arg(long, conflicts_with = "status")]
     pub aggregate: bool,
     /// Run nothing: per shard, its runs done of its total and the time left.
-    #[arg(long, conflicts_with = "compare")]
+    #[arg(long, conflicts_with_all = ["compare", "json"])]
     pub status: bool,
     /// Print the suite as a campaign file and run nothing (for `fdi-launch sweep` and the
     /// cluster scripts of examples/cluster/).
@@ -82,7 +82,7 @@ pub fn score(args: &ScoreArgs, stop: &Stop) -> Result<ExitCode> {
             args.controller.as_str()
         ))
     });
-    let campaign = place_campaign(&out, &text)?;
+    let campaign = place_campaign(&out, &text, args.aggregate || args.status)?;
     let options = SweepOptions {
         campaign,
         jobs: args.jobs,
@@ -115,24 +115,35 @@ pub fn score(args: &ScoreArgs, stop: &Stop) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// The suite's campaign file in its folder `out` (written, or found there as the same text):
-/// a folder of another campaign is refused, naming it.
-fn place_campaign(out: &Path, text: &str) -> Result<PathBuf> {
+/// The suite's campaign file in its folder `out` (written, or found there as the same text); a
+/// folder of another campaign is refused, naming it, and so is a folder without the file when
+/// it must be there (`existing`: `--aggregate`, `--status`, which run nothing). Written
+/// atomically: the shards of an array job start at once, and one must not read another's half
+/// file.
+fn place_campaign(out: &Path, text: &str, existing: bool) -> Result<PathBuf> {
     let file = out.join("campaign.toml");
-    match std::fs::read_to_string(&file) {
-        Ok(there) if there == text => return Ok(file),
-        Ok(_) => bail!(
+    let read = || match std::fs::read_to_string(&file) {
+        Ok(there) => Ok(Some(there)),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(e).with_context(|| format!("reading {}", file.display())),
+    };
+    match read()? {
+        Some(there) if there == text => return Ok(file),
+        Some(_) => bail!(
             "{} holds another campaign than this suite's (another controller, detector or teams, or another launcher's suite): score into another --out, or run it with `fdi-launch sweep {}`",
             file.display(),
             file.display()
         ),
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => return Err(e).with_context(|| format!("reading {}", file.display())),
+        None if existing => bail!(
+            "{} holds no suite (no campaign.toml): run the suite or its shards into it first",
+            out.display()
+        ),
+        None => {}
     }
     if out.exists() && !out.is_dir() {
         bail!("--out {} is not a folder", out.display());
     }
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    std::fs::write(&file, text).with_context(|| format!("writing {}", file.display()))?;
+    fdi_campaign::store::write_atomic(&file, text.as_bytes())?;
     Ok(file)
 }
