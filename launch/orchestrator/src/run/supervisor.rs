@@ -222,12 +222,23 @@ impl<M> Supervisor<M> {
             .stderr(writer)
             .process_group(0);
         crate::run::program::ends_with_the_launcher(&mut cmd);
-        let child = crate::run::program::spawn_noted(&mut cmd).with_context(|| {
-            format!(
-                "spawning {label} ({:?}: is the program installed and on PATH?)",
-                cmd.get_program()
-            )
-        })?;
+        let child = match crate::run::program::spawn_noted(&mut cmd) {
+            Ok(child) => child,
+            // The check before exec: the launcher was dying as it started the program.
+            Err(e) if e.raw_os_error() == Some(rustix::io::Errno::SRCH.raw_os_error()) => {
+                return Err(e).with_context(|| {
+                    format!("spawning {label}: the launcher is ending (its parent is gone)")
+                })
+            }
+            Err(e) => {
+                return Err(e).with_context(|| {
+                    format!(
+                        "spawning {label} ({:?}: is the program installed and on PATH?)",
+                        cmd.get_program()
+                    )
+                })
+            }
+        };
         let program = Program::new(child.id(), &cmd);
         // Our copies of the write end went into the command: dropped with it, so the relay
         // sees the end of the stream when the child (and whatever it started) exits.
