@@ -6,6 +6,7 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 
 from fdi_mas import _core
@@ -207,3 +208,40 @@ def add_summary(episode: Any, info: dict[str, Any]) -> None:
     if summary is not None:
         info["summary"] = json.loads(summary)
         info["digest"] = info["summary"]["trace_digest"]
+
+
+class DrawnEpisodeEnv(gym.Env):
+    """An environment whose episode draws its attack from ``self.attacks`` (and, with
+    ``self.vary_seed``, its seed) at each reset: the detector's and the defender's. Subclasses
+    set ``self._episode``, ``self.attacks``, ``self._scenarios``, ``self.vary_seed`` and
+    ``self.observation_space``, and call ``self._check_step()`` first in ``step``."""
+
+    attack: str | None = None
+    _ended: bool = True
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Draws the episode's attack (``options={"attack": name}`` chooses it) and, with
+        ``vary_seed``, its seed, and goes back to the start."""
+        super().reset(seed=seed)
+        check_open(self._episode)
+        attack, scenario = draw_episode(
+            self.np_random, self.attacks, self._scenarios, self.vary_seed, (options or {}).get("attack")
+        )
+        self._episode.reset(scenario)
+        self.attack = attack
+        self._ended = False
+        obs = np.zeros(self.observation_space.shape, dtype=np.float64)
+        return obs, {"t_s": 0.0, "attack": attack, "seed": scenario.seed}
+
+    def _check_step(self) -> None:
+        """An episode that is open and has not ended, or an error saying why."""
+        check_open(self._episode)
+        if self._ended:
+            raise gym.error.ResetNeeded("the episode ended (or never began): call reset()")
+
+    def close(self) -> None:
+        self._episode.close()
+        self._ended = True
+        super().close()

@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
@@ -20,7 +19,7 @@ DEFAULT_ATTACKS = ("none", "paper", "actuator-bias", "scale", "stealthy-bias")
 DEFAULT_CORRECTION_BUDGET = 1.0
 
 
-class DefenderEnv(gym.Env):
+class DefenderEnv(_common.DrawnEpisodeEnv):
     """A defence at the control center, as a Gymnasium environment: the policy corrects the
     torque the scenario's controller commands, robot by robot and joint by joint.
 
@@ -97,29 +96,10 @@ class DefenderEnv(gym.Env):
         )
         self.action_space = spaces.Box(-1.0, 1.0, shape=(len(agents), links), dtype=np.float64)
         assert size == len(agents) * links
-        self.attack: str | None = None
-        self._ended = True
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Draws the episode's attack (``options={"attack": name}`` chooses it) and, with
-        ``vary_seed``, its seed, and goes back to the start."""
-        super().reset(seed=seed)
-        _common.check_open(self._episode)
-        attack, scenario = _common.draw_episode(
-            self.np_random, self.attacks, self._scenarios, self.vary_seed, (options or {}).get("attack")
-        )
-        self._episode.reset(scenario)
-        self.attack = attack
-        self._ended = False
-        obs = np.zeros(self.observation_space.shape, dtype=np.float64)
-        return obs, {"t_s": 0.0, "attack": attack, "seed": scenario.seed}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        _common.check_open(self._episode)
-        if self._ended:
-            raise gym.error.ResetNeeded("the episode ended (or never began): call reset()")
+        self._check_step()
         a = np.asarray(action, dtype=np.float64)
         out = self._episode.step(_common.checked_action(a, self.action_space.shape))
         ticks, damage, _, attacked, terminated, truncated = out[:6]
@@ -138,8 +118,3 @@ class DefenderEnv(gym.Env):
             self._ended = True
             _common.add_summary(self._episode, info)
         return obs, float(reward), bool(terminated), bool(truncated), info
-
-    def close(self) -> None:
-        self._episode.close()
-        self._ended = True
-        super().close()

@@ -5,7 +5,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
@@ -48,7 +47,7 @@ def detection_reward(
     return float(r.sum() / (ticks * on.size))
 
 
-class DetectorEnv(gym.Env):
+class DetectorEnv(_common.DrawnEpisodeEnv):
     """A detector at the control center, as a Gymnasium environment.
 
     **Observation** (``Box``, float64): what the control center has after the last tick:
@@ -108,29 +107,10 @@ class DetectorEnv(gym.Env):
             -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
         )
         self.action_space = spaces.MultiBinary(len(agents))
-        self.attack: str | None = None
-        self._ended = True
 
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray, dict[str, Any]]:
-        """Draws the episode's attack (``options={"attack": name}`` chooses it) and, with
-        ``vary_seed``, its seed, and goes back to the start."""
-        super().reset(seed=seed)
-        _common.check_open(self._episode)
-        attack, scenario = _common.draw_episode(
-            self.np_random, self.attacks, self._scenarios, self.vary_seed, (options or {}).get("attack")
-        )
-        self._episode.reset(scenario)
-        self.attack = attack
-        self._ended = False
-        obs = np.zeros(self.observation_space.shape, dtype=np.float64)
-        return obs, {"t_s": 0.0, "attack": attack, "seed": scenario.seed}
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
-        _common.check_open(self._episode)
-        if self._ended:
-            raise gym.error.ResetNeeded("the episode ended (or never began): call reset()")
+        self._check_step()
         alarm = np.asarray(action)
         if alarm.shape != (len(self.agents),):
             raise ValueError(f"action: expected shape ({len(self.agents)},), got {alarm.shape}")
@@ -145,8 +125,3 @@ class DetectorEnv(gym.Env):
             self._ended = True
             _common.add_summary(self._episode, info)
         return obs, reward, bool(terminated), bool(truncated), info
-
-    def close(self) -> None:
-        self._episode.close()
-        self._ended = True
-        super().close()
