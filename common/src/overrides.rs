@@ -150,13 +150,25 @@ impl SetArgs {
             });
         }
         let mut doc = r.to_document()?;
-        let problems: Vec<Problem> = self
-            .set
-            .iter()
-            .filter_map(|e| {
-                e.path.set(&mut doc, &e.value).err().map(|why| Problem {
+        // Every path first (an edit of `[defaults]` reaches the agents that inherit it, as
+        // they were before any edit), then the edits.
+        let mut targets: Vec<(&Edit, Result<FieldPath, String>)> = Vec::new();
+        for e in &self.set {
+            match inheritors(&doc, &e.path, &self.set) {
+                Ok(paths) => targets.extend(paths.into_iter().map(|p| (e, p))),
+                Err(message) => targets.push((e, Err(message))),
+            }
+        }
+        let problems: Vec<Problem> = targets
+            .into_iter()
+            .filter_map(|(e, p)| {
+                let message = match p {
+                    Ok(p) => p.set(&mut doc, &e.value).err()?.to_string(),
+                    Err(message) => message,
+                };
+                Some(Problem {
                     path: format!("--set {e}"),
-                    message: why.to_string(),
+                    message,
                 })
             })
             .collect();
@@ -213,6 +225,55 @@ impl SetArgs {
     pub fn name_parts(&self) -> Vec<String> {
         self.set.iter().map(ToString::to_string).collect()
     }
+}
+
+/// The paths an edit at `path` makes in `doc`, the scenario as resolved: `path` itself, and for
+/// an edit of `defaults.KEY…` the same edit in every agent whose `KEY` is `[defaults]`' (the
+/// agents that inherit it: a resolved scenario holds a copy in each, which the run reads), but
+/// not in an agent that an edit of `edits` gives its own (`agents[2].KEY…`), whatever the
+/// edits' order. An edit of `[defaults]` that no agent inherits would change nothing: refused.
+fn inheritors(
+    doc: &toml::Table,
+    path: &FieldPath,
+    edits: &[Edit],
+) -> Result<Vec<Result<FieldPath, String>>, String> {
+    let (Some(Seg::Key(root)), Some(Seg::Key(key))) = (path.segs.first(), path.segs.get(1)) else {
+        return Ok(vec![Ok(path.clone())]);
+    };
+    if root != "defaults" {
+        return Ok(vec![Ok(path.clone())]);
+    }
+    let inherited = doc.get("defaults").and_then(|d| d.get(key.as_str()));
+    let agents = doc.get("agents").and_then(toml::Value::as_array);
+    let (Some(inherited), Some(agents)) = (inherited, agents) else {
+        return Ok(vec![Ok(path.clone())]);
+    };
+    let heirs: Vec<usize> = agents
+        .iter()
+        .enumerate()
+        .filter(|(_, a)| a.get(key.as_str()) == Some(inherited))
+        .map(|(i, _)| i)
+        .filter(|i| {
+            let own = [
+                Seg::Key("agents".into()),
+                Seg::Index(*i),
+                Seg::Key(key.clone()),
+            ];
+            !edits.iter().any(|e| e.path.segs.starts_with(&own))
+        })
+        .collect();
+    if heirs.is_empty() {
+        return Err(format!(
+            "no agent inherits `defaults.{key}` (each sets its own `{key}`): the edit would change nothing; set `agents[i].{key}…`"
+        ));
+    }
+    let mut out = vec![Ok(path.clone())];
+    for i in heirs {
+        let mut segs = vec![Seg::Key("agents".into()), Seg::Index(i)];
+        segs.extend(path.segs[1..].iter().cloned());
+        out.push(FieldPath::parse(&crate::field_path::segs_text(&segs)).map_err(|e| e.to_string()));
+    }
+    Ok(out)
 }
 
 /// What the command line changes in a scenario: one struct for `run`, `detect`, the API and

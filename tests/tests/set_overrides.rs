@@ -200,3 +200,95 @@ fn a_set_that_does_not_fit_is_refused_naming_its_path_and_value() {
         "a refused run left a run directory"
     );
 }
+
+/// A resolved scenario holds a copy of `[defaults]` in every agent that inherits it, and the
+/// run reads the agents': an edit of `defaults.…` reaches the agents that inherit the value
+/// (not one given its own by another edit, in either order) as the same edit in the file
+/// does, and an edit of `[defaults]` that no agent inherits is refused instead of changing
+/// nothing.
+#[test]
+fn a_set_of_defaults_reaches_the_agents_that_inherit_them() {
+    let tmp = Scratch::new("set-defaults");
+    let robots = tmp.0.join("robots");
+    std::fs::create_dir_all(&robots).expect("robots folder");
+    std::fs::copy(
+        fdi_tests::repo_path("scenarios/robots/panda.urdf"),
+        robots.join("panda.urdf"),
+    )
+    .expect("copy the Panda's URDF");
+    let mixed = std::fs::read_to_string(fdi_tests::repo_path("scenarios/mixed-team.toml"))
+        .expect("read the mixed team");
+    let plain_file = tmp.0.join("mixed.toml");
+    std::fs::write(&plain_file, &mixed).expect("write the mixed team");
+    let plain_file = plain_file.to_str().expect("UTF-8 path");
+    // In the file: the defaults' delay at 4 ms, robot 2 with its own at 5 ms.
+    let edited = replace_nth(&mixed, "offset_s = 0.003", "offset_s = 0.004", 0).replace(
+        "id = 2\n",
+        "id = 2\ndelay = { kind = \"sine\", amplitude_s = 0.002, offset_s = 0.005, rate_rad_s = 0.5 }\n",
+    );
+    assert_ne!(edited, mixed);
+    let file = tmp.0.join("edited.toml");
+    std::fs::write(&file, edited).expect("write the edited scenario");
+    let from_file = json(&run(
+        &[file.to_str().expect("UTF-8 path")],
+        &tmp.0.join("file"),
+    ));
+    let defaults = "defaults.delay.offset_s=0.004";
+    let own = "agents[1].delay.offset_s=0.005";
+    for (order, edits) in [
+        ("defaults first", [defaults, own]),
+        ("the agent first", [own, defaults]),
+    ] {
+        let set = json(&run(
+            &[plain_file, "--set", edits[0], "--set", edits[1]],
+            &tmp.0.join(order.replace(' ', "-")),
+        ));
+        assert_eq!(
+            set["trace_digest"], from_file["trace_digest"],
+            "{order}: --set of [defaults] and the same edit in the file run differently"
+        );
+    }
+    let plain = json(&run(&[plain_file], &tmp.0.join("plain")));
+    assert_ne!(plain["trace_digest"], from_file["trace_digest"]);
+
+    // Every agent with a delay of its own: an edit of the defaults' would change nothing.
+    let own_delays = mixed
+        .replace(
+            "delay = { kind = \"sine\", amplitude_s = 0.002, offset_s = 0.003",
+            "delay = { kind = \"sine\", amplitude_s = 0.002, offset_s = 0.009",
+        )
+        .replace(
+            "id = 1\n",
+            "id = 1\ndelay = { kind = \"constant\", value_s = 0.003 }\n",
+        )
+        .replace(
+            "id = 2\n",
+            "id = 2\ndelay = { kind = \"constant\", value_s = 0.003 }\n",
+        )
+        .replace(
+            "id = 3\n",
+            "id = 3\ndelay = { kind = \"constant\", value_s = 0.003 }\n",
+        )
+        .replace(
+            "id = 4\n",
+            "id = 4\ndelay = { kind = \"constant\", value_s = 0.003 }\n",
+        );
+    let file = tmp.0.join("own-delays.toml");
+    std::fs::write(&file, own_delays).expect("write the scenario");
+    let out = tmp.0.join("refused");
+    let refused = run(
+        &[
+            file.to_str().expect("UTF-8 path"),
+            "--set",
+            "defaults.delay.offset_s=0.004",
+        ],
+        &out,
+    );
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "an edit of nothing was run");
+    assert!(
+        err.contains("--set defaults.delay.offset_s=0.004: no agent inherits `defaults.delay`"),
+        "{err}"
+    );
+    assert!(!out.exists(), "a refused run left a run directory");
+}
