@@ -13,6 +13,7 @@
 //! non-finite or negative number (docs/model.md, "Your own arm").
 
 mod chain;
+mod cholesky;
 mod config;
 mod dynamics;
 mod load;

@@ -17,6 +17,9 @@ pub(crate) struct Rigid<const N: usize> {
     placement: [Frame; N],
     axis: [Vector3<f64>; N],
     motion: [Motion; N],
+    /// Each joint's axis when it is one of its frame's own (most URDFs' joints turn about `z`):
+    /// its rotation is then a few products, not a general one.
+    along: [Along; N],
     /// The body riding on each joint: its mass, its centre of mass and its inertia about it,
     /// in the frame of the joint's child.
     mass: [f64; N],
@@ -25,11 +28,53 @@ pub(crate) struct Rigid<const N: usize> {
     gravity: Vector3<f64>,
 }
 
+/// Which of its frame's own axes a joint's axis is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Along {
+    X,
+    Y,
+    Z,
+    /// Another direction.
+    Other,
+}
+
+impl Along {
+    fn of(axis: &Vector3<f64>) -> Self {
+        match (axis.x, axis.y, axis.z) {
+            (1.0, 0.0, 0.0) => Self::X,
+            (0.0, 1.0, 0.0) => Self::Y,
+            (0.0, 0.0, 1.0) => Self::Z,
+            _ => Self::Other,
+        }
+    }
+}
+
+/// `r` turned by `q` about its own axis `axis` (`along` it): `r R(axis, q)`.
+fn turned(r: &Matrix3<f64>, along: Along, axis: &Vector3<f64>, q: f64) -> Matrix3<f64> {
+    // With R about a frame axis, two of r's columns mix and the third stays.
+    let mix = |a: usize, b: usize| {
+        let (s, c) = q.sin_cos();
+        let (ra, rb) = (r.column(a).into_owned(), r.column(b).into_owned());
+        let mut out = *r;
+        out.set_column(a, &(ra * c + rb * s));
+        out.set_column(b, &(rb * c - ra * s));
+        out
+    };
+    match along {
+        Along::X => mix(1, 2),
+        Along::Y => mix(2, 0),
+        Along::Z => mix(0, 1),
+        Along::Other => r * Frame::motion(Motion::Revolute, axis, q).r,
+    }
+}
+
 /// Where the joints and bodies are at one `q`, in the root link's frame.
 struct Placed<const N: usize> {
-    /// Each joint's origin and unit axis.
+    /// Each joint's origin and unit axis, and their product `axis × origin` (the joint's
+    /// moment arm in [`unit_rate_momentum`] and [`felt`]).
     origin: [Vector3<f64>; N],
     axis: [Vector3<f64>; N],
+    arm: [Vector3<f64>; N],
     /// Each joint's child's origin.
     child: [Vector3<f64>; N],
     /// Each body's centre of mass and inertia about it.
@@ -44,6 +89,7 @@ impl<const N: usize> Rigid<N> {
             placement: std::array::from_fn(|j| chain.joints[j].placement),
             axis: std::array::from_fn(|j| chain.joints[j].axis),
             motion: std::array::from_fn(|j| chain.joints[j].motion),
+            along: std::array::from_fn(|j| Along::of(&chain.joints[j].axis)),
             mass: [0.0; N],
             com: [Vector3::zeros(); N],
             inertia: [Matrix3::zeros(); N],
@@ -73,6 +119,7 @@ impl<const N: usize> Rigid<N> {
         let mut p = Placed {
             origin: [Vector3::zeros(); N],
             axis: [Vector3::zeros(); N],
+            arm: [Vector3::zeros(); N],
             child: [Vector3::zeros(); N],
             com: [Vector3::zeros(); N],
             inertia: [Matrix3::zeros(); N],
@@ -80,9 +127,25 @@ impl<const N: usize> Rigid<N> {
         let mut at = Frame::IDENTITY;
         for j in 0..N {
             let frame = at.then(&self.placement[j]);
+            let axis = match self.along[j] {
+                Along::X => frame.r.column(0).into_owned(),
+                Along::Y => frame.r.column(1).into_owned(),
+                Along::Z => frame.r.column(2).into_owned(),
+                Along::Other => frame.r * self.axis[j],
+            };
             p.origin[j] = frame.p;
-            p.axis[j] = frame.r * self.axis[j];
-            at = frame.then(&Frame::motion(self.motion[j], &self.axis[j], q[j]));
+            p.axis[j] = axis;
+            p.arm[j] = axis.cross(&frame.p);
+            at = match self.motion[j] {
+                Motion::Revolute => Frame {
+                    r: turned(&frame.r, self.along[j], &self.axis[j], q[j]),
+                    p: frame.p,
+                },
+                Motion::Prismatic => Frame {
+                    r: frame.r,
+                    p: frame.p + axis * q[j],
+                },
+            };
             p.child[j] = at.p;
             p.com[j] = at.r * self.com[j] + at.p;
             p.inertia[j] = at.r * self.inertia[j] * at.r.transpose();
@@ -105,10 +168,16 @@ impl<const N: usize> Rigid<N> {
             first += mb * c;
             second +=
                 p.inertia[j] + mb * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
-            let joint = (self.motion[j], p.axis[j], p.origin[j]);
-            let momentum = unit_rate_momentum(joint, (mass, &first, &second));
+            let (z, arm) = (p.axis[j], p.arm[j]);
+            let (linear, angular) = match self.motion[j] {
+                Motion::Revolute => (z.cross(&first) - mass * arm, second * z - first.cross(&arm)),
+                Motion::Prismatic => (mass * z, first.cross(&z)),
+            };
             for i in 0..=j {
-                m[(i, j)] = felt((self.motion[i], p.axis[i], p.origin[i]), momentum);
+                m[(i, j)] = match self.motion[i] {
+                    Motion::Revolute => p.axis[i].dot(&angular) - p.arm[i].dot(&linear),
+                    Motion::Prismatic => p.axis[i].dot(&linear),
+                };
                 m[(j, i)] = m[(i, j)];
             }
         }
