@@ -237,12 +237,16 @@ fn inheritors(
     path: &FieldPath,
     edits: &[Edit],
 ) -> Result<Vec<Result<FieldPath, String>>, String> {
-    let (Some(Seg::Key(root)), Some(Seg::Key(key))) = (path.segs.first(), path.segs.get(1)) else {
-        return Ok(vec![Ok(path.clone())]);
-    };
-    if root != "defaults" {
+    if !matches!(path.segs.first(), Some(Seg::Key(root)) if root == "defaults") {
         return Ok(vec![Ok(path.clone())]);
     }
+    let Some(Seg::Key(key)) = path.segs.get(1) else {
+        // Which agents would inherit a table written whole is not the file's to say.
+        return Err(
+            "edits `[defaults]` whole: set one of its keys (`defaults.model…`, `defaults.delay…`)"
+                .into(),
+        );
+    };
     let inherited = doc.get("defaults").and_then(|d| d.get(key.as_str()));
     let agents = doc.get("agents").and_then(toml::Value::as_array);
     let (Some(inherited), Some(agents)) = (inherited, agents) else {

@@ -291,4 +291,22 @@ fn a_set_of_defaults_reaches_the_agents_that_inherit_them() {
         "{err}"
     );
     assert!(!out.exists(), "a refused run left a run directory");
+    let whole = run(
+        &[
+            plain_file,
+            "--set",
+            "defaults={ delay = { kind = \"constant\", value_s = 0.004 } }",
+        ],
+        &out,
+    );
+    let err = String::from_utf8_lossy(&whole.stderr);
+    assert!(
+        !whole.status.success(),
+        "an edit of [defaults] whole was run"
+    );
+    assert!(
+        err.contains("edits `[defaults]` whole: set one of its keys"),
+        "{err}"
+    );
+    assert!(!out.exists(), "a refused run left a run directory");
 }
