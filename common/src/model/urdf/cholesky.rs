@@ -11,6 +11,9 @@ pub(super) struct Cholesky<const N: usize> {
     inv_diag: [f64; N],
 }
 
+// The factorization's textbook indices (row `i`, column `j`, the sum over `k`) read clearer
+// than iterators over rows that two of them index at once.
+#[allow(clippy::needless_range_loop)]
 impl<const N: usize> Cholesky<N> {
     /// Factors the symmetric `m` (its lower triangle is read).
     pub(super) fn new(m: &Matrix<N>) -> Option<Self> {
@@ -21,7 +24,7 @@ impl<const N: usize> Cholesky<N> {
             for k in 0..j {
                 d -= l[j][k] * l[j][k];
             }
-            if !(d > 0.0) {
+            if d.is_nan() || d <= 0.0 {
                 return None;
             }
             let d = d.sqrt();
