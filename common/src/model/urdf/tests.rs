@@ -395,6 +395,14 @@ proptest! {
     fn the_rigid_form_is_the_chain_s_reference((q, qd) in state(5)) {
         let c = spatial();
         prop_assert_eq!(rigid_differs::<5>(&c, &q, &qd), None);
+        // The rigid form turns a joint about its frame's own x, y or z by mixing two columns,
+        // any other axis by a general rotation: the arm has z, y and (1, 1, 0); with j3 about
+        // x, every kind.
+        let mut s = spec();
+        s.lock.insert("finger_joint".into(), 0.02);
+        let about_x = chain(&SPATIAL.replace(r#"<axis xyz="1 1 0"/>"#, r#"<axis xyz="1 0 0"/>"#), &s);
+        prop_assert_ne!(&about_x, &c);
+        prop_assert_eq!(rigid_differs::<5>(&about_x, &q, &qd), None);
         let paper = chain(PAPER, &spec());
         prop_assert_eq!(rigid_differs::<2>(&paper, &q[..2], &qd[..2]), None);
     }
