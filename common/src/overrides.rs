@@ -155,7 +155,7 @@ impl SetArgs {
         let mut targets: Vec<(&Edit, Result<FieldPath, String>)> = Vec::new();
         for e in &self.set {
             match inheritors(&doc, &e.path, &self.set) {
-                Ok(paths) => targets.extend(paths.into_iter().map(|p| (e, p))),
+                Ok(paths) => targets.extend(paths.into_iter().map(|p| (e, Ok(p)))),
                 Err(message) => targets.push((e, Err(message))),
             }
         }
@@ -236,9 +236,9 @@ fn inheritors(
     doc: &toml::Table,
     path: &FieldPath,
     edits: &[Edit],
-) -> Result<Vec<Result<FieldPath, String>>, String> {
+) -> Result<Vec<FieldPath>, String> {
     if !matches!(path.segs.first(), Some(Seg::Key(root)) if root == "defaults") {
-        return Ok(vec![Ok(path.clone())]);
+        return Ok(vec![path.clone()]);
     }
     let Some(Seg::Key(key)) = path.segs.get(1) else {
         // Which agents would inherit a table written whole is not the file's to say.
@@ -250,7 +250,7 @@ fn inheritors(
     let inherited = doc.get("defaults").and_then(|d| d.get(key.as_str()));
     let agents = doc.get("agents").and_then(toml::Value::as_array);
     let (Some(inherited), Some(agents)) = (inherited, agents) else {
-        return Ok(vec![Ok(path.clone())]);
+        return Ok(vec![path.clone()]);
     };
     let heirs: Vec<usize> = agents
         .iter()
@@ -271,11 +271,14 @@ fn inheritors(
             "no agent inherits `defaults.{key}` (each sets its own `{key}`): the edit would change nothing; set `agents[i].{key}…`"
         ));
     }
-    let mut out = vec![Ok(path.clone())];
+    let mut out = vec![path.clone()];
     for i in heirs {
         let mut segs = vec![Seg::Key("agents".into()), Seg::Index(i)];
         segs.extend(path.segs[1..].iter().cloned());
-        out.push(FieldPath::parse(&crate::field_path::segs_text(&segs)).map_err(|e| e.to_string()));
+        out.push(FieldPath {
+            text: crate::field_path::segs_text(&segs),
+            segs,
+        });
     }
     Ok(out)
 }

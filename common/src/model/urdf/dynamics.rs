@@ -90,7 +90,10 @@ impl Chain {
                 second += pose.inertia[b]
                     + mb * (p.norm_squared() * Matrix3::identity() - p * p.transpose());
             }
-            let joint = |k: usize| (self.joints[k].motion, pose.axis[k], pose.origin[k]);
+            let joint = |k: usize| {
+                let (z, o) = (pose.axis[k], pose.origin[k]);
+                (self.joints[k].motion, z, z.cross(&o))
+            };
             let momentum = unit_rate_momentum(joint(j), (mass, &first, &second));
             for i in 0..=j {
                 m[(i, j)] = felt(joint(i), momentum);

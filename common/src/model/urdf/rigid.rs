@@ -28,43 +28,43 @@ pub(crate) struct Rigid<const N: usize> {
     gravity: Vector3<f64>,
 }
 
-/// Which of its frame's own axes a joint's axis is.
+/// Which of its frame's own axes (0 = x, 1 = y, 2 = z) a joint's axis is, if any.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Along {
-    X,
-    Y,
-    Z,
+    Own(usize),
     /// Another direction.
     Other,
 }
 
 impl Along {
     fn of(axis: &Vector3<f64>) -> Self {
-        match (axis.x, axis.y, axis.z) {
-            (1.0, 0.0, 0.0) => Self::X,
-            (0.0, 1.0, 0.0) => Self::Y,
-            (0.0, 0.0, 1.0) => Self::Z,
-            _ => Self::Other,
+        match (0..3).find(|&i| *axis == Vector3::ith(i, 1.0)) {
+            Some(i) => Self::Own(i),
+            None => Self::Other,
         }
     }
-}
 
-/// `r` turned by `q` about its own axis `axis` (`along` it): `r R(axis, q)`.
-fn turned(r: &Matrix3<f64>, along: Along, axis: &Vector3<f64>, q: f64) -> Matrix3<f64> {
-    // With R about a frame axis, two of r's columns mix and the third stays.
-    let mix = |a: usize, b: usize| {
+    /// The joint's axis in the frame `r` is turned from: `r axis`.
+    fn axis_of(self, r: &Matrix3<f64>, axis: &Vector3<f64>) -> Vector3<f64> {
+        match self {
+            Self::Own(i) => r.column(i).into_owned(),
+            Self::Other => r * axis,
+        }
+    }
+
+    /// `r` turned by `q` about the joint's axis: `r R(axis, q)`. About its frame's own axis
+    /// `i`, the two other columns of `r` mix and column `i` stays.
+    fn turned(self, r: &Matrix3<f64>, axis: &Vector3<f64>, q: f64) -> Matrix3<f64> {
+        let Self::Own(i) = self else {
+            return r * Frame::motion(Motion::Revolute, axis, q).r;
+        };
+        let (a, b) = ((i + 1) % 3, (i + 2) % 3);
         let (s, c) = q.sin_cos();
         let (ra, rb) = (r.column(a).into_owned(), r.column(b).into_owned());
         let mut out = *r;
         out.set_column(a, &(ra * c + rb * s));
         out.set_column(b, &(rb * c - ra * s));
         out
-    };
-    match along {
-        Along::X => mix(1, 2),
-        Along::Y => mix(2, 0),
-        Along::Z => mix(0, 1),
-        Along::Other => r * Frame::motion(Motion::Revolute, axis, q).r,
     }
 }
 
@@ -127,18 +127,13 @@ impl<const N: usize> Rigid<N> {
         let mut at = Frame::IDENTITY;
         for j in 0..N {
             let frame = at.then(&self.placement[j]);
-            let axis = match self.along[j] {
-                Along::X => frame.r.column(0).into_owned(),
-                Along::Y => frame.r.column(1).into_owned(),
-                Along::Z => frame.r.column(2).into_owned(),
-                Along::Other => frame.r * self.axis[j],
-            };
+            let axis = self.along[j].axis_of(&frame.r, &self.axis[j]);
             p.origin[j] = frame.p;
             p.axis[j] = axis;
             p.arm[j] = axis.cross(&frame.p);
             at = match self.motion[j] {
                 Motion::Revolute => Frame {
-                    r: turned(&frame.r, self.along[j], &self.axis[j], q[j]),
+                    r: self.along[j].turned(&frame.r, &self.axis[j], q[j]),
                     p: frame.p,
                 },
                 Motion::Prismatic => Frame {
@@ -168,16 +163,10 @@ impl<const N: usize> Rigid<N> {
             first += mb * c;
             second +=
                 p.inertia[j] + mb * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
-            let (z, arm) = (p.axis[j], p.arm[j]);
-            let (linear, angular) = match self.motion[j] {
-                Motion::Revolute => (z.cross(&first) - mass * arm, second * z - first.cross(&arm)),
-                Motion::Prismatic => (mass * z, first.cross(&z)),
-            };
+            let joint = |k: usize| (self.motion[k], p.axis[k], p.arm[k]);
+            let momentum = unit_rate_momentum(joint(j), (mass, &first, &second));
             for i in 0..=j {
-                m[(i, j)] = match self.motion[i] {
-                    Motion::Revolute => p.axis[i].dot(&angular) - p.arm[i].dot(&linear),
-                    Motion::Prismatic => p.axis[i].dot(&linear),
-                };
+                m[(i, j)] = felt(joint(i), momentum);
                 m[(j, i)] = m[(i, j)];
             }
         }
@@ -314,30 +303,28 @@ fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
 }
 
 /// The momentum of a composite body (its mass, first moment and inertia about the root's
-/// origin) when one joint (how it moves, its unit axis, its origin) alone moves at a unit rate:
-/// linear, and angular about the root's origin. The column of `M` that joint owns, before
-/// [`felt`] projects it on each joint.
+/// origin) when one joint (how it moves, its unit axis `z`, and `z × o` for its origin `o`)
+/// alone moves at a unit rate: linear, and angular about the root's origin. The column of `M`
+/// that joint owns, before [`felt`] projects it on each joint.
 pub(super) fn unit_rate_momentum(
-    (motion, z, o): (Motion, Vector3<f64>, Vector3<f64>),
+    (motion, z, arm): (Motion, Vector3<f64>, Vector3<f64>),
     (mass, first, second): (f64, &Vector3<f64>, &Matrix3<f64>),
 ) -> (Vector3<f64>, Vector3<f64>) {
     match motion {
-        Motion::Revolute => (
-            z.cross(first) - mass * z.cross(&o),
-            second * z - first.cross(&z.cross(&o)),
-        ),
+        Motion::Revolute => (z.cross(first) - mass * arm, second * z - first.cross(&arm)),
         Motion::Prismatic => (mass * z, first.cross(&z)),
     }
 }
 
-/// What a joint (how it moves, its unit axis, its origin) bears of a momentum (linear, and
-/// angular about the root's origin): an entry of `M`.
+/// What a joint (how it moves, its unit axis `z`, and `z × o` for its origin `o`) bears of a
+/// momentum (linear, and angular about the root's origin): an entry of `M`,
+/// `z · (angular − o × linear)`.
 pub(super) fn felt(
-    (motion, z, o): (Motion, Vector3<f64>, Vector3<f64>),
+    (motion, z, arm): (Motion, Vector3<f64>, Vector3<f64>),
     (linear, angular): (Vector3<f64>, Vector3<f64>),
 ) -> f64 {
     match motion {
-        Motion::Revolute => z.dot(&(angular - o.cross(&linear))),
+        Motion::Revolute => z.dot(&angular) - arm.dot(&linear),
         Motion::Prismatic => z.dot(&linear),
     }
 }
