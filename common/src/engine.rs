@@ -13,7 +13,7 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use crate::attack::{Attacker, Injection, Sent, TorqueInjection};
-use crate::control::{CenterAgent, CenterOutput};
+use crate::control::{Answer, CenterAgent, CenterOutput, ControllerMode, Question};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::Vector;
 use crate::plant::{Measurement, Plant, StepReport};
@@ -385,10 +385,17 @@ pub enum EngineError {
     #[error("the scenario has no agents")]
     NoAgents,
     #[error(
-        "controller `external` asks a program for its torques (`[roles.controller]`, over \
-         IPC): the in-process engine cannot run it; run it with `--engine ipc`"
+        "controller `external` asks a program for its torques (`[roles.controller]`): the \
+         in-process engine cannot run it without that program (`fdi-launch run` starts it, on \
+         either engine)"
     )]
     ExternalController,
+    #[error("controller `{0}` decides the torques itself: no program is asked")]
+    NotExternal(&'static str),
+    /// The program that decides the torques failed, broke the protocol, or the run was stopped
+    /// while it waited.
+    #[error("{0}")]
+    Program(Box<dyn std::error::Error + Send + Sync>),
 }
 
 /// Runs `resolved` to the end on this thread; `sink` sees every joined tick record in digest
@@ -487,6 +494,8 @@ impl Books {
 struct AgentLoop<const N: usize> {
     plant: Plant<N>,
     center: CenterAgent<N>,
+    /// A tick asked of a program and not answered yet ([`Self::ask`]).
+    asked: Option<Measured<N>>,
 }
 
 crate::per_joint_count!(
@@ -500,6 +509,7 @@ impl<const N: usize> AgentLoop<N> {
         Some(Self {
             plant: Plant::<N>::new(s.plant_params(a))?,
             center: CenterAgent::<N>::new(s.center_params(a))?,
+            asked: None,
         })
     }
 
@@ -523,12 +533,45 @@ impl<const N: usize> AgentLoop<N> {
         (k, t): (u64, f64),
         sink: &mut impl FnMut(&TickRecord),
     ) {
-        let Self { plant, center } = self;
+        let open = self.measure(attacker, (k, t));
+        let out = center_tick(&mut self.center, t, open.sent.usable().map(|(m, _)| m));
+        self.close(attacker, (k, t), open, &out, sink);
+    }
+
+    /// The first half of tick `k` at `t`: the state before the step, the measurement, and what
+    /// `attacker` made of it on its way to the control center.
+    fn measure<A: Attacker>(&mut self, attacker: &mut A, (k, t): (u64, f64)) -> Measured<N> {
+        let (q, qd) = (self.plant.q, self.plant.qd);
+        let m = self.plant.measure();
+        let (sent, inj) = attacker.measurement::<N>(self.plant.agent_id(), k, t, &m);
+        Measured {
+            q,
+            qd,
+            m,
+            sent,
+            inj,
+        }
+    }
+
+    /// The second half of tick `k` at `t`, once the control center decided `out`: its torque
+    /// on its way to the robot (through `attacker` when it sits on the torque path), the
+    /// robot's step, and the tick's record to `sink`.
+    fn close<A: Attacker>(
+        &mut self,
+        attacker: &mut A,
+        (k, t): (u64, f64),
+        Measured {
+            q,
+            qd,
+            m,
+            sent,
+            inj,
+        }: Measured<N>,
+        out: &CenterOutput<N>,
+        sink: &mut impl FnMut(&TickRecord),
+    ) {
+        let plant = &mut self.plant;
         let id = plant.agent_id();
-        let (q, qd) = (plant.q, plant.qd);
-        let m = plant.measure();
-        let (sent, inj) = attacker.measurement::<N>(id, k, t, &m);
-        let out = center_tick(center, t, sent.usable().map(|(m, _)| m));
         // A refused or missing command is counted by the plant; the run goes on.
         let actuation = if attacker.on_torque_path(id) {
             let (sent, tinj) = attacker.torque::<N>(id, k, t, &out.u);
@@ -542,11 +585,81 @@ impl<const N: usize> AgentLoop<N> {
         sink(&TickRecord {
             agent: agent_record(k, id, t, (&q, &qd), &m, &step),
             attack: attack_record(k, id, &sent, &inj),
-            center: center_record(k, id, &out),
+            center: center_record(k, id, out),
             actuation,
             monitor: None,
         });
     }
+
+    /// The first half of tick `k` at `t` of a robot whose torques a program decides: measured
+    /// as in [`Self::tick`], the tick opened at the control center and its question asked of
+    /// `program`.
+    fn ask<A: Attacker, P: TorqueProgram>(
+        &mut self,
+        attacker: &mut A,
+        program: &mut P,
+        (k, t): (u64, f64),
+    ) -> Result<(), P::Error> {
+        let open = self.measure(attacker, (k, t));
+        let input = open.sent.usable().map(|(m, _)| (&m.y, &m.yd));
+        let question = self.center.ask(t, input);
+        self.asked = Some(open);
+        program.ask(k, self.plant.agent_id(), &question)
+    }
+
+    /// The second half of the tick [`Self::ask`] asked: `program`'s answer (none usable: the
+    /// last good torque held, as [`CenterAgent::answer`] says), then as [`Self::tick`].
+    fn answer<A: Attacker, P: TorqueProgram>(
+        &mut self,
+        attacker: &mut A,
+        program: &mut P,
+        (k, t): (u64, f64),
+        sink: &mut impl FnMut(&TickRecord),
+    ) -> Result<(), P::Error> {
+        let id = self.plant.agent_id();
+        let answer = program.answer::<N>(k, id)?;
+        let (Some(open), Some(out)) = (self.asked.take(), self.center.answer(answer.as_ref()))
+        else {
+            // [`Asking::tick`] asks every agent before it takes any answer.
+            unreachable!("agent {id}: tick {k} answered without being asked");
+        };
+        self.close(attacker, (k, t), open, &out, sink);
+        Ok(())
+    }
+}
+
+/// What the first half of a robot's tick measured ([`AgentLoop::measure`]).
+#[derive(Debug)]
+struct Measured<const N: usize> {
+    q: Vector<N>,
+    qd: Vector<N>,
+    m: Measurement<N>,
+    sent: Sent<Measurement<N>>,
+    inj: Injection<N>,
+}
+
+/// The program that decides the torques of a run whose controller is `external`
+/// (`[roles.controller]`), as the in-process engine asks it ([`Asking`]): each tick, the
+/// question of every agent (what the control center shows a controller:
+/// [`CenterAgent::ask`]), in the scenario's agent order, then the answer of each, in the same
+/// order. The multi-process control center asks it the same questions over shared memory.
+pub trait TorqueProgram {
+    /// Why the run cannot go on (the program failed, broke the protocol, or was stopped).
+    type Error;
+    /// Asks tick `k` of agent `agent`.
+    fn ask<const N: usize>(
+        &mut self,
+        k: u64,
+        agent: u32,
+        question: &Question<N>,
+    ) -> Result<(), Self::Error>;
+    /// The answer to tick `k` of agent `agent`, asked before: `None` when it is not usable
+    /// (another number of joints, a non-finite entry): the last good torque is then held.
+    fn answer<const N: usize>(
+        &mut self,
+        k: u64,
+        agent: u32,
+    ) -> Result<Option<Answer<N>>, Self::Error>;
 }
 
 /// The in-process engine's ticking alone: every agent's plant, attacker and control center,
@@ -562,18 +675,20 @@ pub struct Ticker {
 }
 
 impl Ticker {
-    /// The run of `resolved` at its start (tick 0 next).
+    /// The run of `resolved` at its start (tick 0 next). A run whose torques a program decides
+    /// is [`Asking`]'s.
     pub fn new(resolved: &Resolved) -> Result<Self, EngineError> {
+        // Its ticks would go unanswered: every torque held at zero, a run of wrong numbers.
+        if resolved.scenario.controller.mode == ControllerMode::External {
+            return Err(EngineError::ExternalController);
+        }
+        Self::build(resolved)
+    }
+
+    fn build(resolved: &Resolved) -> Result<Self, EngineError> {
         let s = &resolved.scenario;
         if s.agents.is_empty() {
             return Err(EngineError::NoAgents);
-        }
-        // Its ticks would go unanswered: every torque held at zero, a run of wrong numbers.
-        if s.agents
-            .iter()
-            .any(|a| s.controller_of(a).mode == crate::control::ControllerMode::External)
-        {
-            return Err(EngineError::ExternalController);
         }
         let mut loops = Vec::with_capacity(s.agents.len());
         for a in &s.agents {
@@ -647,6 +762,62 @@ impl Ticker {
         }
         self.k += 1;
         true
+    }
+}
+
+/// The in-process engine when a program decides the torques (`[controller] mode =
+/// "external"`, `[roles.controller]`): [`Ticker`] whose ticks are asked of a [`TorqueProgram`]
+/// side by side, every agent's question of a tick before any answer, as the multi-process
+/// control center asks them. Its records are those of the same run over IPC.
+#[derive(Debug)]
+pub struct Asking(Ticker);
+
+impl Asking {
+    /// The run of `resolved` at its start (tick 0 next).
+    pub fn new(resolved: &Resolved) -> Result<Self, EngineError> {
+        let mode = resolved.scenario.controller.mode;
+        if mode != ControllerMode::External {
+            return Err(EngineError::NotExternal(mode.as_str()));
+        }
+        Ticker::build(resolved).map(Self)
+    }
+
+    /// The next tick to run.
+    pub fn k(&self) -> u64 {
+        self.0.k
+    }
+
+    /// Seconds since the start.
+    pub fn wall_s(&self) -> f64 {
+        self.0.wall_s()
+    }
+
+    /// Runs the next tick of every agent, its torques decided by `program`, with `attacker`
+    /// ([`run_inproc_any_with`] says how it is asked); `sink` sees each agent's record, in the
+    /// scenario's agent order. False, and nothing run, once every tick has run; the program's
+    /// error stops the run where it came (the records of the tick not yet seen).
+    pub fn tick<A: Attacker, P: TorqueProgram>(
+        &mut self,
+        attacker: &mut A,
+        program: &mut P,
+        mut sink: impl FnMut(&TickRecord),
+    ) -> Result<bool, P::Error> {
+        let ticker = &mut self.0;
+        if ticker.k >= ticker.ticks {
+            return Ok(false);
+        }
+        let k = ticker.k;
+        let kt = (k, tick_time(k, ticker.control_period_s));
+        for agent in &mut ticker.loops {
+            crate::on_joint_count!(AnyLoop, agent, a => a.ask(attacker, program, kt))?;
+        }
+        for agent in &mut ticker.loops {
+            crate::on_joint_count!(AnyLoop, agent, a => {
+                a.answer(attacker, program, kt, &mut sink)
+            })?;
+        }
+        ticker.k += 1;
+        Ok(true)
     }
 }
 
@@ -733,5 +904,30 @@ pub fn tick_inproc_any_with<A: Attacker>(
     Ok(Ticked {
         ticks: ticker.k(),
         wall_s: ticker.wall_s(),
+    })
+}
+
+/// [`tick_inproc_any_with`] for a run whose torques `program` decides ([`Asking`]): a failure
+/// of the program stops the run ([`EngineError::Program`]).
+pub fn tick_inproc_asking<A: Attacker, P: TorqueProgram>(
+    resolved: &Resolved,
+    (attacker, program): (&mut A, &mut P),
+    mut sink: impl FnMut(&TickRecord),
+    mut go_on: impl FnMut() -> bool,
+) -> Result<Ticked, EngineError>
+where
+    P::Error: std::error::Error + Send + Sync + 'static,
+{
+    let mut asking = Asking::new(resolved)?;
+    while go_on() {
+        match asking.tick(attacker, program, &mut sink) {
+            Ok(true) => {}
+            Ok(false) => break,
+            Err(e) => return Err(EngineError::Program(Box::new(e))),
+        }
+    }
+    Ok(Ticked {
+        ticks: asking.k(),
+        wall_s: asking.wall_s(),
     })
 }

@@ -23,7 +23,7 @@ use fdi_common::trace::TraceWriter;
 use fdi_runtime::ipc::msg::{from_matrix, from_vector, to_vector};
 use fdi_runtime::ipc::{
     monotonic_ns, ControllerInMsg, ControllerOutMsg, Inbox as _, IpcError, MeasurementMsg,
-    Outbox as _, Stream, Transport, Wake,
+    Outbox as _, Stream, Transport, Wake, Waker as _,
 };
 use fdi_runtime::process::external::LateBell;
 use fdi_runtime::process::RoleError;
@@ -72,11 +72,133 @@ struct Tally {
     dropped_late: u64,
 }
 
+/// The rules of the exchange with a controller program, the same whichever engine asks it
+/// (the control center's [`ControllerProgram`], the in-process engine's [`Asker`]): whom it
+/// answers for, what an answer must say, and what it did over the run.
+#[derive(Debug)]
+pub struct Exchange {
+    label: String,
+    ids: Vec<u32>,
+    /// Lockstep: the longest wait for an answer.
+    timeout: Duration,
+    tally: Tally,
+}
+
+impl Exchange {
+    /// The program of `role` for the agents `ids`.
+    pub fn new(role: &ExternalRole, ids: &[u32]) -> Self {
+        Self {
+            label: role.label(),
+            ids: ids.to_vec(),
+            timeout: role.timeout(),
+            tally: Tally::default(),
+        }
+    }
+
+    fn violation(&self, what: String) -> RoleError {
+        RoleError::External(format!("controller `{}`: {what}", self.label))
+    }
+
+    /// Where the agent `agent` stands among the agents asked (`None`: not one of them).
+    fn index(&self, agent: u32) -> Option<usize> {
+        self.ids.iter().position(|&id| id == agent)
+    }
+
+    /// Where the agent answer `a` is for stands; an agent the run does not have stops the run.
+    fn agent_of(&self, a: &ControllerOutMsg) -> Result<usize, RoleError> {
+        self.index(a.agent).ok_or_else(|| {
+            self.violation(format!(
+                "answer for agent {}, which the run does not have (tick {})",
+                a.agent, a.seq
+            ))
+        })
+    }
+
+    /// An answer `a` for another tick than `asked`, the one asked of its agent (`None`: none
+    /// was).
+    fn out_of_order(&self, a: &ControllerOutMsg, asked: Option<u64>) -> RoleError {
+        let what = match asked {
+            Some(seq) => format!("tick {seq} was asked"),
+            None => "no tick of it was asked".into(),
+        };
+        self.violation(format!(
+            "agent {}: answered tick {} where {what} (one answer per question, in tick order)",
+            a.agent, a.seq
+        ))
+    }
+
+    /// Lockstep: no answer to tick `seq` of `agent` within the timeout.
+    fn silent(&self, seq: u64, agent: u32) -> RoleError {
+        self.violation(format!(
+            "no answer to tick {seq} of agent {agent} within {:?} (lockstep waits for every \
+             answer; `[roles.controller] timeout_s` sets the limit)",
+            self.timeout
+        ))
+    }
+
+    /// The answer `a` as the pipeline takes it: `None` (counted; the first of each kind said
+    /// on stderr, naming the program) when it has another number of joints than `N` or a
+    /// non-finite entry.
+    fn usable<const N: usize>(&mut self, a: &ControllerOutMsg) -> Option<Answer<N>> {
+        let (tally, label) = (&mut self.tally, &self.label);
+        let say = |what: String| {
+            fdi_runtime::process::print_warning(format_args!(
+                "controller `{label}`: agent {}, tick {}: {what}; the last good torque is held \
+                 (every such answer is counted in the trace's closing note)",
+                a.agent, a.seq
+            ))
+        };
+        if a.dof as usize != N {
+            if tally.wrong_dof == 0 {
+                say(format!("an answer of {} joints for a robot of {N}", a.dof));
+            }
+            tally.wrong_dof += 1;
+            return None;
+        }
+        let (u, s_hat) = (to_vector::<N>(&a.u), to_vector::<N>(&a.s_hat));
+        if !u.iter().chain(s_hat.iter()).all(|x| x.is_finite()) {
+            if tally.non_finite == 0 {
+                say(format!(
+                    "a non-finite torque or Ŝ (u = {:?}, Ŝ = {:?})",
+                    u.as_slice(),
+                    s_hat.as_slice()
+                ));
+            }
+            tally.non_finite += 1;
+            return None;
+        }
+        Some(Answer {
+            command: Command { u, s_hat },
+            alarm: a.alarm(),
+        })
+    }
+
+    /// What the program did, for the trace's closing note; `deadline_ns`: a realtime run's
+    /// deadline after a tick's time.
+    pub fn summary(&self, deadline_ns: Option<u64>) -> String {
+        let t = self.tally;
+        let mut s = format!(
+            "controller `{}`: {} answers, {} with a non-finite torque or Ŝ, {} with another \
+             number of joints than their agent's (the last good torque held for each)",
+            self.label, t.answers, t.non_finite, t.wrong_dof
+        );
+        if let Some(deadline_ns) = deadline_ns {
+            s.push_str(&format!(
+                ", {} ticks past the {:.3} ms deadline after their tick's time (the last good \
+                 torque held), {} late answers dropped",
+                t.late,
+                deadline_ns as f64 / 1e6,
+                t.dropped_late
+            ));
+        }
+        s
+    }
+}
+
 /// The control center's state of a controller program.
 #[derive(Debug)]
 pub struct ControllerProgram {
-    label: String,
-    ids: Vec<u32>,
+    exchange: Exchange,
     /// Per agent: measurements admitted and not asked yet, in tick order.
     queued: Vec<VecDeque<Admitted>>,
     /// Per agent: the tick asked and not answered, and its deadline (realtime: CLOCK_MONOTONIC,
@@ -88,12 +210,10 @@ pub struct ControllerProgram {
     dt: f64,
     /// Realtime: CLOCK_MONOTONIC of sim time zero, ns.
     epoch_ns: u64,
-    timeout: Duration,
     deadline_ns: u64,
     /// The last answer (or the first question it owed one to): the lockstep timeout counts
     /// from it.
     progress: Instant,
-    tally: Tally,
 }
 
 impl ControllerProgram {
@@ -101,23 +221,16 @@ impl ControllerProgram {
     /// `epoch_ns`.
     pub fn new(role: &ExternalRole, ids: &[u32], dt: f64, lockstep: bool, epoch_ns: u64) -> Self {
         Self {
-            label: role.label(),
-            ids: ids.to_vec(),
+            exchange: Exchange::new(role, ids),
             queued: vec![VecDeque::new(); ids.len()],
             asked: vec![None; ids.len()],
             given_up: vec![BTreeSet::new(); ids.len()],
             lockstep,
             dt,
             epoch_ns,
-            timeout: role.timeout(),
             deadline_ns: role.deadline_ns(),
             progress: Instant::now(),
-            tally: Tally::default(),
         }
-    }
-
-    fn violation(&self, what: String) -> RoleError {
-        RoleError::External(format!("controller `{}`: {what}", self.label))
     }
 
     /// Queues the admitted measurement `m` of scenario agent `i` (received at `received`;
@@ -144,7 +257,7 @@ impl ControllerProgram {
     ) -> Result<usize, RoleError> {
         let dt = self.dt;
         let mut asked = 0;
-        for i in 0..self.ids.len() {
+        for i in 0..self.exchange.ids.len() {
             while self.asked[i].is_none() {
                 let Some(a) = self.queued[i].pop_front() else {
                     break;
@@ -195,30 +308,18 @@ impl ControllerProgram {
         from.answers.drain(|a| got.push(a))?;
         let mut closed = 0;
         for a in got {
-            let Some(i) = self.ids.iter().position(|&id| id == a.agent) else {
-                return Err(self.violation(format!(
-                    "answer for agent {}, which the run does not have (tick {})",
-                    a.agent, a.seq
-                )));
-            };
+            let i = self.exchange.agent_of(&a)?;
             self.progress = Instant::now();
             if self.given_up[i].remove(&a.seq) {
-                self.tally.dropped_late += 1;
+                self.exchange.tally.dropped_late += 1;
                 continue;
             }
             let Some((asked, _)) = self.asked[i].filter(|(x, _)| x.m.seq == a.seq) else {
-                let what = match self.asked[i] {
-                    Some((x, _)) => format!("tick {} was asked", x.m.seq),
-                    None => "no tick of it was asked".into(),
-                };
-                return Err(self.violation(format!(
-                    "agent {}: answered tick {} where {what} (one answer per question, in tick \
-                     order)",
-                    a.agent, a.seq
-                )));
+                let asked = self.asked[i].map(|(x, _)| x.m.seq);
+                return Err(self.exchange.out_of_order(&a, asked));
             };
             self.asked[i] = None;
-            self.tally.answers += 1;
+            self.exchange.tally.answers += 1;
             self.close(i, &asked, Some(&a), (slots, ports), trace)?;
             answered[i] = true;
             closed += 1;
@@ -239,9 +340,9 @@ impl ControllerProgram {
         let link = &ports.links[ports.route[i]];
         let Slot { center, next } = &mut slots[i];
         *next = asked.m.seq + 1;
-        let (tally, dt, label) = (&mut self.tally, self.dt, &self.label);
+        let (exchange, dt) = (&mut self.exchange, self.dt);
         fdi_common::on_joint_count!(AnyCenterAgent, center, c => {
-            let answer = a.and_then(|a| usable(a, tally, label));
+            let answer = a.and_then(|a| exchange.usable(a));
             match c.answer(answer.as_ref()) {
                 Some(out) => {
                     let t = tick_time(asked.m.seq, dt);
@@ -264,12 +365,8 @@ impl ControllerProgram {
     ) -> Result<(), RoleError> {
         if self.lockstep {
             let due = self.asked.iter().flatten().next();
-            if let (Some((a, _)), true) = (due, self.progress.elapsed() > self.timeout) {
-                return Err(self.violation(format!(
-                    "no answer to tick {} of agent {} within {:?} (lockstep waits for every \
-                     answer; `[roles.controller] timeout_s` sets the limit)",
-                    a.m.seq, a.m.agent, self.timeout
-                )));
+            if let (Some((a, _)), true) = (due, self.progress.elapsed() > self.exchange.timeout) {
+                return Err(self.exchange.silent(a.m.seq, a.m.agent));
             }
             return Ok(());
         }
@@ -296,7 +393,7 @@ impl ControllerProgram {
         (slots, ports): (&mut [Slot], &Ports<X>),
         trace: &mut TraceWriter,
     ) -> Result<(), RoleError> {
-        self.tally.late += 1;
+        self.exchange.tally.late += 1;
         let given_up = &mut self.given_up[i];
         given_up.insert(a.m.seq);
         // Answers come in tick order: one 4096 ticks older is not coming any more.
@@ -308,22 +405,8 @@ impl ControllerProgram {
 
     /// What the program did, for the trace's closing note.
     pub fn summary(&self) -> String {
-        let t = self.tally;
-        let mut s = format!(
-            "controller `{}`: {} answers, {} with a non-finite torque or Ŝ, {} with another \
-             number of joints than their agent's (the last good torque held for each)",
-            self.label, t.answers, t.non_finite, t.wrong_dof
-        );
-        if !self.lockstep {
-            s.push_str(&format!(
-                ", {} ticks past the {:.3} ms deadline after their tick's time (the last good \
-                 torque held), {} late answers dropped",
-                t.late,
-                self.deadline_ns as f64 / 1e6,
-                t.dropped_late
-            ));
-        }
-        s
+        self.exchange
+            .summary((!self.lockstep).then_some(self.deadline_ns))
     }
 }
 
@@ -368,42 +451,166 @@ pub fn question_msg<const N: usize>(seq: u64, agent: u32, q: &Question<N>) -> Co
     }
 }
 
-/// The answer `a` as the pipeline takes it: `None` (counted; the first of each kind said on
-/// stderr, naming the program `label`) when it has another number of joints than `N` or a
-/// non-finite entry.
-fn usable<const N: usize>(
-    a: &ControllerOutMsg,
-    tally: &mut Tally,
-    label: &str,
-) -> Option<Answer<N>> {
-    let say = |what: String| {
-        fdi_runtime::process::print_warning(format_args!(
-            "controller `{label}`: agent {}, tick {}: {what}; the last good torque is held (every \
-             such answer is counted in the trace's closing note)",
-            a.agent, a.seq
-        ))
-    };
-    if a.dof as usize != N {
-        if tally.wrong_dof == 0 {
-            say(format!("an answer of {} joints for a robot of {N}", a.dof));
-        }
-        tally.wrong_dof += 1;
-        return None;
+/// The controller program as the in-process engine asks it ([`fdi_common::engine::Asking`]),
+/// over the run's shared memory from the launcher's own node: the questions, the rules
+/// ([`Exchange`]) and the closing note of the control center's, in lockstep (it waits for each
+/// answer, at most the role's `timeout_s`). Between its waits `watch` says whether the run may
+/// go on (the program alive, no stop): its error stops the run.
+pub struct Asker<'a, X: Transport> {
+    transport: &'a X,
+    ports: AskerPorts<X>,
+    exchange: Exchange,
+    /// Per agent: the tick asked and not answered.
+    asked: Vec<Option<u64>>,
+    /// Per agent: its answer, taken and not yet used.
+    answers: Vec<Option<ControllerOutMsg>>,
+    /// The program was rung for the questions asked since its last answer.
+    rung: bool,
+    /// The last answer (or the first question it owed one to): the timeout counts from it.
+    progress: Instant,
+    /// When `watch` was last asked.
+    watched: Instant,
+    watch: &'a mut dyn FnMut() -> Result<(), RoleError>,
+}
+
+/// The ports of an [`Asker`], opened before the program is started: every service it opens
+/// then exists, and its notifier reaches the listener.
+#[derive(Debug)]
+pub struct AskerPorts<X: Transport> {
+    controller: ControllerPorts<X>,
+    /// The program rings the control center's event once it answered.
+    woken: X::Waker,
+}
+
+impl<X: Transport> AskerPorts<X> {
+    pub fn open(transport: &X) -> Result<Self, IpcError> {
+        Ok(Self {
+            controller: ControllerPorts::open(transport)?,
+            woken: transport.waker(Wake::Center)?,
+        })
     }
-    let (u, s_hat) = (to_vector::<N>(&a.u), to_vector::<N>(&a.s_hat));
-    if !u.iter().chain(s_hat.iter()).all(|x| x.is_finite()) {
-        if tally.non_finite == 0 {
-            say(format!(
-                "a non-finite torque or Ŝ (u = {:?}, Ŝ = {:?})",
-                u.as_slice(),
-                s_hat.as_slice()
-            ));
-        }
-        tally.non_finite += 1;
-        return None;
+}
+
+impl<X: Transport> std::fmt::Debug for Asker<'_, X> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Asker")
+            .field("exchange", &self.exchange)
+            .field("asked", &self.asked)
+            .finish_non_exhaustive()
     }
-    Some(Answer {
-        command: Command { u, s_hat },
-        alarm: a.alarm(),
-    })
+}
+
+impl<'a, X: Transport> Asker<'a, X> {
+    /// How long one wait for an answer lasts, and how often `watch` is asked while answers
+    /// are awaited.
+    const WAIT: Duration = Duration::from_millis(50);
+
+    /// Asks the program of `role` for the agents `ids` through `ports` on the node
+    /// `transport`, once it is ready and the run started.
+    pub fn new(
+        (transport, ports): (&'a X, AskerPorts<X>),
+        role: &ExternalRole,
+        ids: &[u32],
+        watch: &'a mut dyn FnMut() -> Result<(), RoleError>,
+    ) -> Self {
+        Self {
+            transport,
+            ports,
+            exchange: Exchange::new(role, ids),
+            asked: vec![None; ids.len()],
+            answers: vec![None; ids.len()],
+            rung: false,
+            progress: Instant::now(),
+            watched: Instant::now(),
+            watch,
+        }
+    }
+
+    /// What the program did, for the closing note.
+    pub fn summary(&self) -> String {
+        self.exchange.summary(None)
+    }
+
+    fn index(&self, agent: u32) -> Result<usize, RoleError> {
+        self.exchange.index(agent).ok_or_else(|| {
+            self.exchange.violation(format!(
+                "agent {agent} is not one the program was started for"
+            ))
+        })
+    }
+
+    /// Takes the answers that arrived, each checked against the tick asked of its agent.
+    fn take(&mut self) -> Result<(), RoleError> {
+        let mut got = Vec::new();
+        self.ports.controller.answers.drain(|a| got.push(a))?;
+        for a in got {
+            let i = self.exchange.agent_of(&a)?;
+            if self.asked[i] != Some(a.seq) {
+                return Err(self.exchange.out_of_order(&a, self.asked[i]));
+            }
+            self.asked[i] = None;
+            self.answers[i] = Some(a);
+            self.exchange.tally.answers += 1;
+            self.progress = Instant::now();
+        }
+        Ok(())
+    }
+}
+
+impl<X: Transport> fdi_common::engine::TorqueProgram for Asker<'_, X> {
+    type Error = RoleError;
+
+    fn ask<const N: usize>(
+        &mut self,
+        k: u64,
+        agent: u32,
+        question: &Question<N>,
+    ) -> Result<(), RoleError> {
+        let i = self.index(agent)?;
+        if self.asked.iter().all(Option::is_none) {
+            self.progress = Instant::now();
+        }
+        self.ports
+            .controller
+            .questions
+            .send(question_msg(k, agent, question))?;
+        self.asked[i] = Some(k);
+        self.rung = false;
+        Ok(())
+    }
+
+    fn answer<const N: usize>(
+        &mut self,
+        k: u64,
+        agent: u32,
+    ) -> Result<Option<Answer<N>>, RoleError> {
+        let i = self.index(agent)?;
+        if !self.rung {
+            self.ports.controller.bell.ring(self.transport)?;
+            self.rung = true;
+        }
+        loop {
+            if let Some(a) = self.answers[i].take() {
+                return Ok(self.exchange.usable::<N>(&a));
+            }
+            if self.asked[i].is_none() {
+                return Err(self
+                    .exchange
+                    .violation(format!("agent {agent}: tick {k} was never asked")));
+            }
+            self.take()?;
+            if self.answers[i].is_some() {
+                continue;
+            }
+            if self.progress.elapsed() > self.exchange.timeout {
+                return Err(self.exchange.silent(k, agent));
+            }
+            // A program that died or a stop rings nothing: looked at after a quiet wait, and
+            // at least every `WAIT` however often the program rings.
+            if !self.ports.woken.wait(Self::WAIT)? || self.watched.elapsed() > Self::WAIT {
+                self.watched = Instant::now();
+                (self.watch)()?;
+            }
+        }
+    }
 }

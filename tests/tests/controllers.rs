@@ -233,18 +233,138 @@ fn the_external_controller_and_its_program_come_together() {
     );
     let out = fdi_tests::wait_with_watchdog(out, WATCHDOG);
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && err.contains("roles"), "{err}");
+    // The in-process engine starts the program too (tests/tests/external.rs): here one that
+    // cannot run, named.
+    assert!(
+        !out.status.success()
+            && err.contains("controller `python3 c.py`")
+            && err.contains("before the start"),
+        "{err}"
+    );
     // What bypasses the scenario's validation (a table's or the score's cells set the mode on
     // a resolved scenario) meets the engine, which refuses the program it cannot ask: its
     // ticks would go unanswered, every torque held at zero.
     let e = run_inproc_any(&paper_with(ControllerMode::External, "none", 0.1), |_| {})
         .expect_err("refused");
-    assert!(e.to_string().contains("--engine ipc"), "{e}");
+    assert!(e.to_string().contains("without that program"), "{e}");
     let out = fdi_tests::spawn(&["score", "--controller", "external"], &dir.0);
     let out = fdi_tests::wait_with_watchdog(out, WATCHDOG);
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(
         !out.status.success() && err.contains("in-process engine cannot run it"),
         "{err}"
+    );
+}
+
+/// A program that decides the torques with the paper's traditional law, written from the
+/// questions alone (`u = K (q̇_d − ẏ + β (q_d − y) − A e_u + Ŝ)`, `Ŝ = 0`, in the built-in's
+/// order of operations), as `examples/python/controller.py` does over shared memory. It logs
+/// what it was asked and answered, and fails at `fail_at` (a tick) when given one.
+#[derive(Debug)]
+struct TraditionalLaw {
+    k: f64,
+    beta: f64,
+    torques: std::collections::BTreeMap<u32, (u64, Vec<f64>)>,
+    log: Vec<(char, u64, u32)>,
+    fail_at: Option<u64>,
+}
+
+impl fdi_common::engine::TorqueProgram for TraditionalLaw {
+    type Error = std::io::Error;
+
+    fn ask<const N: usize>(
+        &mut self,
+        k: u64,
+        agent: u32,
+        q: &fdi_common::control::Question<N>,
+    ) -> Result<(), std::io::Error> {
+        self.log.push(('?', k, agent));
+        let psi1 = q.reference.q - q.y;
+        let psi1_dot = q.reference.qd - q.yd;
+        let zero = fdi_common::model::Vector::<N>::zeros();
+        let r_hat = psi1_dot + psi1 * self.beta - q.inverse_inertia_ref * q.e_u + zero;
+        let u = r_hat.component_mul(&fdi_common::model::Vector::<N>::from_element(self.k));
+        self.torques.insert(agent, (k, u.as_slice().to_vec()));
+        Ok(())
+    }
+
+    fn answer<const N: usize>(
+        &mut self,
+        k: u64,
+        agent: u32,
+    ) -> Result<Option<fdi_common::control::Answer<N>>, std::io::Error> {
+        self.log.push(('!', k, agent));
+        if self.fail_at == Some(k) {
+            return Err(std::io::Error::other(format!("gave up at tick {k}")));
+        }
+        let (asked, u) = self.torques.remove(&agent).expect("asked before answered");
+        assert_eq!(asked, k, "agent {agent}");
+        Ok(Some(fdi_common::control::Answer {
+            command: fdi_common::control::Command {
+                u: fdi_common::model::Vector::<N>::from_column_slice(&u),
+                s_hat: fdi_common::model::Vector::<N>::zeros(),
+            },
+            alarm: None,
+        }))
+    }
+}
+
+/// The in-process engine asks a program for the torques as the control center does over IPC
+/// (the same questions; every agent's question of a tick before any answer): a program that
+/// computes the traditional law from its questions gives the built-in traditional run, digest
+/// and metrics, under the paper's attack. A program's failure stops the run, with its message.
+#[test]
+fn the_in_process_engine_asks_a_program_for_the_torques_as_the_control_center_does() {
+    use fdi_common::engine::{tick_inproc_asking, Books};
+    let external = paper_with(ControllerMode::External, "paper", 1.0);
+    let builtin = run_inproc_any(
+        &paper_with(ControllerMode::Traditional, "paper", 1.0),
+        |_| {},
+    )
+    .expect("runs");
+    let c = &external.scenario.controller;
+    let mut law = TraditionalLaw {
+        k: c.gain_k,
+        beta: c.beta,
+        torques: Default::default(),
+        log: Vec::new(),
+        fail_at: None,
+    };
+    let mut books = Books::new(&external);
+    let mut attacker = external.profile_attacker();
+    let ticked = tick_inproc_asking(
+        &external,
+        (&mut attacker, &mut law),
+        |rec| books.push(rec),
+        || true,
+    )
+    .expect("runs");
+    assert_eq!(ticked.ticks, external.ticks());
+    let asked = books.summary(&external, ticked.ticks, ticked.wall_s, "paper");
+    assert_eq!(asked.trace_digest, builtin.trace_digest);
+    assert_eq!(asked.metrics, builtin.metrics);
+    // Tick 0: the four questions, then the four answers, in the scenario's agent order.
+    let ids: Vec<u32> = external.scenario.agents.iter().map(|a| a.id).collect();
+    let first: Vec<(char, u64, u32)> = ['?', '!']
+        .into_iter()
+        .flat_map(|c| ids.iter().map(move |&id| (c, 0, id)))
+        .collect();
+    assert_eq!(law.log[..8], first[..]);
+    assert_eq!(law.log.len() as u64, 8 * external.ticks());
+
+    law.fail_at = Some(5);
+    let mut records = 0;
+    let e = tick_inproc_asking(
+        &external,
+        (&mut external.profile_attacker(), &mut law),
+        |_| records += 1,
+        || true,
+    )
+    .expect_err("the program failed");
+    assert_eq!(e.to_string(), "gave up at tick 5");
+    assert_eq!(
+        records,
+        5 * ids.len(),
+        "the ticks before the failure were recorded"
     );
 }

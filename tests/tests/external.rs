@@ -257,6 +257,17 @@ fn a_python_monitor_is_reported_beside_the_detectors_and_changes_nothing() {
 /// Runs the paper scenario for `duration_s` with `[roles.<role>]` running `script`; returns
 /// its output, once it checked that the run left no shared-memory file behind.
 fn run_with_script(role: &str, name: &str, script: &str, duration_s: f64, clock: &str) -> Output {
+    run_with_script_on("ipc", role, (name, script), duration_s, clock)
+}
+
+/// [`run_with_script`] on the engine `engine`.
+fn run_with_script_on(
+    engine: &str,
+    role: &str,
+    (name, script): (&str, &str),
+    duration_s: f64,
+    clock: &str,
+) -> Output {
     let python = python().expect("checked by the caller");
     let s = Scratch::new(&format!("ext-{name}"));
     let value = script_role(&python, &s.0, name, script);
@@ -275,7 +286,10 @@ fn run_with_script(role: &str, name: &str, script: &str, duration_s: f64, clock:
         }
     });
     let scenario = scenario.display().to_string();
-    let child = fdi_tests::spawn(&["run", &scenario, "--json"], &s.0.join("runs"));
+    let child = fdi_tests::spawn(
+        &["run", &scenario, "--engine", engine, "--json"],
+        &s.0.join("runs"),
+    );
     let pid = child.id();
     let out = fdi_tests::wait_with_watchdog(child, WATCHDOG);
     // However the program misbehaved, the run leaves nothing behind.
@@ -791,13 +805,22 @@ fn the_python_controller_gives_the_digest_of_the_built_in_traditional_law() {
         WATCHDOG,
     ));
     assert_eq!(rust["controller"], "traditional");
-    assert_eq!(digest(&py), digest(&rust));
-    assert_eq!(rejected_torques(&py), [0; 4]);
-    let note = controller_note(&py, "python-traditional");
-    assert!(
-        note.contains(": 12000 answers, 0 with a non-finite"),
-        "{note}"
-    );
+    // The in-process engine asks the program itself, as the control center does.
+    let inproc = json(&launch(
+        &["run", &scenario, "--engine", "inproc", "--json"],
+        &s.0.join("py-inproc"),
+        WATCHDOG,
+    ));
+    assert_eq!(inproc["engine"], "inproc", "{inproc}");
+    for run in [&py, &inproc] {
+        assert_eq!(digest(run), digest(&rust));
+        assert_eq!(rejected_torques(run), [0; 4]);
+        let note = controller_note(run, "python-traditional");
+        assert!(
+            note.contains(": 12000 answers, 0 with a non-finite"),
+            "{note}"
+        );
+    }
 }
 
 /// An answer with non-finite torques, or of another number of joints than its robot's, sends
@@ -821,19 +844,30 @@ fn a_controller_that_answers_non_finite_torques_or_the_wrong_joints_is_named_and
         let s = Scratch::new(&format!("ext-controller-{bad}"));
         let args = ["--bad", bad, "--bad-from", "600"];
         let scenario = python_controller(&python, &s.0, 1.0, &args, |_| {});
-        let out = launch(&["run", &scenario, "--json"], &s.0.join("runs"), WATCHDOG);
-        let summary = json(&out);
-        assert_eq!(rejected_torques(&summary), [400; 4], "{bad}");
-        let err = stderr(&out);
-        assert!(err.contains("controller `python-traditional`"), "{err}");
-        assert!(err.contains(said), "{bad}: {err}");
-        let note = controller_note(&summary, "python-traditional");
-        assert_eq!(count_in(&note, what), 1600, "{note}");
-        // The robots stayed under control on the held torques.
-        for r in 1..=4 {
-            let e = summary["metrics"][r.to_string()]["max_abs_error_rad"].as_f64();
-            assert!(e.is_some_and(|e| e < 0.5), "robot {r}: {e:?}");
+        // The same on either engine: the in-process one asks the program as the control
+        // center does.
+        let mut digests = Vec::new();
+        for engine in ["ipc", "inproc"] {
+            let out = launch(
+                &["run", &scenario, "--engine", engine, "--json"],
+                &s.0.join(engine),
+                WATCHDOG,
+            );
+            let summary = json(&out);
+            assert_eq!(rejected_torques(&summary), [400; 4], "{bad} {engine}");
+            let err = stderr(&out);
+            assert!(err.contains("controller `python-traditional`"), "{err}");
+            assert!(err.contains(said), "{bad} {engine}: {err}");
+            let note = controller_note(&summary, "python-traditional");
+            assert_eq!(count_in(&note, what), 1600, "{engine}: {note}");
+            // The robots stayed under control on the held torques.
+            for r in 1..=4 {
+                let e = summary["metrics"][r.to_string()]["max_abs_error_rad"].as_f64();
+                assert!(e.is_some_and(|e| e < 0.5), "{engine}: robot {r}: {e:?}");
+            }
+            digests.push(digest(&summary));
         }
+        assert_eq!(digests[0], digests[1], "{bad}");
     }
 }
 
@@ -853,19 +887,73 @@ fn a_controller_that_stops_answering_or_never_says_ready_is_named() {
             c.insert("timeout_s".into(), 2.0.into());
         }
     });
-    let child = fdi_tests::spawn(&["run", &scenario, "--json"], &s.0.join("runs"));
-    let pid = child.id();
-    let out = fdi_tests::wait_with_watchdog(child, WATCHDOG);
-    fdi_tests::assert_no_leftovers(pid);
-    assert_failed_naming(&out, "python-traditional", "no answer to tick 300 of agent");
-    let out = run_with_script(
-        "controller",
-        "never-ready",
-        "import time\ntime.sleep(60)\n",
-        1.0,
-        "lockstep",
-    );
-    assert_failed_naming(&out, "never-ready", "not ready after");
+    for engine in ["ipc", "inproc"] {
+        let child = fdi_tests::spawn(
+            &["run", &scenario, "--engine", engine, "--json"],
+            &s.0.join(engine),
+        );
+        let pid = child.id();
+        let out = fdi_tests::wait_with_watchdog(child, WATCHDOG);
+        fdi_tests::assert_no_leftovers(pid);
+        assert_failed_naming(&out, "python-traditional", "no answer to tick 300 of agent");
+    }
+    for engine in ["ipc", "inproc"] {
+        let out = run_with_script_on(
+            engine,
+            "controller",
+            ("never-ready", "import time\ntime.sleep(60)\n"),
+            1.0,
+            "lockstep",
+        );
+        assert_failed_naming(&out, "never-ready", "not ready after");
+    }
+}
+
+/// A controller program answering each question `q` with `ControllerOutMsg(seq=q.seq + shift,
+/// agent=q.agent + other)`.
+fn misanswering_controller(shift: u64, other: u32) -> String {
+    format!(
+        "with fdi.Run('controller') as run:\n    \
+         questions = run.subscriber('fdi/external/controller/in', fdi.ControllerInMsg)\n    \
+         answers = run.publisher('fdi/external/controller/out', fdi.ControllerOutMsg)\n    \
+         center = run.notifier('fdi/wake/center')\n    \
+         run.ready_and_wait_for_start()\n    \
+         while True:\n        \
+         batch = run.drain(questions, fdi.ControllerInMsg)\n        \
+         if not batch:\n            run.wait()\n            continue\n        \
+         for q in batch:\n            \
+         answers.send_copy(fdi.ControllerOutMsg(seq=q.seq + {shift}, agent=q.agent + {other}, \
+         dof=q.dof))\n        \
+         center.notify()\n"
+    )
+}
+
+/// An answer for another tick than the one asked, or for an agent the run does not have, stops
+/// the run naming the program, on either engine (the in-process one asks the program as the
+/// control center does), and leaves nothing behind.
+#[test]
+fn a_controller_that_answers_another_tick_or_agent_is_named() {
+    if python().is_none() {
+        return;
+    }
+    for engine in ["ipc", "inproc"] {
+        for (name, script, what) in [
+            (
+                "ahead",
+                misanswering_controller(1, 0),
+                // (Whichever agent's answer the control center reads first.)
+                ": answered tick 1 where tick 0 was asked",
+            ),
+            (
+                "elsewhere",
+                misanswering_controller(0, 100),
+                ", which the run does not have (tick 0)",
+            ),
+        ] {
+            let out = run_with_script_on(engine, "controller", (name, &script), 1.0, "lockstep");
+            assert_failed_naming(&out, name, what);
+        }
+    }
 }
 
 /// Realtime: a question unanswered at its deadline holds the last good torque (a rejected

@@ -4,8 +4,9 @@
 //! terms) and sends the torque it answers; the program's `Ŝ` and its own alarm, if it has one,
 //! are recorded. What the run records as the estimate of the state is the paper's observer
 //! (22)–(24), stepped with the torques sent and the program's `Ŝ`, as for `traditional`: the
-//! residual detectors read it. Runs only over IPC, where the control-center process asks the
-//! program ([`super::CenterAgent::ask`]).
+//! residual detectors read it. The control-center process asks the program over IPC
+//! ([`super::CenterAgent::ask`], then [`super::CenterAgent::answer`]), and so does the in-process
+//! engine in lockstep ([`crate::engine::Asking`]).
 
 use crate::model::{EulerLagrange, Vector};
 

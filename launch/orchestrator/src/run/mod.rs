@@ -24,7 +24,9 @@ use std::sync::Arc;
 use anyhow::{bail, Context, Result};
 pub use error::RunError;
 use fdi_common::attack::Attacker;
-use fdi_common::engine::{run_inproc_any_until, tick_inproc_any_with, Books, Partial, RunSummary};
+use fdi_common::engine::{
+    run_inproc_any_until, tick_inproc_any_with, tick_inproc_asking, Books, Partial, RunSummary,
+};
 use fdi_common::observe::Observer;
 use fdi_common::records::TickRecord;
 use fdi_common::run_dir::{Process, RunDir};
@@ -297,12 +299,31 @@ impl Options {
     }
 }
 
-/// Refuses a scenario the in-process engine cannot run.
+/// Refuses a scenario the in-process engine cannot run: a program in the attacker's or the
+/// monitor's role, or a controller program in realtime (its deadlines are the control center
+/// process's). A controller program in lockstep it asks itself
+/// ([`runtime::with_controller_program`]).
 fn inproc_runs(r: &Resolved) -> Result<()> {
-    if r.has_external_roles() {
+    let roles = &r.scenario.roles;
+    let taken: Vec<&str> = [
+        ("[roles.attacker]", roles.attacker.is_some()),
+        ("[roles.monitor]", roles.monitor.is_some()),
+    ]
+    .into_iter()
+    .filter_map(|(name, taken)| taken.then_some(name))
+    .collect();
+    if !taken.is_empty() {
         bail!(
-            "the in-process engine cannot run a program that takes a role (`[roles]` of the \
-             scenario): run it with --engine ipc"
+            "the in-process engine cannot run a program in the attacker's or the monitor's role \
+             ({} of the scenario): run it with --engine ipc",
+            taken.join(", ")
+        );
+    }
+    if roles.controller.is_some() && r.scenario.clock == ClockMode::Realtime {
+        bail!(
+            "the in-process engine asks a controller program (`[roles.controller]`) in lockstep \
+             only: a realtime run's deadlines are kept by the control center's process; run it \
+             with --engine ipc, or `clock = \"lockstep\"`"
         );
     }
     Ok(())
@@ -360,22 +381,34 @@ fn execute_inproc_watched<A: Attacker>(
     let stop = &opts.stop;
     let run = || -> Result<_> {
         let mut records = RecordThread::start(Books::new(r), writers, direct)?;
-        // An interrupt stops the engine before its next tick; what it ran is kept.
-        let ticked = tick_inproc_any_with(
-            r,
-            attacker,
-            |rec| {
+        let (ticked, note) = {
+            let sink = |rec: &TickRecord| {
                 if let Some(p) = &mut pacer {
                     p.wait(rec.center.k);
                 }
                 records.push(rec);
-            },
-            || stop.pending().is_none(),
-        )
-        .context("in-process engine")?;
+            };
+            // An interrupt stops the engine before its next tick; what it ran is kept.
+            let go_on = || stop.pending().is_none();
+            let engine = "in-process engine";
+            match &r.scenario.roles.controller {
+                None => (
+                    tick_inproc_any_with(r, attacker, sink, go_on).context(engine)?,
+                    None,
+                ),
+                // A program decides the torques: asked over shared memory, as the control
+                // center asks it; its closing note goes into the control center's trace.
+                Some(_) => {
+                    let (ticked, note) = runtime::with_controller_program(r, dir, stop, |asker| {
+                        tick_inproc_asking(r, (attacker, asker), sink, go_on).context(engine)
+                    })?;
+                    (ticked, Some((r.scenario.duration_s, note)))
+                }
+            }
+        };
         // The run ends when its records are entered and written: the wait for that counts.
         let waited = std::time::Instant::now();
-        let books = records.finish()?;
+        let books = records.finish(note)?;
         Ok((ticked, books, waited.elapsed().as_secs_f64()))
     };
     let (ticked, books, waited) = match (&live, followed) {
@@ -427,6 +460,8 @@ struct RecordThread {
     to_thread: std::sync::mpsc::SyncSender<Vec<TickRecord>>,
     /// The thread's emptied batches, filled again (fresh ones cost a page fault per page).
     emptied: std::sync::mpsc::Receiver<Vec<TickRecord>>,
+    /// The closing note of the control center's trace.
+    note: std::sync::mpsc::Sender<(f64, String)>,
     thread: std::thread::JoinHandle<(Books, Result<()>)>,
 }
 
@@ -443,6 +478,7 @@ impl RecordThread {
     ) -> Result<Self> {
         let (to_thread, batches) = std::sync::mpsc::sync_channel::<Vec<TickRecord>>(Self::QUEUED);
         let (give_back, emptied) = std::sync::mpsc::sync_channel(Self::QUEUED + 1);
+        let (note, noted) = std::sync::mpsc::channel::<(f64, String)>();
         let thread = std::thread::Builder::new()
             .name("records".into())
             .spawn(move || {
@@ -461,6 +497,14 @@ impl RecordThread {
                     // Never waits: a batch that finds no room is dropped.
                     let _ = give_back.try_send(batch);
                 }
+                if let (Some(w), Ok(())) = (&mut traces, &written) {
+                    if let Ok((t, message)) = noted.try_recv() {
+                        written = w
+                            .center
+                            .write(&TraceRecord::Event { t, message })
+                            .map_err(Into::into);
+                    }
+                }
                 if let (Some(w), Ok(())) = (traces, &written) {
                     written = w.flush();
                 }
@@ -472,6 +516,7 @@ impl RecordThread {
             batch: Vec::with_capacity(Self::BATCH),
             to_thread,
             emptied,
+            note,
             thread,
         })
     }
@@ -494,11 +539,16 @@ impl RecordThread {
         let _ = self.to_thread.send(batch);
     }
 
-    /// Hands over the last records, waits for the thread to enter, write and flush them all,
-    /// and returns the books, or the first write error.
-    fn finish(mut self) -> Result<Books> {
+    /// Hands over the last records and `note` (a closing note at a time, s, for the control
+    /// center's trace), waits for the thread to enter, write and flush them all, and returns
+    /// the books, or the first write error.
+    fn finish(mut self, note: Option<(f64, String)>) -> Result<Books> {
         if !self.batch.is_empty() {
             self.send();
+        }
+        if let Some(note) = note {
+            // The thread reads it once the batches end, after this send.
+            let _ = self.note.send(note);
         }
         drop(self.to_thread);
         let (books, written) = self
@@ -545,7 +595,7 @@ pub fn execute_on(
         inproc_runs(r)?;
     }
     match (engine, run_dir) {
-        (Engine::Inproc, None) => {
+        (Engine::Inproc, None) if r.scenario.roles.controller.is_none() => {
             let stop = &opts.stop;
             let mut attacker = r.profile_attacker();
             let mut s = run_inproc_any_until(r, &mut attacker, |_| {}, || stop.pending().is_none())
@@ -560,9 +610,10 @@ pub fn execute_on(
         (Engine::Inproc, Some(dir)) => {
             execute_inproc_watched(r, dir, opts, &mut r.profile_attacker())
         }
-        (Engine::Ipc, None) => {
-            // The processes need a folder of their own (the scenario as used, their pipes):
-            // a scratch run directory that keeps no traces, removed after the run.
+        (_, None) => {
+            // The processes, and a program that takes a role, need a folder of their own (the
+            // scenario as used, their pipes): a scratch run directory that keeps no traces,
+            // removed after the run.
             let scratch =
                 crate::run_dirs::create_run_dir(&std::env::temp_dir().join("fdi-mas-runs"), r)?;
             let scratch_opts = Options {

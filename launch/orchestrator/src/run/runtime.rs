@@ -21,6 +21,7 @@ use fdi_runtime::process::procfs;
 
 use crate::run::split::{Hosts, Split};
 use crate::run::supervisor::{Child, Supervisor};
+use fdi_control_center::controller::{Asker, AskerPorts};
 
 /// Grace period between SIGTERM and SIGKILL when a run is torn down.
 pub const GRACE: Duration = Duration::from_secs(2);
@@ -493,7 +494,7 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome, Run
 
     let ended = {
         let (transport, mut launcher) =
-            open_launcher(resolved, opts, &prefix, sizing).map_err(RunError::not_started)?;
+            open_launcher(resolved, &opts.stop, &prefix, sizing).map_err(RunError::not_started)?;
         run_and_tear_down(
             resolved,
             opts,
@@ -535,6 +536,93 @@ pub fn run_ipc(resolved: &Resolved, opts: &IpcOptions) -> Result<IpcOutcome, Run
     })
 }
 
+/// The controller program of an in-process run (`[roles.controller]`, lockstep): started on a
+/// node of the launcher's own in the run directory `run_dir` and its ports opened first, as
+/// the control center opens them; once it is ready, `body` runs the engine and asks it through
+/// an [`Asker`] (a stop, or the program's exit, ends the wait for an answer); then the program
+/// is let go once it reported done, and everything it started is ended. Returns `body`'s result
+/// and the program's closing note.
+pub fn with_controller_program<T>(
+    resolved: &Resolved,
+    run_dir: &Path,
+    stop: &Stop,
+    body: impl FnOnce(&mut Asker<'_, Shm>) -> Result<T>,
+) -> Result<(T, String), RunError> {
+    let Some(role) = &resolved.scenario.roles.controller else {
+        return Err(anyhow::anyhow!("the scenario has no `[roles.controller]`").into());
+    };
+    reap_stale_runs();
+    let prefix = new_prefix();
+    stop.check(BEFORE_THE_START)
+        .map_err(RunError::not_started)?;
+    let sizing = check_machine(resolved, &prefix).map_err(RunError::not_started)?;
+    let result = {
+        let (transport, mut l) =
+            open_launcher(resolved, stop, &prefix, sizing).map_err(RunError::not_started)?;
+        let r = host_and_ask(
+            resolved,
+            (run_dir, &prefix),
+            (&transport, &mut l),
+            role,
+            body,
+        );
+        l.teardown();
+        for line in l.procs.drain_stderr(OUTPUT_WAIT) {
+            log::warn!("{line}");
+        }
+        match r {
+            Err(e) if !l.started => Err(RunError::not_started(e)),
+            r => r.map_err(RunError::Failed),
+        }
+        // ports and node dropped here, before the files are removed
+    };
+    Shm::remove_leftovers(&prefix).ok();
+    result
+}
+
+/// [`with_controller_program`] on the launcher `l`'s node `transport`.
+fn host_and_ask<T>(
+    resolved: &Resolved,
+    (run_dir, prefix): (&Path, &str),
+    (transport, l): (&Shm, &mut Launcher<Shm>),
+    role: &fdi_common::roles::ExternalRole,
+    body: impl FnOnce(&mut Asker<'_, Shm>) -> Result<T>,
+) -> Result<(T, String)> {
+    let ports = AskerPorts::open(transport)?;
+    let scenario = RunDir::new(run_dir).scenario();
+    spawn_externals(resolved, (false, run_dir), prefix, &scenario, l)?;
+    await_ready(l)?;
+    start_run(resolved, transport, l)?;
+    let ids: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
+    let (out, note) = {
+        let mut watch = || -> Result<(), fdi_runtime::process::RoleError> {
+            let failed = match l.interrupt() {
+                Some(signal) => Some(format!("interrupted by {}", signal_name(signal))),
+                None => l.poll_children(),
+            };
+            failed.map_or(Ok(()), |f| {
+                Err(fdi_runtime::process::RoleError::External(f))
+            })
+        };
+        let mut asker = Asker::new((transport, ports), role, &ids, &mut watch);
+        let out = body(&mut asker)?;
+        (out, asker.summary())
+    };
+    // Interrupted: the engine stopped where it was; the program is ended with the run.
+    if l.interrupt().is_none() {
+        let stall_timeout = stall_timeout_of(resolved, None, None);
+        supervise(
+            resolved,
+            l,
+            &fdi_common::observe::Quiet,
+            Instant::now(),
+            stall_timeout,
+        )?;
+        release_and_reap(l)?;
+    }
+    Ok((out, note))
+}
+
 /// The sizing of the run's services, once the machine is known to carry them.
 fn check_machine(resolved: &Resolved, prefix: &str) -> Result<ipc::Sizing> {
     let sizing = fdi_runtime::process::sizing_for(resolved);
@@ -549,7 +637,7 @@ fn check_machine(resolved: &Resolved, prefix: &str) -> Result<ipc::Sizing> {
 /// Opens the launcher's node and ports, and makes the launcher that owns them.
 fn open_launcher(
     resolved: &Resolved,
-    opts: &IpcOptions,
+    stop: &Stop,
     prefix: &str,
     sizing: ipc::Sizing,
 ) -> Result<(Shm, Launcher<Shm>)> {
@@ -577,7 +665,7 @@ fn open_launcher(
         control,
         status,
         waker,
-        stop: opts.stop.clone(),
+        stop: stop.clone(),
         started: false,
         remote: None,
         progress: (0, Instant::now()),
@@ -703,7 +791,13 @@ fn spawn_and_supervise<X: Transport>(
 ) -> Result<Supervised> {
     spawn_roles(resolved, opts, prefix, scenario_path, l)?;
     await_ready(l)?;
-    spawn_externals(resolved, opts, prefix, scenario_path, l)?;
+    spawn_externals(
+        resolved,
+        (opts.replay, &opts.run_dir),
+        prefix,
+        scenario_path,
+        l,
+    )?;
     await_ready(l)?;
     let bar = &*opts.progress;
     bar.begin(Work::Ticks {
@@ -867,14 +961,14 @@ fn spawn_local<X: Transport>(
 /// replayer stands in for the attacker).
 fn spawn_externals<X: Transport>(
     resolved: &Resolved,
-    opts: &IpcOptions,
+    (replay, run_dir): (bool, &Path),
     prefix: &str,
     scenario_path: &Path,
     l: &mut Launcher<X>,
 ) -> Result<()> {
     use fdi_runtime::process::external::{environment, ExternalKind};
     let roles = &resolved.scenario.roles;
-    let attacker = roles.attacker.as_ref().filter(|_| !opts.replay);
+    let attacker = roles.attacker.as_ref().filter(|_| !replay);
     for (kind, role, wake, what) in [
         (
             ExternalKind::Attacker,
@@ -901,13 +995,8 @@ fn spawn_externals<X: Transport>(
             bail!("{label}: `command` names no program");
         };
         let mut cmd = Command::new(program);
-        cmd.args(args).envs(environment(
-            kind,
-            prefix,
-            resolved,
-            scenario_path,
-            &opts.run_dir,
-        ));
+        cmd.args(args)
+            .envs(environment(kind, prefix, resolved, scenario_path, run_dir));
         let slot = Slot {
             wake,
             ready: false,
