@@ -5,7 +5,10 @@
 //!
 //! The attacker is a value: [`run_inproc_any`] runs the scenario's attack profile
 //! ([`crate::attack::ProfileAttacker`]); [`run_inproc_any_with`] runs any [`Attacker`] a caller
-//! supplies. Each robot runs with its own number of joints: a team may mix arms.
+//! supplies. Each robot runs with its own number of joints: a team may mix arms. A run whose
+//! torques a program decides (`[controller] mode = "external"`) is [`Asking`]'s: the caller
+//! gives it the program ([`TorqueProgram`]; the launcher's is the control center's `Asker`,
+//! which asks a program over shared memory as the control-center process does).
 
 use std::collections::BTreeMap;
 use std::time::Instant;

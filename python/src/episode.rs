@@ -43,6 +43,8 @@ pub struct Spec {
 pub struct EnvAttacker {
     base: ProfileAttacker,
     name: String,
+    /// Entries per channel of an injection: the team's largest joint count (a robot of fewer
+    /// joints takes the first of them).
     links: usize,
     /// Per chosen robot: its id and its injection, `[position…, velocity…, torque…]`
     /// (`3 × links` entries, in rad, rad/s, N·m).
@@ -265,16 +267,39 @@ impl DefenderReward {
     }
 }
 
-/// The latest values each observer has seen, per robot in the scenario's order.
+/// The latest values each observer has seen, per robot in the scenario's order, each with its
+/// own number of joints.
 #[derive(Debug, Clone)]
 struct Seen {
     t: f64,
     /// The attacker's view: per robot the clean `y`, `ẏ`, and the center's command `u` where
-    /// the attacker sits on the torque path (zeros elsewhere): `3 × links`.
+    /// the attacker sits on the torque path (zeros elsewhere): `3 × joints`.
     attacker: Vec<f64>,
     /// The control center's view: per robot the received `y`, `ẏ`, `Ŝ`, and the observer's
-    /// residuals `y − q̂`, `ẏ − q̂̇`: `5 × links`.
+    /// residuals `y − q̂`, `ẏ − q̂̇`: `5 × joints`.
     center: Vec<f64>,
+    /// Per robot: where its entries start in `attacker` and in `center` (its `3 ×` and
+    /// `5 × joints` entries follow), and its joints.
+    at: Vec<(usize, usize, usize)>,
+}
+
+impl Seen {
+    /// Nothing seen yet, of robots with `joints` each.
+    fn new(joints: &[usize]) -> Self {
+        let mut at = Vec::with_capacity(joints.len());
+        let (mut a, mut c) = (0, 0);
+        for &l in joints {
+            at.push((a, c, l));
+            a += 3 * l;
+            c += 5 * l;
+        }
+        Self {
+            t: 0.0,
+            attacker: vec![0.0; a],
+            center: vec![0.0; c],
+            at,
+        }
+    }
 }
 
 /// An episode of a scenario.
@@ -282,7 +307,10 @@ struct Seen {
 pub struct Episode {
     resolved: Resolved,
     spec: Spec,
+    /// The action's entries per robot and channel: the team's largest joint count.
     links: usize,
+    /// Each robot's joints, in the scenario's order.
+    joints: Vec<usize>,
     agents: Vec<u32>,
     engine: Option<Lockstep>,
     attacker: EnvAttacker,
@@ -326,22 +354,23 @@ impl Episode {
     pub fn new(resolved: Resolved, spec: Spec) -> Result<Self, String> {
         check(&resolved, &spec)?;
         let engine = Lockstep::new(&resolved).map_err(|e| e.to_string())?;
-        let links = resolved.joint_count().ok_or(
-            "the environments take robots of one joint count (their spaces have an entry per \
-                 joint); this team mixes them: `fdi_mas.run` and `fdi-launch run` run it",
-        )?;
+        // A team may mix robots: each view has each robot's own joints, an action the largest
+        // count's entries per robot and channel (a robot of fewer joints ignores the rest).
+        let joints: Vec<usize> = resolved
+            .scenario
+            .agents
+            .iter()
+            .map(|a| a.model.dof())
+            .collect();
+        let links = joints.iter().copied().max().unwrap_or(0);
         let agents: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
         let attacker = EnvAttacker::new(&resolved, &spec, links);
-        let n = agents.len();
         Ok(Self {
-            seen: Seen {
-                t: 0.0,
-                attacker: vec![0.0; n * 3 * links],
-                center: vec![0.0; n * 5 * links],
-            },
+            seen: Seen::new(&joints),
             resolved,
             spec,
             links,
+            joints,
             agents,
             engine: Some(engine),
             attacker,
@@ -353,18 +382,56 @@ impl Episode {
     pub fn reset(&mut self, resolved: Option<Resolved>) -> Result<(), String> {
         let resolved = resolved.unwrap_or_else(|| self.resolved.clone());
         let fresh = Self::new(resolved, self.spec.clone())?;
-        if fresh.agents != self.agents || fresh.links != self.links {
+        if fresh.agents != self.agents || fresh.joints != self.joints {
             return Err(format!(
-                "the new scenario's robots ({:?}, {} links) are not the episode's ({:?}, {} links)",
-                fresh.agents, fresh.links, self.agents, self.links
+                "the new scenario's robots ({:?}, joints {:?}) are not the episode's ({:?}, joints \
+                 {:?})",
+                fresh.agents, fresh.joints, self.agents, self.joints
             ));
         }
         *self = fresh;
         Ok(())
     }
 
+    /// The action's entries per robot and channel: the team's largest joint count.
     pub fn links(&self) -> usize {
         self.links
+    }
+
+    /// Each robot's joints, in the scenario's order (its entries in each view).
+    pub fn joints(&self) -> &[usize] {
+        &self.joints
+    }
+
+    /// Per entry of an action (robots × channels × links): whether it acts, that is whether
+    /// its link is a joint of its robot (a robot of fewer joints than the team's largest
+    /// ignores the rest).
+    pub fn action_mask(&self) -> Vec<bool> {
+        let mut mask = Vec::with_capacity(self.action_size());
+        for id in &self.spec.robots {
+            let n = self.joints_of(*id);
+            for _ in 0..self.action_channels() {
+                mask.extend((0..self.links).map(|j| j < n));
+            }
+        }
+        mask
+    }
+
+    /// The entries of `action` that act ([`Self::action_mask`]), in order.
+    pub fn acting(&self, action: &[f64]) -> Vec<f64> {
+        action
+            .iter()
+            .zip(self.action_mask())
+            .filter_map(|(a, acts)| acts.then_some(*a))
+            .collect()
+    }
+
+    /// The joints of robot `id` (0 for a robot the scenario lacks: [`check`] refused it).
+    fn joints_of(&self, id: u32) -> usize {
+        self.agents
+            .iter()
+            .position(|a| *a == id)
+            .map_or(0, |i| self.joints[i])
     }
 
     pub fn agents(&self) -> &[u32] {
@@ -457,15 +524,15 @@ impl Episode {
                     *dst = v * budget;
                 }
             }
-            if let (Some(budget), Some(engine), Some(id)) = (
+            let joints = self.spec.robots.get(r).map(|id| self.joints_of(*id));
+            if let (Some(budget), Some(engine), Some(id), Some(n)) = (
                 self.spec.correction,
                 self.engine.as_mut(),
                 self.spec.robots.get(r),
+                joints,
             ) {
-                let c: Vec<f64> = a[self.spec.channels.len() * l..]
-                    .iter()
-                    .map(|v| v * budget)
-                    .collect();
+                let from = self.spec.channels.len() * l;
+                let c: Vec<f64> = a[from..from + n].iter().map(|v| v * budget).collect();
                 // The robots and their links were checked when the episode was made.
                 let _ = engine.set_correction(*id, &c);
             }
@@ -483,13 +550,13 @@ impl Episode {
             out.truncated = self.summary.as_ref().is_some_and(|s| s.partial.is_none());
             return out;
         };
-        let (l, agents) = (self.links, &self.agents);
+        let agents = &self.agents;
         let seen = &mut self.seen;
         let mut attacked = vec![0u64; agents.len()];
         for _ in 0..self.spec.decision_period {
             let mut i = 0;
             let ran = engine.tick(&mut self.attacker, |r: &TickRecord| {
-                seen_record(seen, l, i, r);
+                seen_record(seen, i, r);
                 attacked[i] += u64::from(fdi_common::detect::in_force(r));
                 i += 1;
             });
@@ -533,16 +600,17 @@ impl Episode {
 }
 
 /// Stores what robot `i`'s record of a tick shows each observer.
-fn seen_record(seen: &mut Seen, l: usize, i: usize, r: &TickRecord) {
+fn seen_record(seen: &mut Seen, i: usize, r: &TickRecord) {
     seen.t = r.agent.t;
-    let a = &mut seen.attacker[i * 3 * l..(i + 1) * 3 * l];
+    let (at_a, at_c, l) = seen.at[i];
+    let a = &mut seen.attacker[at_a..at_a + 3 * l];
     copy(&mut a[..l], r.agent.y.as_slice());
     copy(&mut a[l..2 * l], r.agent.yd.as_slice());
     match &r.actuation {
         Some(_) => copy(&mut a[2 * l..], r.center.u.as_slice()),
         None => a[2 * l..].fill(0.0),
     }
-    let c = &mut seen.center[i * 5 * l..(i + 1) * 5 * l];
+    let c = &mut seen.center[at_c..at_c + 5 * l];
     let (y, yd) = (r.attack.y.as_slice(), r.attack.yd.as_slice());
     copy(&mut c[..l], y);
     copy(&mut c[l..2 * l], yd);

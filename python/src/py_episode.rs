@@ -216,9 +216,16 @@ impl Episode {
         self.with(|e| Ok(e.progress()))
     }
 
-    /// Robot ids (scenario order), links, entries of an action.
+    /// Robot ids (scenario order), links (an action's entries per robot and channel: the
+    /// team's largest joint count), entries of an action.
     fn shape(&self) -> PyResult<(Vec<u32>, usize, usize)> {
         self.with(|e| Ok((e.agents().to_vec(), e.links(), e.action_size())))
+    }
+
+    /// Each robot's joints (scenario order), and per entry of an action whether it acts (its
+    /// link is a joint of its robot).
+    fn joints(&self) -> PyResult<(Vec<usize>, Vec<bool>)> {
+        self.with(|e| Ok((e.joints().to_vec(), e.action_mask())))
     }
 
     /// Ends the episode and frees the engine; any later call raises.
@@ -349,7 +356,9 @@ fn step_slot(slot: &mut Slot, action: &[f64], learner: &Learner) {
         slot.episode.apply_action(action);
         slot.episode.step()
     };
-    slot.reward = learner.reward(&o, action);
+    // The defence's effort counts the entries that act (a robot of fewer joints than the
+    // team's largest ignores the rest).
+    slot.reward = learner.reward(&o, &slot.episode.acting(action));
     (slot.terminated, slot.truncated) = (o.terminated, o.truncated);
     slot.ended_digest = None;
     if o.terminated || o.truncated {
@@ -439,6 +448,15 @@ fn float_bytes(v: &[f64]) -> Vec<u8> {
 }
 
 impl Batch {
+    /// `f` of the batch's first environment's episode (every one has the same spec and team).
+    fn first<T>(&self, f: impl FnOnce(&episode::Episode) -> T) -> PyResult<T> {
+        let guard = self.guard()?;
+        let stepping = guard.as_ref().ok_or_else(closed)?;
+        let slot = stepping.envs.slots.first().ok_or_else(closed)?;
+        let slot = slot.lock().map_err(|_| failed_earlier())?;
+        Ok(f(&slot.episode))
+    }
+
     /// A batch of `slots` (episodes and their draws) for `learner`, stepped on `threads`
     /// threads (every core by default).
     fn of_slots(
@@ -716,12 +734,13 @@ impl Batch {
 
     /// Robot ids (scenario order), links, entries of one environment's action.
     fn shape(&self) -> PyResult<(Vec<u32>, usize, usize)> {
-        let guard = self.guard()?;
-        let stepping = guard.as_ref().ok_or_else(closed)?;
-        let slot = stepping.envs.slots.first().ok_or_else(closed)?;
-        let slot = slot.lock().map_err(|_| failed_earlier())?;
-        let e = &slot.episode;
-        Ok((e.agents().to_vec(), e.links(), e.action_size()))
+        self.first(|e| (e.agents().to_vec(), e.links(), e.action_size()))
+    }
+
+    /// Each robot's joints (scenario order), and per entry of one environment's action whether
+    /// it acts.
+    fn joints(&self) -> PyResult<(Vec<usize>, Vec<bool>)> {
+        self.first(|e| (e.joints().to_vec(), e.action_mask()))
     }
 
     /// Frees every engine and stops the threads; any later call raises.

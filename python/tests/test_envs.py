@@ -3,6 +3,8 @@ line, and clear errors for bad input."""
 
 from __future__ import annotations
 
+import pathlib
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -299,3 +301,65 @@ def test_the_vector_defender_gives_each_episode_the_single_one_s_digest_and_rewa
     assert mixed[0].digests() == mixed[1].digests() and len(set(mixed[0].digests())) > 1
     vec = gym.make_vec("fdi_mas/Defender-v0", num_envs=2, vectorization_mode="vector_entry_point", scenario=scenario)
     assert vec.num_envs == 2
+
+
+MIXED = pathlib.Path(__file__).parents[2] / "scenarios" / "mixed-team.toml"
+
+
+def test_a_team_of_different_robots_has_each_robot_s_joints_and_ignores_the_rest_of_an_action(fdi_launch, tmp_path):
+    summary, _ = cli_run(fdi_launch, tmp_path, str(MIXED), "--duration-s", "0.2")
+    s = fdi_mas.Scenario.load(str(MIXED), duration_s=0.2)
+    env = AttackerEnv(s, attack=None, channels=("position", "velocity"))
+    assert (env.joints, env.links) == ([7, 7, 2, 2], 7)
+    assert env.observation_space.shape == (1 + 3 * 18,)
+    names = env.observation_names
+    assert "robot3.y2" in names and "robot3.y3" not in names and names[-1] == "robot4.u2"
+    assert env.action_space.shape == env.action_mask.shape == (4, 2, 7)
+    assert env.action_mask[:2].all() and env.action_mask[2:, :, :2].all() and not env.action_mask[2:, :, 2:].any()
+    # Zeros: the command line's run. Values where the mask is False: ignored, the same run.
+    _, _, zeros = run_episode(env, np.zeros(env.action_space.shape))
+    assert zeros["digest"] == summary["trace_digest"]
+    ignored = np.where(env.action_mask, 0.0, 0.9)
+    _, _, info = run_episode(env, ignored)
+    assert info["digest"] == zeros["digest"]
+    acting = np.zeros(env.action_space.shape)
+    acting[2, 0, 1] = 0.5
+    _, _, info = run_episode(env, acting)
+    assert info["digest"] != zeros["digest"], "an entry of a joint acts"
+    # The vector environment: the single one's episode.
+    vec = VectorAttackerEnv(2, s, attack=None, channels=("position", "velocity"), threads=1)
+    obs, _ = vec.reset(seed=0)
+    assert obs.shape == (2, 1 + 3 * 18) and (vec.joints, vec.links) == ([7, 7, 2, 2], 7)
+    while not vec.step(np.broadcast_to(ignored, (2, *ignored.shape)))[3].all():
+        pass
+    assert vec.digests() == [zeros["digest"]] * 2
+    vec.close()
+
+
+def test_a_team_of_different_robots_passes_the_checkers_and_the_defence_counts_the_joints_it_acts_on():
+    s = fdi_mas.Scenario.load(str(MIXED), duration_s=0.05)
+    check_env(AttackerEnv(s), skip_render_check=True)
+    check_env(DetectorEnv(s), skip_render_check=True)
+    check_env(DefenderEnv(s, decision_period=5), skip_render_check=True)
+    parallel_api_test(attack_defend_v0.parallel_env(scenario=s), num_cycles=60)
+    defender = DefenderEnv(s, attacks=("none",), vary_seed=False, decision_period=50)
+    assert defender.observation_space.shape == (1 + 5 * 18,) and defender.action_space.shape == (4, 7)
+    defender.reset()
+    # 0.5 on every joint, 1 beyond a robot's joints (ignored): the effort is 0.25.
+    _, _, _, _, info = defender.step(np.where(defender.action_mask, 0.5, 1.0))
+    assert info["effort"] == 0.25
+    # A correction of a two-joint arm reaches it; one beyond its joints changes nothing.
+    small = DefenderEnv(s, attacks=("none",), vary_seed=False, decision_period=50)
+    zeros = run_episode(small, np.zeros(small.action_space.shape))[2]["digest"]
+    beyond = np.zeros(small.action_space.shape)
+    beyond[2, 2:] = 1.0
+    assert run_episode(small, beyond)[2]["digest"] == zeros
+    on_joint = np.zeros(small.action_space.shape)
+    on_joint[2, 1] = 1.0
+    assert run_episode(small, on_joint)[2]["digest"] != zeros
+    vec = VectorDefenderEnv(2, s, attacks=("none",), vary_seed=False, decision_period=50, threads=1)
+    vec.reset(seed=0)
+    _, rewards, _, _, _ = vec.step(np.broadcast_to(np.where(defender.action_mask, 0.5, 1.0), (2, 4, 7)))
+    assert vec.joints == [7, 7, 2, 2]
+    assert rewards[0] == rewards[1] and np.isfinite(rewards).all()
+    vec.close()

@@ -98,13 +98,25 @@ def views(core_out: tuple[Any, ...]) -> tuple[np.ndarray, np.ndarray]:
     )
 
 
-def observation_names(agents: Sequence[int], links: int, parts: Sequence[str]) -> list[str]:
-    """Names of a view's entries: ``t_s``, then per robot and part, per link."""
+def observation_names(agents: Sequence[int], joints: Sequence[int], parts: Sequence[str]) -> list[str]:
+    """Names of a view's entries: ``t_s``, then per robot and part, per joint of that robot
+    (``joints``: each robot's, in the order of ``agents``; a team may mix robots)."""
     names = ["t_s"]
-    for a in agents:
+    for a, n in zip(agents, joints, strict=True):
         for p in parts:
-            names.extend(f"robot{a}.{p}{i}" for i in range(1, links + 1))
+            names.extend(f"robot{a}.{p}{i}" for i in range(1, n + 1))
     return names
+
+
+def team_of(core: Any, action_shape: tuple[int, ...]) -> tuple[list[int], list[int], int, np.ndarray]:
+    """A core episode's (or batch's) robots (scenario order), their joints, ``links`` (an
+    action's entries per robot and channel: the team's largest joint count) and the action
+    mask of an action of ``action_shape`` (a function of ``links``): True where the entry acts,
+    False where its link is beyond its robot's joints (the entry is ignored)."""
+    agents, links, size = core.shape()
+    joints, mask = core.joints()
+    shape = action_shape if action_shape else (size,)
+    return list(agents), list(joints), int(links), np.asarray(mask, dtype=bool).reshape(shape)
 
 
 ATTACKER_PARTS = ("y", "y_dot", "u")

@@ -91,9 +91,12 @@ class AttackDefendEnv(ParallelEnv):
             int(decision_period),
         )
         self.detect_weights = (float(detect_reward), float(false_alarm_penalty), float(miss_penalty))
-        robot_ids, links, _ = self._episode.shape()
-        self.robot_ids = robot_ids
+        _, links, _ = self._episode.shape()
         self._action_shape = (len(self.robots), len(self.channels), links)
+        robot_ids, self.joints, self.links, self.action_mask = _common.team_of(
+            self._episode, self._action_shape
+        )
+        self.robot_ids = robot_ids
         self.possible_agents = [ATTACKER, DETECTOR]
         self.agents: list[str] = []
         self._spaces = {
@@ -101,7 +104,7 @@ class AttackDefendEnv(ParallelEnv):
                 spaces.Box(
                     -np.inf,
                     np.inf,
-                    shape=(len(_common.observation_names(robot_ids, links, _common.ATTACKER_PARTS)),),
+                    shape=(len(_common.observation_names(robot_ids, self.joints, _common.ATTACKER_PARTS)),),
                     dtype=np.float64,
                 ),
                 spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float64),
@@ -110,7 +113,7 @@ class AttackDefendEnv(ParallelEnv):
                 spaces.Box(
                     -np.inf,
                     np.inf,
-                    shape=(len(_common.observation_names(robot_ids, links, _common.CENTER_PARTS)),),
+                    shape=(len(_common.observation_names(robot_ids, self.joints, _common.CENTER_PARTS)),),
                     dtype=np.float64,
                 ),
                 spaces.MultiBinary(len(robot_ids)),

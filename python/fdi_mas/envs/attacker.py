@@ -18,13 +18,15 @@ class AttackerEnv(gym.Env):
     environment.
 
     **Observation** (``Box``, float64): what the attacker sees on the wire after the last tick:
-    ``[t, then per robot (scenario order): y (links), y_dot (links), u (links)]`` — each
+    ``[t, then per robot (scenario order): y, y_dot, u (each of its joints)]`` — each
     robot's clean measured positions (rad) and velocities (rad/s), and the control center's
     torque command (N·m) on the robots whose torque path the attacker sits on (zeros
     elsewhere). ``observation_names`` names every entry. Zeros at reset (nothing seen yet).
 
-    **Action** (``Box`` in [-1, 1], shape ``(robots, channels, links)``): the injection on each
-    chosen robot's chosen channels, as a fraction of the channel's budget (``budget``: rad,
+    **Action** (``Box`` in [-1, 1], shape ``(robots, channels, links)``, ``links`` the team's
+    largest joint count): the injection on each chosen robot's chosen channels and joints (in a
+    team that mixes robots, a robot's entries beyond its joints are ignored: ``action_mask`` is
+    False there; ``joints`` has each robot's count), as a fraction of the channel's budget (``budget``: rad,
     rad/s, N·m; default 0.05, 0.5, 5). It is added to what the scenario's attack profile
     (``attack``, ``none`` by default) delivers and holds for the ``decision_period`` ticks of
     the step. An action with a non-finite entry, an entry outside [-1, 1] or another shape
@@ -90,13 +92,15 @@ class AttackerEnv(gym.Env):
             self.detectors,
             self.decision_period,
         )
-        agents, links, _ = self._episode.shape()
-        self.links = links
-        self.observation_names = _common.observation_names(agents, links, _common.ATTACKER_PARTS)
+        _, links, _ = self._episode.shape()
+        self._action_shape = (len(self.robots), len(self.channels), links)
+        agents, self.joints, self.links, self.action_mask = _common.team_of(
+            self._episode, self._action_shape
+        )
+        self.observation_names = _common.observation_names(agents, self.joints, _common.ATTACKER_PARTS)
         self.observation_space = spaces.Box(
             -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
         )
-        self._action_shape = (len(self.robots), len(self.channels), links)
         self.action_space = spaces.Box(-1.0, 1.0, shape=self._action_shape, dtype=np.float64)
         self._ended = True
 

@@ -24,13 +24,15 @@ class DefenderEnv(_common.DrawnEpisodeEnv):
     torque the scenario's controller commands, robot by robot and joint by joint.
 
     **Observation** (``Box``, float64): what the control center has after the last tick:
-    ``[t, then per robot (scenario order): y, y_dot, s_hat, r, r_dot]`` (each of ``links``
-    entries) — the measurements it received (tampered or not), the NN estimate ``Ŝ`` of the
+    ``[t, then per robot (scenario order): y, y_dot, s_hat, r, r_dot]`` (each of its joints)
+    — the measurements it received (tampered or not), the NN estimate ``Ŝ`` of the
     attack, and the observer's residuals ``y − q̂``, ``ẏ − q̂̇``; as for ``Detector-v0``.
     ``observation_names`` names every entry.
 
-    **Action** (``Box`` in [-1, 1], shape ``(robots, links)``): per robot and joint a torque
-    correction, as a fraction of ``correction_budget`` (N·m, default 1), added at the control
+    **Action** (``Box`` in [-1, 1], shape ``(robots, links)``, ``links`` the team's largest
+    joint count; in a team that mixes robots a robot's entries beyond its joints are ignored,
+    ``action_mask`` False there, and count in neither the effort nor the reward): per robot and
+    joint a torque correction, as a fraction of ``correction_budget`` (N·m, default 1), added at the control
     center to the torque its controller commands, for the step's ``decision_period`` ticks.
     It is the torque the center sends (and records as its ``u``); an attack on the torque path
     acts on it afterwards. An action with a non-finite entry, an entry outside [-1, 1] or
@@ -87,15 +89,16 @@ class DefenderEnv(_common.DrawnEpisodeEnv):
             self._scenarios[self.attacks[0]], robots, ["correction"], [0.0, 0.0, 0.0], [],
             self.decision_period, correction_budget=budget,
         )
-        agents, links, size = self._episode.shape()
-        self.agents, self.links = agents, links
+        _, links, _ = self._episode.shape()
+        self.agents, self.joints, self.links, self.action_mask = _common.team_of(
+            self._episode, (len(robots), links)
+        )
         self.error_scale = _common.damage_scale_of(error_scale, self.base, robots)
-        self.observation_names = _common.observation_names(agents, links, _common.CENTER_PARTS)
+        self.observation_names = _common.observation_names(self.agents, self.joints, _common.CENTER_PARTS)
         self.observation_space = spaces.Box(
             -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
         )
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(len(agents), links), dtype=np.float64)
-        assert size == len(agents) * links
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(len(self.agents), links), dtype=np.float64)
 
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -106,13 +109,14 @@ class DefenderEnv(_common.DrawnEpisodeEnv):
         _, obs = _common.views(out)
         error = damage / ticks if ticks else 0.0
         # The one formula, in Rust (the vector environment's too).
-        reward = _core.defender_reward(ticks, damage, a.ravel().tolist(), self.error_scale, self.effort_weight)
+        acting = a[self.action_mask]
+        reward = _core.defender_reward(ticks, damage, acting.tolist(), self.error_scale, self.effort_weight)
         info: dict[str, Any] = {
             "t_s": float(obs[0]),
             "attack": self.attack,
             "attacked_ticks": attacked,
             "tracking_error": error,
-            "effort": float(np.mean(a * a)),
+            "effort": float(np.mean(acting * acting)),
         }
         if terminated or truncated:
             self._ended = True

@@ -51,8 +51,8 @@ class DetectorEnv(_common.DrawnEpisodeEnv):
     """A detector at the control center, as a Gymnasium environment.
 
     **Observation** (``Box``, float64): what the control center has after the last tick:
-    ``[t, then per robot (scenario order): y, y_dot, s_hat, r, r_dot]`` (each of ``links``
-    entries) — the measurements it received (tampered or not), the NN estimate ``Ŝ`` of the
+    ``[t, then per robot (scenario order): y, y_dot, s_hat, r, r_dot]`` (each of its joints)
+    — the measurements it received (tampered or not), the NN estimate ``Ŝ`` of the
     attack, and the observer's residuals ``y − q̂``, ``ẏ − q̂̇``. ``observation_names`` names
     every entry.
 
@@ -99,14 +99,13 @@ class DetectorEnv(_common.DrawnEpisodeEnv):
         self._episode = _core.Episode(
             self._scenarios[self.attacks[0]], [], [], [0.0, 0.0, 0.0], [], self.decision_period
         )
-        agents, links, _ = self._episode.shape()
-        self.links = links
-        self.agents = agents
-        self.observation_names = _common.observation_names(agents, links, _common.CENTER_PARTS)
+        # (No action on the wire: the mask of an empty action.)
+        self.agents, self.joints, self.links, _ = _common.team_of(self._episode, ())
+        self.observation_names = _common.observation_names(self.agents, self.joints, _common.CENTER_PARTS)
         self.observation_space = spaces.Box(
             -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
         )
-        self.action_space = spaces.MultiBinary(len(agents))
+        self.action_space = spaces.MultiBinary(len(self.agents))
 
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:

@@ -73,11 +73,10 @@ class VectorAttackerEnv(VectorEnv):
             self.damage_scale,
             threads,
         )
-        agents, links, _ = self._batch.shape()
-        self._open(
-            _common.observation_names(agents, links, _common.ATTACKER_PARTS),
-            (len(self.robots), len(self.channels), links),
-        )
+        _, links, _ = self._batch.shape()
+        shape = (len(self.robots), len(self.channels), links)
+        agents, self.joints, self.links, self.action_mask = _common.team_of(self._batch, shape)
+        self._open(_common.observation_names(agents, self.joints, _common.ATTACKER_PARTS), shape)
 
     def _open(self, observation_names: list[str], action_shape: tuple[int, ...]) -> None:
         """The spaces of a batch whose observations are named ``observation_names`` and whose
@@ -196,4 +195,6 @@ class VectorDefenderEnv(VectorAttackerEnv):
             threads,
         )
         agents, links, _ = self._batch.shape()
-        self._open(_common.observation_names(agents, links, _common.CENTER_PARTS), (len(agents), links))
+        shape = (len(agents), links)
+        agents, self.joints, self.links, self.action_mask = _common.team_of(self._batch, shape)
+        self._open(_common.observation_names(agents, self.joints, _common.CENTER_PARTS), shape)
