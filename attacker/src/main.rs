@@ -1,23 +1,9 @@
 //! `fdi-attacker`: started by `fdi-launch`.
 
-use std::process::ExitCode;
-
-use clap::Parser;
-use fdi_runtime::process::ProcessArgs;
-
-#[derive(Debug, Parser)]
-#[command(
-    name = "fdi-attacker",
-    about = "fdi-mas attacker process (started by fdi-launch)"
-)]
-struct Cli {
-    #[command(flatten)]
-    args: ProcessArgs,
-}
-
-fn main() -> ExitCode {
-    match fdi_attacker::run_process(Cli::parse().args) {
-        Ok(_) => ExitCode::SUCCESS,
-        Err(_) => ExitCode::FAILURE,
-    }
+fn main() -> std::process::ExitCode {
+    fdi_runtime::role::main(
+        "fdi-attacker",
+        "fdi-mas attacker process (started by fdi-launch)",
+        fdi_attacker::run_process,
+    )
 }

@@ -221,3 +221,24 @@ pub fn run_process<R: Role>(role: &R, args: &ProcessArgs) -> Result<Ended, Faile
         Failed
     })
 }
+
+/// The `main` of a role's binary, the same for every role: its command line (the program
+/// `name`, a line `about` it, the [`ProcessArgs`]) parsed (a bad one said by clap, which exits),
+/// then `run` (the role's [`run_process`]); success unless it [`Failed`].
+#[cfg(feature = "clap")]
+pub fn main(
+    name: &'static str,
+    about: &'static str,
+    run: impl FnOnce(ProcessArgs) -> Result<Ended, Failed>,
+) -> std::process::ExitCode {
+    use clap::{Args as _, FromArgMatches as _};
+    // (After the arguments: their struct's doc would stand as the program's `about`.)
+    let matches = ProcessArgs::augment_args(clap::Command::new(name))
+        .about(about)
+        .get_matches();
+    let args = ProcessArgs::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    match run(args) {
+        Ok(_) => std::process::ExitCode::SUCCESS,
+        Err(Failed) => std::process::ExitCode::FAILURE,
+    }
+}
