@@ -1002,8 +1002,9 @@ impl Scenario {
         out
     }
 
-    /// A program in a role (`[roles]`) is told one joint count for every robot
-    /// (docs/protocol.md): a team that mixes joint counts runs without one.
+    /// An attacker or monitor program (`[roles]`) is told one joint count for every robot
+    /// (docs/protocol.md): a team that mixes joint counts runs without one. A controller
+    /// program is asked each robot's ticks with its own joints (`FDI_JOINTS`).
     fn mixed_team_role_problems(&self) -> Vec<Problem> {
         let dofs = self.joint_counts();
         if dofs.len() < 2 {
@@ -1013,14 +1014,14 @@ impl Scenario {
         let roles = [
             ("roles.attacker", self.roles.attacker.is_some()),
             ("roles.monitor", self.roles.monitor.is_some()),
-            ("roles.controller", self.roles.controller.is_some()),
         ];
         (roles.iter().filter(|(_, set)| *set))
             .map(|(path, _)| Problem {
                 path: (*path).into(),
                 message: format!(
-                    "a program in a role is told one joint count for every robot, and this \
-                     team mixes {} joints: run it with robots of one joint count",
+                    "an attacker or monitor program is told one joint count for every robot, \
+                     and this team mixes {} joints: run it with robots of one joint count (a \
+                     controller program takes a team of different robots)",
                     counts.join(" and ")
                 ),
             })
@@ -1652,14 +1653,22 @@ mod tests {
         });
         s.agents[2].disturbance.as_mut().expect("set").links.pop();
         s.roles.monitor = Some(toml::from_str("command = [\"judge\"]").expect("a role"));
+        s.roles.controller = Some(toml::from_str("command = [\"decide\"]").expect("a role"));
         let said = paths(&s);
         for expected in [
             "agents[2].gains.gain_k: must be finite and > 0, got -1",
             "agents[2].disturbance.links: needs 3 entries (one per link), found 2",
-            "roles.monitor: a program in a role is told one joint count for every robot, and this team mixes 2 and 3 joints",
+            "roles.monitor: an attacker or monitor program is told one joint count for every robot, and this team mixes 2 and 3 joints",
         ] {
             assert!(said.iter().any(|p| p.starts_with(expected)), "{expected}: {said:#?}");
         }
+        // A controller program takes the team (each robot's ticks with its own joints).
+        assert!(
+            !said
+                .iter()
+                .any(|p| p.starts_with("roles.controller: an attacker")),
+            "{said:#?}"
+        );
     }
 
     /// Regression (issue 18): syntax errors said only `TOML syntax: invalid float`, without

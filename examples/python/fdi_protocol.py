@@ -173,7 +173,12 @@ class Env:
         self.scenario = get("FDI_SCENARIO")  # the run's resolved scenario (TOML)
         self.run_dir = get("FDI_RUN_DIR")
         self.agents = [int(a) for a in get("FDI_AGENTS").split(",") if a]
-        self.dof = int(get("FDI_DOF"))  # links per agent
+        # Joints per agent: one count for every robot, or None for a team of different robots
+        # (FDI_DOF is then "mixed"; only a controller program takes such a team).
+        dof = get("FDI_DOF")
+        self.dof = None if dof == "mixed" else int(dof)
+        # Each agent's joints, in the order of FDI_AGENTS.
+        self.joints = dict(zip(self.agents, (int(n) for n in get("FDI_JOINTS").split(","))))
         self.ticks = int(get("FDI_TICKS"))  # ticks k = 0 .. ticks - 1
         self.dt = float(get("FDI_CONTROL_PERIOD_S"))  # Δ, the very f64 of the scenario
         self.clock = get("FDI_CLOCK")  # "lockstep" or "realtime"

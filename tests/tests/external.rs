@@ -1045,6 +1045,70 @@ fn the_python_controller_gives_the_built_in_digest_on_the_panda_team_too() {
     assert_eq!(digest(&py), digest(&rust));
 }
 
+/// The same program takes a team of different robots (`scenarios/mixed-team.toml`: two
+/// Pandas, two paper arms, each with its own gains; `FDI_DOF` is `mixed`, `FDI_JOINTS` each
+/// robot's count): on both engines the built-in traditional law's digest.
+#[test]
+fn the_python_controller_gives_the_built_in_digest_on_a_mixed_team() {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-controller-mixed");
+    let scenario = with_python("scenarios/mixed-team.toml", &python, &s.0, |doc| {
+        let urdf = repo_path("scenarios/robots/panda.urdf")
+            .display()
+            .to_string();
+        let model = doc
+            .get_mut("defaults")
+            .and_then(|d| d.get_mut("model"))
+            .and_then(|m| m.as_table_mut())
+            .expect("[defaults] model: the Pandas'");
+        model.insert("path".into(), urdf.into());
+        if let Some(c) = doc.get_mut("controller").and_then(|c| c.as_table_mut()) {
+            c.insert("mode".into(), "external".into());
+        }
+        let mut role = toml::Table::new();
+        let program = repo_path("examples/python/controller.py");
+        role.insert(
+            "command".into(),
+            toml::Value::Array(vec![
+                python.display().to_string().into(),
+                program.display().to_string().into(),
+            ]),
+        );
+        role.insert("name".into(), "python-traditional".into());
+        set_role(doc, "controller", toml::Value::Table(role), 1.0);
+    });
+    let builtin = repo_path("scenarios/mixed-team.toml").display().to_string();
+    let rust = json(&launch(
+        &[
+            "run",
+            &builtin,
+            "--duration-s",
+            "1",
+            "--engine",
+            "inproc",
+            "--json",
+        ],
+        &s.0.join("rust"),
+        WATCHDOG,
+    ));
+    assert_eq!(rust["controller"], "traditional");
+    for engine in ["ipc", "inproc"] {
+        let py = json(&launch(
+            &[
+                "run",
+                &scenario.display().to_string(),
+                "--engine",
+                engine,
+                "--json",
+            ],
+            &s.0.join(engine),
+            WATCHDOG,
+        ));
+        assert_eq!(digest(&py), digest(&rust), "{engine}");
+        assert_eq!(rejected_torques(&py), [0; 4], "{engine}");
+    }
+}
+
 /// A SIGKILLed launcher cannot end the programs it started, and a program need not watch its
 /// parent: the kernel sends it SIGTERM when the launcher dies (here a shell that never says
 /// ready, waited for by the launcher until it is killed).

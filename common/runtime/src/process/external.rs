@@ -11,7 +11,7 @@ use crate::ipc::{Bell as _, IpcError, Transport, Wake};
 pub const MONITOR_LAG: u64 = 64;
 
 /// The environment variables of an external role, in the order docs/protocol.md lists them.
-pub const ENV_VARS: [&str; 11] = [
+pub const ENV_VARS: [&str; 12] = [
     "FDI_PREFIX",
     "FDI_ROLE",
     "FDI_SCENARIO",
@@ -23,6 +23,7 @@ pub const ENV_VARS: [&str; 11] = [
     "FDI_CLOCK",
     "FDI_MONITOR_LAG",
     "FDI_LAUNCHER_PID",
+    "FDI_JOINTS",
 ];
 
 /// The bell of a program's wake-up event, made at its first ring: the program opens its
@@ -85,20 +86,27 @@ pub fn environment(
 ) -> Vec<(&'static str, String)> {
     let s = &resolved.scenario;
     let agents: Vec<String> = s.agents.iter().map(|a| a.id.to_string()).collect();
-    let dof = s.agents.first().map_or(0, |a| a.model.dof());
+    let joints: Vec<String> = s.agents.iter().map(|a| a.model.dof().to_string()).collect();
+    // One count for every robot, or `mixed` (a team of different robots: `FDI_JOINTS` has
+    // each one's), never one robot's count standing for another's.
+    let dof = match resolved.joint_count() {
+        Some(n) => n.to_string(),
+        None => "mixed".to_string(),
+    };
     let values = [
         prefix.to_string(),
         kind.as_str().to_string(),
         scenario.display().to_string(),
         run_dir.display().to_string(),
         agents.join(","),
-        dof.to_string(),
+        dof,
         resolved.ticks().to_string(),
         // Rust's shortest round-trip form: a reader's float parser gets the very f64.
         format!("{:?}", s.control_period_s),
         s.clock.as_str().to_string(),
         MONITOR_LAG.to_string(),
         std::process::id().to_string(),
+        joints.join(","),
     ];
     ENV_VARS.into_iter().zip(values).collect()
 }
@@ -124,5 +132,9 @@ mod tests {
         assert_eq!(get("FDI_ROLE"), Some("monitor"));
         assert_eq!(get("FDI_TICKS"), Some("40000"));
         assert_eq!(get("FDI_CONTROL_PERIOD_S"), Some("0.001"));
+        assert_eq!(
+            (get("FDI_DOF"), get("FDI_JOINTS")),
+            (Some("2"), Some("2,2,2,2"))
+        );
     }
 }
