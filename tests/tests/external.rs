@@ -990,14 +990,11 @@ fn realtime_a_silent_controller_holds_the_last_torque_past_each_deadline() {
     );
 }
 
-/// The same program on the Panda team (7 joints, gains scaled by each arm's inertia, which the
-/// program reads off the first question's `M(q_d)`): the built-in traditional law's digest too.
-#[test]
-fn the_python_controller_gives_the_built_in_digest_on_the_panda_team_too() {
-    let Some(python) = python() else { return };
-    let s = Scratch::new("ext-controller-panda");
-    let scenario = with_python("scenarios/panda-team.toml", &python, &s.0, |doc| {
-        doc.insert("duration_s".into(), 2.0.into());
+/// `scenario` (a repo file whose `[defaults]` model is the Panda's URDF) for `duration_s`, its
+/// torques decided by `examples/python/controller.py` (`python-traditional`) under `python`;
+/// written into `dir`.
+fn python_controller_on(scenario: &str, python: &Path, dir: &Path, duration_s: f64) -> PathBuf {
+    with_python(scenario, python, dir, |doc| {
         let urdf = repo_path("scenarios/robots/panda.urdf")
             .display()
             .to_string();
@@ -1020,93 +1017,54 @@ fn the_python_controller_gives_the_built_in_digest_on_the_panda_team_too() {
             ]),
         );
         role.insert("name".into(), "python-traditional".into());
-        set_role(doc, "controller", toml::Value::Table(role), 2.0);
-    });
-    let py = json(&launch(
-        &["run", &scenario.display().to_string(), "--json"],
-        &s.0.join("py"),
-        WATCHDOG,
-    ));
-    let builtin = repo_path("scenarios/panda-team.toml").display().to_string();
-    let rust = json(&launch(
-        &[
+        set_role(doc, "controller", toml::Value::Table(role), duration_s);
+    })
+}
+
+/// `examples/python/controller.py` deciding the torques of `scenario` (a repo file whose
+/// `[defaults]` model is the Panda's URDF) for `duration_s` gives the built-in traditional
+/// law's run, on both engines: its digest, no torque held.
+fn the_python_controller_gives_the_built_in_digest_on(scenario: &str, duration_s: f64) {
+    let Some(python) = python() else { return };
+    let s = Scratch::new("ext-controller-team");
+    let program = python_controller_on(scenario, &python, &s.0, duration_s);
+    let builtin = repo_path(scenario).display().to_string();
+    let duration = duration_s.to_string();
+    let run = |file: &str, engine: &str, out: &str| {
+        let args = [
             "run",
-            &builtin,
+            file,
             "--duration-s",
-            "2",
+            &duration,
             "--engine",
-            "inproc",
+            engine,
             "--json",
-        ],
-        &s.0.join("rust"),
-        WATCHDOG,
-    ));
+        ];
+        json(&launch(&args, &s.0.join(out), WATCHDOG))
+    };
+    let rust = run(&builtin, "inproc", "rust");
     assert_eq!(rust["controller"], "traditional");
-    assert_eq!(digest(&py), digest(&rust));
+    for engine in ["ipc", "inproc"] {
+        let py = run(&program.display().to_string(), engine, engine);
+        assert_eq!(py["controller"], "external", "{engine}");
+        assert_eq!(digest(&py), digest(&rust), "{scenario} {engine}");
+        assert_eq!(rejected_torques(&py), [0; 4], "{scenario} {engine}");
+    }
+}
+
+/// The same program on the Panda team (7 joints, gains scaled by each arm's inertia, which the
+/// program reads off the first question's `M(q_d)`): the built-in traditional law's digest too.
+#[test]
+fn the_python_controller_gives_the_built_in_digest_on_the_panda_team_too() {
+    the_python_controller_gives_the_built_in_digest_on("scenarios/panda-team.toml", 2.0);
 }
 
 /// The same program takes a team of different robots (`scenarios/mixed-team.toml`: two
 /// Pandas, two paper arms, each with its own gains; `FDI_DOF` is `mixed`, `FDI_JOINTS` each
-/// robot's count): on both engines the built-in traditional law's digest.
+/// robot's count).
 #[test]
 fn the_python_controller_gives_the_built_in_digest_on_a_mixed_team() {
-    let Some(python) = python() else { return };
-    let s = Scratch::new("ext-controller-mixed");
-    let scenario = with_python("scenarios/mixed-team.toml", &python, &s.0, |doc| {
-        let urdf = repo_path("scenarios/robots/panda.urdf")
-            .display()
-            .to_string();
-        let model = doc
-            .get_mut("defaults")
-            .and_then(|d| d.get_mut("model"))
-            .and_then(|m| m.as_table_mut())
-            .expect("[defaults] model: the Pandas'");
-        model.insert("path".into(), urdf.into());
-        if let Some(c) = doc.get_mut("controller").and_then(|c| c.as_table_mut()) {
-            c.insert("mode".into(), "external".into());
-        }
-        let mut role = toml::Table::new();
-        let program = repo_path("examples/python/controller.py");
-        role.insert(
-            "command".into(),
-            toml::Value::Array(vec![
-                python.display().to_string().into(),
-                program.display().to_string().into(),
-            ]),
-        );
-        role.insert("name".into(), "python-traditional".into());
-        set_role(doc, "controller", toml::Value::Table(role), 1.0);
-    });
-    let builtin = repo_path("scenarios/mixed-team.toml").display().to_string();
-    let rust = json(&launch(
-        &[
-            "run",
-            &builtin,
-            "--duration-s",
-            "1",
-            "--engine",
-            "inproc",
-            "--json",
-        ],
-        &s.0.join("rust"),
-        WATCHDOG,
-    ));
-    assert_eq!(rust["controller"], "traditional");
-    for engine in ["ipc", "inproc"] {
-        let py = json(&launch(
-            &[
-                "run",
-                &scenario.display().to_string(),
-                "--engine",
-                engine,
-                "--json",
-            ],
-            &s.0.join(engine),
-            WATCHDOG,
-        ));
-        assert_eq!(digest(&py), digest(&rust), "{engine}");
-        assert_eq!(rejected_torques(&py), [0; 4], "{engine}");
-    }
+    the_python_controller_gives_the_built_in_digest_on("scenarios/mixed-team.toml", 1.0);
 }
 
 /// A SIGKILLed launcher cannot end the programs it started, and a program need not watch its
