@@ -311,6 +311,8 @@ pub struct Episode {
     links: usize,
     /// Each robot's joints, in the scenario's order.
     joints: Vec<usize>,
+    /// Per entry of an action: whether it acts ([`Self::action_mask`]).
+    mask: Vec<bool>,
     agents: Vec<u32>,
     engine: Option<Lockstep>,
     attacker: EnvAttacker,
@@ -365,12 +367,23 @@ impl Episode {
         let links = joints.iter().copied().max().unwrap_or(0);
         let agents: Vec<u32> = resolved.scenario.agents.iter().map(|a| a.id).collect();
         let attacker = EnvAttacker::new(&resolved, &spec, links);
+        // Per chosen robot (`check` made sure each is the scenario's), each channel: its
+        // joints act, the rest of the team's largest count does not.
+        let channels = spec.channels.len() + usize::from(spec.correction.is_some());
+        let mut mask = Vec::with_capacity(spec.robots.len() * channels * links);
+        for id in &spec.robots {
+            let n = agents.iter().position(|a| a == id).map_or(0, |i| joints[i]);
+            for _ in 0..channels {
+                mask.extend((0..links).map(|j| j < n));
+            }
+        }
         Ok(Self {
             seen: Seen::new(&joints),
             resolved,
             spec,
             links,
             joints,
+            mask,
             agents,
             engine: Some(engine),
             attacker,
@@ -406,32 +419,17 @@ impl Episode {
     /// Per entry of an action (robots × channels × links): whether it acts, that is whether
     /// its link is a joint of its robot (a robot of fewer joints than the team's largest
     /// ignores the rest).
-    pub fn action_mask(&self) -> Vec<bool> {
-        let mut mask = Vec::with_capacity(self.action_size());
-        for id in &self.spec.robots {
-            let n = self.joints_of(*id);
-            for _ in 0..self.action_channels() {
-                mask.extend((0..self.links).map(|j| j < n));
-            }
-        }
-        mask
+    pub fn action_mask(&self) -> &[bool] {
+        &self.mask
     }
 
     /// The entries of `action` that act ([`Self::action_mask`]), in order.
     pub fn acting(&self, action: &[f64]) -> Vec<f64> {
         action
             .iter()
-            .zip(self.action_mask())
+            .zip(&self.mask)
             .filter_map(|(a, acts)| acts.then_some(*a))
             .collect()
-    }
-
-    /// The joints of robot `id` (0 for a robot the scenario lacks: [`check`] refused it).
-    fn joints_of(&self, id: u32) -> usize {
-        self.agents
-            .iter()
-            .position(|a| *a == id)
-            .map_or(0, |i| self.joints[i])
     }
 
     pub fn agents(&self) -> &[u32] {
@@ -524,15 +522,19 @@ impl Episode {
                     *dst = v * budget;
                 }
             }
-            let joints = self.spec.robots.get(r).map(|id| self.joints_of(*id));
-            if let (Some(budget), Some(engine), Some(id), Some(n)) = (
+            if let (Some(budget), Some(engine), Some(id)) = (
                 self.spec.correction,
                 self.engine.as_mut(),
                 self.spec.robots.get(r),
-                joints,
             ) {
+                // The correction's entries that act: the robot's joints.
                 let from = self.spec.channels.len() * l;
-                let c: Vec<f64> = a[from..from + n].iter().map(|v| v * budget).collect();
+                let acts = &self.mask[r * per_robot + from..(r + 1) * per_robot];
+                let c: Vec<f64> = a[from..]
+                    .iter()
+                    .zip(acts)
+                    .filter_map(|(v, acts)| acts.then_some(v * budget))
+                    .collect();
                 // The robots and their links were checked when the episode was made.
                 let _ = engine.set_correction(*id, &c);
             }

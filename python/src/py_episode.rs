@@ -225,7 +225,7 @@ impl Episode {
     /// Each robot's joints (scenario order), and per entry of an action whether it acts (its
     /// link is a joint of its robot).
     fn joints(&self) -> PyResult<(Vec<usize>, Vec<bool>)> {
-        self.with(|e| Ok((e.joints().to_vec(), e.action_mask())))
+        self.with(|e| Ok((e.joints().to_vec(), e.action_mask().to_vec())))
     }
 
     /// Ends the episode and frees the engine; any later call raises.
@@ -740,7 +740,7 @@ impl Batch {
     /// Each robot's joints (scenario order), and per entry of one environment's action whether
     /// it acts.
     fn joints(&self) -> PyResult<(Vec<usize>, Vec<bool>)> {
-        self.first(|e| (e.joints().to_vec(), e.action_mask()))
+        self.first(|e| (e.joints().to_vec(), e.action_mask().to_vec()))
     }
 
     /// Frees every engine and stops the threads; any later call raises.

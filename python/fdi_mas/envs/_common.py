@@ -108,15 +108,15 @@ def observation_names(agents: Sequence[int], joints: Sequence[int], parts: Seque
     return names
 
 
-def team_of(core: Any, action_shape: tuple[int, ...]) -> tuple[list[int], list[int], int, np.ndarray]:
+def team_of(core: Any, leading: tuple[int, ...] | None) -> tuple[list[int], list[int], int, np.ndarray | None]:
     """A core episode's (or batch's) robots (scenario order), their joints, ``links`` (an
-    action's entries per robot and channel: the team's largest joint count) and the action
-    mask of an action of ``action_shape`` (a function of ``links``): True where the entry acts,
-    False where its link is beyond its robot's joints (the entry is ignored)."""
-    agents, links, size = core.shape()
+    action's entries per robot and channel: the team's largest joint count) and, for an action
+    of shape ``(*leading, links)``, its mask: True where the entry acts, False where its link is
+    beyond its robot's joints (the entry is ignored). ``leading`` None: no action, no mask."""
+    agents, links, _ = core.shape()
     joints, mask = core.joints()
-    shape = action_shape if action_shape else (size,)
-    return list(agents), list(joints), int(links), np.asarray(mask, dtype=bool).reshape(shape)
+    shaped = None if leading is None else np.asarray(mask, dtype=bool).reshape(*leading, links)
+    return list(agents), list(joints), int(links), shaped
 
 
 ATTACKER_PARTS = ("y", "y_dot", "u")

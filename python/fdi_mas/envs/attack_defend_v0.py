@@ -91,11 +91,10 @@ class AttackDefendEnv(ParallelEnv):
             int(decision_period),
         )
         self.detect_weights = (float(detect_reward), float(false_alarm_penalty), float(miss_penalty))
-        _, links, _ = self._episode.shape()
-        self._action_shape = (len(self.robots), len(self.channels), links)
         robot_ids, self.joints, self.links, self.action_mask = _common.team_of(
-            self._episode, self._action_shape
+            self._episode, (len(self.robots), len(self.channels))
         )
+        self._action_shape = self.action_mask.shape
         self.robot_ids = robot_ids
         self.possible_agents = [ATTACKER, DETECTOR]
         self.agents: list[str] = []

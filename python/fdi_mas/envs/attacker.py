@@ -92,11 +92,10 @@ class AttackerEnv(gym.Env):
             self.detectors,
             self.decision_period,
         )
-        _, links, _ = self._episode.shape()
-        self._action_shape = (len(self.robots), len(self.channels), links)
         agents, self.joints, self.links, self.action_mask = _common.team_of(
-            self._episode, self._action_shape
+            self._episode, (len(self.robots), len(self.channels))
         )
+        self._action_shape = self.action_mask.shape
         self.observation_names = _common.observation_names(agents, self.joints, _common.ATTACKER_PARTS)
         self.observation_space = spaces.Box(
             -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64

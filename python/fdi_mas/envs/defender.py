@@ -89,16 +89,15 @@ class DefenderEnv(_common.DrawnEpisodeEnv):
             self._scenarios[self.attacks[0]], robots, ["correction"], [0.0, 0.0, 0.0], [],
             self.decision_period, correction_budget=budget,
         )
-        _, links, _ = self._episode.shape()
         self.agents, self.joints, self.links, self.action_mask = _common.team_of(
-            self._episode, (len(robots), links)
+            self._episode, (len(robots),)
         )
         self.error_scale = _common.damage_scale_of(error_scale, self.base, robots)
         self.observation_names = _common.observation_names(self.agents, self.joints, _common.CENTER_PARTS)
         self.observation_space = spaces.Box(
             -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64
         )
-        self.action_space = spaces.Box(-1.0, 1.0, shape=(len(self.agents), links), dtype=np.float64)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=self.action_mask.shape, dtype=np.float64)
 
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:

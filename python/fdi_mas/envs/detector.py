@@ -100,7 +100,7 @@ class DetectorEnv(_common.DrawnEpisodeEnv):
             self._scenarios[self.attacks[0]], [], [], [0.0, 0.0, 0.0], [], self.decision_period
         )
         # (No action on the wire: the mask of an empty action.)
-        self.agents, self.joints, self.links, _ = _common.team_of(self._episode, ())
+        self.agents, self.joints, self.links, _ = _common.team_of(self._episode, None)
         self.observation_names = _common.observation_names(self.agents, self.joints, _common.CENTER_PARTS)
         self.observation_space = spaces.Box(
             -np.inf, np.inf, shape=(len(self.observation_names),), dtype=np.float64

@@ -73,10 +73,12 @@ class VectorAttackerEnv(VectorEnv):
             self.damage_scale,
             threads,
         )
-        _, links, _ = self._batch.shape()
-        shape = (len(self.robots), len(self.channels), links)
-        agents, self.joints, self.links, self.action_mask = _common.team_of(self._batch, shape)
-        self._open(_common.observation_names(agents, self.joints, _common.ATTACKER_PARTS), shape)
+        leading = (len(self.robots), len(self.channels))
+        agents, self.joints, self.links, self.action_mask = _common.team_of(self._batch, leading)
+        self._open(
+            _common.observation_names(agents, self.joints, _common.ATTACKER_PARTS),
+            self.action_mask.shape,
+        )
 
     def _open(self, observation_names: list[str], action_shape: tuple[int, ...]) -> None:
         """The spaces of a batch whose observations are named ``observation_names`` and whose
@@ -194,7 +196,8 @@ class VectorDefenderEnv(VectorAttackerEnv):
             bool(vary_seed),
             threads,
         )
-        agents, links, _ = self._batch.shape()
-        shape = (len(agents), links)
-        agents, self.joints, self.links, self.action_mask = _common.team_of(self._batch, shape)
-        self._open(_common.observation_names(agents, self.joints, _common.CENTER_PARTS), shape)
+        agents, self.joints, self.links, self.action_mask = _common.team_of(self._batch, (len(robots),))
+        self._open(
+            _common.observation_names(agents, self.joints, _common.CENTER_PARTS),
+            self.action_mask.shape,
+        )
