@@ -83,6 +83,7 @@ impl Frame {
     };
 
     /// `self ∘ other`: `other` expressed in `self`'s parent.
+    #[inline(always)]
     pub(crate) fn then(&self, other: &Frame) -> Frame {
         Frame {
             r: self.r * other.r,

@@ -16,6 +16,7 @@ pub(super) struct Cholesky<const N: usize> {
 #[allow(clippy::needless_range_loop)]
 impl<const N: usize> Cholesky<N> {
     /// Factors the symmetric `m` (its lower triangle is read).
+    #[inline(always)]
     pub(super) fn new(m: &Matrix<N>) -> Option<Self> {
         let mut l = [[0.0; N]; N];
         let mut inv_diag = [0.0; N];
@@ -42,6 +43,7 @@ impl<const N: usize> Cholesky<N> {
     }
 
     /// `M⁻¹ b`: `L y = b` forward, then `Lᵀ x = y` back.
+    #[inline(always)]
     pub(super) fn solve(&self, b: &Vector<N>) -> Vector<N> {
         let l = &self.l;
         let mut x = [0.0; N];
@@ -63,6 +65,7 @@ impl<const N: usize> Cholesky<N> {
     }
 
     /// `M⁻¹ = L⁻ᵀ L⁻¹`, from `W = L⁻¹` (lower triangular), exactly symmetric.
+    #[inline(always)]
     pub(super) fn inverse(&self) -> Matrix<N> {
         let l = &self.l;
         let mut w = [[0.0; N]; N];

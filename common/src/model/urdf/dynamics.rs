@@ -358,7 +358,7 @@ impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
 
     fn drift(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
         let (m, bias) = self.rigid.inertia_and_bias(q, qd);
-        -solve(m, bias + self.friction(qd))
+        -solve(&m, bias + self.friction(qd))
     }
 
     fn acceleration(
@@ -369,13 +369,14 @@ impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
         disturbance: &Vector<N>,
     ) -> Vector<N> {
         let (m, bias) = self.rigid.inertia_and_bias(q, qd);
-        solve(m, torque - bias - self.friction(qd) - disturbance)
+        solve(&m, torque - bias - self.friction(qd) - disturbance)
     }
 }
 
 /// `M⁻¹ b` by Cholesky; not a number when `M` is not positive definite.
-fn solve<const N: usize>(m: Matrix<N>, b: Vector<N>) -> Vector<N> {
-    match Cholesky::new(&m) {
+#[inline(always)]
+fn solve<const N: usize>(m: &Matrix<N>, b: Vector<N>) -> Vector<N> {
+    match Cholesky::new(m) {
         Some(c) => c.solve(&b),
         None => Vector::<N>::from_element(f64::NAN),
     }

@@ -45,6 +45,7 @@ impl Along {
     }
 
     /// The joint's axis in the frame `r` is turned from: `r axis`.
+    #[inline(always)]
     fn axis_of(self, r: &Matrix3<f64>, axis: &Vector3<f64>) -> Vector3<f64> {
         match self {
             Self::Own(i) => r.column(i).into_owned(),
@@ -54,6 +55,7 @@ impl Along {
 
     /// `r` turned by `q` about the joint's axis: `r R(axis, q)`. About its frame's own axis
     /// `i`, the two other columns of `r` mix and column `i` stays.
+    #[inline(always)]
     fn turned(self, r: &Matrix3<f64>, axis: &Vector3<f64>, q: f64) -> Matrix3<f64> {
         let Self::Own(i) = self else {
             return r * Frame::motion(Motion::Revolute, axis, q).r;
@@ -115,6 +117,7 @@ impl<const N: usize> Rigid<N> {
         r
     }
 
+    #[inline(always)]
     fn place(&self, q: &Vector<N>) -> Placed<N> {
         let mut p = Placed {
             origin: [Vector3::zeros(); N],
@@ -153,6 +156,7 @@ impl<const N: usize> Rigid<N> {
         self.inertia_placed(&self.place(q))
     }
 
+    #[inline(always)]
     fn inertia_placed(&self, p: &Placed<N>) -> Matrix<N> {
         let mut m = Matrix::<N>::zeros();
         // The composite body of joint j: mass, first moment and inertia about the root's origin.
@@ -178,6 +182,7 @@ impl<const N: usize> Rigid<N> {
         self.coriolis_and_gravity_placed(&self.place(q), qd)
     }
 
+    #[inline(always)]
     fn coriolis_and_gravity_placed(&self, p: &Placed<N>, qd: &Vector<N>) -> Vector<N> {
         // Forward: each body's angular velocity and acceleration, and the acceleration of its
         // joint's child's origin, the root accelerating by −g (gravity as an inertial force).
@@ -298,6 +303,7 @@ impl<const N: usize> Rigid<N> {
 }
 
 /// The skew matrix of `v`: `skew(v) x = v × x`.
+#[inline(always)]
 fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
 }
@@ -306,6 +312,7 @@ fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
 /// origin) when one joint (how it moves, its unit axis `z`, and `z × o` for its origin `o`)
 /// alone moves at a unit rate: linear, and angular about the root's origin. The column of `M`
 /// that joint owns, before [`felt`] projects it on each joint.
+#[inline(always)]
 pub(super) fn unit_rate_momentum(
     (motion, z, arm): (Motion, Vector3<f64>, Vector3<f64>),
     (mass, first, second): (f64, &Vector3<f64>, &Matrix3<f64>),
@@ -319,6 +326,7 @@ pub(super) fn unit_rate_momentum(
 /// What a joint (how it moves, its unit axis `z`, and `z × o` for its origin `o`) bears of a
 /// momentum (linear, and angular about the root's origin): an entry of `M`,
 /// `z · (angular − o × linear)`.
+#[inline(always)]
 pub(super) fn felt(
     (motion, z, arm): (Motion, Vector3<f64>, Vector3<f64>),
     (linear, angular): (Vector3<f64>, Vector3<f64>),
