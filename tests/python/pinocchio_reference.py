@@ -117,6 +117,8 @@ def main():
         if args.check:
             if not out.is_file() or not same(json.loads(out.read_text()), json.loads(text)):
                 differ.append(out)
+            else:
+                print(f"{out.relative_to(ROOT)}: {arm['name']}, {STATES} states, as Pinocchio {pin.__version__} makes them")
         else:
             out.write_text(text)
             print(f"{out.relative_to(ROOT)}: {arm['name']}, {STATES} states")
