@@ -53,15 +53,20 @@ impl Along {
         }
     }
 
-    /// `r` turned by `q` about the joint's axis: `r R(axis, q)`. About its frame's own axis
-    /// `i`, the two other columns of `r` mix and column `i` stays.
+    /// `r` turned by `q` about the joint's axis: `r R(axis, q)`, given `(sin q, cos q)`. About
+    /// its frame's own axis `i`, the two other columns of `r` mix and column `i` stays.
     #[inline(always)]
-    fn turned(self, r: &Matrix3<f64>, axis: &Vector3<f64>, q: f64) -> Matrix3<f64> {
+    fn turned(
+        self,
+        r: &Matrix3<f64>,
+        axis: &Vector3<f64>,
+        q: f64,
+        (s, c): (f64, f64),
+    ) -> Matrix3<f64> {
         let Self::Own(i) = self else {
             return r * Frame::motion(Motion::Revolute, axis, q).r;
         };
         let (a, b) = ((i + 1) % 3, (i + 2) % 3);
-        let (s, c) = q.sin_cos();
         let (ra, rb) = (r.column(a).into_owned(), r.column(b).into_owned());
         let mut out = *r;
         out.set_column(a, &(ra * c + rb * s));
@@ -127,6 +132,9 @@ impl<const N: usize> Rigid<N> {
             com: [Vector3::zeros(); N],
             inertia: [Matrix3::zeros(); N],
         };
+        // Every joint's sine and cosine first: a call to the maths library inside the loop
+        // below would make the loop keep its frame in memory across the call at every joint.
+        let turns: [(f64, f64); N] = std::array::from_fn(|j| q[j].sin_cos());
         let mut at = Frame::IDENTITY;
         for j in 0..N {
             let frame = at.then(&self.placement[j]);
@@ -136,7 +144,7 @@ impl<const N: usize> Rigid<N> {
             p.arm[j] = axis.cross(&frame.p);
             at = match self.motion[j] {
                 Motion::Revolute => Frame {
-                    r: self.along[j].turned(&frame.r, &self.axis[j], q[j]),
+                    r: self.along[j].turned(&frame.r, &self.axis[j], q[j], turns[j]),
                     p: frame.p,
                 },
                 Motion::Prismatic => Frame {
