@@ -129,9 +129,10 @@ fn text(
     let n = chain.dof();
     let _ = writeln!(
         out,
-        "robot `{}` ({}): {n} moving joints, in the order of q",
+        "robot `{}` ({}): {n} moving joint{}, in the order of q",
         chain.name,
-        file.display()
+        file.display(),
+        if n == 1 { "" } else { "s" }
     );
     for (i, j) in chain.joints.iter().enumerate() {
         let unit = match j.motion {

@@ -32,6 +32,17 @@ pub enum UrdfError {
     Arm { path: PathBuf, why: String },
 }
 
+/// What a joint's `<limit>` says.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Limits {
+    /// Lower and upper, finite.
+    Range(f64, f64),
+    /// A continuous joint, or a limit at infinity.
+    Unbounded,
+    /// No `<limit>` (or one of zeros) on a revolute or prismatic joint.
+    Missing,
+}
+
 impl Chain {
     /// The arm `spec` names in its URDF file (`base`: the folder a relative `spec.path` is
     /// relative to, the scenario file's).
@@ -210,8 +221,42 @@ impl Reader<'_> {
                     format!("a {:?} joint cannot be locked at one value", j.joint_type),
                 ));
             }
+            if let Limits::Range(lo, hi) = self.limits(j)? {
+                if !(lo..=hi).contains(value) {
+                    return Err(self.joint_error(
+                        name,
+                        format!("locked at {value}, outside its limits [{lo}, {hi}]"),
+                    ));
+                }
+            }
         }
         Ok(())
+    }
+
+    /// The limits `j`'s file gives it. A revolute or prismatic joint must have a `<limit>`;
+    /// without one the parser fills in zeros (the same as a limit of zeros, which holds the
+    /// joint at 0): [`Limits::Missing`], not a range.
+    fn limits(&self, j: &urdf_rs::Joint) -> Result<Limits, UrdfError> {
+        if j.joint_type == JointType::Continuous {
+            return Ok(Limits::Unbounded);
+        }
+        if j.limit == urdf_rs::JointLimit::default() {
+            return Ok(Limits::Missing);
+        }
+        let (lo, hi) = (j.limit.lower, j.limit.upper);
+        if lo.is_nan() || hi.is_nan() {
+            return Err(self.joint_error(&j.name, format!("limits [{lo}, {hi}]: not numbers")));
+        }
+        if lo > hi {
+            return Err(self.joint_error(&j.name, format!("lower limit {lo} above upper {hi}")));
+        }
+        // Infinite: no limit on that side (URDF 1.2 writes an omitted limit so); the arm's
+        // joint then has none.
+        Ok(if lo.is_finite() && hi.is_finite() {
+            Limits::Range(lo, hi)
+        } else {
+            Limits::Unbounded
+        })
     }
 
     /// The place of joint `j`'s child, from its parent's `place`; a moving joint is added to
@@ -267,14 +312,21 @@ impl Reader<'_> {
                 return Err(self.joint_error(&j.name, format!("{what} {v}: must be ≥ 0")));
             }
         }
-        let limits = match j.joint_type {
-            JointType::Continuous => None,
-            _ => Some((j.limit.lower, j.limit.upper))
-                .filter(|(lo, hi)| lo.is_finite() && hi.is_finite()),
+        let limits = match self.limits(j)? {
+            Limits::Range(lo, hi) => Some((lo, hi)),
+            Limits::Unbounded => None,
+            Limits::Missing => {
+                return Err(self.joint_error(
+                    &j.name,
+                    format!(
+                        "a {:?} joint without `<limit lower=\"…\" upper=\"…\" …>` (or with one \
+                         of zeros, which holds it at 0): give its limits, make it `continuous`, \
+                         or lock it",
+                        j.joint_type
+                    ),
+                ))
+            }
         };
-        if let Some((lo, hi)) = limits.filter(|(lo, hi)| lo > hi) {
-            return Err(self.joint_error(&j.name, format!("lower limit {lo} above upper {hi}")));
-        }
         joints.push((
             Joint {
                 name: j.name.clone(),

@@ -263,6 +263,53 @@ fn what_is_not_an_arm_is_refused_naming_the_joint_or_link() {
 }
 
 #[test]
+fn a_joint_s_limits_are_its_file_s_and_a_lock_stays_inside_them() {
+    let finger = |value: f64| {
+        let mut s = spec();
+        s.lock.insert("finger_joint".into(), value);
+        s
+    };
+    let c = spatial();
+    assert_eq!(c.joints[1].limits, Some((-1.7, 1.7)), "j2's, as written");
+    assert_eq!(c.joints[2].limits, None, "j3 is continuous");
+
+    // Without `<limit>` the parser reads zeros, which would hold the joint at 0: a moving
+    // revolute joint without one is refused, naming it; locked, it needs none.
+    let no_limit = SPATIAL.replace(
+        r#"<limit lower="-1.7" upper="1.7" effort="80" velocity="2"/>"#,
+        "",
+    );
+    let e = refusal(&no_limit, &finger(0.02));
+    assert!(
+        e.contains("joint `j2`") && e.contains("without `<limit") && e.contains("Revolute"),
+        "{e}"
+    );
+    let mut held = finger(0.02);
+    held.lock.insert("j2".into(), 0.3);
+    assert_eq!(chain(&no_limit, &held).dof(), 4);
+
+    // A lock outside the joint's limits is refused; at a limit it holds.
+    let e = refusal(SPATIAL, &finger(0.5));
+    assert!(
+        e.contains("joint `finger_joint`")
+            && e.contains("locked at 0.5, outside its limits [0, 0.04]"),
+        "{e}"
+    );
+    assert_eq!(chain(SPATIAL, &finger(0.04)).dof(), 5);
+    assert_eq!(chain(SPATIAL, &finger(0.0)).dof(), 5);
+
+    let nan = SPATIAL.replace(r#"lower="-1.7""#, r#"lower="nan""#);
+    let e = refusal(&nan, &finger(0.02));
+    assert!(e.contains("joint `j2`") && e.contains("not numbers"), "{e}");
+    let inverted = SPATIAL.replace(r#"lower="-1.7" upper="1.7""#, r#"lower="1.7" upper="-1.7""#);
+    let e = refusal(&inverted, &finger(0.02));
+    assert!(
+        e.contains("joint `j2`") && e.contains("lower limit 1.7 above upper -1.7"),
+        "{e}"
+    );
+}
+
+#[test]
 fn the_composite_rigid_body_inertia_is_the_jacobians_sum() {
     let c = spatial();
     let q = [0.4, -0.9, 1.3, 0.2, 0.07];
