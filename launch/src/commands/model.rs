@@ -156,7 +156,8 @@ fn text(
     let masses: Vec<String> = (chain.masses.iter())
         .map(|(l, m)| format!("{l} {m} kg"))
         .collect();
-    let moving: f64 = chain.bodies.iter().map(|b| b.mass).sum();
+    // From +0: an empty sum of floats is −0, printed "-0.000000".
+    let moving = chain.bodies.iter().fold(0.0, |sum, b| sum + b.mass);
     let _ = writeln!(
         out,
         "links: {}; moving with the joints: {moving:.6} kg",

@@ -160,7 +160,20 @@ impl Reader<'_> {
 
     /// The joint whose child each link is; a link with two is a closed chain.
     fn parent_joints(&self) -> Result<BTreeMap<&str, &urdf_rs::Joint>, UrdfError> {
-        let links: BTreeSet<&str> = self.robot.links.iter().map(|l| l.name.as_str()).collect();
+        // One link or joint of a name: which of two a name meant (for its mass, a lock, a
+        // trajectory's joint) would otherwise be the loader's guess.
+        let mut links = BTreeSet::new();
+        for l in &self.robot.links {
+            if !links.insert(l.name.as_str()) {
+                return Err(self.link_error(&l.name, "defined twice in the file"));
+            }
+        }
+        let mut joints = BTreeSet::new();
+        for j in &self.robot.joints {
+            if !joints.insert(j.name.as_str()) {
+                return Err(self.joint_error(&j.name, "defined twice in the file"));
+            }
+        }
         let mut parent = BTreeMap::new();
         for j in &self.robot.joints {
             for end in [&j.parent.link, &j.child.link] {
@@ -396,6 +409,18 @@ impl Reader<'_> {
         }
         if m < 0.0 {
             return Err(self.link_error(name, format!("mass {m} kg is negative")));
+        }
+        // A rigid body's inertia about its centre of mass has no negative principal moment (a
+        // point mass has three zeros); beyond the rounding of the eigenvalues, refused.
+        let moments = tensor.symmetric_eigenvalues();
+        let scale = moments.amax();
+        if moments.min() < -1e-12 * scale {
+            let mut m = moments.as_slice().to_vec();
+            m.sort_by(f64::total_cmp);
+            return Err(self.link_error(
+                name,
+                format!("its inertia is not positive semi-definite: principal moments {m:?} kg·m²"),
+            ));
         }
         let Some(rides_on) = place.rides_on else {
             return Ok(None);

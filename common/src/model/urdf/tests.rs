@@ -310,6 +310,47 @@ fn a_joint_s_limits_are_its_file_s_and_a_lock_stays_inside_them() {
 }
 
 #[test]
+fn a_name_given_twice_or_an_inertia_no_body_has_is_refused_naming_it() {
+    let mut locked = spec();
+    locked.lock.insert("finger_joint".into(), 0.02);
+    let twice = SPATIAL.replace(
+        "</robot>",
+        r#"<link name="l3"><inertial><mass value="9"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" iyz="0" izz="1"/></inertial></link></robot>"#,
+    );
+    let e = refusal(&twice, &locked);
+    assert!(
+        e.contains("link `l3`") && e.contains("defined twice"),
+        "{e}"
+    );
+    let twice = SPATIAL.replace(r#"<joint name="j4""#, r#"<joint name="j2""#);
+    let e = refusal(&twice, &locked);
+    assert!(
+        e.contains("joint `j2`") && e.contains("defined twice"),
+        "{e}"
+    );
+
+    // Positive definite at q = 0 for the arm as a whole, but no rigid body has this inertia
+    // (a negative principal moment): M would lose its definiteness elsewhere.
+    let negative = SPATIAL.replace(
+        r#"<inertia ixx="0.02" ixy="0" ixz="0.001" iyy="0.03""#,
+        r#"<inertia ixx="0.02" ixy="0.05" ixz="0.001" iyy="0.03""#,
+    );
+    assert_ne!(negative, SPATIAL);
+    let e = refusal(&negative, &locked);
+    assert!(
+        e.contains("link `l2`") && e.contains("not positive semi-definite"),
+        "{e}"
+    );
+    // A point mass (no inertia about its centre) is a body.
+    let point = SPATIAL.replace(
+        r#"<inertia ixx="0.02" ixy="0" ixz="0.001" iyy="0.03" iyz="0" izz="0.025"/>"#,
+        r#"<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>"#,
+    );
+    assert_ne!(point, SPATIAL);
+    assert_eq!(chain(&point, &locked).dof(), 5);
+}
+
+#[test]
 fn the_composite_rigid_body_inertia_is_the_jacobians_sum() {
     let c = spatial();
     let q = [0.4, -0.9, 1.3, 0.2, 0.07];
