@@ -333,8 +333,8 @@ impl Reader<'_> {
                     &j.name,
                     format!(
                         "a {:?} joint without `<limit lower=\"…\" upper=\"…\" …>` (or with one \
-                         of zeros, which holds it at 0): give its limits, make it `continuous`, \
-                         or lock it",
+                         of zeros, which holds it at 0): give its limits, lock it, or (a revolute \
+                         joint that turns without end) make it `continuous`",
                         j.joint_type
                     ),
                 ))
