@@ -4,7 +4,7 @@
 use std::time::Duration;
 
 use fdi_common::model::{EulerLagrange, TwoLink, TwoLinkParams, Vector};
-use fdi_tests::{launch_plain, repo_path};
+use fdi_tests::{launch_plain, repo_path, Scratch};
 
 const WATCHDOG: Duration = Duration::from_secs(60);
 
@@ -30,6 +30,7 @@ fn the_json_of_the_paper_arm_s_file_is_the_hand_written_model_at_that_state() {
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
     assert_eq!(v["joints"], serde_json::json!(["joint1", "joint2"]));
+    assert_eq!(v["inertia_positive_definite"], serde_json::json!(true));
     let paper = TwoLink::new(TwoLinkParams::PAPER);
     let (q, qd) = (Vector::<2>::new(0.3, -1.2), Vector::<2>::new(0.7, 2.5));
     let rows = |key: &str| -> Vec<Vec<f64>> {
@@ -108,4 +109,38 @@ fn the_text_names_the_joints_and_the_terms_and_bad_input_is_named() {
         !out.status.success() && err.contains("no/such.urdf"),
         "{err}"
     );
+}
+
+#[test]
+fn an_arm_without_a_forward_dynamics_at_the_state_is_said_so() {
+    // The moving link has no <inertial>: M = 0 at every state.
+    let dir = Scratch::new("model-massless");
+    let file = dir.0.join("massless.urdf");
+    std::fs::write(
+        &file,
+        r#"<robot name="massless"><link name="base"/><link name="arm"/>
+        <joint name="turn" type="continuous"><parent link="base"/><child link="arm"/><axis xyz="0 0 1"/></joint></robot>"#,
+    )
+    .expect("write the URDF");
+    let file = file.to_string_lossy().into_owned();
+    let out = launch_plain(&["model", &file], WATCHDOG);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        text.contains("moving with the joints: 0.000000 kg")
+            && text.contains("M(q) is not positive definite at this state"),
+        "{text}"
+    );
+    let out = launch_plain(&["model", &file, "--json"], WATCHDOG);
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    assert_eq!(v["inertia_positive_definite"], serde_json::json!(false));
+
+    // The paper's arm has one.
+    let out = launch_plain(&["model", &paper_urdf()], WATCHDOG);
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(!text.contains("not positive definite"), "{text}");
 }

@@ -35,7 +35,8 @@ pub struct ModelArgs {
     #[arg(long, value_name = "X,Y,Z", value_parser = values_of, allow_hyphen_values = true)]
     pub gravity: Option<Values>,
     /// Print one JSON object: `joints` (names), `inertia`, `coriolis` (lists of rows),
-    /// `gravity`, `friction` (lists), with the limits, masses and the state.
+    /// `gravity`, `friction` (lists), `inertia_positive_definite`, with the limits, masses and
+    /// the state.
     #[arg(long)]
     pub json: bool,
 }
@@ -91,6 +92,9 @@ pub fn model(args: &ModelArgs) -> Result<ExitCode> {
         .dynamics(&q, &qd)
         .map_err(anyhow::Error::msg)
         .with_context(|| format!("--q/--qd for {}", args.file.display()))?;
+    // The forward dynamics needs M⁻¹: where M is not positive definite the arm has none (a
+    // scenario refuses an arm whose M at q = 0 is not).
+    let definite = terms.inertia.clone().cholesky().is_some();
     if args.json {
         let rows = |m: &DMatrix<f64>| -> Vec<Vec<f64>> {
             m.row_iter().map(|r| r.iter().copied().collect()).collect()
@@ -107,6 +111,7 @@ pub fn model(args: &ModelArgs) -> Result<ExitCode> {
             "q": q,
             "qd": qd,
             "inertia": rows(&terms.inertia),
+            "inertia_positive_definite": definite,
             "coriolis": rows(&terms.coriolis),
             "gravity": list(&terms.gravity),
             "friction": list(&terms.friction),
@@ -115,6 +120,12 @@ pub fn model(args: &ModelArgs) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     print!("{}", text(&chain, &args.file, (&q, &qd), &terms));
+    if !definite {
+        println!(
+            "M(q) is not positive definite at this state: the arm has no forward dynamics here \
+             (a moving link without mass or inertia?)"
+        );
+    }
     Ok(ExitCode::SUCCESS)
 }
 
