@@ -60,16 +60,21 @@ fn the_json_of_the_paper_arm_s_file_is_the_hand_written_model_at_that_state() {
     }
 }
 
-#[test]
-fn the_text_names_the_joints_and_the_terms_and_bad_input_is_named() {
-    let file = paper_urdf();
-    let out = launch_plain(&["model", &file], WATCHDOG);
-    let text = String::from_utf8_lossy(&out.stdout);
+/// `fdi-launch model FILE`'s text, the command having succeeded.
+fn model_text(file: &str) -> String {
+    let out = launch_plain(&["model", file], WATCHDOG);
     assert!(
         out.status.success(),
         "{}",
         String::from_utf8_lossy(&out.stderr)
     );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+#[test]
+fn the_text_names_the_joints_and_the_terms_and_bad_input_is_named() {
+    let file = paper_urdf();
+    let text = model_text(&file);
     for want in [
         "2 moving joints",
         "joint1",
@@ -123,13 +128,7 @@ fn an_arm_without_a_forward_dynamics_at_the_state_is_said_so() {
     )
     .expect("write the URDF");
     let file = file.to_string_lossy().into_owned();
-    let out = launch_plain(&["model", &file], WATCHDOG);
-    let text = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let text = model_text(&file);
     assert!(
         text.contains("moving with the joints: 0.000000 kg")
             && text.contains("M(q) is not positive definite at this state"),
@@ -140,7 +139,6 @@ fn an_arm_without_a_forward_dynamics_at_the_state_is_said_so() {
     assert_eq!(v["inertia_positive_definite"], serde_json::json!(false));
 
     // The paper's arm has one.
-    let out = launch_plain(&["model", &paper_urdf()], WATCHDOG);
-    let text = String::from_utf8_lossy(&out.stdout);
+    let text = model_text(&paper_urdf());
     assert!(!text.contains("not positive definite"), "{text}");
 }
