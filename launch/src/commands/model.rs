@@ -119,13 +119,10 @@ pub fn model(args: &ModelArgs) -> Result<ExitCode> {
         println!("{out}");
         return Ok(ExitCode::SUCCESS);
     }
-    print!("{}", text(&chain, &args.file, (&q, &qd), &terms));
-    if !definite {
-        println!(
-            "M(q) is not positive definite at this state: the arm has no forward dynamics here \
-             (a moving link without mass or inertia?)"
-        );
-    }
+    print!(
+        "{}",
+        text(&chain, &args.file, (&q, &qd), (&terms, definite))
+    );
     Ok(ExitCode::SUCCESS)
 }
 
@@ -133,7 +130,7 @@ fn text(
     chain: &Chain,
     file: &std::path::Path,
     (q, qd): (&[f64], &[f64]),
-    terms: &fdi_common::model::urdf::Dynamics,
+    (terms, definite): (&fdi_common::model::urdf::Dynamics, bool),
 ) -> String {
     use std::fmt::Write as _;
     let mut out = String::new();
@@ -193,6 +190,13 @@ fn text(
     matrix(&mut out, "V(q, q̇)", &terms.coriolis);
     let _ = writeln!(out, "G(q) = {}", vector(terms.gravity.as_slice()));
     let _ = writeln!(out, "F(q̇) = {}", vector(terms.friction.as_slice()));
+    if !definite {
+        let _ = writeln!(
+            out,
+            "M(q) is not positive definite at this state: the arm has no forward dynamics here \
+             (a moving link without mass or inertia?)"
+        );
+    }
     out
 }
 

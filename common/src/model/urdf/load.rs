@@ -415,11 +415,13 @@ impl Reader<'_> {
         let moments = tensor.symmetric_eigenvalues();
         let scale = moments.amax();
         if moments.min() < -1e-12 * scale {
-            let mut m = moments.as_slice().to_vec();
-            m.sort_by(f64::total_cmp);
+            let mut sorted = moments.as_slice().to_vec();
+            sorted.sort_by(f64::total_cmp);
             return Err(self.link_error(
                 name,
-                format!("its inertia is not positive semi-definite: principal moments {m:?} kg·m²"),
+                format!(
+                    "its inertia is not positive semi-definite: principal moments {sorted:?} kg·m²"
+                ),
             ));
         }
         let Some(rides_on) = place.rides_on else {
