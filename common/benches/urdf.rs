@@ -10,6 +10,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
+use fdi_common::model::robot::{Forward, LANES};
 use fdi_common::model::urdf::{Chain, UrdfArm, UrdfSpec};
 use fdi_common::model::{EulerLagrange, TwoLink, TwoLinkParams, Vector};
 
@@ -43,6 +44,27 @@ fn terms<const N: usize>(c: &mut Criterion, name: &str, model: &dyn EulerLagrang
     });
     c.bench_function(&format!("{name}/acceleration"), |b| {
         b.iter(|| black_box(model.acceleration(black_box(&q), black_box(&qd), &u, &zero)));
+    });
+    // Several states at once (the plants of a team of one robot step together).
+    let qs: [Vector<N>; LANES] = std::array::from_fn(|l| q * (1.0 + 0.1 * l as f64));
+    c.bench_function(
+        &format!("{name}/acceleration x{LANES} (side by side)"),
+        |b| {
+            b.iter(|| {
+                let qs = black_box(&qs);
+                let states: [Forward<'_, N>; LANES] =
+                    std::array::from_fn(|l| (&qs[l], &qd, &u, &zero));
+                black_box(model.accelerations(&states))
+            });
+        },
+    );
+    c.bench_function(&format!("{name}/acceleration x{LANES} (one by one)"), |b| {
+        b.iter(|| {
+            let qs = black_box(&qs);
+            let each: [Vector<N>; LANES] =
+                std::array::from_fn(|l| model.acceleration(&qs[l], &qd, &u, &zero));
+            black_box(each)
+        });
     });
 }
 

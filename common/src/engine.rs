@@ -18,6 +18,7 @@ use serde::{Deserialize, Serialize};
 use crate::attack::{Attacker, Injection, Sent, TorqueInjection};
 use crate::control::{Answer, CenterAgent, CenterOutput, ControllerMode, Question};
 use crate::metrics::{AgentMetrics, Evaluator};
+use crate::model::primed::{prime, Wants};
 use crate::model::Vector;
 use crate::plant::{Measurement, Plant, StepReport};
 use crate::records::{
@@ -557,11 +558,45 @@ impl<const N: usize> AgentLoop<N> {
     }
 
     /// The second half of tick `k` at `t`, once the control center decided `out`: its torque
-    /// on its way to the robot (through `attacker` when it sits on the torque path), the
-    /// robot's step, and the tick's record to `sink`.
+    /// on its way to the robot ([`Self::hand`]), the robot's step, and the tick's record to
+    /// `sink`.
     fn close<A: Attacker>(
         &mut self,
         attacker: &mut A,
+        (k, t): (u64, f64),
+        open: Measured<N>,
+        out: &CenterOutput<N>,
+        sink: &mut impl FnMut(&TickRecord),
+    ) {
+        let actuation = self.hand(attacker, (k, t), out);
+        let step = self.plant.advance(k);
+        sink(&self.record((k, t), open, out, actuation, &step));
+    }
+
+    /// The torque `out` of tick `k` at `t` on its way to the robot (through `attacker` when it
+    /// sits on the torque path), taken by the plant; what the attacker did to it.
+    fn hand<A: Attacker>(
+        &mut self,
+        attacker: &mut A,
+        (k, t): (u64, f64),
+        out: &CenterOutput<N>,
+    ) -> Option<ActuationRecord> {
+        let plant = &mut self.plant;
+        let id = plant.agent_id();
+        // A refused or missing command is counted by the plant; the run goes on.
+        if attacker.on_torque_path(id) {
+            let (sent, tinj) = attacker.torque::<N>(id, k, t, &out.u);
+            let _ = plant.take_command(t, sent.usable().map(|(u, h)| (*u, h)));
+            Some(actuation_record(k, id, &sent, &tinj))
+        } else {
+            let _ = plant.take_command(t, Some((out.u, 0.0)));
+            None
+        }
+    }
+
+    /// The record of tick `k` at `t` once the robot took its `step`.
+    fn record(
+        &self,
         (k, t): (u64, f64),
         Measured {
             q,
@@ -571,27 +606,17 @@ impl<const N: usize> AgentLoop<N> {
             inj,
         }: Measured<N>,
         out: &CenterOutput<N>,
-        sink: &mut impl FnMut(&TickRecord),
-    ) {
-        let plant = &mut self.plant;
-        let id = plant.agent_id();
-        // A refused or missing command is counted by the plant; the run goes on.
-        let actuation = if attacker.on_torque_path(id) {
-            let (sent, tinj) = attacker.torque::<N>(id, k, t, &out.u);
-            let _ = plant.take_command(t, sent.usable().map(|(u, h)| (*u, h)));
-            Some(actuation_record(k, id, &sent, &tinj))
-        } else {
-            let _ = plant.take_command(t, Some((out.u, 0.0)));
-            None
-        };
-        let step = plant.advance(k);
-        sink(&TickRecord {
-            agent: agent_record(k, id, t, (&q, &qd), &m, &step),
+        actuation: Option<ActuationRecord>,
+        step: &StepReport<N>,
+    ) -> TickRecord {
+        let id = self.plant.agent_id();
+        TickRecord {
+            agent: agent_record(k, id, t, (&q, &qd), &m, step),
             attack: attack_record(k, id, &sent, &inj),
             center: center_record(k, id, out),
             actuation,
             monitor: None,
-        });
+        }
     }
 
     /// The first half of tick `k` at `t` of a robot whose torques a program decides: measured
@@ -671,6 +696,9 @@ pub trait TorqueProgram {
 #[derive(Debug)]
 pub struct Ticker {
     loops: Vec<AnyLoop>,
+    /// The loops, cut into runs of consecutive robots of one model whose plants step side by
+    /// side ([`Plant::advance_side_by_side`]); a robot of its own is a run of one.
+    runs: Vec<std::ops::Range<usize>>,
     control_period_s: f64,
     k: u64,
     ticks: u64,
@@ -705,6 +733,7 @@ impl Ticker {
             );
         }
         Ok(Self {
+            runs: side_by_side(&s.agents, &loops),
             loops,
             control_period_s: s.control_period_s,
             k: 0,
@@ -760,11 +789,88 @@ impl Ticker {
         }
         let k = self.k;
         let t = tick_time(k, self.control_period_s);
-        for agent in &mut self.loops {
-            crate::on_joint_count!(AnyLoop, agent, a => a.tick(attacker, (k, t), &mut sink));
+        for run in &self.runs {
+            let loops = &mut self.loops[run.clone()];
+            match loops {
+                [one] => {
+                    crate::on_joint_count!(AnyLoop, one, a => a.tick(attacker, (k, t), &mut sink))
+                }
+                _ => {
+                    let tick =
+                        crate::on_joint_count!(AnyLoop, &loops[0], a => side_by_side_tick(&**a));
+                    tick(loops, attacker, (k, t), &mut sink);
+                }
+            }
         }
         self.k += 1;
         true
+    }
+}
+
+/// The runs of [`Ticker::runs`]: consecutive agents whose robots are of one model that
+/// computes several states side by side ([`crate::model::EulerLagrange::side_by_side`]).
+fn side_by_side(agents: &[AgentConfig], loops: &[AnyLoop]) -> Vec<std::ops::Range<usize>> {
+    let batched =
+        |i: usize| crate::on_joint_count!(AnyLoop, &loops[i], a => a.plant.side_by_side());
+    let mut runs: Vec<std::ops::Range<usize>> = Vec::new();
+    for i in 0..agents.len() {
+        match runs.last_mut() {
+            Some(run)
+                if batched(i)
+                    && batched(run.start)
+                    && agents[run.start].model == agents[i].model =>
+            {
+                run.end = i + 1;
+            }
+            _ => runs.push(i..i + 1),
+        }
+    }
+    runs
+}
+
+/// [`tick_side_by_side`] for robots of `first`'s joint count.
+fn side_by_side_tick<const N: usize, A: Attacker, S: FnMut(&TickRecord)>(
+    _first: &AgentLoop<N>,
+) -> fn(&mut [AnyLoop], &mut A, (u64, f64), &mut S) {
+    tick_side_by_side::<N, A, S>
+}
+
+/// Tick `k` at `t` of a run of robots of one model and `N` joints: each
+/// measured, controlled and handed its torque in turn, as [`AgentLoop::tick`] does, then
+/// their plants stepped side by side, then each record to `sink` in the agents' order — the
+/// records of one by one, to the bit.
+fn tick_side_by_side<const N: usize, A: Attacker, S: FnMut(&TickRecord)>(
+    loops: &mut [AnyLoop],
+    attacker: &mut A,
+    (k, t): (u64, f64),
+    sink: &mut S,
+) {
+    let mut team: Vec<&mut AgentLoop<N>> = (loops.iter_mut())
+        .map(|l| {
+            let any: &mut dyn std::any::Any = crate::on_joint_count!(AnyLoop, l, a => &mut **a);
+            any.downcast_mut::<AgentLoop<N>>()
+                .expect("a run holds robots of one model")
+        })
+        .collect();
+    // The control centers' `M(q_d)⁻¹` and drifts of the tick, side by side.
+    let wants: Vec<Wants<N>> = team.iter().map(|a| a.center.wants(t)).collect();
+    let primes = prime(team[0].center.model(), &wants);
+    for (a, primes) in team.iter_mut().zip(primes) {
+        a.center.prime(primes);
+    }
+    let mut opened = Vec::with_capacity(team.len());
+    for a in team.iter_mut() {
+        let open = a.measure(attacker, (k, t));
+        let out = center_tick(&mut a.center, t, open.sent.usable().map(|(m, _)| m));
+        let actuation = a.hand(attacker, (k, t), &out);
+        opened.push((open, out, actuation));
+    }
+    let steps = {
+        let mut plants: Vec<&mut Plant<N>> = team.iter_mut().map(|a| &mut a.plant).collect();
+        Plant::advance_side_by_side(&mut plants, k)
+    };
+    for ((a, (open, out, actuation)), step) in team.iter().zip(opened).zip(&steps) {
+        sink(&a.record((k, t), open, &out, actuation, step));
     }
 }
 

@@ -8,6 +8,7 @@ use rand_distr::{Distribution, Normal};
 
 use crate::delay::{in_force_at, DelayLine, DelayProfile, PushError};
 use crate::memo::Recent;
+use crate::model::robot::{Forward, LANES};
 use crate::model::{EulerLagrange, ModelConfig, Vector};
 use crate::rng::{stream, Purpose};
 use crate::time::tick_time;
@@ -77,6 +78,8 @@ pub struct Plant<const N: usize> {
     /// step's start, and a piece's end the next piece's start ([`Recent`]: same bits).
     recent_tau: Recent<f64, 4>,
     recent_disturbance: Recent<Vector<N>, 4>,
+    /// The RK4 pieces of the step under way ([`Self::plan`]).
+    pieces: Vec<Piece<N>>,
 }
 
 impl<const N: usize> Plant<N> {
@@ -101,6 +104,7 @@ impl<const N: usize> Plant<N> {
             missing_commands: 0,
             recent_tau: Recent::default(),
             recent_disturbance: Recent::default(),
+            pieces: Vec::new(),
         })
     }
 }
@@ -108,6 +112,12 @@ impl<const N: usize> Plant<N> {
 impl<const N: usize> Plant<N> {
     pub fn agent_id(&self) -> u32 {
         self.params.agent_id
+    }
+
+    /// Whether its model computes several states side by side
+    /// ([`EulerLagrange::side_by_side`]): [`Self::advance_side_by_side`] then gains.
+    pub fn side_by_side(&self) -> bool {
+        self.model.side_by_side()
     }
 
     /// The sensor: `y = q + θ1`, `ẏ = q̇ + θ2`. Draws θ1 for every link, then θ2.
@@ -230,39 +240,48 @@ impl<const N: usize> Plant<N> {
         earliest
     }
 
-    /// One classic RK4 step of length `len` from `t` with the delayed input held at `u`.
-    fn rk4(&mut self, t: f64, len: f64, u: &Vector<N>) -> Vector<N> {
+    /// The RK4 step of `piece` from the plant's state, its disturbances evaluated.
+    fn start(&mut self, piece: &Piece<N>) -> Rk4<N> {
+        let (t, len) = (piece.from, piece.len);
         // The disturbance at the midpoint serves the two midpoint stages (one evaluation).
         let mid = self.disturbance(t + len / 2.0);
         let (start, end) = (self.disturbance(t), self.disturbance(t + len));
-        let acc =
-            |d: &Vector<N>, q: &Vector<N>, qd: &Vector<N>| self.model.acceleration(q, qd, u, d);
-        let (q, qd) = (self.q, self.qd);
-        let a1 = acc(&start, &q, &qd);
-        let (q2, qd2) = (q + qd * (len / 2.0), qd + a1 * (len / 2.0));
-        let a2 = acc(&mid, &q2, &qd2);
-        let (q3, qd3) = (q + qd2 * (len / 2.0), qd + a2 * (len / 2.0));
-        let a3 = acc(&mid, &q3, &qd3);
-        let (q4, qd4) = (q + qd3 * len, qd + a3 * len);
-        let a4 = acc(&end, &q4, &qd4);
-        self.q = q + (qd + qd2 * 2.0 + qd3 * 2.0 + qd4) * (len / 6.0);
-        self.qd = qd + (a1 + a2 * 2.0 + a3 * 2.0 + a4) * (len / 6.0);
-        a1
+        Rk4 {
+            len,
+            u: piece.u,
+            d: [start, mid, mid, end],
+            q: self.q,
+            qd: [self.qd; 4],
+            a: [Vector::<N>::zeros(); 4],
+        }
     }
 
-    /// Integrates step `k`, `[t_k, t_k + Δ]` with `t_k =` [`tick_time`]`(k)`, sub-step by
-    /// sub-step. The delayed input `u(t − τ(t))` is piecewise constant: each sub-step is split
-    /// at the instants where a newer command takes over (its stamp reached by `t − τ(t)`), and
-    /// each piece is one RK4 step with its own held command. No RK stage straddles a switch, so
-    /// the result depends continuously on τ: a delay of exactly `m·Δ` and one a hair longer
-    /// integrate the same input over all but a hair of the step.
-    pub fn advance(&mut self, k: u64) -> StepReport<N> {
+    /// One classic RK4 step of `piece`: the plant's state moves to its end; the acceleration
+    /// at its start.
+    fn rk4(&mut self, piece: &Piece<N>) -> Vector<N> {
+        let mut rk = self.start(piece);
+        for s in 0..4 {
+            let (q, qd) = rk.stage(s);
+            rk.a[s] = self.model.acceleration(&q, &qd, &rk.u, &rk.d[s]);
+        }
+        (self.q, self.qd) = rk.end();
+        rk.a[0]
+    }
+
+    /// Step `k`'s pieces in `self.pieces`, `[t_k, t_k + Δ]` with `t_k =` [`tick_time`]`(k)`,
+    /// sub-step by sub-step. The delayed input `u(t − τ(t))` is piecewise constant: each
+    /// sub-step is split at the instants where a newer command takes over (its stamp reached
+    /// by `t − τ(t)`), and each piece is one RK4 step with its own held command. No RK stage
+    /// straddles a switch, so the result depends continuously on τ: a delay of exactly `m·Δ`
+    /// and one a hair longer integrate the same input over all but a hair of the step. True
+    /// when some piece needed a command that had not arrived.
+    fn plan(&mut self, k: u64) -> bool {
         let period = self.params.control_period_s;
         let t_k = tick_time(k, period);
         let m = self.params.substeps.max(1);
         let h = period / f64::from(m);
-        let mut report = None;
         let mut missed = false;
+        self.pieces.clear();
         for s in 0..m {
             let (a, b) = (t_k + f64::from(s) * h, t_k + f64::from(s + 1) * h);
             let (qa, qb) = (self.step_query(a), self.step_query(b));
@@ -275,26 +294,150 @@ impl<const N: usize> Plant<N> {
                     self.params.delay.takeover_time(stamp, (a, qa), (b, qb))
                 });
                 if to > from {
-                    let a1 = self.rk4(from, to - from, &u);
-                    report.get_or_insert((u, a1));
+                    self.pieces.push(Piece {
+                        from,
+                        len: to - from,
+                        u,
+                    });
                 }
                 let Some((stamp, value)) = next else { break };
                 (from, from_query, u) = (to.max(from), stamp, value);
             }
         }
+        missed
+    }
+
+    /// The end of step `k` once its pieces ran: the miss counted, the delay line pruned, the
+    /// report (`first`: the first piece's command and acceleration).
+    fn finish(
+        &mut self,
+        k: u64,
+        missed: bool,
+        first: Option<(Vector<N>, Vector<N>)>,
+    ) -> StepReport<N> {
         if missed {
             self.deadline_misses += 1;
         }
         // Prune at the very instant the next step's first query computes.
         let next = self.earliest_step_query(k + 1);
         self.commands.prune_before(next);
-        let (u_applied, qdd) = report.unwrap_or((Vector::<N>::zeros(), Vector::<N>::zeros()));
+        let (u_applied, qdd) = first.unwrap_or((Vector::<N>::zeros(), Vector::<N>::zeros()));
         StepReport {
             u_applied,
             qdd,
-            tau: self.tau(t_k),
+            tau: self.tau(tick_time(k, self.params.control_period_s)),
             missed,
         }
+    }
+
+    /// Integrates step `k` ([`Self::plan`] says how it is cut into RK4 pieces).
+    pub fn advance(&mut self, k: u64) -> StepReport<N> {
+        let missed = self.plan(k);
+        let mut first = None;
+        for i in 0..self.pieces.len() {
+            let piece = self.pieces[i];
+            let a1 = self.rk4(&piece);
+            first.get_or_insert((piece.u, a1));
+        }
+        self.finish(k, missed, first)
+    }
+
+    /// [`Self::advance`] of several plants of one model (the caller's word: the first
+    /// plant's model serves them all), side by side: [`LANES`] at a time, their RK4 pieces run
+    /// together, the model asked for their forward dynamics at once
+    /// ([`EulerLagrange::accelerations`]). Each plant ends where its own [`Self::advance`]
+    /// would, to the bit, and its report is the same.
+    pub fn advance_side_by_side(plants: &mut [&mut Plant<N>], k: u64) -> Vec<StepReport<N>> {
+        let mut reports = Vec::with_capacity(plants.len());
+        for lanes in plants.chunks_mut(LANES) {
+            Self::advance_lanes(lanes, k, &mut reports);
+        }
+        reports
+    }
+
+    /// [`Self::advance_side_by_side`] of at most [`LANES`] plants, their reports pushed.
+    fn advance_lanes(plants: &mut [&mut Plant<N>], k: u64, reports: &mut Vec<StepReport<N>>) {
+        let mut missed = [false; LANES];
+        for (plant, missed) in plants.iter_mut().zip(&mut missed) {
+            *missed = plant.plan(k);
+        }
+        let mut first = [None; LANES];
+        let pieces = plants.iter().map(|p| p.pieces.len()).max().unwrap_or(0);
+        for i in 0..pieces {
+            // The plants with an `i`-th piece; a lane without one repeats the first such
+            // plant's step (its result unused).
+            let running: [bool; LANES] =
+                std::array::from_fn(|l| plants.get(l).is_some_and(|p| p.pieces.len() > i));
+            let Some(lead) = running.iter().position(|r| *r) else {
+                continue;
+            };
+            let mut rk: [Rk4<N>; LANES] = std::array::from_fn(|l| {
+                let plant = &mut plants[if running[l] { l } else { lead }];
+                let piece = plant.pieces[i];
+                plant.start(&piece)
+            });
+            for s in 0..4 {
+                let stage: [(Vector<N>, Vector<N>); LANES] =
+                    std::array::from_fn(|l| rk[l].stage(s));
+                let states: [Forward<'_, N>; LANES] =
+                    std::array::from_fn(|l| (&stage[l].0, &stage[l].1, &rk[l].u, &rk[l].d[s]));
+                let a = plants[lead].model.accelerations(&states);
+                for (r, a) in rk.iter_mut().zip(a) {
+                    r.a[s] = a;
+                }
+            }
+            for (l, plant) in plants.iter_mut().enumerate().filter(|(l, _)| running[*l]) {
+                (plant.q, plant.qd) = rk[l].end();
+                first[l].get_or_insert((rk[l].u, rk[l].a[0]));
+            }
+        }
+        for (l, plant) in plants.iter_mut().enumerate() {
+            reports.push(plant.finish(k, missed[l], first[l]));
+        }
+    }
+}
+
+/// One RK4 piece of a step: from `from`, `len` long, the command `u` held over it.
+#[derive(Debug, Clone, Copy)]
+struct Piece<const N: usize> {
+    from: f64,
+    len: f64,
+    u: Vector<N>,
+}
+
+/// A classic RK4 step under way from `(q, q̇)`: the disturbance each stage sees (the
+/// midpoint's twice), each stage's velocity and, once asked of the model, acceleration.
+struct Rk4<const N: usize> {
+    len: f64,
+    u: Vector<N>,
+    d: [Vector<N>; 4],
+    q: Vector<N>,
+    qd: [Vector<N>; 4],
+    a: [Vector<N>; 4],
+}
+
+impl<const N: usize> Rk4<N> {
+    /// The state at which stage `s` (0–3) asks for the acceleration, from the stages before
+    /// it; its velocity is kept for the end.
+    fn stage(&mut self, s: usize) -> (Vector<N>, Vector<N>) {
+        let (q, qd, len) = (self.q, self.qd[0], self.len);
+        let (q_s, qd_s) = match s {
+            0 => (q, qd),
+            1 => (q + qd * (len / 2.0), qd + self.a[0] * (len / 2.0)),
+            2 => (q + self.qd[1] * (len / 2.0), qd + self.a[1] * (len / 2.0)),
+            _ => (q + self.qd[2] * len, qd + self.a[2] * len),
+        };
+        self.qd[s] = qd_s;
+        (q_s, qd_s)
+    }
+
+    /// The state at the end of the step.
+    fn end(&self) -> (Vector<N>, Vector<N>) {
+        let (q, qd, a, len) = (self.q, &self.qd, &self.a, self.len);
+        (
+            q + (qd[0] + qd[1] * 2.0 + qd[2] * 2.0 + qd[3]) * (len / 6.0),
+            qd[0] + (a[0] + a[1] * 2.0 + a[2] * 2.0 + a[3]) * (len / 6.0),
+        )
     }
 }
 // `[noise]` and `[disturbance]` of a scenario: read by the plant only.

@@ -3,6 +3,7 @@
 //! mode`).
 
 use crate::delay::DelayLine;
+use crate::model::primed::{Primed, Primes, Wants};
 use crate::model::{EulerLagrange, Matrix, Vector};
 use crate::trajectory::Reference;
 
@@ -97,6 +98,8 @@ pub struct CenterAgent<const N: usize> {
     /// A correction added to every torque the controller commands, until changed
     /// ([`CenterAgent::set_correction`]: a learned defence's action).
     correction: Option<Vector<N>>,
+    /// Answers of the model computed ahead for the next tick ([`Self::prime`]).
+    primes: Option<Primes<N>>,
 }
 
 impl<const N: usize> CenterAgent<N> {
@@ -123,6 +126,7 @@ impl<const N: usize> CenterAgent<N> {
             missing_inputs: 0,
             asked: None,
             correction: None,
+            primes: None,
         })
     }
 }
@@ -166,6 +170,23 @@ impl<const N: usize> CenterAgent<N> {
     /// one, and count the tick.
     pub fn tick_missing(&mut self, t: f64) -> CenterOutput<N> {
         self.tick_on(t, None, None)
+    }
+
+    /// What its controller will ask the model in the tick at `t` ([`Controller::wants`]).
+    pub fn wants(&self, t: f64) -> Wants<N> {
+        self.controller
+            .wants(&self.params.trajectory.reference::<N>(t))
+    }
+
+    /// Its robot's model.
+    pub fn model(&self) -> &dyn EulerLagrange<N> {
+        self.model.as_ref()
+    }
+
+    /// Answers of the model computed ahead for its next tick (of [`Self::wants`]): the tick
+    /// uses each for its very arguments only ([`Primed`]).
+    pub fn prime(&mut self, primes: Primes<N>) {
+        self.primes = Some(primes);
     }
 
     /// A tick whose torque a controller program decides (`[roles.controller]`), first half:
@@ -239,6 +260,9 @@ impl<const N: usize> CenterAgent<N> {
             missing,
         } = open;
         let t = x.t;
+        // The answers computed ahead for this tick serve it alone.
+        let (primes, model) = (self.primes.take(), self.model.as_ref());
+        let primed = primes.as_ref().map(|primes| Primed { model, primes });
         let tick = Tick {
             t,
             dt: self.params.control_period_s,
@@ -248,7 +272,9 @@ impl<const N: usize> CenterAgent<N> {
             trajectory: &self.params.trajectory,
             e_u: &x.e_u,
             delay: &self.params.delay,
-            model: self.model.as_ref(),
+            model: primed
+                .as_ref()
+                .map_or(model, |p| p as &dyn EulerLagrange<N>),
             s_override,
             answer,
         };

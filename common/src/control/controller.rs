@@ -15,6 +15,7 @@
 //! [`CenterParams`]: super::config::CenterParams
 
 use crate::delay::DelayProfile;
+use crate::model::primed::Wants;
 use crate::model::{EulerLagrange, Vector};
 use crate::trajectory::{Reference, TrajectoryConfig};
 
@@ -89,4 +90,11 @@ pub trait Controller<const N: usize>: std::fmt::Debug + Send {
     /// Starts again from the measurement `(y, ẏ)` after its state turned non-finite; its
     /// estimate then.
     fn reset(&mut self, y: &Vector<N>, yd: &Vector<N>) -> Estimate<N>;
+    /// What it will ask its model in the next tick, whose reference is `reference`, as far as
+    /// it knows before the tick ([`Wants`]): the in-process engine may compute it ahead, side
+    /// by side with other robots' ([`crate::model::primed`]). Nothing by default.
+    fn wants(&self, reference: &Reference<N>) -> Wants<N> {
+        let _ = reference;
+        Wants::default()
+    }
 }

@@ -2,8 +2,10 @@
 //! observer (22)–(24) and the NN attack estimate `Ŝ` (32), (37), (38) in the torque (12), (14);
 //! and `traditional`, the same observer with `Ŝ ≡ 0` and no learning.
 
+use crate::model::primed::Wants;
 use crate::model::{EulerLagrange, Matrix, Vector};
 use crate::rng::{stream, Purpose};
+use crate::trajectory::Reference;
 
 use super::config::{CenterParams, ControllerConfig};
 use super::controller::{Command, Controller, Estimate, Tick};
@@ -136,5 +138,14 @@ impl<const N: usize> Controller<N> for Paper<N> {
         self.observer = Observer::at(*y, *yd);
         self.psi2_prev = Vector::<N>::zeros();
         self.estimate()
+    }
+
+    /// `A = M(q_d)⁻¹` ([`Self::command`]) and the observer's drift at its state
+    /// ([`Self::update`]).
+    fn wants(&self, reference: &Reference<N>) -> Wants<N> {
+        Wants {
+            inverse_inertia: Some(reference.q),
+            drift: Some((self.observer.q, self.observer.qd)),
+        }
     }
 }

@@ -6,6 +6,7 @@
 //! A robot of a URDF file needs none of that ([`urdf`], `kind = "urdf"`).
 
 pub mod joint_count;
+pub mod primed;
 pub mod robot;
 pub mod three_link;
 pub mod two_link;

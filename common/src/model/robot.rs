@@ -9,6 +9,13 @@ pub type Vector<const N: usize> = SVector<f64, N>;
 /// Square matrix over the generalized coordinates of an `N`-dof robot.
 pub type Matrix<const N: usize> = SMatrix<f64, N, N>;
 
+/// How many states [`EulerLagrange::accelerations`] takes at once.
+pub const LANES: usize = 4;
+
+/// One state of the forward dynamics: `q`, `q̇`, the torque and the disturbance
+/// ([`EulerLagrange::acceleration`]'s arguments).
+pub type Forward<'a, const N: usize> = (&'a Vector<N>, &'a Vector<N>, &'a Vector<N>, &'a Vector<N>);
+
 /// The known dynamics of one agent. Pure: no state, no I/O.
 pub trait EulerLagrange<const N: usize>: Send + Sync + std::fmt::Debug {
     /// Every way the parameters are physically meaningless, as `(field, why)`; empty for a
@@ -52,6 +59,30 @@ pub trait EulerLagrange<const N: usize>: Send + Sync + std::fmt::Debug {
         disturbance: &Vector<N>,
     ) -> Vector<N> {
         self.inverse_inertia(q) * (torque - self.bias_forces(q, qd) - disturbance)
+    }
+
+    /// [`Self::acceleration`] of [`LANES`] states, each to the bit as it gives it alone: a
+    /// model may compute them side by side (the plants of a team of the same robot step
+    /// together).
+    fn accelerations(&self, states: &[Forward<'_, N>; LANES]) -> [Vector<N>; LANES] {
+        states.map(|(q, qd, u, d)| self.acceleration(q, qd, u, d))
+    }
+
+    /// [`Self::drift`] of [`LANES`] states, each to the bit as it gives it alone.
+    fn drifts(&self, states: &[(&Vector<N>, &Vector<N>); LANES]) -> [Vector<N>; LANES] {
+        states.map(|(q, qd)| self.drift(q, qd))
+    }
+
+    /// [`Self::inverse_inertia`] at [`LANES`] poses, each to the bit as it gives it alone.
+    fn inverse_inertias(&self, qs: &[&Vector<N>; LANES]) -> [Matrix<N>; LANES] {
+        qs.map(|q| self.inverse_inertia(q))
+    }
+
+    /// Whether [`Self::accelerations`], [`Self::drifts`] and [`Self::inverse_inertias`]
+    /// compute their states side by side (faster than one by one); else they ask the
+    /// single-state method of each.
+    fn side_by_side(&self) -> bool {
+        false
     }
 
     /// Kinetic energy `½ q̇ᵀ M q̇`.

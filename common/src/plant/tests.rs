@@ -151,3 +151,56 @@ fn a_refused_command_counts_as_missing_and_acts_as_one() {
         assert_eq!(p.deadline_misses, dropped.deadline_misses);
     }
 }
+
+/// Plants of the shipped Panda team (each its own delay, noise and disturbance), stepped side
+/// by side and each alone, fed the same commands (one a tick, some ticks' missing, so their
+/// steps are cut into different pieces): every state and report has the same bits.
+#[cfg(feature = "urdf")]
+#[test]
+fn plants_stepped_side_by_side_are_each_stepped_alone() {
+    let folder = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../scenarios");
+    let text = std::fs::read_to_string(folder.join("panda-team.toml")).expect("read");
+    let r = crate::scenario::load_str(&text, "panda-team.toml", Some(&folder)).expect("valid");
+    let s = &r.scenario;
+    let plants = |substeps: u32| -> Vec<Plant<7>> {
+        (s.agents.iter().cycle().take(5))
+            .map(|a| {
+                let mut p = s.plant_params(a);
+                p.substeps = substeps;
+                Plant::<7>::new(p).expect("a Panda")
+            })
+            .collect()
+    };
+    let torque = |k: u64, i: usize| -> Vector<7> {
+        let t = tick_time(k, DT);
+        Vector::<7>::from_fn(|j, _| (3.0 + j as f64) * ((2.0 + i as f64) * t + j as f64).sin())
+    };
+    // Five plants: a lane of four and one alone, with one and two sub-steps.
+    for substeps in [1, 2] {
+        let (mut alone, mut together) = (plants(substeps), plants(substeps));
+        assert!(alone[0].side_by_side());
+        for k in 0..400 {
+            let t = tick_time(k, DT);
+            for (i, (a, b)) in alone.iter_mut().zip(&mut together).enumerate() {
+                let command = (k % (7 + i as u64) != 3).then(|| (torque(k, i), 0.0));
+                assert_eq!(a.take_command(t, command), b.take_command(t, command));
+            }
+            let each: Vec<StepReport<7>> = alone.iter_mut().map(|p| p.advance(k)).collect();
+            let mut lanes: Vec<&mut Plant<7>> = together.iter_mut().collect();
+            let side = Plant::advance_side_by_side(&mut lanes, k);
+            assert_eq!(each, side, "tick {k}");
+            for (i, (a, b)) in alone.iter().zip(&together).enumerate() {
+                let same = |x: &Vector<7>, y: &Vector<7>| {
+                    x.iter()
+                        .zip(y.iter())
+                        .all(|(x, y)| x.to_bits() == y.to_bits())
+                };
+                assert!(
+                    same(&a.q, &b.q) && same(&a.qd, &b.qd),
+                    "plant {i}, tick {k}"
+                );
+            }
+        }
+        assert!(together.iter().all(|p| p.q.iter().all(|x| x.is_finite())));
+    }
+}

@@ -4,8 +4,10 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Scalar, Vector3};
 use serde::{Deserialize, Serialize};
+
+use super::lanes::{mul3, mul33, Lane};
 
 /// The most joints a URDF arm may move.
 pub const MAX_JOINTS: usize = 12;
@@ -69,11 +71,23 @@ pub enum Motion {
     Prismatic,
 }
 
-/// A rigid transform: a rotation and a translation (`x ↦ r x + p`).
+/// A rigid transform: a rotation and a translation (`x ↦ r x + p`), of one arm (`f64`) or of
+/// several side by side ([`Lane`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) struct Frame {
-    pub r: Matrix3<f64>,
-    pub p: Vector3<f64>,
+pub(crate) struct Frame<T: Scalar = f64> {
+    pub r: Matrix3<T>,
+    pub p: Vector3<T>,
+}
+
+impl<T: Lane> Frame<T> {
+    /// `self ∘ other`: `other` expressed in `self`'s parent.
+    #[inline(always)]
+    pub(crate) fn then(&self, other: &Frame<T>) -> Frame<T> {
+        Frame {
+            r: mul33(&self.r, &other.r),
+            p: mul3(&self.r, &other.p) + self.p,
+        }
+    }
 }
 
 impl Frame {
@@ -82,12 +96,12 @@ impl Frame {
         p: Vector3::new(0.0, 0.0, 0.0),
     };
 
-    /// `self ∘ other`: `other` expressed in `self`'s parent.
+    /// This frame's numbers in every lane of `T`.
     #[inline(always)]
-    pub(crate) fn then(&self, other: &Frame) -> Frame {
+    pub(crate) fn lift<T: Lane>(&self) -> Frame<T> {
         Frame {
-            r: self.r * other.r,
-            p: self.r * other.p + self.p,
+            r: self.r.map(T::splat),
+            p: self.p.map(T::splat),
         }
     }
 

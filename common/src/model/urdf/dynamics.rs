@@ -14,8 +14,9 @@ use nalgebra::{DMatrix, DVector, Matrix3, Matrix3xX, Vector3};
 
 use super::chain::{Chain, Frame, Motion};
 use super::cholesky::Cholesky;
+use super::lanes::{wide, F64x4, LANES};
 use super::rigid::{felt, unit_rate_momentum, Rigid};
-use crate::model::robot::{EulerLagrange, Matrix, Vector};
+use crate::model::robot::{EulerLagrange, Forward, Matrix, Vector};
 
 /// The joint speed, rad/s or m/s, over which a joint's Coulomb friction rises to its full
 /// value (`tanh`): a step at zero would make the arm's equations stiff.
@@ -342,9 +343,112 @@ impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
         })
     }
 
-    fn inverse_inertia(&self, q: &Vector<N>) -> Matrix<N> {
-        let m = self.rigid.inertia(q);
-        match Cholesky::new(&m) {
+    wide!(fn inverse_inertia / inverse_inertia_wide / inverse_inertia_here (&self, q: &Vector<N>) -> Matrix<N>);
+
+    fn bias_forces(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
+        self.rigid.coriolis_and_gravity(q, qd) + self.friction(qd)
+    }
+
+    wide!(fn drift / drift_wide / drift_here (&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N>);
+
+    wide!(fn acceleration / acceleration_wide / acceleration_here (
+        &self,
+        q: &Vector<N>,
+        qd: &Vector<N>,
+        torque: &Vector<N>,
+        disturbance: &Vector<N>
+    ) -> Vector<N>);
+
+    fn side_by_side(&self) -> bool {
+        true
+    }
+
+    wide!(fn drifts / drifts_wide / drifts_here (
+        &self,
+        states: &[(&Vector<N>, &Vector<N>); LANES]
+    ) -> [Vector<N>; LANES]);
+
+    wide!(fn inverse_inertias / inverse_inertias_wide / inverse_inertias_here (
+        &self,
+        qs: &[&Vector<N>; LANES]
+    ) -> [Matrix<N>; LANES]);
+
+    wide!(
+        /// The states' `M` and `V q̇ + G` side by side ([`F64x4`]), and their `q̈`, each to
+        /// the bit as [`Self::acceleration`] gives it; where one of the `M` is not positive
+        /// definite, each state alone.
+        fn accelerations / accelerations_wide / accelerations_here (
+            &self,
+            states: &[Forward<'_, N>; LANES]
+        ) -> [Vector<N>; LANES]
+    );
+}
+
+/// The hot paths of the [`EulerLagrange`] implementation, for whichever instructions their
+/// caller is compiled for, and compiled for AVX2 ([`wide!`]).
+impl<const N: usize> UrdfArm<N> {
+    wide!(@wide fn inverse_inertia_wide / inverse_inertia_here (&self, q: &Vector<N>) -> Matrix<N>);
+    wide!(@wide fn drift_wide / drift_here (&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N>);
+    wide!(@wide fn acceleration_wide / acceleration_here (
+        &self,
+        q: &Vector<N>,
+        qd: &Vector<N>,
+        torque: &Vector<N>,
+        disturbance: &Vector<N>
+    ) -> Vector<N>);
+    wide!(@wide fn accelerations_wide / accelerations_here (
+        &self,
+        states: &[Forward<'_, N>; LANES]
+    ) -> [Vector<N>; LANES]);
+
+    wide!(@wide fn drifts_wide / drifts_here (
+        &self,
+        states: &[(&Vector<N>, &Vector<N>); LANES]
+    ) -> [Vector<N>; LANES]);
+    wide!(@wide fn inverse_inertias_wide / inverse_inertias_here (
+        &self,
+        qs: &[&Vector<N>; LANES]
+    ) -> [Matrix<N>; LANES]);
+
+    /// The poses' `M` side by side ([`F64x4`]) and their inverses; where one of them is not
+    /// positive definite, each pose alone.
+    #[inline(always)]
+    pub(super) fn inverse_inertias_here(&self, qs: &[&Vector<N>; LANES]) -> [Matrix<N>; LANES] {
+        let q: [F64x4; N] = std::array::from_fn(|j| F64x4(qs.map(|q| q[j])));
+        let mut m = self.rigid.inertia_rows_of(&q);
+        let Some(m) = Cholesky::new(&mut m) else {
+            return qs.map(|q| self.inverse_inertia_here(q));
+        };
+        let inv = m.inverse_rows();
+        // Symmetric: its rows are its columns, which nalgebra's arrays of arrays hold.
+        std::array::from_fn(|l| Matrix::<N>::from(inv.map(|row| row.map(|x| x.0[l]))))
+    }
+
+    /// The states' `M` and `V q̇ + G` side by side ([`F64x4`]), and their drifts; where one
+    /// `M` is not positive definite, each state alone.
+    #[inline(always)]
+    pub(super) fn drifts_here(
+        &self,
+        states: &[(&Vector<N>, &Vector<N>); LANES],
+    ) -> [Vector<N>; LANES] {
+        let q: [F64x4; N] = std::array::from_fn(|j| F64x4(states.map(|s| s.0[j])));
+        let qd: [F64x4; N] = std::array::from_fn(|j| F64x4(states.map(|s| s.1[j])));
+        let (mut m, bias) = self.rigid.inertia_and_bias(&q, &qd);
+        let Some(m) = Cholesky::new(&mut m) else {
+            return states.map(|(q, qd)| self.drift_here(q, qd));
+        };
+        // `(V q̇ + G) + F` of each state, as `Self::drift` forms it.
+        let friction = states.map(|(_, qd)| self.friction(qd));
+        let rhs: [F64x4; N] =
+            std::array::from_fn(|j| F64x4(std::array::from_fn(|l| bias[j].0[l] + friction[l][j])));
+        let x = m.solve(&rhs);
+        std::array::from_fn(|l| -Vector::<N>::from(std::array::from_fn(|j| x[j].0[l])))
+    }
+
+    #[inline(always)]
+    pub(super) fn inverse_inertia_here(&self, q: &Vector<N>) -> Matrix<N> {
+        let mut m = self.rigid.inertia_rows(q);
+        match Cholesky::new(&mut m) {
             Some(c) => c.inverse(),
             // Not positive definite: no number stands in for it (the run reports the
             // non-finite state).
@@ -352,32 +456,57 @@ impl<const N: usize> EulerLagrange<N> for UrdfArm<N> {
         }
     }
 
-    fn bias_forces(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
-        self.rigid.coriolis_and_gravity(q, qd) + self.friction(qd)
+    #[inline(always)]
+    pub(super) fn drift_here(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
+        let (mut m, bias) = self.rigid.inertia_and_bias(&q.data.0[0], &qd.data.0[0]);
+        -solve(&mut m, Vector::<N>::from(bias) + self.friction(qd))
     }
 
-    fn drift(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
-        let (m, bias) = self.rigid.inertia_and_bias(q, qd);
-        -solve(&m, bias + self.friction(qd))
-    }
-
-    fn acceleration(
+    #[inline(always)]
+    pub(super) fn acceleration_here(
         &self,
         q: &Vector<N>,
         qd: &Vector<N>,
         torque: &Vector<N>,
         disturbance: &Vector<N>,
     ) -> Vector<N> {
-        let (m, bias) = self.rigid.inertia_and_bias(q, qd);
-        solve(&m, torque - bias - self.friction(qd) - disturbance)
+        let (mut m, bias) = self.rigid.inertia_and_bias(&q.data.0[0], &qd.data.0[0]);
+        solve(
+            &mut m,
+            torque - Vector::<N>::from(bias) - self.friction(qd) - disturbance,
+        )
+    }
+
+    #[inline(always)]
+    pub(super) fn accelerations_here(
+        &self,
+        states: &[Forward<'_, N>; LANES],
+    ) -> [Vector<N>; LANES] {
+        let q: [F64x4; N] = std::array::from_fn(|j| F64x4(states.map(|s| s.0[j])));
+        let qd: [F64x4; N] = std::array::from_fn(|j| F64x4(states.map(|s| s.1[j])));
+        let (mut m, bias) = self.rigid.inertia_and_bias(&q, &qd);
+        let Some(m) = Cholesky::new(&mut m) else {
+            return states.map(|(q, qd, u, d)| self.acceleration_here(q, qd, u, d));
+        };
+        // `u − (V q̇ + G) − F − d` of each state, as `Self::acceleration` forms it.
+        let friction = states.map(|(_, qd, _, _)| self.friction(qd));
+        let rhs: [F64x4; N] = std::array::from_fn(|j| {
+            F64x4(std::array::from_fn(|l| {
+                let (_, _, u, d) = states[l];
+                u[j] - bias[j].0[l] - friction[l][j] - d[j]
+            }))
+        });
+        let x = m.solve(&rhs);
+        std::array::from_fn(|l| Vector::<N>::from(std::array::from_fn(|j| x[j].0[l])))
     }
 }
 
-/// `M⁻¹ b` by Cholesky; not a number when `M` is not positive definite.
+/// `M⁻¹ b` by Cholesky, `M` by rows (overwritten by its factor); not a number when `M` is not
+/// positive definite.
 #[inline(always)]
-fn solve<const N: usize>(m: &Matrix<N>, b: Vector<N>) -> Vector<N> {
+fn solve<const N: usize>(m: &mut [[f64; N]; N], b: Vector<N>) -> Vector<N> {
     match Cholesky::new(m) {
-        Some(c) => c.solve(&b),
+        Some(c) => Vector::<N>::from(c.solve(&b.data.0[0])),
         None => Vector::<N>::from_element(f64::NAN),
     }
 }

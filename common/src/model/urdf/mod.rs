@@ -16,6 +16,7 @@ mod chain;
 mod cholesky;
 mod config;
 mod dynamics;
+mod lanes;
 mod load;
 mod rigid;
 

@@ -6,9 +6,10 @@
 //! Christoffel `V` itself from the bodies' Jacobians and their rates ([`Rigid::coriolis`]).
 //! [`Chain`]'s own methods are the reference the tests hold these to.
 
-use nalgebra::{Matrix3, SMatrix, Vector3};
+use nalgebra::{Matrix3, SMatrix, Scalar, Vector3};
 
 use super::chain::{Chain, Frame, Motion};
+use super::lanes::{identity33, mul3, mul33, zero3, zero33, zero33s, zero3s, Lane};
 use crate::model::robot::{Matrix, Vector};
 
 /// A [`Chain`] of `N` joints, one rigid body per joint.
@@ -46,47 +47,54 @@ impl Along {
 
     /// The joint's axis in the frame `r` is turned from: `r axis`.
     #[inline(always)]
-    fn axis_of(self, r: &Matrix3<f64>, axis: &Vector3<f64>) -> Vector3<f64> {
+    fn axis_of<T: Lane>(self, r: &Matrix3<T>, axis: &Vector3<f64>) -> Vector3<T> {
         match self {
             Self::Own(i) => r.column(i).into_owned(),
-            Self::Other => r * axis,
+            Self::Other => mul3(r, &axis.map(T::splat)),
         }
     }
 
     /// `r` turned by `q` about the joint's axis: `r R(axis, q)`, given `(sin q, cos q)`. About
     /// its frame's own axis `i`, the two other columns of `r` mix and column `i` stays.
     #[inline(always)]
-    fn turned(
+    fn turned<T: Lane>(
         self,
-        r: &Matrix3<f64>,
+        r: &Matrix3<T>,
         axis: &Vector3<f64>,
-        q: f64,
-        (s, c): (f64, f64),
-    ) -> Matrix3<f64> {
+        q: T,
+        (s, c): (T, T),
+    ) -> Matrix3<T> {
         let Self::Own(i) = self else {
-            return r * Frame::motion(Motion::Revolute, axis, q).r;
+            return mul33(r, &q.each(|q| Frame::motion(Motion::Revolute, axis, q).r));
         };
         let (a, b) = ((i + 1) % 3, (i + 2) % 3);
         let (ra, rb) = (r.column(a).into_owned(), r.column(b).into_owned());
-        let mut out = *r;
-        out.set_column(a, &(ra * c + rb * s));
-        out.set_column(b, &(rb * c - ra * s));
+        let mut c3 = [r.column(i).into_owned(); 3];
+        c3[a] = ra * c + rb * s;
+        c3[b] = rb * c - ra * s;
+        #[rustfmt::skip]
+        let out = Matrix3::new(
+            c3[0][0], c3[1][0], c3[2][0],
+            c3[0][1], c3[1][1], c3[2][1],
+            c3[0][2], c3[1][2], c3[2][2],
+        );
         out
     }
 }
 
-/// Where the joints and bodies are at one `q`, in the root link's frame.
-struct Placed<const N: usize> {
+/// Where the joints and bodies are at one `q`, in the root link's frame (of one arm, or of
+/// several side by side: [`Lane`]).
+struct Placed<const N: usize, T: Scalar = f64> {
     /// Each joint's origin and unit axis, and their product `axis × origin` (the joint's
     /// moment arm in [`unit_rate_momentum`] and [`felt`]).
-    origin: [Vector3<f64>; N],
-    axis: [Vector3<f64>; N],
-    arm: [Vector3<f64>; N],
+    origin: [Vector3<T>; N],
+    axis: [Vector3<T>; N],
+    arm: [Vector3<T>; N],
     /// Each joint's child's origin.
-    child: [Vector3<f64>; N],
+    child: [Vector3<T>; N],
     /// Each body's centre of mass and inertia about it.
-    com: [Vector3<f64>; N],
-    inertia: [Matrix3<f64>; N],
+    com: [Vector3<T>; N],
+    inertia: [Matrix3<T>; N],
 }
 
 impl<const N: usize> Rigid<N> {
@@ -123,21 +131,21 @@ impl<const N: usize> Rigid<N> {
     }
 
     #[inline(always)]
-    fn place(&self, q: &Vector<N>) -> Placed<N> {
+    fn place<T: Lane>(&self, q: &[T; N]) -> Placed<N, T> {
         let mut p = Placed {
-            origin: [Vector3::zeros(); N],
-            axis: [Vector3::zeros(); N],
-            arm: [Vector3::zeros(); N],
-            child: [Vector3::zeros(); N],
-            com: [Vector3::zeros(); N],
-            inertia: [Matrix3::zeros(); N],
+            origin: zero3s(),
+            axis: zero3s(),
+            arm: zero3s(),
+            child: zero3s(),
+            com: zero3s(),
+            inertia: zero33s(),
         };
         // Every joint's sine and cosine first: a call to the maths library inside the loop
         // below would make the loop keep its frame in memory across the call at every joint.
-        let turns: [(f64, f64); N] = std::array::from_fn(|j| q[j].sin_cos());
-        let mut at = Frame::IDENTITY;
+        let turns: [(T, T); N] = std::array::from_fn(|j| q[j].sin_cos());
+        let mut at = Frame::IDENTITY.lift::<T>();
         for j in 0..N {
-            let frame = at.then(&self.placement[j]);
+            let frame = at.then(&self.placement[j].lift());
             let axis = self.along[j].axis_of(&frame.r, &self.axis[j]);
             p.origin[j] = frame.p;
             p.axis[j] = axis;
@@ -153,33 +161,51 @@ impl<const N: usize> Rigid<N> {
                 },
             };
             p.child[j] = at.p;
-            p.com[j] = at.r * self.com[j] + at.p;
-            p.inertia[j] = at.r * self.inertia[j] * at.r.transpose();
+            p.com[j] = mul3(&at.r, &self.com[j].map(T::splat)) + at.p;
+            p.inertia[j] = mul33(
+                &mul33(&at.r, &self.inertia[j].map(T::splat)),
+                &at.r.transpose(),
+            );
         }
         p
     }
 
     /// `M(q)`.
     pub(crate) fn inertia(&self, q: &Vector<N>) -> Matrix<N> {
+        let m = self.inertia_rows(q);
+        Matrix::<N>::from_fn(|i, j| m[i][j])
+    }
+
+    /// `M(q)` by rows.
+    #[inline(always)]
+    pub(crate) fn inertia_rows(&self, q: &Vector<N>) -> [[f64; N]; N] {
+        self.inertia_rows_of(&q.data.0[0])
+    }
+
+    /// `M(q)` by rows, of one arm (`f64`) or of several side by side ([`Lane`]).
+    #[inline(always)]
+    pub(crate) fn inertia_rows_of<T: Lane>(&self, q: &[T; N]) -> [[T; N]; N] {
         self.inertia_placed(&self.place(q))
     }
 
+    /// `M(q)` as rows.
     #[inline(always)]
-    fn inertia_placed(&self, p: &Placed<N>) -> Matrix<N> {
-        let mut m = Matrix::<N>::zeros();
+    // Row `i` and column `j` of one matrix, written twice (it is symmetric).
+    #[allow(clippy::needless_range_loop)]
+    fn inertia_placed<T: Lane>(&self, p: &Placed<N, T>) -> [[T; N]; N] {
+        let mut m = [[T::zero(); N]; N];
         // The composite body of joint j: mass, first moment and inertia about the root's origin.
-        let (mut mass, mut first, mut second) = (0.0, Vector3::zeros(), Matrix3::zeros());
+        let (mut mass, mut first, mut second) = (T::zero(), zero3(), zero33());
         for j in (0..N).rev() {
-            let (mb, c) = (self.mass[j], p.com[j]);
+            let (mb, c) = (T::splat(self.mass[j]), p.com[j]);
             mass += mb;
-            first += mb * c;
-            second +=
-                p.inertia[j] + mb * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
+            first += c * mb;
+            second += p.inertia[j] + (identity33() * c.dot(&c) - c * c.transpose()) * mb;
             let joint = |k: usize| (self.motion[k], p.axis[k], p.arm[k]);
             let momentum = unit_rate_momentum(joint(j), (mass, &first, &second));
             for i in 0..=j {
-                m[(i, j)] = felt(joint(i), momentum);
-                m[(j, i)] = m[(i, j)];
+                m[i][j] = felt(joint(i), momentum);
+                m[j][i] = m[i][j];
             }
         }
         m
@@ -187,16 +213,19 @@ impl<const N: usize> Rigid<N> {
 
     /// `V(q, q̇) q̇ + G(q)`: the joint forces that hold the arm at `q̈ = 0`.
     pub(crate) fn coriolis_and_gravity(&self, q: &Vector<N>, qd: &Vector<N>) -> Vector<N> {
-        self.coriolis_and_gravity_placed(&self.place(q), qd)
+        Vector::<N>::from(
+            self.coriolis_and_gravity_placed(&self.place(&q.data.0[0]), &qd.data.0[0]),
+        )
     }
 
     #[inline(always)]
-    fn coriolis_and_gravity_placed(&self, p: &Placed<N>, qd: &Vector<N>) -> Vector<N> {
+    fn coriolis_and_gravity_placed<T: Lane>(&self, p: &Placed<N, T>, qd: &[T; N]) -> [T; N] {
         // Forward: each body's angular velocity and acceleration, and the acceleration of its
         // joint's child's origin, the root accelerating by −g (gravity as an inertial force).
-        let (mut w, mut alpha, mut a) = (Vector3::zeros(), Vector3::zeros(), -self.gravity);
-        let mut before = Vector3::zeros();
-        let (mut force, mut moment) = ([Vector3::zeros(); N], [Vector3::zeros(); N]);
+        let (mut w, mut alpha) = (zero3::<T>(), zero3::<T>());
+        let mut a = -self.gravity.map(T::splat);
+        let mut before = zero3();
+        let (mut force, mut moment): ([Vector3<T>; N], [Vector3<T>; N]) = (zero3s(), zero3s());
         for j in 0..N {
             let (z, r) = (p.axis[j], p.child[j] - before);
             // The child's origin as a point of the previous body, then its own motion.
@@ -207,18 +236,18 @@ impl<const N: usize> Rigid<N> {
                     alpha += w.cross(&rate);
                     w += rate;
                 }
-                Motion::Prismatic => a += 2.0 * w.cross(&rate),
+                Motion::Prismatic => a += w.cross(&rate) * T::splat(2.0),
             }
             before = p.child[j];
             let d = p.com[j] - p.child[j];
             let at_com = a + alpha.cross(&d) + w.cross(&w.cross(&d));
-            force[j] = self.mass[j] * at_com;
+            force[j] = at_com * T::splat(self.mass[j]);
             let i = p.inertia[j];
-            moment[j] = i * alpha + w.cross(&(i * w));
+            moment[j] = mul3(&i, &alpha) + w.cross(&mul3(&i, &w));
         }
         // Backward: what joint j carries, the bodies from j to the tip, about its axis.
-        let mut out = Vector::<N>::zeros();
-        let (mut total, mut about_origin) = (Vector3::zeros(), Vector3::zeros());
+        let mut out = [T::zero(); N];
+        let (mut total, mut about_origin) = (zero3(), zero3());
         for j in (0..N).rev() {
             total += force[j];
             about_origin += p.com[j].cross(&force[j]) + moment[j];
@@ -237,7 +266,7 @@ impl<const N: usize> Rigid<N> {
     /// `B = ½ (ω× I − I ω× − (I ω)×)`, the rotational part whose `B ω = ω × I ω` and for
     /// which `Ṁ − 2V` is skew-symmetric (the tests hold it to the chain's Christoffel `V`).
     pub(crate) fn coriolis(&self, q: &Vector<N>, qd: &Vector<N>) -> Matrix<N> {
-        let p = self.place(q);
+        let p = self.place(&q.data.0[0]);
         // The angular velocity of the body before each joint (the one its axis is fixed in),
         // and of each joint's own body.
         let mut before = [Vector3::zeros(); N];
@@ -300,8 +329,14 @@ impl<const N: usize> Rigid<N> {
         out
     }
 
-    /// `M(q)` and `V(q, q̇) q̇ + G(q)` from one placement.
-    pub(crate) fn inertia_and_bias(&self, q: &Vector<N>, qd: &Vector<N>) -> (Matrix<N>, Vector<N>) {
+    /// `M(q)` and `V(q, q̇) q̇ + G(q)` from one placement, as rows and a list: of one arm
+    /// (`f64`) or of several side by side ([`Lane`]).
+    #[inline(always)]
+    pub(crate) fn inertia_and_bias<T: Lane>(
+        &self,
+        q: &[T; N],
+        qd: &[T; N],
+    ) -> ([[T; N]; N], [T; N]) {
         let p = self.place(q);
         (
             self.inertia_placed(&p),
@@ -321,13 +356,16 @@ fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
 /// alone moves at a unit rate: linear, and angular about the root's origin. The column of `M`
 /// that joint owns, before [`felt`] projects it on each joint.
 #[inline(always)]
-pub(super) fn unit_rate_momentum(
-    (motion, z, arm): (Motion, Vector3<f64>, Vector3<f64>),
-    (mass, first, second): (f64, &Vector3<f64>, &Matrix3<f64>),
-) -> (Vector3<f64>, Vector3<f64>) {
+pub(super) fn unit_rate_momentum<T: Lane>(
+    (motion, z, arm): (Motion, Vector3<T>, Vector3<T>),
+    (mass, first, second): (T, &Vector3<T>, &Matrix3<T>),
+) -> (Vector3<T>, Vector3<T>) {
     match motion {
-        Motion::Revolute => (z.cross(first) - mass * arm, second * z - first.cross(&arm)),
-        Motion::Prismatic => (mass * z, first.cross(&z)),
+        Motion::Revolute => (
+            z.cross(first) - arm * mass,
+            mul3(second, &z) - first.cross(&arm),
+        ),
+        Motion::Prismatic => (z * mass, first.cross(&z)),
     }
 }
 
@@ -335,10 +373,10 @@ pub(super) fn unit_rate_momentum(
 /// momentum (linear, and angular about the root's origin): an entry of `M`,
 /// `z · (angular − o × linear)`.
 #[inline(always)]
-pub(super) fn felt(
-    (motion, z, arm): (Motion, Vector3<f64>, Vector3<f64>),
-    (linear, angular): (Vector3<f64>, Vector3<f64>),
-) -> f64 {
+pub(super) fn felt<T: Lane>(
+    (motion, z, arm): (Motion, Vector3<T>, Vector3<T>),
+    (linear, angular): (Vector3<T>, Vector3<T>),
+) -> T {
     match motion {
         Motion::Revolute => z.dot(&angular) - arm.dot(&linear),
         Motion::Prismatic => z.dot(&linear),

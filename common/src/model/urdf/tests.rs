@@ -5,7 +5,7 @@ use proptest::prelude::*;
 use rand::Rng as _;
 
 use super::*;
-use crate::model::robot::{free_motion, EulerLagrange, Vector};
+use crate::model::robot::{free_motion, EulerLagrange, Forward, Vector};
 use crate::model::{ThreeLink, ThreeLinkParams, TwoLink, TwoLinkParams};
 
 const PAPER: &str = include_str!("../../../../scenarios/robots/paper-two-link.urdf");
@@ -648,4 +648,104 @@ fn every_arm_agrees_with_pinocchio_at_its_reference_states() {
             assert_eq!(differs, None, "{}", what("the rigid form"));
         }
     }
+}
+
+/// Every bit of `a` and `b`, entry by entry (a `−0` is not a `0`; a NaN is a NaN).
+fn bits(a: &[f64]) -> Vec<u64> {
+    a.iter().map(|x| x.to_bits()).collect()
+}
+
+/// The four states' `q̈`, drifts and `M⁻¹` side by side, as the arm computes them for
+/// processors with 256-bit vectors and for others, against each state's alone: the same bits.
+fn side_by_side_differs<const N: usize>(
+    arm: &UrdfArm<N>,
+    states: &[(Vector<N>, Vector<N>); 4],
+) -> Option<String> {
+    let u: [Vector<N>; 4] =
+        std::array::from_fn(|l| Vector::<N>::from_fn(|i, _| 1.0 - 0.3 * (i + l) as f64));
+    let d: [Vector<N>; 4] =
+        std::array::from_fn(|l| Vector::<N>::from_fn(|i, _| 0.05 * (i * l) as f64));
+    let forward: [Forward<'_, N>; 4] =
+        std::array::from_fn(|l| (&states[l].0, &states[l].1, &u[l], &d[l]));
+    let pairs: [(&Vector<N>, &Vector<N>); 4] =
+        std::array::from_fn(|l| (&states[l].0, &states[l].1));
+    let qs: [&Vector<N>; 4] = std::array::from_fn(|l| &states[l].0);
+    for l in 0..4 {
+        let (q, qd) = &states[l];
+        let alone = [
+            bits(arm.acceleration(q, qd, &u[l], &d[l]).as_slice()),
+            bits(arm.drift(q, qd).as_slice()),
+            bits(arm.inverse_inertia(q).as_slice()),
+        ];
+        let together = [
+            (
+                "q̈",
+                arm.accelerations(&forward)[l].as_slice().to_vec(),
+                arm.accelerations_here(&forward)[l].as_slice().to_vec(),
+            ),
+            (
+                "drift",
+                arm.drifts(&pairs)[l].as_slice().to_vec(),
+                arm.drifts_here(&pairs)[l].as_slice().to_vec(),
+            ),
+            (
+                "M⁻¹",
+                arm.inverse_inertias(&qs)[l].as_slice().to_vec(),
+                arm.inverse_inertias_here(&qs)[l].as_slice().to_vec(),
+            ),
+        ];
+        for ((what, wide, here), alone) in together.iter().zip(&alone) {
+            if bits(wide) != *alone || bits(here) != *alone {
+                return Some(format!("{what} of state {l}"));
+            }
+        }
+    }
+    None
+}
+
+fn states<const N: usize>(values: &[(Vec<f64>, Vec<f64>)]) -> [(Vector<N>, Vector<N>); 4] {
+    std::array::from_fn(|l| {
+        let (q, qd) = &values[l];
+        (
+            Vector::<N>::from_column_slice(&q[..N]),
+            Vector::<N>::from_column_slice(&qd[..N]),
+        )
+    })
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn side_by_side_the_arm_computes_each_state_s_bits(values in proptest::collection::vec(state(7), 4)) {
+        // Every kind of joint (about a frame's own axis and another, prismatic), and the Panda.
+        let spatial = UrdfArm::<5>::new(spatial()).expect("five joints");
+        prop_assert_eq!(side_by_side_differs(&spatial, &states::<5>(&values)), None);
+        let mut spec = UrdfSpec::new(Path::new(env!("CARGO_MANIFEST_DIR")).join("testdata/urdf/panda.urdf"));
+        spec.lock = [("panda_finger_joint1", 0.02), ("panda_finger_joint2", 0.02)]
+            .map(|(j, v)| (j.to_string(), v))
+            .into();
+        let panda = UrdfArm::<7>::new(Chain::load(&spec, Path::new("")).expect("the Panda reads")).expect("seven joints");
+        prop_assert_eq!(side_by_side_differs(&panda, &states::<7>(&values)), None);
+    }
+}
+
+#[test]
+fn side_by_side_a_state_without_forward_dynamics_leaves_the_others_bits() {
+    // A NaN in one state: its `M` has no factor, and each state is then computed alone.
+    let arm = UrdfArm::<5>::new(spatial()).expect("five joints");
+    let mut values: Vec<(Vec<f64>, Vec<f64>)> = (0..4)
+        .map(|l| (vec![0.1 * l as f64; 7], vec![-0.2; 7]))
+        .collect();
+    values[2].0[1] = f64::NAN;
+    let states = states::<5>(&values);
+    assert_eq!(side_by_side_differs(&arm, &states), None);
+    assert!(arm
+        .drift(&states[2].0, &states[2].1)
+        .iter()
+        .all(|x| x.is_nan()));
+    assert!(arm
+        .drift(&states[1].0, &states[1].1)
+        .iter()
+        .all(|x| x.is_finite()));
 }
