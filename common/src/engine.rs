@@ -19,6 +19,7 @@ use crate::attack::{Attacker, Injection, Sent, TorqueInjection};
 use crate::control::{Answer, CenterAgent, CenterOutput, ControllerMode, Question};
 use crate::metrics::{AgentMetrics, Evaluator};
 use crate::model::primed::{prime, Wants};
+use crate::model::robot::SIDE_BY_SIDE_MIN;
 use crate::model::Vector;
 use crate::plant::{Measurement, Plant, StepReport};
 use crate::records::{
@@ -807,8 +808,9 @@ impl Ticker {
     }
 }
 
-/// The runs of [`Ticker::runs`]: consecutive agents whose robots are of one model that
-/// computes several states side by side ([`crate::model::EulerLagrange::side_by_side`]).
+/// The runs of [`Ticker::runs`]: consecutive agents, at least [`SIDE_BY_SIDE_MIN`], whose robots
+/// are of one model that computes several states side by side
+/// ([`crate::model::EulerLagrange::side_by_side`]); every other agent a run of its own.
 fn side_by_side(agents: &[AgentConfig], loops: &[AnyLoop]) -> Vec<std::ops::Range<usize>> {
     let batched =
         |i: usize| crate::on_joint_count!(AnyLoop, &loops[i], a => a.plant.side_by_side());
@@ -825,7 +827,12 @@ fn side_by_side(agents: &[AgentConfig], loops: &[AnyLoop]) -> Vec<std::ops::Rang
             _ => runs.push(i..i + 1),
         }
     }
-    runs
+    (runs.into_iter())
+        .flat_map(|run| match run.len() {
+            n if n >= SIDE_BY_SIDE_MIN => vec![run],
+            _ => run.map(|i| i..i + 1).collect(),
+        })
+        .collect()
 }
 
 /// [`tick_side_by_side`] for robots of `first`'s joint count.

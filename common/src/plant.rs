@@ -8,7 +8,7 @@ use rand_distr::{Distribution, Normal};
 
 use crate::delay::{in_force_at, DelayLine, DelayProfile, PushError};
 use crate::memo::Recent;
-use crate::model::robot::{Forward, LANES};
+use crate::model::robot::{Forward, LANES, SIDE_BY_SIDE_MIN};
 use crate::model::{EulerLagrange, ModelConfig, Vector};
 use crate::rng::{stream, Purpose};
 use crate::time::tick_time;
@@ -343,14 +343,19 @@ impl<const N: usize> Plant<N> {
     }
 
     /// [`Self::advance`] of several plants of one model (the caller's word: the first
-    /// plant's model serves them all), side by side: [`LANES`] at a time, their RK4 pieces run
+    /// plant's model serves them all), side by side: [`LANES`] at a time (fewer than
+    /// [`SIDE_BY_SIDE_MIN`] left over, each alone), their RK4 pieces run
     /// together, the model asked for their forward dynamics at once
     /// ([`EulerLagrange::accelerations`]). Each plant ends where its own [`Self::advance`]
     /// would, to the bit, and its report is the same.
     pub fn advance_side_by_side(plants: &mut [&mut Plant<N>], k: u64) -> Vec<StepReport<N>> {
         let mut reports = Vec::with_capacity(plants.len());
         for lanes in plants.chunks_mut(LANES) {
-            Self::advance_lanes(lanes, k, &mut reports);
+            if lanes.len() < SIDE_BY_SIDE_MIN {
+                reports.extend(lanes.iter_mut().map(|p| p.advance(k)));
+            } else {
+                Self::advance_lanes(lanes, k, &mut reports);
+            }
         }
         reports
     }

@@ -4,7 +4,7 @@
 //! own. An answer is used only for the very arguments it was computed at (bit for bit); any
 //! other question goes to the model, so a prime never stands in for a number it is not.
 
-use super::robot::{EulerLagrange, Forward, Matrix, Vector, LANES};
+use super::robot::{EulerLagrange, Forward, Matrix, Vector, LANES, SIDE_BY_SIDE_MIN};
 
 /// What a controller will ask its model in the tick under way
 /// ([`crate::control::Controller::wants`]): where to compute ahead.
@@ -97,14 +97,18 @@ impl<const N: usize> EulerLagrange<N> for Primed<'_, N> {
     }
 }
 
-/// The answers `wants` asks of `model` for each of up to [`LANES`] controllers, computed side
-/// by side (a missing lane repeats the first one that wants; its answer is dropped).
+/// The answers `wants` asks of `model` for each controller, computed side by side, [`LANES`] at
+/// a time (a missing lane repeats the first one; its answer is dropped); fewer than
+/// [`SIDE_BY_SIDE_MIN`] left over are not computed ahead (the model answers them in the tick).
 pub fn prime<const N: usize>(model: &dyn EulerLagrange<N>, wants: &[Wants<N>]) -> Vec<Primes<N>> {
     let mut primes = vec![Primes::default(); wants.len()];
     let inverses: Vec<(usize, Vector<N>)> = (wants.iter().enumerate())
         .filter_map(|(i, w)| w.inverse_inertia.map(|q| (i, q)))
         .collect();
-    for lanes in inverses.chunks(LANES) {
+    for lanes in inverses
+        .chunks(LANES)
+        .filter(|l| l.len() >= SIDE_BY_SIDE_MIN)
+    {
         let qs: [&Vector<N>; LANES] = std::array::from_fn(|l| &lanes[l.min(lanes.len() - 1)].1);
         for ((i, q), inverse) in lanes.iter().zip(model.inverse_inertias(&qs)) {
             primes[*i].inverse_inertia = Some((*q, inverse));
@@ -113,7 +117,7 @@ pub fn prime<const N: usize>(model: &dyn EulerLagrange<N>, wants: &[Wants<N>]) -
     let drifts: Vec<(usize, (Vector<N>, Vector<N>))> = (wants.iter().enumerate())
         .filter_map(|(i, w)| w.drift.map(|s| (i, s)))
         .collect();
-    for lanes in drifts.chunks(LANES) {
+    for lanes in drifts.chunks(LANES).filter(|l| l.len() >= SIDE_BY_SIDE_MIN) {
         let states: [(&Vector<N>, &Vector<N>); LANES] = std::array::from_fn(|l| {
             let (q, qd) = &lanes[l.min(lanes.len() - 1)].1;
             (q, qd)
@@ -164,25 +168,28 @@ mod tests {
     #[test]
     fn primes_are_the_model_s_answers_for_what_each_controller_wants() {
         let model = TwoLink::new(TwoLinkParams::PAPER);
-        // Six controllers (a lane of four, one of two), one wanting no drift.
-        let wants: Vec<Wants<2>> = (0..6)
+        // Nine controllers (lanes of four, four and one), one wanting no drift.
+        let wants: Vec<Wants<2>> = (0..9)
             .map(|i| {
                 let x = 0.1 * i as f64;
                 Wants {
                     inverse_inertia: Some(Vector::<2>::new(x, -x)),
-                    drift: (i != 4).then(|| (Vector::<2>::new(x, 0.5), Vector::<2>::new(-x, x))),
+                    drift: (i != 2).then(|| (Vector::<2>::new(x, 0.5), Vector::<2>::new(-x, x))),
                 }
             })
             .collect();
         let primes = prime(&model, &wants);
-        assert_eq!(primes.len(), 6);
-        for (w, p) in wants.iter().zip(&primes) {
+        assert_eq!(primes.len(), 9);
+        for (i, (w, p)) in wants.iter().zip(&primes).enumerate() {
+            // The inverses' lanes: 0–3, 4–7, and 8 alone, left to the model in the tick.
             let q = w.inverse_inertia.expect("wanted");
-            assert_eq!(p.inverse_inertia, Some((q, model.inverse_inertia(&q))));
-            assert_eq!(
-                p.drift,
-                w.drift.map(|(q, qd)| ((q, qd), model.drift(&q, &qd)))
-            );
+            let inverse = (i < 8).then(|| (q, model.inverse_inertia(&q)));
+            assert_eq!(p.inverse_inertia, inverse, "controller {i}");
+            // The drifts' lanes: 0, 1, 3, 4, then 5–8.
+            let drift = w.drift.map(|(q, qd)| ((q, qd), model.drift(&q, &qd)));
+            assert_eq!(p.drift, drift, "controller {i}");
         }
+        assert_eq!(primes[8].inverse_inertia, None);
+        assert!(primes[8].drift.is_some() && primes[2].drift.is_none());
     }
 }

@@ -12,6 +12,11 @@ pub type Matrix<const N: usize> = SMatrix<f64, N, N>;
 /// How many states [`EulerLagrange::accelerations`] takes at once.
 pub const LANES: usize = 4;
 
+/// The fewest states worth computing side by side: [`LANES`] of them cost about as much as three
+/// alone (a Panda's forward dynamics, `cargo bench -p fdi-common --bench urdf`), so fewer are
+/// computed one by one.
+pub const SIDE_BY_SIDE_MIN: usize = 3;
+
 /// One state of the forward dynamics: `q`, `q̇`, the torque and the disturbance
 /// ([`EulerLagrange::acceleration`]'s arguments).
 pub type Forward<'a, const N: usize> = (&'a Vector<N>, &'a Vector<N>, &'a Vector<N>, &'a Vector<N>);
