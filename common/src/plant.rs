@@ -342,13 +342,14 @@ impl<const N: usize> Plant<N> {
         self.finish(k, missed, first)
     }
 
-    /// [`Self::advance`] of several plants of one model (the caller's word: the first
-    /// plant's model serves them all), side by side: [`LANES`] at a time (fewer than
+    /// [`Self::advance`] of several plants of one model (the caller's word, which the engine
+    /// gives from their equal model configurations: the first plant's model serves them all;
+    /// hence not public), side by side: [`LANES`] at a time (fewer than
     /// [`SIDE_BY_SIDE_MIN`] left over, each alone), their RK4 pieces run
     /// together, the model asked for their forward dynamics at once
     /// ([`EulerLagrange::accelerations`]). Each plant ends where its own [`Self::advance`]
     /// would, to the bit, and its report is the same.
-    pub fn advance_side_by_side(plants: &mut [&mut Plant<N>], k: u64) -> Vec<StepReport<N>> {
+    pub(crate) fn advance_side_by_side(plants: &mut [&mut Plant<N>], k: u64) -> Vec<StepReport<N>> {
         let mut reports = Vec::with_capacity(plants.len());
         for lanes in plants.chunks_mut(LANES) {
             if lanes.len() < SIDE_BY_SIDE_MIN {
