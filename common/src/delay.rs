@@ -29,6 +29,29 @@ pub enum DelayProfile {
 }
 
 impl DelayProfile {
+    /// Whether `other` is this delay to the bit (then `τ(t)` has the same bits at every `t`;
+    /// `==` takes −0 for 0).
+    pub fn same_bits(&self, other: &Self) -> bool {
+        match (*self, *other) {
+            (
+                Self::Sine {
+                    amplitude_s: a,
+                    offset_s: o,
+                    rate_rad_s: r,
+                },
+                Self::Sine {
+                    amplitude_s: a2,
+                    offset_s: o2,
+                    rate_rad_s: r2,
+                },
+            ) => [a, o, r].map(f64::to_bits) == [a2, o2, r2].map(f64::to_bits),
+            (Self::Constant { value_s: v }, Self::Constant { value_s: v2 }) => {
+                v.to_bits() == v2.to_bits()
+            }
+            _ => false,
+        }
+    }
+
     /// `τ(t)` in seconds.
     pub fn tau(&self, t: f64) -> f64 {
         match *self {
@@ -402,6 +425,22 @@ mod tests {
 
     fn v(x: f64) -> Vector<2> {
         Vector::<2>::new(x, -2.0 * x)
+    }
+
+    /// Delays the same to the bit give `τ`'s bits at every instant; `==` is not that (−0 is 0).
+    #[test]
+    fn the_same_delay_to_the_bit_and_only_that() {
+        let sine = |offset_s: f64| DelayProfile::Sine {
+            amplitude_s: 0.002,
+            offset_s,
+            rate_rad_s: 0.5,
+        };
+        let constant = |value_s: f64| DelayProfile::Constant { value_s };
+        assert!(sine(0.003).same_bits(&sine(0.003)) && constant(0.01).same_bits(&constant(0.01)));
+        assert!(!sine(0.003).same_bits(&sine(0.0031)) && !sine(0.0).same_bits(&constant(0.0)));
+        assert!(constant(0.0) == constant(-0.0) && !constant(0.0).same_bits(&constant(-0.0)));
+        assert!(sine(0.0) == sine(-0.0) && !sine(0.0).same_bits(&sine(-0.0)));
+        assert_ne!(constant(0.0).tau(1.0).to_bits(), constant(-0.0).tau(1.0).to_bits());
     }
 
     fn line(n: usize, dt: f64) -> DelayLine<2> {

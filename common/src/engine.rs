@@ -860,7 +860,7 @@ fn tick_side_by_side<const N: usize, A: Attacker, S: FnMut(&TickRecord)>(
         })
         .collect();
     // The control centers' `M(q_d)⁻¹` and drifts of the tick, side by side.
-    let wants: Vec<Wants<N>> = team.iter().map(|a| a.center.wants(t)).collect();
+    let wants: Vec<Wants<N>> = team.iter_mut().map(|a| a.center.wants(t)).collect();
     let primes = prime(team[0].center.model(), &wants);
     for (a, primes) in team.iter_mut().zip(primes) {
         a.center.prime(primes);

@@ -246,10 +246,15 @@ impl<const N: usize> Plant<N> {
         // The disturbance at the midpoint serves the two midpoint stages (one evaluation).
         let mid = self.disturbance(t + len / 2.0);
         let (start, end) = (self.disturbance(t), self.disturbance(t + len));
+        self.start_seeing(piece, [start, mid, mid, end])
+    }
+
+    /// The RK4 step of `piece` from the plant's state, its stages seeing the disturbances `d`.
+    fn start_seeing(&self, piece: &Piece<N>, d: [Vector<N>; 4]) -> Rk4<N> {
         Rk4 {
-            len,
+            len: piece.len,
             u: piece.u,
-            d: [start, mid, mid, end],
+            d,
             q: self.q,
             qd: [self.qd; 4],
             a: [Vector::<N>::zeros(); 4],
@@ -276,6 +281,13 @@ impl<const N: usize> Plant<N> {
     /// and one a hair longer integrate the same input over all but a hair of the step. True
     /// when some piece needed a command that had not arrived.
     fn plan(&mut self, k: u64) -> bool {
+        self.plan_sharing(k, &mut Takeovers::default())
+    }
+
+    /// [`Self::plan`], the instants where a newer command takes over looked up in `takeovers`
+    /// first and kept there: plants whose delay is one to the bit find there the instants the
+    /// others computed (the same bits: the same function of the same arguments).
+    fn plan_sharing(&mut self, k: u64, takeovers: &mut Takeovers) -> bool {
         let period = self.params.control_period_s;
         let t_k = tick_time(k, period);
         let m = self.params.substeps.max(1);
@@ -291,7 +303,10 @@ impl<const N: usize> Plant<N> {
             loop {
                 let next = self.commands.next_switch(from_query, qb);
                 let to = next.map_or(b, |(stamp, _)| {
-                    self.params.delay.takeover_time(stamp, (a, qa), (b, qb))
+                    let delay = &self.params.delay;
+                    takeovers.get_or([stamp, a, b], || {
+                        delay.takeover_time(stamp, (a, qa), (b, qb))
+                    })
                 });
                 if to > from {
                     self.pieces.push(Piece {
@@ -364,10 +379,26 @@ impl<const N: usize> Plant<N> {
     /// [`Self::advance_side_by_side`] of at most [`LANES`] plants, their reports pushed.
     fn advance_lanes(plants: &mut [&mut Plant<N>], k: u64, reports: &mut Vec<StepReport<N>>) {
         let mut missed = [false; LANES];
+        // `t − τ(t)` and so the instants where commands take over are the delay's: the plants
+        // whose delay is the first plant's, to the bit, share them.
+        let (delay, mut takeovers) = (plants[0].params.delay, Takeovers::default());
         for (plant, missed) in plants.iter_mut().zip(&mut missed) {
-            *missed = plant.plan(k);
+            *missed = if plant.params.delay.same_bits(&delay) {
+                plant.plan_sharing(k, &mut takeovers)
+            } else {
+                plant.plan(k)
+            };
         }
         let mut first = [None; LANES];
+        // The plants whose disturbance is the first plant's, to the bit: a piece over the same
+        // instants sees the same `d(t)`, evaluated once for them all.
+        let shares: [bool; LANES] = std::array::from_fn(|l| {
+            (plants.get(l)).is_some_and(|p| {
+                p.params
+                    .disturbance
+                    .same_bits(&plants[0].params.disturbance)
+            })
+        });
         let pieces = plants.iter().map(|p| p.pieces.len()).max().unwrap_or(0);
         for i in 0..pieces {
             // The plants with an `i`-th piece; a lane without one repeats the first such
@@ -377,10 +408,23 @@ impl<const N: usize> Plant<N> {
             let Some(lead) = running.iter().position(|r| *r) else {
                 continue;
             };
+            let mut shared: Option<(Piece<N>, [Vector<N>; 4])> = None;
             let mut rk: [Rk4<N>; LANES] = std::array::from_fn(|l| {
-                let plant = &mut plants[if running[l] { l } else { lead }];
+                let l = if running[l] { l } else { lead };
+                let plant = &mut plants[l];
                 let piece = plant.pieces[i];
-                plant.start(&piece)
+                match shared {
+                    Some((seen, d)) if shares[l] && seen.spans_the_instants_of(&piece) => {
+                        plant.start_seeing(&piece, d)
+                    }
+                    _ => {
+                        let rk = plant.start(&piece);
+                        if shares[l] {
+                            shared.get_or_insert((piece, rk.d));
+                        }
+                        rk
+                    }
+                }
             });
             for s in 0..4 {
                 let stage: [(Vector<N>, Vector<N>); LANES] =
@@ -409,6 +453,36 @@ struct Piece<const N: usize> {
     from: f64,
     len: f64,
     u: Vector<N>,
+}
+
+/// The instants computed by [`crate::delay::DelayProfile::takeover_time`] for one delay, by
+/// the bits of their `(stamp, a, b)` (the plan of a step asks a few).
+#[derive(Debug, Default)]
+struct Takeovers {
+    known: [Option<([u64; 3], f64)>; 8],
+    next: usize,
+}
+
+impl Takeovers {
+    /// The instant kept for `args`, or `f()` kept for them.
+    fn get_or(&mut self, args: [f64; 3], f: impl FnOnce() -> f64) -> f64 {
+        let key = args.map(f64::to_bits);
+        if let Some((_, c)) = self.known.iter().flatten().find(|(k, _)| *k == key) {
+            return *c;
+        }
+        let c = f();
+        self.known[self.next] = Some((key, c));
+        self.next = (self.next + 1) % self.known.len();
+        c
+    }
+}
+
+impl<const N: usize> Piece<N> {
+    /// Whether `other` starts and ends at the very instants of this piece (bit for bit: the
+    /// disturbance at its start, midpoint and end then is this one's).
+    fn spans_the_instants_of(&self, other: &Self) -> bool {
+        self.from.to_bits() == other.from.to_bits() && self.len.to_bits() == other.len.to_bits()
+    }
 }
 
 /// A classic RK4 step under way from `(q, q̇)`: the disturbance each stage sees (the
@@ -481,6 +555,17 @@ pub struct DisturbanceConfig {
 }
 
 impl DisturbanceConfig {
+    /// Whether `other` is this disturbance to the bit (then `d(t)` has the same bits at every
+    /// `t`; `==` takes −0 for 0).
+    pub fn same_bits(&self, other: &Self) -> bool {
+        self.units == other.units
+            && self.links.len() == other.links.len()
+            && (self.links.iter().zip(&other.links)).all(|(a, b)| {
+                a.amplitude.to_bits() == b.amplitude.to_bits()
+                    && a.omega_rad_s.to_bits() == b.omega_rad_s.to_bits()
+            })
+    }
+
     /// `d(t)` into `out`, N·m.
     pub fn value_into(&self, t: f64, out: &mut [f64]) {
         let scale = self.units.to_rad();

@@ -3,6 +3,7 @@
 //! mode`).
 
 use crate::delay::DelayLine;
+use crate::memo::Recent;
 use crate::model::primed::{Primed, Primes, Wants};
 use crate::model::{EulerLagrange, Matrix, Vector};
 use crate::trajectory::Reference;
@@ -100,6 +101,8 @@ pub struct CenterAgent<const N: usize> {
     correction: Option<Vector<N>>,
     /// Answers of the model computed ahead for the next tick ([`Self::prime`]).
     primes: Option<Primes<N>>,
+    /// The last reference computed ([`Self::wants`] and the tick ask for the same instant).
+    recent_reference: Recent<Reference<N>, 1>,
 }
 
 impl<const N: usize> CenterAgent<N> {
@@ -127,6 +130,7 @@ impl<const N: usize> CenterAgent<N> {
             asked: None,
             correction: None,
             primes: None,
+            recent_reference: Recent::default(),
         })
     }
 }
@@ -173,9 +177,15 @@ impl<const N: usize> CenterAgent<N> {
     }
 
     /// What its controller will ask the model in the tick at `t` ([`Controller::wants`]).
-    pub fn wants(&self, t: f64) -> Wants<N> {
-        self.controller
-            .wants(&self.params.trajectory.reference::<N>(t))
+    pub fn wants(&mut self, t: f64) -> Wants<N> {
+        let reference = self.reference_at(t);
+        self.controller.wants(&reference)
+    }
+
+    /// The reference at `t` as the tick computes it (remembered, [`Recent`]: the same bits).
+    fn reference_at(&mut self, t: f64) -> Reference<N> {
+        let trajectory = &self.params.trajectory;
+        (self.recent_reference).get_or(t, |t| trajectory.reference::<N>(t))
     }
 
     /// Its robot's model.
@@ -371,7 +381,7 @@ impl<const N: usize> CenterAgent<N> {
     /// zero-order-held history of sent `u`.
     fn tick_inputs(&mut self, t: f64) -> TickInputs<N> {
         let (y, yd) = self.last_good;
-        let reference = self.params.trajectory.reference::<N>(t);
+        let reference = self.reference_at(t);
         let query = t - self.params.delay.tau(t);
         let (e_u, history_miss) = match self.sent.integral(query, t) {
             Ok(e_u) => (e_u, false),

@@ -154,7 +154,12 @@ fn a_refused_command_counts_as_missing_and_acts_as_one() {
 
 /// Plants of the shipped Panda team (each its own delay, noise and disturbance), stepped side
 /// by side and each alone, fed the same commands (one a tick, some ticks' missing, so their
-/// steps are cut into different pieces): every state and report has the same bits.
+/// steps are cut into different pieces): every state and report has the same bits. The
+/// plants share the team's disturbance but two: one has another, one differs from the team's
+/// in the sign of a zero amplitude only (`==` to it, not the same bits), so the disturbance a
+/// lane evaluates once for the plants that share it is tried with plants that do not; and they
+/// share the team's delay but one (the instants where commands take over, computed once for
+/// the plants that share them).
 #[cfg(feature = "urdf")]
 #[test]
 fn plants_stepped_side_by_side_are_each_stepped_alone() {
@@ -163,10 +168,21 @@ fn plants_stepped_side_by_side_are_each_stepped_alone() {
     let r = crate::scenario::load_str(&text, "panda-team.toml", Some(&folder)).expect("valid");
     let s = &r.scenario;
     let plants = |substeps: u32| -> Vec<Plant<7>> {
-        (s.agents.iter().cycle().take(5))
-            .map(|a| {
+        (s.agents.iter().cycle().take(5).enumerate())
+            .map(|(i, a)| {
                 let mut p = s.plant_params(a);
                 p.substeps = substeps;
+                let links = &mut p.disturbance.links;
+                links[6].amplitude = 0.0;
+                match i {
+                    1 => links[3].amplitude *= 1.5,
+                    3 => links[6].amplitude = -0.0,
+                    _ => {}
+                }
+                // Another delay: its commands take over at other instants.
+                if let (2, DelayProfile::Sine { offset_s, .. }) = (i, &mut p.delay) {
+                    *offset_s *= 1.2;
+                }
                 Plant::<7>::new(p).expect("a Panda")
             })
             .collect()
@@ -178,6 +194,11 @@ fn plants_stepped_side_by_side_are_each_stepped_alone() {
     // Five plants: a lane of four and one alone, with one and two sub-steps.
     for substeps in [1, 2] {
         let (mut alone, mut together) = (plants(substeps), plants(substeps));
+        let (team, zero) = (&alone[0].params.disturbance, &alone[3].params.disturbance);
+        assert!(
+            team == zero && !team.same_bits(zero) && team.same_bits(&alone[2].params.disturbance)
+        );
+        assert!(!alone[2].params.delay.same_bits(&alone[0].params.delay));
         assert!(alone[0].side_by_side());
         for k in 0..400 {
             let t = tick_time(k, DT);
