@@ -440,7 +440,10 @@ mod tests {
         assert!(!sine(0.003).same_bits(&sine(0.0031)) && !sine(0.0).same_bits(&constant(0.0)));
         assert!(constant(0.0) == constant(-0.0) && !constant(0.0).same_bits(&constant(-0.0)));
         assert!(sine(0.0) == sine(-0.0) && !sine(0.0).same_bits(&sine(-0.0)));
-        assert_ne!(constant(0.0).tau(1.0).to_bits(), constant(-0.0).tau(1.0).to_bits());
+        assert_ne!(
+            constant(0.0).tau(1.0).to_bits(),
+            constant(-0.0).tau(1.0).to_bits()
+        );
     }
 
     fn line(n: usize, dt: f64) -> DelayLine<2> {

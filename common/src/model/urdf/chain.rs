@@ -136,8 +136,8 @@ impl Frame {
 pub struct Joint {
     pub name: String,
     pub motion: Motion,
-    /// Lower and upper limit (rad or m); `None`: a continuous joint, or limits the URDF leaves
-    /// out.
+    /// Lower and upper limit (rad or m; one of them infinite where the URDF puts that side at
+    /// infinity); `None`: a continuous joint, or both sides at infinity.
     pub limits: Option<(f64, f64)>,
     /// Viscous damping, N·m·s/rad or N·s/m (`<dynamics damping>`).
     pub damping: f64,

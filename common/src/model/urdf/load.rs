@@ -35,9 +35,9 @@ pub enum UrdfError {
 /// What a joint's `<limit>` says.
 #[derive(Debug, Clone, Copy, PartialEq)]
 enum Limits {
-    /// Lower and upper, finite.
+    /// Lower and upper, at least one finite (the other may be infinite: no limit there).
     Range(f64, f64),
-    /// A continuous joint, or a limit at infinity.
+    /// A continuous joint, or limits at infinity on both sides.
     Unbounded,
     /// No `<limit>` (or one of zeros) on a revolute or prismatic joint.
     Missing,
@@ -263,9 +263,9 @@ impl Reader<'_> {
         if lo > hi {
             return Err(self.joint_error(&j.name, format!("lower limit {lo} above upper {hi}")));
         }
-        // Infinite: no limit on that side (URDF 1.2 writes an omitted limit so); the arm's
-        // joint then has none.
-        Ok(if lo.is_finite() && hi.is_finite() {
+        // Infinite: no limit on that side (URDF 1.2 writes an omitted limit so); the other
+        // side still holds. Both infinite: none.
+        Ok(if lo.is_finite() || hi.is_finite() {
             Limits::Range(lo, hi)
         } else {
             Limits::Unbounded

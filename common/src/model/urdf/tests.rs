@@ -298,6 +298,23 @@ fn a_joint_s_limits_are_its_file_s_and_a_lock_stays_inside_them() {
     assert_eq!(chain(SPATIAL, &finger(0.04)).dof(), 5);
     assert_eq!(chain(SPATIAL, &finger(0.0)).dof(), 5);
 
+    // A side at infinity has no limit; the other side still holds, for a lock as for a
+    // trajectory.
+    let one_sided = SPATIAL.replace(r#"lower="-1.7" upper="1.7""#, r#"lower="-inf" upper="1.7""#);
+    let c = chain(&one_sided, &finger(0.02));
+    assert_eq!(c.joints[1].limits, Some((f64::NEG_INFINITY, 1.7)));
+    let mut past = finger(0.02);
+    past.lock.insert("j2".into(), 1.8);
+    let e = refusal(&one_sided, &past);
+    assert!(
+        e.contains("joint `j2`") && e.contains("locked at 1.8, outside"),
+        "{e}"
+    );
+    past.lock.insert("j2".into(), -1e6);
+    assert_eq!(chain(&one_sided, &past).dof(), 4);
+    let both = SPATIAL.replace(r#"lower="-1.7" upper="1.7""#, r#"lower="-inf" upper="inf""#);
+    assert_eq!(chain(&both, &finger(0.02)).joints[1].limits, None);
+
     let nan = SPATIAL.replace(r#"lower="-1.7""#, r#"lower="nan""#);
     let e = refusal(&nan, &finger(0.02));
     assert!(e.contains("joint `j2`") && e.contains("not numbers"), "{e}");
