@@ -7,6 +7,7 @@ use std::path::Path;
 use fdi_common::run_dir::RunDir;
 
 use anyhow::{Context, Result};
+use fdi_common::control::ControllerMode;
 use fdi_common::detect;
 use fdi_common::engine::RunSummary;
 use fdi_common::metrics::{AgentMetrics, DetectorMetrics};
@@ -65,18 +66,33 @@ pub fn metrics_table(s: &RunSummary) -> String {
 /// A line per robot whose control center reset its observer and estimator (their state
 /// became non-finite, docs/faults.md): the estimate `Ŝ` and the alarms of such a robot are not
 /// the estimator's at work, whatever its RMSE says.
+/// Under the traditional controller (no estimator: `Ŝ ≡ 0`, the torque does not read the
+/// observer) what a reset spoils is the observer's record and what reads it.
 pub fn state_reset_warnings(s: &RunSummary) -> Vec<String> {
+    let traditional = s.controller == ControllerMode::Traditional.as_str();
     s.metrics
         .iter()
         .filter(|(_, m)| m.state_resets > 0)
         .map(|(id, m)| {
-            format!(
-                "robot {id}: the control center reset its observer and estimator {} time{} \
-                 (their state became non-finite): its Ŝ and alarms are not the estimator's at \
-                 work (report.md: state resets)",
+            let times = format!(
+                "{} time{}",
                 m.state_resets,
                 if m.state_resets == 1 { "" } else { "s" }
-            )
+            );
+            if traditional {
+                format!(
+                    "robot {id}: the control center reset its observer {times} (its state \
+                     became non-finite): the traditional controller's torque does not read it, \
+                     but its q̂ in the traces and the residual detectors do (report.md: state \
+                     resets)"
+                )
+            } else {
+                format!(
+                    "robot {id}: the control center reset its observer and estimator {times} \
+                     (their state became non-finite): its Ŝ and alarms are not the \
+                     estimator's at work (report.md: state resets)"
+                )
+            }
         })
         .collect()
 }
@@ -613,6 +629,16 @@ mod tests {
         assert_eq!(lines.len(), 1);
         assert!(
             lines[0].starts_with("robot 2: ") && lines[0].contains(" 1 time "),
+            "{lines:?}"
+        );
+        assert!(lines[0].contains("observer and estimator"), "{lines:?}");
+        // The traditional controller has no estimator, and its torque does not read the
+        // observer: the line says what a reset spoils there.
+        s.controller = "traditional".into();
+        let lines = super::state_reset_warnings(&s);
+        assert!(
+            lines[0].starts_with("robot 2: the control center reset its observer 1 time ")
+                && lines[0].contains("torque does not read it"),
             "{lines:?}"
         );
     }
