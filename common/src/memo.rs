@@ -1,17 +1,39 @@
-//! [`Recent`]: the last few values of a pure function of one `f64`, looked up by the argument's
-//! bits. A pure function evaluated again at the very same argument gives the very same bits, so
+//! [`Recent`]: the last few values of a pure function of `f64`s, looked up by the arguments'
+//! bits. A pure function evaluated again at the very same arguments gives the very same bits, so
 //! a hit returns exactly what the call would have: memoising changes no result, only the number
 //! of `sin`s the engine evaluates (the plant asks for `τ(t)` and `d(t)` at the same instants
-//! from neighbouring steps and RK stages).
+//! from neighbouring steps and RK stages, and the plants of a lane for the same instants where
+//! commands take over).
 
-/// The last `K` `(argument, value)` pairs of a pure function, the oldest replaced first.
+/// An argument of [`Recent`]'s function, looked up by its bits (−0 is not 0; a NaN finds the
+/// NaN of its bits).
+pub trait Bits: Copy {
+    type Key: Copy + PartialEq + std::fmt::Debug;
+    fn bits(self) -> Self::Key;
+}
+
+impl Bits for f64 {
+    type Key = u64;
+    fn bits(self) -> u64 {
+        self.to_bits()
+    }
+}
+
+impl<const M: usize> Bits for [f64; M] {
+    type Key = [u64; M];
+    fn bits(self) -> [u64; M] {
+        self.map(f64::to_bits)
+    }
+}
+
+/// The last `K` `(argument, value)` pairs of a pure function of `A`, the oldest replaced first.
 #[derive(Debug, Clone)]
-pub struct Recent<V: Copy, const K: usize> {
-    entries: [Option<(u64, V)>; K],
+pub struct Recent<V: Copy, const K: usize, A: Bits = f64> {
+    entries: [Option<(A::Key, V)>; K],
     next: usize,
 }
 
-impl<V: Copy, const K: usize> Default for Recent<V, K> {
+impl<V: Copy, const K: usize, A: Bits> Default for Recent<V, K, A> {
     fn default() -> Self {
         Self {
             entries: [None; K],
@@ -20,10 +42,10 @@ impl<V: Copy, const K: usize> Default for Recent<V, K> {
     }
 }
 
-impl<V: Copy, const K: usize> Recent<V, K> {
+impl<V: Copy, const K: usize, A: Bits> Recent<V, K, A> {
     /// `f(x)`: the value kept for the bits of `x`, or `f(x)` evaluated and kept.
-    pub fn get_or(&mut self, x: f64, f: impl FnOnce(f64) -> V) -> V {
-        let key = x.to_bits();
+    pub fn get_or(&mut self, x: A, f: impl FnOnce(A) -> V) -> V {
+        let key = x.bits();
         if let Some((_, v)) = self.entries.iter().flatten().find(|(k, _)| *k == key) {
             return *v;
         }
@@ -54,6 +76,29 @@ mod tests {
                 prop_assert_eq!(got.to_bits(), (x * 0.7).sin().to_bits());
             }
         }
+    }
+
+    /// Arguments of several numbers: a hit needs every one's bits.
+    #[test]
+    fn several_arguments_hit_only_all_together() {
+        let mut memo = Recent::<f64, 4, [f64; 3]>::default();
+        let mut calls = 0;
+        let mut f = |x: [f64; 3]| {
+            calls += 1;
+            x[0] + 2.0 * x[1] + 4.0 * x[2]
+        };
+        for x in [
+            [1.0, 2.0, 3.0],
+            [1.0, 2.0, 3.0],
+            [1.0, 2.0, -3.0],
+            [1.0, 2.0, 3.0],
+        ] {
+            assert_eq!(memo.get_or(x, &mut f), x[0] + 2.0 * x[1] + 4.0 * x[2]);
+        }
+        // −0 is not 0: the second is evaluated, not served the first's value.
+        memo.get_or([0.0, 0.0, -0.0], &mut f);
+        memo.get_or([0.0, 0.0, 0.0], &mut f);
+        assert_eq!(calls, 4);
     }
 
     #[test]

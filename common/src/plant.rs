@@ -304,7 +304,7 @@ impl<const N: usize> Plant<N> {
                 let next = self.commands.next_switch(from_query, qb);
                 let to = next.map_or(b, |(stamp, _)| {
                     let delay = &self.params.delay;
-                    takeovers.get_or([stamp, a, b], || {
+                    takeovers.get_or([stamp, a, b], |_| {
                         delay.takeover_time(stamp, (a, qa), (b, qb))
                     })
                 });
@@ -456,26 +456,8 @@ struct Piece<const N: usize> {
 }
 
 /// The instants computed by [`crate::delay::DelayProfile::takeover_time`] for one delay, by
-/// the bits of their `(stamp, a, b)` (the plan of a step asks a few).
-#[derive(Debug, Default)]
-struct Takeovers {
-    known: [Option<([u64; 3], f64)>; 8],
-    next: usize,
-}
-
-impl Takeovers {
-    /// The instant kept for `args`, or `f()` kept for them.
-    fn get_or(&mut self, args: [f64; 3], f: impl FnOnce() -> f64) -> f64 {
-        let key = args.map(f64::to_bits);
-        if let Some((_, c)) = self.known.iter().flatten().find(|(k, _)| *k == key) {
-            return *c;
-        }
-        let c = f();
-        self.known[self.next] = Some((key, c));
-        self.next = (self.next + 1) % self.known.len();
-        c
-    }
-}
+/// their `[stamp, a, b]` (the plan of a step asks a few).
+type Takeovers = Recent<f64, 8, [f64; 3]>;
 
 impl<const N: usize> Piece<N> {
     /// Whether `other` starts and ends at the very instants of this piece (bit for bit: the
