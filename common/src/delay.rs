@@ -32,24 +32,17 @@ impl DelayProfile {
     /// Whether `other` is this delay to the bit (then `τ(t)` has the same bits at every `t`;
     /// `==` takes −0 for 0).
     pub fn same_bits(&self, other: &Self) -> bool {
-        match (*self, *other) {
-            (
-                Self::Sine {
-                    amplitude_s: a,
-                    offset_s: o,
-                    rate_rad_s: r,
-                },
-                Self::Sine {
-                    amplitude_s: a2,
-                    offset_s: o2,
-                    rate_rad_s: r2,
-                },
-            ) => [a, o, r].map(f64::to_bits) == [a2, o2, r2].map(f64::to_bits),
-            (Self::Constant { value_s: v }, Self::Constant { value_s: v2 }) => {
-                v.to_bits() == v2.to_bits()
-            }
-            _ => false,
-        }
+        // The kind and its numbers (a constant's padded with zeros: the kinds are compared).
+        let numbers = |d: &Self| match *d {
+            Self::Sine {
+                amplitude_s,
+                offset_s,
+                rate_rad_s,
+            } => (true, [amplitude_s, offset_s, rate_rad_s]),
+            Self::Constant { value_s } => (false, [value_s, 0.0, 0.0]),
+        };
+        let ((sine, a), (other_sine, b)) = (numbers(self), numbers(other));
+        sine == other_sine && crate::memo::same_bits(a, b)
     }
 
     /// `τ(t)` in seconds.

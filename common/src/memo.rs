@@ -5,6 +5,12 @@
 //! from neighbouring steps and RK stages, and the plants of a lane for the same instants where
 //! commands take over).
 
+/// Whether `a` and `b` are the same numbers to the bit, as many and in the same order (a −0 is
+/// not a 0, a NaN is the NaN of its bits): then a pure function of them gives the same bits.
+pub fn same_bits(a: impl IntoIterator<Item = f64>, b: impl IntoIterator<Item = f64>) -> bool {
+    (a.into_iter().map(f64::to_bits)).eq(b.into_iter().map(f64::to_bits))
+}
+
 /// An argument of [`Recent`]'s function, looked up by its bits (−0 is not 0; a NaN finds the
 /// NaN of its bits).
 pub trait Bits: Copy {

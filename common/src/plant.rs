@@ -463,7 +463,7 @@ impl<const N: usize> Piece<N> {
     /// Whether `other` starts and ends at the very instants of this piece (bit for bit: the
     /// disturbance at its start, midpoint and end then is this one's).
     fn spans_the_instants_of(&self, other: &Self) -> bool {
-        self.from.to_bits() == other.from.to_bits() && self.len.to_bits() == other.len.to_bits()
+        crate::memo::same_bits([self.from, self.len], [other.from, other.len])
     }
 }
 
@@ -540,12 +540,10 @@ impl DisturbanceConfig {
     /// Whether `other` is this disturbance to the bit (then `d(t)` has the same bits at every
     /// `t`; `==` takes −0 for 0).
     pub fn same_bits(&self, other: &Self) -> bool {
-        self.units == other.units
-            && self.links.len() == other.links.len()
-            && (self.links.iter().zip(&other.links)).all(|(a, b)| {
-                a.amplitude.to_bits() == b.amplitude.to_bits()
-                    && a.omega_rad_s.to_bits() == b.omega_rad_s.to_bits()
-            })
+        fn numbers(d: &DisturbanceConfig) -> impl Iterator<Item = f64> + '_ {
+            (d.links.iter()).flat_map(|l| [l.amplitude, l.omega_rad_s])
+        }
+        self.units == other.units && crate::memo::same_bits(numbers(self), numbers(other))
     }
 
     /// `d(t)` into `out`, N·m.

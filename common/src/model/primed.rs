@@ -5,6 +5,7 @@
 //! other question goes to the model, so a prime never stands in for a number it is not.
 
 use super::robot::{EulerLagrange, Forward, Matrix, Vector, LANES, SIDE_BY_SIDE_MIN};
+use crate::memo::same_bits;
 
 /// What a controller will ask its model in the tick under way
 /// ([`crate::control::Controller::wants`]): where to compute ahead.
@@ -30,11 +31,9 @@ pub struct Primed<'a, const N: usize> {
     pub primes: &'a Primes<N>,
 }
 
-/// The same bits (a `−0` is not a `0`, a NaN is itself).
+/// The same bits ([`same_bits`]).
 fn same<const N: usize>(a: &Vector<N>, b: &Vector<N>) -> bool {
-    a.iter()
-        .zip(b.iter())
-        .all(|(x, y)| x.to_bits() == y.to_bits())
+    same_bits(a.iter().copied(), b.iter().copied())
 }
 
 impl<const N: usize> EulerLagrange<N> for Primed<'_, N> {

@@ -66,6 +66,7 @@ pub fn metrics_table(s: &RunSummary) -> String {
 /// A line per robot whose control center reset its observer and estimator (their state
 /// became non-finite, docs/faults.md): the estimate `Ŝ` and the alarms of such a robot are not
 /// the estimator's at work, whatever its RMSE says.
+///
 /// Under the traditional controller (no estimator: `Ŝ ≡ 0`, the torque does not read the
 /// observer) what a reset spoils is the observer's record and what reads it.
 pub fn state_reset_warnings(s: &RunSummary) -> Vec<String> {
